@@ -1,0 +1,308 @@
+"""
+Rotation matrices: quaternion <-> matrix and the nearest rotation of a noisy matrix.
+
+``R`` maps body coordinates to world coordinates; ``R = matrix_from_quaternion(q)``
+is the seed's ``(2 q_s^2 - 1) I + 2 q_s [q_v]x + 2 q_v q_v^T``.
+
+Matrix to quaternion uses Markley's pivot (the largest of trace, R00, R11, R22
+selects the best-conditioned column of the symmetric 4x4 matrix), exact to an
+ulp or two everywhere, including rotations by pi, where the seed's trace
+formula returns NaN. A matrix that is not orthonormal beyond a tolerance is
+replaced by its nearest rotation (Frobenius norm), computed as the dominant
+eigenvector of Bar-Itzhack's symmetric 4x4 matrix.
+
+References
+----------
+.. [1] F. L. Markley, "Unit Quaternion from Rotation Matrix", J. Guidance,
+   Control, and Dynamics 31(2), 2008.
+.. [2] S. W. Shepperd, "Quaternion from Rotation Matrix", J. Guidance and
+   Control 1(3), 1978.
+.. [3] I. Y. Bar-Itzhack, "New Method for Extracting the Quaternion from a
+   Rotation Matrix", J. Guidance, Control, and Dynamics 23(6), 2000.
+"""
+import math
+
+import numpy as np
+
+from ._quaternion import (canonical_kernel, canonical_unit_quaternion, jit, quaternion_defect,
+                          scaled_quaternion)
+from ._validation import (NON_FINITE, NOT_ORTHONORMAL, NOT_ROTATION, OK, flat_array,
+                          raise_sample_error)
+
+DEFAULT_ORTHONORMAL_TOLERANCE = 1e-6
+
+
+@jit
+def matrix_from_unit_direction(x, y, z, w, out):
+    """Write ``R(q)`` into ``out`` (3x3); ``q`` any non-zero scale (rescaled exactly first)."""
+    x, y, z, w = scaled_quaternion(x, y, z, w)
+    s = 2.0 / (x * x + y * y + z * z + w * w)
+    xx, yy, zz = s * x * x, s * y * y, s * z * z
+    xy, xz, yz = s * x * y, s * x * z, s * y * z
+    wx, wy, wz = s * w * x, s * w * y, s * w * z
+    out[0, 0] = 1.0 - (yy + zz)
+    out[0, 1] = xy - wz
+    out[0, 2] = xz + wy
+    out[1, 0] = xy + wz
+    out[1, 1] = 1.0 - (xx + zz)
+    out[1, 2] = yz - wx
+    out[2, 0] = xz - wy
+    out[2, 1] = yz + wx
+    out[2, 2] = 1.0 - (xx + yy)
+
+
+# Deviation from orthonormality below which a matrix is used as it is: at this
+# level Markley's quaternion is within rounding of the nearest rotation's.
+EXACT_ORTHONORMAL = 1e-15
+# Newton-Schulz converges for deviations below 1 (singular values in (0, sqrt 3));
+# beyond this the eigenvector method is used instead.
+NEWTON_SCHULZ_LIMIT = 0.5
+
+
+@jit
+def orthonormality_deviation(m):
+    """Largest absolute element of ``m^T m - I``."""
+    worst = 0.0
+    for a in range(3):
+        for b in range(a, 3):
+            g = m[0, a] * m[0, b] + m[1, a] * m[1, b] + m[2, a] * m[2, b]
+            if a == b:
+                g -= 1.0
+            worst = max(worst, abs(g))
+    return worst
+
+
+@jit
+def matrix_defect(m):
+    """Defect code of a 3x3 matrix: NON_FINITE, NOT_ROTATION (det <= 0) or OK."""
+    for r in range(3):
+        for c in range(3):
+            if not math.isfinite(m[r, c]):
+                return NON_FINITE
+    det = (m[0, 0] * (m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1])
+           - m[0, 1] * (m[1, 0] * m[2, 2] - m[1, 2] * m[2, 0])
+           + m[0, 2] * (m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0]))
+    if not det > 0.0:
+        return NOT_ROTATION
+    return OK
+
+
+@jit
+def newton_schulz_orthonormalize(x, work):
+    """
+    Replace ``x`` by its orthogonal polar factor (the nearest rotation when det > 0).
+
+    Iterates ``X <- X (3 I - X^T X) / 2`` (Bjorck and Bowie 1971), which
+    converges quadratically from any deviation below 1; returns whether the
+    deviation fell to rounding level within the iteration budget.
+    """
+    for _ in range(12):
+        deviation = orthonormality_deviation(x)
+        if deviation <= EXACT_ORTHONORMAL:
+            return True
+        for a in range(3):
+            for b in range(3):
+                g = x[0, a] * x[0, b] + x[1, a] * x[1, b] + x[2, a] * x[2, b]
+                work[a, b] = (1.5 if a == b else 0.0) - 0.5 * g
+        for r in range(3):
+            x0, x1, x2 = x[r, 0], x[r, 1], x[r, 2]
+            for c in range(3):
+                x[r, c] = x0 * work[0, c] + x1 * work[1, c] + x2 * work[2, c]
+    return orthonormality_deviation(x) <= EXACT_ORTHONORMAL
+
+
+@jit
+def quaternion_from_orthonormal(m):
+    """Markley's quaternion of a rotation matrix, unit and canonical."""
+    m00, m11, m22 = m[0, 0], m[1, 1], m[2, 2]
+    trace = m00 + m11 + m22
+    if trace >= m00 and trace >= m11 and trace >= m22:
+        x, y, z, w = m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1], 1.0 + trace
+    elif m00 >= m11 and m00 >= m22:
+        x, y, z, w = 1.0 + m00 - m11 - m22, m[0, 1] + m[1, 0], m[0, 2] + m[2, 0], m[2, 1] - m[1, 2]
+    elif m11 >= m22:
+        x, y, z, w = m[0, 1] + m[1, 0], 1.0 + m11 - m00 - m22, m[1, 2] + m[2, 1], m[0, 2] - m[2, 0]
+    else:
+        x, y, z, w = m[0, 2] + m[2, 0], m[1, 2] + m[2, 1], 1.0 + m22 - m00 - m11, m[1, 0] - m[0, 1]
+    return canonical_unit_quaternion(x, y, z, w)
+
+
+@jit
+def _matrix_from_quaternion_kernel(q):
+    n = q.shape[0]
+    out = np.empty((n, 3, 3))
+    for s in range(n):
+        code = quaternion_defect(q[s, 0], q[s, 1], q[s, 2], q[s, 3])
+        if code != OK:
+            return out, s, code
+        matrix_from_unit_direction(q[s, 0], q[s, 1], q[s, 2], q[s, 3], out[s])
+    return out, -1, OK
+
+
+@jit
+def quaternion_from_matrix_kernel(m, tolerance, project):
+    """
+    Quaternions of matrices; returns ``(q, needs_eigen, n_eigen, bad, code)``.
+
+    A matrix deviating from orthonormality by more than ``tolerance`` is an
+    error unless ``project``. Every matrix deviating by more than rounding is
+    replaced by its nearest rotation: by Newton-Schulz iteration here, or,
+    when the deviation is too large for it to converge, flagged in
+    ``needs_eigen`` for the eigenvector method (its row of ``q`` is left for
+    the caller to fill in).
+    """
+    n = m.shape[0]
+    out = np.empty((n, 4))
+    needs_eigen = np.zeros(n, dtype=np.bool_)
+    count = 0
+    x = np.empty((3, 3))
+    work = np.empty((3, 3))
+    for s in range(n):
+        code = matrix_defect(m[s])
+        if code != OK:
+            return out, needs_eigen, count, s, code
+        deviation = orthonormality_deviation(m[s])
+        if deviation > tolerance and not project:
+            return out, needs_eigen, count, s, NOT_ORTHONORMAL
+        if deviation <= EXACT_ORTHONORMAL:
+            out[s, 0], out[s, 1], out[s, 2], out[s, 3] = quaternion_from_orthonormal(m[s])
+            continue
+        x[:, :] = m[s]
+        if deviation < NEWTON_SCHULZ_LIMIT and newton_schulz_orthonormalize(x, work):
+            out[s, 0], out[s, 1], out[s, 2], out[s, 3] = quaternion_from_orthonormal(x)
+        else:
+            needs_eigen[s] = True
+            count += 1
+    return out, needs_eigen, count, -1, OK
+
+
+def nearest_rotation_quaternions(m):
+    """
+    Quaternions of the rotations nearest (Frobenius norm) to matrices with det > 0.
+
+    The maximiser of ``trace(R(q)^T M)`` is the eigenvector of the largest
+    eigenvalue of Bar-Itzhack's symmetric matrix ``K(M)`` [3]_: the same
+    rotation as the orthogonal Procrustes (SVD) solution.
+
+    Parameters
+    ----------
+    m : ndarray, shape (n, 3, 3)
+        Finite matrices with positive determinant.
+
+    Returns
+    -------
+    ndarray, shape (n, 4)
+        Unit quaternions (x, y, z, w), canonical.
+    """
+    m00, m01, m02 = m[:, 0, 0], m[:, 0, 1], m[:, 0, 2]
+    m10, m11, m12 = m[:, 1, 0], m[:, 1, 1], m[:, 1, 2]
+    m20, m21, m22 = m[:, 2, 0], m[:, 2, 1], m[:, 2, 2]
+    k = np.empty(m.shape[:1] + (4, 4))
+    k[:, 0, 0] = m00 - m11 - m22
+    k[:, 1, 1] = m11 - m00 - m22
+    k[:, 2, 2] = m22 - m00 - m11
+    k[:, 3, 3] = m00 + m11 + m22
+    k[:, 0, 1] = k[:, 1, 0] = m01 + m10
+    k[:, 0, 2] = k[:, 2, 0] = m02 + m20
+    k[:, 1, 2] = k[:, 2, 1] = m12 + m21
+    k[:, 0, 3] = k[:, 3, 0] = m21 - m12
+    k[:, 1, 3] = k[:, 3, 1] = m02 - m20
+    k[:, 2, 3] = k[:, 3, 2] = m10 - m01
+    _, vectors = np.linalg.eigh(k)
+    q, _, _ = canonical_kernel(np.ascontiguousarray(vectors[:, :, 3]))
+    return q
+
+
+# ------------------------------------------------------------ public API
+
+def matrix_from_quaternion(q):
+    """
+    Rotation matrices of quaternions.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        Quaternions (x, y, z, w), scalar last, any non-zero norm (the rotation
+        of ``q / |q|``; norms from 1e-160 to 1e+160 are handled exactly).
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 3)
+        ``R`` mapping body coordinates to world coordinates (active rotation).
+
+    Raises
+    ------
+    ValueError
+        Wrong shape, a NaN/Inf component, or a zero quaternion.
+    """
+    fq, lead = flat_array(q, 'q', (4,))
+    out, bad, code = _matrix_from_quaternion_kernel(fq)
+    if bad >= 0:
+        raise_sample_error('q', bad, code, lead)
+    return out.reshape(lead + (3, 3))
+
+
+def flat_quaternions_from_matrices(matrix, name, orthonormal_tolerance, non_orthonormal):
+    """Validated ``(n, 4)`` quaternions of ``matrix`` and its leading shape (shared by all ``*_from_matrix``)."""
+    if non_orthonormal not in ('project', 'raise'):
+        raise ValueError(
+            f"Expected `non_orthonormal` to be 'project' or 'raise', got {non_orthonormal!r}.")
+    if not orthonormal_tolerance >= 0.0:
+        raise ValueError(
+            f'Expected `orthonormal_tolerance` >= 0, got {orthonormal_tolerance!r}.')
+    fm, lead = flat_array(matrix, name, (3, 3))
+    q, needs_eigen, count, bad, code = quaternion_from_matrix_kernel(
+        fm, float(orthonormal_tolerance), non_orthonormal == 'project')
+    if bad >= 0:
+        raise_sample_error(name, bad, code, lead)
+    if count:
+        q[needs_eigen] = nearest_rotation_quaternions(fm[needs_eigen])
+    return q, lead
+
+
+def quaternion_from_matrix(R, *, orthonormal_tolerance=DEFAULT_ORTHONORMAL_TOLERANCE,
+                           non_orthonormal='project'):
+    """
+    Quaternions of rotation matrices.
+
+    Parameters
+    ----------
+    R : array_like, shape (..., 3, 3)
+        Rotation matrices mapping body to world coordinates; ``det(R) > 0``.
+    orthonormal_tolerance : float, optional
+        Largest absolute element of ``R^T R - I`` accepted (default 1e-6, which
+        float32 round-off passes). Only used with ``non_orthonormal='raise'``.
+    non_orthonormal : {'project', 'raise'}, optional
+        What to do with a matrix beyond the tolerance: ``'project'`` (default)
+        uses the nearest rotation in the Frobenius norm (the SVD / orthogonal
+        Procrustes answer); ``'raise'`` raises ``ValueError``.
+
+    Notes
+    -----
+    The result is the quaternion of the rotation nearest to ``R``, to
+    rounding, for every accepted matrix: one that is orthonormal to within
+    1e-15 is used as it is (Markley's pivot); any other is first replaced by
+    its nearest rotation, by Newton-Schulz (Bjorck) iteration when it deviates
+    by less than 0.5, else by Bar-Itzhack's eigenvector method.
+
+    Returns
+    -------
+    ndarray, shape (..., 4)
+        Unit quaternions (x, y, z, w), canonical (``w >= 0``).
+
+    Raises
+    ------
+    ValueError
+        Wrong shape, NaN/Inf, ``det(R) <= 0`` (never a rotation), or a
+        non-orthonormal matrix with ``non_orthonormal='raise'``.
+
+    References
+    ----------
+    .. [1] F. L. Markley, "Unit Quaternion from Rotation Matrix", JGCD 31(2), 2008.
+    .. [2] I. Y. Bar-Itzhack, "New Method for Extracting the Quaternion from a
+       Rotation Matrix", JGCD 23(6), 2000.
+    """
+    q, lead = flat_quaternions_from_matrices(R, 'R', orthonormal_tolerance, non_orthonormal)
+    return q.reshape(lead + (4,))
+
+

@@ -1,0 +1,22 @@
+"""
+Exception types of rotation_node.
+
+Every error the package raises on bad input is a ``ValueError`` (or a subclass
+of it) whose message names the argument, key or file that was wrong.
+"""
+
+
+class RotationNodeError(Exception):
+    """Base class of the package's own errors."""
+
+
+class BagError(RotationNodeError, ValueError):
+    """An MCAP bag could not be read or written (corrupt, truncated, unknown type...)."""
+
+
+class SceneError(RotationNodeError, ValueError):
+    """A scene file is invalid: an unknown key, a missing field or a bad value."""
+
+
+class ParameterError(RotationNodeError, ValueError):
+    """A node parameter (or parameters file entry) has an invalid value."""

@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# The two commands of the README:
+#   ./run.sh main [ARGS...]   create .venv if missing, run the built-in demo job
+#   ./run.sh test [ARGS...]   create .venv if missing, run the whole test suite
+# Everything is installed from PyPI into .venv (override with ROTATION_NODE_VENV).
+set -euo pipefail
+cd "$(dirname "$0")"
+venv="${ROTATION_NODE_VENV:-$PWD/.venv}"
+
+ensure_env() {
+  local want have
+  want=$(cat requirements.txt setup.py setup.cfg | sha256sum | cut -d' ' -f1)
+  have=$(cat "$venv/.installed" 2>/dev/null || true)
+  if [ -x "$venv/bin/python" ] && [ "$want" = "$have" ]; then
+    return
+  fi
+  echo "run.sh: setting up $venv (first run only)" >&2
+  python3 -m venv "$venv"
+  "$venv/bin/python" -m pip install --quiet --upgrade pip
+  "$venv/bin/python" -m pip install --quiet -r requirements.txt
+  "$venv/bin/python" -m pip install --quiet --no-deps -e .
+  echo "$want" > "$venv/.installed"
+}
+
+cmd="${1:-}"
+shift || true
+case "$cmd" in
+  main)
+    ensure_env
+    exec "$venv/bin/python" -m rotation_node.demo "$@"
+    ;;
+  test)
+    ensure_env
+    exec "$venv/bin/python" -m pytest test "$@"
+    ;;
+  *)
+    echo "usage: ./run.sh main [ARGS...] | ./run.sh test [PYTEST ARGS...]" >&2
+    exit 2
+    ;;
+esac

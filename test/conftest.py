@@ -1,0 +1,27 @@
+"""
+Test-session set-up shared by all test modules.
+
+ROS isolation: every pytest run gets its own ``ROS_DOMAIN_ID`` (derived from the
+process id, within the range that is valid for localhost discovery) and
+``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, set in ``os.environ`` before any
+test starts so that subprocesses started by tests inherit them.
+"""
+import os
+import sys
+
+import pytest
+
+if 'ROTATION_NODE_TEST_DOMAIN_ID' not in os.environ:
+    os.environ['ROTATION_NODE_TEST_DOMAIN_ID'] = str(1 + os.getpid() % 100)
+os.environ['ROS_DOMAIN_ID'] = os.environ['ROTATION_NODE_TEST_DOMAIN_ID']
+os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+os.environ.setdefault('RCUTILS_COLORIZED_OUTPUT', '0')
+
+sys.path.insert(0, os.path.dirname(__file__))
+
+
+@pytest.fixture
+def rng():
+    """Seeded generator: every random test is reproducible."""
+    import numpy as np
+    return np.random.default_rng(20261121)
