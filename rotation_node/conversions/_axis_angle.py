@@ -17,10 +17,10 @@ import numpy as np
 
 from ._matrix import (DEFAULT_ORTHONORMAL_TOLERANCE, flat_quaternions_from_matrices,
                       matrix_from_unit_direction)
-from ._quaternion import (canonical_unit_quaternion, half_angle_atan2, jit, quaternion_defect,
-                          scaled_quaternion, vector_defect, vector_norm)
-from ._validation import (NON_FINITE, OK, ZERO_NORM, broadcast_flat, flat_array,
-                          raise_sample_error)
+from ._quaternion import (call_binary, call_unary, canonical_unit_quaternion, half_angle_atan2,
+                          jit, quaternion_status, scaled_quaternion, status, vector_norm,
+                          vector_status)
+from ._validation import NON_FINITE, ZERO_NORM
 
 
 @jit
@@ -63,92 +63,93 @@ def quaternion_from_axis_angle_scalar(ax, ay, az, angle):
 # ----------------------------------------------------------------- kernels
 
 @jit
-def _quaternion_from_axis_angle_kernel(axis, angle):
-    n = axis.shape[0]
-    out = np.empty((n, 4))
-    for s in range(n):
-        code = vector_defect(axis[s, 0], axis[s, 1], axis[s, 2])
-        if code != OK:
-            return out, s, code, 0
-        if axis[s, 0] == 0.0 and axis[s, 1] == 0.0 and axis[s, 2] == 0.0:
-            return out, s, ZERO_NORM, 0
-        if not math.isfinite(angle[s]):
-            return out, s, NON_FINITE, 1
-        out[s, 0], out[s, 1], out[s, 2], out[s, 3] = quaternion_from_axis_angle_scalar(
-            axis[s, 0], axis[s, 1], axis[s, 2], angle[s])
-    return out, -1, OK, 0
+def _axis_angle_status(fa, ft, s):
+    bad = vector_status(fa, s, 0)
+    if bad < 0 and fa[s, 0] == 0.0 and fa[s, 1] == 0.0 and fa[s, 2] == 0.0:
+        bad = status(s, 0, ZERO_NORM)
+    if bad < 0 and not math.isfinite(ft[s]):
+        bad = status(s, 1, NON_FINITE)
+    return bad
 
 
 @jit
-def _matrix_from_axis_angle_kernel(axis, angle):
-    q, bad, code, which = _quaternion_from_axis_angle_kernel(axis, angle)
-    out = np.empty((axis.shape[0], 3, 3))
-    if bad < 0:
-        for s in range(axis.shape[0]):
-            matrix_from_unit_direction(q[s, 0], q[s, 1], q[s, 2], q[s, 3], out[s])
-    return out, bad, code, which
+def _quaternion_from_axis_angle_kernel(axis, angle, out):
+    fa, ft, fo = axis.reshape(-1, 3), angle.reshape(-1), out.reshape(-1, 4)
+    for s in range(fa.shape[0]):
+        bad = _axis_angle_status(fa, ft, s)
+        if bad >= 0:
+            return bad
+        fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3] = quaternion_from_axis_angle_scalar(
+            fa[s, 0], fa[s, 1], fa[s, 2], ft[s])
+    return -1
 
 
 @jit
-def _axis_angle_from_quaternion_kernel(q):
-    n = q.shape[0]
-    axis = np.empty((n, 3))
-    angle = np.empty(n)
-    for s in range(n):
-        code = quaternion_defect(q[s, 0], q[s, 1], q[s, 2], q[s, 3])
-        if code != OK:
-            return axis, angle, s, code
-        axis[s, 0], axis[s, 1], axis[s, 2], angle[s] = axis_angle_from_quaternion_scalar(
-            q[s, 0], q[s, 1], q[s, 2], q[s, 3])
-    return axis, angle, -1, OK
+def _matrix_from_axis_angle_kernel(axis, angle, out):
+    fa, ft, fo = axis.reshape(-1, 3), angle.reshape(-1), out.reshape(-1, 3, 3)
+    for s in range(fa.shape[0]):
+        bad = _axis_angle_status(fa, ft, s)
+        if bad >= 0:
+            return bad
+        x, y, z, w = quaternion_from_axis_angle_scalar(fa[s, 0], fa[s, 1], fa[s, 2], ft[s])
+        matrix_from_unit_direction(x, y, z, w, fo[s])
+    return -1
 
 
 @jit
-def _quaternion_from_rotation_vector_kernel(v):
-    n = v.shape[0]
-    out = np.empty((n, 4))
-    for s in range(n):
-        code = vector_defect(v[s, 0], v[s, 1], v[s, 2])
-        if code != OK:
-            return out, s, code
-        out[s, 0], out[s, 1], out[s, 2], out[s, 3] = quaternion_from_rotation_vector_scalar(
-            v[s, 0], v[s, 1], v[s, 2])
-    return out, -1, OK
+def axis_angle_kernel(q, out):
+    """``(x, y, z, angle)`` of quaternions into ``out`` (..., 4); returns the status."""
+    fq, fo = q.reshape(-1, 4), out.reshape(-1, 4)
+    for s in range(fq.shape[0]):
+        bad = quaternion_status(fq, s, 0)
+        if bad >= 0:
+            return bad
+        fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3] = axis_angle_from_quaternion_scalar(
+            fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3])
+    return -1
 
 
 @jit
-def _matrix_from_rotation_vector_kernel(v):
-    n = v.shape[0]
-    out = np.empty((n, 3, 3))
-    for s in range(n):
-        code = vector_defect(v[s, 0], v[s, 1], v[s, 2])
-        if code != OK:
-            return out, s, code
-        x, y, z, w = quaternion_from_rotation_vector_scalar(v[s, 0], v[s, 1], v[s, 2])
-        matrix_from_unit_direction(x, y, z, w, out[s])
-    return out, -1, OK
+def _quaternion_from_rotation_vector_kernel(v, out):
+    fv, fo = v.reshape(-1, 3), out.reshape(-1, 4)
+    for s in range(fv.shape[0]):
+        bad = vector_status(fv, s, 0)
+        if bad >= 0:
+            return bad
+        fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3] = quaternion_from_rotation_vector_scalar(
+            fv[s, 0], fv[s, 1], fv[s, 2])
+    return -1
 
 
 @jit
-def _rotation_vector_from_quaternion_kernel(q):
-    n = q.shape[0]
-    out = np.empty((n, 3))
-    for s in range(n):
-        code = quaternion_defect(q[s, 0], q[s, 1], q[s, 2], q[s, 3])
-        if code != OK:
-            return out, s, code
-        out[s, 0], out[s, 1], out[s, 2] = rotation_vector_from_quaternion_scalar(
-            q[s, 0], q[s, 1], q[s, 2], q[s, 3])
-    return out, -1, OK
+def _matrix_from_rotation_vector_kernel(v, out):
+    fv, fo = v.reshape(-1, 3), out.reshape(-1, 3, 3)
+    for s in range(fv.shape[0]):
+        bad = vector_status(fv, s, 0)
+        if bad >= 0:
+            return bad
+        x, y, z, w = quaternion_from_rotation_vector_scalar(fv[s, 0], fv[s, 1], fv[s, 2])
+        matrix_from_unit_direction(x, y, z, w, fo[s])
+    return -1
+
+
+@jit
+def rotation_vector_kernel(q, out):
+    """Rotation vectors of quaternions into ``out`` (..., 3); returns the status."""
+    fq, fo = q.reshape(-1, 4), out.reshape(-1, 3)
+    for s in range(fq.shape[0]):
+        bad = quaternion_status(fq, s, 0)
+        if bad >= 0:
+            return bad
+        fo[s, 0], fo[s, 1], fo[s, 2] = rotation_vector_from_quaternion_scalar(
+            fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3])
+    return -1
 
 
 # ------------------------------------------------------------ public API
 
-def _flat_axis_angle(axis, angle):
-    fa, la = flat_array(axis, 'axis', (3,))
-    ft, lt = flat_array(angle, 'angle', ())
-    (fa, ft), lead = broadcast_flat((fa, ft), (la, lt))
-    return fa, ft, lead
+def _scalar(angle):
+    return angle[()] if angle.ndim == 0 else angle
 
 
 def quaternion_from_axis_angle(axis, angle):
@@ -172,11 +173,8 @@ def quaternion_from_axis_angle(axis, angle):
     ValueError
         Wrong shape, NaN/Inf, or a zero axis.
     """
-    fa, ft, lead = _flat_axis_angle(axis, angle)
-    out, bad, code, which = _quaternion_from_axis_angle_kernel(fa, ft)
-    if bad >= 0:
-        raise_sample_error(('axis', 'angle')[which], bad, code, lead)
-    return out.reshape(lead + (4,))
+    return call_binary(_quaternion_from_axis_angle_kernel, axis, angle,
+                       ('axis', 'angle'), ((3,), ()), (4,))
 
 
 def matrix_from_axis_angle(axis, angle):
@@ -195,11 +193,8 @@ def matrix_from_axis_angle(axis, angle):
     ndarray, shape (..., 3, 3)
         Body-to-world rotation matrices.
     """
-    fa, ft, lead = _flat_axis_angle(axis, angle)
-    out, bad, code, which = _matrix_from_axis_angle_kernel(fa, ft)
-    if bad >= 0:
-        raise_sample_error(('axis', 'angle')[which], bad, code, lead)
-    return out.reshape(lead + (3, 3))
+    return call_binary(_matrix_from_axis_angle_kernel, axis, angle,
+                       ('axis', 'angle'), ((3,), ()), (3, 3))
 
 
 def axis_angle_from_quaternion(q):
@@ -218,11 +213,8 @@ def axis_angle_from_quaternion(q):
     angle : ndarray, shape (...)
         Angles in [0, pi], ``2 atan2(|q_v|, |q_s|)``: ~1 ulp for every angle.
     """
-    fq, lead = flat_array(q, 'q', (4,))
-    axis, angle, bad, code = _axis_angle_from_quaternion_kernel(fq)
-    if bad >= 0:
-        raise_sample_error('q', bad, code, lead)
-    return axis.reshape(lead + (3,)), angle.reshape(lead)
+    packed = call_unary(axis_angle_kernel, q, 'q', (4,), (4,))
+    return packed[..., :3], _scalar(packed[..., 3])
 
 
 def axis_angle_from_matrix(R, *, orthonormal_tolerance=DEFAULT_ORTHONORMAL_TOLERANCE,
@@ -245,9 +237,10 @@ def axis_angle_from_matrix(R, *, orthonormal_tolerance=DEFAULT_ORTHONORMAL_TOLER
     angle : ndarray, shape (...)
         Angles in [0, pi].
     """
-    q, lead = flat_quaternions_from_matrices(R, 'R', orthonormal_tolerance, non_orthonormal)
-    axis, angle, _, _ = _axis_angle_from_quaternion_kernel(q)
-    return axis.reshape(lead + (3,)), angle.reshape(lead)
+    q, m = flat_quaternions_from_matrices(R, orthonormal_tolerance, non_orthonormal)
+    packed = np.empty(m.shape[:-2] + (4,))
+    axis_angle_kernel(q, packed)
+    return packed[..., :3], _scalar(packed[..., 3])
 
 
 def quaternion_from_rotation_vector(v):
@@ -265,11 +258,7 @@ def quaternion_from_rotation_vector(v):
         Unit quaternions (x, y, z, w), canonical; exact to ~1 ulp from
         ``|v| = 0`` (identity) up.
     """
-    fv, lead = flat_array(v, 'v', (3,))
-    out, bad, code = _quaternion_from_rotation_vector_kernel(fv)
-    if bad >= 0:
-        raise_sample_error('v', bad, code, lead)
-    return out.reshape(lead + (4,))
+    return call_unary(_quaternion_from_rotation_vector_kernel, v, 'v', (3,), (4,))
 
 
 def matrix_from_rotation_vector(v):
@@ -287,11 +276,7 @@ def matrix_from_rotation_vector(v):
         Body-to-world rotation matrices. Computed through the quaternion, so
         no ``(1 - cos t) / t^2`` cancellation.
     """
-    fv, lead = flat_array(v, 'v', (3,))
-    out, bad, code = _matrix_from_rotation_vector_kernel(fv)
-    if bad >= 0:
-        raise_sample_error('v', bad, code, lead)
-    return out.reshape(lead + (3, 3))
+    return call_unary(_matrix_from_rotation_vector_kernel, v, 'v', (3,), (3, 3))
 
 
 def rotation_vector_from_quaternion(q):
@@ -308,11 +293,7 @@ def rotation_vector_from_quaternion(q):
     ndarray, shape (..., 3)
         Rotation vectors with norm in [0, pi] (the shorter way round).
     """
-    fq, lead = flat_array(q, 'q', (4,))
-    out, bad, code = _rotation_vector_from_quaternion_kernel(fq)
-    if bad >= 0:
-        raise_sample_error('q', bad, code, lead)
-    return out.reshape(lead + (3,))
+    return call_unary(rotation_vector_kernel, q, 'q', (4,), (3,))
 
 
 def rotation_vector_from_matrix(R, *, orthonormal_tolerance=DEFAULT_ORTHONORMAL_TOLERANCE,
@@ -334,7 +315,7 @@ def rotation_vector_from_matrix(R, *, orthonormal_tolerance=DEFAULT_ORTHONORMAL_
         Rotation vectors with norm in [0, pi]; exact near pi, where ``acos``
         of the trace loses everything.
     """
-    q, lead = flat_quaternions_from_matrices(R, 'R', orthonormal_tolerance, non_orthonormal)
-    out, _, _ = _rotation_vector_from_quaternion_kernel(q)
-    return out.reshape(lead + (3,))
-
+    q, m = flat_quaternions_from_matrices(R, orthonormal_tolerance, non_orthonormal)
+    out = np.empty(m.shape[:-2] + (3,))
+    rotation_vector_kernel(q, out)
+    return out

@@ -27,8 +27,8 @@ import numpy as np
 
 from ._matrix import (DEFAULT_ORTHONORMAL_TOLERANCE, flat_quaternions_from_matrices,
                       matrix_from_unit_direction)
-from ._quaternion import jit, product, quaternion_defect, vector_defect
-from ._validation import OK, flat_array, parse_sequence, raise_sample_error
+from ._quaternion import call_unary, jit, product, quaternion_status, vector_status
+from ._validation import SEQUENCE_TABLE, parse_sequence
 
 _TWO_PI = 2.0 * math.pi
 _DEGREES_PER_RADIAN = 180.0 / math.pi
@@ -139,69 +139,72 @@ def singularity_margin_scalar(x, y, z, w, i, j, k, intrinsic):
 # ----------------------------------------------------------------- kernels
 
 @jit
-def _quaternion_from_euler_kernel(angles, i, j, k, intrinsic, scale):
-    n = angles.shape[0]
-    out = np.empty((n, 4))
-    for s in range(n):
-        code = vector_defect(angles[s, 0], angles[s, 1], angles[s, 2])
-        if code != OK:
-            return out, s, code
-        out[s, 0], out[s, 1], out[s, 2], out[s, 3] = quaternion_from_euler_scalar(
-            angles[s, 0] * scale, angles[s, 1] * scale, angles[s, 2] * scale, i, j, k, intrinsic)
-    return out, -1, OK
+def _quaternion_from_euler_kernel(angles, out, i, j, k, intrinsic, scale):
+    fa, fo = angles.reshape(-1, 3), out.reshape(-1, 4)
+    for s in range(fa.shape[0]):
+        bad = vector_status(fa, s, 0)
+        if bad >= 0:
+            return bad
+        fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3] = quaternion_from_euler_scalar(
+            fa[s, 0] * scale, fa[s, 1] * scale, fa[s, 2] * scale, i, j, k, intrinsic)
+    return -1
 
 
 @jit
-def _matrix_from_euler_kernel(angles, i, j, k, intrinsic, scale):
-    n = angles.shape[0]
-    out = np.empty((n, 3, 3))
-    for s in range(n):
-        code = vector_defect(angles[s, 0], angles[s, 1], angles[s, 2])
-        if code != OK:
-            return out, s, code
+def _matrix_from_euler_kernel(angles, out, i, j, k, intrinsic, scale):
+    fa, fo = angles.reshape(-1, 3), out.reshape(-1, 3, 3)
+    for s in range(fa.shape[0]):
+        bad = vector_status(fa, s, 0)
+        if bad >= 0:
+            return bad
         x, y, z, w = quaternion_from_euler_scalar(
-            angles[s, 0] * scale, angles[s, 1] * scale, angles[s, 2] * scale, i, j, k, intrinsic)
-        matrix_from_unit_direction(x, y, z, w, out[s])
-    return out, -1, OK
+            fa[s, 0] * scale, fa[s, 1] * scale, fa[s, 2] * scale, i, j, k, intrinsic)
+        matrix_from_unit_direction(x, y, z, w, fo[s])
+    return -1
 
 
 @jit
-def _euler_from_quaternion_kernel(q, i, j, k, intrinsic, scale):
-    n = q.shape[0]
-    out = np.empty((n, 3))
-    for s in range(n):
-        code = quaternion_defect(q[s, 0], q[s, 1], q[s, 2], q[s, 3])
-        if code != OK:
-            return out, s, code
-        a1, a2, a3 = euler_from_quaternion_scalar(q[s, 0], q[s, 1], q[s, 2], q[s, 3],
+def _euler_from_quaternion_kernel(q, out, i, j, k, intrinsic, scale):
+    fq, fo = q.reshape(-1, 4), out.reshape(-1, 3)
+    for s in range(fq.shape[0]):
+        bad = quaternion_status(fq, s, 0)
+        if bad >= 0:
+            return bad
+        a1, a2, a3 = euler_from_quaternion_scalar(fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3],
                                                   i, j, k, intrinsic)
-        out[s, 0], out[s, 1], out[s, 2] = a1 * scale, a2 * scale, a3 * scale
-    return out, -1, OK
+        fo[s, 0], fo[s, 1], fo[s, 2] = a1 * scale, a2 * scale, a3 * scale
+    return -1
 
 
 @jit
-def _singularity_margin_kernel(q, i, j, k, intrinsic):
-    n = q.shape[0]
-    out = np.empty(n)
-    for s in range(n):
-        code = quaternion_defect(q[s, 0], q[s, 1], q[s, 2], q[s, 3])
-        if code != OK:
-            return out, s, code
-        out[s] = singularity_margin_scalar(q[s, 0], q[s, 1], q[s, 2], q[s, 3], i, j, k, intrinsic)
-    return out, -1, OK
+def _singularity_margin_kernel(q, out, i, j, k, intrinsic):
+    fq, fo = q.reshape(-1, 4), out.reshape(-1)
+    for s in range(fq.shape[0]):
+        bad = quaternion_status(fq, s, 0)
+        if bad >= 0:
+            return bad
+        fo[s] = singularity_margin_scalar(fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3],
+                                          i, j, k, intrinsic)
+    return -1
 
 
 # ------------------------------------------------------------ public API
 
-def _from_angles(kernel, angles, seq, degrees, trailing):
-    spec = parse_sequence(seq)
-    fa, lead = flat_array(angles, 'angles', (3,))
-    i, j, k = spec.axes
-    out, bad, code = kernel(fa, i, j, k, spec.intrinsic,
-                            _RADIANS_PER_DEGREE if degrees else 1.0)
-    if bad >= 0:
-        raise_sample_error('angles', bad, code, lead)
-    return out.reshape(lead + trailing)
+_KERNEL_ARGUMENTS = {name: spec.axes + (spec.intrinsic,) for name, spec in SEQUENCE_TABLE.items()}
+
+
+def _sequence_arguments(seq):
+    """Kernel arguments ``(i, j, k, intrinsic)`` of ``seq``; ValueError if invalid."""
+    try:
+        return _KERNEL_ARGUMENTS[seq]
+    except (KeyError, TypeError):
+        parse_sequence(seq)  # raises the explanatory ValueError
+        raise
+
+
+def _from_angles(kernel, angles, seq, degrees, out_trailing):
+    return call_unary(kernel, angles, 'angles', (3,), out_trailing, *_sequence_arguments(seq),
+                      _RADIANS_PER_DEGREE if degrees else 1.0)
 
 
 def quaternion_from_euler(angles, seq, *, degrees=False):
@@ -255,15 +258,6 @@ def matrix_from_euler(angles, seq, *, degrees=False):
     return _from_angles(_matrix_from_euler_kernel, angles, seq, degrees, (3, 3))
 
 
-def _euler_from_flat_quaternions(fq, lead, spec, degrees, name):
-    i, j, k = spec.axes
-    out, bad, code = _euler_from_quaternion_kernel(
-        fq, i, j, k, spec.intrinsic, _DEGREES_PER_RADIAN if degrees else 1.0)
-    if bad >= 0:
-        raise_sample_error(name, bad, code, lead)
-    return out.reshape(lead + (3,))
-
-
 def euler_from_quaternion(q, seq, *, degrees=False):
     """
     Euler angles of quaternions.
@@ -295,9 +289,8 @@ def euler_from_quaternion(q, seq, *, degrees=False):
     ----------
     .. [1] E. Bernardes and S. Viollet, PLOS ONE 17(11), e0276302, 2022.
     """
-    spec = parse_sequence(seq)
-    fq, lead = flat_array(q, 'q', (4,))
-    return _euler_from_flat_quaternions(fq, lead, spec, degrees, 'q')
+    return call_unary(_euler_from_quaternion_kernel, q, 'q', (4,), (3,),
+                      *_sequence_arguments(seq), _DEGREES_PER_RADIAN if degrees else 1.0)
 
 
 def euler_from_matrix(R, seq, *, degrees=False,
@@ -324,9 +317,11 @@ def euler_from_matrix(R, seq, *, degrees=False,
         Angles as in :func:`euler_from_quaternion` (computed through the
         quaternion: no ``asin`` of a matrix element).
     """
-    spec = parse_sequence(seq)
-    fq, lead = flat_quaternions_from_matrices(R, 'R', orthonormal_tolerance, non_orthonormal)
-    return _euler_from_flat_quaternions(fq, lead, spec, degrees, 'R')
+    arguments = _sequence_arguments(seq)
+    q, m = flat_quaternions_from_matrices(R, orthonormal_tolerance, non_orthonormal)
+    out = np.empty(m.shape[:-2] + (3,))
+    _euler_from_quaternion_kernel(q, out, *arguments, _DEGREES_PER_RADIAN if degrees else 1.0)
+    return out
 
 
 def euler_singularity_margin(q, seq):
@@ -348,10 +343,4 @@ def euler_singularity_margin(q, seq):
         exact to an ulp even for tiny margins. Compare with a threshold to flag
         samples whose first and third angles are ill-conditioned.
     """
-    spec = parse_sequence(seq)
-    fq, lead = flat_array(q, 'q', (4,))
-    i, j, k = spec.axes
-    out, bad, code = _singularity_margin_kernel(fq, i, j, k, spec.intrinsic)
-    if bad >= 0:
-        raise_sample_error('q', bad, code, lead)
-    return out.reshape(lead)
+    return call_unary(_singularity_margin_kernel, q, 'q', (4,), (), *_sequence_arguments(seq))

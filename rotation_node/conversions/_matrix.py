@@ -7,9 +7,9 @@ is the seed's ``(2 q_s^2 - 1) I + 2 q_s [q_v]x + 2 q_v q_v^T``.
 Matrix to quaternion uses Markley's pivot (the largest of trace, R00, R11, R22
 selects the best-conditioned column of the symmetric 4x4 matrix), exact to an
 ulp or two everywhere, including rotations by pi, where the seed's trace
-formula returns NaN. A matrix that is not orthonormal beyond a tolerance is
-replaced by its nearest rotation (Frobenius norm), computed as the dominant
-eigenvector of Bar-Itzhack's symmetric 4x4 matrix.
+formula returns NaN. A matrix that is not orthonormal to rounding is replaced
+by its nearest rotation (Frobenius norm): by Newton-Schulz iteration when it is
+close, else as the dominant eigenvector of Bar-Itzhack's symmetric 4x4 matrix.
 
 References
 ----------
@@ -19,14 +19,16 @@ References
    Control 1(3), 1978.
 .. [3] I. Y. Bar-Itzhack, "New Method for Extracting the Quaternion from a
    Rotation Matrix", J. Guidance, Control, and Dynamics 23(6), 2000.
+.. [4] A. Bjorck and C. Bowie, "An Iterative Algorithm for Computing the Best
+   Estimate of an Orthogonal Matrix", SIAM J. Numer. Anal. 8(2), 1971.
 """
 import math
 
 import numpy as np
 
-from ._quaternion import (canonical_kernel, canonical_unit_quaternion, jit, quaternion_defect,
-                          scaled_quaternion)
-from ._validation import (NON_FINITE, NOT_ORTHONORMAL, NOT_ROTATION, OK, flat_array,
+from ._quaternion import (call_unary, canonical_kernel, canonical_unit_quaternion, jit,
+                          quaternion_status, scaled_quaternion, status)
+from ._validation import (NON_FINITE, NOT_ORTHONORMAL, NOT_ROTATION, OK, float_array,
                           raise_sample_error)
 
 DEFAULT_ORTHONORMAL_TOLERANCE = 1e-6
@@ -128,52 +130,49 @@ def quaternion_from_orthonormal(m):
 
 
 @jit
-def _matrix_from_quaternion_kernel(q):
-    n = q.shape[0]
-    out = np.empty((n, 3, 3))
-    for s in range(n):
-        code = quaternion_defect(q[s, 0], q[s, 1], q[s, 2], q[s, 3])
-        if code != OK:
-            return out, s, code
-        matrix_from_unit_direction(q[s, 0], q[s, 1], q[s, 2], q[s, 3], out[s])
-    return out, -1, OK
+def _matrix_from_quaternion_kernel(q, out):
+    fq, fo = q.reshape(-1, 4), out.reshape(-1, 3, 3)
+    for s in range(fq.shape[0]):
+        bad = quaternion_status(fq, s, 0)
+        if bad >= 0:
+            return bad
+        matrix_from_unit_direction(fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3], fo[s])
+    return -1
 
 
 @jit
-def quaternion_from_matrix_kernel(m, tolerance, project):
+def quaternion_from_matrix_kernel(m, out, tolerance, project):
     """
-    Quaternions of matrices; returns ``(q, needs_eigen, n_eigen, bad, code)``.
+    Quaternions of matrices (any leading shape) into ``out`` (n, 4).
 
-    A matrix deviating from orthonormality by more than ``tolerance`` is an
-    error unless ``project``. Every matrix deviating by more than rounding is
-    replaced by its nearest rotation: by Newton-Schulz iteration here, or,
-    when the deviation is too large for it to converge, flagged in
-    ``needs_eigen`` for the eigenvector method (its row of ``q`` is left for
-    the caller to fill in).
+    Returns the status of the first bad sample, or ``-1 - count`` where
+    ``count`` rows of ``out`` are NaN: matrices too far from orthonormal for
+    Newton-Schulz, left for the eigenvector method. A matrix deviating from
+    orthonormality by more than ``tolerance`` is an error unless ``project``;
+    every matrix deviating by more than rounding is replaced by its nearest
+    rotation before Markley's formula is applied.
     """
-    n = m.shape[0]
-    out = np.empty((n, 4))
-    needs_eigen = np.zeros(n, dtype=np.bool_)
+    fm = m.reshape(-1, 3, 3)
     count = 0
     x = np.empty((3, 3))
     work = np.empty((3, 3))
-    for s in range(n):
-        code = matrix_defect(m[s])
+    for s in range(fm.shape[0]):
+        code = matrix_defect(fm[s])
         if code != OK:
-            return out, needs_eigen, count, s, code
-        deviation = orthonormality_deviation(m[s])
+            return status(s, 0, code)
+        deviation = orthonormality_deviation(fm[s])
         if deviation > tolerance and not project:
-            return out, needs_eigen, count, s, NOT_ORTHONORMAL
+            return status(s, 0, NOT_ORTHONORMAL)
         if deviation <= EXACT_ORTHONORMAL:
-            out[s, 0], out[s, 1], out[s, 2], out[s, 3] = quaternion_from_orthonormal(m[s])
+            out[s, 0], out[s, 1], out[s, 2], out[s, 3] = quaternion_from_orthonormal(fm[s])
             continue
-        x[:, :] = m[s]
+        x[:, :] = fm[s]
         if deviation < NEWTON_SCHULZ_LIMIT and newton_schulz_orthonormalize(x, work):
             out[s, 0], out[s, 1], out[s, 2], out[s, 3] = quaternion_from_orthonormal(x)
         else:
-            needs_eigen[s] = True
+            out[s, :] = np.nan
             count += 1
-    return out, needs_eigen, count, -1, OK
+    return -1 - count
 
 
 def nearest_rotation_quaternions(m):
@@ -197,7 +196,7 @@ def nearest_rotation_quaternions(m):
     m00, m01, m02 = m[:, 0, 0], m[:, 0, 1], m[:, 0, 2]
     m10, m11, m12 = m[:, 1, 0], m[:, 1, 1], m[:, 1, 2]
     m20, m21, m22 = m[:, 2, 0], m[:, 2, 1], m[:, 2, 2]
-    k = np.empty(m.shape[:1] + (4, 4))
+    k = np.empty((m.shape[0], 4, 4))
     k[:, 0, 0] = m00 - m11 - m22
     k[:, 1, 1] = m11 - m00 - m22
     k[:, 2, 2] = m22 - m00 - m11
@@ -209,7 +208,8 @@ def nearest_rotation_quaternions(m):
     k[:, 1, 3] = k[:, 3, 1] = m02 - m20
     k[:, 2, 3] = k[:, 3, 2] = m10 - m01
     _, vectors = np.linalg.eigh(k)
-    q, _, _ = canonical_kernel(np.ascontiguousarray(vectors[:, :, 3]))
+    q = np.empty((m.shape[0], 4))
+    canonical_kernel(np.ascontiguousarray(vectors[:, :, 3]), q)
     return q
 
 
@@ -235,29 +235,31 @@ def matrix_from_quaternion(q):
     ValueError
         Wrong shape, a NaN/Inf component, or a zero quaternion.
     """
-    fq, lead = flat_array(q, 'q', (4,))
-    out, bad, code = _matrix_from_quaternion_kernel(fq)
-    if bad >= 0:
-        raise_sample_error('q', bad, code, lead)
-    return out.reshape(lead + (3, 3))
+    return call_unary(_matrix_from_quaternion_kernel, q, 'q', (4,), (3, 3))
 
 
-def flat_quaternions_from_matrices(matrix, name, orthonormal_tolerance, non_orthonormal):
-    """Validated ``(n, 4)`` quaternions of ``matrix`` and its leading shape (shared by all ``*_from_matrix``)."""
+def flat_quaternions_from_matrices(matrix, orthonormal_tolerance, non_orthonormal, name='R'):
+    """
+    Validated quaternions of ``matrix``, flat ``(n, 4)``, and the validated matrix array.
+
+    Shared by every ``*_from_matrix`` function.
+    """
     if non_orthonormal not in ('project', 'raise'):
         raise ValueError(
             f"Expected `non_orthonormal` to be 'project' or 'raise', got {non_orthonormal!r}.")
     if not orthonormal_tolerance >= 0.0:
         raise ValueError(
             f'Expected `orthonormal_tolerance` >= 0, got {orthonormal_tolerance!r}.')
-    fm, lead = flat_array(matrix, name, (3, 3))
-    q, needs_eigen, count, bad, code = quaternion_from_matrix_kernel(
-        fm, float(orthonormal_tolerance), non_orthonormal == 'project')
+    m = float_array(matrix, name, (3, 3))
+    q = np.empty((m.size // 9, 4))
+    bad = quaternion_from_matrix_kernel(m, q, float(orthonormal_tolerance),
+                                        non_orthonormal == 'project')
     if bad >= 0:
-        raise_sample_error(name, bad, code, lead)
-    if count:
-        q[needs_eigen] = nearest_rotation_quaternions(fm[needs_eigen])
-    return q, lead
+        raise_sample_error(bad, (name,), (m,), ((3, 3),))
+    if bad < -1:
+        rows = np.isnan(q[:, 3])
+        q[rows] = nearest_rotation_quaternions(m.reshape(-1, 3, 3)[rows])
+    return q, m
 
 
 def quaternion_from_matrix(R, *, orthonormal_tolerance=DEFAULT_ORTHONORMAL_TOLERANCE,
@@ -302,7 +304,7 @@ def quaternion_from_matrix(R, *, orthonormal_tolerance=DEFAULT_ORTHONORMAL_TOLER
     .. [2] I. Y. Bar-Itzhack, "New Method for Extracting the Quaternion from a
        Rotation Matrix", JGCD 23(6), 2000.
     """
-    q, lead = flat_quaternions_from_matrices(R, 'R', orthonormal_tolerance, non_orthonormal)
-    return q.reshape(lead + (4,))
+    q, m = flat_quaternions_from_matrices(R, orthonormal_tolerance, non_orthonormal)
+    return q.reshape(m.shape[:-2] + (4,))
 
 

@@ -16,7 +16,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ._validation import NON_FINITE, OK, ZERO_NORM, broadcast_flat, flat_array, raise_sample_error
+from ._validation import NON_FINITE, OK, ZERO_NORM, broadcast_pair, float_array, raise_sample_error
 
 jit = njit(cache=True, nogil=True, error_model='numpy')
 
@@ -103,101 +103,130 @@ def half_angle_atan2(vector_norm_value, scalar):
     return 2.0 * math.atan2(vector_norm_value, abs(scalar))
 
 
+@jit
+def status(sample, argument, code):
+    """Kernel status for a bad sample: ``(sample << 4) | (argument << 3) | code``."""
+    return (sample << 4) | (argument << 3) | code
+
+
+@jit
+def first_status(a, b):
+    """The first of two statuses that reports a bad sample (-1 if neither does)."""
+    return a if a >= 0 else b
+
+
+@jit
+def quaternion_status(fq, s, argument):
+    """Status of sample ``s`` of the flat quaternions ``fq`` (-1 when fine)."""
+    code = quaternion_defect(fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3])
+    return -1 if code == OK else status(s, argument, code)
+
+
+@jit
+def vector_status(fv, s, argument):
+    """Status of sample ``s`` of the flat 3-vectors ``fv`` (-1 when fine)."""
+    code = vector_defect(fv[s, 0], fv[s, 1], fv[s, 2])
+    return -1 if code == OK else status(s, argument, code)
+
+
 # ----------------------------------------------------------------- kernels
+# Kernels take validated C-contiguous arrays of any (common) leading shape and
+# a preallocated output, flatten them (free views), fill the output and return
+# the status of the first bad sample, or -1. Allocating in Python and returning
+# an int keeps a single-sample call near numba's dispatch floor.
 
 @jit
-def _product_kernel(p, q):
-    n = p.shape[0]
-    out = np.empty((n, 4))
-    for s in range(n):
-        code = quaternion_defect(p[s, 0], p[s, 1], p[s, 2], p[s, 3])
-        if code != OK:
-            return out, s, code, 0
-        code = quaternion_defect(q[s, 0], q[s, 1], q[s, 2], q[s, 3])
-        if code != OK:
-            return out, s, code, 1
-        out[s, 0], out[s, 1], out[s, 2], out[s, 3] = product(
-            p[s, 0], p[s, 1], p[s, 2], p[s, 3], q[s, 0], q[s, 1], q[s, 2], q[s, 3])
-    return out, -1, OK, 0
-
-
-@jit
-def _conjugate_kernel(q):
-    n = q.shape[0]
-    out = np.empty((n, 4))
-    for s in range(n):
-        code = quaternion_defect(q[s, 0], q[s, 1], q[s, 2], q[s, 3])
-        if code != OK:
-            return out, s, code
-        out[s, 0], out[s, 1], out[s, 2], out[s, 3] = -q[s, 0], -q[s, 1], -q[s, 2], q[s, 3]
-    return out, -1, OK
+def _product_kernel(p, q, out):
+    fp, fq, fo = p.reshape(-1, 4), q.reshape(-1, 4), out.reshape(-1, 4)
+    for s in range(fp.shape[0]):
+        bad = first_status(quaternion_status(fp, s, 0), quaternion_status(fq, s, 1))
+        if bad >= 0:
+            return bad
+        fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3] = product(
+            fp[s, 0], fp[s, 1], fp[s, 2], fp[s, 3], fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3])
+    return -1
 
 
 @jit
-def canonical_kernel(q):
-    n = q.shape[0]
-    out = np.empty((n, 4))
-    for s in range(n):
-        code = quaternion_defect(q[s, 0], q[s, 1], q[s, 2], q[s, 3])
-        if code != OK:
-            return out, s, code
-        out[s, 0], out[s, 1], out[s, 2], out[s, 3] = canonical_unit_quaternion(
-            q[s, 0], q[s, 1], q[s, 2], q[s, 3])
-    return out, -1, OK
+def _conjugate_kernel(q, out):
+    fq, fo = q.reshape(-1, 4), out.reshape(-1, 4)
+    for s in range(fq.shape[0]):
+        bad = quaternion_status(fq, s, 0)
+        if bad >= 0:
+            return bad
+        fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3] = -fq[s, 0], -fq[s, 1], -fq[s, 2], fq[s, 3]
+    return -1
 
 
 @jit
-def _distance_kernel(p, q):
-    n = p.shape[0]
-    out = np.empty(n)
-    for s in range(n):
-        code = quaternion_defect(p[s, 0], p[s, 1], p[s, 2], p[s, 3])
-        if code != OK:
-            return out, s, code, 0
-        code = quaternion_defect(q[s, 0], q[s, 1], q[s, 2], q[s, 3])
-        if code != OK:
-            return out, s, code, 1
-        px, py, pz, pw = scaled_quaternion(p[s, 0], p[s, 1], p[s, 2], p[s, 3])
-        qx, qy, qz, qw = scaled_quaternion(q[s, 0], q[s, 1], q[s, 2], q[s, 3])
+def canonical_kernel(q, out):
+    """Canonical unit quaternions of ``q`` into ``out``; returns the status."""
+    fq, fo = q.reshape(-1, 4), out.reshape(-1, 4)
+    for s in range(fq.shape[0]):
+        bad = quaternion_status(fq, s, 0)
+        if bad >= 0:
+            return bad
+        fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3] = canonical_unit_quaternion(
+            fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3])
+    return -1
+
+
+@jit
+def _distance_kernel(p, q, out):
+    fp, fq, fo = p.reshape(-1, 4), q.reshape(-1, 4), out.reshape(-1)
+    for s in range(fp.shape[0]):
+        bad = first_status(quaternion_status(fp, s, 0), quaternion_status(fq, s, 1))
+        if bad >= 0:
+            return bad
+        px, py, pz, pw = scaled_quaternion(fp[s, 0], fp[s, 1], fp[s, 2], fp[s, 3])
+        qx, qy, qz, qw = scaled_quaternion(fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3])
         ex, ey, ez, ew = product(-px, -py, -pz, pw, qx, qy, qz, qw)
-        out[s] = half_angle_atan2(vector_norm(ex, ey, ez), ew)
-    return out, -1, OK, 0
+        fo[s] = half_angle_atan2(vector_norm(ex, ey, ez), ew)
+    return -1
 
 
 @jit
-def _rotate_kernel(q, v):
-    n = q.shape[0]
-    out = np.empty((n, 3))
-    for s in range(n):
-        code = quaternion_defect(q[s, 0], q[s, 1], q[s, 2], q[s, 3])
-        if code != OK:
-            return out, s, code, 0
-        code = vector_defect(v[s, 0], v[s, 1], v[s, 2])
-        if code != OK:
-            return out, s, code, 1
-        x, y, z, w = canonical_unit_quaternion(q[s, 0], q[s, 1], q[s, 2], q[s, 3])
-        out[s, 0], out[s, 1], out[s, 2] = rotated_vector(x, y, z, w, v[s, 0], v[s, 1], v[s, 2])
-    return out, -1, OK, 0
+def _rotate_kernel(q, v, out):
+    fq, fv, fo = q.reshape(-1, 4), v.reshape(-1, 3), out.reshape(-1, 3)
+    for s in range(fq.shape[0]):
+        bad = first_status(quaternion_status(fq, s, 0), vector_status(fv, s, 1))
+        if bad >= 0:
+            return bad
+        x, y, z, w = canonical_unit_quaternion(fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3])
+        fo[s, 0], fo[s, 1], fo[s, 2] = rotated_vector(x, y, z, w, fv[s, 0], fv[s, 1], fv[s, 2])
+    return -1
 
 
 # ------------------------------------------------------------ public API
 
-def _binary(kernel, a, b, names, trailing_a, trailing_b, trailing_out):
-    fa, la = flat_array(a, names[0], trailing_a)
-    fb, lb = flat_array(b, names[1], trailing_b)
-    (fa, fb), lead = broadcast_flat((fa, fb), (la, lb))
-    out, bad, code, which = kernel(fa, fb)
-    if bad >= 0:
-        raise_sample_error(names[which], bad, code, lead)
-    return out.reshape(lead + trailing_out)
+def _result(out):
+    return out[()] if out.ndim == 0 else out
 
 
-def _unary_quaternion(kernel, q, name='q'):
-    fq, lead = flat_array(q, name, (4,))
-    out, bad, code = kernel(fq)
+def call_unary(kernel, x, name, trailing, out_trailing, *args):
+    """
+    Validate ``x``, run ``kernel(x, out, *args)``, raise for a bad sample.
+
+    ``out`` gets ``x``'s leading shape followed by ``out_trailing``; a 0-d
+    result is returned as a scalar.
+    """
+    a = float_array(x, name, trailing)
+    out = np.empty(a.shape[:a.ndim - len(trailing)] + out_trailing)
+    bad = kernel(a, out, *args)
     if bad >= 0:
-        raise_sample_error(name, bad, code, lead)
-    return out.reshape(lead + (4,))
+        raise_sample_error(bad, (name,), (a,), (trailing,))
+    return _result(out)
+
+
+def call_binary(kernel, x, y, names, trailings, out_trailing):
+    """Validate and broadcast ``x`` and ``y``, run ``kernel(x, y, out)``, raise for a bad sample."""
+    a, b = broadcast_pair(float_array(x, names[0], trailings[0]),
+                          float_array(y, names[1], trailings[1]), *trailings)
+    out = np.empty(a.shape[:a.ndim - len(trailings[0])] + out_trailing)
+    bad = kernel(a, b, out)
+    if bad >= 0:
+        raise_sample_error(bad, names, (a, b), trailings)
+    return _result(out)
 
 
 def quaternion_product(p, q):
@@ -221,7 +250,7 @@ def quaternion_product(p, q):
     ValueError
         Wrong shape, a NaN/Inf component, or a zero quaternion.
     """
-    return _binary(_product_kernel, p, q, ('p', 'q'), (4,), (4,), (4,))
+    return call_binary(_product_kernel, p, q, ('p', 'q'), ((4,), (4,)), (4,))
 
 
 def quaternion_conjugate(q):
@@ -238,7 +267,7 @@ def quaternion_conjugate(q):
     ndarray, shape (..., 4)
         The conjugates (same norm as ``q``).
     """
-    return _unary_quaternion(_conjugate_kernel, q)
+    return call_unary(_conjugate_kernel, q, 'q', (4,), (4,))
 
 
 def canonical_quaternion(q):
@@ -257,7 +286,7 @@ def canonical_quaternion(q):
         the first non-zero of x, y, z is positive. ``q`` and ``-q`` give the
         same result.
     """
-    return _unary_quaternion(canonical_kernel, q)
+    return call_unary(canonical_kernel, q, 'q', (4,), (4,))
 
 
 def quaternion_distance(p, q):
@@ -276,7 +305,7 @@ def quaternion_distance(p, q):
         rotation that takes ``p`` to ``q``. Accurate to ~1 ulp down to 0 (an
         ``acos`` form floors at ~1e-8). ``p`` and ``-p`` are the same rotation.
     """
-    return _binary(_distance_kernel, p, q, ('p', 'q'), (4,), (4,), ())
+    return call_binary(_distance_kernel, p, q, ('p', 'q'), ((4,), (4,)), ())
 
 
 def rotate_vector(q, v):
@@ -296,4 +325,4 @@ def rotate_vector(q, v):
         The rotated vectors. With ``q`` body-to-world, this maps body
         coordinates to world coordinates (e.g. ``w_world = R w_body``).
     """
-    return _binary(_rotate_kernel, q, v, ('q', 'v'), (4,), (3,), (3,))
+    return call_binary(_rotate_kernel, q, v, ('q', 'v'), ((4,), (3,)), (3,))

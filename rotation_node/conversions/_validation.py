@@ -2,11 +2,13 @@
 Argument checks at the public boundary of :mod:`rotation_node.conversions`.
 
 Public functions validate once, here: they turn array_like arguments into
-C-contiguous float64 arrays flattened to ``(n, *trailing)`` and remember the
-leading shape. Per-sample checks (finiteness, zero norm, determinant) run
+C-contiguous float64 arrays with the right trailing shape; the compiled kernels
+flatten them to ``(n, *trailing)`` and give the output the input's leading
+shape, so a single sample costs little more than one kernel call. Per-sample checks (finiteness, zero norm, determinant) run
 inside the compiled kernels, which report the first bad sample as
-``(flat_index, defect_code)``; :func:`raise_sample_error` turns that into a
-``ValueError`` that names the argument, the sample and what was wrong.
+a status ``(flat_index << 4) | (argument << 3) | defect`` (negative when every
+sample is fine); :func:`raise_sample_error` turns it into a ``ValueError``
+that names the argument, the sample and what was wrong.
 """
 from collections import namedtuple
 
@@ -29,9 +31,9 @@ _DEFECT_TEXT = {
 _SHAPE_TEXT = {(): '(...)', (3,): '(..., 3)', (4,): '(..., 4)', (3, 3): '(..., 3, 3)'}
 
 
-def flat_array(x, name, trailing):
+def float_array(x, name, trailing):
     """
-    Return ``x`` as a C-contiguous float64 array of shape ``(n, *trailing)``.
+    Return ``x`` as a C-contiguous float64 array whose shape ends in ``trailing``.
 
     Parameters
     ----------
@@ -44,10 +46,9 @@ def flat_array(x, name, trailing):
 
     Returns
     -------
-    flat : ndarray, shape (n, *trailing)
+    ndarray
         The values; a copy only where a conversion or reordering was needed.
-    lead : tuple of int
-        The leading shape of ``x`` (``x.shape`` without ``trailing``).
+        Kernels flatten it to ``(n, *trailing)`` themselves (a free view).
 
     Raises
     ------
@@ -61,50 +62,41 @@ def flat_array(x, name, trailing):
             f'Expected `{name}` to be an array of numbers with shape '
             f'{_SHAPE_TEXT[trailing]}, got {type(x).__name__}: {exc}') from None
     k = len(trailing)
-    if a.ndim < k or a.shape[a.ndim - k:] != trailing:
+    if a.shape[a.ndim - k:] != trailing or a.ndim < k:
         raise ValueError(
             f'Expected `{name}` to have shape {_SHAPE_TEXT[trailing]}, got {a.shape}.')
-    lead = a.shape[:a.ndim - k]
-    return np.ascontiguousarray(a).reshape((-1,) + trailing), lead
+    return a if a.flags.c_contiguous else np.ascontiguousarray(a)
 
 
-def broadcast_flat(args, lead_shapes):
+def broadcast_pair(a, b, trailing_a, trailing_b):
     """
-    Broadcast flattened arguments against each other's leading shapes.
-
-    Parameters
-    ----------
-    args : sequence of ndarray
-        Arrays from :func:`flat_array`, each ``(n_i, *trailing_i)``.
-    lead_shapes : sequence of tuple
-        Their leading shapes.
+    Broadcast two arrays from :func:`float_array` against each other's leading shapes.
 
     Returns
     -------
-    flats : list of ndarray
-        C-contiguous arrays with a common first dimension.
-    lead : tuple of int
-        The broadcast leading shape.
+    a, b : ndarray
+        C-contiguous, with a common leading shape (unchanged when it already was).
     """
-    if all(s == lead_shapes[0] for s in lead_shapes):
-        return list(args), lead_shapes[0]
+    lead_a = a.shape[:a.ndim - len(trailing_a)]
+    lead_b = b.shape[:b.ndim - len(trailing_b)]
+    if lead_a == lead_b:
+        return a, b
     try:
-        lead = np.broadcast_shapes(*lead_shapes)
+        lead = np.broadcast_shapes(lead_a, lead_b)
     except ValueError:
         raise ValueError(
-            'Leading shapes of the arguments do not broadcast: '
-            + ', '.join(str(s) for s in lead_shapes)) from None
-    out = []
-    for a, s in zip(args, lead_shapes):
-        full = np.broadcast_to(a.reshape(s + a.shape[1:]), lead + a.shape[1:])
-        out.append(np.ascontiguousarray(full).reshape((-1,) + a.shape[1:]))
-    return out, lead
+            f'Leading shapes of the arguments do not broadcast: {lead_a} and {lead_b}.') from None
+    return (np.ascontiguousarray(np.broadcast_to(a, lead + trailing_a)),
+            np.ascontiguousarray(np.broadcast_to(b, lead + trailing_b)))
 
 
-def raise_sample_error(name, flat_index, code, lead):
-    """Raise the ``ValueError`` for a bad sample reported by a kernel."""
+def raise_sample_error(status, names, arrays, trailings):
+    """Raise the ``ValueError`` for the bad sample that a kernel's ``status`` reports."""
+    flat_index, argument, code = status >> 4, (status >> 3) & 1, status & 7
+    array, trailing = arrays[argument], trailings[argument]
+    lead = array.shape[:array.ndim - len(trailing)]
     where = '' if lead == () else f' at index {tuple(int(i) for i in np.unravel_index(flat_index, lead))}'
-    raise ValueError(f'`{name}`{where} {_DEFECT_TEXT[code]}.')
+    raise ValueError(f'`{names[argument]}`{where} {_DEFECT_TEXT[code]}.')
 
 
 EulerSequence = namedtuple('EulerSequence', 'name axes intrinsic proper')
@@ -138,7 +130,8 @@ def _all_sequences():
     return table
 
 
-_SEQUENCES = _all_sequences()
+#: The 24 valid conventions by name.
+SEQUENCE_TABLE = _all_sequences()
 
 
 def parse_sequence(seq):
@@ -162,7 +155,7 @@ def parse_sequence(seq):
     ValueError
         If ``seq`` is not one of the 24 conventions; the message says why.
     """
-    parsed = _SEQUENCES.get(seq) if isinstance(seq, str) else None
+    parsed = SEQUENCE_TABLE.get(seq) if isinstance(seq, str) else None
     if parsed is not None:
         return parsed
     if not isinstance(seq, str):
