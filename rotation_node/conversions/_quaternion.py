@@ -40,16 +40,16 @@ def vector_defect(x, y, z):
 
 
 @jit
-def power_of_two_scale(m):
-    """Return ``2**-e`` with ``m * 2**-e`` in [0.5, 1): an exact rescaling factor."""
-    return math.ldexp(1.0, -math.frexp(m)[1])
+def binary_exponent(m):
+    """``e`` with ``m = f 2**e``, f in [0.5, 1): scaling by ``2**-e`` is exact."""
+    return math.frexp(m)[1]
 
 
 @jit
 def scaled_quaternion(x, y, z, w):
-    """Scale by a power of two so the largest component is in [0.5, 1) (exact)."""
-    s = power_of_two_scale(max(abs(x), abs(y), abs(z), abs(w)))
-    return x * s, y * s, z * s, w * s
+    """Scale by a power of two so the largest component is in [0.5, 1) (exact, subnormals too)."""
+    e = -binary_exponent(max(abs(x), abs(y), abs(z), abs(w)))
+    return math.ldexp(x, e), math.ldexp(y, e), math.ldexp(z, e), math.ldexp(w, e)
 
 
 @jit
@@ -58,9 +58,9 @@ def vector_norm(x, y, z):
     m = max(abs(x), abs(y), abs(z))
     if m == 0.0:
         return 0.0
-    s = power_of_two_scale(m)
-    x, y, z = x * s, y * s, z * s
-    return math.sqrt(x * x + y * y + z * z) / s
+    e = binary_exponent(m)
+    x, y, z = math.ldexp(x, -e), math.ldexp(y, -e), math.ldexp(z, -e)
+    return math.ldexp(math.sqrt(x * x + y * y + z * z), e)
 
 
 @jit

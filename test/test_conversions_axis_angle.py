@@ -1,0 +1,98 @@
+"""Tests of rotation_node.conversions._axis_angle: axis-angle and rotation vectors (exp / log maps)."""
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+from scipy.spatial.transform import Rotation
+
+import mp_reference as mpr
+from rotation_node import conversions as rc
+from rotation_node.hard_cases import hard_matrices, hard_quaternions, hard_rotation_vectors
+
+BOUND = 8  # eps, geodesic error of one conversion (issue 2)
+ROUND_TRIP = 16
+
+
+def _max_error(got_quaternions, truths):
+    return max(mpr.error_in_eps(g, t) for g, t in zip(got_quaternions, truths))
+
+
+def test_quaternion_from_rotation_vector_hard_cases(rng):
+    v = hard_rotation_vectors(rng, 200)
+    got = rc.quaternion_from_rotation_vector(v)
+    assert _max_error(got, [mpr.quaternion_from_rotation_vector(x) for x in v]) <= BOUND
+    assert np.all(got[:, 3] >= 0)
+
+
+def test_rotation_vector_from_quaternion_hard_cases(rng):
+    q = hard_quaternions(rng, 200)
+    v = rc.rotation_vector_from_quaternion(q)
+    assert np.all(np.linalg.norm(v, axis=1) <= np.pi * (1 + 2 * mpr.EPS))
+    errors = [mpr.error_in_eps(mpr.quaternion_from_rotation_vector(x), mpr.mpf_vector(t))
+              for x, t in zip(v, q)]
+    assert max(errors) <= BOUND
+
+
+def test_rotation_vector_of_tiny_rotation_is_exact():
+    theta = 1e-300
+    v = rc.rotation_vector_from_quaternion([np.sin(theta / 2), 0, 0, np.cos(theta / 2)])
+    assert v[0] == pytest.approx(theta, rel=2 * mpr.EPS)
+
+
+def test_axis_angle_from_quaternion_hard_cases(rng):
+    q = hard_quaternions(rng, 200)
+    axis, angle = rc.axis_angle_from_quaternion(q)
+    assert np.all((angle >= 0) & (angle <= np.pi))
+    assert np.allclose(np.linalg.norm(axis, axis=1), 1.0, atol=4e-16)
+    errors = [mpr.error_in_eps(mpr.quaternion_from_axis_angle(a, t), mpr.mpf_vector(x))
+              for a, t, x in zip(axis, angle, q)]
+    assert max(errors) <= BOUND
+
+
+def test_axis_angle_of_identity_is_x_axis_zero():
+    axis, angle = rc.axis_angle_from_quaternion([0, 0, 0, 3.0])
+    assert np.array_equal(axis, [1, 0, 0]) and angle == 0.0
+
+
+def test_quaternion_from_axis_angle_hard_cases(rng):
+    axis = rng.normal(size=(200, 3)) * 10.0 ** rng.uniform(-100, 100, (200, 1))
+    angle = np.concatenate([hard_rotation_vectors(rng, 100)[:, 0], rng.uniform(-10, 10, 100)])
+    got = rc.quaternion_from_axis_angle(axis, angle)
+    assert _max_error(got, [mpr.quaternion_from_axis_angle(a, t) for a, t in zip(axis, angle)]) <= BOUND
+
+
+def test_axis_angle_broadcasts_scalar_angle():
+    q = rc.quaternion_from_axis_angle([[1, 0, 0], [0, 2, 0]], np.pi / 2)
+    assert q.shape == (2, 4)
+    assert np.allclose(q[1], [0, np.sqrt(0.5), 0, np.sqrt(0.5)])
+
+
+def test_matrix_forms_match_scipy(rng):
+    v = rng.normal(size=(50, 3))
+    assert np.allclose(rc.matrix_from_rotation_vector(v), Rotation.from_rotvec(v).as_matrix(), atol=1e-15)
+    axis, angle = v, np.linalg.norm(v, axis=1)
+    assert np.allclose(rc.matrix_from_axis_angle(axis, angle),
+                       Rotation.from_rotvec(v).as_matrix(), atol=1e-15)
+    m = Rotation.from_rotvec(v).as_matrix()
+    assert np.allclose(rc.rotation_vector_from_matrix(m),
+                       Rotation.from_matrix(m).as_rotvec(), atol=1e-14)
+    a2, t2 = rc.axis_angle_from_matrix(m)
+    assert np.allclose(a2 * t2[:, None], Rotation.from_matrix(m).as_rotvec(), atol=1e-14)
+
+
+def test_rotation_vector_from_matrix_near_pi(rng):
+    m = hard_matrices(rng, 100)
+    v = rc.rotation_vector_from_matrix(m)
+    errors = [mpr.error_in_eps(mpr.quaternion_from_rotation_vector(x), mpr.nearest_rotation_quaternion(r))
+              for x, r in zip(v, m)]
+    assert max(errors) <= BOUND
+
+
+@settings(max_examples=300, deadline=None)
+@given(v=arrays(np.float64, 3, elements=st.floats(-3.0, 3.0)))
+def test_exp_log_round_trip(v):
+    if np.linalg.norm(v) >= np.pi:
+        v = v * (3.0 / np.linalg.norm(v))
+    back = rc.rotation_vector_from_quaternion(rc.quaternion_from_rotation_vector(v))
+    assert np.allclose(back, v, rtol=ROUND_TRIP * mpr.EPS, atol=ROUND_TRIP * mpr.EPS * np.pi)

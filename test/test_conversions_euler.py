@@ -1,0 +1,224 @@
+"""Tests of rotation_node.conversions._euler: all 24 conventions, gimbal lock, singularity margin."""
+import numpy as np
+import pytest
+import transforms3d
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+from scipy.spatial.transform import Rotation
+
+import mp_reference as mpr
+from rotation_node import conversions as rc
+from rotation_node.hard_cases import hard_quaternions, near_gimbal_lock_angles
+
+BOUND = 8
+ROUND_TRIP = 16
+SEQUENCES = rc.SEQUENCES
+
+
+def _regular_angles(rng, n, seq):
+    """Angles away from gimbal lock, inside each convention's ranges."""
+    a = rng.uniform(-np.pi, np.pi, (n, 3))
+    if rc.parse_sequence(seq).proper:
+        a[:, 1] = rng.uniform(0.1, np.pi - 0.1, n)
+    else:
+        a[:, 1] = rng.uniform(-np.pi / 2 + 0.1, np.pi / 2 - 0.1, n)
+    return a
+
+
+def test_there_are_24_conventions():
+    assert len(set(SEQUENCES)) == 24
+    assert all(rc.parse_sequence(s).name == s for s in SEQUENCES)
+
+
+@pytest.mark.parametrize('seq', SEQUENCES)
+def test_quaternion_from_euler_matches_scipy(rng, seq):
+    a = rng.uniform(-4, 4, (50, 3))
+    expected = rc.canonical_quaternion(Rotation.from_euler(seq, a).as_quat())
+    assert np.allclose(rc.quaternion_from_euler(a, seq), expected, atol=1e-15)
+
+
+@pytest.mark.parametrize('seq', SEQUENCES)
+def test_euler_from_quaternion_matches_scipy_away_from_gimbal_lock(rng, seq):
+    a = _regular_angles(rng, 50, seq)
+    q = Rotation.from_euler(seq, a).as_quat()
+    got = rc.euler_from_quaternion(q, seq)
+    assert np.allclose(got, Rotation.from_quat(q).as_euler(seq), atol=1e-13)
+    assert np.allclose(got, a, atol=1e-13)
+
+
+@pytest.mark.parametrize('seq', ['sxyz', 'szyx', 'rzyx', 'rxyz', 'szxz', 'rzxz', 'syzy', 'rxzx'])
+def test_matrix_from_euler_matches_transforms3d(rng, seq):
+    # transforms3d: 's' = static (extrinsic), 'r' = rotating (intrinsic).
+    ours = seq[1:] if seq[0] == 's' else seq[1:].upper()
+    a = rng.uniform(-3, 3, 3)
+    assert np.allclose(rc.matrix_from_euler(a, ours), transforms3d.euler.euler2mat(*a, axes=seq),
+                       atol=1e-15)
+
+
+def test_seed_zxz_matrix():
+    """The seed's R_WB = R_Z(phi) R_X(theta) R_Z(psi), with its R_Z written out."""
+    phi, theta, psi = 0.3, 1.1, -2.0
+
+    def r_z(t):
+        return np.array([[np.cos(t), -np.sin(t), 0], [np.sin(t), np.cos(t), 0], [0, 0, 1]])
+
+    def r_x(t):
+        return np.array([[1, 0, 0], [0, np.cos(t), -np.sin(t)], [0, np.sin(t), np.cos(t)]])
+
+    expected = r_z(phi) @ r_x(theta) @ r_z(psi)
+    assert np.allclose(rc.matrix_from_euler([phi, theta, psi], 'ZXZ'), expected, atol=1e-15)
+
+
+def test_ros_roll_pitch_yaw_conventions():
+    roll, pitch, yaw = 0.1, -0.2, 2.5
+    q_rpy = rc.quaternion_from_euler([roll, pitch, yaw], 'xyz')
+    q_ypr = rc.quaternion_from_euler([yaw, pitch, roll], 'ZYX')
+    assert np.allclose(q_rpy, q_ypr, atol=1e-16)
+    # tf2's setRPY: R = Rz(yaw) Ry(pitch) Rx(roll)
+    expected = (Rotation.from_rotvec([0, 0, yaw]) * Rotation.from_rotvec([0, pitch, 0])
+                * Rotation.from_rotvec([roll, 0, 0])).as_matrix()
+    assert np.allclose(rc.matrix_from_quaternion(q_rpy), expected, atol=1e-15)
+
+
+@pytest.mark.parametrize('seq', SEQUENCES)
+def test_output_ranges(rng, seq):
+    angles = rc.euler_from_quaternion(rng.normal(size=(500, 4)), seq)
+    assert np.all((angles[:, [0, 2]] > -np.pi) & (angles[:, [0, 2]] <= np.pi))
+    if rc.parse_sequence(seq).proper:
+        assert np.all((angles[:, 1] >= 0) & (angles[:, 1] <= np.pi))
+    else:
+        assert np.all(np.abs(angles[:, 1]) <= np.pi / 2)
+
+
+@pytest.mark.parametrize('seq', SEQUENCES)
+def test_quaternion_from_euler_near_gimbal_lock_against_mpmath(rng, seq):
+    a = near_gimbal_lock_angles(rng, 48, seq)
+    got = rc.quaternion_from_euler(a, seq)
+    errors = [mpr.error_in_eps(g, mpr.quaternion_from_euler(x, seq)) for g, x in zip(got, a)]
+    assert max(errors) <= BOUND
+
+
+@pytest.mark.parametrize('seq', SEQUENCES)
+def test_euler_from_quaternion_near_gimbal_lock_against_mpmath(rng, seq):
+    truth = [mpr.quaternion_from_euler(x, seq) for x in near_gimbal_lock_angles(rng, 48, seq)]
+    q = np.array([[float(c) for c in t] for t in truth])
+    angles = rc.euler_from_quaternion(q, seq)
+    errors = [mpr.error_in_eps(mpr.quaternion_from_euler(a, seq), mpr.mpf_vector(x))
+              for a, x in zip(angles, q)]
+    assert max(errors) <= BOUND
+
+
+@pytest.mark.parametrize('seq', SEQUENCES)
+def test_round_trip_near_gimbal_lock(rng, seq):
+    q = rc.quaternion_from_euler(near_gimbal_lock_angles(rng, 200, seq), seq)
+    back = rc.quaternion_from_euler(rc.euler_from_quaternion(q, seq), seq)
+    assert rc.quaternion_distance(q, back).max() <= ROUND_TRIP * mpr.EPS
+
+
+@pytest.mark.parametrize('seq', SEQUENCES)
+def test_round_trip_hard_quaternions(rng, seq):
+    q = hard_quaternions(rng, 200)
+    back = rc.quaternion_from_euler(rc.euler_from_quaternion(q, seq), seq)
+    assert rc.quaternion_distance(q, back).max() <= ROUND_TRIP * mpr.EPS
+
+
+def _exactly_locked_quaternion(seq, first_angle):
+    """
+    A quaternion whose middle angle is exactly singular for ``seq``.
+
+    ``e_first (x) J`` with ``J`` the rotation by pi/2 (Tait-Bryan) or pi (proper)
+    about the middle axis, written with components 0 and 1 (any norm is a
+    rotation), so every component of the product is exact.
+    """
+    spec = rc.parse_sequence(seq)
+    i, j = spec.axes[0], spec.axes[1]
+    lock = np.zeros(4)
+    lock[j] = 1.0
+    lock[3] = 0.0 if spec.proper else 1.0
+    first = np.zeros(4)
+    first[i], first[3] = np.sin(first_angle / 2), np.cos(first_angle / 2)
+    return rc.quaternion_product(first, lock) if spec.intrinsic else rc.quaternion_product(lock, first)
+
+
+@pytest.mark.parametrize('seq', SEQUENCES)
+@pytest.mark.parametrize('first_angle', [0.0, 0.7, -2.9])
+def test_exact_gimbal_lock_sets_third_angle_to_zero(seq, first_angle):
+    q = _exactly_locked_quaternion(seq, first_angle)
+    assert rc.euler_singularity_margin(q, seq) == 0.0
+    angles = rc.euler_from_quaternion(q, seq)
+    assert angles[2] == 0.0
+    singular = np.pi if rc.parse_sequence(seq).proper else np.pi / 2
+    assert abs(angles[1]) == pytest.approx(singular, abs=4 * mpr.EPS)
+    back = rc.quaternion_from_euler(angles, seq)
+    assert rc.quaternion_distance(q, back) <= ROUND_TRIP * mpr.EPS
+
+
+@pytest.mark.parametrize('seq', ['xyz', 'ZYX', 'zxz', 'YXY'])
+def test_exact_gimbal_lock_from_a_matrix(seq):
+    # A matrix at exact lock: rotate 90 deg about the middle axis (Tait-Bryan) or identity-like (proper).
+    middle = 'xyz'.index(seq[1].lower())
+    m = np.zeros((3, 3))
+    m[middle, middle] = 1.0
+    a, b = [i for i in range(3) if i != middle]
+    m[a, b], m[b, a] = -1.0, 1.0
+    if rc.parse_sequence(seq).proper:
+        m = np.eye(3)
+    angles = rc.euler_from_matrix(m, seq)
+    assert np.isfinite(angles).all()
+    back = rc.matrix_from_euler(angles, seq)
+    assert np.allclose(back, m, atol=4e-16)
+
+
+@pytest.mark.parametrize('seq', SEQUENCES)
+def test_singularity_margin_is_distance_to_singular_middle_angle(rng, seq):
+    a = near_gimbal_lock_angles(rng, 100, seq)
+    truth = [mpr.quaternion_from_euler(x, seq) for x in a]
+    q = np.array([[float(c) for c in t] for t in truth])
+    margin = rc.euler_singularity_margin(q, seq)
+    if rc.parse_sequence(seq).proper:
+        expected = np.minimum(a[:, 1], np.pi - a[:, 1])
+    else:
+        expected = np.pi / 2 - np.abs(a[:, 1])
+    # The angles were rounded to float64 before and after; compare to that precision.
+    assert np.allclose(margin, expected, rtol=1e-6, atol=8 * mpr.EPS)
+    assert np.all((margin >= 0) & (margin <= np.pi / 2))
+
+
+def test_singularity_margin_regular_orientation():
+    q = rc.quaternion_from_euler([0.1, 0.5, 0.2], 'xyz')
+    assert rc.euler_singularity_margin(q, 'xyz') == pytest.approx(np.pi / 2 - 0.5, rel=1e-15)
+
+
+@pytest.mark.parametrize('seq', ['xyz', 'ZXZ'])
+def test_degrees(rng, seq):
+    a = _regular_angles(rng, 10, seq)
+    q = rc.quaternion_from_euler(np.rad2deg(a), seq, degrees=True)
+    assert np.allclose(q, rc.quaternion_from_euler(a, seq), atol=1e-15)
+    assert np.allclose(rc.euler_from_quaternion(q, seq, degrees=True), np.rad2deg(a), atol=1e-12)
+    assert np.allclose(rc.euler_from_matrix(rc.matrix_from_quaternion(q), seq, degrees=True),
+                       np.rad2deg(a), atol=1e-12)
+
+
+@pytest.mark.parametrize('seq', SEQUENCES)
+def test_euler_from_matrix_equals_quaternion_path(rng, seq):
+    q = hard_quaternions(rng, 100)
+    m = rc.matrix_from_quaternion(q)
+    via_matrix = rc.quaternion_from_euler(rc.euler_from_matrix(m, seq), seq)
+    assert rc.quaternion_distance(via_matrix, q).max() <= ROUND_TRIP * mpr.EPS
+
+
+def test_leading_dimensions_are_kept(rng):
+    q = rng.normal(size=(2, 3, 5, 4))
+    angles = rc.euler_from_quaternion(q, 'zyx')
+    assert angles.shape == (2, 3, 5, 3)
+    assert np.array_equal(angles[1, 2, 3], rc.euler_from_quaternion(q[1, 2, 3], 'zyx'))
+    assert rc.euler_singularity_margin(q, 'zyx').shape == (2, 3, 5)
+
+
+@settings(max_examples=150, deadline=None)
+@given(q=arrays(np.float64, 4, elements=st.floats(-1, 1)).filter(lambda q: np.abs(q).max() > 1e-6),
+       seq=st.sampled_from(SEQUENCES))
+def test_round_trip_property(q, seq):
+    back = rc.quaternion_from_euler(rc.euler_from_quaternion(q, seq), seq)
+    assert rc.quaternion_distance(q, back) <= ROUND_TRIP * mpr.EPS

@@ -1,0 +1,95 @@
+"""Tests of rotation_node.conversions._matrix: quaternion <-> rotation matrix, nearest rotation."""
+import numpy as np
+import pytest
+import transforms3d
+from scipy.spatial.transform import Rotation
+
+import mp_reference as mpr
+from rotation_node import conversions as rc
+from rotation_node.hard_cases import diagonal_rotations, hard_matrices, hard_quaternions, noisy_matrices
+
+BOUND = 8
+ROUND_TRIP = 16
+
+
+def test_matrix_from_quaternion_matches_scipy_and_transforms3d(rng):
+    q = rng.normal(size=(50, 4))
+    m = rc.matrix_from_quaternion(q)
+    assert np.allclose(m, Rotation.from_quat(q).as_matrix(), atol=1e-15)
+    assert np.allclose(m[0], transforms3d.quaternions.quat2mat(np.roll(q[0], 1)), atol=1e-15)
+
+
+def test_matrix_from_quaternion_hard_cases(rng):
+    q = hard_quaternions(rng, 200)
+    m = rc.matrix_from_quaternion(q)
+    assert np.abs(np.einsum('nji,njk->nik', m, m) - np.eye(3)).max() <= 8 * mpr.EPS
+    errors = [mpr.error_in_eps(mpr.nearest_rotation_quaternion(r), t) for r, t in zip(m, q)]
+    assert max(errors) <= BOUND
+
+
+def test_quaternion_from_matrix_hard_cases(rng):
+    m = hard_matrices(rng, 200)
+    q = rc.quaternion_from_matrix(m)
+    assert np.all(q[:, 3] >= 0)
+    errors = [mpr.error_in_eps(x, mpr.nearest_rotation_quaternion(r)) for x, r in zip(q, m)]
+    assert max(errors) <= BOUND
+
+
+@pytest.mark.parametrize('index', range(3))
+def test_rotation_by_pi_about_coordinate_axis(index):
+    q = rc.quaternion_from_matrix(diagonal_rotations()[index])
+    expected = np.zeros(4)
+    expected[index] = 1.0
+    assert np.array_equal(q, expected)
+
+
+def test_round_trip_quaternion_matrix_quaternion(rng):
+    q = hard_quaternions(rng, 300)
+    back = rc.quaternion_from_matrix(rc.matrix_from_quaternion(q))
+    assert rc.quaternion_distance(q, back).max() <= ROUND_TRIP * mpr.EPS
+
+
+@pytest.mark.parametrize('sigma', [1e-16, 1e-13, 1e-10, 1e-7, 1e-4, 1e-2, 1e-1])
+def test_noisy_matrix_gives_nearest_rotation(rng, sigma):
+    noisy, _ = noisy_matrices(rng, 40, sigma)
+    q = rc.quaternion_from_matrix(noisy)
+    errors = [mpr.error_in_eps(x, mpr.nearest_rotation_quaternion(r)) for x, r in zip(q, noisy)]
+    assert max(errors) <= BOUND
+
+
+def test_nearest_rotation_agrees_with_svd(rng):
+    noisy, _ = noisy_matrices(rng, 80, 0.3)
+    noisy = noisy[np.linalg.det(noisy) > 0]
+    u, _, vt = np.linalg.svd(noisy)
+    d = np.sign(np.linalg.det(u @ vt))
+    u[:, :, 2] *= d[:, None]
+    nearest = u @ vt
+    assert np.allclose(rc.matrix_from_quaternion(rc.quaternion_from_matrix(noisy)), nearest, atol=1e-13)
+
+
+def test_scaled_rotation_projects_to_rotation(rng):
+    r = rc.matrix_from_quaternion(rng.normal(size=4))
+    assert rc.quaternion_distance(rc.quaternion_from_matrix(2.0 * r),
+                                  rc.quaternion_from_matrix(r)) <= 4 * mpr.EPS
+
+
+def test_det_not_positive_is_rejected():
+    with pytest.raises(ValueError, match=r'`R` at index \(1,\) has det <= 0'):
+        rc.quaternion_from_matrix([np.eye(3), np.diag([1.0, 1, -1])])
+    with pytest.raises(ValueError, match='det <= 0'):
+        rc.quaternion_from_matrix(np.zeros((3, 3)))
+
+
+def test_non_orthonormal_raise_mode():
+    m = np.eye(3)
+    m[0, 1] = 1e-3
+    with pytest.raises(ValueError, match='orthonormal'):
+        rc.quaternion_from_matrix(m, non_orthonormal='raise')
+    assert np.allclose(rc.quaternion_from_matrix(m, non_orthonormal='raise',
+                                                 orthonormal_tolerance=1e-2)[3], 1.0, atol=1e-6)
+
+
+def test_float32_roundoff_passes_default_tolerance_in_raise_mode(rng):
+    m = rc.matrix_from_quaternion(rng.normal(size=(20, 4))).astype(np.float32)
+    q = rc.quaternion_from_matrix(m, non_orthonormal='raise')
+    assert q.shape == (20, 4)

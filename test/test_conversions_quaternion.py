@@ -1,0 +1,98 @@
+"""Tests of rotation_node.conversions._quaternion: product, conjugate, canonical form, distance, rotation."""
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+from scipy.spatial.transform import Rotation
+
+import mp_reference as mpr
+from rotation_node import conversions as rc
+from rotation_node.hard_cases import hard_quaternions
+
+finite = st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False)
+nonzero_quaternions = arrays(np.float64, 4, elements=finite).filter(
+    lambda q: np.linalg.norm(q) > 1e-3)
+
+
+def test_product_matches_scipy_composition(rng):
+    p, q = rng.normal(size=(2, 50, 4))
+    expected = (Rotation.from_quat(p) * Rotation.from_quat(q)).as_quat()
+    got = rc.canonical_quaternion(rc.quaternion_product(p, q))
+    assert np.allclose(got, rc.canonical_quaternion(expected), atol=1e-15)
+
+
+def test_product_is_hamilton_ijk():
+    i, j, k = np.eye(4)[:3]
+    assert np.array_equal(rc.quaternion_product(i, j), k)
+    assert np.array_equal(rc.quaternion_product(j, i), -k)
+    assert np.array_equal(rc.quaternion_product(i, i), [0, 0, 0, -1])
+
+
+def test_product_broadcasts_leading_dimensions(rng):
+    p = rng.normal(size=(5, 1, 4))
+    q = rng.normal(size=(3, 4))
+    out = rc.quaternion_product(p, q)
+    assert out.shape == (5, 3, 4)
+    assert np.allclose(out[2, 1], rc.quaternion_product(p[2, 0], q[1]))
+
+
+def test_conjugate_is_inverse(rng):
+    q = rc.canonical_quaternion(rng.normal(size=(20, 4)))
+    identity = rc.quaternion_product(q, rc.quaternion_conjugate(q))
+    assert np.allclose(identity, [0, 0, 0, 1], atol=4e-16)
+
+
+@pytest.mark.parametrize('scale', [1e-160, 1e-6, 1.0, 1e6, 1e160, -1.0, -1e160])
+def test_canonical_is_unit_with_nonnegative_w_for_any_scale(rng, scale):
+    q = rng.normal(size=(100, 4))
+    out = rc.canonical_quaternion(q * scale)
+    assert np.all(out[:, 3] >= 0)
+    assert np.allclose(np.linalg.norm(out, axis=1), 1.0, atol=4e-16)
+    assert np.allclose(out, rc.canonical_quaternion(q), atol=4e-16)
+
+
+@pytest.mark.parametrize('q', [[1, 0, 0, 0], [0, -1, 0, 0], [0, 0, -2, 0], [-1, 1, 0, 0],
+                               [-0.0, -0.0, -1, -0.0]])
+def test_canonical_is_unique_for_w_zero(q):
+    q = np.asarray(q, dtype=float)
+    a, b = rc.canonical_quaternion(q), rc.canonical_quaternion(-q)
+    assert np.array_equal(a, b)
+    assert a[3] == 0 and not np.signbit(a[3])
+    assert a[np.flatnonzero(a)[0]] > 0
+
+
+def test_distance_is_exact_for_tiny_angles():
+    angle = 1e-12
+    q = [np.sin(angle / 2), 0, 0, np.cos(angle / 2)]
+    assert rc.quaternion_distance([0, 0, 0, 1], q) == pytest.approx(angle, rel=4 * mpr.EPS)
+
+
+def test_distance_ignores_sign_and_scale(rng):
+    p, q = rng.normal(size=(2, 30, 4))
+    d = rc.quaternion_distance(p, q)
+    assert np.allclose(rc.quaternion_distance(-1e160 * p, 1e-160 * q), d, rtol=1e-15)
+    assert np.all((d >= 0) & (d <= np.pi))
+
+
+def test_distance_hard_cases_against_mpmath(rng):
+    p, q = hard_quaternions(rng, 64), hard_quaternions(rng, 64)
+    got = rc.quaternion_distance(p, q)
+    for a, b, d in zip(p, q, got):
+        truth = float(mpr.distance(mpr.mpf_vector(a), mpr.mpf_vector(b)))
+        assert abs(d - truth) <= 4 * mpr.EPS * max(truth, 1e-300) + 1e-300
+
+
+def test_rotate_vector_matches_matrix(rng):
+    q = rng.normal(size=(40, 4))
+    v = rng.normal(size=(40, 3))
+    expected = np.einsum('nij,nj->ni', rc.matrix_from_quaternion(q), v)
+    assert np.allclose(rc.rotate_vector(q, v), expected, atol=1e-14)
+
+
+@settings(max_examples=200, deadline=None)
+@given(p=nonzero_quaternions, q=nonzero_quaternions)
+def test_distance_is_symmetric_and_bounded(p, q):
+    d = rc.quaternion_distance(p, q)
+    assert 0.0 <= d <= np.pi
+    assert abs(d - rc.quaternion_distance(q, p)) <= 8 * mpr.EPS * max(d, 1.0)
