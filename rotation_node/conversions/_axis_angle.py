@@ -15,22 +15,52 @@ import math
 
 import numpy as np
 
-from ._matrix import (DEFAULT_ORTHONORMAL_TOLERANCE, flat_quaternions_from_matrices,
-                      matrix_from_unit_direction)
-from ._quaternion import (call_binary, call_unary, canonical_unit_quaternion, half_angle_atan2,
-                          jit, quaternion_status, scaled_quaternion, status, vector_norm,
+from ._matrix import DEFAULT_ORTHONORMAL_TOLERANCE, flat_quaternions_from_matrices, store_rotation
+from ._quaternion import (call_binary, call_unary, half_angle_atan2, jit, quaternion_status,
+                          run_staged, scaled_quaternion, sincos_in_place, status, vector_norm,
                           vector_status)
 from ._validation import NON_FINITE, ZERO_NORM
+
+
+@jit
+def rotation_quaternion(ux, uy, uz, k, half_angle_cos):
+    """``(k u, cos(a/2))`` with the sign chosen so that ``w > 0`` (cos of a double is never 0)."""
+    if half_angle_cos < 0.0:
+        k, half_angle_cos = -k, -half_angle_cos
+    return k * ux, k * uy, k * uz, half_angle_cos
+
+
+@jit
+def rotation_vector_quaternion(vx, vy, vz, theta, half_angle_sin, half_angle_cos):
+    """
+    Exponential map from ``sin`` and ``cos`` of half the norm ``theta = |v|``.
+
+    ``sin(theta/2) / theta`` is exactly 1/2 below 2e-8 in float64; the guard
+    also keeps ``theta = 0`` and subnormal ``theta`` exact.
+    """
+    k = 0.5 if theta < 2e-8 else half_angle_sin / theta
+    return rotation_quaternion(vx, vy, vz, k, half_angle_cos)
+
+
+@jit
+def axis_angle_quaternion(ax, ay, az, half_angle_sin, half_angle_cos):
+    """Quaternion of a rotation about the non-zero axis ``a``, from sin/cos of half the angle."""
+    n = vector_norm(ax, ay, az)
+    return rotation_quaternion(ax / n, ay / n, az / n, half_angle_sin, half_angle_cos)
 
 
 @jit
 def quaternion_from_rotation_vector_scalar(vx, vy, vz):
     """Exponential map: unit canonical quaternion of the rotation vector ``v``."""
     theta = vector_norm(vx, vy, vz)
-    half = 0.5 * theta
-    # sin(h)/h rounds to 1 below h ~ 2.6e-8; the guard also covers theta = 0.
-    k = 0.5 if half < 1e-8 else 0.5 * math.sin(half) / half
-    return canonical_unit_quaternion(k * vx, k * vy, k * vz, math.cos(half))
+    return rotation_vector_quaternion(vx, vy, vz, theta, math.sin(0.5 * theta),
+                                      math.cos(0.5 * theta))
+
+
+@jit
+def quaternion_from_axis_angle_scalar(ax, ay, az, angle):
+    """Unit canonical quaternion of a rotation by ``angle`` about a non-zero axis."""
+    return axis_angle_quaternion(ax, ay, az, math.sin(0.5 * angle), math.cos(0.5 * angle))
 
 
 @jit
@@ -52,15 +82,10 @@ def rotation_vector_from_quaternion_scalar(x, y, z, w):
     return ax * angle, ay * angle, az * angle
 
 
-@jit
-def quaternion_from_axis_angle_scalar(ax, ay, az, angle):
-    """Unit canonical quaternion of a rotation by ``angle`` about a non-zero axis."""
-    n = vector_norm(ax, ay, az)
-    s = math.sin(0.5 * angle) / n
-    return canonical_unit_quaternion(ax * s, ay * s, az * s, math.cos(0.5 * angle))
-
-
 # ----------------------------------------------------------------- kernels
+# The exponential-map kernels write quaternions or matrices, as ``out`` is
+# shaped (..., 4) or (..., 3, 3); each has a fused and a staged (batch)
+# schedule, the latter evaluating sin and cos with numpy's SIMD ufuncs.
 
 @jit
 def _axis_angle_status(fa, ft, s):
@@ -73,27 +98,86 @@ def _axis_angle_status(fa, ft, s):
 
 
 @jit
-def _quaternion_from_axis_angle_kernel(axis, angle, out):
-    fa, ft, fo = axis.reshape(-1, 3), angle.reshape(-1), out.reshape(-1, 4)
-    for s in range(fa.shape[0]):
-        bad = _axis_angle_status(fa, ft, s)
-        if bad >= 0:
-            return bad
-        fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3] = quaternion_from_axis_angle_scalar(
-            fa[s, 0], fa[s, 1], fa[s, 2], ft[s])
-    return -1
-
-
-@jit
-def _matrix_from_axis_angle_kernel(axis, angle, out):
-    fa, ft, fo = axis.reshape(-1, 3), angle.reshape(-1), out.reshape(-1, 3, 3)
+def _from_axis_angle_kernel(axis, angle, out):
+    fa, ft = axis.reshape(-1, 3), angle.reshape(-1)
+    fo = out.reshape(fa.shape[0], -1)
     for s in range(fa.shape[0]):
         bad = _axis_angle_status(fa, ft, s)
         if bad >= 0:
             return bad
         x, y, z, w = quaternion_from_axis_angle_scalar(fa[s, 0], fa[s, 1], fa[s, 2], ft[s])
-        matrix_from_unit_direction(x, y, z, w, fo[s])
+        store_rotation(fo, s, x, y, z, w)
     return -1
+
+
+@jit
+def _axis_angle_arguments_kernel(fa, ft, y):
+    for s in range(fa.shape[0]):
+        bad = _axis_angle_status(fa, ft, s)
+        if bad >= 0:
+            return bad
+        y[s, 0] = 0.5 * ft[s]
+    return -1
+
+
+@jit
+def _from_axis_angle_sincos_kernel(fa, sin_half, cos_half, fo):
+    for s in range(fa.shape[0]):
+        x, y, z, w = axis_angle_quaternion(fa[s, 0], fa[s, 1], fa[s, 2],
+                                           sin_half[s, 0], cos_half[s, 0])
+        store_rotation(fo, s, x, y, z, w)
+
+
+def _from_axis_angle_batch(axis, angle, out):
+    fa, ft = axis.reshape(-1, 3), angle.reshape(-1)
+    fo = out.reshape(fa.shape[0], -1)
+    return run_staged(
+        fa.shape[0], 1,
+        lambda a, b, y, x: _axis_angle_arguments_kernel(fa[a:b], ft[a:b], y),
+        sincos_in_place,
+        lambda a, b, y, x: _from_axis_angle_sincos_kernel(fa[a:b], y, x, fo[a:b]))
+
+
+@jit
+def _from_rotation_vector_kernel(v, out):
+    fv = v.reshape(-1, 3)
+    fo = out.reshape(fv.shape[0], -1)
+    for s in range(fv.shape[0]):
+        bad = vector_status(fv, s, 0)
+        if bad >= 0:
+            return bad
+        x, y, z, w = quaternion_from_rotation_vector_scalar(fv[s, 0], fv[s, 1], fv[s, 2])
+        store_rotation(fo, s, x, y, z, w)
+    return -1
+
+
+@jit
+def _rotation_vector_arguments_kernel(fv, y):
+    for s in range(fv.shape[0]):
+        bad = vector_status(fv, s, 0)
+        if bad >= 0:
+            return bad
+        y[s, 0] = 0.5 * vector_norm(fv[s, 0], fv[s, 1], fv[s, 2])
+    return -1
+
+
+@jit
+def _from_rotation_vector_sincos_kernel(fv, sin_half, cos_half, fo):
+    for s in range(fv.shape[0]):
+        vx, vy, vz = fv[s, 0], fv[s, 1], fv[s, 2]
+        x, y, z, w = rotation_vector_quaternion(vx, vy, vz, vector_norm(vx, vy, vz),
+                                                sin_half[s, 0], cos_half[s, 0])
+        store_rotation(fo, s, x, y, z, w)
+
+
+def _from_rotation_vector_batch(v, out):
+    fv = v.reshape(-1, 3)
+    fo = out.reshape(fv.shape[0], -1)
+    return run_staged(
+        fv.shape[0], 1,
+        lambda a, b, y, x: _rotation_vector_arguments_kernel(fv[a:b], y),
+        sincos_in_place,
+        lambda a, b, y, x: _from_rotation_vector_sincos_kernel(fv[a:b], y, x, fo[a:b]))
 
 
 @jit
@@ -106,30 +190,6 @@ def axis_angle_kernel(q, out):
             return bad
         fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3] = axis_angle_from_quaternion_scalar(
             fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3])
-    return -1
-
-
-@jit
-def _quaternion_from_rotation_vector_kernel(v, out):
-    fv, fo = v.reshape(-1, 3), out.reshape(-1, 4)
-    for s in range(fv.shape[0]):
-        bad = vector_status(fv, s, 0)
-        if bad >= 0:
-            return bad
-        fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3] = quaternion_from_rotation_vector_scalar(
-            fv[s, 0], fv[s, 1], fv[s, 2])
-    return -1
-
-
-@jit
-def _matrix_from_rotation_vector_kernel(v, out):
-    fv, fo = v.reshape(-1, 3), out.reshape(-1, 3, 3)
-    for s in range(fv.shape[0]):
-        bad = vector_status(fv, s, 0)
-        if bad >= 0:
-            return bad
-        x, y, z, w = quaternion_from_rotation_vector_scalar(fv[s, 0], fv[s, 1], fv[s, 2])
-        matrix_from_unit_direction(x, y, z, w, fo[s])
     return -1
 
 
@@ -173,8 +233,8 @@ def quaternion_from_axis_angle(axis, angle):
     ValueError
         Wrong shape, NaN/Inf, or a zero axis.
     """
-    return call_binary(_quaternion_from_axis_angle_kernel, axis, angle,
-                       ('axis', 'angle'), ((3,), ()), (4,))
+    return call_binary(_from_axis_angle_kernel, axis, angle, ('axis', 'angle'), ((3,), ()),
+                       (4,), batch_kernel=_from_axis_angle_batch)
 
 
 def matrix_from_axis_angle(axis, angle):
@@ -193,8 +253,8 @@ def matrix_from_axis_angle(axis, angle):
     ndarray, shape (..., 3, 3)
         Body-to-world rotation matrices.
     """
-    return call_binary(_matrix_from_axis_angle_kernel, axis, angle,
-                       ('axis', 'angle'), ((3,), ()), (3, 3))
+    return call_binary(_from_axis_angle_kernel, axis, angle, ('axis', 'angle'), ((3,), ()),
+                       (3, 3), batch_kernel=_from_axis_angle_batch)
 
 
 def axis_angle_from_quaternion(q):
@@ -258,7 +318,8 @@ def quaternion_from_rotation_vector(v):
         Unit quaternions (x, y, z, w), canonical; exact to ~1 ulp from
         ``|v| = 0`` (identity) up.
     """
-    return call_unary(_quaternion_from_rotation_vector_kernel, v, 'v', (3,), (4,))
+    return call_unary(_from_rotation_vector_kernel, v, 'v', (3,), (4,),
+                      batch_kernel=_from_rotation_vector_batch)
 
 
 def matrix_from_rotation_vector(v):
@@ -276,7 +337,8 @@ def matrix_from_rotation_vector(v):
         Body-to-world rotation matrices. Computed through the quaternion, so
         no ``(1 - cos t) / t^2`` cancellation.
     """
-    return call_unary(_matrix_from_rotation_vector_kernel, v, 'v', (3,), (3, 3))
+    return call_unary(_from_rotation_vector_kernel, v, 'v', (3,), (3, 3),
+                      batch_kernel=_from_rotation_vector_batch)
 
 
 def rotation_vector_from_quaternion(q):

@@ -25,9 +25,9 @@ import math
 
 import numpy as np
 
-from ._matrix import (DEFAULT_ORTHONORMAL_TOLERANCE, flat_quaternions_from_matrices,
-                      matrix_from_unit_direction)
-from ._quaternion import call_unary, jit, product, quaternion_status, vector_status
+from ._matrix import DEFAULT_ORTHONORMAL_TOLERANCE, flat_quaternions_from_matrices, store_rotation
+from ._quaternion import (atan2_in_place, call_unary, is_batch, jit, product, quaternion_status,
+                          run_staged, scaled_quaternion, vector_status)
 from ._validation import SEQUENCE_TABLE, parse_sequence
 
 _TWO_PI = 2.0 * math.pi
@@ -75,9 +75,9 @@ def _wrap(angle):
 
 
 @jit
-def _bernardes_viollet_terms(x, y, z, w, i, j, k, intrinsic):
+def _working_axes(i, j, k, intrinsic):
     """
-    The quantities (a, b, c, d) of [1]_ and the axis-permutation sign.
+    Axes ``(i, j, k)`` in extrinsic working order, the permutation sign, and whether proper.
 
     The algorithm works in extrinsic order; an intrinsic sequence is the
     extrinsic one reversed. Proper sequences use the missing axis as ``k``.
@@ -87,27 +87,56 @@ def _bernardes_viollet_terms(x, y, z, w, i, j, k, intrinsic):
     proper = i == k
     if proper:
         k = 3 - i - j
-    sign = (i - j) * (j - k) * (k - i) // 2
-    v = (x, y, z)
-    qi, qj, qk = v[i], v[j], v[k] * sign
-    if proper:
-        return w, qi, qj, qk, sign, proper
-    return w - qj, qi + qk, qj + w, qk - qi, sign, proper
+    return i, j, k, (i - j) * (j - k) * (k - i) // 2, proper
 
 
 @jit
-def euler_from_quaternion_scalar(x, y, z, w, i, j, k, intrinsic):
-    """Euler angles (radians) of a quaternion for the sequence ``(i, j, k)``."""
-    a, b, c, d, sign, proper = _bernardes_viollet_terms(x, y, z, w, i, j, k, intrinsic)
-    h_ab = math.hypot(a, b)
-    h_cd = math.hypot(c, d)
-    middle = 2.0 * math.atan2(h_cd, h_ab)
-    half_sum = math.atan2(b, a)
-    half_diff = math.atan2(d, c)
-    # Exact degeneracy: only the sum (h_cd == 0) or difference (h_ab == 0) of the
+def _bernardes_viollet_terms(x, y, z, w, i, j, k, intrinsic):
+    """
+    The quantities (a, b, c, d) of [1]_ and ``h_ab = |(a, b)|``, ``h_cd = |(c, d)|``.
+
+    The quaternion is first rescaled exactly into the range where
+    ``sqrt(a^2 + b^2)`` cannot overflow; where it underflows, ``a`` and ``b``
+    are below 1e-150 of the quaternion's norm and the split of the outer angles
+    they decide moves the rotation by less than that.
+    """
+    x, y, z, w = scaled_quaternion(x, y, z, w)
+    i, j, k, sign, proper = _working_axes(i, j, k, intrinsic)
+    v = (x, y, z)
+    qi, qj, qk = v[i], v[j], v[k] * sign
+    if proper:
+        a, b, c, d = w, qi, qj, qk
+    else:
+        a, b, c, d = w - qj, qi + qk, qj + w, qk - qi
+    return a, b, c, d, math.sqrt(a * a + b * b), math.sqrt(c * c + d * d)
+
+
+@jit
+def euler_atan2_arguments(x, y, z, w, i, j, k, intrinsic):
+    """
+    The three ``atan2`` argument pairs of the conversion: ``(y1, y2, y3), (x1, x2, x3)``.
+
+    ``atan2(y1, x1)`` is half the middle angle (in [0, pi/2]), ``atan2(y2, x2)``
+    and ``atan2(y3, x3)`` the half sum and half difference of the outer angles.
+    """
+    a, b, c, d, h_ab, h_cd = _bernardes_viollet_terms(x, y, z, w, i, j, k, intrinsic)
+    return (h_cd, b, d), (h_ab, a, c)
+
+
+@jit
+def euler_from_half_angles(half_middle, half_sum, half_diff, h_ab, i, j, k, intrinsic):
+    """
+    Euler angles from the three ``atan2`` results of :func:`euler_atan2_arguments`.
+
+    ``h_ab`` (the first ``x`` argument) tells the degeneracy at pi;
+    ``half_middle == 0`` is exactly the degeneracy at 0.
+    """
+    _, _, _, sign, proper = _working_axes(i, j, k, intrinsic)
+    middle = 2.0 * half_middle
+    # Exact degeneracy: only the sum (middle 0) or difference (middle pi) of the
     # outer angles is defined; choose the split that makes the caller's third
     # angle zero (the first of the extrinsic working order when intrinsic).
-    if h_cd == 0.0:
+    if half_middle == 0.0:
         half_diff = half_sum if intrinsic else -half_sum
     elif h_ab == 0.0:
         half_sum = half_diff if intrinsic else -half_diff
@@ -122,6 +151,14 @@ def euler_from_quaternion_scalar(x, y, z, w, i, j, k, intrinsic):
 
 
 @jit
+def euler_from_quaternion_scalar(x, y, z, w, i, j, k, intrinsic):
+    """Euler angles (radians) of a quaternion for the sequence ``(i, j, k)``."""
+    (y1, y2, y3), (x1, x2, x3) = euler_atan2_arguments(x, y, z, w, i, j, k, intrinsic)
+    return euler_from_half_angles(math.atan2(y1, x1), math.atan2(y2, x2), math.atan2(y3, x3),
+                                  x1, i, j, k, intrinsic)
+
+
+@jit
 def singularity_margin_scalar(x, y, z, w, i, j, k, intrinsic):
     """
     Distance (rad) of the middle angle from its nearest singular value.
@@ -130,36 +167,24 @@ def singularity_margin_scalar(x, y, z, w, i, j, k, intrinsic):
     convention, the margin is ``2 atan2(min(h_ab, h_cd), max(h_ab, h_cd))``:
     exact to an ulp even for margins of 1e-300.
     """
-    a, b, c, d, _, _ = _bernardes_viollet_terms(x, y, z, w, i, j, k, intrinsic)
-    h_ab = math.hypot(a, b)
-    h_cd = math.hypot(c, d)
+    _, _, _, _, h_ab, h_cd = _bernardes_viollet_terms(x, y, z, w, i, j, k, intrinsic)
     return 2.0 * math.atan2(min(h_ab, h_cd), max(h_ab, h_cd))
 
 
 # ----------------------------------------------------------------- kernels
 
 @jit
-def _quaternion_from_euler_kernel(angles, out, i, j, k, intrinsic, scale):
-    fa, fo = angles.reshape(-1, 3), out.reshape(-1, 4)
-    for s in range(fa.shape[0]):
-        bad = vector_status(fa, s, 0)
-        if bad >= 0:
-            return bad
-        fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3] = quaternion_from_euler_scalar(
-            fa[s, 0] * scale, fa[s, 1] * scale, fa[s, 2] * scale, i, j, k, intrinsic)
-    return -1
-
-
-@jit
-def _matrix_from_euler_kernel(angles, out, i, j, k, intrinsic, scale):
-    fa, fo = angles.reshape(-1, 3), out.reshape(-1, 3, 3)
+def _from_euler_kernel(angles, out, i, j, k, intrinsic, scale):
+    """Quaternions or matrices (as ``out`` is (..., 4) or (..., 3, 3)) of Euler angles."""
+    fa = angles.reshape(-1, 3)
+    fo = out.reshape(fa.shape[0], -1)
     for s in range(fa.shape[0]):
         bad = vector_status(fa, s, 0)
         if bad >= 0:
             return bad
         x, y, z, w = quaternion_from_euler_scalar(
             fa[s, 0] * scale, fa[s, 1] * scale, fa[s, 2] * scale, i, j, k, intrinsic)
-        matrix_from_unit_direction(x, y, z, w, fo[s])
+        store_rotation(fo, s, x, y, z, w)
     return -1
 
 
@@ -174,6 +199,34 @@ def _euler_from_quaternion_kernel(q, out, i, j, k, intrinsic, scale):
                                                   i, j, k, intrinsic)
         fo[s, 0], fo[s, 1], fo[s, 2] = a1 * scale, a2 * scale, a3 * scale
     return -1
+
+
+@jit
+def _euler_arguments_kernel(fq, y, x, i, j, k, intrinsic):
+    for s in range(fq.shape[0]):
+        bad = quaternion_status(fq, s, 0)
+        if bad >= 0:
+            return bad
+        (y[s, 0], y[s, 1], y[s, 2]), (x[s, 0], x[s, 1], x[s, 2]) = euler_atan2_arguments(
+            fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3], i, j, k, intrinsic)
+    return -1
+
+
+@jit
+def _euler_from_half_angles_kernel(t, x, fo, i, j, k, intrinsic, scale):
+    for s in range(t.shape[0]):
+        a1, a2, a3 = euler_from_half_angles(t[s, 0], t[s, 1], t[s, 2], x[s, 0], i, j, k, intrinsic)
+        fo[s, 0], fo[s, 1], fo[s, 2] = a1 * scale, a2 * scale, a3 * scale
+
+
+def _euler_from_quaternion_batch(q, out, i, j, k, intrinsic, scale):
+    """Batch schedule of ``_euler_from_quaternion_kernel`` (see ``run_staged``)."""
+    fq, fo = q.reshape(-1, 4), out.reshape(-1, 3)
+    return run_staged(
+        fq.shape[0], 3,
+        lambda a, b, y, x: _euler_arguments_kernel(fq[a:b], y, x, i, j, k, intrinsic),
+        atan2_in_place,
+        lambda a, b, t, x: _euler_from_half_angles_kernel(t, x, fo[a:b], i, j, k, intrinsic, scale))
 
 
 @jit
@@ -202,8 +255,8 @@ def _sequence_arguments(seq):
         raise
 
 
-def _from_angles(kernel, angles, seq, degrees, out_trailing):
-    return call_unary(kernel, angles, 'angles', (3,), out_trailing, *_sequence_arguments(seq),
+def _from_angles(angles, seq, degrees, out_trailing):
+    return call_unary(_from_euler_kernel, angles, 'angles', (3,), out_trailing, *_sequence_arguments(seq),
                       _RADIANS_PER_DEGREE if degrees else 1.0)
 
 
@@ -233,7 +286,7 @@ def quaternion_from_euler(angles, seq, *, degrees=False):
     ValueError
         Wrong shape, NaN/Inf, or an invalid ``seq``.
     """
-    return _from_angles(_quaternion_from_euler_kernel, angles, seq, degrees, (4,))
+    return _from_angles(angles, seq, degrees, (4,))
 
 
 def matrix_from_euler(angles, seq, *, degrees=False):
@@ -255,7 +308,7 @@ def matrix_from_euler(angles, seq, *, degrees=False):
     ndarray, shape (..., 3, 3)
         Body-to-world rotation matrices.
     """
-    return _from_angles(_matrix_from_euler_kernel, angles, seq, degrees, (3, 3))
+    return _from_angles(angles, seq, degrees, (3, 3))
 
 
 def euler_from_quaternion(q, seq, *, degrees=False):
@@ -290,7 +343,8 @@ def euler_from_quaternion(q, seq, *, degrees=False):
     .. [1] E. Bernardes and S. Viollet, PLOS ONE 17(11), e0276302, 2022.
     """
     return call_unary(_euler_from_quaternion_kernel, q, 'q', (4,), (3,),
-                      *_sequence_arguments(seq), _DEGREES_PER_RADIAN if degrees else 1.0)
+                      *_sequence_arguments(seq), _DEGREES_PER_RADIAN if degrees else 1.0,
+                      batch_kernel=_euler_from_quaternion_batch)
 
 
 def euler_from_matrix(R, seq, *, degrees=False,
@@ -320,7 +374,8 @@ def euler_from_matrix(R, seq, *, degrees=False,
     arguments = _sequence_arguments(seq)
     q, m = flat_quaternions_from_matrices(R, orthonormal_tolerance, non_orthonormal)
     out = np.empty(m.shape[:-2] + (3,))
-    _euler_from_quaternion_kernel(q, out, *arguments, _DEGREES_PER_RADIAN if degrees else 1.0)
+    kernel = _euler_from_quaternion_batch if is_batch(q) else _euler_from_quaternion_kernel
+    kernel(q, out, *arguments, _DEGREES_PER_RADIAN if degrees else 1.0)
     return out
 
 

@@ -35,22 +35,33 @@ DEFAULT_ORTHONORMAL_TOLERANCE = 1e-6
 
 
 @jit
-def matrix_from_unit_direction(x, y, z, w, out):
-    """Write ``R(q)`` into ``out`` (3x3); ``q`` any non-zero scale (rescaled exactly first)."""
+def matrix_entries(x, y, z, w):
+    """Row-major entries of ``R(q)``; ``q`` any non-zero scale (rescaled exactly first)."""
     x, y, z, w = scaled_quaternion(x, y, z, w)
     s = 2.0 / (x * x + y * y + z * z + w * w)
     xx, yy, zz = s * x * x, s * y * y, s * z * z
     xy, xz, yz = s * x * y, s * x * z, s * y * z
     wx, wy, wz = s * w * x, s * w * y, s * w * z
-    out[0, 0] = 1.0 - (yy + zz)
-    out[0, 1] = xy - wz
-    out[0, 2] = xz + wy
-    out[1, 0] = xy + wz
-    out[1, 1] = 1.0 - (xx + zz)
-    out[1, 2] = yz - wx
-    out[2, 0] = xz - wy
-    out[2, 1] = yz + wx
-    out[2, 2] = 1.0 - (xx + yy)
+    return (1.0 - (yy + zz), xy - wz, xz + wy,
+            xy + wz, 1.0 - (xx + zz), yz - wx,
+            xz - wy, yz + wx, 1.0 - (xx + yy))
+
+
+@jit
+def store_matrix(fo, s, x, y, z, w):
+    """Write ``R(q)`` into row ``s`` of ``fo`` (shape (n, 9), row-major matrices)."""
+    e = matrix_entries(x, y, z, w)
+    for c in range(9):
+        fo[s, c] = e[c]
+
+
+@jit
+def store_rotation(fo, s, x, y, z, w):
+    """Write ``q`` into row ``s`` of ``fo``: as it is if ``fo`` is (n, 4), as ``R(q)`` if (n, 9)."""
+    if fo.shape[1] == 9:
+        store_matrix(fo, s, x, y, z, w)
+    else:
+        fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3] = x, y, z, w
 
 
 # Deviation from orthonormality below which a matrix is used as it is: at this
@@ -131,12 +142,12 @@ def quaternion_from_orthonormal(m):
 
 @jit
 def _matrix_from_quaternion_kernel(q, out):
-    fq, fo = q.reshape(-1, 4), out.reshape(-1, 3, 3)
+    fq, fo = q.reshape(-1, 4), out.reshape(-1, 9)
     for s in range(fq.shape[0]):
         bad = quaternion_status(fq, s, 0)
         if bad >= 0:
             return bad
-        matrix_from_unit_direction(fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3], fo[s])
+        store_matrix(fo, s, fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3])
     return -1
 
 

@@ -39,6 +39,11 @@ def vector_defect(x, y, z):
     return OK
 
 
+# Magnitudes whose squares and sums of squares are normal, finite doubles.
+_SAFE_LOW = 2.0 ** -500
+_SAFE_HIGH = 2.0 ** 500
+
+
 @jit
 def binary_exponent(m):
     """``e`` with ``m = f 2**e``, f in [0.5, 1): scaling by ``2**-e`` is exact."""
@@ -47,8 +52,16 @@ def binary_exponent(m):
 
 @jit
 def scaled_quaternion(x, y, z, w):
-    """Scale by a power of two so the largest component is in [0.5, 1) (exact, subnormals too)."""
-    e = -binary_exponent(max(abs(x), abs(y), abs(z), abs(w)))
+    """
+    The same quaternion, rescaled exactly so that sums of squares neither over- nor underflow.
+
+    Unchanged when the largest component is within [2^-500, 2^500]; otherwise
+    scaled by a power of two (exact, subnormals included) to [0.5, 1).
+    """
+    m = max(abs(x), abs(y), abs(z), abs(w))
+    if _SAFE_LOW < m < _SAFE_HIGH:
+        return x, y, z, w
+    e = -binary_exponent(m)
     return math.ldexp(x, e), math.ldexp(y, e), math.ldexp(z, e), math.ldexp(w, e)
 
 
@@ -56,6 +69,8 @@ def scaled_quaternion(x, y, z, w):
 def vector_norm(x, y, z):
     """Euclidean norm of a 3-vector without under- or overflow."""
     m = max(abs(x), abs(y), abs(z))
+    if _SAFE_LOW < m < _SAFE_HIGH:
+        return math.sqrt(x * x + y * y + z * z)
     if m == 0.0:
         return 0.0
     e = binary_exponent(m)
@@ -203,26 +218,100 @@ def _result(out):
     return out[()] if out.ndim == 0 else out
 
 
-def call_unary(kernel, x, name, trailing, out_trailing, *args):
+# Inputs with at least this many float64 elements use a kernel's batch
+# schedule, where it has one.
+BATCH_SIZE = 4096
+# Samples per chunk of a staged batch: the intermediates stay in cache.
+STAGE_CHUNK = 4096
+
+
+def is_batch(a):
+    """Whether the array ``a`` is large enough for the batch schedule of a kernel."""
+    return a.size >= BATCH_SIZE
+
+
+def run_staged(n, width, first, transcendental, second):
+    """
+    Run a kernel split around vectorised transcendental functions, chunk by chunk.
+
+    The batch schedule of a kernel whose scalar formula calls libm (``atan2``,
+    ``sin``, ``cos``): a compiled loop computes the arguments, numpy's SIMD
+    ufuncs (< 1 ulp, several times faster than scalar libm calls) evaluate
+    them, and a second compiled loop finishes the formula. The formulas are
+    the fused kernel's own scalar functions; only the schedule differs.
+
+    Parameters
+    ----------
+    n : int
+        Number of samples.
+    width : int
+        Arguments per sample.
+    first : callable
+        ``first(start, stop, y, x) -> status`` validates samples
+        ``start:stop`` and fills the arguments ``y`` and ``x`` (``(m, width)``).
+    transcendental : callable
+        ``transcendental(y, x)`` evaluates in place, e.g. :func:`atan2_in_place`.
+    second : callable
+        ``second(start, stop, y, x)`` turns the results into output.
+
+    Returns
+    -------
+    int
+        The status of the first bad sample (with its index among the ``n``), or -1.
+    """
+    y = np.empty((min(n, STAGE_CHUNK), width))
+    x = np.empty_like(y)
+    for start in range(0, n, STAGE_CHUNK):
+        stop = min(n, start + STAGE_CHUNK)
+        yc, xc = y[:stop - start], x[:stop - start]
+        bad = first(start, stop, yc, xc)
+        if bad >= 0:
+            return bad + (start << 4)
+        transcendental(yc, xc)
+        second(start, stop, yc, xc)
+    return -1
+
+
+def atan2_in_place(y, x):
+    """``y <- atan2(y, x)``."""
+    np.arctan2(y, x, out=y)
+
+
+def sincos_in_place(y, x):
+    """``x <- cos(y)``, ``y <- sin(y)``."""
+    np.cos(y, out=x)
+    np.sin(y, out=y)
+
+
+def call_unary(kernel, x, name, trailing, out_trailing, *args, batch_kernel=None):
     """
     Validate ``x``, run ``kernel(x, out, *args)``, raise for a bad sample.
 
     ``out`` gets ``x``'s leading shape followed by ``out_trailing``; a 0-d
-    result is returned as a scalar.
+    result is returned as a scalar. Large inputs go to ``batch_kernel``
+    (same signature) where one is given.
     """
     a = float_array(x, name, trailing)
     out = np.empty(a.shape[:a.ndim - len(trailing)] + out_trailing)
+    if batch_kernel is not None and a.size >= BATCH_SIZE:
+        kernel = batch_kernel
     bad = kernel(a, out, *args)
     if bad >= 0:
         raise_sample_error(bad, (name,), (a,), (trailing,))
     return _result(out)
 
 
-def call_binary(kernel, x, y, names, trailings, out_trailing):
-    """Validate and broadcast ``x`` and ``y``, run ``kernel(x, y, out)``, raise for a bad sample."""
+def call_binary(kernel, x, y, names, trailings, out_trailing, batch_kernel=None):
+    """
+    Validate and broadcast ``x`` and ``y``, run ``kernel(x, y, out)``, raise for a bad sample.
+
+    Large inputs go to ``batch_kernel`` (same signature) where one is given.
+    """
     a, b = broadcast_pair(float_array(x, names[0], trailings[0]),
                           float_array(y, names[1], trailings[1]), *trailings)
     out = np.empty(a.shape[:a.ndim - len(trailings[0])] + out_trailing)
+    if batch_kernel is not None and a.size >= BATCH_SIZE:
+        kernel = batch_kernel
     bad = kernel(a, b, out)
     if bad >= 0:
         raise_sample_error(bad, names, (a, b), trailings)

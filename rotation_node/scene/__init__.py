@@ -1,0 +1,14 @@
+"""
+Scene simulator: scene files -> truth and sensor streams -> MCAP test bags.
+
+``load_scene(path)`` validates a YAML scene (:mod:`.spec`), ``simulate(scene,
+seed)`` returns the truth and sensor arrays (:mod:`.motions`, :mod:`.effects`),
+``write_bag(simulation, path)`` writes them as a ROS 2 bag (:mod:`.simulator`).
+The command line is ``rotation_scene`` (:mod:`.cli`).
+"""
+from .effects import SensorStream
+from .simulator import Simulation, sample_stamps_ns, simulate, write_bag
+from .spec import Scene, load_scene, scene_from_dict
+
+__all__ = ['Scene', 'SensorStream', 'Simulation', 'load_scene', 'sample_stamps_ns',
+           'scene_from_dict', 'simulate', 'write_bag']

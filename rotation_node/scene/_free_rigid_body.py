@@ -1,0 +1,133 @@
+"""
+Free rigid body integrator: Lie-Poisson splitting, fourth order.
+
+The kinetic energy of a free rigid body splits into one term per principal
+axis, ``T = sum_i L_i^2 / (2 I_i)`` with ``L = I w`` the body angular
+momentum. The flow of one term alone is exact and cheap: ``L_i`` stays
+constant, the body turns about its axis ``e_i`` at the constant rate
+``L_i / I_i``, so ``L`` rotates by ``-L_i t / I_i`` about ``e_i`` in the body
+and the attitude becomes ``q (x) exp(e_i L_i t / I_i)``. Every sub-flow
+therefore preserves ``|L|`` and the world angular momentum ``R L`` exactly (to
+round-off), and the composition is symplectic, so the energy error stays
+bounded instead of drifting. The symmetric (Strang) composition of the three
+axis flows is second order; Yoshida's triple jump makes it fourth order.
+
+References
+----------
+R. I. McLachlan, "Explicit Lie-Poisson integration and the Euler equations",
+Phys. Rev. Lett. 71, 3043 (1993).
+H. Yoshida, "Construction of higher order symplectic integrators",
+Phys. Lett. A 150, 262 (1990).
+F. Fasso, "Comparison of splitting algorithms for the rigid body",
+J. Comput. Phys. 189, 527 (2003).
+"""
+import math
+
+import numba
+import numpy as np
+
+#: Largest rotation (rad) the fastest axis flow makes in one internal step;
+#: 1e-3 keeps the relative energy error near 1e-14 and the trajectory within
+#: ~1e-12 of a tight DOP853 reference over 20 s (measured in the tests).
+MAX_STEP_ANGLE = 1e-3
+
+
+def _yoshida_axis_flows():
+    """
+    Return the axis flows of one fourth-order step as (axes, fractions of the step).
+
+    Strang ``X0(h/2) X1(h/2) X2(h) X1(h/2) X0(h/2)`` composed as Yoshida's
+    ``S(c1 h) S(c0 h) S(c1 h)``; adjacent half flows about axis 0 merged.
+    """
+    c1 = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
+    c0 = 1.0 - 2.0 * c1
+    flows = []
+    for c in (c1, c0, c1):
+        for axis, fraction in ((0, c / 2), (1, c / 2), (2, c), (1, c / 2), (0, c / 2)):
+            if flows and flows[-1][0] == axis:
+                flows[-1] = (axis, flows[-1][1] + fraction)
+            else:
+                flows.append((axis, fraction))
+    axes, fractions = zip(*flows)
+    return np.array(axes, dtype=np.int64), np.array(fractions)
+
+
+#: The fourth-order step: axis flows and their durations as fractions of the step.
+AXES, FRACTIONS = _yoshida_axis_flows()
+
+
+@numba.njit(cache=True)
+def _axis_flow(q, momentum, inverse_inertia, axis, duration):
+    """Advance (q, L) in place by the exact flow of ``L_axis^2 / (2 I_axis)``."""
+    j = (axis + 1) % 3
+    k = (axis + 2) % 3
+    angle = momentum[axis] * inverse_inertia[axis] * duration
+    # Body angular momentum turns by -angle about e_axis.
+    c = math.cos(angle)
+    s = math.sin(angle)
+    lj = momentum[j]
+    lk = momentum[k]
+    momentum[j] = c * lj + s * lk
+    momentum[k] = c * lk - s * lj
+    # Attitude: q (x) (sin(angle/2) e_axis, cos(angle/2)), quaternions (x, y, z, w).
+    c = math.cos(0.5 * angle)
+    s = math.sin(0.5 * angle)
+    qi = q[axis]
+    qj = q[j]
+    qk = q[k]
+    qw = q[3]
+    q[axis] = c * qi + s * qw
+    q[j] = c * qj + s * qk
+    q[k] = c * qk - s * qj
+    q[3] = c * qw - s * qi
+
+
+@numba.njit(cache=True)
+def integrate(q0, momentum0, inverse_inertia, t, substeps, axes, fractions):
+    """
+    Integrate a free rigid body from ``t[0]`` and return its state at every ``t``.
+
+    Parameters
+    ----------
+    q0 : ndarray, shape (4,)
+        Unit quaternion (x, y, z, w) at ``t[0]``, body-to-world.
+    momentum0 : ndarray, shape (3,)
+        Body angular momentum ``I w`` at ``t[0]``.
+    inverse_inertia : ndarray, shape (3,)
+        ``1 / I_i``, principal axes along the body x, y, z axes.
+    t : ndarray, shape (n,)
+        Non-decreasing sample times, s.
+    substeps : int
+        Internal steps between consecutive samples.
+    axes, fractions : ndarray, shape (m,)
+        One step's axis flows (``AXES``, ``FRACTIONS``).
+
+    Returns
+    -------
+    q : ndarray, shape (n, 4)
+        Unit quaternions, continuous in sign.
+    momentum : ndarray, shape (n, 3)
+        Body angular momentum, ``|L|`` equal to ``|momentum0|``.
+    """
+    n = t.shape[0]
+    momentum_norm = math.sqrt(momentum0[0] ** 2 + momentum0[1] ** 2 + momentum0[2] ** 2)
+    q_out = np.empty((n, 4))
+    momentum_out = np.empty((n, 3))
+    q = q0.copy()
+    momentum = momentum0.copy()
+    q_out[0] = q
+    momentum_out[0] = momentum
+    for sample in range(1, n):
+        h = (t[sample] - t[sample - 1]) / substeps
+        for _ in range(substeps):
+            for flow in range(axes.shape[0]):
+                _axis_flow(q, momentum, inverse_inertia, axes[flow], fractions[flow] * h)
+        # The flows preserve |q| and |L| exactly; round-off alone moves them
+        # (a bias of ~1e-18 per flow): put the state back on both spheres.
+        q /= math.sqrt(q[0] ** 2 + q[1] ** 2 + q[2] ** 2 + q[3] ** 2)
+        if momentum_norm > 0.0:
+            momentum *= momentum_norm / math.sqrt(
+                momentum[0] ** 2 + momentum[1] ** 2 + momentum[2] ** 2)
+        q_out[sample] = q
+        momentum_out[sample] = momentum
+    return q_out, momentum_out

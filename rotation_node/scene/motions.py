@@ -1,0 +1,210 @@
+"""
+Ground-truth motions: orientation and body angular velocity at given times.
+
+Every function returns ``(q, w)`` for times ``t`` (seconds since the first
+sample, shape ``(n,)``):
+
+- ``q``, shape (n, 4): unit quaternions (x, y, z, w), active, body-to-world,
+  continuous in sign (``q[k] . q[k-1] >= 0``), so that a sign flip in a sensor
+  stream comes only from the ``quaternion_sign_flips`` effect;
+- ``w``, shape (n, 3): body angular velocity, rad/s
+  (``q' = 1/2 q (x) (w, 0)``).
+
+``constant_rate``, ``coning`` and ``euler_sweep`` are exact (closed form);
+``torque_free`` integrates Euler's equations with a structure-preserving
+splitting (:mod:`rotation_node.scene._free_rigid_body`).
+"""
+import math
+
+import numpy as np
+
+from rotation_node.conversions import (quaternion_from_euler, quaternion_from_rotation_vector,
+                                       quaternion_product)
+from rotation_node.kinematics import angular_velocity_from_euler_rates
+
+from . import _free_rigid_body
+from .spec import Coning, ConstantRate, EulerSweep, TorqueFree
+
+
+def sign_continuous(q):
+    """
+    Return the quaternion series with signs chosen so that consecutive ones have ``dot >= 0``.
+
+    Parameters
+    ----------
+    q : ndarray, shape (n, 4)
+        Quaternions (x, y, z, w); ``q[0]`` keeps its sign.
+
+    Returns
+    -------
+    ndarray, shape (n, 4)
+        ``+-q[k]``, the same rotations.
+    """
+    steps = np.sign(np.einsum('ij,ij->i', q[1:], q[:-1]))
+    steps[steps == 0] = 1.0
+    signs = np.concatenate(([1.0], np.cumprod(steps)))
+    return q * signs[:, np.newaxis]
+
+
+def constant_rate_truth(orientation, angular_velocity, t):
+    """
+    Return the exact rotation at constant body rate: ``q(t) = q0 (x) exp(w t)``.
+
+    Parameters
+    ----------
+    orientation : array_like, shape (4,)
+        ``q0`` (x, y, z, w), unit, at ``t = 0``.
+    angular_velocity : array_like, shape (3,)
+        Body angular velocity ``w``, rad/s.
+    t : array_like, shape (n,)
+        Times, s.
+
+    Returns
+    -------
+    q : ndarray, shape (n, 4)
+    w : ndarray, shape (n, 3)
+    """
+    t = np.asarray(t, dtype=np.float64)
+    w = np.broadcast_to(np.asarray(angular_velocity, dtype=np.float64), (t.size, 3))
+    q = quaternion_product(orientation, quaternion_from_rotation_vector(w * t[:, np.newaxis]))
+    # exp(w t) comes back canonical (scalar >= 0); undo the jump at |w| t = pi.
+    return sign_continuous(q), w.copy()
+
+
+def coning_truth(half_angle, frequency, t):
+    """
+    Return classical coning motion, phase 0 at ``t = 0`` (NUMERICS.md).
+
+    With half angle ``a`` and cone rate ``W``, scalar last:
+    ``q = (sin(a/2) cos(W t), sin(a/2) sin(W t), 0, cos(a/2))`` and
+    ``w = (-W sin a sin(W t), W sin a cos(W t), -W (1 - cos a))``.
+
+    Parameters
+    ----------
+    half_angle : float
+        ``a``, rad.
+    frequency : float
+        ``W``, rad/s.
+    t : array_like, shape (n,)
+        Times, s.
+
+    Returns
+    -------
+    q : ndarray, shape (n, 4)
+    w : ndarray, shape (n, 3)
+    """
+    phase = frequency * np.asarray(t, dtype=np.float64)
+    cos_phase, sin_phase = np.cos(phase), np.sin(phase)
+    s = np.sin(0.5 * half_angle)
+    q = np.stack([s * cos_phase, s * sin_phase, np.zeros_like(phase),
+                  np.full_like(phase, np.cos(0.5 * half_angle))], axis=-1)
+    # 1 - cos a = 2 sin^2(a/2), without the cancellation at small a.
+    w = np.stack([-frequency * np.sin(half_angle) * sin_phase,
+                  frequency * np.sin(half_angle) * cos_phase,
+                  np.full_like(phase, -2.0 * frequency * s * s)], axis=-1)
+    return q, w
+
+
+def torque_free_truth(inertia, orientation, angular_velocity, t):
+    """
+    Return a free rigid body's motion: ``I w' = (I w) x w`` with attitude.
+
+    Integrated by a fourth-order Lie-Poisson splitting
+    (:mod:`rotation_node.scene._free_rigid_body`) with internal steps of at
+    most ``MAX_STEP_ANGLE`` rad: ``|I w|`` and the world angular momentum
+    ``R I w`` stay constant to round-off, the kinetic energy within ~1e-14
+    (relative), with no secular drift.
+
+    Parameters
+    ----------
+    inertia : array_like, shape (3,)
+        Principal moments about the body x, y, z axes.
+    orientation : array_like, shape (4,)
+        Orientation (x, y, z, w) at ``t[0]``.
+    angular_velocity : array_like, shape (3,)
+        Body angular velocity at ``t[0]``, rad/s.
+    t : array_like, shape (n,)
+        Non-decreasing times, s.
+
+    Returns
+    -------
+    q : ndarray, shape (n, 4)
+    w : ndarray, shape (n, 3)
+    """
+    inverse_inertia = 1.0 / np.asarray(inertia, dtype=np.float64)
+    w0 = np.asarray(angular_velocity, dtype=np.float64)
+    momentum = w0 / inverse_inertia
+    t = np.ascontiguousarray(t, dtype=np.float64)
+    # |w|^2 <= w.I w / I_min = 2T / I_min along the whole motion: T is conserved.
+    fastest = np.sqrt(w0 @ momentum * inverse_inertia.max())
+    longest_interval = np.max(np.diff(t), initial=0.0)
+    substeps = max(1, math.ceil(fastest * longest_interval / _free_rigid_body.MAX_STEP_ANGLE))
+    q0 = np.array(orientation, dtype=np.float64)
+    q, momentum = _free_rigid_body.integrate(
+        q0 / np.linalg.norm(q0), momentum, inverse_inertia, t, substeps,
+        _free_rigid_body.AXES, _free_rigid_body.FRACTIONS)
+    return q, momentum * inverse_inertia
+
+
+def euler_sweep_truth(sequence, start, end, duration, t):
+    """
+    Return the rotation whose Euler angles move linearly from ``start`` to ``end``.
+
+    The angles are ``start`` at ``t = 0`` and ``end`` at ``t = duration``.
+
+    The body angular velocity follows from the constant Euler rates; that map
+    is defined everywhere, gimbal lock included (only its inverse is singular).
+
+    Parameters
+    ----------
+    sequence : str
+        Euler sequence (upper case intrinsic, lower case extrinsic).
+    start, end : array_like, shape (3,)
+        Angles of ``sequence`` at ``t = 0`` and ``t = duration``, rad.
+    duration : float
+        Sweep time, s (> 0).
+    t : array_like, shape (n,)
+        Times, s.
+
+    Returns
+    -------
+    q : ndarray, shape (n, 4)
+    w : ndarray, shape (n, 3)
+    """
+    t = np.asarray(t, dtype=np.float64)
+    start = np.asarray(start, dtype=np.float64)
+    rates = (np.asarray(end, dtype=np.float64) - start) / duration
+    angles = start + rates * t[:, np.newaxis]
+    q = sign_continuous(quaternion_from_euler(angles, sequence))
+    w = angular_velocity_from_euler_rates(angles, np.broadcast_to(rates, angles.shape),
+                                          sequence, frame='body')
+    return q, w
+
+
+def motion_truth(motion, t, duration):
+    """
+    Return the truth ``(q, w)`` of a scene's motion at times ``t``.
+
+    Parameters
+    ----------
+    motion : ConstantRate or Coning or TorqueFree or EulerSweep
+        The scene's validated ``motion``.
+    t : ndarray, shape (n,)
+        Times since the first sample, s.
+    duration : float
+        The scene's duration, s (the end of an Euler sweep).
+
+    Returns
+    -------
+    q : ndarray, shape (n, 4)
+    w : ndarray, shape (n, 3)
+    """
+    if isinstance(motion, ConstantRate):
+        return constant_rate_truth(motion.orientation, motion.angular_velocity, t)
+    if isinstance(motion, Coning):
+        return coning_truth(motion.half_angle, motion.frequency, t)
+    if isinstance(motion, TorqueFree):
+        return torque_free_truth(motion.inertia, motion.orientation, motion.angular_velocity, t)
+    if isinstance(motion, EulerSweep):
+        return euler_sweep_truth(motion.sequence, motion.start, motion.end, duration, t)
+    raise TypeError(f'motion_truth: not a scene motion: {motion!r}')

@@ -1,0 +1,174 @@
+"""Tests of rotation_node.scene.simulator: arrays -> messages -> MCAP bag."""
+import os
+
+import numpy as np
+import pytest
+
+from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
+from rclpy.serialization import deserialize_message, serialize_message
+from sensor_msgs.msg import Imu
+
+from rotation_node.bag.mcap_io import BagReader
+from rotation_node.errors import BagError
+from rotation_node.scene import simulator, spec
+from rotation_node.scene.simulator import sample_stamps_ns, simulate, write_bag
+
+SCENES_DIR = os.path.join(os.path.dirname(__file__), '..', 'config', 'scenes')
+TRUTH_TOPICS = ('/truth/orientation', '/truth/angular_velocity')
+
+
+def stamp_ns(header):
+    return header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
+
+
+def read_topic(path, topic):
+    with BagReader(path) as reader:
+        return [(record.log_time_ns, record.message()) for record in reader.messages([topic])]
+
+
+@pytest.fixture(scope='module')
+def every_effect(tmp_path_factory):
+    """The shipped every-effect scene, simulated and written once."""
+    simulation = simulate(spec.load_scene(os.path.join(SCENES_DIR, 'every_effect.yaml')), 4)
+    path = tmp_path_factory.mktemp('bags') / 'every_effect.mcap'
+    write_bag(simulation, path)
+    return simulation, path
+
+
+def test_bag_topics_and_counts(every_effect):
+    simulation, path = every_effect
+    n = len(simulation.time)
+    with BagReader(path) as reader:
+        assert reader.topics == {'/imu': 'sensor_msgs/msg/Imu',
+                                 '/truth/orientation': 'geometry_msgs/msg/QuaternionStamped',
+                                 '/truth/angular_velocity': 'geometry_msgs/msg/Vector3Stamped'}
+        assert reader.message_counts == {'/imu': int(simulation.sensor.published.sum()),
+                                         '/truth/orientation': n,
+                                         '/truth/angular_velocity': n}
+    assert 0 < simulation.sensor.published.sum() < n
+
+
+def test_truth_messages_hold_the_truth_at_the_nominal_stamps(every_effect):
+    simulation, path = every_effect
+    orientation = read_topic(path, '/truth/orientation')
+    angular_velocity = read_topic(path, '/truth/angular_velocity')
+    for k, ((log_q, q), (log_w, w)) in enumerate(zip(orientation, angular_velocity)):
+        assert log_q == log_w == stamp_ns(q.header) == stamp_ns(w.header) == simulation.stamp_ns[k]
+        assert q.header.frame_id == w.header.frame_id == 'imu_link'
+        m = q.quaternion
+        assert [m.x, m.y, m.z, m.w] == simulation.truth_orientation[k].tolist()
+        v = w.vector
+        assert [v.x, v.y, v.z] == simulation.truth_angular_velocity[k].tolist()
+
+
+def test_imu_messages_hold_the_sensor_stream(every_effect):
+    simulation, path = every_effect
+    sensor = simulation.sensor
+    published = np.flatnonzero(sensor.published)
+    messages = read_topic(path, '/imu')
+    assert len(messages) == len(published)
+    for k, (log_time, msg) in zip(published, messages):
+        assert log_time == simulation.stamp_ns[k]            # recorder clock: nominal
+        assert stamp_ns(msg.header) == sensor.stamp_ns[k]    # sensor clock: jittered
+        assert msg.header.frame_id == 'imu_link'
+        o, w = msg.orientation, msg.angular_velocity
+        np.testing.assert_array_equal([o.x, o.y, o.z, o.w], sensor.orientation[k])
+        np.testing.assert_array_equal([w.x, w.y, w.z], sensor.angular_velocity[k])
+        np.testing.assert_array_equal(msg.orientation_covariance, sensor.orientation_covariance[k])
+        np.testing.assert_array_equal(msg.angular_velocity_covariance,
+                                      sensor.angular_velocity_covariance[k])
+        a = msg.linear_acceleration
+        assert [a.x, a.y, a.z] == [0.0, 0.0, 0.0]
+        assert msg.linear_acceleration_covariance.tolist() == [-1.0] + [0.0] * 8
+
+
+def test_every_effect_scene_shows_every_effect(every_effect):
+    simulation, _ = every_effect
+    sensor = simulation.sensor
+    assert set(simulation.effect_masks) == set(spec.EFFECT_PARAMETERS)
+    assert np.isnan(sensor.orientation).any() and np.isnan(sensor.angular_velocity).any()
+    assert (sensor.orientation_covariance[:, 0] == -1).any()
+    assert np.any(np.diff(sensor.stamp_ns) < 0)
+    known = np.isfinite(sensor.orientation).all(axis=1) & sensor.orientation.any(axis=1)
+    dots = np.einsum('ij,ij->i', sensor.orientation[known], simulation.truth_orientation[known])
+    assert (dots < 0).any() and (dots > 0).any()
+
+
+def test_scene_without_effects_writes_sensor_equal_to_truth(tmp_path):
+    path = tmp_path / 'coning.mcap'
+    write_bag(simulate(spec.load_scene(os.path.join(SCENES_DIR, 'coning.yaml'))), path)
+    imu = read_topic(path, '/imu')
+    truth_q = read_topic(path, '/truth/orientation')
+    truth_w = read_topic(path, '/truth/angular_velocity')
+    assert len(imu) == len(truth_q) == len(truth_w) == 401
+    for (_, msg), (_, q), (_, w) in zip(imu, truth_q, truth_w):
+        assert msg.header == q.header == w.header
+        assert msg.orientation == q.quaternion
+        assert msg.angular_velocity == w.vector
+
+
+def test_same_scene_and_seed_give_a_byte_identical_bag(tmp_path):
+    """Same file name in other directories: rosbag2's metadata records the file name."""
+    scene = spec.load_scene(os.path.join(SCENES_DIR, 'every_effect.yaml'))
+    paths = []
+    for run, seed in (('a', 9), ('b', 9), ('c', 10)):
+        (tmp_path / run).mkdir()
+        paths.append(tmp_path / run / 'out.mcap')
+        write_bag(simulate(scene, seed), paths[-1])
+    assert paths[0].read_bytes() == paths[1].read_bytes()
+    assert paths[0].read_bytes() != paths[2].read_bytes()
+
+
+@pytest.mark.parametrize('msg_class', [Imu, QuaternionStamped, Vector3Stamped])
+@pytest.mark.parametrize('frame_id', ['', 'a', 'imu', 'imu_lnk', 'imu_link', 'base_link_imu_0',
+                                      'caf\u00e9'])
+def test_serialize_zeroes_the_padding_and_keeps_the_message(msg_class, frame_id):
+    """Header (12 bytes + string + NUL), then float64s aligned to 8 in the payload."""
+    msg = msg_class()
+    msg.header.frame_id = frame_id
+    msg.header.stamp.sec = 7
+    data = simulator._serialize(msg)
+    payload_string_end = 12 + len(frame_id.encode()) + 1
+    padding = data[4 + payload_string_end:4 + 8 * -(-payload_string_end // 8)]
+    assert padding == bytes(len(padding))
+    assert len(data) == len(serialize_message(msg))
+    assert deserialize_message(data, msg_class) == msg
+
+
+def test_existing_bag_is_kept_unless_overwrite(tmp_path):
+    path = tmp_path / 'out.mcap'
+    path.write_bytes(b'precious')
+    simulation = simulate(spec.load_scene(os.path.join(SCENES_DIR, 'coning.yaml')))
+    with pytest.raises(BagError):
+        write_bag(simulation, path)
+    assert path.read_bytes() == b'precious'
+    write_bag(simulation, path, overwrite=True)
+    with BagReader(path) as reader:
+        assert reader.message_counts['/imu'] == 401
+
+
+@pytest.mark.parametrize('start_time, rate, expected', [
+    (1735689600.0, 100.0, [1735689600_000_000_000, 1735689600_010_000_000]),
+    (12.25, 3.0, [12_250_000_000, 12_583_333_333]),
+    (0.0, 1e9, [0, 1]),
+])
+def test_sample_stamps(start_time, rate, expected):
+    scene = spec.scene_from_dict({'duration': 1.0 / rate, 'rate': rate, 'start_time': start_time,
+                                  'motion': {'type': 'coning', 'half_angle': 0.1,
+                                             'frequency': 1.0}})
+    np.testing.assert_array_equal(sample_stamps_ns(scene), expected)
+
+
+def test_simulation_times_come_from_the_stamps():
+    scene = spec.load_scene(os.path.join(SCENES_DIR, 'coning.yaml'))
+    simulation = simulate(scene)
+    np.testing.assert_array_equal(simulation.time,
+                                  (simulation.stamp_ns - simulation.stamp_ns[0]) / 1e9)
+    assert simulation.time[-1] == scene.duration
+
+
+@pytest.mark.parametrize('seed', [-1, 1.5, True, '3'])
+def test_bad_seed(seed):
+    scene = spec.load_scene(os.path.join(SCENES_DIR, 'coning.yaml'))
+    with pytest.raises(ValueError, match='seed'):
+        simulate(scene, seed)
