@@ -222,3 +222,16 @@ def test_leading_dimensions_are_kept(rng):
 def test_round_trip_property(q, seq):
     back = rc.quaternion_from_euler(rc.euler_from_quaternion(q, seq), seq)
     assert rc.quaternion_distance(q, back) <= ROUND_TRIP * mpr.EPS
+
+
+@pytest.mark.parametrize('seq', SEQUENCES)
+def test_batch_schedule_is_as_exact_as_the_fused_kernel(rng, seq):
+    # Large enough for the staged (numpy arctan2) schedule; hard cases throughout.
+    q = np.concatenate([hard_quaternions(rng, 1024),
+                        rc.quaternion_from_euler(near_gimbal_lock_angles(rng, 1024, seq), seq)])
+    batch = rc.euler_from_quaternion(q, seq)
+    fused = np.array([rc.euler_from_quaternion(x, seq) for x in q[::37]])
+    back = rc.quaternion_from_euler(batch, seq)
+    assert rc.quaternion_distance(q, back).max() <= ROUND_TRIP * mpr.EPS
+    assert rc.quaternion_distance(rc.quaternion_from_euler(fused, seq), back[::37]).max() \
+        <= ROUND_TRIP * mpr.EPS

@@ -154,3 +154,33 @@ def test_single_sample_shapes():
 def test_empty_batch():
     assert rc.matrix_from_quaternion(np.zeros((0, 4))).shape == (0, 3, 3)
     assert rc.euler_from_matrix(np.zeros((0, 3, 3)), 'xyz').shape == (0, 3)
+
+
+@pytest.fixture
+def two_threads():
+    from rotation_node.conversions import _quaternion
+    before = _quaternion._threads
+    rc.set_threads(2)
+    yield
+    rc.set_threads(before)
+
+
+def test_threaded_batches_equal_single_threaded(rng, two_threads):
+    q = rng.normal(size=(70000, 4))
+    threaded = rc.euler_from_quaternion(q, 'ZYX'), rc.matrix_from_quaternion(q)
+    rc.set_threads(1)
+    single = rc.euler_from_quaternion(q, 'ZYX'), rc.matrix_from_quaternion(q)
+    assert all(np.array_equal(a, b) for a, b in zip(threaded, single))
+
+
+def test_threaded_batch_reports_the_first_bad_sample(rng, two_threads):
+    q = rng.normal(size=(2, 50000, 4))
+    q[1, 20000, 2] = np.nan
+    q[1, 30000] = 0.0
+    with pytest.raises(ValueError, match=r'`q` at index \(1, 20000\) has a NaN'):
+        rc.matrix_from_quaternion(q)
+
+
+def test_set_threads_rejects_zero():
+    with pytest.raises(ValueError, match='`n` >= 1'):
+        rc.set_threads(0)

@@ -17,8 +17,7 @@ import numpy as np
 
 from ._matrix import DEFAULT_ORTHONORMAL_TOLERANCE, flat_quaternions_from_matrices, store_rotation
 from ._quaternion import (call_binary, call_unary, half_angle_atan2, jit, quaternion_status,
-                          run_staged, scaled_quaternion, sincos_in_place, status, vector_norm,
-                          vector_status)
+                          scaled_quaternion, status, vector_norm, vector_status)
 from ._validation import NON_FINITE, ZERO_NORM
 
 
@@ -84,8 +83,8 @@ def rotation_vector_from_quaternion_scalar(x, y, z, w):
 
 # ----------------------------------------------------------------- kernels
 # The exponential-map kernels write quaternions or matrices, as ``out`` is
-# shaped (..., 4) or (..., 3, 3); each has a fused and a staged (batch)
-# schedule, the latter evaluating sin and cos with numpy's SIMD ufuncs.
+# shaped (..., 4) or (..., 3, 3). (numpy's float64 sin/cos are no faster than
+# libm's here, so unlike Euler angles these have no staged batch schedule.)
 
 @jit
 def _axis_angle_status(fa, ft, s):
@@ -111,34 +110,6 @@ def _from_axis_angle_kernel(axis, angle, out):
 
 
 @jit
-def _axis_angle_arguments_kernel(fa, ft, y):
-    for s in range(fa.shape[0]):
-        bad = _axis_angle_status(fa, ft, s)
-        if bad >= 0:
-            return bad
-        y[s, 0] = 0.5 * ft[s]
-    return -1
-
-
-@jit
-def _from_axis_angle_sincos_kernel(fa, sin_half, cos_half, fo):
-    for s in range(fa.shape[0]):
-        x, y, z, w = axis_angle_quaternion(fa[s, 0], fa[s, 1], fa[s, 2],
-                                           sin_half[s, 0], cos_half[s, 0])
-        store_rotation(fo, s, x, y, z, w)
-
-
-def _from_axis_angle_batch(axis, angle, out):
-    fa, ft = axis.reshape(-1, 3), angle.reshape(-1)
-    fo = out.reshape(fa.shape[0], -1)
-    return run_staged(
-        fa.shape[0], 1,
-        lambda a, b, y, x: _axis_angle_arguments_kernel(fa[a:b], ft[a:b], y),
-        sincos_in_place,
-        lambda a, b, y, x: _from_axis_angle_sincos_kernel(fa[a:b], y, x, fo[a:b]))
-
-
-@jit
 def _from_rotation_vector_kernel(v, out):
     fv = v.reshape(-1, 3)
     fo = out.reshape(fv.shape[0], -1)
@@ -149,35 +120,6 @@ def _from_rotation_vector_kernel(v, out):
         x, y, z, w = quaternion_from_rotation_vector_scalar(fv[s, 0], fv[s, 1], fv[s, 2])
         store_rotation(fo, s, x, y, z, w)
     return -1
-
-
-@jit
-def _rotation_vector_arguments_kernel(fv, y):
-    for s in range(fv.shape[0]):
-        bad = vector_status(fv, s, 0)
-        if bad >= 0:
-            return bad
-        y[s, 0] = 0.5 * vector_norm(fv[s, 0], fv[s, 1], fv[s, 2])
-    return -1
-
-
-@jit
-def _from_rotation_vector_sincos_kernel(fv, sin_half, cos_half, fo):
-    for s in range(fv.shape[0]):
-        vx, vy, vz = fv[s, 0], fv[s, 1], fv[s, 2]
-        x, y, z, w = rotation_vector_quaternion(vx, vy, vz, vector_norm(vx, vy, vz),
-                                                sin_half[s, 0], cos_half[s, 0])
-        store_rotation(fo, s, x, y, z, w)
-
-
-def _from_rotation_vector_batch(v, out):
-    fv = v.reshape(-1, 3)
-    fo = out.reshape(fv.shape[0], -1)
-    return run_staged(
-        fv.shape[0], 1,
-        lambda a, b, y, x: _rotation_vector_arguments_kernel(fv[a:b], y),
-        sincos_in_place,
-        lambda a, b, y, x: _from_rotation_vector_sincos_kernel(fv[a:b], y, x, fo[a:b]))
 
 
 @jit
@@ -234,7 +176,7 @@ def quaternion_from_axis_angle(axis, angle):
         Wrong shape, NaN/Inf, or a zero axis.
     """
     return call_binary(_from_axis_angle_kernel, axis, angle, ('axis', 'angle'), ((3,), ()),
-                       (4,), batch_kernel=_from_axis_angle_batch)
+                       (4,))
 
 
 def matrix_from_axis_angle(axis, angle):
@@ -254,7 +196,7 @@ def matrix_from_axis_angle(axis, angle):
         Body-to-world rotation matrices.
     """
     return call_binary(_from_axis_angle_kernel, axis, angle, ('axis', 'angle'), ((3,), ()),
-                       (3, 3), batch_kernel=_from_axis_angle_batch)
+                       (3, 3))
 
 
 def axis_angle_from_quaternion(q):
@@ -318,8 +260,7 @@ def quaternion_from_rotation_vector(v):
         Unit quaternions (x, y, z, w), canonical; exact to ~1 ulp from
         ``|v| = 0`` (identity) up.
     """
-    return call_unary(_from_rotation_vector_kernel, v, 'v', (3,), (4,),
-                      batch_kernel=_from_rotation_vector_batch)
+    return call_unary(_from_rotation_vector_kernel, v, 'v', (3,), (4,))
 
 
 def matrix_from_rotation_vector(v):
@@ -337,8 +278,7 @@ def matrix_from_rotation_vector(v):
         Body-to-world rotation matrices. Computed through the quaternion, so
         no ``(1 - cos t) / t^2`` cancellation.
     """
-    return call_unary(_from_rotation_vector_kernel, v, 'v', (3,), (3, 3),
-                      batch_kernel=_from_rotation_vector_batch)
+    return call_unary(_from_rotation_vector_kernel, v, 'v', (3,), (3, 3))
 
 
 def rotation_vector_from_quaternion(q):

@@ -12,6 +12,8 @@ loop kernels; they assume finite, non-zero input (the kernels check with
 :func:`quaternion_defect` first).
 """
 import math
+import os
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from numba import njit
@@ -277,10 +279,51 @@ def atan2_in_place(y, x):
     np.arctan2(y, x, out=y)
 
 
-def sincos_in_place(y, x):
-    """``x <- cos(y)``, ``y <- sin(y)``."""
-    np.cos(y, out=x)
-    np.sin(y, out=y)
+# Batches of at least this many samples are split across threads (the kernels
+# release the GIL); ROTATION_NODE_THREADS overrides the number of threads.
+THREADED_SAMPLES = 1 << 16
+_threads = int(os.environ.get('ROTATION_NODE_THREADS', 0)) or len(os.sched_getaffinity(0))
+_pool = None
+
+
+def set_threads(n):
+    """
+    Set how many threads large batches (>= 65536 samples) are split across.
+
+    Parameters
+    ----------
+    n : int
+        1 runs everything in the calling thread. The default is the number of
+        CPUs this process may use, or the environment variable
+        ``ROTATION_NODE_THREADS``.
+    """
+    global _threads, _pool
+    if int(n) < 1:
+        raise ValueError(f'Expected `n` >= 1 threads, got {n!r}.')
+    _threads = int(n)
+    if _pool is not None:
+        _pool.shutdown()
+        _pool = None
+
+
+def _run(kernel, inputs, trailings, out, out_trailing, args):
+    """Run ``kernel(*inputs, out, *args)``, split across threads for large batches."""
+    n = out.size // math.prod(out_trailing)
+    if _threads == 1 or n < THREADED_SAMPLES:
+        return kernel(*inputs, out, *args)
+    global _pool
+    if _pool is None:
+        _pool = ThreadPoolExecutor(_threads, thread_name_prefix='rotation_node')
+    flat_inputs = [a.reshape((n,) + t) for a, t in zip(inputs, trailings)]
+    flat_out = out.reshape((n,) + out_trailing)
+    bounds = np.linspace(0, n, _threads + 1).astype(int)
+    jobs = [_pool.submit(kernel, *[a[lo:hi] for a in flat_inputs], flat_out[lo:hi], *args)
+            for lo, hi in zip(bounds[:-1], bounds[1:])]
+    for lo, job in zip(bounds[:-1], jobs):
+        bad = job.result()
+        if bad >= 0:
+            return bad + (int(lo) << 4)
+    return -1
 
 
 def call_unary(kernel, x, name, trailing, out_trailing, *args, batch_kernel=None):
@@ -289,30 +332,31 @@ def call_unary(kernel, x, name, trailing, out_trailing, *args, batch_kernel=None
 
     ``out`` gets ``x``'s leading shape followed by ``out_trailing``; a 0-d
     result is returned as a scalar. Large inputs go to ``batch_kernel``
-    (same signature) where one is given.
+    (same signature) where one is given, and large batches are split across
+    threads.
     """
     a = float_array(x, name, trailing)
     out = np.empty(a.shape[:a.ndim - len(trailing)] + out_trailing)
-    if batch_kernel is not None and a.size >= BATCH_SIZE:
-        kernel = batch_kernel
-    bad = kernel(a, out, *args)
+    if a.size < BATCH_SIZE:
+        bad = kernel(a, out, *args)
+    else:
+        bad = _run(batch_kernel or kernel, (a,), (trailing,), out, out_trailing, args)
     if bad >= 0:
         raise_sample_error(bad, (name,), (a,), (trailing,))
     return _result(out)
 
 
-def call_binary(kernel, x, y, names, trailings, out_trailing, batch_kernel=None):
+def call_binary(kernel, x, y, names, trailings, out_trailing, *args):
     """
-    Validate and broadcast ``x`` and ``y``, run ``kernel(x, y, out)``, raise for a bad sample.
+    Validate and broadcast ``x`` and ``y``, run ``kernel(x, y, out, *args)``, raise if bad.
 
-    Large inputs go to ``batch_kernel`` (same signature) where one is given.
+    ``out`` gets the common leading shape followed by ``out_trailing``; large
+    batches are split across threads.
     """
     a, b = broadcast_pair(float_array(x, names[0], trailings[0]),
                           float_array(y, names[1], trailings[1]), *trailings)
     out = np.empty(a.shape[:a.ndim - len(trailings[0])] + out_trailing)
-    if batch_kernel is not None and a.size >= BATCH_SIZE:
-        kernel = batch_kernel
-    bad = kernel(a, b, out)
+    bad = _run(kernel, (a, b), trailings, out, out_trailing, args)
     if bad >= 0:
         raise_sample_error(bad, names, (a, b), trailings)
     return _result(out)

@@ -1,0 +1,90 @@
+"""
+Angular velocity from a time series of orientations, by finite differences.
+
+Between consecutive samples the relative rotation is ``q_k^-1 q_{k+1}`` (body)
+or ``q_{k+1} q_k^-1`` (world); its rotation vector (log map, ``atan2`` form,
+sign-independent: the shorter way round) divided by the step is the mean
+angular velocity over the step. By the Magnus expansion
+``log(q_k^-1 q_{k+1}) = h w_b(t_k + h/2) + O(h^3)``, so it is a second-order
+estimate at the midpoint time, and exact for a constant angular velocity.
+It aliases when the true rotation per step reaches pi (``|w| h >= pi``).
+"""
+import numpy as np
+
+from ..conversions._axis_angle import rotation_vector_from_quaternion_scalar
+from ..conversions._quaternion import jit, product, quaternion_status, scaled_quaternion
+from ..conversions._validation import float_array, raise_sample_error
+from ._validation import is_world_frame, sample_times
+
+
+@jit
+def _finite_difference_kernel(q, h, out, world):
+    n = h.shape[0] + 1
+    fq, fo = q.reshape(-1, 4), out.reshape(-1, 3)
+    for series in range(fq.shape[0] // n):
+        first = series * n
+        bad = quaternion_status(fq, first, 0)
+        if bad >= 0:
+            return bad
+        px, py, pz, pw = scaled_quaternion(fq[first, 0], fq[first, 1], fq[first, 2], fq[first, 3])
+        for k in range(n - 1):
+            s = first + k + 1
+            bad = quaternion_status(fq, s, 0)
+            if bad >= 0:
+                return bad
+            qx, qy, qz, qw = scaled_quaternion(fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3])
+            if world:  # q_{k+1} (x) q_k*
+                rx, ry, rz, rw = product(qx, qy, qz, qw, -px, -py, -pz, pw)
+            else:  # q_k* (x) q_{k+1}
+                rx, ry, rz, rw = product(-px, -py, -pz, pw, qx, qy, qz, qw)
+            vx, vy, vz = rotation_vector_from_quaternion_scalar(rx, ry, rz, rw)
+            o = series * (n - 1) + k
+            fo[o, 0], fo[o, 1], fo[o, 2] = vx / h[k], vy / h[k], vz / h[k]
+            px, py, pz, pw = qx, qy, qz, qw
+    return -1
+
+
+def angular_velocity_from_quaternions(q, t, frame='body'):
+    """
+    Angular velocity between consecutive orientations of a time series.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., N, 4)
+        Orientations (x, y, z, w), scalar last, body-to-world, at the times
+        ``t``; any non-zero norm and either sign per sample (``q`` and ``-q``
+        are the same rotation, so sign flips between samples do no harm).
+    t : array_like, shape (N,)
+        Sample times in seconds, strictly increasing, N >= 2. The steps are
+        ``t[1:] - t[:-1]`` in float64: pass times relative to a recent origin
+        (not ~1.7e9 s since the epoch, whose rounding is ~2e-7 s).
+    frame : {'body', 'world'}, optional
+        ``'body'``: ``w_b = log(q_k^-1 q_{k+1}) / h_k``; ``'world'``:
+        ``w_w = log(q_{k+1} q_k^-1) / h_k``.
+
+    Returns
+    -------
+    ndarray, shape (..., N - 1, 3)
+        Angular velocity (rad/s) in ``frame`` over each step, referring to the
+        midpoint times ``(t[:-1] + t[1:]) / 2``: second-order accurate there,
+        exact for a constant angular velocity. Two samples give one value:
+        ``angular_velocity_from_quaternions([q_prev, q], [t_prev, t])[0]``.
+        A rotation of pi or more per step cannot be told from the shorter
+        way round (aliasing).
+
+    Raises
+    ------
+    ValueError
+        Bad ``frame``; ``q`` not (..., N, 4) or with a NaN/Inf or zero
+        sample; ``t`` of the wrong shape, non-finite or not strictly increasing.
+    """
+    world = is_world_frame(frame)
+    a = float_array(q, 'q', (4,))
+    if a.ndim < 2:
+        raise ValueError(f'Expected `q` to have shape (..., N, 4) (a time series), got {a.shape}.')
+    _, h = sample_times(t, a.shape[-2], 'q')
+    out = np.empty(a.shape[:-2] + (a.shape[-2] - 1, 3))
+    bad = _finite_difference_kernel(a, h, out, world)
+    if bad >= 0:
+        raise_sample_error(bad, ('q',), (a,), ((4,),))
+    return out

@@ -1,0 +1,100 @@
+"""
+Angular velocity at the stage times of an integration method.
+
+A method evaluates the rate at fixed fractions ``c`` of each step
+(``t_k + c h_k``). The rate comes either from a function, called once with all
+those times, or from samples at the step boundaries ``t``, read between samples
+off the local cubic through the four nearest samples (Lagrange form, one-sided
+at the ends): its error is ``O(h^4)``, so no method of order <= 4 loses its order
+on smooth sampled data. With fewer than four samples the polynomial through all
+of them is used.
+"""
+import numpy as np
+
+from ..conversions._validation import float_array
+
+
+def _lagrange_stencils(t, h, nodes):
+    """
+    Stencil indices and Lagrange weights of the local interpolating cubic.
+
+    Returns
+    -------
+    stencil : ndarray of int, shape (K, P)
+        Sample indices used for step ``k`` (``P = min(N, 4)``).
+    weights : ndarray, shape (K, S, P)
+        The rate at ``t_k + nodes[s] h_k`` is ``sum_p weights[k, s, p] omega[stencil[k, p]]``.
+    """
+    n = t.shape[0]
+    points = min(n, 4)
+    start = np.clip(np.arange(n - 1) - 1, 0, n - points)
+    stencil = start[:, None] + np.arange(points)
+    # Times relative to t_k: exact zeros at the stencil's own nodes, no epoch rounding.
+    offsets = t[stencil] - t[:-1, None]                                # (K, P)
+    x = nodes[None, :] * h[:, None]                                   # (K, S)
+    weights = np.ones(x.shape + (points,))
+    for m in range(points):
+        for other in range(points):
+            if other != m:
+                weights[:, :, m] *= ((x - offsets[:, None, other])
+                                     / (offsets[:, None, m] - offsets[:, None, other]))
+    return stencil, weights
+
+
+def _first_non_finite(values, trailing_ndim):
+    """Index (leading dimensions) of the first sample with a NaN or Inf, or None."""
+    bad = ~np.isfinite(values).all(axis=tuple(range(-trailing_ndim, 0)))
+    if not bad.any():
+        return None
+    return tuple(int(i) for i in np.unravel_index(np.flatnonzero(bad)[0], bad.shape))
+
+
+def stage_rates(omega, t, h, nodes):
+    """
+    Angular velocity at ``t_k + nodes[s] h_k`` for every step ``k``.
+
+    Parameters
+    ----------
+    omega : callable or array_like
+        ``omega(times)`` with ``times`` of shape (M,) returning shape
+        (..., M, 3); or samples of shape (..., N, 3) at ``t``.
+    t : ndarray, shape (N,)
+        Validated, strictly increasing sample times.
+    h : ndarray, shape (N - 1,)
+        Their steps.
+    nodes : ndarray, shape (S,)
+        The method's stage fractions, in [0, 1].
+
+    Returns
+    -------
+    ndarray, shape (..., N - 1, S, 3)
+        The rates, all finite.
+
+    Raises
+    ------
+    ValueError
+        Samples of the wrong shape or with a NaN/Inf; a function whose result
+        has the wrong shape or a NaN/Inf (naming the time).
+    """
+    steps, stages = h.shape[0], nodes.shape[0]
+    if callable(omega):
+        times = (t[:-1, None] + nodes[None, :] * h[:, None]).ravel()
+        rates = np.asarray(omega(times), dtype=np.float64)
+        if rates.shape[-2:] != (times.shape[0], 3):
+            raise ValueError(
+                f'Expected `omega(t)` to return shape (..., {times.shape[0]}, 3) for t of shape '
+                f'({times.shape[0]},), got {rates.shape} (a constant w: '
+                f'np.broadcast_to(w, t.shape + (3,))).')
+        bad = _first_non_finite(rates, 1)
+        if bad is not None:
+            raise ValueError(f'`omega(t)` returned a NaN or Inf at t = {float(times[bad[-1]])!r}.')
+        return rates.reshape(rates.shape[:-2] + (steps, stages, 3))
+    samples = float_array(omega, 'omega', (3,))
+    if samples.ndim < 2 or samples.shape[-2] != t.shape[0]:
+        raise ValueError(f'Expected `omega` samples of shape (..., {t.shape[0]}, 3) to match `t`, '
+                         f'got {samples.shape}.')
+    bad = _first_non_finite(samples, 1)
+    if bad is not None:
+        raise ValueError(f'`omega` at index {bad} has a NaN or Inf component.')
+    stencil, weights = _lagrange_stencils(t, h, nodes)
+    return np.einsum('ksp,...kpd->...ksd', weights, samples[..., stencil, :])

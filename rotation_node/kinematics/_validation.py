@@ -1,0 +1,110 @@
+"""
+Argument checks shared by the kinematics functions.
+
+Arrays are validated with the helpers of :mod:`rotation_node.conversions`
+(``float_array``, ``call_unary``, ``call_binary``, ``raise_sample_error``: one
+contract for shapes, broadcasting, kernel status codes and error messages
+across the package). This module adds what only kinematics needs: the reference frame of
+an angular velocity and a strictly increasing vector of sample times.
+"""
+import math
+
+import numpy as np
+
+from ..conversions._quaternion import jit
+
+def is_world_frame(frame):
+    """
+    Validate ``frame`` and say whether it is the world frame.
+
+    Parameters
+    ----------
+    frame : str
+        ``'body'`` (angular velocity in body coordinates, ``w_b``) or
+        ``'world'`` (in world coordinates, ``w_w = R w_b``).
+
+    Returns
+    -------
+    bool
+        True for ``'world'``, False for ``'body'``.
+
+    Raises
+    ------
+    ValueError
+        If ``frame`` is anything else.
+    """
+    if frame == 'body':
+        return False
+    if frame == 'world':
+        return True
+    raise ValueError(f"Expected `frame` to be 'body' or 'world', got {frame!r}.")
+
+
+def sample_times(t, n_samples=None, series_name='t'):
+    """
+    Validate sample times and return them with the steps between them.
+
+    Parameters
+    ----------
+    t : array_like, shape (N,)
+        Times in seconds, finite and strictly increasing, N >= 2.
+    n_samples : int, optional
+        The ``N`` of the time series argument (its time axis length); by
+        default ``t``'s own length.
+    series_name : str, optional
+        The name of that argument, for the error message when ``N < 2``.
+
+    Returns
+    -------
+    t : ndarray, shape (N,)
+        The times as float64.
+    h : ndarray, shape (N - 1,)
+        The steps ``t[1:] - t[:-1]``, all > 0.
+
+    Raises
+    ------
+    ValueError
+        Fewer than two samples; ``t`` not numeric, not of shape (N,), with a
+        NaN/Inf, or not strictly increasing (naming the first offending pair).
+    """
+    try:
+        t = np.asarray(t, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f'Expected `t` to be an array of numbers, got {type(t).__name__}: {exc}'
+                         ) from None
+    if n_samples is None:
+        if t.ndim != 1:
+            raise ValueError(f'Expected `t` to have shape (N,), got {t.shape}.')
+        n_samples = t.shape[0]
+    if n_samples < 2:
+        raise ValueError(f'Expected `{series_name}` to hold a time series of N >= 2 samples, '
+                         f'got N = {n_samples}.')
+    if t.shape != (n_samples,):
+        raise ValueError(f'Expected `t` to have shape ({n_samples},) to match `{series_name}`, '
+                         f'got {t.shape}.')
+    h = np.empty(n_samples - 1)
+    bad = _steps_kernel(t, h)
+    if bad >= 0 and not math.isfinite(t[bad]):
+        raise ValueError(f'`t` at index {bad} is {float(t[bad])!r}: times must be finite.')
+    if bad >= 0:
+        raise ValueError(f'Expected `t` to be strictly increasing, got '
+                         f't[{bad}] = {float(t[bad])!r} <= t[{bad - 1}] = {float(t[bad - 1])!r}.')
+    return t, h
+
+
+@jit
+def _steps_kernel(t, h):
+    """
+    Fill ``h`` with ``t[1:] - t[:-1]`` and return the index of the first bad time, or -1.
+
+    A time is bad if it is NaN/Inf or not after its predecessor (which is finite).
+    """
+    if not math.isfinite(t[0]):
+        return 0
+    for k in range(1, t.shape[0]):
+        if not math.isfinite(t[k]):
+            return k
+        h[k - 1] = t[k] - t[k - 1]
+        if not h[k - 1] > 0.0:
+            return k
+    return -1
