@@ -7,9 +7,12 @@ quaternion represents the same rotation; every formula here either works on
 ratios or rescales by a power of two first (exact), so quaternions scaled by
 1e-160 or 1e+160 are handled without under- or overflow.
 
-The ``_``-prefixed scalar functions are compiled with numba and called from the
-loop kernels; they assume finite, non-zero input (the kernels check with
-:func:`quaternion_defect` first).
+The scalar functions (tuples in, tuples out) are compiled with numba and
+called from the loop kernels of every module; they assume finite, non-zero
+input (the kernels check with :func:`quaternion_defect` first). The helpers
+at the end (``call_unary``, ``call_binary``, ``run_staged``) are the one
+Python-side path from public arguments to kernels: validation, output
+allocation, batch schedules, threads and error reporting.
 """
 import math
 import os
