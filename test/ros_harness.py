@@ -105,3 +105,93 @@ class TestNode:
 
     def __exit__(self, *exc):
         self.close()
+
+
+def make_input_message(input_type, rotation, *, omega=(0.0, 0.0, 0.0), stamp_ns=0,
+                       frame_id='', sequence='xyz', degrees=False):
+    """
+    Return an input message of the node's ``input_type`` holding ``rotation``.
+
+    ``rotation`` is a scipy ``Rotation`` (the tests' oracle); ``omega`` goes into
+    the angular-velocity field of Imu and Odometry; ``sequence`` and ``degrees``
+    give the Euler convention of an ``euler`` input.
+    """
+    from rotation_node.pipeline import input_message_type
+    msg = input_message_type(input_type)()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
+    msg.header.frame_id = frame_id
+    fields = {
+        'quaternion': lambda m: m.quaternion,
+        'pose': lambda m: m.pose.orientation,
+        'pose_with_covariance': lambda m: m.pose.pose.orientation,
+        'imu': lambda m: m.orientation,
+        'odometry': lambda m: m.pose.pose.orientation,
+        'transform': lambda m: m.transform.rotation,
+    }
+    if input_type in fields:
+        q = fields[input_type](msg)
+        q.x, q.y, q.z, q.w = (float(v) for v in rotation.as_quat())
+    else:
+        values = (rotation.as_euler(sequence, degrees=degrees) if input_type == 'euler'
+                  else rotation.as_rotvec())
+        msg.vector.x, msg.vector.y, msg.vector.z = (float(v) for v in values)
+    rate = {'imu': lambda m: m.angular_velocity, 'odometry': lambda m: m.twist.twist.angular}
+    if input_type in rate:
+        w = rate[input_type](msg)
+        w.x, w.y, w.z = (float(v) for v in omega)
+    return msg
+
+
+def oracle_output(name, rotation, omega_body=(0.0, 0.0, 0.0), *, sequence='xyz',
+                  degrees=False, frame='body'):
+    """
+    Expected values of the node output ``name``, computed independently with scipy.
+
+    ``rotation`` (scipy ``Rotation``) turns at the constant body rate
+    ``omega_body``; rates are central differences of scipy's conversions.
+    Returns a flat array laid out as :func:`output_values` reads the message.
+    """
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+    omega_body = np.asarray(omega_body, dtype=float)
+    q = rotation.as_quat(canonical=True)
+    h = 1e-6
+
+    def moved(t):
+        return rotation * Rotation.from_rotvec(omega_body * t)
+
+    if name == 'quaternion':
+        return q
+    if name == 'euler':
+        return rotation.as_euler(sequence, degrees=degrees)
+    if name == 'rotation_vector':
+        return rotation.as_rotvec()
+    if name == 'axis_angle':
+        v = rotation.as_rotvec()
+        angle = np.linalg.norm(v)
+        return np.array([1.0, 0.0, 0.0, 0.0]) if angle == 0 else np.append(v / angle, angle)
+    if name == 'matrix':
+        return rotation.as_matrix().ravel()
+    if name == 'angular_velocity':
+        return omega_body if frame == 'body' else rotation.apply(omega_body)
+    if name == 'euler_rates':
+        step = moved(h).as_euler(sequence) - moved(-h).as_euler(sequence)
+        rates = (np.remainder(step + np.pi, 2 * np.pi) - np.pi) / (2 * h)
+        return np.degrees(rates) if degrees else rates
+    if name == 'quaternion_rate':
+        ahead, behind = moved(h).as_quat(), moved(-h).as_quat()
+        ahead, behind = (p if np.dot(p, q) > 0 else -p for p in (ahead, behind))
+        return (ahead - behind) / (2 * h)
+    raise ValueError(f'unknown output {name!r}')
+
+
+def output_values(msg):
+    """Return the numbers of an output message as a flat array."""
+    import numpy as np
+    if hasattr(msg, 'quaternion'):
+        q = msg.quaternion
+        return np.array([q.x, q.y, q.z, q.w])
+    if hasattr(msg, 'vector'):
+        v = msg.vector
+        return np.array([v.x, v.y, v.z])
+    return np.array(msg.data)

@@ -1,0 +1,225 @@
+"""
+The orientation-conversion node (console script ``rotation_node``).
+
+Subscribes the relative topic ``input`` (type chosen by the ``input_type``
+parameter) and publishes each output listed in ``outputs`` on the relative
+topic of the same name; the conversion itself is
+:class:`rotation_node.pipeline.ConversionPipeline`, the same code that
+``rotation_bag convert`` runs on bags. Parameters are declared from the table in
+:mod:`rotation_node.parameters`; a change at runtime is validated first, then
+takes effect on the next message. Counters and the current conventions are
+published on ``/diagnostics`` once a second.
+
+Run it with, for example::
+
+    rotation_node --ros-args -r input:=/imu/data -p outputs:='[euler, angular_velocity]'
+"""
+import gc
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import (
+    FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult)
+from rclpy.exceptions import (
+    InvalidParameterTypeException, InvalidParameterValueException)
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from rotation_node.errors import ParameterError
+from rotation_node.parameters import (
+    NODE_NAME, PARAMETERS, PARAMETERS_BY_NAME, NodeParameters)
+from rotation_node.pipeline import (
+    DROP_REASONS, SKIP_REASONS, ConversionPipeline, warm_up_conversions)
+
+DIAGNOSTICS_PERIOD_S = 1.0
+ISSUE_LOG_PERIOD_S = 5.0
+
+_RELIABILITY = {
+    'reliable': ReliabilityPolicy.RELIABLE,
+    'best_effort': ReliabilityPolicy.BEST_EFFORT,
+}
+
+
+def parameter_descriptor(spec) -> ParameterDescriptor:
+    """Return the ROS descriptor of one row of the parameter table."""
+    descriptor = ParameterDescriptor(
+        name=spec.name, description=spec.description,
+        additional_constraints=spec.constraints)
+    if spec.bounds is not None and spec.type is float:
+        descriptor.floating_point_range = [
+            FloatingPointRange(from_value=spec.bounds[0], to_value=spec.bounds[1])]
+    elif spec.bounds is not None:
+        descriptor.integer_range = [
+            IntegerRange(from_value=spec.bounds[0], to_value=spec.bounds[1], step=1)]
+    return descriptor
+
+
+def qos_profile(params: NodeParameters) -> QoSProfile:
+    """Return the QoS of the input subscription and the output publishers."""
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST, depth=params.qos_depth,
+        reliability=_RELIABILITY[params.qos_reliability])
+
+
+class RotationNode(Node):
+    """
+    Convert orientations and angular velocities from ``input`` to the configured outputs.
+
+    Raises
+    ------
+    ParameterError
+        An initial parameter value (from ``-p`` or a parameters file) is invalid.
+
+    """
+
+    def __init__(self, **kwargs):
+        super().__init__(NODE_NAME, **kwargs)
+        self.params = NodeParameters()
+        self._pipeline = None
+        self._subscription = None
+        self._output_publishers = {}
+        self._issue_loggers = {}
+        self._reported = (0, 0)   # dropped and skipped totals at the last diagnostics
+        # Registered before declaring, so the initial values pass the same checks.
+        self.add_on_set_parameters_callback(self._check_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        defaults = self.params.to_ros()
+        try:
+            self.declare_parameters('', [
+                (spec.name, defaults[spec.name], parameter_descriptor(spec))
+                for spec in PARAMETERS])
+        except (InvalidParameterValueException, InvalidParameterTypeException) as exc:
+            self.destroy_node()
+            raise ParameterError(str(exc)) from None
+        warm_up_conversions()
+        self._configure(None, self.params)
+        self._diagnostics_publisher = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
+
+    # Parameters --------------------------------------------------------------------
+
+    def _check_parameters(self, parameters):
+        """Validate a parameter change (all of it, or none of it, is applied)."""
+        try:
+            self.params.replaced(_own(parameters))
+        except ParameterError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, parameters):
+        """Apply a validated change; it takes effect on the next message."""
+        previous, self.params = self.params, self.params.replaced(_own(parameters))
+        # Not while declaring (__init__ configures once), nor for others' parameters.
+        if self._pipeline is not None and self.params != previous:
+            self._configure(previous, self.params)
+
+    def _configure(self, previous, params):
+        """Create or update the pipeline, subscription and publishers for ``params``."""
+        qos = qos_profile(params)
+        qos_changed = previous is None or qos != qos_profile(previous)
+        stats = None if self._pipeline is None else self._pipeline.stats
+        self._pipeline = ConversionPipeline(params, on_issue=self._log_issue, stats=stats)
+        if qos_changed or params.input_type != previous.input_type:
+            if self._subscription is not None:
+                self.destroy_subscription(self._subscription)
+            self._subscription = self.create_subscription(
+                self._pipeline.input_type, 'input', self._on_input, qos)
+        for name in list(self._output_publishers):
+            if qos_changed or name not in params.outputs:
+                self.destroy_publisher(self._output_publishers.pop(name))
+        for name, message_type in self._pipeline.output_types.items():
+            if name not in self._output_publishers:
+                self._output_publishers[name] = self.create_publisher(message_type, name, qos)
+        self.get_logger().info(
+            f'converting {params.input_type} messages on {self._subscription.topic_name} '
+            f'to {", ".join(params.outputs)} (euler.sequence {params.euler_sequence}, '
+            f'{"degrees" if params.euler_degrees else "radians"})')
+
+    # Messages ----------------------------------------------------------------------
+
+    def _on_input(self, msg):
+        for name, output in self._pipeline.process(msg):
+            self._output_publishers[name].publish(output)
+
+    def _log_issue(self, reason, detail):
+        # rclpy throttles per logger object and call site: one logger per reason, so
+        # a flood of one problem cannot hide the first report of another.
+        logger = self._issue_loggers.get(reason)
+        if logger is None:
+            logger = self._issue_loggers[reason] = rclpy.logging.get_logger(
+                self.get_logger().name)
+        logger.warning(f'{detail} [{reason}]', throttle_duration_sec=ISSUE_LOG_PERIOD_S)
+
+    # Diagnostics -------------------------------------------------------------------
+
+    def _publish_diagnostics(self):
+        stats = self._pipeline.stats
+        totals = (sum(stats.dropped.values()), sum(stats.skipped.values()))
+        new_dropped, new_skipped = (now - before for now, before in zip(totals, self._reported))
+        self._reported = totals
+        if new_dropped or new_skipped:
+            level = DiagnosticStatus.WARN
+            message = (f'{new_dropped} messages dropped, {new_skipped} partly converted '
+                       f'in the last {DIAGNOSTICS_PERIOD_S:g} s')
+        else:
+            level, message = DiagnosticStatus.OK, 'converting'
+        values = {
+            'input_topic': self._subscription.topic_name,
+            'received': stats.received,
+            'published': stats.published,
+            'dropped': totals[0],
+            **{f'dropped.{reason}': stats.dropped[reason] for reason in DROP_REASONS},
+            'skipped': totals[1],
+            **{f'skipped.{reason}': stats.skipped[reason] for reason in SKIP_REASONS},
+            'normalised': stats.normalised,
+            'near_singular': stats.near_singular,
+            **self.params.to_ros(),
+        }
+        array = DiagnosticArray()
+        array.header.stamp = self.get_clock().now().to_msg()
+        array.status = [DiagnosticStatus(
+            level=level, name=f'{self.get_fully_qualified_name()}: orientation conversion',
+            message=message, hardware_id='',
+            values=[KeyValue(key=key, value=_text(value)) for key, value in values.items()])]
+        self._diagnostics_publisher.publish(array)
+
+
+def _own(parameters):
+    """Return ``{name: value}`` of the node's own parameters (not use_sim_time etc.)."""
+    return {p.name: p.value for p in parameters if p.name in PARAMETERS_BY_NAME}
+
+
+def _text(value):
+    if isinstance(value, list):
+        return ','.join(value)
+    if isinstance(value, bool):
+        return str(value).lower()
+    return str(value)
+
+
+def main(args=None):
+    """Run the node until Ctrl-C; return 1 if a parameter value is invalid."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = RotationNode()
+        # The ~1e5 objects of rclpy, numpy and numba live as long as the process: keep
+        # them out of the cyclic collector, whose full passes over them stall a
+        # callback for ~50 ms (50 messages at 1 kHz).
+        gc.freeze()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except ParameterError as exc:
+        rclpy.logging.get_logger(NODE_NAME).fatal(f'invalid parameter: {exc}')
+        return 1
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,376 @@
+"""
+Parameters of the orientation-conversion node, in one table.
+
+Every parameter is a field of :class:`NodeParameters`; its ROS name, default,
+description and allowed values live in that field's :class:`ParameterSpec`, and
+:data:`PARAMETERS` lists them in declaration order. The node declares its ROS
+parameters from this table, and :func:`parameters_from_yaml` reads the same
+parameters from a ROS parameters file for ``rotation_bag convert``, so the live
+node and the offline conversion accept exactly the same values.
+
+Values are typed as ROS types them: a double parameter needs a float (``0.0``,
+not ``0``), a string array a list of strings. This module does not import rclpy.
+"""
+import math
+import re
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any, Callable, Mapping, Optional
+
+import yaml
+
+from rotation_node.conversions import parse_sequence
+from rotation_node.errors import ParameterError
+
+NODE_NAME = 'rotation_node'
+
+INPUT_TYPES = (
+    'quaternion', 'pose', 'pose_with_covariance', 'imu', 'odometry', 'transform',
+    'euler', 'rotation_vector')
+"""Values of ``input_type``: the message type subscribed on ``input``."""
+
+ORIENTATION_OUTPUTS = ('quaternion', 'euler', 'rotation_vector', 'axis_angle', 'matrix')
+"""Outputs computed from the orientation alone."""
+
+ANGULAR_VELOCITY_OUTPUTS = ('angular_velocity', 'euler_rates', 'quaternion_rate')
+"""Outputs that need the angular velocity (from the input, or by finite difference)."""
+
+OUTPUTS = ORIENTATION_OUTPUTS + ANGULAR_VELOCITY_OUTPUTS
+"""Values allowed in ``outputs``; each is published on the relative topic of that name."""
+
+FRAMES = ('body', 'world')
+RELIABILITIES = ('reliable', 'best_effort')
+
+# Parameters every rclpy node declares by itself; a parameters file may set them.
+_ROS_BUILTIN_PARAMETERS = frozenset({'use_sim_time', 'start_type_description_service'})
+
+
+@dataclass(frozen=True)
+class ParameterSpec:
+    """
+    One node parameter: ROS name, default, description and allowed values.
+
+    Attributes
+    ----------
+    name : str
+        ROS parameter name, e.g. ``'euler.sequence'``.
+    default : str, bool, int, float or tuple of str
+        Default value; its Python type is the parameter's type (a tuple of str
+        is a ROS string array).
+    description : str
+        One-line description, shown by ``ros2 param describe``.
+    choices : tuple of str, optional
+        Allowed values of a string parameter, or of each string-array element.
+    bounds : tuple of (float, float) or (int, int), optional
+        Inclusive range of a numeric parameter.
+    check : callable, optional
+        Further check of a value of the right type; raises ParameterError.
+    rule : str, optional
+        The allowed values in words, where ``choices`` and ``bounds`` cannot say it.
+    attribute : str
+        Name of the :class:`NodeParameters` field that holds the value.
+
+    """
+
+    name: str
+    default: Any
+    description: str
+    choices: Optional[tuple] = None
+    bounds: Optional[tuple] = None
+    check: Optional[Callable[[Any], None]] = None
+    rule: str = ''
+    attribute: str = ''
+
+    @property
+    def type(self) -> type:
+        """Python type of the value: str, bool, int, float or tuple (string array)."""
+        return type(self.default)
+
+    @property
+    def constraints(self) -> str:
+        """The allowed values in words ('' when the type is the only constraint)."""
+        if self.choices is not None:
+            prefix = 'each one of' if self.type is tuple else 'one of'
+            return f'{prefix}: {", ".join(self.choices)}'
+        if self.bounds is not None:
+            return f'from {self.bounds[0]:g} to {self.bounds[1]:g}'
+        return self.rule
+
+    def checked(self, value):
+        """
+        Return ``value`` in canonical form (string arrays as tuples) if it is valid.
+
+        Raises
+        ------
+        ParameterError
+            The value has the wrong type or is not allowed; the message names the
+            parameter.
+
+        """
+        value = _checked_type(self, value)
+        if self.choices is not None:
+            for item in (value if self.type is tuple else (value,)):
+                if item not in self.choices:
+                    raise ParameterError(
+                        f"parameter '{self.name}': {item!r} is not allowed; "
+                        f'{self.constraints}')
+        if self.bounds is not None and not self.bounds[0] <= value <= self.bounds[1]:
+            raise ParameterError(
+                f"parameter '{self.name}': {value!r} is out of range; "
+                f'allowed {self.constraints}')
+        if self.check is not None:
+            self.check(value)
+        return value
+
+
+_TYPE_NAMES = {
+    str: 'a string', bool: 'a boolean', int: 'an integer',
+    float: 'a floating-point number (write 0.0, not 0)', tuple: 'a list of strings'}
+
+
+def _checked_type(spec, value):
+    if spec.type is tuple:
+        ok = isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value)
+        value = tuple(value) if ok else value
+    elif spec.type is bool:
+        ok = isinstance(value, bool)
+    else:  # bool is an int subclass, but a bool is not a number here
+        ok = isinstance(value, spec.type) and not isinstance(value, bool)
+    if not ok:
+        raise ParameterError(
+            f"parameter '{spec.name}': expected {_TYPE_NAMES[spec.type]}, "
+            f'got {type(value).__name__} {value!r}')
+    if spec.type is float and not math.isfinite(value):
+        raise ParameterError(f"parameter '{spec.name}': must be finite, got {value!r}")
+    return value
+
+
+def _check_sequence(value):
+    try:
+        parse_sequence(value)
+    except ValueError as exc:
+        raise ParameterError(
+            f"parameter 'euler.sequence': {value!r} is not an Euler sequence ({exc})"
+        ) from None
+
+
+def _check_outputs(value):
+    if not value:
+        raise ParameterError(
+            f"parameter 'outputs': list at least one output; choose from {', '.join(OUTPUTS)}")
+    repeated = sorted({name for name in value if value.count(name) > 1})
+    if repeated:
+        raise ParameterError(f"parameter 'outputs': {', '.join(repeated)} listed twice")
+
+
+def _parameter(name, default, description, **constraints):
+    return field(default=default, metadata={'spec': ParameterSpec(
+        name, default, description, **constraints)})
+
+
+@dataclass(frozen=True)
+class NodeParameters:
+    """
+    The node's parameter values; always valid (checked on construction).
+
+    Construct it with keyword arguments named after the fields, from ROS names
+    with :meth:`from_ros`, or from a parameters file with
+    :func:`parameters_from_yaml`. Each field's :class:`ParameterSpec` (ROS name,
+    default, description, allowed values) is in :data:`PARAMETERS`.
+
+    Raises
+    ------
+    ParameterError
+        A value is invalid; the message names the ROS parameter.
+
+    """
+
+    input_type: str = _parameter(
+        'input_type', 'imu',
+        'Message type subscribed on the topic "input"; changing it recreates the subscription',
+        choices=INPUT_TYPES)
+    outputs: tuple = _parameter(
+        'outputs', ('euler',),
+        'Outputs to publish, each on the relative topic of the same name',
+        choices=OUTPUTS, check=_check_outputs)
+    euler_sequence: str = _parameter(
+        'euler.sequence', 'xyz',
+        'Euler axis sequence of the euler input and outputs: lower case extrinsic, '
+        'upper case intrinsic; xyz is ROS roll, pitch, yaw (REP 103)',
+        check=_check_sequence,
+        rule='three of x, y, z, no two consecutive alike, all lower case (extrinsic) '
+             'or all upper case (intrinsic)')
+    euler_degrees: bool = _parameter(
+        'euler.degrees', False,
+        'Euler angles (input and output) and Euler rates in degrees instead of radians')
+    euler_unwrap: bool = _parameter(
+        'euler.unwrap', False,
+        'Keep the first and third Euler angles continuous over time instead of '
+        'wrapping them to (-pi, pi]')
+    euler_singularity_threshold: float = _parameter(
+        'euler.singularity_threshold', 0.01,
+        'Distance (rad) of the middle Euler angle from gimbal lock below which a '
+        'sample counts as near-singular',
+        bounds=(0.0, math.pi / 2))
+    quaternion_continuity: bool = _parameter(
+        'quaternion.continuity', False,
+        'Choose the sign of each output quaternion to be continuous with the previous '
+        'one, instead of w >= 0')
+    quaternion_norm_tolerance: float = _parameter(
+        'quaternion.norm_tolerance', 1e-3,
+        'Largest | |q| - 1 | of an input quaternion normalised without a warning',
+        bounds=(0.0, 1.0))
+    angular_velocity_input_frame: str = _parameter(
+        'angular_velocity.input_frame', 'body',
+        'Frame of the angular velocity carried by Imu and Odometry inputs '
+        '(body as REP 145 says)',
+        choices=FRAMES)
+    angular_velocity_output_frame: str = _parameter(
+        'angular_velocity.output_frame', 'body',
+        'Frame of the angular_velocity output',
+        choices=FRAMES)
+    qos_reliability: str = _parameter(
+        'qos.reliability', 'reliable',
+        'Reliability of the input subscription and of the output publishers',
+        choices=RELIABILITIES)
+    qos_depth: int = _parameter(
+        'qos.depth', 10,
+        'History depth (keep last) of the input subscription and of the output publishers',
+        bounds=(1, 10000))
+
+    def __post_init__(self):
+        """Check every value; store string arrays as tuples."""
+        for spec in PARAMETERS:
+            object.__setattr__(self, spec.attribute, spec.checked(getattr(self, spec.attribute)))
+
+    @classmethod
+    def from_ros(cls, values: Mapping[str, Any]) -> 'NodeParameters':
+        """Return parameters from ``{ROS name: value}``; missing ones take their defaults."""
+        return cls().replaced(values)
+
+    def replaced(self, values: Mapping[str, Any]) -> 'NodeParameters':
+        """
+        Return a copy with the parameters named (by ROS name) in ``values`` changed.
+
+        Raises
+        ------
+        ParameterError
+            A name is not a parameter of the node, or a value is invalid.
+
+        """
+        changes = {}
+        for name, value in values.items():
+            if name not in PARAMETERS_BY_NAME:
+                raise ParameterError(
+                    f"unknown parameter '{name}'; the node's parameters are "
+                    f"{', '.join(PARAMETERS_BY_NAME)}")
+            changes[PARAMETERS_BY_NAME[name].attribute] = value
+        return replace(self, **changes)
+
+    def to_ros(self) -> dict:
+        """Return ``{ROS name: value}``, string arrays as lists (what rclpy expects)."""
+        return {spec.name: list(value) if isinstance(value, tuple) else value
+                for spec, value in ((s, getattr(self, s.attribute)) for s in PARAMETERS)}
+
+
+PARAMETERS = tuple(replace(f.metadata['spec'], attribute=f.name) for f in fields(NodeParameters))
+"""The parameter table: one :class:`ParameterSpec` per :class:`NodeParameters` field."""
+
+PARAMETERS_BY_NAME = {spec.name: spec for spec in PARAMETERS}
+
+
+class _RosYamlLoader(yaml.SafeLoader):
+    """YAML loader that reads numbers the way ROS (rcl_yaml_param_parser) does."""
+
+
+# YAML 1.1 (PyYAML) reads 1e-3 as a string; rcl reads it as a double, as people mean it.
+_RosYamlLoader.add_implicit_resolver(
+    'tag:yaml.org,2002:float',
+    re.compile(r'^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$'),
+    list('-+0123456789'))
+
+
+def parameters_from_yaml(path, node_name: str = NODE_NAME) -> NodeParameters:
+    """
+    Read the node's parameters from a ROS 2 parameters file.
+
+    The file has the format ``ros2 run ... --ros-args --params-file`` reads::
+
+        rotation_node:            # or /rotation_node, /**, /**/rotation_node
+          ros__parameters:
+            input_type: imu
+            euler:
+              sequence: ZYX       # nested keys join with '.', or write euler.sequence
+
+    Every section whose key matches the node (rcl wildcards ``*`` and ``**``
+    allowed) is applied in file order; sections of other nodes are ignored.
+    Parameters not in the file keep their defaults.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The parameters file.
+    node_name : str, optional
+        Node name, or fully qualified name (``/ns/name``) to match the keys against.
+
+    Returns
+    -------
+    NodeParameters
+
+    Raises
+    ------
+    ParameterError
+        The file is missing or unreadable, is not valid YAML, has no section for
+        the node, or sets an unknown parameter or an invalid value; the message
+        names the file and the parameter.
+
+    """
+    path = Path(path)
+    try:
+        document = yaml.load(path.read_text(), Loader=_RosYamlLoader)
+    except OSError as exc:
+        raise ParameterError(f'parameters file {path}: cannot read it ({exc.strerror})') from None
+    except yaml.YAMLError as exc:
+        raise ParameterError(f'parameters file {path}: invalid YAML: {exc}') from None
+    if not isinstance(document, dict):
+        raise ParameterError(f'parameters file {path}: expected a mapping of node names')
+    fq_name = node_name if node_name.startswith('/') else '/' + node_name
+    sections = [(key, value) for key, value in document.items()
+                if _node_key_matches(str(key), fq_name)]
+    if not sections:
+        raise ParameterError(
+            f"parameters file {path}: no section for node '{fq_name}' "
+            f"(expected a key such as '{node_name}:' or '/**:')")
+    values = {}
+    for key, section in sections:
+        if not isinstance(section, dict) or not isinstance(section.get('ros__parameters'), dict):
+            raise ParameterError(
+                f"parameters file {path}: section '{key}' needs a 'ros__parameters:' mapping")
+        values.update(_flattened(section['ros__parameters']))
+    for name in _ROS_BUILTIN_PARAMETERS.intersection(values):
+        del values[name]
+    try:
+        return NodeParameters.from_ros(values)
+    except ParameterError as exc:
+        raise ParameterError(f'parameters file {path}: {exc}') from None
+
+
+def _flattened(mapping, prefix=''):
+    """Return ``{'a.b': value}`` from nested ``{'a': {'b': value}}``, as rcl reads it."""
+    flat = {}
+    for key, value in mapping.items():
+        name = f'{prefix}{key}'
+        if isinstance(value, dict):
+            flat.update(_flattened(value, name + '.'))
+        else:
+            flat[name] = value
+    return flat
+
+
+def _node_key_matches(key, fq_name):
+    """Whether a parameters-file node key (rcl syntax, wildcards * and **) names the node."""
+    tokens = key.strip('/').split('/')
+    pattern = ''.join(
+        '(?:/[^/]+)*' if token == '**' else '/[^/]+' if token == '*' else '/' + re.escape(token)
+        for token in tokens)
+    return re.fullmatch(pattern, fq_name) is not None

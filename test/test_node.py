@@ -1,0 +1,404 @@
+"""
+Process tests of the ``rotation_node`` console script: real processes talking over DDS.
+
+One node process (module fixture) serves most tests: each test first sets every
+parameter (defaults plus its own changes) through the node's parameter service,
+so tests do not depend on each other's settings. Values are compared with scipy
+(``ros_harness.oracle_output``); test_pipeline.py covers the conversions in depth.
+"""
+from pathlib import Path
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rcl_interfaces.msg import Log
+from rclpy.parameter import Parameter, parameter_value_to_python
+from rclpy.parameter_client import AsyncParameterClient
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from scipy.spatial.transform import Rotation
+
+from rotation_node.parameters import INPUT_TYPES, OUTPUTS, PARAMETERS, NodeParameters
+from rotation_node.pipeline import OUTPUT_MESSAGE_TYPES, input_message_type
+
+from ros_harness import (
+    RosProcess, TestNode, make_input_message, oracle_output, output_values, script)
+
+CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'params.yaml'
+STAMP_NS = 1_700_000_000_000_000_000
+OMEGA_BODY = np.array([0.4, -0.9, 1.7])
+START_TIMEOUT_S = 60.0
+
+
+@pytest.fixture(scope='module')
+def ros():
+    with TestNode('rotation_node_test') as test_node:
+        test_node.diagnostics = test_node.collect(DiagnosticArray, '/diagnostics')
+        test_node.log = test_node.collect(Log, '/rosout', qos=1000)
+        yield test_node
+
+
+class NodeUnderTest:
+    """A running ``rotation_node`` process and the test's handles on it."""
+
+    def __init__(self, ros, args, namespace='/'):
+        self.ros = ros
+        self.namespace = namespace
+        self.fq_name = namespace.rstrip('/') + '/rotation_node'
+        self.process = RosProcess([script('rotation_node'), '--ros-args', *args])
+        self.parameters = AsyncParameterClient(ros.node, self.fq_name)
+        self.received = {name: [] for name in OUTPUTS}
+        self.subscriptions = {
+            name: ros.node.create_subscription(
+                OUTPUT_MESSAGE_TYPES[name], self.topic(name), self.received[name].append, 100)
+            for name in OUTPUTS}
+        if not self.parameters.wait_for_services(timeout_sec=START_TIMEOUT_S):
+            self.stop()
+            pytest.fail(f'rotation_node did not start:\n{self.process.output}')
+
+    def call(self, future):
+        assert self.ros.spin_until(future.done, timeout=10.0), 'parameter service timed out'
+        return future.result()
+
+    def set(self, values):
+        """Set parameters one by one; return the SetParametersResult of each."""
+        return self.call(self.parameters.set_parameters(
+            [Parameter(name, value=value) for name, value in values.items()])).results
+
+    def get(self, name):
+        value, = self.call(self.parameters.get_parameters([name])).values
+        return parameter_value_to_python(value)
+
+    def configure(self, values):
+        """Set every parameter: the defaults, changed by ``values`` (ROS names)."""
+        ros_values = NodeParameters.from_ros(values).to_ros()
+        result = self.call(self.parameters.set_parameters_atomically(
+            [Parameter(name, value=value) for name, value in ros_values.items()])).result
+        assert result.successful, result.reason
+
+    def topic(self, name):
+        return f'{self.namespace.rstrip("/")}/{name}'
+
+    def exchange(self, input_type, messages, expected_counts, *, topic='input', qos=None,
+                 timeout=10.0):
+        """
+        Publish ``messages`` on the node's input; return ``{output: [messages]}``.
+
+        Waits until every output named in ``expected_counts`` has received that many
+        messages (and fails if not). Send a valid message last when checking that an
+        earlier one produced nothing: outputs of one topic arrive in order.
+
+        The outputs are read by subscriptions that live as long as this object, so
+        the node's publishers, however new, match them as soon as they exist. With
+        ``qos`` (a QoSProfile) the publisher and fresh subscriptions use it instead.
+        """
+        node = self.ros.node
+        if qos is None:
+            for name in expected_counts:
+                self.received[name].clear()
+            received, subscriptions = self.received, [
+                self.subscriptions[name] for name in expected_counts]
+        else:
+            received = {name: [] for name in expected_counts}
+            subscriptions = [
+                node.create_subscription(OUTPUT_MESSAGE_TYPES[name], self.topic(name),
+                                         received[name].append, qos)
+                for name in expected_counts]
+        publisher = node.create_publisher(
+            input_message_type(input_type), self.topic(topic) if topic == 'input' else topic,
+            qos or 100)
+        try:
+            assert self.ros.spin_until(lambda: publisher.get_subscription_count() > 0 and all(
+                s.get_publisher_count() > 0 for s in subscriptions), timeout), 'no match'
+            if qos is not None:
+                self.ros.spin_for(0.5)   # for the node's publishers to match the new readers
+            for msg in messages:
+                publisher.publish(msg)
+            done = self.ros.spin_until(lambda: all(
+                len(received[name]) >= count for name, count in expected_counts.items()),
+                timeout)
+            self.ros.spin_for(0.1)
+            assert done, {name: len(received[name]) for name in expected_counts}
+        finally:
+            node.destroy_publisher(publisher)
+            if qos is not None:
+                for subscription in subscriptions:
+                    node.destroy_subscription(subscription)
+        return {name: list(received[name]) for name in expected_counts}
+
+    def next_diagnostics(self, condition=lambda values: True, timeout=5.0):
+        """Return the values of the next /diagnostics status of this node meeting ``condition``."""
+        seen = len(self.ros.diagnostics)
+        found = []
+
+        def arrived():
+            for array in self.ros.diagnostics[seen:]:
+                for status in array.status:
+                    values = {kv.key: kv.value for kv in status.values}
+                    if status.name.startswith(self.fq_name + ':') and condition(values):
+                        found.append((status, values))
+            return bool(found)
+        assert self.ros.spin_until(arrived, timeout), 'no matching /diagnostics'
+        status, values = found[0]
+        values['level'], values['name'] = status.level, status.name
+        return values
+
+    def stop(self):
+        """Ctrl-C the node; return its exit code."""
+        for subscription in self.subscriptions.values():
+            self.ros.node.destroy_subscription(subscription)
+        self.subscriptions.clear()
+        return self.process.stop()
+
+
+@pytest.fixture(scope='module')
+def node(ros):
+    under_test = NodeUnderTest(ros, [])
+    yield under_test
+    under_test.stop()
+
+
+@pytest.fixture
+def rotation(rng):
+    return Rotation.random(random_state=rng)
+
+
+def assert_output(out, name, rotation, omega=OMEGA_BODY, **convention):
+    expected = oracle_output(name, rotation, omega, **convention)
+    np.testing.assert_allclose(output_values(out), expected, rtol=1e-7, atol=1e-9)
+
+
+# Inputs, outputs, headers ----------------------------------------------------------
+
+@pytest.mark.parametrize('input_type', INPUT_TYPES)
+def test_each_input_type(node, input_type, rotation):
+    node.configure({'input_type': input_type, 'outputs': ['quaternion', 'euler']})
+    msg = make_input_message(input_type, rotation, stamp_ns=STAMP_NS + 123, frame_id='base')
+    got = node.exchange(input_type, [msg], {'quaternion': 1, 'euler': 1})
+    for name in ('quaternion', 'euler'):
+        out, = got[name]
+        assert_output(out, name, rotation)
+        assert out.header == msg.header   # stamp and frame_id preserved
+
+
+@pytest.mark.parametrize('name', OUTPUTS)
+def test_each_output(node, name, rotation):
+    node.configure({'input_type': 'imu', 'outputs': [name],
+                    'angular_velocity.output_frame': 'world'})
+    msg = make_input_message('imu', rotation, omega=OMEGA_BODY, stamp_ns=STAMP_NS,
+                             frame_id='imu_link')
+    out, = node.exchange('imu', [msg], {name: 1})[name]
+    assert_output(out, name, rotation, frame='world')
+    if name not in ('axis_angle', 'matrix'):   # Float64MultiArray has no header
+        assert out.header == msg.header
+
+
+def test_finite_difference_angular_velocity(node, rotation):
+    node.configure({'input_type': 'pose', 'outputs': ['angular_velocity']})
+    dt_ns = 2_000_000
+    later = rotation * Rotation.from_rotvec(OMEGA_BODY * dt_ns * 1e-9)
+    messages = [make_input_message('pose', r, stamp_ns=STAMP_NS + k * dt_ns)
+                for k, r in enumerate((rotation, later))]
+    out, = node.exchange('pose', messages, {'angular_velocity': 1})['angular_velocity']
+    np.testing.assert_allclose(output_values(out), OMEGA_BODY, rtol=1e-9)
+    assert out.header == messages[1].header
+
+
+# Runtime parameter changes ----------------------------------------------------------
+
+def test_a_convention_change_applies_to_the_next_message(node, rotation):
+    node.configure({'input_type': 'quaternion', 'outputs': ['euler']})
+    msg = make_input_message('quaternion', rotation)
+    first, = node.exchange('quaternion', [msg], {'euler': 1})['euler']
+    assert_output(first, 'euler', rotation)
+    results = node.set({'euler.sequence': 'ZYX', 'euler.degrees': True})
+    assert all(result.successful for result in results)
+    assert node.get('euler.sequence') == 'ZYX' and node.get('euler.degrees') is True
+    second, = node.exchange('quaternion', [msg], {'euler': 1})['euler']
+    assert_output(second, 'euler', rotation, sequence='ZYX', degrees=True)
+
+
+@pytest.mark.parametrize('name, value, reason', [
+    ('euler.sequence', 'xxy', "'xxy' is not an Euler sequence"),
+    ('euler.sequence', 'XyZ', "'XyZ' is not an Euler sequence"),
+    ('outputs', ['euler', 'eulr'], "'eulr' is not allowed"),
+    ('outputs', ['euler', 'euler'], 'euler listed twice'),
+    ('input_type', 'twist', "'twist' is not allowed"),
+    ('angular_velocity.output_frame', 'map', "'map' is not allowed"),
+    ('qos.depth', 0, 'qos.depth'),                     # rejected by the descriptor's range
+    ('euler.singularity_threshold', 3.0, 'euler.singularity_threshold'),
+    ('euler.degrees', 'yes', 'type'),                  # rejected by the declared type
+])
+def test_an_invalid_change_is_rejected_and_the_old_value_stays(node, name, value, reason):
+    node.configure({})
+    before = node.get(name)
+    result, = node.set({name: value})
+    assert not result.successful
+    assert reason in result.reason
+    assert node.get(name) == before
+
+
+def test_changing_outputs_creates_and_destroys_publishers(node):
+    graph = node.ros.node
+    node.configure({'outputs': ['euler', 'matrix']})
+    assert node.ros.spin_until(lambda: graph.count_publishers('/matrix') == 1)
+    node.configure({'outputs': ['rotation_vector']})
+    assert node.ros.spin_until(lambda: graph.count_publishers('/matrix') == 0
+                               and graph.count_publishers('/euler') == 0
+                               and graph.count_publishers('/rotation_vector') == 1)
+
+
+def test_changing_reliability_recreates_the_subscription(node, rotation):
+    best_effort = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+    node.configure({'input_type': 'quaternion', 'outputs': ['quaternion']})
+    msg = make_input_message('quaternion', rotation)
+    with pytest.raises(AssertionError, match='no match'):   # a reliable reader ignores it
+        node.exchange('quaternion', [msg], {'quaternion': 1}, qos=best_effort, timeout=2.0)
+    node.configure({'input_type': 'quaternion', 'outputs': ['quaternion'],
+                    'qos.reliability': 'best_effort'})
+    out, = node.exchange('quaternion', [msg], {'quaternion': 1}, qos=best_effort)['quaternion']
+    assert_output(out, 'quaternion', rotation)
+
+
+# Bad input -------------------------------------------------------------------------
+
+def set_quaternion(msg, values):
+    msg.quaternion.x, msg.quaternion.y, msg.quaternion.z, msg.quaternion.w = values
+
+
+@pytest.mark.parametrize('values, reason', [
+    ((np.nan, 0.0, 0.0, 1.0), 'non_finite_orientation'),
+    ((0.0, 0.0, np.inf, 1.0), 'non_finite_orientation'),
+    ((0.0, 0.0, 0.0, 0.0), 'zero_quaternion'),
+], ids=['nan', 'inf', 'zero'])
+def test_a_bad_quaternion_is_dropped_and_counted(node, values, reason, rotation):
+    node.configure({'input_type': 'quaternion', 'outputs': ['quaternion']})
+    before = node.next_diagnostics()
+    bad = make_input_message('quaternion', rotation, stamp_ns=STAMP_NS)
+    set_quaternion(bad, values)
+    good = make_input_message('quaternion', rotation, stamp_ns=STAMP_NS + 1)
+    out, = node.exchange('quaternion', [bad, good], {'quaternion': 1})['quaternion']
+    assert out.header == good.header
+    key = f'dropped.{reason}'
+    after = node.next_diagnostics(lambda v: int(v[key]) > int(before[key]))
+    assert int(after[key]) == int(before[key]) + 1
+    assert after['level'] == DiagnosticStatus.WARN   # the report right after the drop
+
+
+def test_imu_without_orientation_still_gives_angular_velocity(node, rotation):
+    node.configure({'input_type': 'imu', 'outputs': ['euler', 'angular_velocity']})
+    before = node.next_diagnostics()
+    unknown = make_input_message('imu', rotation, omega=OMEGA_BODY, stamp_ns=STAMP_NS)
+    unknown.orientation_covariance[0] = -1.0
+    good = make_input_message('imu', rotation, omega=OMEGA_BODY, stamp_ns=STAMP_NS + 1)
+    got = node.exchange('imu', [unknown, good], {'euler': 1, 'angular_velocity': 2})
+    assert [out.header for out in got['euler']] == [good.header]
+    assert [out.header for out in got['angular_velocity']] == [unknown.header, good.header]
+    assert_output(got['angular_velocity'][0], 'angular_velocity', rotation)
+    after = node.next_diagnostics(lambda v: int(v['received']) >= int(before['received']) + 2)
+    key = 'skipped.orientation_unknown'
+    assert int(after[key]) == int(before[key]) + 1
+
+
+def test_a_non_unit_quaternion_is_normalised_with_a_warning(node, rotation):
+    node.configure({'input_type': 'quaternion', 'outputs': ['quaternion']})
+    before = node.next_diagnostics()
+    msg = make_input_message('quaternion', rotation)
+    set_quaternion(msg, 1.5 * rotation.as_quat())
+    out, = node.exchange('quaternion', [msg], {'quaternion': 1})['quaternion']
+    assert_output(out, 'quaternion', rotation)
+    assert node.ros.spin_until(lambda: any(
+        log.name == 'rotation_node' and 'normalised' in log.msg and log.level == Log.WARN
+        for log in node.ros.log))
+    after = node.next_diagnostics(lambda v: int(v['received']) > int(before['received']))
+    assert int(after['normalised']) == int(before['normalised']) + 1
+
+
+def test_a_backwards_stamp_skips_only_the_finite_difference(node, rotation):
+    node.configure({'input_type': 'quaternion', 'outputs': ['euler', 'angular_velocity']})
+    before = node.next_diagnostics()
+    offsets_ms = [0, 10, 5, 20]     # the third message goes back in time
+    messages = [make_input_message('quaternion', rotation, stamp_ns=STAMP_NS + ms * 10**6)
+                for ms in offsets_ms]
+    got = node.exchange('quaternion', messages, {'euler': 4, 'angular_velocity': 2})
+    assert [out.header for out in got['angular_velocity']] == [
+        messages[1].header, messages[3].header]
+    after = node.next_diagnostics(lambda v: int(v['received']) >= int(before['received']) + 4)
+    key = 'skipped.timestamp_not_increasing'
+    assert int(after[key]) == int(before[key]) + 1
+    assert node.process.alive()
+
+
+# Diagnostics -----------------------------------------------------------------------
+
+def test_diagnostics_report_counters_and_conventions(node):
+    node.configure({'input_type': 'euler', 'outputs': ['euler'], 'euler.sequence': 'ZYX',
+                    'euler.degrees': True})
+    before = node.next_diagnostics(lambda v: v['euler.sequence'] == 'ZYX')
+    near_lock = make_input_message('euler', Rotation.from_euler('ZYX', [10, 89.9, 20], True),
+                                   sequence='ZYX', degrees=True)
+    node.exchange('euler', [near_lock], {'euler': 1})
+    after = node.next_diagnostics(lambda v: int(v['received']) > int(before['received']))
+    assert after['name'] == '/rotation_node: orientation conversion'
+    assert int(after['published']) == int(before['published']) + 1
+    assert int(after['near_singular']) == int(before['near_singular']) + 1
+    assert after['input_topic'] == '/input'
+    assert after['euler.degrees'] == 'true' and after['outputs'] == 'euler'
+    assert {spec.name for spec in PARAMETERS} <= set(after)
+    assert {'dropped.zero_quaternion', 'skipped.timestamp_not_increasing',
+            'normalised'} <= set(after)
+
+
+# Start-up: parameters file, invalid values, namespace and remapping -------------------
+
+def test_parameters_files_are_applied(ros, tmp_path, rotation):
+    overrides = tmp_path / 'override.yaml'
+    overrides.write_text(
+        '/**:\n  ros__parameters:\n    input_type: odometry\n'
+        '    outputs: [rotation_vector]\n    euler:\n      sequence: zxz\n')
+    started = NodeUnderTest(ros, ['-r', '__ns:=/from_file', '--params-file', CONFIG,
+                                  '--params-file', overrides], namespace='/from_file')
+    try:
+        assert started.get('euler.sequence') == 'zxz'
+        assert started.get('qos.depth') == 10    # from config/params.yaml
+        msg = make_input_message('odometry', rotation)
+        out, = started.exchange('odometry', [msg], {'rotation_vector': 1})['rotation_vector']
+        assert_output(out, 'rotation_vector', rotation)
+    finally:
+        assert started.stop() == 0
+
+
+@pytest.mark.parametrize('args, message', [
+    (['-p', 'euler.sequence:=xxy'], "'xxy' is not an Euler sequence"),
+    (['-p', 'outputs:=[euler,eulr]'], "'eulr' is not allowed"),
+    (['-p', 'euler.degrees:=1'], 'euler.degrees'),
+    (['-p', 'qos.depth:=0'], 'qos.depth'),
+], ids=['sequence', 'outputs', 'type', 'range'])
+def test_an_invalid_initial_value_exits_non_zero_with_the_reason(args, message):
+    process = RosProcess([script('rotation_node'), '--ros-args', *args])
+    process.proc.wait(timeout=START_TIMEOUT_S)
+    assert process.stop() == 1
+    assert message in process.output
+    assert 'Traceback' not in process.output
+
+
+@pytest.fixture(scope='module')
+def namespaced(ros):
+    under_test = NodeUnderTest(ros, ['-r', '__ns:=/robot', '-r', 'input:=/imu'],
+                               namespace='/robot')
+    yield under_test
+    under_test.stop()
+
+
+def test_namespace_and_input_remapping(namespaced, rotation):
+    msg = make_input_message('imu', rotation, frame_id='imu_link')
+    out, = namespaced.exchange('imu', [msg], {'euler': 1}, topic='/imu')['euler']
+    assert_output(out, 'euler', rotation)
+    assert namespaced.ros.node.count_publishers('/robot/euler') == 1
+    values = namespaced.next_diagnostics()
+    assert values['name'] == '/robot/rotation_node: orientation conversion'
+    assert values['input_topic'] == '/imu'
+
+
+def test_ctrl_c_exits_cleanly(namespaced):
+    assert namespaced.stop() == 0
+    assert 'Traceback' not in namespaced.process.output

@@ -1,0 +1,225 @@
+"""Tests of rotation_node.parameters: the parameter table, validation and YAML loading."""
+import math
+import re
+from pathlib import Path
+
+import pytest
+import yaml
+
+from rotation_node.conversions import SEQUENCES
+from rotation_node.errors import ParameterError
+from rotation_node.parameters import (
+    NODE_NAME, OUTPUTS, PARAMETERS, PARAMETERS_BY_NAME, NodeParameters, parameters_from_yaml)
+
+CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'params.yaml'
+
+
+def write(tmp_path, text, name='params.yaml'):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+# The table ------------------------------------------------------------------------
+
+def test_every_field_has_one_row_with_a_description():
+    assert [spec.attribute for spec in PARAMETERS] == list(NodeParameters.__dataclass_fields__)
+    assert len(PARAMETERS_BY_NAME) == len(PARAMETERS)
+    assert all(len(spec.description) > 20 for spec in PARAMETERS)
+
+
+def test_the_issue_names_every_parameter():
+    assert set(PARAMETERS_BY_NAME) == {
+        'input_type', 'outputs', 'euler.sequence', 'euler.degrees', 'euler.unwrap',
+        'euler.singularity_threshold', 'quaternion.continuity', 'quaternion.norm_tolerance',
+        'angular_velocity.input_frame', 'angular_velocity.output_frame',
+        'qos.reliability', 'qos.depth'}
+
+
+def test_defaults_follow_ros_conventions():
+    params = NodeParameters()
+    assert params.euler_sequence == 'xyz'                 # roll, pitch, yaw (REP 103)
+    assert params.angular_velocity_input_frame == 'body'  # REP 145
+    assert params.euler_degrees is False                  # REP 103: radians
+
+
+def test_ros_names_round_trip():
+    params = NodeParameters(outputs=['euler', 'matrix'], euler_sequence='ZYZ', qos_depth=3)
+    ros = params.to_ros()
+    assert ros['outputs'] == ['euler', 'matrix'] and ros['euler.sequence'] == 'ZYZ'
+    assert NodeParameters.from_ros(ros) == params
+
+
+def test_string_arrays_are_stored_as_tuples():
+    assert NodeParameters(outputs=['quaternion']).outputs == ('quaternion',)
+
+
+def test_replaced_changes_only_the_named_parameters():
+    params = NodeParameters().replaced({'euler.degrees': True})
+    assert params == NodeParameters(euler_degrees=True)
+
+
+def test_replaced_rejects_an_unknown_name():
+    with pytest.raises(ParameterError, match="unknown parameter 'euler.sequnce'"):
+        NodeParameters().replaced({'euler.sequnce': 'ZYX'})
+
+
+# Validation -----------------------------------------------------------------------
+
+@pytest.mark.parametrize('sequence', SEQUENCES)
+def test_every_euler_convention_is_accepted(sequence):
+    assert NodeParameters(euler_sequence=sequence).euler_sequence == sequence
+
+
+@pytest.mark.parametrize('name, value, message', [
+    ('euler.sequence', 'xxy', "'euler.sequence': 'xxy' is not an Euler sequence"),
+    ('euler.sequence', 'XyZ', "'euler.sequence': 'XyZ' is not an Euler sequence"),
+    ('euler.sequence', 'rpy', "'euler.sequence': 'rpy' is not an Euler sequence"),
+    ('euler.sequence', 'xy', "'euler.sequence': 'xy' is not an Euler sequence"),
+    ('input_type', 'twist', "'input_type': 'twist' is not allowed; one of: quaternion"),
+    ('outputs', ['euler', 'eular'], "'outputs': 'eular' is not allowed"),
+    ('outputs', [], "'outputs': list at least one output"),
+    ('outputs', ['euler', 'matrix', 'euler'], "'outputs': euler listed twice"),
+    ('outputs', 'euler', "'outputs': expected a list of strings, got str"),
+    ('euler.degrees', 1, "'euler.degrees': expected a boolean, got int"),
+    ('euler.unwrap', 'true', "'euler.unwrap': expected a boolean, got str"),
+    ('euler.singularity_threshold', -0.1, "'euler.singularity_threshold': -0.1 is out of range"),
+    ('euler.singularity_threshold', 2.0, "'euler.singularity_threshold': 2.0 is out of range"),
+    ('euler.singularity_threshold', 0, "'euler.singularity_threshold': expected a floating"),
+    ('euler.singularity_threshold', math.nan, "'euler.singularity_threshold': must be finite"),
+    ('quaternion.norm_tolerance', True, "'quaternion.norm_tolerance': expected a floating"),
+    ('quaternion.norm_tolerance', math.inf, "'quaternion.norm_tolerance': must be finite"),
+    ('angular_velocity.input_frame', 'imu', "'angular_velocity.input_frame': 'imu' is not"),
+    ('angular_velocity.output_frame', 'World', "'angular_velocity.output_frame': 'World'"),
+    ('qos.reliability', 'sensor_data', "'qos.reliability': 'sensor_data' is not allowed"),
+    ('qos.depth', 0, "'qos.depth': 0 is out of range; allowed from 1 to 10000"),
+    ('qos.depth', 10.0, "'qos.depth': expected an integer, got float"),
+])
+def test_invalid_values_are_rejected_naming_the_parameter(name, value, message):
+    with pytest.raises(ParameterError, match=re.escape(message)):
+        NodeParameters.from_ros({name: value})
+
+
+def test_parameter_error_is_a_value_error():
+    with pytest.raises(ValueError):
+        NodeParameters(qos_depth=-1)
+
+
+@pytest.mark.parametrize('name, value', [
+    ('euler.singularity_threshold', 0.0), ('euler.singularity_threshold', math.pi / 2),
+    ('quaternion.norm_tolerance', 0.0), ('quaternion.norm_tolerance', 1.0),
+    ('qos.depth', 1), ('qos.depth', 10000), ('outputs', list(OUTPUTS)),
+])
+def test_range_ends_and_every_output_are_accepted(name, value):
+    assert NodeParameters.from_ros({name: value}).to_ros()[name] == value
+
+
+# YAML -----------------------------------------------------------------------------
+
+def test_shipped_config_holds_every_parameter_at_its_default():
+    assert parameters_from_yaml(CONFIG) == NodeParameters()
+    section = yaml.safe_load(CONFIG.read_text())[NODE_NAME]['ros__parameters']
+
+    def names(mapping, prefix=''):
+        for key, value in mapping.items():
+            if isinstance(value, dict):
+                yield from names(value, f'{prefix}{key}.')
+            else:
+                yield f'{prefix}{key}'
+    assert sorted(names(section)) == sorted(PARAMETERS_BY_NAME)
+
+
+NESTED = """
+rotation_node:
+  ros__parameters:
+    input_type: odometry
+    outputs: [quaternion, angular_velocity]
+    euler:
+      sequence: ZYX
+      degrees: true
+    qos:
+      depth: 50
+"""
+
+FLAT = """
+rotation_node:
+  ros__parameters:
+    input_type: odometry
+    outputs: [quaternion, angular_velocity]
+    euler.sequence: ZYX
+    euler.degrees: true
+    qos.depth: 50
+"""
+
+EXPECTED = NodeParameters(
+    input_type='odometry', outputs=('quaternion', 'angular_velocity'),
+    euler_sequence='ZYX', euler_degrees=True, qos_depth=50)
+
+
+@pytest.mark.parametrize('text', [NESTED, FLAT], ids=['nested', 'dotted'])
+def test_nested_and_dotted_names_are_read(tmp_path, text):
+    assert parameters_from_yaml(write(tmp_path, text)) == EXPECTED
+
+
+@pytest.mark.parametrize('key', ['rotation_node', '/rotation_node', '/**', '/**/rotation_node',
+                                 '/*'])
+def test_node_keys_and_wildcards_are_matched(tmp_path, key):
+    text = NESTED.replace('rotation_node:', f'{key}:', 1)
+    assert parameters_from_yaml(write(tmp_path, text)) == EXPECTED
+
+
+def test_sections_apply_in_file_order_and_other_nodes_are_ignored(tmp_path):
+    text = """
+/**:
+  ros__parameters:
+    use_sim_time: true
+    euler.sequence: ZYZ
+other_node:
+  ros__parameters:
+    input_type: not_ours
+rotation_node:
+  ros__parameters:
+    euler.degrees: true
+"""
+    assert parameters_from_yaml(write(tmp_path, text)) == NodeParameters(
+        euler_sequence='ZYZ', euler_degrees=True)
+
+
+def test_a_namespaced_node_name_is_matched(tmp_path):
+    text = NESTED.replace('rotation_node:', '/robot/rotation_node:', 1)
+    assert parameters_from_yaml(write(tmp_path, text), '/robot/rotation_node') == EXPECTED
+    with pytest.raises(ParameterError, match="no section for node '/rotation_node'"):
+        parameters_from_yaml(write(tmp_path, text))
+
+
+@pytest.mark.parametrize('text', ['1e-3', '1.0e-3', '0.001', '.001'])
+def test_exponent_floats_are_read_as_ros_reads_them(tmp_path, text):
+    path = write(tmp_path, f'/**:\n  ros__parameters:\n    quaternion.norm_tolerance: {text}\n')
+    assert parameters_from_yaml(path).quaternion_norm_tolerance == 0.001
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(ParameterError, match='nope.yaml: cannot read it'):
+        parameters_from_yaml(tmp_path / 'nope.yaml')
+
+
+@pytest.mark.parametrize('text, message', [
+    ('rotation_node: [unclosed', 'invalid YAML'),
+    ('- a list', 'expected a mapping of node names'),
+    ('other_node:\n  ros__parameters: {}\n', "no section for node '/rotation_node'"),
+    ('rotation_node:\n  input_type: imu\n', "section 'rotation_node' needs a 'ros__parameters:"),
+    ('rotation_node:\n  ros__parameters:\n    euler:\n      sequense: xyz\n',
+     "unknown parameter 'euler.sequense'"),
+    ('rotation_node:\n  ros__parameters:\n    euler.sequence: xxy\n',
+     "parameter 'euler.sequence': 'xxy' is not an Euler sequence"),
+    ('rotation_node:\n  ros__parameters:\n    euler.singularity_threshold: 0\n',
+     "parameter 'euler.singularity_threshold': expected a floating-point number"),
+    ('rotation_node:\n  ros__parameters:\n    outputs: euler\n',
+     "parameter 'outputs': expected a list of strings"),
+])
+def test_bad_files_name_the_file_and_the_problem(tmp_path, text, message):
+    path = write(tmp_path, text)
+    with pytest.raises(ParameterError) as error:
+        parameters_from_yaml(path)
+    assert str(error.value).startswith(f'parameters file {path}: ')
+    assert message in str(error.value)

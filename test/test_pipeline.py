@@ -1,0 +1,445 @@
+"""
+Tests of rotation_node.pipeline: message-level conversions, per-stream state, bad input.
+
+Fast, no processes: the node and ``rotation_bag convert`` both run this code, so
+the values are checked here against scipy, and test_node.py checks the wiring.
+"""
+import math
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
+from std_msgs.msg import Float64MultiArray
+
+from rotation_node.conversions import SEQUENCES
+from rotation_node.parameters import INPUT_TYPES, OUTPUTS, NodeParameters
+from rotation_node.pipeline import (
+    EULER_RATES_NEAR_SINGULAR, NON_FINITE_ANGULAR_VELOCITY, NON_FINITE_ORIENTATION, NON_UNIT_QUATERNION,
+    ORIENTATION_UNKNOWN, TIMESTAMP_NOT_INCREASING, ZERO_QUATERNION, ConversionPipeline,
+    input_message_type)
+
+from ros_harness import make_input_message, oracle_output, output_values
+
+STAMP_NS = 1_700_000_000_123_456_789   # a realistic wall-clock stamp (float seconds lose ~0.2 us)
+FRAME_ID = 'imu_link'
+
+
+def pipeline(**params):
+    issues = []
+    p = ConversionPipeline(NodeParameters(**params),
+                           on_issue=lambda reason, detail: issues.append((reason, detail)))
+    p.issues = issues
+    return p
+
+
+def outputs_of(p, msg):
+    return dict(p.process(msg))
+
+
+def set_orientation(msg, input_type, values):
+    q = {'quaternion': lambda m: m.quaternion, 'imu': lambda m: m.orientation,
+         'odometry': lambda m: m.pose.pose.orientation}[input_type](msg)
+    q.x, q.y, q.z, q.w = values
+
+
+def same_rotation(q, expected):
+    """Quaternions equal up to sign."""
+    return min(np.abs(q - expected).max(), np.abs(q + expected).max()) < 1e-12
+
+
+@pytest.fixture
+def rotation(rng):
+    return Rotation.random(random_state=rng)
+
+
+# Input types ----------------------------------------------------------------------
+
+@pytest.mark.parametrize('input_type, expected', [
+    ('quaternion', 'geometry_msgs/msg/QuaternionStamped'),
+    ('pose', 'geometry_msgs/msg/PoseStamped'),
+    ('pose_with_covariance', 'geometry_msgs/msg/PoseWithCovarianceStamped'),
+    ('imu', 'sensor_msgs/msg/Imu'),
+    ('odometry', 'nav_msgs/msg/Odometry'),
+    ('transform', 'geometry_msgs/msg/TransformStamped'),
+    ('euler', 'geometry_msgs/msg/Vector3Stamped'),
+    ('rotation_vector', 'geometry_msgs/msg/Vector3Stamped'),
+])
+def test_input_type_selects_the_message_class(input_type, expected):
+    message_type = input_message_type(input_type)
+    assert f'{message_type.__module__.split(".")[0]}/msg/{message_type.__name__}' == expected
+    assert pipeline(input_type=input_type).input_type is message_type
+
+
+@pytest.mark.parametrize('input_type', INPUT_TYPES)
+def test_every_input_type_gives_its_orientation_with_the_header(input_type, rotation):
+    p = pipeline(input_type=input_type, outputs=['quaternion'])
+    msg = make_input_message(input_type, rotation, stamp_ns=STAMP_NS, frame_id=FRAME_ID)
+    (name, out), = p.process(msg)
+    assert name == 'quaternion' and isinstance(out, QuaternionStamped)
+    assert same_rotation(output_values(out), rotation.as_quat())
+    assert (out.header.stamp.sec, out.header.stamp.nanosec) == divmod(STAMP_NS, 10**9)
+    assert out.header.frame_id == FRAME_ID
+
+
+@pytest.mark.parametrize('sequence', SEQUENCES)
+def test_euler_input_in_every_convention(sequence, rotation):
+    p = pipeline(input_type='euler', outputs=['quaternion'], euler_sequence=sequence)
+    out = outputs_of(p, make_input_message('euler', rotation, sequence=sequence))['quaternion']
+    assert same_rotation(output_values(out), rotation.as_quat())
+
+
+def test_euler_input_in_degrees(rotation):
+    p = pipeline(input_type='euler', outputs=['quaternion'], euler_degrees=True)
+    msg = make_input_message('euler', rotation, degrees=True)
+    assert same_rotation(output_values(outputs_of(p, msg)['quaternion']), rotation.as_quat())
+
+
+# Orientation outputs --------------------------------------------------------------
+
+def test_output_types_follow_outputs_in_order():
+    p = pipeline(outputs=['matrix', 'euler', 'quaternion_rate'])
+    assert p.output_types == {
+        'matrix': Float64MultiArray, 'euler': Vector3Stamped,
+        'quaternion_rate': QuaternionStamped}
+
+
+def test_all_outputs_come_in_the_order_of_outputs(rotation):
+    order = list(reversed(OUTPUTS))
+    p = pipeline(input_type='imu', outputs=order)
+    assert [name for name, _ in p.process(make_input_message('imu', rotation))] == order
+
+
+def test_quaternion_output_is_unit_with_w_positive(rotation):
+    p = pipeline(input_type='quaternion', outputs=['quaternion'])
+    msg = make_input_message('quaternion', rotation)
+    # Non-unit and w < 0, within the norm tolerance.
+    set_orientation(msg, 'quaternion', -0.9995 * rotation.as_quat(canonical=True))
+    q = output_values(outputs_of(p, msg)['quaternion'])
+    np.testing.assert_allclose(q, rotation.as_quat(canonical=True), atol=1e-15)
+    assert p.stats.normalised == 0 and p.issues == []
+
+
+@pytest.mark.parametrize('sequence', SEQUENCES)
+def test_euler_output_in_every_convention(sequence, rotation):
+    p = pipeline(input_type='quaternion', outputs=['euler'], euler_sequence=sequence)
+    out = outputs_of(p, make_input_message('quaternion', rotation))['euler']
+    np.testing.assert_allclose(output_values(out), rotation.as_euler(sequence), atol=1e-12)
+
+
+def test_euler_output_in_degrees(rotation):
+    p = pipeline(input_type='quaternion', outputs=['euler'], euler_degrees=True)
+    out = outputs_of(p, make_input_message('quaternion', rotation))['euler']
+    np.testing.assert_allclose(output_values(out), rotation.as_euler('xyz', degrees=True),
+                               atol=1e-10)
+
+
+OMEGA_BODY = np.array([0.3, -1.2, 2.5])
+
+
+@pytest.mark.parametrize('frame', ['body', 'world'])
+@pytest.mark.parametrize('name', OUTPUTS)
+def test_every_output_matches_scipy(name, frame, rotation):
+    p = pipeline(input_type='imu', outputs=[name], angular_velocity_output_frame=frame)
+    msg = make_input_message('imu', rotation, omega=OMEGA_BODY)
+    out = outputs_of(p, msg)[name]
+    expected = oracle_output(name, rotation, OMEGA_BODY, frame=frame)
+    rates = name in ('euler_rates', 'quaternion_rate')
+    np.testing.assert_allclose(output_values(out), expected, rtol=1e-7 if rates else 0,
+                               atol=1e-8 if rates else 1e-12)
+
+
+def test_axis_angle_layout():
+    out = outputs_of(pipeline(outputs=['axis_angle']),
+                     make_input_message('imu', Rotation.identity()))['axis_angle']
+    assert [(d.label, d.size, d.stride) for d in out.layout.dim] == [('axis_angle', 4, 4)]
+    assert list(out.data) == [1.0, 0.0, 0.0, 0.0]   # identity: axis (1, 0, 0), angle 0
+
+
+def test_matrix_layout_is_row_major():
+    rotation = Rotation.from_euler('z', 0.5)
+    out = outputs_of(pipeline(outputs=['matrix']), make_input_message('imu', rotation))['matrix']
+    assert [(d.label, d.size, d.stride) for d in out.layout.dim] == [
+        ('rows', 3, 9), ('cols', 3, 3)]
+    assert out.data[1] == pytest.approx(-math.sin(0.5))   # R[0, 1]
+
+
+def test_stamped_outputs_keep_the_header_and_counts_add_up(rotation):
+    p = pipeline(input_type='imu', outputs=list(OUTPUTS))
+    msg = make_input_message('imu', rotation, omega=(0.1, 0.2, 0.3), stamp_ns=STAMP_NS,
+                             frame_id=FRAME_ID)
+    results = p.process(msg)
+    stamped = [out for _, out in results if hasattr(out, 'header')]
+    assert len(stamped) == len(OUTPUTS) - 2   # axis_angle and matrix have no header
+    assert all(out.header == msg.header for out in stamped)
+    assert (p.stats.received, p.stats.published) == (1, len(OUTPUTS))
+
+
+# Angular velocity -----------------------------------------------------------------
+
+@pytest.mark.parametrize('input_frame, output_frame', [
+    ('body', 'body'), ('body', 'world'), ('world', 'body'), ('world', 'world')])
+@pytest.mark.parametrize('input_type', ['imu', 'odometry'])
+def test_measured_angular_velocity_changes_frame(input_type, input_frame, output_frame,
+                                                 rotation):
+    omega = {'body': OMEGA_BODY, 'world': rotation.apply(OMEGA_BODY)}
+    p = pipeline(input_type=input_type, outputs=['angular_velocity'],
+                 angular_velocity_input_frame=input_frame,
+                 angular_velocity_output_frame=output_frame)
+    msg = make_input_message(input_type, rotation, omega=omega[input_frame])
+    out = outputs_of(p, msg)['angular_velocity']
+    np.testing.assert_allclose(output_values(out), omega[output_frame], atol=1e-12)
+
+
+def constant_rate_messages(input_type, rotation, dt_ns, **kwargs):
+    """Two messages of a rotation at constant body rate OMEGA_BODY, dt_ns apart."""
+    second = rotation * Rotation.from_rotvec(OMEGA_BODY * dt_ns * 1e-9)
+    return [make_input_message(input_type, r, stamp_ns=STAMP_NS + k * dt_ns, **kwargs)
+            for k, r in enumerate((rotation, second))]
+
+
+@pytest.mark.parametrize('frame', ['body', 'world'])
+@pytest.mark.parametrize('input_type', [
+    'quaternion', 'pose', 'pose_with_covariance', 'transform', 'euler', 'rotation_vector'])
+def test_finite_difference_angular_velocity(input_type, frame, rotation):
+    p = pipeline(input_type=input_type, outputs=['angular_velocity'],
+                 angular_velocity_output_frame=frame)
+    first, second = constant_rate_messages(input_type, rotation, dt_ns=1_000_000)
+    assert p.process(first) == []   # nothing to difference against yet
+    out = outputs_of(p, second)['angular_velocity']
+    expected = OMEGA_BODY if frame == 'body' else rotation.apply(OMEGA_BODY)
+    np.testing.assert_allclose(output_values(out), expected, rtol=1e-9)
+    assert out.header == second.header
+
+
+def test_imu_without_angular_velocity_falls_back_to_finite_difference(rotation):
+    p = pipeline(input_type='imu', outputs=['angular_velocity'])
+    messages = constant_rate_messages('imu', rotation, dt_ns=5_000_000)
+    for msg in messages:
+        msg.angular_velocity.x = 99.0                 # not to be used:
+        msg.angular_velocity_covariance[0] = -1.0     # "no estimate" (sensor_msgs/Imu)
+    p.process(messages[0])
+    out = outputs_of(p, messages[1])['angular_velocity']
+    np.testing.assert_allclose(output_values(out), OMEGA_BODY, rtol=1e-9)
+
+
+@pytest.mark.parametrize('sequence', ['xyz', 'ZYX', 'zxz', 'YXY'])
+@pytest.mark.parametrize('frame', ['body', 'world'])
+def test_euler_rates_in_several_conventions(sequence, frame):
+    rotation = Rotation.from_euler(sequence, [0.4, 0.7, -2.0])   # away from gimbal lock
+    omega = oracle_output('angular_velocity', rotation, OMEGA_BODY, frame=frame)
+    p = pipeline(input_type='imu', outputs=['euler_rates'], euler_sequence=sequence,
+                 angular_velocity_input_frame=frame, angular_velocity_output_frame=frame)
+    out = outputs_of(p, make_input_message('imu', rotation, omega=omega))['euler_rates']
+    np.testing.assert_allclose(output_values(out),
+                               oracle_output('euler_rates', rotation, OMEGA_BODY,
+                                             sequence=sequence), rtol=1e-7)
+
+
+def test_euler_rates_in_degrees_per_second(rotation):
+    p = pipeline(input_type='imu', outputs=['euler_rates'], euler_degrees=True)
+    out = outputs_of(p, make_input_message('imu', rotation, omega=OMEGA_BODY))['euler_rates']
+    np.testing.assert_allclose(
+        output_values(out), oracle_output('euler_rates', rotation, OMEGA_BODY, degrees=True),
+        rtol=1e-7)
+
+
+def test_euler_rates_are_skipped_near_gimbal_lock():
+    rotation = Rotation.from_euler('xyz', [0.3, np.pi / 2 - 1e-3, 0.2])
+    p = pipeline(input_type='imu', outputs=['euler', 'euler_rates'])
+    results = outputs_of(p, make_input_message('imu', rotation, omega=OMEGA_BODY))
+    assert list(results) == ['euler']
+    assert p.stats.skipped == {EULER_RATES_NEAR_SINGULAR: 1} and p.stats.near_singular == 1
+    assert [r for r, _ in p.issues] == [EULER_RATES_NEAR_SINGULAR]
+
+
+def test_quaternion_rate_has_the_sign_of_the_published_quaternion():
+    # Yaw 3.1 then -3.1 rad: with continuity the second quaternion is published with w < 0.
+    before, rotation = Rotation.from_euler('z', 3.1), Rotation.from_euler('z', -3.1)
+    p = pipeline(input_type='imu', outputs=['quaternion', 'quaternion_rate'],
+                 quaternion_continuity=True)
+    p.process(make_input_message('imu', before))
+    results = outputs_of(p, make_input_message('imu', rotation, omega=OMEGA_BODY))
+    np.testing.assert_allclose(output_values(results['quaternion']),
+                               -rotation.as_quat(canonical=True), atol=1e-15)
+    np.testing.assert_allclose(output_values(results['quaternion_rate']),
+                               -oracle_output('quaternion_rate', rotation, OMEGA_BODY),
+                               atol=1e-8)
+
+
+# State over time ------------------------------------------------------------------
+
+def yaw_messages(yaws, input_type='quaternion'):
+    return [make_input_message(input_type, Rotation.from_euler('xyz', [0.1, -0.2, yaw]),
+                               stamp_ns=STAMP_NS + k * 10_000_000)
+            for k, yaw in enumerate(yaws)]
+
+
+@pytest.mark.parametrize('degrees', [False, True])
+def test_unwrap_keeps_yaw_continuous_through_noise_at_the_wrap(degrees, rng):
+    yaws = np.pi + np.concatenate([np.linspace(-0.3, 0.0, 20), np.zeros(20)])
+    yaws += rng.normal(0.0, 1e-3, yaws.size)    # noise around +-pi
+    p = pipeline(input_type='quaternion', outputs=['euler'], euler_unwrap=True,
+                 euler_degrees=degrees)
+    out = np.array([output_values(outputs_of(p, m)['euler']) for m in yaw_messages(yaws)])
+    scale = 180.0 / np.pi if degrees else 1.0
+    wrapped = (yaws + np.pi) % (2 * np.pi) - np.pi
+    assert np.ptp(wrapped) > 6.0    # the raw yaw does jump across the wrap
+    np.testing.assert_allclose(out[:, 2], yaws * scale, rtol=1e-12)
+    np.testing.assert_allclose(out[:, :2], np.tile([0.1, -0.2], (yaws.size, 1)) * scale,
+                               rtol=1e-12)
+
+
+def test_without_unwrap_yaw_stays_in_minus_pi_to_pi():
+    p = pipeline(input_type='quaternion', outputs=['euler'])
+    out = [output_values(outputs_of(p, m)['euler'])[2] for m in yaw_messages([3.0, 3.2, 3.4])]
+    np.testing.assert_allclose(out, [3.0, 3.2 - 2 * np.pi, 3.4 - 2 * np.pi], rtol=1e-12)
+
+
+@pytest.mark.parametrize('continuity', [False, True])
+def test_quaternion_sign_continuity(continuity):
+    # A yaw sweep through 180 degrees: the canonical (w >= 0) quaternion flips sign there.
+    yaws = np.linspace(2.8, 3.5, 15)
+    p = pipeline(input_type='quaternion', outputs=['quaternion'], quaternion_continuity=continuity)
+    qs = np.array([output_values(outputs_of(p, m)['quaternion']) for m in yaw_messages(yaws)])
+    steps = np.einsum('ij,ij->i', qs[1:], qs[:-1])
+    if continuity:
+        assert np.all(steps > 0.99)
+    else:
+        assert np.all(qs[:, 3] >= 0) and np.any(steps < 0)
+
+
+@pytest.mark.parametrize('sequence, middle, near', [
+    ('xyz', np.pi / 2 - 0.005, True), ('xyz', np.pi / 2 - 0.02, False),
+    ('ZYZ', 0.005, True), ('ZYZ', np.pi - 0.005, True), ('ZYZ', 0.5, False),
+])
+def test_near_singular_samples_are_counted(sequence, middle, near):
+    p = pipeline(input_type='quaternion', outputs=['euler'], euler_sequence=sequence)
+    msg = make_input_message('quaternion', Rotation.from_euler(sequence, [0.3, middle, 0.2]))
+    assert 'euler' in outputs_of(p, msg)
+    assert p.stats.near_singular == int(near)
+
+
+# Bad input ------------------------------------------------------------------------
+
+@pytest.mark.parametrize('values, reason', [
+    ((math.nan, 0.0, 0.0, 1.0), NON_FINITE_ORIENTATION),
+    ((0.0, math.inf, 0.0, 1.0), NON_FINITE_ORIENTATION),
+    ((0.0, 0.0, 0.0, -math.inf), NON_FINITE_ORIENTATION),
+    ((0.0, 0.0, 0.0, 0.0), ZERO_QUATERNION),
+])
+@pytest.mark.parametrize('input_type', ['quaternion', 'imu', 'odometry'])
+def test_bad_quaternions_are_dropped_with_a_reason(input_type, values, reason):
+    p = pipeline(input_type=input_type, outputs=list(OUTPUTS))
+    msg = make_input_message(input_type, Rotation.identity(), omega=(0.1, 0.2, 0.3))
+    set_orientation(msg, input_type, values)
+    assert p.process(msg) == []
+    assert p.stats.dropped == {reason: 1} and p.stats.published == 0
+    assert [r for r, _ in p.issues] == [reason]
+    assert 'dropped' in p.issues[0][1]
+
+
+@pytest.mark.parametrize('input_type', ['euler', 'rotation_vector'])
+def test_non_finite_vectors_are_dropped(input_type):
+    p = pipeline(input_type=input_type, outputs=['quaternion'])
+    msg = make_input_message(input_type, Rotation.identity())
+    msg.vector.y = math.nan
+    assert p.process(msg) == []
+    assert p.stats.dropped == {NON_FINITE_ORIENTATION: 1}
+
+
+def test_the_stream_continues_after_a_dropped_message(rotation):
+    p = pipeline(input_type='quaternion', outputs=['quaternion'])
+    bad = make_input_message('quaternion', rotation)
+    bad.quaternion.w = math.nan
+    assert p.process(bad) == []
+    assert len(p.process(make_input_message('quaternion', rotation))) == 1
+    assert (p.stats.received, p.stats.published) == (2, 1)
+
+
+def test_imu_without_orientation_still_converts_angular_velocity(rotation):
+    p = pipeline(input_type='imu', outputs=['euler', 'angular_velocity', 'quaternion_rate'])
+    msg = make_input_message('imu', rotation, omega=OMEGA_BODY)
+    msg.orientation_covariance[0] = -1.0
+    results = outputs_of(p, msg)
+    assert list(results) == ['angular_velocity']
+    np.testing.assert_allclose(output_values(results['angular_velocity']), OMEGA_BODY)
+    assert p.stats.skipped == {ORIENTATION_UNKNOWN: 1} and not p.stats.dropped
+    assert [r for r, _ in p.issues] == [ORIENTATION_UNKNOWN]
+
+
+def test_imu_without_orientation_cannot_change_the_frame(rotation):
+    p = pipeline(input_type='imu', outputs=['angular_velocity'],
+                 angular_velocity_output_frame='world')
+    msg = make_input_message('imu', rotation, omega=OMEGA_BODY)
+    msg.orientation_covariance[0] = -1.0
+    assert p.process(msg) == []
+    assert p.stats.skipped == {ORIENTATION_UNKNOWN: 1}
+
+
+def test_non_finite_angular_velocity_skips_only_the_rates(rotation):
+    p = pipeline(input_type='imu', outputs=['euler', 'angular_velocity', 'euler_rates'])
+    msg = make_input_message('imu', rotation, omega=(0.0, math.nan, 0.0))
+    assert list(outputs_of(p, msg)) == ['euler']
+    assert p.stats.skipped == {NON_FINITE_ANGULAR_VELOCITY: 1}
+
+
+@pytest.mark.parametrize('scale', [1.01, 0.5, 1e-160, 1e160])
+def test_non_unit_quaternions_are_normalised_and_reported(scale, rotation):
+    p = pipeline(input_type='quaternion', outputs=['quaternion', 'euler'])
+    msg = make_input_message('quaternion', rotation)
+    set_orientation(msg, 'quaternion', scale * rotation.as_quat(canonical=True))
+    results = outputs_of(p, msg)
+    np.testing.assert_allclose(output_values(results['quaternion']),
+                               rotation.as_quat(canonical=True), atol=1e-15)
+    np.testing.assert_allclose(output_values(results['euler']), rotation.as_euler('xyz'),
+                               atol=1e-12)
+    assert p.stats.normalised == 1 and not p.stats.dropped
+    assert [r for r, _ in p.issues] == [NON_UNIT_QUATERNION]
+
+
+def test_norm_tolerance_sets_where_reporting_starts(rotation):
+    p = pipeline(input_type='quaternion', outputs=['quaternion'], quaternion_norm_tolerance=0.1)
+    msg = make_input_message('quaternion', rotation)
+    msg.quaternion.w *= 1.05
+    p.process(msg)
+    assert p.stats.normalised == 0
+
+
+@pytest.mark.parametrize('step_ns', [0, -1, -5_000_000])
+def test_a_stamp_not_after_the_previous_skips_the_finite_difference(step_ns, rotation):
+    p = pipeline(input_type='quaternion', outputs=['euler', 'angular_velocity'])
+    first, second = constant_rate_messages('quaternion', rotation, dt_ns=1_000_000)
+    later = make_input_message('quaternion', rotation, stamp_ns=STAMP_NS + 2_000_000)
+    second.header.stamp.sec, second.header.stamp.nanosec = divmod(STAMP_NS + step_ns, 10**9)
+    p.process(first)
+    assert list(outputs_of(p, second)) == ['euler']   # orientation outputs still published
+    assert p.stats.skipped == {TIMESTAMP_NOT_INCREASING: 1}
+    assert [r for r, _ in p.issues] == [TIMESTAMP_NOT_INCREASING]
+    # The stream restarts from the out-of-order sample instead of stalling.
+    assert list(outputs_of(p, later)) == ['euler', 'angular_velocity']
+
+
+FIELD = st.one_of(st.floats(allow_nan=True, allow_infinity=True),
+                  st.sampled_from([0.0, -0.0, 1e-310, 1e308, math.nan, math.inf]))
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.tuples(FIELD, FIELD, FIELD, FIELD), min_size=1, max_size=4),
+       st.tuples(FIELD, FIELD, FIELD), st.booleans())
+@pytest.mark.parametrize('input_type', ['imu', 'quaternion'])
+def test_process_never_raises_and_accounts_for_every_message(input_type, quaternions, omega,
+                                                             continuity):
+    p = ConversionPipeline(NodeParameters(
+        input_type=input_type, outputs=list(OUTPUTS), euler_unwrap=True,
+        quaternion_continuity=continuity))
+    for k, values in enumerate(quaternions):
+        msg = make_input_message(input_type, Rotation.identity(), omega=omega, stamp_ns=k)
+        set_orientation(msg, input_type, values)
+        for _, out in p.process(msg):
+            assert np.all(np.isfinite(output_values(out)))
+    valid = sum(1 for values in quaternions if all(map(math.isfinite, values)) and any(values))
+    assert p.stats.received == len(quaternions)
+    assert sum(p.stats.dropped.values()) == len(quaternions) - valid
