@@ -1,0 +1,253 @@
+"""
+Benchmark ``rotation_bag convert`` against the naive way, on sensor_msgs/Imu bags.
+
+Both produce the same bag: every input message plus ``/imu/euler``
+(geometry_msgs/Vector3Stamped, extrinsic xyz = ROS roll, pitch, yaw, radians),
+from the parameters file ``config/params.yaml`` (``input_type: imu``,
+``outputs: [euler]``).
+
+- ours: ``rotation_node.bag.convert.convert`` (rclpy CDR (de)serialisation and
+  the node's ``ConversionPipeline``, the live node's code path).
+- naive: mcap-ros2-support decoding, ``scipy.spatial.transform.Rotation`` per
+  message, mcap-ros2-support encoding (``read_ros2_messages`` + ``Writer``).
+
+Printed, all measured in this run, as CPU time of this process (the machine
+may be shared; wall time would measure the neighbours too):
+
+1. throughput of both on the same bag (default 200 000 messages) and the ratio;
+2. where the time of ours goes, stage by stage, on a 20 000-message sample;
+3. time and peak memory of ours from 10^2 to 2*10^5 messages (10^6 with
+   ``--million``), each size converted in a fresh process so that its peak RSS
+   is its own; memory that does not grow with the bag length means streaming.
+
+Run: ``.venv/bin/python benchmarks/bench_bag_convert.py [--messages N] [--million]``.
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+PARAMS_FILE = os.path.join(HERE, os.pardir, 'config', 'params.yaml')
+TOPIC = '/imu'
+PERIOD_NS = 10_000_000   # 100 Hz
+T0_NS = 1_700_000_000_000_000_000
+
+
+def write_imu_bag(path, count, seed=0):
+    """An Imu bag: random orientations and angular velocities at 100 Hz."""
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import Imu
+
+    from rotation_node.bag.mcap_io import BagWriter
+    rng = np.random.default_rng(seed)
+    msg = Imu()
+    msg.header.frame_id = 'imu_link'
+    with BagWriter(path, overwrite=True) as writer:
+        for start in range(0, count, 10_000):
+            n = min(10_000, count - start)
+            quaternions = rng.normal(size=(n, 4))
+            quaternions /= np.linalg.norm(quaternions, axis=1, keepdims=True)
+            rates = rng.normal(scale=0.5, size=(n, 3))
+            for i, (q, w) in enumerate(zip(quaternions.tolist(), rates.tolist())):
+                stamp_ns = T0_NS + (start + i) * PERIOD_NS
+                msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
+                o, v = msg.orientation, msg.angular_velocity
+                o.x, o.y, o.z, o.w = q
+                v.x, v.y, v.z = w
+                writer.write_serialized(TOPIC, 'sensor_msgs/msg/Imu', serialize_message(msg),
+                                        stamp_ns + 1_000_000)
+
+
+def convert_ours(source, output):
+    """``rotation_bag convert SOURCE OUTPUT --params config/params.yaml --force``."""
+    from rotation_node.bag.convert import convert
+    from rotation_node.parameters import parameters_from_yaml
+    convert(source, output, parameters_from_yaml(PARAMS_FILE), overwrite=True)
+
+
+def convert_naive(source, output):
+    """The same output bag with mcap-ros2-support and scipy, message by message."""
+    from mcap_ros2.reader import read_ros2_messages
+    from mcap_ros2.writer import Writer
+    from scipy.spatial.transform import Rotation
+
+    from rotation_node.bag.message_types import message_definition
+    with open(output, 'wb') as stream:
+        writer = Writer(stream)
+        imu_schema = writer.register_msgdef(
+            'sensor_msgs/msg/Imu', message_definition('sensor_msgs/msg/Imu'))
+        euler_schema = writer.register_msgdef(
+            'geometry_msgs/msg/Vector3Stamped',
+            message_definition('geometry_msgs/msg/Vector3Stamped'))
+        for record in read_ros2_messages(source):
+            imu = record.ros_msg
+            writer.write_message(TOPIC, imu_schema, imu, record.log_time_ns,
+                                 record.publish_time_ns)
+            q = imu.orientation
+            roll, pitch, yaw = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_euler('xyz')
+            writer.write_message(
+                TOPIC + '/euler', euler_schema,
+                {'header': imu.header, 'vector': {'x': roll, 'y': pitch, 'z': yaw}},
+                record.log_time_ns, record.publish_time_ns)
+        writer.finish()
+
+
+def _timed(function, *args):
+    """``(CPU seconds, result)`` of ``function(*args)``; CPU time ignores other jobs."""
+    start = time.process_time()
+    result = function(*args)
+    return time.process_time() - start, result
+
+
+def _euler_values(path):
+    from rotation_node.bag.mcap_io import BagReader
+    with BagReader(path) as reader:
+        return np.array([(m.vector.x, m.vector.y, m.vector.z) for m in
+                         (r.message() for r in reader.messages([TOPIC + '/euler']))])
+
+
+def compare(directory, count):
+    """Throughput of ours and naive on one bag; checks that they agree."""
+    source = os.path.join(directory, 'imu.mcap')
+    write_imu_bag(source, count)
+    convert_ours(source, os.path.join(directory, 'warm.mcap'))   # numba compilation
+    ours, _ = _timed(convert_ours, source, os.path.join(directory, 'ours.mcap'))
+    naive, _ = _timed(convert_naive, source, os.path.join(directory, 'naive.mcap'))
+    sample = min(count, 2000)
+    difference = (_euler_values(os.path.join(directory, 'ours.mcap'))[:sample]
+                  - _euler_values(os.path.join(directory, 'naive.mcap'))[:sample])
+    difference = np.abs((difference + np.pi) % (2 * np.pi) - np.pi)   # modulo 2 pi
+    print(f'\n## Throughput, {count} Imu messages -> + /imu/euler')
+    print(f'{"":8s} {"CPU s":>9s} {"us/msg":>9s} {"msg/s":>10s}')
+    for name, seconds in (('ours', ours), ('naive', naive)):
+        print(f'{name:8s} {seconds:9.2f} {seconds / count * 1e6:9.1f} {count / seconds:10.0f}')
+    print(f'ratio naive/ours: {naive / ours:.2f}x (target >= 3x)')
+    print(f'largest |ours - naive| Euler angle (mod 2 pi), first {sample} messages: '
+          f'{difference.max():.1e} rad')
+
+
+def breakdown(directory, count=20_000):
+    """Microseconds per input message spent in each stage of ``convert``."""
+    from rclpy.serialization import serialize_message
+
+    from rotation_node.bag.mcap_io import BagReader, BagWriter
+    from rotation_node.parameters import parameters_from_yaml
+    from rotation_node.pipeline import ConversionPipeline
+
+    source = os.path.join(directory, 'sample.mcap')
+    write_imu_bag(source, count, seed=1)
+    pipeline = ConversionPipeline(parameters_from_yaml(PARAMS_FILE))
+
+    def write(records, serialised):
+        with BagWriter(os.path.join(directory, 'sample_out.mcap'), overwrite=True) as writer:
+            for record, outputs in zip(records, serialised):
+                writer.write_serialized(TOPIC, record.type_name, record.data, record.log_time_ns)
+                for data in outputs:
+                    writer.write_serialized(TOPIC + '/euler', 'geometry_msgs/msg/Vector3Stamped',
+                                            data, record.log_time_ns)
+
+    with BagReader(source) as reader:
+        read, records = _timed(lambda: list(reader.messages()))
+    deserialise, messages = _timed(lambda: [r.message() for r in records])
+    process, outputs = _timed(lambda: [pipeline.process(m) for m in messages])
+    serialise, serialised = _timed(
+        lambda: [[serialize_message(out) for _, out in result] for result in outputs])
+    written, _ = _timed(write, records, serialised)
+    total, _ = _timed(convert_ours, source, os.path.join(directory, 'sample_convert.mcap'))
+    stages = [
+        ('read (mcap, log-time order)', read),
+        ('deserialise Imu (rclpy)', deserialise),
+        ('ConversionPipeline.process', process),
+        ('serialise Vector3Stamped (rclpy)', serialise),
+        ('write input + output (mcap)', written),
+    ]
+    print(f'\n## Where the time goes ({count} messages, us per input message)')
+    for name, seconds in stages:
+        print(f'{name:36s} {seconds / count * 1e6:7.1f}  {seconds / total:5.0%}')
+    print(f'{"sum of stages":36s} {sum(s for _, s in stages) / count * 1e6:7.1f}')
+    print(f'{"convert() end to end":36s} {total / count * 1e6:7.1f}')
+
+
+class RssSampler(threading.Thread):
+    """Samples the resident set size every 10 ms while active; Linux (/proc) only."""
+
+    def __init__(self):
+        super().__init__(daemon=True)
+        self._done = threading.Event()
+        self.baseline_mib = self.peak_mib = self._rss_mib()
+
+    @staticmethod
+    def _rss_mib():
+        with open('/proc/self/statm') as statm:
+            return int(statm.read().split()[1]) * os.sysconf('SC_PAGE_SIZE') / 2**20
+
+    def run(self):
+        while not self._done.wait(0.01):
+            self.peak_mib = max(self.peak_mib, self._rss_mib())
+
+    def __enter__(self):
+        self.start()
+        return self
+
+    def __exit__(self, *exc):
+        self._done.set()
+        self.join()
+        self.peak_mib = max(self.peak_mib, self._rss_mib())
+
+
+def _child(source, output):
+    """In a fresh process: convert once, print time and memory as JSON."""
+    warm = output + '.warm.mcap'
+    tiny = output + '.tiny.mcap'
+    write_imu_bag(tiny, 10)
+    convert_ours(tiny, warm)
+    sampler = RssSampler()
+    with sampler:
+        seconds, _ = _timed(convert_ours, source, output)
+    print(json.dumps({'seconds': seconds, 'baseline_mib': sampler.baseline_mib,
+                      'peak_mib': sampler.peak_mib}))
+
+
+def scaling(directory, sizes):
+    """Time and peak memory of ``convert`` against the number of messages."""
+    print('\n## Scaling (each size in a fresh process)')
+    print(f'{"messages":>9s} {"CPU s":>9s} {"us/msg":>8s} {"RSS before MiB":>15s} '
+          f'{"peak growth MiB":>16s}')
+    for count in sizes:
+        source = os.path.join(directory, f'scale_{count}.mcap')
+        write_imu_bag(source, count, seed=2)
+        result = subprocess.run(
+            [sys.executable, __file__, '--child', source, source + '.out.mcap'],
+            check=True, capture_output=True, text=True)
+        stats = json.loads(result.stdout.strip().splitlines()[-1])
+        print(f'{count:9d} {stats["seconds"]:9.2f} {stats["seconds"] / count * 1e6:8.1f} '
+              f'{stats["baseline_mib"]:15.1f} {stats["peak_mib"] - stats["baseline_mib"]:16.1f}')
+        os.unlink(source)
+        os.unlink(source + '.out.mcap')
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--messages', type=int, default=200_000)
+    parser.add_argument('--million', action='store_true', help='also scale to 10^6 messages')
+    parser.add_argument('--child', nargs=2, metavar=('SOURCE', 'OUTPUT'), help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.child:
+        _child(*args.child)
+        return
+    sizes = [100, 1_000, 10_000, 100_000, 200_000] + ([1_000_000] if args.million else [])
+    with tempfile.TemporaryDirectory() as directory:
+        compare(directory, args.messages)
+        breakdown(directory)
+        scaling(directory, sizes)
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,134 @@
+"""
+Command line ``rotation_bag``: record, play, convert and plot MCAP bags.
+
+Usage::
+
+    rotation_bag record OUT.mcap --topics /imu [/odom ...] [--duration S] [--force]
+    rotation_bag play IN.mcap [--rate R] [--topics T ...] [--loop]
+    rotation_bag convert IN.mcap OUT.mcap --params config/params.yaml [--topic T ...] [--force]
+    rotation_bag plot IN.mcap --topic /imu/euler [-o plot.png] [--params FILE] [--force]
+
+``record`` and ``play`` accept ``--ros-args ...`` (remapping, namespace, ...).
+Bad input (a missing, truncated or corrupt bag, an unknown message type, a
+topic not in the bag, an invalid parameters file, an existing output) ends
+with one line on stderr naming the problem and exit status 1; no output file
+is left behind and the input is never modified.
+"""
+import argparse
+import os
+import sys
+
+from rclpy.utilities import remove_ros_args
+
+from rotation_node.errors import RotationNodeError
+
+PROG = 'rotation_bag'
+EXIT_ERROR = 1
+EXIT_INTERRUPTED = 130
+
+
+def _record(args, ros_args):
+    from rotation_node.bag.record import record
+    counts = record(args.output, args.topics, duration=args.duration, overwrite=args.force,
+                    ros_args=ros_args)
+    _say(f'wrote {sum(counts.values())} messages to {args.output}: ' +
+         (', '.join(f'{topic} {count}' for topic, count in counts.items()) or 'no topics'))
+
+
+def _play(args, ros_args):
+    from rotation_node.bag.play import play
+    play(args.input, rate=args.rate, topics=args.topics, loop=args.loop, ros_args=ros_args)
+
+
+def _convert(args, ros_args):
+    from rotation_node.bag.convert import convert, output_topic
+    from rotation_node.parameters import parameters_from_yaml
+    params = parameters_from_yaml(args.params)
+    stats = convert(args.input, args.output, params, topics=args.topic, overwrite=args.force)
+    for topic, topic_stats in stats.items():
+        outputs = ', '.join(output_topic(topic, name) for name in params.outputs)
+        notes = [f'{reason} {count}' for reason, count in
+                 sorted({**topic_stats.dropped, **topic_stats.skipped}.items())]
+        if topic_stats.near_singular:
+            notes.append(f'near gimbal lock {topic_stats.near_singular}')
+        _say(f'{topic}: {topic_stats.received} messages -> {outputs}: '
+             f'{topic_stats.published} messages' + ''.join(f'; {note}' for note in notes))
+    _say(f'wrote {args.output}')
+
+
+def _plot(args, ros_args):
+    from rotation_node.bag.plot import plot_topic
+    from rotation_node.parameters import parameters_from_yaml
+    output = args.output or (
+        os.path.splitext(os.path.basename(args.input))[0] + args.topic.replace('/', '_') + '.png')
+    params = None if args.params is None else parameters_from_yaml(args.params)
+    count = plot_topic(args.input, args.topic, output, params=params, overwrite=args.force)
+    _say(f'plotted {count} messages of {args.topic} to {output}')
+
+
+def _say(text):
+    print(text, file=sys.stderr)
+
+
+def build_parser():
+    """The argument parser of ``rotation_bag``."""
+    parser = argparse.ArgumentParser(
+        prog=PROG, description='Record, play, convert and plot ROS 2 MCAP bags.')
+    commands = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
+
+    record = commands.add_parser('record', help='record live topics to an MCAP bag')
+    record.add_argument('output', metavar='OUT.mcap')
+    record.add_argument('--topics', nargs='+', required=True, metavar='TOPIC')
+    record.add_argument('--duration', type=float, metavar='S',
+                        help='stop after S seconds (default: at Ctrl-C or SIGTERM)')
+    record.add_argument('--force', action='store_true', help='overwrite OUT.mcap')
+    record.set_defaults(run=_record)
+
+    play = commands.add_parser('play', help='publish the messages of a bag')
+    play.add_argument('input', metavar='IN.mcap')
+    play.add_argument('--rate', type=float, default=1.0, metavar='R',
+                      help='speed factor on the recorded timing; 0: as fast as the '
+                           'subscribers acknowledge, lossless on reliable QoS (default 1)')
+    play.add_argument('--topics', nargs='+', metavar='TOPIC', help='only these topics')
+    play.add_argument('--loop', action='store_true', help='start again at the end')
+    play.set_defaults(run=_play)
+
+    convert = commands.add_parser(
+        'convert', help="add the node's outputs for the input topics to a copy of a bag")
+    convert.add_argument('input', metavar='IN.mcap')
+    convert.add_argument('output', metavar='OUT.mcap')
+    convert.add_argument('--params', required=True, metavar='FILE',
+                         help="the node's parameters file (rotation_node: ros__parameters: ...)")
+    convert.add_argument('--topic', action='append', metavar='T',
+                         help='input topic to convert (repeatable; default: every topic of '
+                              'the input_type)')
+    convert.add_argument('--force', action='store_true', help='overwrite OUT.mcap')
+    convert.set_defaults(run=_convert)
+
+    plot = commands.add_parser('plot', help='plot a (converted) topic over time as a PNG')
+    plot.add_argument('input', metavar='IN.mcap')
+    plot.add_argument('--topic', required=True, metavar='T')
+    plot.add_argument('-o', '--output', metavar='PNG',
+                      help='default: <bag name><topic with / as _>.png')
+    plot.add_argument('--params', metavar='FILE',
+                      help='parameters the bag was converted with (Euler sequence and units '
+                           'for the labels; default: the node defaults)')
+    plot.add_argument('--force', action='store_true', help='overwrite the PNG')
+    plot.set_defaults(run=_plot)
+    return parser
+
+
+def main(argv=None):
+    """Run ``rotation_bag``; return the exit status."""
+    argv = sys.argv if argv is None else [PROG, *argv]
+    args = build_parser().parse_args(remove_ros_args(argv)[1:])
+    try:
+        args.run(args, argv)
+    except RotationNodeError as error:
+        # One line, whatever the message holds (YAML errors span several).
+        print(f'{PROG} {args.command}: error: {" ".join(str(error).split())}', file=sys.stderr)
+        return EXIT_ERROR
+    except KeyboardInterrupt:
+        print(f'{PROG} {args.command}: interrupted', file=sys.stderr)
+        return EXIT_INTERRUPTED
+    return 0

@@ -1,0 +1,109 @@
+"""
+Convert a recorded bag offline with the node's conversions (``rotation_bag convert``).
+
+The output bag holds every message of the input, unchanged, plus for each
+converted input topic ``T`` the outputs the live node would publish, on
+``T/<output name>`` (``/imu/euler``): the same ``ConversionPipeline`` with the
+same parameters, one pipeline per input topic, fed in log-time order (the
+order of reception). Converted messages get the log and publish times of the
+input message they come from.
+The bag is streamed, never loaded: memory does not grow with its length.
+"""
+import os
+
+from rotation_node.bag.mcap_io import BagReader, BagWriter, TopicMetadata
+from rotation_node.bag.message_types import type_name_of
+from rotation_node.bag.progress import ProgressBar
+from rotation_node.bag.qos import qos_profiles_yaml
+from rotation_node.errors import BagError
+from rotation_node.node import qos_profile
+from rotation_node.pipeline import ConversionPipeline, input_message_type
+
+
+def output_topic(input_topic, output_name):
+    """Topic of the output ``output_name`` of ``input_topic``: ``/imu`` -> ``/imu/euler``."""
+    return f'{input_topic.rstrip("/")}/{output_name}'
+
+
+def _input_topics(reader, input_type_name, topics):
+    """The topics to convert: the given ones, checked, or every topic of the input type."""
+    if topics is None:
+        topics = [topic for topic, type_name in reader.topics.items()
+                  if type_name == input_type_name]
+        if not topics:
+            raise BagError(f'{reader.path} has no {input_type_name} topic to convert '
+                           f'(its topics: {reader.topics})')
+        return topics
+    reader.messages(topics)   # raises if a topic is not in the bag
+    for topic in topics:
+        if reader.topics[topic] != input_type_name:
+            raise BagError(f'topic {topic} in {reader.path} is {reader.topics[topic]}, '
+                           f'but input_type expects {input_type_name}')
+    return list(dict.fromkeys(topics))
+
+
+def convert(input_path, output_path, params, *, topics=None, overwrite=False,
+            progress_stream=None):
+    """
+    Write ``output_path``: the input bag plus the node's outputs for its input topics.
+
+    Parameters
+    ----------
+    input_path, output_path : str or os.PathLike
+        MCAP bags; the output is written to a temporary file and renamed, so a
+        failure never leaves a partial file, and the input is only read.
+    params : rotation_node.parameters.NodeParameters
+        As loaded from the node's parameters file.
+    topics : list of str, optional
+        Topics to convert; by default every topic of the type ``params.input_type``
+        names.
+    overwrite : bool, optional
+        Replace an existing output file.
+    progress_stream : file, optional
+        Where to draw the progress bar (only if it is a terminal); stderr by default.
+
+    Returns
+    -------
+    dict
+        ``{input topic: PipelineStats}``.
+
+    Raises
+    ------
+    BagError
+        If the input is unreadable or corrupt, a topic is missing or of the
+        wrong type, an output topic already exists in the input, or the output
+        exists (without ``overwrite``) or is the input.
+
+    """
+    with BagReader(input_path) as reader:
+        if os.path.exists(output_path) and os.path.samefile(input_path, output_path):
+            raise BagError(f'output {output_path} is the input bag')
+        input_type_name = type_name_of(input_message_type(params.input_type))
+        pipelines = {topic: ConversionPipeline(params)
+                     for topic in _input_topics(reader, input_type_name, topics)}
+        output_topics = {topic: {name: output_topic(topic, name) for name in pipeline.output_types}
+                         for topic, pipeline in pipelines.items()}
+        offered_qos = qos_profiles_yaml([qos_profile(params)])
+        new_topics = [TopicMetadata(output_topics[topic][name], type_name_of(msg_class),
+                                    offered_qos)
+                      for topic, pipeline in pipelines.items()
+                      for name, msg_class in pipeline.output_types.items()]
+        clashes = [t.name for t in new_topics if t.name in reader.topics]
+        if clashes:
+            raise BagError(f'output topic {", ".join(clashes)} is already in {reader.path}')
+
+        with BagWriter(output_path, overwrite=overwrite) as writer, \
+                ProgressBar(sum(reader.message_counts.values()), stream=progress_stream,
+                            label='converting ') as progress:
+            for metadata in [*reader.topic_metadata.values(), *new_topics]:
+                writer.add_topic(metadata)
+            for record in reader.messages():
+                writer.write_serialized(record.topic, record.type_name, record.data,
+                                        record.log_time_ns, record.publish_time_ns)
+                pipeline = pipelines.get(record.topic)
+                if pipeline is not None:
+                    names = output_topics[record.topic]
+                    for name, msg in pipeline.process(record.message()):
+                        writer.write(names[name], msg, record.log_time_ns, record.publish_time_ns)
+                progress.update()
+    return {topic: pipeline.stats for topic, pipeline in pipelines.items()}

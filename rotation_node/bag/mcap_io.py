@@ -1,0 +1,517 @@
+"""
+Read and write ROS 2 bags as single MCAP files, the way rosbag2 writes them.
+
+A bag written here is what ``ros2 bag record -s mcap`` would write for the same
+messages: profile ``ros2``; one schema per message type, named
+``pkg/msg/Type`` with encoding ``ros2msg`` and the complete concatenated
+definition (see ``message_types.message_definition``); one channel per topic
+with message encoding ``cdr`` and the metadata ``offered_qos_profiles`` (QoS
+YAML, see ``qos``) and ``topic_type_hash``; uncompressed chunks with message
+indexes and a summary; and a ``rosbag2`` metadata record holding the
+version 9 bag metadata, without which rosbag2 would read the QoS YAML with the
+pre-Jazzy (integer) schema.
+
+Messages are stored as the CDR bytes ``rclpy.serialization`` produces and
+reads, so a bag round trip is byte-exact. Reading streams chunk by chunk:
+memory does not grow with the length of the bag.
+"""
+import dataclasses
+import operator
+import os
+import struct
+from typing import Optional
+
+import mcap
+import yaml
+import zstandard
+from mcap.exceptions import McapError
+from mcap.reader import SeekingReader
+from mcap.writer import CompressionType, Writer
+from rclpy.serialization import deserialize_message, serialize_message
+
+from rotation_node.bag.atomic_file import AtomicFile
+from rotation_node.bag.message_types import (
+    message_class, message_definition, split_type_name, type_hash, type_name_of)
+from rotation_node.errors import BagError
+
+PROFILE = 'ros2'
+MESSAGE_ENCODING = 'cdr'
+SCHEMA_ENCODINGS = ('ros2msg', 'ros2idl')
+#: Version of the rosbag2 metadata written (Jazzy's).
+ROSBAG2_METADATA_VERSION = 9
+LIBRARY = f'rotation_node bag; mcap-python/{mcap.__version__}'
+
+_MAX_TIMESTAMP = 2**64 - 1
+# What parsing a damaged file can raise from inside the mcap library, besides
+# its own McapError: short reads, bad lengths, undecodable strings, missing ids,
+# failed decompression (zstandard's ZstdError, lz4's RuntimeError; both are
+# dependencies of mcap).
+_CORRUPT_DATA_ERRORS = (McapError, struct.error, EOFError, ValueError, KeyError,
+                        IndexError, MemoryError, RuntimeError, zstandard.ZstdError)
+
+
+@dataclasses.dataclass(frozen=True)
+class TopicMetadata:
+    """
+    What a bag records about one topic.
+
+    Attributes
+    ----------
+    name : str
+        The topic, e.g. ``'/imu'``.
+    type_name : str
+        ``'pkg/msg/Type'``.
+    offered_qos_profiles : str
+        The publishers' QoS profiles as rosbag2's YAML (``'[]'`` if unknown).
+    definition : str or None
+        The schema text; None means the installed definition of ``type_name``.
+    definition_encoding : str
+        ``'ros2msg'`` or ``'ros2idl'``.
+    type_hash : str or None
+        REP-2011 hash; None means the installed type's hash.
+
+    """
+
+    name: str
+    type_name: str
+    offered_qos_profiles: str = '[]'
+    definition: Optional[str] = None
+    definition_encoding: str = 'ros2msg'
+    type_hash: Optional[str] = None
+
+
+class BagMessage:
+    """
+    One message read from a bag.
+
+    Attributes
+    ----------
+    topic : str
+    type_name : str
+        ``'pkg/msg/Type'``.
+    data : bytes
+        The CDR-serialised message.
+    log_time_ns : int
+        Receive time, nanoseconds.
+    publish_time_ns : int
+        Publish time, nanoseconds.
+
+    """
+
+    __slots__ = ('topic', 'type_name', 'data', 'log_time_ns', 'publish_time_ns')
+
+    def __init__(self, topic, type_name, data, log_time_ns, publish_time_ns):
+        self.topic = topic
+        self.type_name = type_name
+        self.data = data
+        self.log_time_ns = log_time_ns
+        self.publish_time_ns = publish_time_ns
+
+    def message(self):
+        """
+        Deserialise the message.
+
+        Returns
+        -------
+        object
+            An instance of the rclpy message class of ``type_name``.
+
+        Raises
+        ------
+        BagError
+            If the type is not installed or the bytes are not a valid message.
+
+        """
+        try:
+            return deserialize_message(self.data, message_class(self.type_name))
+        except BagError:
+            raise
+        except Exception as error:  # rclpy raises bare RuntimeError/TypeError on bad CDR
+            raise BagError(
+                f'message on {self.topic} at {self.log_time_ns} ns is not a valid '
+                f'{self.type_name}: {error}') from None
+
+    def __repr__(self):
+        return (f'BagMessage({self.topic!r}, {self.type_name!r}, <{len(self.data)} bytes>, '
+                f'log_time_ns={self.log_time_ns}, publish_time_ns={self.publish_time_ns})')
+
+
+def _timestamp(value, name):
+    """Validate a timestamp argument: an integer in [0, 2**64)."""
+    try:
+        value = operator.index(value)
+    except TypeError:
+        raise BagError(
+            f'{name} must be an integer number of nanoseconds, got {value!r}') from None
+    if not 0 <= value <= _MAX_TIMESTAMP:
+        raise BagError(f'{name} must be in [0, 2**64) ns, got {value}')
+    return value
+
+
+class _Channel:
+    __slots__ = ('id', 'type_name', 'msg_class')
+
+    def __init__(self, channel_id, type_name):
+        self.id = channel_id
+        self.type_name = type_name
+        self.msg_class = None
+
+
+class BagWriter:
+    """
+    Write a ROS 2 MCAP bag; a context manager.
+
+    The file appears at ``path`` only when the writer is closed cleanly (end
+    of the ``with`` block or ``close()``): until then the data goes to a
+    temporary file in the same directory, which an exception (or ``abort()``)
+    removes.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The ``.mcap`` file to write.
+    overwrite : bool, optional
+        Replace an existing file. Default False: an existing file is an error.
+
+    Raises
+    ------
+    BagError
+        If ``path`` exists and ``overwrite`` is false, or cannot be created.
+
+    Examples
+    --------
+    >>> with BagWriter('out.mcap') as writer:                  # doctest: +SKIP
+    ...     writer.write('/imu', Imu(), log_time_ns=1_700_000_000_000_000_000)
+
+    """
+
+    def __init__(self, path, *, overwrite=False):
+        self.path = os.fspath(path)
+        self._file = AtomicFile(self.path, overwrite=overwrite)
+        self._writer = Writer(self._file.stream, compression=CompressionType.NONE)
+        self._writer.start(profile=PROFILE, library=LIBRARY)
+        self._schema_ids = {}
+        self._channels = {}
+        self._topics = []
+        self._counts = {}
+        self._start_ns = _MAX_TIMESTAMP
+        self._end_ns = 0
+
+    def add_topic(self, metadata):
+        """
+        Register a topic with explicit metadata (QoS, definition).
+
+        ``write`` and ``write_serialized`` register unknown topics by
+        themselves, with the installed definition and no QoS profiles; call
+        this first to record the publishers' QoS, or to copy a topic from
+        another bag with its own schema.
+
+        Parameters
+        ----------
+        metadata : TopicMetadata
+
+        Raises
+        ------
+        BagError
+            If the topic is already registered or the type name is invalid or
+            (with ``definition=None``) not installed.
+
+        """
+        if metadata.name in self._channels:
+            raise BagError(f'topic {metadata.name} is already registered in {self.path}')
+        split_type_name(metadata.type_name)
+        definition = (message_definition(metadata.type_name) if metadata.definition is None
+                      else metadata.definition)
+        schema_key = (metadata.type_name, metadata.definition_encoding, definition)
+        schema_id = self._schema_ids.get(schema_key)
+        if schema_id is None:
+            schema_id = self._writer.register_schema(
+                name=metadata.type_name, encoding=metadata.definition_encoding,
+                data=definition.encode())
+            self._schema_ids[schema_key] = schema_id
+        channel_id = self._writer.register_channel(
+            topic=metadata.name, message_encoding=MESSAGE_ENCODING, schema_id=schema_id,
+            metadata={
+                'offered_qos_profiles': metadata.offered_qos_profiles,
+                'topic_type_hash': (type_hash(metadata.type_name) if metadata.type_hash is None
+                                    else metadata.type_hash),
+            })
+        self._channels[metadata.name] = _Channel(channel_id, metadata.type_name)
+        self._topics.append(metadata)
+        self._counts[channel_id] = 0
+
+    def _channel(self, topic, type_name):
+        channel = self._channels.get(topic)
+        if channel is None:
+            self.add_topic(TopicMetadata(topic, type_name))
+            channel = self._channels[topic]
+        elif channel.type_name != type_name:
+            raise BagError(
+                f'topic {topic} holds {channel.type_name} in {self.path}, '
+                f'cannot write {type_name}')
+        return channel
+
+    def write(self, topic, msg, log_time_ns, publish_time_ns=None):
+        """
+        Serialise and write one message.
+
+        Parameters
+        ----------
+        topic : str
+        msg : rclpy message
+            Its class decides the topic's type on first use.
+        log_time_ns : int
+            Receive time, nanoseconds (e.g. since the Unix epoch).
+        publish_time_ns : int, optional
+            Publish time; defaults to ``log_time_ns``.
+
+        Raises
+        ------
+        BagError
+            If the topic already holds another type or a time is not a
+            non-negative integer.
+
+        """
+        channel = self._channels.get(topic)
+        if channel is None or channel.msg_class is not type(msg):
+            channel = self._channel(topic, type_name_of(type(msg)))
+            channel.msg_class = type(msg)
+        self._add(channel.id, serialize_message(msg), log_time_ns, publish_time_ns)
+
+    def write_serialized(self, topic, type_name, data, log_time_ns, publish_time_ns=None):
+        """
+        Write one message that is already CDR-serialised.
+
+        Parameters
+        ----------
+        topic : str
+        type_name : str
+            ``'pkg/msg/Type'``; decides the topic's type on first use.
+        data : bytes
+        log_time_ns : int
+        publish_time_ns : int, optional
+            Defaults to ``log_time_ns``.
+
+        Raises
+        ------
+        BagError
+            As ``write``; also if the type is not installed on first use of a
+            topic not registered with ``add_topic``.
+
+        """
+        channel = self._channels.get(topic)
+        if channel is None or channel.type_name != type_name:
+            channel = self._channel(topic, type_name)
+        self._add(channel.id, data, log_time_ns, publish_time_ns)
+
+    def _add(self, channel_id, data, log_time_ns, publish_time_ns):
+        log_time_ns = _timestamp(log_time_ns, 'log_time_ns')
+        publish_time_ns = (log_time_ns if publish_time_ns is None
+                           else _timestamp(publish_time_ns, 'publish_time_ns'))
+        self._writer.add_message(channel_id=channel_id, log_time=log_time_ns, data=data,
+                                 publish_time=publish_time_ns)
+        self._counts[channel_id] += 1
+        if log_time_ns < self._start_ns:
+            self._start_ns = log_time_ns
+        if log_time_ns > self._end_ns:
+            self._end_ns = log_time_ns
+
+    def _rosbag2_metadata(self):
+        """The bag metadata rosbag2 stores in the MCAP metadata record ``rosbag2``."""
+        count = sum(self._counts.values())
+        start = self._start_ns if count else 0
+        duration = {'nanoseconds': self._end_ns - start if count else 0}
+        name = os.path.basename(self.path)
+        return {
+            'version': ROSBAG2_METADATA_VERSION,
+            'storage_identifier': 'mcap',
+            'duration': duration,
+            'starting_time': {'nanoseconds_since_epoch': start},
+            'message_count': count,
+            'topics_with_message_count': [{
+                'topic_metadata': {
+                    'name': topic.name,
+                    'type': topic.type_name,
+                    'serialization_format': MESSAGE_ENCODING,
+                    'offered_qos_profiles': yaml.safe_load(topic.offered_qos_profiles) or [],
+                    'type_description_hash': (type_hash(topic.type_name)
+                                              if topic.type_hash is None else topic.type_hash),
+                },
+                'message_count': self._counts[self._channels[topic.name].id],
+            } for topic in self._topics],
+            'compression_format': '',
+            'compression_mode': '',
+            'relative_file_paths': [name],
+            'files': [{
+                'path': name,
+                'starting_time': {'nanoseconds_since_epoch': start},
+                'duration': duration,
+                'message_count': count,
+            }],
+            'custom_data': {},
+            'ros_distro': os.environ.get('ROS_DISTRO', 'jazzy'),
+        }
+
+    def close(self):
+        """Finish the file and move it to ``path``; idempotent."""
+        if self._file.closed:
+            return
+        try:
+            serialized = yaml.safe_dump(self._rosbag2_metadata(), sort_keys=False)
+            self._writer.add_metadata('rosbag2', {'serialized_metadata': serialized})
+            self._writer.finish()
+        except BaseException:
+            self._file.discard()
+            raise
+        self._file.commit()
+
+    def abort(self):
+        """Discard everything written; ``path`` is left as it was."""
+        if not self._file.closed:
+            self._file.discard()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, traceback):
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+
+
+class BagReader:
+    """
+    Read a ROS 2 MCAP bag.
+
+    The file is checked when opened: it must be a complete MCAP file (header,
+    summary, footer) whose channels all carry CDR messages with ``ros2msg`` or
+    ``ros2idl`` schemas. Messages are read lazily, one chunk at a time.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Attributes
+    ----------
+    path : str
+    topics : dict
+        ``{topic: 'pkg/msg/Type'}``.
+    topic_metadata : dict
+        ``{topic: TopicMetadata}`` as stored (schema text, QoS YAML, hash).
+    message_counts : dict
+        ``{topic: number of messages}``.
+
+    Raises
+    ------
+    BagError
+        If the file does not exist, is not MCAP, is truncated or corrupt, or
+        holds a channel that is not a ROS 2 CDR channel.
+
+    """
+
+    def __init__(self, path):
+        self.path = os.fspath(path)
+        try:
+            self._stream = open(self.path, 'rb')
+        except OSError as error:
+            raise BagError(f'cannot open bag {self.path}: {error.strerror}') from None
+        try:
+            self._read_summary()
+        except BaseException:
+            self._stream.close()
+            raise
+
+    def _read_summary(self):
+        try:
+            self._reader = SeekingReader(self._stream, validate_crcs=True)
+            summary = self._reader.get_summary()
+        except _CORRUPT_DATA_ERRORS as error:
+            raise BagError(f'{self.path} is not a valid MCAP file (truncated or corrupt?): '
+                           f'{error}') from None
+        if summary is None:
+            raise BagError(f'{self.path} has no MCAP summary section (index); '
+                           'it was not closed by its writer')
+        self.topic_metadata = {}
+        self.message_counts = {}
+        self._type_names = {}
+        counts = summary.statistics.channel_message_counts if summary.statistics else {}
+        for channel in summary.channels.values():
+            metadata = self._topic_metadata(channel, summary.schemas.get(channel.schema_id))
+            known = self.topic_metadata.setdefault(channel.topic, metadata)
+            if known.type_name != metadata.type_name:
+                raise BagError(f'topic {channel.topic} in {self.path} has two types: '
+                               f'{known.type_name} and {metadata.type_name}')
+            self._type_names[channel.id] = metadata.type_name
+            self.message_counts[channel.topic] = (
+                self.message_counts.get(channel.topic, 0) + counts.get(channel.id, 0))
+        self.topics = {topic: m.type_name for topic, m in self.topic_metadata.items()}
+
+    def _topic_metadata(self, channel, schema):
+        if channel.message_encoding != MESSAGE_ENCODING:
+            raise BagError(f'topic {channel.topic} in {self.path} has message encoding '
+                           f'{channel.message_encoding!r}, expected {MESSAGE_ENCODING!r}')
+        if schema is None or schema.encoding not in SCHEMA_ENCODINGS:
+            found = 'no schema' if schema is None else f'schema encoding {schema.encoding!r}'
+            raise BagError(f'topic {channel.topic} in {self.path} has {found}, '
+                           f'expected one of {SCHEMA_ENCODINGS}')
+        try:
+            split_type_name(schema.name)
+            definition = schema.data.decode()
+        except (BagError, UnicodeDecodeError) as error:
+            raise BagError(f'topic {channel.topic} in {self.path}: {error}') from None
+        return TopicMetadata(
+            name=channel.topic, type_name=schema.name,
+            offered_qos_profiles=channel.metadata.get('offered_qos_profiles', '[]'),
+            definition=definition, definition_encoding=schema.encoding,
+            type_hash=channel.metadata.get('topic_type_hash', ''))
+
+    def messages(self, topics=None):
+        """
+        Iterate over the messages in log-time order (ties in file order).
+
+        Parameters
+        ----------
+        topics : iterable of str, optional
+            Only these topics; all by default.
+
+        Yields
+        ------
+        BagMessage
+
+        Raises
+        ------
+        BagError
+            If a requested topic is not in the bag (raised at once), or a chunk
+            turns out to be corrupt (raised when it is reached).
+
+        """
+        if topics is not None:
+            topics = list(topics)
+            missing = [topic for topic in topics if topic not in self.topics]
+            if missing:
+                raise BagError(f'topic {", ".join(missing)} not in {self.path} '
+                               f'(it has {", ".join(sorted(self.topics)) or "no topics"})')
+        return self._messages(topics)
+
+    def _messages(self, topics):
+        # Log-time order streams chunk by chunk. (mcap 1.6's file order,
+        # log_time_order=False, queues every chunk's messages before yielding
+        # the first: it loads the whole bag.)
+        type_names = self._type_names
+        try:
+            for _, channel, message in self._reader.iter_messages(topics=topics):
+                yield BagMessage(channel.topic, type_names[channel.id], message.data,
+                                 message.log_time, message.publish_time)
+        except _CORRUPT_DATA_ERRORS as error:
+            raise BagError(f'{self.path} is corrupt: {error!r}') from None
+
+    def close(self):
+        """Close the file."""
+        self._stream.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()

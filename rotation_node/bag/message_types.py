@@ -1,0 +1,230 @@
+"""
+ROS 2 message types by name: Python classes, full definitions and type hashes.
+
+A type name is the ROS 2 resource name ``'pkg/msg/Type'`` as stored in a bag
+(``sensor_msgs/msg/Imu``). Classes come from the installed Python message
+packages (``import pkg.msg``); definitions and hashes from the ``.msg`` and
+``.json`` files the packages install under ``<prefix>/share/<pkg>/msg/``,
+where ``<prefix>`` is each entry of ``AMENT_PREFIX_PATH`` and then the
+interpreter's own prefix (PyPI wheels install there without setting
+``AMENT_PREFIX_PATH``).
+"""
+import functools
+import importlib
+import json
+import os
+import re
+import sys
+
+from rotation_node.errors import BagError
+
+_NAME = r'[A-Za-z][A-Za-z0-9_]*'
+_TYPE_NAME = re.compile(rf'({_NAME})/({_NAME})/({_NAME})')
+_SHORT_TYPE_NAME = re.compile(rf'({_NAME})/({_NAME})')
+
+# Field types in a .msg text ("foo_msgs/Bar" in "foo_msgs/Bar[] bar"), the same
+# expression rosbag2's LocalMessageDefinitionSource uses, so that the
+# dependency set, and therefore the concatenated definition, is the same.
+_MSG_FIELD_TYPE = re.compile(r'(?:^|\n)\s*([a-zA-Z0-9_/]+)(?:\[[^\]]*\])?\s+')
+_PRIMITIVE_TYPES = frozenset((
+    'bool', 'byte', 'char', 'float32', 'float64', 'int8', 'uint8', 'int16', 'uint16',
+    'int32', 'uint32', 'int64', 'uint64', 'string', 'wstring'))
+_DEFINITION_DELIMITER = '=' * 80 + '\n'
+
+
+def split_type_name(type_name):
+    """
+    Split a message type name into package, interface kind and type.
+
+    Parameters
+    ----------
+    type_name : str
+        ``'pkg/msg/Type'``.
+
+    Returns
+    -------
+    tuple of str
+        ``(package, kind, type)``, e.g. ``('sensor_msgs', 'msg', 'Imu')``.
+
+    Raises
+    ------
+    BagError
+        If ``type_name`` is not of the form ``'pkg/msg/Type'``.
+
+    """
+    match = _TYPE_NAME.fullmatch(type_name) if isinstance(type_name, str) else None
+    if match is None:
+        raise BagError(f"invalid message type name {type_name!r}: expected 'pkg/msg/Type'")
+    return match.groups()
+
+
+@functools.lru_cache(maxsize=None)
+def message_class(type_name):
+    """
+    Return the Python message class of a type name.
+
+    Parameters
+    ----------
+    type_name : str
+        ``'pkg/msg/Type'``, e.g. ``'sensor_msgs/msg/Imu'``.
+
+    Returns
+    -------
+    type
+        The rosidl-generated class, usable with ``rclpy.serialization``.
+
+    Raises
+    ------
+    BagError
+        If the name is malformed or no installed package provides the type.
+
+    """
+    package, kind, name = split_type_name(type_name)
+    try:
+        module = importlib.import_module(f'{package}.{kind}')
+    except ImportError:
+        raise BagError(
+            f'unknown message type {type_name!r}: '
+            f'Python package {package}.{kind} is not installed') from None
+    cls = getattr(module, name, None)
+    if not (isinstance(cls, type) and hasattr(cls, '_TYPE_SUPPORT')):
+        raise BagError(f'unknown message type {type_name!r}: {package}.{kind} has no {name}')
+    return cls
+
+
+def type_name_of(msg_class):
+    """
+    Return the type name ``'pkg/msg/Type'`` of a rosidl-generated message class.
+
+    Parameters
+    ----------
+    msg_class : type
+        A message class such as ``sensor_msgs.msg.Imu``.
+
+    Returns
+    -------
+    str
+
+    Raises
+    ------
+    BagError
+        If ``msg_class`` is not a generated message class (``pkg.msg._module``).
+
+    """
+    parts = getattr(msg_class, '__module__', '').split('.')
+    if len(parts) < 3 or not hasattr(msg_class, '_TYPE_SUPPORT'):
+        raise BagError(f'{msg_class!r} is not a ROS message class')
+    return f'{parts[0]}/{parts[1]}/{msg_class.__name__}'
+
+
+def _share_prefixes():
+    """Install prefixes to search, in order: ``AMENT_PREFIX_PATH``, then ``sys.prefix``."""
+    prefixes = [p for p in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep) if p]
+    prefixes.append(sys.prefix)
+    return list(dict.fromkeys(prefixes))
+
+
+def _interface_file(package, kind, name, extension):
+    """Path of ``<prefix>/share/<package>/<kind>/<name><extension>``, or None if absent."""
+    for prefix in _share_prefixes():
+        path = os.path.join(prefix, 'share', package, kind, name + extension)
+        if os.path.isfile(path):
+            return path
+    return None
+
+
+def _definition_file(dependency_name):
+    """Path of the .msg file of a dependency named ``pkg/Type`` or ``pkg/msg/Type``."""
+    match = _SHORT_TYPE_NAME.fullmatch(dependency_name)
+    package, kind, name = (
+        (match[1], 'msg', match[2]) if match else split_type_name(dependency_name))
+    path = _interface_file(package, kind, name, '.msg')
+    if path is None:
+        raise BagError(
+            f'no message definition for {dependency_name!r}: {package}/{kind}/{name}.msg '
+            f'not found under share/ of {os.pathsep.join(_share_prefixes())}')
+    return path, package
+
+
+def _dependencies(text, package):
+    """Sorted non-primitive field types of a .msg text, qualified with ``package``."""
+    names = set()
+    for field_type in _MSG_FIELD_TYPE.findall(text):
+        if field_type not in _PRIMITIVE_TYPES:
+            names.add(field_type if '/' in field_type else f'{package}/{field_type}')
+    return sorted(names)
+
+
+@functools.lru_cache(maxsize=None)
+def message_definition(type_name):
+    """
+    Return the complete ``ros2msg`` definition of a message type, as rosbag2 stores it.
+
+    The type's own .msg text comes first; then every type it depends on,
+    recursively and once each, depth first with the dependencies of one
+    definition in sorted order, each preceded by a line of 80 ``=`` and a line
+    ``MSG: <name>``, the name as it is spelt in the referring .msg file
+    (``std_msgs/Header``).
+
+    Parameters
+    ----------
+    type_name : str
+        ``'pkg/msg/Type'``.
+
+    Returns
+    -------
+    str
+
+    Raises
+    ------
+    BagError
+        If the name is malformed or a .msg file cannot be found.
+
+    References
+    ----------
+    rosbag2 ``docs/message_definition_encoding.md`` and
+    ``rosbag2_cpp/message_definitions/local_message_definition_source.cpp``.
+
+    """
+    split_type_name(type_name)
+    seen = set()
+
+    def definition_with_dependencies(name):
+        path, package = _definition_file(name)
+        with open(path, encoding='utf-8') as stream:
+            text = stream.read()
+        parts = [text]
+        for dependency in _dependencies(text, package):
+            if dependency not in seen:
+                seen.add(dependency)
+                parts.append(f'\n{_DEFINITION_DELIMITER}MSG: {dependency}\n')
+                parts.append(definition_with_dependencies(dependency))
+        return ''.join(parts)
+
+    return definition_with_dependencies(type_name)
+
+
+@functools.lru_cache(maxsize=None)
+def type_hash(type_name):
+    """
+    Return the REP-2011 type hash (``'RIHS01_...'``) of a message type.
+
+    Parameters
+    ----------
+    type_name : str
+        ``'pkg/msg/Type'``.
+
+    Returns
+    -------
+    str
+        The hash from the type description file installed with the package,
+        or ``''`` if there is none (rosbag2 stores ``''`` then too).
+
+    """
+    package, kind, name = split_type_name(type_name)
+    path = _interface_file(package, kind, name, '.json')
+    if path is None:
+        return ''
+    with open(path, encoding='utf-8') as stream:
+        hashes = json.load(stream).get('type_hashes', [])
+    return next((h['hash_string'] for h in hashes if h.get('type_name') == type_name), '')

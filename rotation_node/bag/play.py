@@ -1,0 +1,130 @@
+"""
+Publish the messages of an MCAP bag on their topics (``rotation_bag play``).
+
+Messages go out as stored (CDR bytes, never deserialised) in log-time order,
+spaced as they were recorded divided by the rate. Rate 0 publishes as fast as
+the subscribers acknowledge: it waits until every played topic has a
+subscriber, offers a deep reliable queue, and every ``ACK_BATCH`` messages
+waits until they are acknowledged, so the queue never overflows; a reliable
+subscriber whose own queue is deep enough (as the recorder's) then receives
+every message.
+"""
+import time
+
+import rclpy
+from rclpy.duration import Duration
+from rclpy.qos import ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+
+from rotation_node.bag.mcap_io import BagReader
+from rotation_node.bag.message_types import message_class
+from rotation_node.bag.qos import DEEP_QUEUE_DEPTH, playback_qos, qos_profiles_from_yaml
+from rotation_node.bag.stop_signal import StopSignal
+from rotation_node.errors import BagError
+
+NODE_NAME = 'rotation_bag_play'
+ACK_BATCH = DEEP_QUEUE_DEPTH // 4
+ACK_TIMEOUT = Duration(seconds=30)
+_POLL_S = 0.05
+
+
+def _publishers(node, reader, topics, lossless):
+    """One publisher per topic with the QoS recorded in the bag; message classes checked first."""
+    classes = {topic: message_class(reader.topics[topic]) for topic in topics}
+    return {topic: node.create_publisher(
+        classes[topic], topic,
+        playback_qos(qos_profiles_from_yaml(reader.topic_metadata[topic].offered_qos_profiles,
+                                            topic=topic), lossless=lossless))
+            for topic in topics}
+
+
+def _wait_for_subscribers(node, publishers, stop):
+    waiting = sorted(topic for topic, p in publishers.items() if p.get_subscription_count() == 0)
+    if waiting:
+        node.get_logger().info(f'waiting for subscribers on {", ".join(waiting)}')
+    while waiting and not stop.event.wait(_POLL_S):
+        waiting = [topic for topic in waiting if publishers[topic].get_subscription_count() == 0]
+
+
+def _wait_for_acks(publishers):
+    for publisher in publishers.values():
+        if publisher.qos_profile.reliability == ReliabilityPolicy.RELIABLE:
+            publisher.wait_for_all_acked(ACK_TIMEOUT)
+
+
+def _play_once(reader, topics, publishers, rate, stop):
+    """Publish every message once; return how many, or stop early on a signal."""
+    count = 0
+    start_wall = time.monotonic()
+    start_bag = None
+    for record in reader.messages(topics):
+        if rate > 0:
+            if start_bag is None:
+                start_bag = record.log_time_ns
+            delay = start_wall + (record.log_time_ns - start_bag) * 1e-9 / rate - time.monotonic()
+            if delay > 0:
+                stop.event.wait(delay)
+        if stop.is_set():
+            break
+        publishers[record.topic].publish(record.data)
+        count += 1
+        if rate == 0 and count % ACK_BATCH == 0:
+            _wait_for_acks(publishers)
+    return count
+
+
+def play(path, *, rate=1.0, topics=None, loop=False, ros_args=None):
+    """
+    Publish the messages of a bag until it ends (or forever with ``loop``) or Ctrl-C.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The MCAP bag.
+    rate : float, optional
+        Speed factor on the recorded timing; 0 publishes as fast as the
+        subscribers acknowledge, after waiting for a subscriber on every topic.
+    topics : list of str, optional
+        Only these topics; all by default.
+    loop : bool, optional
+        Start again at the end.
+    ros_args : list of str, optional
+        Command line passed to ``rclpy.init`` (``--ros-args ...``).
+
+    Returns
+    -------
+    int
+        Messages published.
+
+    Raises
+    ------
+    BagError
+        If the bag is unreadable, a topic is not in it, a type is not installed
+        or the rate is negative; nothing is published then.
+
+    """
+    if not rate >= 0:
+        raise BagError(f'rate must be >= 0, got {rate}')
+    with BagReader(path) as reader:
+        topics = list(reader.topics) if topics is None else list(topics)
+        reader.messages(topics)   # checks the topics before anything is published
+        rclpy.init(args=ros_args, signal_handler_options=SignalHandlerOptions.NO)
+        try:
+            node = rclpy.create_node(NODE_NAME)
+            with StopSignal() as stop:
+                publishers = _publishers(node, reader, topics, lossless=rate == 0)
+                if rate == 0:
+                    _wait_for_subscribers(node, publishers, stop)
+                count = 0
+                while True:
+                    published = _play_once(reader, topics, publishers, rate, stop)
+                    count += published
+                    if not loop or published == 0 or stop.is_set():
+                        break
+                if not stop.is_set():
+                    _wait_for_acks(publishers)
+            node.get_logger().info(f'published {count} messages from {path}')
+            node.destroy_node()
+            return count
+        finally:
+            rclpy.try_shutdown()

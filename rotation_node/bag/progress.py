@@ -1,0 +1,69 @@
+"""
+A one-line progress bar on a terminal, nothing elsewhere.
+"""
+import sys
+import time
+
+_REFRESH_S = 0.2
+_CHECK_EVERY = 1024   # messages between clock reads: keeps update() to an increment
+_WIDTH = 30
+
+
+class ProgressBar:
+    """
+    ``[#########.....]  61%  122000/200000 messages  3.1 s`` redrawn in place.
+
+    Drawn only when ``stream`` is a terminal, so pipes, logs and CI output stay
+    clean. Use as a context manager, call ``update()`` once per item.
+
+    Parameters
+    ----------
+    total : int
+        Number of items expected (the bar is clipped at 100 %).
+    stream : file, optional
+        Where to draw; ``sys.stderr`` by default.
+    label : str, optional
+        Printed before the bar.
+
+    """
+
+    def __init__(self, total, *, stream=None, label=''):
+        self.total = max(int(total), 1)
+        self.stream = sys.stderr if stream is None else stream
+        self.label = label
+        self.enabled = self.stream.isatty()
+        self.count = 0
+        self._next_check = _CHECK_EVERY
+        self._start = time.monotonic()
+        self._next_draw = self._start
+
+    def update(self, items=1):
+        """Count ``items`` more; redraw at most every 0.2 s."""
+        self.count += items
+        if self.enabled and self.count >= self._next_check:
+            self._next_check = self.count + _CHECK_EVERY
+            if time.monotonic() >= self._next_draw:
+                self._draw()
+
+    def _draw(self):
+        now = time.monotonic()
+        self._next_draw = now + _REFRESH_S
+        fraction = min(self.count / self.total, 1.0)
+        filled = round(fraction * _WIDTH)
+        self.stream.write(
+            f'\r{self.label}[{"#" * filled}{"." * (_WIDTH - filled)}] {fraction:4.0%}  '
+            f'{self.count}/{self.total} messages  {now - self._start:.1f} s')
+        self.stream.flush()
+
+    def close(self):
+        """Draw the final state and end the line."""
+        if self.enabled:
+            self._draw()
+            self.stream.write('\n')
+            self.stream.flush()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()

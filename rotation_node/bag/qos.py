@@ -1,0 +1,178 @@
+"""
+QoS profiles as rosbag2 stores them, and the profiles record and play use.
+
+rosbag2 (metadata version 9, Jazzy) stores the QoS profiles offered by a
+topic's publishers in the MCAP channel metadata ``offered_qos_profiles`` as a
+YAML list; each entry holds history, depth, reliability, durability, deadline,
+lifespan, liveliness, liveliness lease duration and
+avoid_ros_namespace_conventions, policies by name (``keep_last``) and durations
+as ``{sec, nsec}``. Bags written before version 9 hold the policies as
+integers; both are read.
+"""
+import yaml
+from rclpy.duration import Duration
+from rclpy.qos import (
+    DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy)
+
+from rotation_node.errors import BagError
+
+_POLICIES = (
+    ('history', HistoryPolicy),
+    ('reliability', ReliabilityPolicy),
+    ('durability', DurabilityPolicy),
+    ('liveliness', LivelinessPolicy),
+)
+_DURATIONS = ('deadline', 'lifespan', 'liveliness_lease_duration')
+_NS_PER_S = 1_000_000_000
+
+#: Depth of the reliable queue ``play`` offers at ``--rate 0``, and that
+#: ``record`` requests: deep enough that a burst never overwrites unread samples.
+DEEP_QUEUE_DEPTH = 10_000
+
+
+def _duration_yaml(duration):
+    seconds, nanoseconds = divmod(duration.nanoseconds, _NS_PER_S)
+    return {'sec': seconds, 'nsec': nanoseconds}
+
+
+def qos_profiles_yaml(profiles):
+    """
+    Serialise QoS profiles to rosbag2's ``offered_qos_profiles`` YAML.
+
+    Parameters
+    ----------
+    profiles : iterable of rclpy.qos.QoSProfile
+        E.g. the ``qos_profile`` of each ``Node.get_publishers_info_by_topic`` entry.
+
+    Returns
+    -------
+    str
+        A YAML list, ``'[]'`` for no profiles.
+
+    """
+    entries = [{
+        'history': profile.history.short_key,
+        'depth': profile.depth,
+        'reliability': profile.reliability.short_key,
+        'durability': profile.durability.short_key,
+        'deadline': _duration_yaml(profile.deadline),
+        'lifespan': _duration_yaml(profile.lifespan),
+        'liveliness': profile.liveliness.short_key,
+        'liveliness_lease_duration': _duration_yaml(profile.liveliness_lease_duration),
+        'avoid_ros_namespace_conventions': bool(profile.avoid_ros_namespace_conventions),
+    } for profile in profiles]
+    return yaml.safe_dump(entries, sort_keys=False, default_flow_style=False).rstrip('\n')
+
+
+def _policy(entry, key, policy_type):
+    value = entry[key]
+    if isinstance(value, int):
+        return policy_type(value)
+    return policy_type[str(value).upper()]
+
+
+def qos_profiles_from_yaml(text, *, topic=''):
+    """
+    Parse rosbag2's ``offered_qos_profiles`` YAML into QoS profiles.
+
+    Parameters
+    ----------
+    text : str
+        The channel metadata value; ``''`` (no metadata) gives an empty list.
+    topic : str, optional
+        Named in the error message.
+
+    Returns
+    -------
+    list of rclpy.qos.QoSProfile
+
+    Raises
+    ------
+    BagError
+        If the text is not a list of complete QoS entries.
+
+    """
+    if not text.strip():
+        return []
+    try:
+        entries = yaml.safe_load(text)
+        if not isinstance(entries, list):
+            raise TypeError(f'expected a YAML list, got {type(entries).__name__}')
+        profiles = []
+        for entry in entries:
+            profile = QoSProfile(
+                depth=int(entry['depth']),
+                avoid_ros_namespace_conventions=bool(entry['avoid_ros_namespace_conventions']),
+                **{key: _policy(entry, key, policy) for key, policy in _POLICIES},
+                **{key: Duration(seconds=int(entry[key]['sec']),
+                                 nanoseconds=int(entry[key]['nsec'])) for key in _DURATIONS})
+            profiles.append(profile)
+    except (yaml.YAMLError, TypeError, KeyError, ValueError) as error:
+        raise BagError(f'invalid offered_qos_profiles of topic {topic!r}: {error!r}') from None
+    return profiles
+
+
+def recording_qos(offered):
+    """
+    Return the subscription QoS that receives every publisher's messages.
+
+    As rosbag2 does: reliable only if every publisher offers reliable,
+    transient local only if every publisher offers it. The history keeps
+    ``DEEP_QUEUE_DEPTH`` samples so that bursts are not overwritten before
+    the recorder takes them.
+
+    Parameters
+    ----------
+    offered : list of rclpy.qos.QoSProfile
+        The publishers' offered profiles.
+
+    Returns
+    -------
+    rclpy.qos.QoSProfile
+
+    """
+    def every(policy_name, value):
+        return bool(offered) and all(getattr(p, policy_name) == value for p in offered)
+
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=DEEP_QUEUE_DEPTH,
+        reliability=(ReliabilityPolicy.RELIABLE
+                     if every('reliability', ReliabilityPolicy.RELIABLE)
+                     else ReliabilityPolicy.BEST_EFFORT),
+        durability=(DurabilityPolicy.TRANSIENT_LOCAL
+                    if every('durability', DurabilityPolicy.TRANSIENT_LOCAL)
+                    else DurabilityPolicy.VOLATILE))
+
+
+def playback_qos(offered, *, lossless=False):
+    """
+    Return the publisher QoS that replays a topic as it was recorded.
+
+    As rosbag2 does: the recorded reliability and durability if every
+    recorded publisher offered the same ones, else reliable and volatile; keep
+    last 10. ``lossless`` (``--rate 0``) makes it reliable with a
+    ``DEEP_QUEUE_DEPTH`` queue.
+
+    Parameters
+    ----------
+    offered : list of rclpy.qos.QoSProfile
+        The profiles recorded in the bag for the topic (may be empty).
+    lossless : bool, optional
+
+    Returns
+    -------
+    rclpy.qos.QoSProfile
+
+    """
+    same = offered and all(
+        (p.reliability, p.durability) == (offered[0].reliability, offered[0].durability)
+        for p in offered)
+    reliability, durability = (
+        (offered[0].reliability, offered[0].durability) if same
+        else (ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE))
+    if lossless:
+        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=DEEP_QUEUE_DEPTH,
+                          reliability=ReliabilityPolicy.RELIABLE, durability=durability)
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                      reliability=reliability, durability=durability)

@@ -1,0 +1,153 @@
+"""
+Record live topics into an MCAP bag (``rotation_bag record``).
+
+Types are discovered from the ROS graph: a topic is subscribed as soon as it
+has a publisher, with a QoS every publisher is compatible with, and its
+messages are stored as received (``raw=True``: CDR bytes, never deserialised).
+Log time is the node clock at reception, publish time the DDS source
+timestamp, as rosbag2 records them.
+"""
+import functools
+import math
+import time
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+
+from rotation_node.bag.mcap_io import BagWriter, TopicMetadata
+from rotation_node.bag.message_types import message_class
+from rotation_node.bag.qos import qos_profiles_yaml, recording_qos
+from rotation_node.bag.stop_signal import StopSignal
+from rotation_node.errors import BagError
+
+NODE_NAME = 'rotation_bag_record'
+DISCOVERY_PERIOD_S = 0.1
+DRAIN_LIMIT_S = 5.0
+
+
+class BagRecorder(Node):
+    """
+    A node that subscribes to topics as they appear and writes them to a bag.
+
+    Parameters
+    ----------
+    writer : BagWriter
+        Receives every message; the caller closes it.
+    topics : iterable of str
+        Topic names; relative names are resolved in the node's namespace and
+        ``--ros-args -r`` remappings apply.
+    **kwargs
+        Passed to ``rclpy.node.Node`` (e.g. ``context``).
+
+    Attributes
+    ----------
+    counts : dict
+        ``{topic: messages written}`` for the subscribed topics.
+
+    """
+
+    def __init__(self, writer, topics, *, node_name=NODE_NAME, **kwargs):
+        super().__init__(node_name, **kwargs)
+        self._writer = writer
+        self._pending = [self.resolve_topic_name(topic) for topic in topics]
+        self.counts = {}
+        self._discovery = self.create_timer(DISCOVERY_PERIOD_S, self._discover)
+        self._discover()
+
+    @property
+    def pending_topics(self):
+        """Requested topics that have no publisher yet."""
+        return list(self._pending)
+
+    def _discover(self):
+        types = dict(self.get_topic_names_and_types())
+        for topic in [t for t in self._pending if t in types]:
+            offered = [info.qos_profile for info in self.get_publishers_info_by_topic(topic)]
+            if not offered:
+                continue   # only subscribers so far: wait for a publisher's QoS
+            type_name = types[topic][0]
+            if len(types[topic]) > 1:
+                self.get_logger().warning(
+                    f'{topic} has several types {types[topic]}; recording {type_name}')
+            msg_class = message_class(type_name)
+            self._writer.add_topic(TopicMetadata(topic, type_name, qos_profiles_yaml(offered)))
+            self.create_subscription(
+                msg_class, topic, functools.partial(self._write, topic, type_name),
+                recording_qos(offered), raw=True)
+            self.counts[topic] = 0
+            self._pending.remove(topic)
+            self.get_logger().info(f'recording {topic} ({type_name})')
+        if not self._pending:
+            self._discovery.cancel()
+
+    def _write(self, topic, type_name, data, info):
+        log_time_ns = self.get_clock().now().nanoseconds
+        self._writer.write_serialized(topic, type_name, data, log_time_ns,
+                                      info['source_timestamp'] or log_time_ns)
+        self.counts[topic] += 1
+
+
+def _drain(executor, recorder):
+    """Write what the subscriptions already received, until two idle spins or DRAIN_LIMIT_S."""
+    deadline = time.monotonic() + DRAIN_LIMIT_S
+    idle = 0
+    while idle < 2 and time.monotonic() < deadline:
+        before = sum(recorder.counts.values())
+        executor.spin_once(timeout_sec=0.01)
+        idle = idle + 1 if sum(recorder.counts.values()) == before else 0
+
+
+def record(output, topics, *, duration=None, overwrite=False, ros_args=None):
+    """
+    Record ``topics`` into ``output`` until Ctrl-C, SIGTERM or ``duration``.
+
+    The bag is closed cleanly on every one of these, so it is always valid;
+    messages already received by then are written first.
+
+    Parameters
+    ----------
+    output : str or os.PathLike
+        The MCAP file to write.
+    topics : list of str
+    duration : float, optional
+        Seconds to record; until stopped by a signal by default.
+    overwrite : bool, optional
+        Replace an existing ``output``.
+    ros_args : list of str, optional
+        Command line passed to ``rclpy.init`` (``--ros-args ...``).
+
+    Returns
+    -------
+    dict
+        ``{topic: messages recorded}``; topics that never appeared are absent.
+
+    Raises
+    ------
+    BagError
+        If ``output`` exists (without ``overwrite``), ``duration`` is not
+        positive or a topic's type is not installed; no file is left behind.
+
+    """
+    if duration is not None and not duration > 0:
+        raise BagError(f'duration must be > 0 s, got {duration}')
+    rclpy.init(args=ros_args, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        with StopSignal() as stop, BagWriter(output, overwrite=overwrite) as writer:
+            recorder = BagRecorder(writer, topics)
+            executor = SingleThreadedExecutor()
+            executor.add_node(recorder)
+            deadline = math.inf if duration is None else time.monotonic() + duration
+            try:
+                while not stop.is_set() and (remaining := deadline - time.monotonic()) > 0:
+                    executor.spin_once(timeout_sec=min(0.05, remaining))
+                _drain(executor, recorder)
+                for topic in recorder.pending_topics:
+                    recorder.get_logger().warning(f'{topic} never had a publisher; not recorded')
+            finally:
+                executor.shutdown()
+                recorder.destroy_node()
+        return recorder.counts
+    finally:
+        rclpy.try_shutdown()

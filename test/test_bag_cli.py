@@ -1,0 +1,154 @@
+"""
+Tests of the rotation_bag command line (rotation_node.bag.cli): results and bad input.
+
+Every bad input must end with exit status 1 and one line on stderr naming the
+problem, leave no output file behind and leave the input untouched. convert
+and plot run in-process through ``main``; play (which initialises rclpy) and
+the installed console script run as subprocesses.
+"""
+import os
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+from bag_helpers import imu_messages, stamp_ns
+from ros_harness import script
+
+from rotation_node.bag.cli import main
+from rotation_node.bag.mcap_io import BagReader, BagWriter, TopicMetadata
+
+PARAMS_YAML = """rotation_node:
+  ros__parameters:
+    input_type: imu
+    outputs: [euler, angular_velocity]
+    euler: {sequence: ZYX, degrees: true}
+"""
+
+
+@pytest.fixture(scope='module')
+def template(tmp_path_factory):
+    """imu.mcap (/imu and a /foreign topic of an uninstalled type) and params.yaml."""
+    directory = tmp_path_factory.mktemp('template')
+    with BagWriter(directory / 'imu.mcap') as writer:
+        writer.add_topic(TopicMetadata('/foreign', 'foreign_msgs/msg/Thing',
+                                       definition='int32 a\n', type_hash=''))
+        # Several chunks, so that damage in the middle hits one.
+        for msg in imu_messages(np.random.default_rng(7), 8000):
+            writer.write('/imu', msg, stamp_ns(msg))
+        writer.write_serialized('/foreign', 'foreign_msgs/msg/Thing', b'\0\1\0\0\7\0\0\0',
+                                stamp_ns(msg))
+    (directory / 'params.yaml').write_text(PARAMS_YAML)
+    return directory
+
+
+@pytest.fixture
+def workspace(template, tmp_path):
+    """A fresh copy of the template files in tmp_path."""
+    for name in os.listdir(template):
+        shutil.copy(template / name, tmp_path / name)
+    return tmp_path
+
+
+def _snapshot(directory):
+    return {name: (directory / name).read_bytes() for name in sorted(os.listdir(directory))}
+
+
+def _damage(workspace, how):
+    path = workspace / 'imu.mcap'
+    data = path.read_bytes()
+    if how == 'truncated':
+        path.write_bytes(data[:len(data) // 2])
+    elif how == 'corrupt':
+        middle = len(data) // 2
+        path.write_bytes(data[:middle] + b'\xff' * 64 + data[middle + 64:])
+    elif how == 'bad_value':
+        (workspace / 'params.yaml').write_text(PARAMS_YAML.replace('ZYX', 'ZZX'))
+    elif how == 'bad_yaml':
+        (workspace / 'params.yaml').write_text('rotation_node: [unclosed\n  ros__parameters:')
+
+
+def _run(capsys, *argv):
+    status = main([str(a) for a in argv])
+    return status, capsys.readouterr().err
+
+
+@pytest.mark.parametrize('damage, args, match', [
+    (None, ['missing.mcap', 'out.mcap', '--params', 'params.yaml'],
+     'cannot open bag missing.mcap'),
+    ('truncated', ['imu.mcap', 'out.mcap', '--params', 'params.yaml'],
+     'imu.mcap is not a valid MCAP file'),
+    ('corrupt', ['imu.mcap', 'out.mcap', '--params', 'params.yaml'], 'imu.mcap is corrupt'),
+    (None, ['imu.mcap', 'out.mcap', '--params', 'params.yaml', '--topic', '/nope'],
+     'topic /nope not in imu.mcap'),
+    (None, ['imu.mcap', 'out.mcap', '--params', 'params.yaml', '--topic', '/foreign'],
+     'topic /foreign in imu.mcap is foreign_msgs/msg/Thing, but input_type expects'),
+    ('bad_value', ['imu.mcap', 'out.mcap', '--params', 'params.yaml'],
+     "parameter 'euler.sequence': 'ZZX' is not an Euler sequence"),
+    ('bad_yaml', ['imu.mcap', 'out.mcap', '--params', 'params.yaml'],
+     'parameters file params.yaml: invalid YAML'),
+    (None, ['imu.mcap', 'out.mcap', '--params', 'missing.yaml'],
+     'parameters file missing.yaml: cannot read it'),
+    (None, ['imu.mcap', 'imu.mcap', '--params', 'params.yaml', '--force'],
+     'output imu.mcap is the input bag'),
+    (None, ['imu.mcap', 'params.yaml', '--params', 'params.yaml'],
+     'output params.yaml already exists'),
+], ids=['missing', 'truncated', 'corrupt', 'topic_not_in_bag', 'wrong_type', 'bad_value',
+        'bad_yaml', 'missing_params', 'output_is_input', 'output_exists'])
+def test_convert_bad_input(workspace, capsys, monkeypatch, damage, args, match):
+    monkeypatch.chdir(workspace)
+    _damage(workspace, damage)
+    before = _snapshot(workspace)
+    status, stderr = _run(capsys, 'convert', *args)
+    assert status == 1
+    line, = stderr.splitlines()
+    assert line.startswith('rotation_bag convert: error: ') and match in line
+    assert _snapshot(workspace) == before
+
+
+def test_convert_writes_and_reports(workspace, capsys, monkeypatch):
+    monkeypatch.chdir(workspace)
+    status, stderr = _run(capsys, 'convert', 'imu.mcap', 'out.mcap', '--params', 'params.yaml')
+    assert status == 0, stderr
+    assert '/imu: 8000 messages -> /imu/euler, /imu/angular_velocity: 16000 messages' in stderr
+    with BagReader(workspace / 'out.mcap') as reader:
+        assert reader.message_counts == {'/imu': 8000, '/foreign': 1, '/imu/euler': 8000,
+                                         '/imu/angular_velocity': 8000}
+
+
+def test_plot_default_name_and_bad_topic(workspace, capsys, monkeypatch):
+    monkeypatch.chdir(workspace)
+    assert _run(capsys, 'convert', 'imu.mcap', 'out.mcap', '--params', 'params.yaml')[0] == 0
+    status, stderr = _run(capsys, 'plot', 'out.mcap', '--topic', '/imu/euler',
+                          '--params', 'params.yaml')
+    assert status == 0 and 'plotted 8000 messages of /imu/euler to out_imu_euler.png' in stderr
+    assert (workspace / 'out_imu_euler.png').read_bytes()[:4] == b'\x89PNG'
+    before = _snapshot(workspace)
+    for topic, match in (('/nope', 'topic /nope not in out.mcap'),
+                         ('/foreign', 'cannot plot foreign_msgs/msg/Thing')):
+        status, stderr = _run(capsys, 'plot', 'out.mcap', '--topic', topic, '-o', 'x.png')
+        line, = stderr.splitlines()
+        assert status == 1 and line.startswith('rotation_bag plot: error: ') and match in line
+    assert _snapshot(workspace) == before
+
+
+@pytest.mark.parametrize('args, match', [
+    (['missing.mcap'], 'cannot open bag missing.mcap'),
+    (['imu.mcap', '--topics', '/nope'], 'topic /nope not in imu.mcap'),
+    (['imu.mcap', '--topics', '/foreign'], "unknown message type 'foreign_msgs/msg/Thing'"),
+    (['imu.mcap', '--rate', '-1'], 'rate must be >= 0, got -1.0'),
+], ids=['missing', 'topic_not_in_bag', 'unknown_type', 'negative_rate'])
+def test_play_bad_input(workspace, args, match):
+    before = _snapshot(workspace)
+    result = subprocess.run([script('rotation_bag'), 'play', *args], cwd=workspace,
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 1
+    line, = result.stderr.splitlines()
+    assert line.startswith('rotation_bag play: error: ') and match in line
+    assert _snapshot(workspace) == before
+
+
+def test_usage_error_exits_2():
+    result = subprocess.run([script('rotation_bag'), 'convert', 'in.mcap'],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and 'the following arguments are required' in result.stderr

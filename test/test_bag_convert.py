@@ -1,0 +1,212 @@
+"""
+Tests of rotation_node.bag.convert: offline conversion equals the live node.
+
+The in-process tests check ``convert`` against the ``ConversionPipeline`` fed
+message by message; the round trip records a live publisher, plays the bag
+into a running ``rotation_node``, records its outputs and checks that
+``rotation_bag convert`` produced the same messages (values, stamps, count).
+"""
+import os
+import subprocess
+
+import pytest
+import yaml
+from bag_helpers import imu_messages, plain, stamp_ns
+from ros_harness import RosProcess, TestNode, script
+from rclpy.duration import Duration
+from rclpy.qos import QoSProfile
+from sensor_msgs.msg import Imu
+
+from rotation_node.bag.convert import convert, output_topic
+from rotation_node.bag.mcap_io import BagReader, BagWriter
+from rotation_node.bag.qos import qos_profiles_from_yaml
+from rotation_node.errors import BagError
+from rotation_node.node import qos_profile
+from rotation_node.parameters import NodeParameters, parameters_from_yaml
+from rotation_node.pipeline import OUTPUT_MESSAGE_TYPES, ConversionPipeline
+
+OUTPUTS = ('euler', 'quaternion', 'angular_velocity')
+PARAMS = NodeParameters(input_type='imu', outputs=OUTPUTS, euler_sequence='ZYX',
+                        euler_degrees=True, qos_depth=1000)
+
+
+def _write_bag(path, streams):
+    """``streams``: {topic: [msg, ...]}; log time = stamp + 1 ms, interleaved by time."""
+    rows = sorted(((stamp_ns(msg) + 1_000_000, topic, msg)
+                   for topic, messages in streams.items() for msg in messages),
+                  key=lambda row: row[0])
+    with BagWriter(path) as writer:
+        for log_time, topic, msg in rows:
+            writer.write(topic, msg, log_time)
+
+
+def _outputs(path, topic):
+    """``[(stamp ns, plain message)]`` of one topic of a bag."""
+    with BagReader(path) as reader:
+        return [(stamp_ns(m), plain(m)) for m in
+                (record.message() for record in reader.messages([topic]))]
+
+
+def _expected(params, messages):
+    """What the pipeline gives, message by message: {output name: [plain message]}."""
+    pipeline = ConversionPipeline(params)
+    expected = {name: [] for name in params.outputs}
+    for msg in messages:
+        for name, out in pipeline.process(msg):
+            expected[name].append((stamp_ns(out), plain(out)))
+    return expected
+
+
+def test_convert_adds_pipeline_outputs_and_copies_everything(tmp_path, rng):
+    messages = imu_messages(rng, 50)
+    source, output = tmp_path / 'in.mcap', tmp_path / 'out.mcap'
+    _write_bag(source, {'/imu': messages})
+    stats = convert(source, output, PARAMS)
+    assert stats['/imu'].received == 50 and stats['/imu'].published == 150
+    expected = _expected(PARAMS, messages)
+    for name in OUTPUTS:
+        assert _outputs(output, f'/imu/{name}') == expected[name]
+    with BagReader(source) as original, BagReader(output) as converted:
+        assert converted.topics == {'/imu': 'sensor_msgs/msg/Imu',
+                                    '/imu/euler': 'geometry_msgs/msg/Vector3Stamped',
+                                    '/imu/quaternion': 'geometry_msgs/msg/QuaternionStamped',
+                                    '/imu/angular_velocity': 'geometry_msgs/msg/Vector3Stamped'}
+        assert converted.topic_metadata['/imu'] == original.topic_metadata['/imu']
+        assert [(m.data, m.log_time_ns) for m in converted.messages(['/imu'])] == [
+            (m.data, m.log_time_ns) for m in original.messages()]
+        assert [m.log_time_ns for m in converted.messages(['/imu/euler'])] == [
+            m.log_time_ns for m in original.messages()]
+        offered, = qos_profiles_from_yaml(
+            converted.topic_metadata['/imu/euler'].offered_qos_profiles)
+        assert offered == qos_profile(PARAMS)
+
+
+def test_one_pipeline_per_topic(tmp_path, rng):
+    """Finite differences (Imu without angular velocity) must not mix interleaved topics."""
+    streams = {topic: imu_messages(rng, 20, start_ns=1_700_000_000_000_000_000 + offset)
+               for topic, offset in (('/a/imu', 0), ('/b/imu', 3_000_000))}
+    for msg in streams['/a/imu'] + streams['/b/imu']:
+        msg.angular_velocity_covariance[0] = -1.0
+    source, output = tmp_path / 'in.mcap', tmp_path / 'out.mcap'
+    _write_bag(source, streams)
+    convert(source, output, PARAMS)
+    for topic, messages in streams.items():
+        assert _outputs(output, output_topic(topic, 'angular_velocity')) == \
+            _expected(PARAMS, messages)['angular_velocity']
+
+
+def test_topic_selection(tmp_path, rng):
+    source, output = tmp_path / 'in.mcap', tmp_path / 'out.mcap'
+    _write_bag(source, {'/a': imu_messages(rng, 5), '/b': imu_messages(rng, 5)})
+    convert(source, output, PARAMS, topics=['/b'])
+    with BagReader(output) as reader:
+        assert sorted(reader.topics) == ['/a', '/b', '/b/angular_velocity', '/b/euler',
+                                         '/b/quaternion']
+
+
+@pytest.mark.parametrize('topics, params, match', [
+    (['/nope'], PARAMS, '/nope not in'),
+    (['/imu'], NodeParameters(input_type='quaternion'),
+     '/imu .* is sensor_msgs/msg/Imu, but input_type expects geometry_msgs/msg/QuaternionStamped'),
+    (None, NodeParameters(input_type='pose'), 'has no geometry_msgs/msg/PoseStamped topic'),
+])
+def test_bad_topics(tmp_path, rng, topics, params, match):
+    source = tmp_path / 'in.mcap'
+    _write_bag(source, {'/imu': imu_messages(rng, 3)})
+    before = source.read_bytes()
+    with pytest.raises(BagError, match=match):
+        convert(source, tmp_path / 'out.mcap', params, topics=topics)
+    assert os.listdir(tmp_path) == ['in.mcap'] and source.read_bytes() == before
+
+
+def test_output_topic_already_in_input(tmp_path, rng):
+    source = tmp_path / 'in.mcap'
+    _write_bag(source, {'/imu': imu_messages(rng, 3)})
+    convert(source, tmp_path / 'once.mcap', PARAMS)
+    with pytest.raises(BagError, match='/imu/euler.* already in .*once.mcap'):
+        convert(tmp_path / 'once.mcap', tmp_path / 'twice.mcap', PARAMS)
+    assert not (tmp_path / 'twice.mcap').exists()
+
+
+def test_refuses_to_overwrite_input_or_existing_output(tmp_path, rng):
+    source, output = tmp_path / 'in.mcap', tmp_path / 'out.mcap'
+    _write_bag(source, {'/imu': imu_messages(rng, 3)})
+    before = source.read_bytes()
+    with pytest.raises(BagError, match='is the input bag'):
+        convert(source, source, PARAMS, overwrite=True)
+    output.write_bytes(b'keep me')
+    with pytest.raises(BagError, match='out.mcap already exists'):
+        convert(source, output, PARAMS)
+    assert output.read_bytes() == b'keep me' and source.read_bytes() == before
+    convert(source, output, PARAMS, overwrite=True)
+    assert BagReader(output).message_counts['/imu/euler'] == 3
+
+
+def test_corrupt_chunk_leaves_no_output(tmp_path, rng):
+    source, output = tmp_path / 'in.mcap', tmp_path / 'out.mcap'
+    _write_bag(source, {'/imu': imu_messages(rng, 8000)})   # several chunks
+    data = bytearray(source.read_bytes())
+    data[len(data) // 2:len(data) // 2 + 64] = b'\xff' * 64
+    source.write_bytes(bytes(data))
+    with pytest.raises(BagError, match='in.mcap is corrupt'):
+        convert(source, output, PARAMS)
+    assert os.listdir(tmp_path) == ['in.mcap'] and source.read_bytes() == bytes(data)
+
+
+@pytest.mark.timeout(180)
+def test_live_node_round_trip_equals_convert(tmp_path, rng):
+    """record a publisher -> play into rotation_node -> record its outputs == convert."""
+    count = 200
+    params_file = tmp_path / 'params.yaml'
+    params_file.write_text(yaml.safe_dump({'/**/rotation_node': {'ros__parameters': {
+        'input_type': 'imu', 'outputs': list(OUTPUTS),
+        'euler': {'sequence': 'ZYX', 'degrees': True}, 'qos': {'depth': 1000}}}}))
+    assert parameters_from_yaml(params_file) == PARAMS
+    recorded_input, recorded_output = tmp_path / 'input.mcap', tmp_path / 'node_output.mcap'
+    converted = tmp_path / 'converted.mcap'
+    messages = imu_messages(rng, count)
+    output_topics = [f'/imu/{name}' for name in OUTPUTS]
+
+    with TestNode('round_trip') as client:
+        # 1. Record a live publisher.
+        publisher = client.node.create_publisher(Imu, '/imu', QoSProfile(depth=count))
+        with RosProcess([script('rotation_bag'), 'record', recorded_input,
+                         '--topics', '/imu']) as recorder:
+            assert client.wait_for_subscriber(publisher, timeout=30)
+            for msg in messages:
+                publisher.publish(msg)
+            assert publisher.wait_for_all_acked(Duration(seconds=20))
+            assert recorder.stop() == 0, recorder.output
+        client.node.destroy_publisher(publisher)
+        with BagReader(recorded_input) as reader:
+            assert [plain(r.message()) for r in reader.messages()] == [plain(m) for m in messages]
+
+        # 2. Play it into the node, record the node's outputs.
+        received = {topic: client.collect(OUTPUT_MESSAGE_TYPES[topic.rsplit('/', 1)[-1]],
+                                          topic, QoSProfile(depth=count))
+                    for topic in output_topics}
+        node_args = [script('rotation_node'), '--ros-args', '--params-file', params_file,
+                     '-r', '__ns:=/imu', '-r', 'input:=/imu']
+        with RosProcess(node_args) as node, \
+                RosProcess([script('rotation_bag'), 'record', recorded_output,
+                            '--topics', *output_topics]) as recorder:
+            assert client.spin_until(
+                lambda: all(client.node.count_subscribers(t) >= 2 for t in output_topics)
+                and client.node.count_subscribers('/imu') >= 1, timeout=60), node.output
+            player = RosProcess([script('rotation_bag'), 'play', recorded_input, '--rate', '0'])
+            assert client.spin_until(lambda: not player.alive(), timeout=60)
+            assert player.stop() == 0, player.output
+            assert client.spin_until(
+                lambda: all(len(r) >= count for r in received.values()), timeout=30)
+            client.spin_for(0.5)   # the recorder takes them at the same time
+            assert recorder.stop() == 0, recorder.output
+            assert node.stop() == 0, node.output
+
+    # 3. Convert the recorded input offline and compare.
+    result = subprocess.run([script('rotation_bag'), 'convert', recorded_input, converted,
+                             '--params', params_file], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    for topic in output_topics:
+        live, offline = _outputs(recorded_output, topic), _outputs(converted, topic)
+        assert len(live) == len(offline) == count
+        assert live == offline

@@ -1,0 +1,373 @@
+"""
+Tests of rotation_node.bag.mcap_io: BagWriter / BagReader.
+
+Every bag is read back three ways: with BagReader, with the independent rosbags
+AnyReader (which decodes from the definitions stored in the bag, with no type
+store of its own), and record by record with the mcap library's validating
+reader and mcap-ros2-support's decoder.
+"""
+import os
+import pathlib
+
+import pytest
+import yaml
+from bag_helpers import plain, random_message
+from mcap.reader import make_reader
+from mcap.stream_reader import StreamReader
+from mcap.records import Channel, Footer, Header, Metadata, Schema, Statistics
+from mcap_ros2.decoder import DecoderFactory
+from rclpy.serialization import serialize_message
+from rosbags.highlevel import AnyReader
+
+from rotation_node.bag.mcap_io import BagReader, BagWriter, TopicMetadata
+from rotation_node.bag.message_types import message_class, message_definition, type_hash
+from rotation_node.bag.qos import qos_profiles_from_yaml
+from rotation_node.errors import BagError
+
+TYPES = [
+    'sensor_msgs/msg/Imu',
+    'geometry_msgs/msg/Vector3Stamped',
+    'geometry_msgs/msg/QuaternionStamped',
+    'geometry_msgs/msg/PoseWithCovarianceStamped',
+    'geometry_msgs/msg/PolygonStamped',
+    'sensor_msgs/msg/JointState',
+    'std_msgs/msg/String',
+    'visualization_msgs/msg/MarkerArray',
+]
+T0 = 1_700_000_000_123_456_789
+QOS_YAML = """- history: keep_last
+  depth: 7
+  reliability: reliable
+  durability: transient_local
+  deadline:
+    sec: 9223372036
+    nsec: 854775807
+  lifespan:
+    sec: 1
+    nsec: 500
+  liveliness: automatic
+  liveliness_lease_duration:
+    sec: 9223372036
+    nsec: 854775807
+  avoid_ros_namespace_conventions: false"""
+
+
+def _records(type_name, rng, count=5):
+    """(topic, message, log time, publish time) rows of one type on one topic, distinct times."""
+    topic = '/' + type_name.split('/')[-1].lower()
+    cls = message_class(type_name)
+    offset = 1000 * TYPES.index(type_name)
+    return [(topic, random_message(cls, rng), T0 + offset + 10_000_000 * i,
+             T0 + offset + 10_000_000 * i - 1234) for i in range(count)]
+
+
+@pytest.fixture
+def mixed_bag(tmp_path, rng):
+    """A bag with every type in TYPES, interleaved; returns (path, rows)."""
+    rows = [row for type_name in TYPES for row in _records(type_name, rng)]
+    rows.sort(key=lambda row: row[2])
+    path = tmp_path / 'mixed.mcap'
+    with BagWriter(path) as writer:
+        writer.add_topic(TopicMetadata('/imu', 'sensor_msgs/msg/Imu', QOS_YAML))
+        for topic, msg, log_time, publish_time in rows:
+            writer.write(topic, msg, log_time, publish_time)
+    return path, rows
+
+
+def test_reader_returns_every_message(mixed_bag):
+    path, rows = mixed_bag
+    reader = BagReader(path)
+    assert reader.topics == {topic: f'{type(msg).__module__.split(".")[0]}/msg/'
+                             f'{type(msg).__name__}' for topic, msg, _, _ in rows}
+    # Compared decoded: rclpy leaves CDR alignment padding uninitialised, so two
+    # serialisations of one message may differ in their padding bytes.
+    assert [(m.topic, plain(m.message()), m.log_time_ns, m.publish_time_ns)
+            for m in reader.messages()] == [
+        (topic, plain(msg), log_time, publish_time) for topic, msg, log_time, publish_time in rows]
+    assert reader.message_counts == {topic: 5 for topic in reader.topics}
+    reader.close()
+
+
+def test_rosbags_anyreader_reads_every_field(mixed_bag):
+    path, rows = mixed_bag
+    with AnyReader([pathlib.Path(path)]) as reader:   # no type store: definitions from the bag
+        assert reader.message_count == len(rows)
+        assert reader.start_time == rows[0][2]
+        assert reader.end_time == rows[-1][2] + 1
+        assert {c.topic: (c.msgtype, c.msgcount) for c in reader.connections} == {
+            topic: (reader.topics[topic].msgtype, 5) for topic in {r[0] for r in rows}}
+        decoded = [(c.topic, stamp, plain(reader.deserialize(raw, c.msgtype)))
+                   for c, stamp, raw in reader.messages()]
+        qos = {c.topic: c.ext.offered_qos_profiles for c in reader.connections}
+    assert decoded == [(topic, log_time, plain(msg)) for topic, msg, log_time, _ in rows]
+    imu_qos, = qos['/imu']
+    assert (imu_qos.depth, imu_qos.reliability.name, imu_qos.durability.name,
+            imu_qos.lifespan.sec, imu_qos.lifespan.nsec) == (
+        7, 'RELIABLE', 'TRANSIENT_LOCAL', 1, 500)
+    assert qos['/string'] == []
+
+
+def test_mcap_library_validates_file_layout(mixed_bag):
+    path, rows = mixed_bag
+    with open(path, 'rb') as stream:
+        records = list(StreamReader(stream, validate_crcs=True).records)
+    header, footer = records[0], records[-1]
+    assert isinstance(header, Header) and header.profile == 'ros2'
+    assert 'mcap-python' in header.library
+    assert isinstance(footer, Footer) and footer.summary_start > 0
+    schemas = {r.name: r for r in records if isinstance(r, Schema)}
+    assert set(schemas) == set(TYPES)
+    assert all(s.encoding == 'ros2msg' and s.data.decode() == message_definition(s.name)
+               for s in schemas.values())
+    channels = {r.topic: r for r in records if isinstance(r, Channel)}
+    assert all(c.message_encoding == 'cdr' for c in channels.values())
+    assert all(set(c.metadata) == {'offered_qos_profiles', 'topic_type_hash'}
+               for c in channels.values())
+    assert channels['/imu'].metadata['offered_qos_profiles'] == QOS_YAML
+    assert all(c.metadata['topic_type_hash'] == type_hash(schemas[name].name)
+               for name, c in ((s.name, c) for c in channels.values() for s in schemas.values()
+                               if s.id == c.schema_id))
+    statistics, = [r for r in records if isinstance(r, Statistics)]
+    assert statistics.message_count == len(rows)
+    assert (statistics.message_start_time, statistics.message_end_time) == (
+        rows[0][2], rows[-1][2])
+
+    with open(path, 'rb') as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        decoded = [(channel.topic, plain(msg))
+                   for _, channel, _, msg in reader.iter_decoded_messages()]
+    assert decoded == [(topic, plain(msg)) for topic, msg, _, _ in rows]
+
+
+def test_rosbag2_metadata_record(mixed_bag):
+    path, rows = mixed_bag
+    with open(path, 'rb') as stream:
+        metadata, = [r for r in StreamReader(stream).records if isinstance(r, Metadata)]
+    assert metadata.name == 'rosbag2'
+    info = yaml.safe_load(metadata.metadata['serialized_metadata'])
+    assert info['version'] == 9 and info['storage_identifier'] == 'mcap'
+    assert info['message_count'] == len(rows)
+    assert info['starting_time']['nanoseconds_since_epoch'] == rows[0][2]
+    assert info['duration']['nanoseconds'] == rows[-1][2] - rows[0][2]
+    assert info['relative_file_paths'] == ['mixed.mcap']
+    topics = {t['topic_metadata']['name']: t for t in info['topics_with_message_count']}
+    assert {name: t['message_count'] for name, t in topics.items()} == {r[0]: 5 for r in rows}
+    imu = topics['/imu']['topic_metadata']
+    assert (imu['type'], imu['serialization_format']) == ('sensor_msgs/msg/Imu', 'cdr')
+    assert imu['offered_qos_profiles'] == yaml.safe_load(QOS_YAML)
+
+
+def test_message_order_and_topic_filter(tmp_path, rng):
+    rows = _records('sensor_msgs/msg/Imu', rng, 6) + _records('std_msgs/msg/String', rng, 3)
+    path = tmp_path / 'order.mcap'
+    with BagWriter(path) as writer:
+        for topic, msg, log_time, publish_time in reversed(rows):
+            writer.write(topic, msg, log_time, publish_time)
+    reader = BagReader(path)
+    assert [m.log_time_ns for m in reader.messages()] == sorted(r[2] for r in rows)
+    assert [m.log_time_ns for m in reader.messages(['/string'])] == [r[2] for r in rows[6:]]
+    with pytest.raises(BagError, match='/nope not in .*order.mcap'):
+        reader.messages(['/imu', '/nope'])
+
+
+def test_write_serialized_copies_bytes_and_defaults_publish_time(tmp_path, rng):
+    data = serialize_message(random_message(message_class('sensor_msgs/msg/Imu'), rng))
+    path = tmp_path / 'raw.mcap'
+    with BagWriter(path) as writer:
+        writer.write_serialized('/imu', 'sensor_msgs/msg/Imu', data, T0)
+    record, = BagReader(path).messages()
+    assert (record.data, record.log_time_ns, record.publish_time_ns) == (data, T0, T0)
+
+
+def test_copying_a_topic_keeps_its_schema_and_qos(tmp_path, mixed_bag):
+    source, _ = mixed_bag
+    reader = BagReader(source)
+    copy = tmp_path / 'copy.mcap'
+    with BagWriter(copy) as writer:
+        for metadata in reader.topic_metadata.values():
+            writer.add_topic(metadata)
+        for m in reader.messages():
+            writer.write_serialized(m.topic, m.type_name, m.data, m.log_time_ns, m.publish_time_ns)
+    copied = BagReader(copy)
+    assert copied.topic_metadata == reader.topic_metadata
+    assert [(m.topic, m.data, m.log_time_ns, m.publish_time_ns) for m in copied.messages()] == [
+        (m.topic, m.data, m.log_time_ns, m.publish_time_ns) for m in reader.messages()]
+
+
+def test_file_appears_only_on_clean_close(tmp_path, rng):
+    path = tmp_path / 'late.mcap'
+    writer = BagWriter(path)
+    writer.write('/s', random_message(message_class('std_msgs/msg/String'), rng), T0)
+    assert not path.exists()
+    writer.close()
+    writer.close()
+    assert path.exists() and os.listdir(tmp_path) == ['late.mcap']
+
+
+def test_exception_inside_with_leaves_no_file(tmp_path, rng):
+    path = tmp_path / 'failed.mcap'
+    with pytest.raises(RuntimeError, match='boom'):
+        with BagWriter(path) as writer:
+            writer.write('/s', random_message(message_class('std_msgs/msg/String'), rng), T0)
+            raise RuntimeError('boom')
+    assert os.listdir(tmp_path) == []
+
+
+def test_refuses_to_overwrite(tmp_path):
+    path = tmp_path / 'exists.mcap'
+    path.write_bytes(b'precious')
+    with pytest.raises(BagError, match='exists.mcap already exists'):
+        BagWriter(path)
+    assert path.read_bytes() == b'precious' and os.listdir(tmp_path) == ['exists.mcap']
+
+
+def test_overwrite_replaces_only_on_success(tmp_path, rng):
+    path = tmp_path / 'exists.mcap'
+    path.write_bytes(b'precious')
+    msg = random_message(message_class('std_msgs/msg/String'), rng)
+    with pytest.raises(RuntimeError):
+        with BagWriter(path, overwrite=True) as writer:
+            writer.write('/s', msg, T0)
+            raise RuntimeError
+    assert path.read_bytes() == b'precious'
+    with BagWriter(path, overwrite=True) as writer:
+        writer.write('/s', msg, T0)
+    assert [plain(m.message()) for m in BagReader(path).messages()] == [plain(msg)]
+
+
+def test_one_type_per_topic(tmp_path, rng):
+    with BagWriter(tmp_path / 'types.mcap') as writer:
+        writer.write('/x', random_message(message_class('std_msgs/msg/String'), rng), T0)
+        with pytest.raises(BagError, match='/x holds std_msgs/msg/String.*Imu'):
+            writer.write('/x', random_message(message_class('sensor_msgs/msg/Imu'), rng), T0)
+        with pytest.raises(BagError, match='already registered'):
+            writer.add_topic(TopicMetadata('/x', 'std_msgs/msg/String'))
+
+
+@pytest.mark.parametrize('log_time, match', [
+    (-1, r'log_time_ns must be in \[0, 2\*\*64\)'),
+    (2**64, r'log_time_ns must be in'),
+    (1.5, 'log_time_ns must be an integer'),
+    ('1', 'log_time_ns must be an integer'),
+])
+def test_bad_timestamps_rejected_without_damage(tmp_path, rng, log_time, match):
+    msg = random_message(message_class('std_msgs/msg/String'), rng)
+    path = tmp_path / 'times.mcap'
+    with BagWriter(path) as writer:
+        writer.write('/s', msg, T0)
+        with pytest.raises(BagError, match=match):
+            writer.write('/s', msg, log_time)
+        with pytest.raises(BagError, match=match.replace('log_time', 'publish_time')):
+            writer.write('/s', msg, T0, publish_time_ns=log_time)
+    assert [m.log_time_ns for m in BagReader(path).messages()] == [T0]
+
+
+@pytest.mark.parametrize('type_name, match', [
+    ('nonexistent_msgs/msg/Foo', "no message definition for 'nonexistent_msgs/msg/Foo'"),
+    ('sensor_msgs/msg/NoSuchType', "no message definition for 'sensor_msgs/msg/NoSuchType'"),
+    ('Imu', "invalid message type name 'Imu'"),
+])
+def test_unknown_type_on_write(tmp_path, type_name, match):
+    with BagWriter(tmp_path / 'unknown.mcap') as writer:
+        with pytest.raises(BagError, match=match):
+            writer.write_serialized('/x', type_name, b'\0\1\0\0', T0)
+
+
+def test_unknown_type_on_read(tmp_path):
+    path = tmp_path / 'foreign.mcap'
+    with BagWriter(path) as writer:
+        writer.add_topic(TopicMetadata('/x', 'foreign_msgs/msg/Thing', definition='int32 a\n',
+                                       type_hash=''))
+        writer.write_serialized('/x', 'foreign_msgs/msg/Thing', b'\0\1\0\0\7\0\0\0', T0)
+    reader = BagReader(path)
+    assert reader.topics == {'/x': 'foreign_msgs/msg/Thing'}
+    record, = reader.messages()
+    with pytest.raises(BagError, match="unknown message type 'foreign_msgs/msg/Thing'"):
+        record.message()
+
+
+def test_invalid_cdr_is_reported(tmp_path):
+    path = tmp_path / 'bad_cdr.mcap'
+    with BagWriter(path) as writer:
+        writer.write_serialized('/imu', 'sensor_msgs/msg/Imu', b'\0\1\0\0\1', T0)
+    record, = BagReader(path).messages()
+    with pytest.raises(BagError, match='not a valid sensor_msgs/msg/Imu'):
+        record.message()
+
+
+def _damaged(source, how):
+    data = bytearray(source.read_bytes())
+    if how == 'empty':
+        return b''
+    if how == 'text':
+        return b'not an mcap file at all\n' * 10
+    if how.startswith('truncated'):
+        return bytes(data[:int(len(data) * float(how.split('_')[1]))])
+    # Overwrite bytes in the middle of a chunk: caught by its CRC.
+    middle = len(data) // 3
+    data[middle:middle + 16] = b'\xff' * 16
+    return bytes(data)
+
+
+@pytest.mark.parametrize('how', ['empty', 'text', 'truncated_0.1', 'truncated_0.5',
+                                 'truncated_0.999', 'overwritten_chunk'])
+def test_damaged_file_raises_bag_error(tmp_path, mixed_bag, how):
+    path = tmp_path / 'damaged.mcap'
+    path.write_bytes(_damaged(mixed_bag[0], how))
+    with pytest.raises(BagError, match='damaged.mcap'):
+        reader = BagReader(path)
+        list(reader.messages())
+
+
+@pytest.mark.parametrize('make', ['missing', 'directory'])
+def test_unreadable_path_raises_bag_error(tmp_path, make):
+    path = tmp_path / 'x.mcap'
+    if make == 'directory':
+        path.mkdir()
+    with pytest.raises(BagError, match='cannot open bag .*x.mcap'):
+        BagReader(path)
+
+
+def test_non_cdr_channel_rejected(tmp_path):
+    from mcap.writer import Writer
+    path = tmp_path / 'json.mcap'
+    with open(path, 'wb') as stream:
+        writer = Writer(stream)
+        writer.start(profile='', library='test')
+        schema = writer.register_schema('Thing', 'jsonschema', b'{}')
+        channel = writer.register_channel('/json', 'json', schema)
+        writer.add_message(channel, log_time=1, data=b'{}', publish_time=1)
+        writer.finish()
+    with pytest.raises(BagError, match="/json .* message encoding 'json', expected 'cdr'"):
+        BagReader(path)
+
+
+def test_qos_yaml_from_bag_parses_to_profiles(mixed_bag):
+    reader = BagReader(mixed_bag[0])
+    profile, = qos_profiles_from_yaml(reader.topic_metadata['/imu'].offered_qos_profiles)
+    assert profile.depth == 7 and profile.lifespan.nanoseconds == 1_000_000_500
+
+
+@pytest.mark.parametrize('compression', ['ZSTD', 'LZ4'])
+def test_reads_compressed_chunks_and_detects_their_damage(tmp_path, rng, compression):
+    """rosbag2's zstd presets (and other writers) compress chunks."""
+    from mcap.writer import CompressionType, Writer
+    rows = _records('sensor_msgs/msg/Imu', rng, 1000)
+    path = tmp_path / 'compressed.mcap'
+    with open(path, 'wb') as stream:
+        writer = Writer(stream, compression=CompressionType[compression])
+        writer.start(profile='ros2', library='test')
+        schema = writer.register_schema('sensor_msgs/msg/Imu', 'ros2msg',
+                                        message_definition('sensor_msgs/msg/Imu').encode())
+        channel = writer.register_channel('/imu', 'cdr', schema)
+        for _, msg, log_time, publish_time in rows:
+            writer.add_message(channel, log_time=log_time, data=serialize_message(msg),
+                               publish_time=publish_time)
+        writer.finish()
+    assert [plain(m.message()) for m in BagReader(path).messages()] == [
+        plain(msg) for _, msg, _, _ in rows]
+    data = bytearray(path.read_bytes())
+    data[len(data) // 3:len(data) // 3 + 16] = b'\xff' * 16
+    path.write_bytes(bytes(data))
+    with pytest.raises(BagError, match='compressed.mcap'):
+        list(BagReader(path).messages())

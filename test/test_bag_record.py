@@ -1,0 +1,90 @@
+"""Tests of rotation_bag record (rotation_node.bag.record) against live publishers."""
+import pathlib
+import signal
+
+import pytest
+from bag_helpers import imu_messages, plain
+from rclpy.duration import Duration
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from ros_harness import RosProcess, TestNode, script
+from rosbags.highlevel import AnyReader
+from sensor_msgs.msg import Imu
+from std_msgs.msg import String
+
+from rotation_node.bag.mcap_io import BagReader
+from rotation_node.bag.qos import qos_profiles_from_yaml
+
+pytestmark = pytest.mark.timeout(120)
+
+
+def _record(path, *args):
+    return RosProcess([script('rotation_bag'), 'record', path, *args])
+
+
+def _wait_until_recorded(client, topic, timeout=30):
+    """The recorder subscribes once it discovered the publisher: wait for that."""
+    assert client.spin_until(lambda: client.node.count_subscribers(topic) >= 1, timeout)
+
+
+@pytest.mark.parametrize('stop_signal', [signal.SIGINT, signal.SIGTERM], ids=lambda s: s.name)
+def test_records_every_message_and_closes_on_signal(tmp_path, rng, stop_signal):
+    path = tmp_path / 'live.mcap'
+    messages = imu_messages(rng, 100)
+    latched = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    with TestNode('publisher') as client, _record(path, '--topics', '/imu', 'chatter') as recorder:
+        imu = client.node.create_publisher(Imu, '/imu', latched)
+        chatter = client.node.create_publisher(String, '/chatter', 10)
+        _wait_until_recorded(client, '/imu')
+        _wait_until_recorded(client, '/chatter')
+        assert not path.exists()   # written to a temporary file until closed
+        for msg in messages:
+            imu.publish(msg)
+        chatter.publish(String(data='hello'))
+        assert imu.wait_for_all_acked(Duration(seconds=20))
+        assert chatter.wait_for_all_acked(Duration(seconds=20))
+        recorder.proc.send_signal(stop_signal)
+        assert recorder.stop() == 0, recorder.output
+    assert 'wrote 101 messages' in recorder.output
+    with BagReader(path) as reader:
+        assert reader.topics == {'/imu': 'sensor_msgs/msg/Imu', '/chatter': 'std_msgs/msg/String'}
+        records = list(reader.messages(['/imu']))
+        offered, = qos_profiles_from_yaml(reader.topic_metadata['/imu'].offered_qos_profiles)
+    assert [plain(r.message()) for r in records] == [plain(m) for m in messages]
+    assert all(r.publish_time_ns <= r.log_time_ns for r in records)
+    assert (offered.reliability, offered.durability) == (
+        ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL)
+    with AnyReader([pathlib.Path(path)]) as reader:
+        assert reader.message_count == 101
+
+
+def test_duration_without_publishers_gives_an_empty_valid_bag(tmp_path):
+    path = tmp_path / 'empty.mcap'
+    with _record(path, '--topics', '/nobody', '--duration', '1') as recorder:
+        recorder.proc.wait(timeout=60)
+        assert recorder.stop() == 0
+    assert '/nobody never had a publisher' in recorder.output
+    assert BagReader(path).topics == {}
+
+
+def test_relative_topics_resolve_in_the_namespace(tmp_path):
+    path = tmp_path / 'ns.mcap'
+    with TestNode('publisher') as client, \
+            _record(path, '--topics', 'status', '--ros-args', '-r', '__ns:=/robot') as recorder:
+        publisher = client.node.create_publisher(String, '/robot/status', 10)
+        _wait_until_recorded(client, '/robot/status')
+        publisher.publish(String(data='ok'))
+        assert publisher.wait_for_all_acked(Duration(seconds=20))
+        assert recorder.stop() == 0, recorder.output
+    record, = BagReader(path).messages()
+    assert (record.topic, record.message().data) == ('/robot/status', 'ok')
+
+
+def test_refuses_to_overwrite(tmp_path):
+    path = tmp_path / 'exists.mcap'
+    path.write_bytes(b'keep')
+    with _record(path, '--topics', '/x', '--duration', '1') as recorder:
+        recorder.proc.wait(timeout=60)
+        assert recorder.stop() == 1
+    assert 'rotation_bag record: error: output' in recorder.output
+    assert path.read_bytes() == b'keep'
