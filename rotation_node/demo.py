@@ -29,7 +29,7 @@ from rotation_node import conversions as rc
 OUTPUTS = ('quaternion', 'euler', 'angular_velocity')
 SEQUENCE = 'xyz'
 SINGULARITY_THRESHOLD = 0.01
-DISCOVERY_SETTLE_S = 2.0
+DISCOVERY_SETTLE_S = 1.0
 
 
 def config_path(*parts):
@@ -54,15 +54,6 @@ def _write_parameters(path):
                 '    qos:\n      reliability: reliable\n      depth: 1000\n')
 
 
-def _wait_for(condition, timeout, what):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return
-        time.sleep(0.1)
-    raise RuntimeError(f'timed out after {timeout:.0f} s waiting for {what}')
-
-
 def _stop(process, timeout=20):
     if process.poll() is None:
         process.send_signal(signal.SIGINT)
@@ -73,36 +64,70 @@ def _stop(process, timeout=20):
         return process.wait()
 
 
-def _run_live(scene_bag, live_bag, params, topic, log):
-    """Node + recorder + player as processes; returns once the recorder has closed its bag."""
+def _run_live(scene_bag, live_bag, params, topic, expected, log):
+    """
+    Node + recorder + player as processes; returns once the recorder has closed its bag.
+
+    A watcher node in this process subscribes to the node's outputs too, so the
+    recorder is stopped only once every expected message has gone through the
+    node (or after a timeout), not after a guessed delay.
+    """
     import rclpy
     from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+
+    from rotation_node.bag.qos import recording_qos
+    from rotation_node.pipeline import OUTPUT_MESSAGE_TYPES
     context = Context()
     rclpy.init(context=context)
     watcher = rclpy.create_node('rotation_demo_watcher', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(watcher)
+    out_topics = [f'{topic}/{name}' for name in OUTPUTS]
+    received = {t: 0 for t in out_topics}
     processes = []
 
     def start(args):
         processes.append(subprocess.Popen(args, stdout=log, stderr=subprocess.STDOUT))
         return processes[-1]
 
-    out_topics = [f'{topic}/{name}' for name in OUTPUTS]
+    def spin_until(condition, timeout, what):
+        deadline = time.monotonic() + timeout
+        while not condition():
+            if time.monotonic() > deadline:
+                raise RuntimeError(f'timed out after {timeout:.0f} s waiting for {what}')
+            executor.spin_once(timeout_sec=0.05)
+
+    def count(t):
+        def callback(_):
+            received[t] += 1
+        return callback
+
     try:
         node = start([_script('rotation_node'), '--ros-args', '-r', f'__ns:={topic}',
                       '-r', f'input:={topic}', '--params-file', params])
-        _wait_for(lambda: all(watcher.count_publishers(t) for t in out_topics),
-                  120, 'rotation_node to advertise its outputs')
+        spin_until(lambda: all(watcher.count_publishers(t) for t in out_topics),
+                   120, 'rotation_node to advertise its outputs')
+        for t, name in zip(out_topics, OUTPUTS):
+            offered = [i.qos_profile for i in watcher.get_publishers_info_by_topic(t)]
+            watcher.create_subscription(OUTPUT_MESSAGE_TYPES[name], t, count(t),
+                                        recording_qos(offered))
         recorder = start([_script('rotation_bag'), 'record', live_bag, '--force',
                           '--topics', *out_topics])
-        _wait_for(lambda: all(watcher.count_subscribers(t) for t in out_topics),
-                  60, 'the recorder to subscribe')
-        # The graph shows the recorder's subscriptions before the node's publishers
-        # have matched them; give discovery a moment so the first messages are kept.
-        time.sleep(DISCOVERY_SETTLE_S)
-        player = start([_script('rotation_bag'), 'play', scene_bag, '--topics', topic])
-        if player.wait() != 0:
+        spin_until(lambda: all(watcher.count_subscribers(t) >= 2 for t in out_topics),
+                   60, 'the recorder to subscribe')
+        player = start([_script('rotation_bag'), 'play', scene_bag, '--topics', topic,
+                        '--wait-for-subscribers', '--delay', str(DISCOVERY_SETTLE_S)])
+        spin_until(lambda: player.poll() is not None, 600, 'rotation_bag play')
+        if player.returncode != 0:
             raise RuntimeError('rotation_bag play failed (see the log)')
-        time.sleep(1.0)  # let the last messages through the node to the recorder
+        try:
+            spin_until(lambda: min(received.values()) >= expected, 30, 'the node\'s outputs')
+        except RuntimeError:
+            pass  # the summary reports what is missing
+        executor.spin_once(timeout_sec=DISCOVERY_SETTLE_S)  # the recorder is as fast as we are
+        log.write(f'demo watcher received {received} of {expected} each\n')
+        log.flush()
         for process, name in ((recorder, 'rotation_bag record'), (node, 'rotation_node')):
             code = _stop(process)
             if code != 0:
@@ -110,6 +135,7 @@ def _run_live(scene_bag, live_bag, params, topic, log):
     finally:
         for process in processes:
             _stop(process)
+        executor.shutdown()
         watcher.destroy_node()
         rclpy.try_shutdown(context=context)
 
@@ -138,8 +164,10 @@ def _summary(sim, live, offline, topic):
     lines = [f'samples simulated: {len(stamps)}, Imu messages in the scene bag: {published}']
     for name in OUTPUTS:
         got = live[f'{topic}/{name}'][0]
-        lines.append(f'{topic}/{name}: {len(got)} messages recorded live '
-                     f'({"none lost" if len(got) == published else f"{published - len(got)} missing"})')
+        missing = sorted(set(range(len(stamps))) - {index[int(s)] for s in got})
+        lines.append(f'{topic}/{name}: {len(got)} messages recorded live ('
+                     + (f'{len(missing)} missing, samples {missing[0]}..{missing[-1]}'
+                        if missing else 'none lost') + ')')
     q_stamps, q = live[f'{topic}/quaternion']
     rows = [index[int(s)] for s in q_stamps]
     error = rc.quaternion_distance(q, sim.truth_orientation[rows])
@@ -183,7 +211,8 @@ def main(argv=None):
 
     print('2/5 replaying it through a live rotation_node, recording the outputs')
     with open(paths['processes.log'], 'w') as log:
-        _run_live(paths['scene.mcap'], paths['live.mcap'], paths['params.yaml'], scene.topic, log)
+        _run_live(paths['scene.mcap'], paths['live.mcap'], paths['params.yaml'], scene.topic,
+                  int(sim.sensor.published.sum()), log)
 
     print('3/5 converting the same bag offline (rotation_bag convert)')
     subprocess.run([_script('rotation_bag'), 'convert', paths['scene.mcap'],

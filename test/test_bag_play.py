@@ -108,3 +108,29 @@ def test_loop_repeats_until_interrupted(tmp_path, rng):
             assert player.alive()
             assert player.stop() == 0, player.output
     assert [stamp_ns(m) for m in received[:15]] == [stamp_ns(m) for m in received[:5]] * 3
+
+
+def test_wait_for_subscribers_at_recorded_rate_loses_nothing(tmp_path, rng):
+    """The player starts first; it waits for the late subscriber, then plays every message."""
+    count = 50
+    path = tmp_path / 'late.mcap'
+    _imu_bag(path, imu_messages(rng, count, period_ns=5_000_000))
+    with _play(path, '--wait-for-subscribers', '--delay', '0.5') as player:
+        time.sleep(2.0)
+        assert player.alive()   # still waiting: nobody subscribed
+        with TestNode('late_subscriber') as client:
+            received = _raw_collector(client, '/imu')
+            assert client.spin_until(lambda: len(received) >= count, timeout=60)
+            assert client.spin_until(lambda: not player.alive(), timeout=30)
+        assert player.stop() == 0, player.output
+    with BagReader(path) as reader:
+        assert received == [r.data for r in reader.messages()]
+
+
+def test_negative_delay_is_rejected_before_anything_is_published(tmp_path, rng):
+    path = tmp_path / 'some.mcap'
+    _imu_bag(path, imu_messages(rng, 3))
+    with _play(path, '--delay', '-1') as player:
+        player.proc.wait(timeout=60)   # exits by itself
+        assert player.stop() == 1
+    assert 'delay must be >= 0, got -1.0' in player.output

@@ -4,7 +4,8 @@ Command line ``rotation_bag``: record, play, convert and plot MCAP bags.
 Usage::
 
     rotation_bag record OUT.mcap --topics /imu [/odom ...] [--duration S] [--force]
-    rotation_bag play IN.mcap [--rate R] [--topics T ...] [--loop]
+    rotation_bag play IN.mcap [--rate R] [--topics T ...] [--loop] [--delay S]
+                      [--wait-for-subscribers]
     rotation_bag convert IN.mcap OUT.mcap --params config/params.yaml [--topic T ...] [--force]
     rotation_bag plot IN.mcap --topic /imu/euler [-o plot.png] [--params FILE] [--force]
 
@@ -37,7 +38,8 @@ def _record(args, ros_args):
 
 def _play(args, ros_args):
     from rotation_node.bag.play import play
-    play(args.input, rate=args.rate, topics=args.topics, loop=args.loop, ros_args=ros_args)
+    play(args.input, rate=args.rate, topics=args.topics, loop=args.loop, delay=args.delay,
+         wait_for_subscribers=args.wait_for_subscribers, ros_args=ros_args)
 
 
 def _convert(args, ros_args):
@@ -91,6 +93,11 @@ def build_parser():
                            'subscribers acknowledge, lossless on reliable QoS (default 1)')
     play.add_argument('--topics', nargs='+', metavar='TOPIC', help='only these topics')
     play.add_argument('--loop', action='store_true', help='start again at the end')
+    play.add_argument('--delay', type=float, default=0.0, metavar='S',
+                      help='wait S seconds before the first message, so that subscribers '
+                           'match the new publishers (default 0)')
+    play.add_argument('--wait-for-subscribers', action='store_true',
+                      help='start once every played topic has a subscriber (implied by --rate 0)')
     play.set_defaults(run=_play)
 
     convert = commands.add_parser(

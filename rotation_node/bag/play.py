@@ -8,6 +8,13 @@ subscriber, offers a deep reliable queue, and every ``ACK_BATCH`` messages
 waits until they are acknowledged, so the queue never overflows; a reliable
 subscriber whose own queue is deep enough (as the recorder's) then receives
 every message.
+
+A new publisher is matched by its subscribers a little after it sees them
+(discovery is not symmetric, and slow on a loaded machine), and a volatile
+subscriber misses what was published before: with ``wait_for_subscribers``
+(implied by rate 0) playback starts ``DISCOVERY_SETTLE_S`` after every played
+topic has a subscriber, and ``delay`` (``--delay``, as in ``ros2 bag play``)
+holds back the first message further.
 """
 import time
 
@@ -26,6 +33,7 @@ NODE_NAME = 'rotation_bag_play'
 ACK_BATCH = DEEP_QUEUE_DEPTH // 4
 ACK_TIMEOUT = Duration(seconds=30)
 _POLL_S = 0.05
+DISCOVERY_SETTLE_S = 0.5
 
 
 def _publishers(node, reader, topics, lossless):
@@ -44,6 +52,7 @@ def _wait_for_subscribers(node, publishers, stop):
         node.get_logger().info(f'waiting for subscribers on {", ".join(waiting)}')
     while waiting and not stop.event.wait(_POLL_S):
         waiting = [topic for topic in waiting if publishers[topic].get_subscription_count() == 0]
+    stop.event.wait(DISCOVERY_SETTLE_S)
 
 
 def _wait_for_acks(publishers):
@@ -73,7 +82,8 @@ def _play_once(reader, topics, publishers, rate, stop):
     return count
 
 
-def play(path, *, rate=1.0, topics=None, loop=False, ros_args=None):
+def play(path, *, rate=1.0, topics=None, loop=False, delay=0.0, wait_for_subscribers=False,
+         ros_args=None):
     """
     Publish the messages of a bag until it ends (or forever with ``loop``) or Ctrl-C.
 
@@ -88,6 +98,11 @@ def play(path, *, rate=1.0, topics=None, loop=False, ros_args=None):
         Only these topics; all by default.
     loop : bool, optional
         Start again at the end.
+    delay : float, optional
+        Seconds to wait before the first message (after the subscribers, if
+        waiting for them), so that subscribers can match the new publishers.
+    wait_for_subscribers : bool, optional
+        Start only once every played topic has a subscriber (always at rate 0).
     ros_args : list of str, optional
         Command line passed to ``rclpy.init`` (``--ros-args ...``).
 
@@ -105,6 +120,8 @@ def play(path, *, rate=1.0, topics=None, loop=False, ros_args=None):
     """
     if not rate >= 0:
         raise BagError(f'rate must be >= 0, got {rate}')
+    if not delay >= 0:
+        raise BagError(f'delay must be >= 0, got {delay}')
     with BagReader(path) as reader:
         topics = list(reader.topics) if topics is None else list(topics)
         reader.messages(topics)   # checks the topics before anything is published
@@ -113,8 +130,9 @@ def play(path, *, rate=1.0, topics=None, loop=False, ros_args=None):
             node = rclpy.create_node(NODE_NAME)
             with StopSignal() as stop:
                 publishers = _publishers(node, reader, topics, lossless=rate == 0)
-                if rate == 0:
+                if rate == 0 or wait_for_subscribers:
                     _wait_for_subscribers(node, publishers, stop)
+                stop.event.wait(delay)
                 count = 0
                 while True:
                     published = _play_once(reader, topics, publishers, rate, stop)
