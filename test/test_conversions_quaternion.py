@@ -96,3 +96,12 @@ def test_distance_is_symmetric_and_bounded(p, q):
     d = rc.quaternion_distance(p, q)
     assert 0.0 <= d <= np.pi
     assert abs(d - rc.quaternion_distance(q, p)) <= 8 * mpr.EPS * max(d, 1.0)
+
+
+def test_rotate_vector_of_huge_vector_does_not_overflow(rng):
+    q = rng.normal(size=(20, 4))
+    v = rng.normal(size=(20, 3))
+    v /= np.abs(v).max(axis=1, keepdims=True)
+    huge = rc.rotate_vector(q, v * 1e308)
+    assert np.all(np.isfinite(huge))
+    assert np.allclose(huge / 1e308, rc.rotate_vector(q, v), rtol=1e-15, atol=1e-15)

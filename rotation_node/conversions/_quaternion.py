@@ -108,13 +108,21 @@ def product(px, py, pz, pw, qx, qy, qz, qw):
 
 @jit
 def rotated_vector(x, y, z, w, vx, vy, vz):
-    """``R(q) v`` for a unit quaternion: ``v + w t + u x t`` with ``t = 2 u x v``."""
+    """
+    ``R(q) v`` for a unit quaternion: ``v + w t + u x t`` with ``t = 2 u x v``.
+
+    A vector beyond 2^500 is rotated at an exactly rescaled size, so that
+    ``t`` cannot overflow where ``R v`` itself does not.
+    """
+    m = max(abs(vx), abs(vy), abs(vz))
+    e = binary_exponent(m) if m > _SAFE_HIGH else 0
+    vx, vy, vz = math.ldexp(vx, -e), math.ldexp(vy, -e), math.ldexp(vz, -e)
     tx = 2.0 * (y * vz - z * vy)
     ty = 2.0 * (z * vx - x * vz)
     tz = 2.0 * (x * vy - y * vx)
-    return (vx + w * tx + (y * tz - z * ty),
-            vy + w * ty + (z * tx - x * tz),
-            vz + w * tz + (x * ty - y * tx))
+    return (math.ldexp(vx + w * tx + (y * tz - z * ty), e),
+            math.ldexp(vy + w * ty + (z * tx - x * tz), e),
+            math.ldexp(vz + w * tz + (x * ty - y * tx), e))
 
 
 @jit
