@@ -94,11 +94,14 @@ DROP_REASONS = (NON_FINITE_ORIENTATION, ZERO_QUATERNION, CONVERSION_ERROR)
 SKIP_REASONS = (ORIENTATION_UNKNOWN, NON_FINITE_ANGULAR_VELOCITY, TIMESTAMP_NOT_INCREASING,
                 EULER_RATES_NEAR_SINGULAR)
 
-_AXIS_ANGLE_LAYOUT = MultiArrayLayout(
-    dim=[MultiArrayDimension(label='axis_angle', size=4, stride=4)], data_offset=0)
-_MATRIX_LAYOUT = MultiArrayLayout(
-    dim=[MultiArrayDimension(label='rows', size=3, stride=9),
-         MultiArrayDimension(label='cols', size=3, stride=3)], data_offset=0)
+MULTI_ARRAY_LAYOUTS = {
+    'axis_angle': MultiArrayLayout(
+        dim=[MultiArrayDimension(label='axis_angle', size=4, stride=4)], data_offset=0),
+    'matrix': MultiArrayLayout(
+        dim=[MultiArrayDimension(label='rows', size=3, stride=9),
+             MultiArrayDimension(label='cols', size=3, stride=3)], data_offset=0),
+}
+"""Layout of each std_msgs/Float64MultiArray output (do not modify)."""
 
 
 class _InputSpec(NamedTuple):
@@ -277,6 +280,35 @@ class ConversionPipeline:
             raises on bad data.
 
         """
+        return [(name, _BUILDERS[name](header, values))
+                for name, header, values in self.process_values(msg)]
+
+    def process_values(self, msg) -> list:
+        """
+        Convert one input message into the values of the output messages.
+
+        :meth:`process` without building the messages, for callers that encode
+        them themselves (``rotation_bag convert``); same outputs, same counts.
+
+        Parameters
+        ----------
+        msg : object
+            A message of class :attr:`input_type`, or any object with the
+            fields the input type is read from (``header`` and the orientation
+            and angular velocity fields, e.g. a view from
+            :mod:`rotation_node.bag.cdr`).
+
+        Returns
+        -------
+        list of (str, header, sequence of float)
+            ``(output name, msg.header, values)`` for each output that could be
+            computed, in the order of ``outputs``; empty when the message was
+            dropped. ``values`` are the output message's numbers in definition
+            order: ``(x, y, z[, w])`` of the stamped outputs, ``data`` of the
+            Float64MultiArray ones (their layout is :data:`MULTI_ARRAY_LAYOUTS`).
+            Never raises on bad data.
+
+        """
         self.stats.received += 1
         try:
             outputs = self._converted(msg)
@@ -337,8 +369,7 @@ class ConversionPipeline:
             self._skip(ORIENTATION_UNKNOWN,
                        'orientation unknown (Imu orientation_covariance[0] == -1): '
                        'outputs that need it skipped')
-        return [(name, _BUILDERS[name](header, values[name]))
-                for name in wanted if name in values]
+        return [(name, header, values[name]) for name in wanted if name in values]
 
     def _orientation(self, msg):
         """Return the input orientation as a quaternion array (any scale), or None if unknown."""
@@ -473,8 +504,8 @@ _BUILDERS = {
     'quaternion': _quaternion_stamped,
     'euler': _vector3_stamped,
     'rotation_vector': _vector3_stamped,
-    'axis_angle': _multi_array(_AXIS_ANGLE_LAYOUT),
-    'matrix': _multi_array(_MATRIX_LAYOUT),
+    'axis_angle': _multi_array(MULTI_ARRAY_LAYOUTS['axis_angle']),
+    'matrix': _multi_array(MULTI_ARRAY_LAYOUTS['matrix']),
     'angular_velocity': _vector3_stamped,
     'euler_rates': _vector3_stamped,
     'quaternion_rate': _quaternion_stamped,

@@ -12,22 +12,26 @@ import subprocess
 import pytest
 import yaml
 from bag_helpers import imu_messages, plain, stamp_ns
-from ros_harness import RosProcess, TestNode, script
+from ros_harness import RosProcess, TestNode, make_input_message, script
 from rclpy.duration import Duration
 from rclpy.qos import QoSProfile
+from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import Imu
 
+from rotation_node.bag.cdr import message_encoder
 from rotation_node.bag.convert import convert, output_topic
 from rotation_node.bag.mcap_io import BagReader, BagWriter
+from rotation_node.bag.message_types import type_name_of
 from rotation_node.bag.qos import qos_profiles_from_yaml
 from rotation_node.errors import BagError
 from rotation_node.node import qos_profile
-from rotation_node.parameters import NodeParameters, parameters_from_yaml
+from rotation_node.parameters import INPUT_TYPES, NodeParameters, parameters_from_yaml
 from rotation_node.pipeline import OUTPUT_MESSAGE_TYPES, ConversionPipeline
 
 OUTPUTS = ('euler', 'quaternion', 'angular_velocity')
 PARAMS = NodeParameters(input_type='imu', outputs=OUTPUTS, euler_sequence='ZYX',
                         euler_degrees=True, qos_depth=1000)
+ALL_OUTPUTS = tuple(OUTPUT_MESSAGE_TYPES)
 
 
 def _write_bag(path, streams):
@@ -79,6 +83,33 @@ def test_convert_adds_pipeline_outputs_and_copies_everything(tmp_path, rng):
         offered, = qos_profiles_from_yaml(
             converted.topic_metadata['/imu/euler'].offered_qos_profiles)
         assert offered == qos_profile(PARAMS)
+
+
+@pytest.mark.parametrize('input_type', INPUT_TYPES)
+def test_every_input_type_and_output_is_the_pipelines_byte_for_byte(tmp_path, rng, input_type):
+    """convert reads cdr views and encodes values: the same bytes as process()'s messages."""
+    params = NodeParameters(input_type=input_type, outputs=ALL_OUTPUTS, euler_unwrap=True,
+                            quaternion_continuity=True, angular_velocity_output_frame='world')
+    stamps = [1_700_000_000_000_000_000 + 10_000_000 * i for i in range(30)]
+    stamps[12] = stamps[11]   # not increasing: no finite-difference outputs
+    messages = [make_input_message(input_type, Rotation.random(random_state=rng),
+                                   omega=rng.normal(size=3), stamp_ns=stamp, frame_id='base_link')
+                for stamp in stamps]
+    if input_type == 'imu':
+        messages[5].orientation_covariance[0] = -1.0
+        messages[20].angular_velocity_covariance[0] = -1.0
+    source, output = tmp_path / 'in.mcap', tmp_path / 'out.mcap'
+    _write_bag(source, {'/in': messages})
+    stats = convert(source, output, params)
+    pipeline = ConversionPipeline(params)
+    expected = {name: [] for name in ALL_OUTPUTS}
+    for msg in messages:
+        for name, out in pipeline.process(msg):
+            expected[name].append(message_encoder(type_name_of(type(out)))(out))
+    assert stats['/in'] == pipeline.stats and all(expected.values())
+    with BagReader(output) as reader:
+        for name in ALL_OUTPUTS:
+            assert [r.data for r in reader.messages([f'/in/{name}'])] == expected[name], name
 
 
 def test_one_pipeline_per_topic(tmp_path, rng):

@@ -8,21 +8,44 @@ same parameters, one pipeline per input topic, fed in log-time order (the
 order of reception). Converted messages get the log and publish times of the
 input message they come from.
 The bag is streamed, never loaded: memory does not grow with its length.
+
+The input messages are decoded by :mod:`rotation_node.bag.cdr` into
+read-only views (every input type has a fixed layout), which
+:meth:`~rotation_node.pipeline.ConversionPipeline.process_values` reads as it
+reads rclpy messages, and the values it returns are encoded by ``cdr``
+directly: the live node's conversions, without building rclpy messages, which
+took most of the time.
 """
 import os
 
+from rotation_node.bag.cdr import fixed_layout_codec, float64_multi_array_encoder
 from rotation_node.bag.mcap_io import BagReader, BagWriter, TopicMetadata
 from rotation_node.bag.message_types import type_name_of
 from rotation_node.bag.progress import ProgressBar
 from rotation_node.bag.qos import qos_profiles_yaml
 from rotation_node.errors import BagError
 from rotation_node.node import qos_profile
-from rotation_node.pipeline import ConversionPipeline, input_message_type
+from rotation_node.pipeline import (
+    MULTI_ARRAY_LAYOUTS, OUTPUT_MESSAGE_TYPES, ConversionPipeline, input_message_type)
 
 
 def output_topic(input_topic, output_name):
     """Topic of the output ``output_name`` of ``input_topic``: ``/imu`` -> ``/imu/euler``."""
     return f'{input_topic.rstrip("/")}/{output_name}'
+
+
+def _output_encoder(name):
+    """
+    Return the type name of output ``name`` and its ``encode(header, values) -> CDR bytes``.
+
+    The counterpart of the pipeline's message builders, from the values of
+    :meth:`~rotation_node.pipeline.ConversionPipeline.process_values`.
+    """
+    type_name = type_name_of(OUTPUT_MESSAGE_TYPES[name])
+    if name in MULTI_ARRAY_LAYOUTS:   # no header
+        encode_data = float64_multi_array_encoder(MULTI_ARRAY_LAYOUTS[name])
+        return type_name, lambda header, values: encode_data(values)
+    return type_name, fixed_layout_codec(type_name).stamped_encoder()
 
 
 def _input_topics(reader, input_type_name, topics):
@@ -81,13 +104,17 @@ def convert(input_path, output_path, params, *, topics=None, overwrite=False,
         input_type_name = type_name_of(input_message_type(params.input_type))
         pipelines = {topic: ConversionPipeline(params)
                      for topic in _input_topics(reader, input_type_name, topics)}
-        output_topics = {topic: {name: output_topic(topic, name) for name in pipeline.output_types}
-                         for topic, pipeline in pipelines.items()}
+        input_codec = fixed_layout_codec(input_type_name)
+        decode = None if input_codec is None else input_codec.decode
+        encoders = {name: _output_encoder(name) for name in params.outputs}
+        # {input topic: {output name: (output topic, type name, encode)}}
+        outputs = {topic: {name: (output_topic(topic, name), *encoder)
+                           for name, encoder in encoders.items()}
+                   for topic in pipelines}
         offered_qos = qos_profiles_yaml([qos_profile(params)])
-        new_topics = [TopicMetadata(output_topics[topic][name], type_name_of(msg_class),
-                                    offered_qos)
-                      for topic, pipeline in pipelines.items()
-                      for name, msg_class in pipeline.output_types.items()]
+        new_topics = [TopicMetadata(output_topic_name, type_name, offered_qos)
+                      for topic_outputs in outputs.values()
+                      for output_topic_name, type_name, _ in topic_outputs.values()]
         clashes = [t.name for t in new_topics if t.name in reader.topics]
         if clashes:
             raise BagError(f'output topic {", ".join(clashes)} is already in {reader.path}')
@@ -98,12 +125,15 @@ def convert(input_path, output_path, params, *, topics=None, overwrite=False,
             for metadata in [*reader.topic_metadata.values(), *new_topics]:
                 writer.add_topic(metadata)
             for record in reader.messages():
+                log_time_ns, publish_time_ns = record.log_time_ns, record.publish_time_ns
                 writer.write_serialized(record.topic, record.type_name, record.data,
-                                        record.log_time_ns, record.publish_time_ns)
+                                        log_time_ns, publish_time_ns)
                 pipeline = pipelines.get(record.topic)
                 if pipeline is not None:
-                    names = output_topics[record.topic]
-                    for name, msg in pipeline.process(record.message()):
-                        writer.write(names[name], msg, record.log_time_ns, record.publish_time_ns)
+                    topic_outputs = outputs[record.topic]
+                    for name, header, values in pipeline.process_values(record.message(decode)):
+                        topic, type_name, encode = topic_outputs[name]
+                        writer.write_serialized(topic, type_name, encode(header, values),
+                                                log_time_ns, publish_time_ns)
                 progress.update()
     return {topic: pipeline.stats for topic, pipeline in pipelines.items()}

@@ -11,11 +11,16 @@ indexes and a summary; and a ``rosbag2`` metadata record holding the
 version 9 bag metadata, without which rosbag2 would read the QoS YAML with the
 pre-Jazzy (integer) schema.
 
-Messages are stored as the CDR bytes ``rclpy.serialization`` produces and
-reads, so a bag round trip is byte-exact. Reading streams chunk by chunk:
-memory does not grow with the length of the bag.
+Messages are stored as CDR bytes, which reading returns unchanged, so a bag
+round trip is byte-exact. ``BagWriter.write`` encodes messages with
+:mod:`rotation_node.bag.cdr` where it can (fixed-layout types such as
+sensor_msgs/Imu, and std_msgs/Float64MultiArray): rclpy's bytes, with the
+alignment padding zeroed instead of uninitialised, so that the same messages
+give the same bag; other types with ``rclpy.serialization``. Reading streams
+chunk by chunk: memory does not grow with the length of the bag.
 """
 import dataclasses
+import functools
 import operator
 import os
 import struct
@@ -30,6 +35,7 @@ from mcap.writer import CompressionType, Writer
 from rclpy.serialization import deserialize_message, serialize_message
 
 from rotation_node.bag.atomic_file import AtomicFile
+from rotation_node.bag.cdr import message_encoder
 from rotation_node.bag.message_types import (
     message_class, message_definition, split_type_name, type_hash, type_name_of)
 from rotation_node.errors import BagError
@@ -107,14 +113,21 @@ class BagMessage:
         self.log_time_ns = log_time_ns
         self.publish_time_ns = publish_time_ns
 
-    def message(self):
+    def message(self, decode=None):
         """
         Deserialise the message.
+
+        Parameters
+        ----------
+        decode : callable, optional
+            ``decode(data) -> message`` to use instead of rclpy, e.g. the
+            ``decode`` of a :func:`rotation_node.bag.cdr.fixed_layout_codec`.
 
         Returns
         -------
         object
-            An instance of the rclpy message class of ``type_name``.
+            An instance of the rclpy message class of ``type_name``, or what
+            ``decode`` returns.
 
         Raises
         ------
@@ -122,10 +135,11 @@ class BagMessage:
             If the type is not installed or the bytes are not a valid message.
 
         """
+        if decode is None:
+            decode = functools.partial(deserialize_message,
+                                       message_type=message_class(self.type_name))
         try:
-            return deserialize_message(self.data, message_class(self.type_name))
-        except BagError:
-            raise
+            return decode(self.data)
         except Exception as error:  # rclpy raises bare RuntimeError/TypeError on bad CDR
             raise BagError(
                 f'message on {self.topic} at {self.log_time_ns} ns is not a valid '
@@ -149,12 +163,13 @@ def _timestamp(value, name):
 
 
 class _Channel:
-    __slots__ = ('id', 'type_name', 'msg_class')
+    __slots__ = ('id', 'type_name', 'msg_class', 'encode')
 
     def __init__(self, channel_id, type_name):
         self.id = channel_id
         self.type_name = type_name
-        self.msg_class = None
+        self.msg_class = None   # of the messages given to write(), with their encode(msg)
+        self.encode = None
 
 
 class BagWriter:
@@ -255,6 +270,10 @@ class BagWriter:
         """
         Serialise and write one message.
 
+        Types that :func:`rotation_node.bag.cdr.message_encoder` covers are
+        encoded by it (zero padding: the same message gives the same bytes),
+        others by ``rclpy.serialization``.
+
         Parameters
         ----------
         topic : str
@@ -276,7 +295,8 @@ class BagWriter:
         if channel is None or channel.msg_class is not type(msg):
             channel = self._channel(topic, type_name_of(type(msg)))
             channel.msg_class = type(msg)
-        self._add(channel.id, serialize_message(msg), log_time_ns, publish_time_ns)
+            channel.encode = message_encoder(channel.type_name) or serialize_message
+        self._add(channel.id, channel.encode(msg), log_time_ns, publish_time_ns)
 
     def write_serialized(self, topic, type_name, data, log_time_ns, publish_time_ns=None):
         """

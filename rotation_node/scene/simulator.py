@@ -14,8 +14,9 @@ The bag holds, for every sample ``k`` at the nominal stamp
   ``/truth/angular_velocity``, always, with the nominal stamp.
 
 Every message has ``header.frame_id`` = the scene's ``frame_id`` and log time
-= the nominal stamp, so a bag replays in sample order and the same scene and
-seed give a byte-identical bag (see :func:`_serialize`).
+= the nominal stamp, so a bag replays in sample order; the same scene and
+seed give a byte-identical bag (``BagWriter.write`` encodes these types with
+zero padding, see :mod:`rotation_node.bag.cdr`).
 """
 import dataclasses
 from typing import Mapping
@@ -23,11 +24,9 @@ from typing import Mapping
 import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
-from rclpy.serialization import serialize_message
 from sensor_msgs.msg import Imu
 
 from rotation_node.bag.mcap_io import BagWriter
-from rotation_node.bag.message_types import type_name_of
 
 from .effects import UNKNOWN_COVARIANCE, SensorStream, apply_effects
 from .motions import motion_truth
@@ -145,32 +144,6 @@ def _imu_message(sensor, k, frame_id):
     return msg
 
 
-def _write(writer, topic, msg, log_time_ns):
-    """``writer.write(topic, msg, log_time_ns)``, with reproducible bytes (:func:`_serialize`)."""
-    writer.write_serialized(topic, type_name_of(type(msg)), _serialize(msg), log_time_ns)
-
-
-def _serialize(msg):
-    """
-    Return ``msg`` as CDR bytes, with its alignment padding zeroed.
-
-    rclpy's serialisation (rmw) leaves CDR alignment padding uninitialised,
-    so two serialisations of one message can differ there and a bag would
-    not be reproducible. The three types written here are a
-    ``std_msgs/Header`` followed by float64 fields only: their one padding
-    run sits between the NUL ending ``header.frame_id`` and the first float64,
-    which is 8-aligned relative to the payload (after the 4-byte
-    encapsulation header). Zeroing it makes the bytes a function of the
-    message alone.
-    """
-    data = bytearray(serialize_message(msg))
-    # Payload offsets: stamp 0..7, frame_id length 8..11, characters, NUL.
-    string_end = 12 + len(msg.header.frame_id.encode()) + 1
-    padding = -string_end % 8
-    data[4 + string_end:4 + string_end + padding] = bytes(padding)
-    return bytes(data)
-
-
 def write_bag(simulation, path, *, overwrite=False):
     """
     Write a simulation as a ROS 2 MCAP bag (the layout in this module's docstring).
@@ -194,13 +167,13 @@ def write_bag(simulation, path, *, overwrite=False):
     with BagWriter(path, overwrite=overwrite) as writer:
         for k, stamp_ns in enumerate(simulation.stamp_ns.tolist()):
             if sensor.published[k]:
-                _write(writer, topic, _imu_message(sensor, k, frame_id), stamp_ns)
+                writer.write(topic, _imu_message(sensor, k, frame_id), stamp_ns)
             orientation = QuaternionStamped()
             orientation.header.stamp = _time_message(stamp_ns)
             orientation.header.frame_id = frame_id
             _set_quaternion(orientation.quaternion, simulation.truth_orientation[k])
-            _write(writer, TRUTH_ORIENTATION_TOPIC, orientation, stamp_ns)
+            writer.write(TRUTH_ORIENTATION_TOPIC, orientation, stamp_ns)
             angular_velocity = Vector3Stamped()
             angular_velocity.header = orientation.header
             _set_vector(angular_velocity.vector, simulation.truth_angular_velocity[k])
-            _write(writer, TRUTH_ANGULAR_VELOCITY_TOPIC, angular_velocity, stamp_ns)
+            writer.write(TRUTH_ANGULAR_VELOCITY_TOPIC, angular_velocity, stamp_ns)
