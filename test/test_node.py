@@ -37,6 +37,9 @@ def ros():
         yield test_node
 
 
+DISCOVERY_SETTLE_S = 0.25
+
+
 class NodeUnderTest:
     """A running ``rotation_node`` process and the test's handles on it."""
 
@@ -109,8 +112,9 @@ class NodeUnderTest:
         try:
             assert self.ros.spin_until(lambda: publisher.get_subscription_count() > 0 and all(
                 s.get_publisher_count() > 0 for s in subscriptions), timeout), 'no match'
-            if qos is not None:
-                self.ros.spin_for(0.5)   # for the node's publishers to match the new readers
+            # The publisher sees the node's subscription before that subscription has
+            # matched the new publisher, and a volatile reader drops what came before.
+            self.ros.spin_for(0.5 if qos is not None else DISCOVERY_SETTLE_S)
             for msg in messages:
                 publisher.publish(msg)
             done = self.ros.spin_until(lambda: all(
