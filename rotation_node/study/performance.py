@@ -1,0 +1,309 @@
+"""
+The performance summary, ``performance.md``: the repository's benchmarks, run now.
+
+Three benchmark scripts of ``benchmarks/`` measure the package against a peer
+side by side in one run; this module runs them as they are (each in its own
+process) and collects their ratios, with the command that reproduces each:
+
+- ``bench_conversions.py``: the library against scipy, single sample and
+  batch, and time per rotation from 10^2 to 10^6 samples (its ``--json``
+  results are read);
+- ``bench_node.py``: CPU time per message of the live node against a bare
+  rclpy relay (its printed median ratio is read);
+- ``bench_bag_convert.py``: ``rotation_bag convert`` against the naive
+  mcap-ros2-support + scipy pipeline (its printed ratio is read).
+
+A ``--quick`` run measures the library only (``bench_conversions.py --quick``);
+the node and converter benchmarks are listed with their commands.
+"""
+import dataclasses
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from typing import Optional, Tuple
+
+from .report import markdown_table
+
+#: The repository's benchmarks (a source checkout; they are not installed).
+BENCHMARKS_DIR = os.path.join(
+    os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), 'benchmarks')
+#: How the documents spell the interpreter in a command.
+PYTHON = '.venv/bin/python'
+#: bench_conversions' target for the single-sample ratio package / scipy (its batch
+#: targets are in its results).
+SINGLE_SAMPLE_TARGET = 0.10
+
+
+@dataclasses.dataclass(frozen=True)
+class Benchmark:
+    """
+    One benchmark script and how to read its ratio.
+
+    Attributes
+    ----------
+    key, title : str
+    script : str
+        File name under ``benchmarks/``.
+    quick_args, full_args : tuple of str or None
+        Arguments in a quick and in a full run; None: not run.
+    ratio : str
+        What the ratio is (package against peer).
+    target : str
+        What the ratio should be; ``'<= x'`` or ``'>= x'`` where ``pattern`` reads it.
+    pattern : str or None
+        Regular expression whose group 1 is the ratio in the printed output
+        (None: read from the JSON results).
+    timeout : float
+        Seconds before the run is abandoned.
+
+    """
+
+    key: str
+    title: str
+    script: str
+    quick_args: Optional[Tuple[str, ...]]
+    full_args: Optional[Tuple[str, ...]]
+    ratio: str
+    target: str
+    pattern: Optional[str]
+    timeout: float
+
+    def args(self, quick):
+        """Return the script's arguments in this run, or None if it is not run."""
+        return self.quick_args if quick else self.full_args
+
+    def command(self, args):
+        """Return the shell command that reproduces the run."""
+        return ' '.join((PYTHON, f'benchmarks/{self.script}', *args))
+
+    def meets(self, ratio):
+        """Return whether ``ratio`` meets a ``target`` of the form ``'<= x'`` or ``'>= x'``."""
+        relation, bound = self.target.split()
+        return ratio <= float(bound) if relation == '<=' else ratio >= float(bound)
+
+
+LIBRARY = Benchmark(
+    'library', 'Library against scipy', 'bench_conversions.py', ('--quick',), (),
+    'time, package / scipy (single sample) and scipy / package (batch), per conversion',
+    'single sample <= 0.10, batch speed-up >= 2 (>= 3 Euler)', None, 600.0)
+NODE = Benchmark(
+    'node', 'Node against a bare relay', 'bench_node.py', None, (),
+    'CPU time per message, rotation_node / bare relay (median)', '<= 1.15',
+    r'median ratio rotation_node / relay = ([0-9.]+)', 300.0)
+BAG = Benchmark(
+    'bag', 'Bag converter against the naive pipeline', 'bench_bag_convert.py', None,
+    ('--messages', '50000'),
+    'throughput, rotation_bag convert / naive (mcap-ros2-support + scipy per message)',
+    '>= 3', r'ratio naive/ours: ([0-9.]+)x', 420.0)
+BENCHMARKS = (LIBRARY, NODE, BAG)
+
+
+@dataclasses.dataclass(frozen=True)
+class BenchmarkRun:
+    """
+    The outcome of one benchmark in this run.
+
+    Attributes
+    ----------
+    benchmark : Benchmark
+    command : str
+        Reproduces it (the JSON file name is a placeholder).
+    status : {'measured', 'not run', 'failed'}
+    seconds : float
+        Wall time of the run.
+    output : str
+        What it printed.
+    ratio : float or None
+        The headline ratio read from the output (node, bag).
+    results : dict or None
+        The JSON results (library).
+    detail : str
+        Why it failed or was not run.
+
+    """
+
+    benchmark: Benchmark
+    command: str
+    status: str
+    seconds: float = 0.0
+    output: str = ''
+    ratio: Optional[float] = None
+    results: Optional[dict] = None
+    detail: str = ''
+
+
+def require_benchmarks():
+    """Raise ``FileNotFoundError`` (one line) unless the benchmark scripts are there."""
+    missing = [b.script for b in BENCHMARKS
+               if not os.path.isfile(os.path.join(BENCHMARKS_DIR, b.script))]
+    if missing:
+        raise FileNotFoundError(
+            f'{", ".join(missing)} not found in {BENCHMARKS_DIR} (performance.md needs the '
+            'benchmarks of a source checkout)')
+
+
+def run_benchmark(benchmark, quick):
+    """
+    Run one benchmark script as its own process and read its ratio.
+
+    Parameters
+    ----------
+    benchmark : Benchmark
+        The script and how to read it.
+    quick : bool
+        Whether this is a ``--quick`` run.
+
+    Returns
+    -------
+    BenchmarkRun
+        Its status, output and ratio.
+
+    """
+    args = benchmark.args(quick)
+    if args is None:
+        args = benchmark.full_args
+        return BenchmarkRun(benchmark, benchmark.command(args), 'not run',
+                            detail='--quick runs the library benchmark only')
+    with tempfile.TemporaryDirectory() as directory:
+        json_path = os.path.join(directory, 'results.json')
+        extra = ('--json', json_path) if benchmark.pattern is None else ()
+        command = benchmark.command(args + (('--json', 'results.json') if extra else ()))
+        start = time.monotonic()
+        try:
+            process = subprocess.run(
+                [sys.executable, os.path.join(BENCHMARKS_DIR, benchmark.script), *args, *extra],
+                capture_output=True, text=True, timeout=benchmark.timeout,
+                cwd=os.path.dirname(BENCHMARKS_DIR))
+        except subprocess.TimeoutExpired:
+            return BenchmarkRun(benchmark, command, 'failed', benchmark.timeout,
+                                detail=f'timed out after {benchmark.timeout:.0f} s')
+        seconds = time.monotonic() - start
+        if process.returncode != 0:
+            # A script may fail its own checks after measuring (bench_node: messages
+            # lost): keep what it printed and say how it ended.
+            last = process.stderr.strip().splitlines()[-1:] or ['its output is below']
+            return BenchmarkRun(benchmark, command, 'failed', seconds, process.stdout,
+                                detail=f'exit status {process.returncode}; {last[0]}')
+        if benchmark.pattern is None:
+            with open(json_path) as stream:
+                return BenchmarkRun(benchmark, command, 'measured', seconds, process.stdout,
+                                    results=json.load(stream))
+    match = re.search(benchmark.pattern, process.stdout)
+    if match is None:
+        return BenchmarkRun(benchmark, command, 'failed', seconds, process.stdout,
+                            detail='its output has no ratio line (format changed?)')
+    return BenchmarkRun(benchmark, command, 'measured', seconds, process.stdout,
+                        ratio=float(match.group(1)))
+
+
+# ------------------------------------------------------------ the document
+
+def _met(ok):
+    return 'yes' if ok else '**no**'
+
+
+def _library_tables(results):
+    sizes = list(next(iter(results.values()))['growth_ns'])
+    batch_n = next(iter(results.values()))['batch_n']
+    summary = markdown_table(
+        ('conversion', 'single: package (µs)', 'single: scipy (µs)',
+         'single: ratio package/scipy', f'single ≤ {SINGLE_SAMPLE_TARGET}',
+         f'batch 10^{len(str(batch_n)) - 1}: package (ns)', 'batch: scipy (ns)',
+         'batch: speed-up scipy/package', 'speed-up target', 'batch target met'),
+        [(f'`{name}`', f'{r["single_us"]:.2f}', f'{r["single_scipy_us"]:.2f}',
+          f'{r["single_ratio"]:.3f}', _met(r['single_ratio'] <= SINGLE_SAMPLE_TARGET),
+          f'{r["batch_ns"]:.1f}', f'{r["batch_scipy_ns"]:.1f}', f'{r["batch_speedup"]:.1f}x',
+          f'{r["batch_target"]:g}x', _met(r['batch_speedup'] >= r['batch_target']))
+         for name, r in results.items()])
+    growth = markdown_table(
+        ('conversion', *(f'10^{len(n) - 1}' for n in sizes)),
+        [(f'`{name}`', *(f'{ours:.1f} / {scipy:.1f}' for ours, scipy in r['growth_ns'].values()))
+         for name, r in results.items()])
+    return summary, growth
+
+
+def _library_headline(results):
+    worst = max(results.items(), key=lambda item: item[1]['single_ratio'])
+    slowest = min(results.items(), key=lambda item: item[1]['batch_speedup'])
+    best = max(results.items(), key=lambda item: item[1]['batch_speedup'])
+    return (f'single sample: worst ratio {worst[1]["single_ratio"]:.3f} (`{worst[0]}`); '
+            f'batch: speed-up {slowest[1]["batch_speedup"]:.1f}x (`{slowest[0]}`) to '
+            f'{best[1]["batch_speedup"]:.1f}x (`{best[0]}`)')
+
+
+def _summary_cell(run):
+    if run.status == 'not run':
+        return f'not measured ({run.detail}): run the command'
+    if run.status == 'failed':
+        return f'failed ({run.detail})'
+    if run.results is not None:
+        return _library_headline(run.results)
+    return f'**{run.ratio:.3f}** ({_met_words(run)})'
+
+
+def _met_words(run):
+    return 'target met' if run.benchmark.meets(run.ratio) else 'target **missed**'
+
+
+def performance_markdown(runs, *, quick, command, environment):
+    """
+    Return the text of ``performance.md``.
+
+    Parameters
+    ----------
+    runs : list of BenchmarkRun
+        In the order of :data:`BENCHMARKS`.
+    quick : bool
+        Whether this is a ``--quick`` run.
+    command : str
+        The ``rotation_bench`` command that wrote the document.
+    environment : str
+        Machine and versions.
+
+    Returns
+    -------
+    str
+        Markdown.
+
+    """
+    parts = [
+        '# Performance summary',
+        '',
+        f'Generated by `{command}` on {time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}'
+        + (' (**--quick**: library benchmark only, in its quick form)' if quick else '') + '.',
+        f'Machine: {environment}.',
+        '',
+        'Every ratio below was measured in this run by the benchmark script named, which '
+        'times the package and its peer side by side in one process run; the command '
+        'reproduces it. Accuracy against time, method by method, is in '
+        '[accuracy.md](accuracy.md).',
+        '',
+        markdown_table(('benchmark', 'ratio', 'measured in this run', 'target', 'command'),
+                       [(run.benchmark.title, run.benchmark.ratio, _summary_cell(run),
+                         run.benchmark.target, f'`{run.command}`') for run in runs]),
+    ]
+    for run in runs:
+        parts += ['', f'## {run.benchmark.title}', '', f'Command: `{run.command}`'
+                  + (f' ({run.seconds:.0f} s in this run)' if run.status == 'measured' else ''),
+                  '']
+        if run.status != 'measured':
+            parts.append(f'Not measured in this run: {run.detail}.' if run.status == 'not run'
+                         else f'The benchmark failed in this run ({run.detail}).')
+            if run.output:
+                parts += ['', '```', run.output.rstrip(), '```']
+            continue
+        if run.results is not None:
+            summary, growth = _library_tables(run.results)
+            parts += [
+                'Single sample: time per call, validation included (shape (4,), (3,) or (3, 3)).'
+                ' Batch: time per rotation. Ratio = package / scipy (lower is better); '
+                'speed-up = scipy / package (higher is better).', '', summary, '',
+                'Time per rotation (ns) as the batch grows, package / scipy:', '', growth]
+        else:
+            parts += [f'Measured ratio: **{run.ratio:.3f}** (target {run.benchmark.target}: '
+                      f'{_met_words(run)}). Its output:', '', '```', run.output.rstrip(), '```']
+    return '\n'.join(parts) + '\n'
