@@ -96,3 +96,11 @@ def test_exp_log_round_trip(v):
         v = v * (3.0 / np.linalg.norm(v))
     back = rc.rotation_vector_from_quaternion(rc.quaternion_from_rotation_vector(v))
     assert np.allclose(back, v, rtol=ROUND_TRIP * mpr.EPS, atol=ROUND_TRIP * mpr.EPS * np.pi)
+
+
+@pytest.mark.parametrize('angle', [np.pi, -np.pi, 3 * np.pi, np.nextafter(np.pi, 4), 1e10])
+def test_quaternion_from_axis_angle_is_canonical_at_and_beyond_pi(angle):
+    q = rc.quaternion_from_axis_angle([-1.0, 2.0, 0.5], angle)
+    assert q[3] > 0 or (q[3] == 0 and q[np.flatnonzero(q)[0]] > 0)
+    assert abs(np.linalg.norm(q) - 1) <= 2 * mpr.EPS
+    assert mpr.error_in_eps(q, mpr.quaternion_from_axis_angle([-1.0, 2.0, 0.5], angle)) <= BOUND

@@ -16,17 +16,19 @@ import math
 import numpy as np
 
 from ._matrix import DEFAULT_ORTHONORMAL_TOLERANCE, flat_quaternions_from_matrices, store_rotation
-from ._quaternion import (call_binary, call_unary, half_angle_atan2, jit, quaternion_status,
-                          scaled_quaternion, status, vector_norm, vector_status)
+from ._quaternion import (call_binary, call_unary, half_angle_atan2, jit, needs_sign_flip,
+                          quaternion_status, scaled_quaternion, status, vector_norm,
+                          vector_status)
 from ._validation import NON_FINITE, ZERO_NORM
 
 
 @jit
 def rotation_quaternion(ux, uy, uz, k, half_angle_cos):
-    """``(k u, cos(a/2))`` with the sign chosen so that ``w > 0`` (cos of a double is never 0)."""
-    if half_angle_cos < 0.0:
-        k, half_angle_cos = -k, -half_angle_cos
-    return k * ux, k * uy, k * uz, half_angle_cos
+    """``(k u, cos(a/2))`` with the canonical sign."""
+    x, y, z, w = k * ux, k * uy, k * uz, half_angle_cos
+    if needs_sign_flip(x, y, z, w):
+        return -x, -y, -z, -w
+    return x, y, z, w + 0.0
 
 
 @jit
@@ -34,7 +36,7 @@ def rotation_vector_quaternion(vx, vy, vz, theta, half_angle_sin, half_angle_cos
     """
     Exponential map from ``sin`` and ``cos`` of half the norm ``theta = |v|``.
 
-    ``sin(theta/2) / theta`` is exactly 1/2 below 2e-8 in float64; the guard
+    Below 2e-8, ``sin(theta/2) / theta`` is 1/2 to within an ulp; the guard
     also keeps ``theta = 0`` and subnormal ``theta`` exact.
     """
     k = 0.5 if theta < 2e-8 else half_angle_sin / theta
@@ -49,17 +51,34 @@ def axis_angle_quaternion(ax, ay, az, half_angle_sin, half_angle_cos):
 
 
 @jit
+def half_angle_sin_cos(angle):
+    """
+    ``sin(angle/2)`` and ``cos(angle/2)`` from one ``tan(angle/4)`` (one libm call, not two).
+
+    With ``t = tan(angle/4)``: ``sin = 2t / (1 + t^2)``, ``cos = (1 - t^2) / (1 + t^2)``.
+    Both are within a few ulps in absolute terms, which is what a unit
+    quaternion's rotation depends on (``1 - t^2`` cancels only where ``cos``
+    itself is near 0). ``t^2`` cannot overflow: ``angle/4`` is never within
+    1e-154 of a pole of ``tan`` in float64.
+    """
+    t = math.tan(0.25 * angle)
+    tt = t * t
+    return 2.0 * t / (1.0 + tt), (1.0 - tt) / (1.0 + tt)
+
+
+@jit
 def quaternion_from_rotation_vector_scalar(vx, vy, vz):
     """Exponential map: unit canonical quaternion of the rotation vector ``v``."""
     theta = vector_norm(vx, vy, vz)
-    return rotation_vector_quaternion(vx, vy, vz, theta, math.sin(0.5 * theta),
-                                      math.cos(0.5 * theta))
+    half_sin, half_cos = half_angle_sin_cos(theta)
+    return rotation_vector_quaternion(vx, vy, vz, theta, half_sin, half_cos)
 
 
 @jit
 def quaternion_from_axis_angle_scalar(ax, ay, az, angle):
     """Unit canonical quaternion of a rotation by ``angle`` about a non-zero axis."""
-    return axis_angle_quaternion(ax, ay, az, math.sin(0.5 * angle), math.cos(0.5 * angle))
+    half_sin, half_cos = half_angle_sin_cos(angle)
+    return axis_angle_quaternion(ax, ay, az, half_sin, half_cos)
 
 
 @jit

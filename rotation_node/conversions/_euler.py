@@ -174,8 +174,15 @@ def singularity_margin_scalar(x, y, z, w, i, j, k, intrinsic):
 # ----------------------------------------------------------------- kernels
 
 @jit
-def _from_euler_kernel(angles, out, i, j, k, intrinsic, scale):
+def unpack_convention(convention):
+    """Axes ``(i, j, k)`` and intrinsic flag packed by :func:`convention_code`."""
+    return convention & 3, (convention >> 2) & 3, (convention >> 4) & 3, (convention >> 6) == 1
+
+
+@jit
+def _from_euler_kernel(angles, out, convention, scale):
     """Quaternions or matrices (as ``out`` is (..., 4) or (..., 3, 3)) of Euler angles."""
+    i, j, k, intrinsic = unpack_convention(convention)
     fa = angles.reshape(-1, 3)
     fo = out.reshape(fa.shape[0], -1)
     for s in range(fa.shape[0]):
@@ -189,7 +196,8 @@ def _from_euler_kernel(angles, out, i, j, k, intrinsic, scale):
 
 
 @jit
-def _euler_from_quaternion_kernel(q, out, i, j, k, intrinsic, scale):
+def _euler_from_quaternion_kernel(q, out, convention, scale):
+    i, j, k, intrinsic = unpack_convention(convention)
     fq, fo = q.reshape(-1, 4), out.reshape(-1, 3)
     for s in range(fq.shape[0]):
         bad = quaternion_status(fq, s, 0)
@@ -202,7 +210,8 @@ def _euler_from_quaternion_kernel(q, out, i, j, k, intrinsic, scale):
 
 
 @jit
-def _euler_arguments_kernel(fq, y, x, i, j, k, intrinsic):
+def _euler_arguments_kernel(fq, y, x, convention):
+    i, j, k, intrinsic = unpack_convention(convention)
     for s in range(fq.shape[0]):
         bad = quaternion_status(fq, s, 0)
         if bad >= 0:
@@ -213,24 +222,26 @@ def _euler_arguments_kernel(fq, y, x, i, j, k, intrinsic):
 
 
 @jit
-def _euler_from_half_angles_kernel(t, x, fo, i, j, k, intrinsic, scale):
+def _euler_from_half_angles_kernel(t, x, fo, convention, scale):
+    i, j, k, intrinsic = unpack_convention(convention)
     for s in range(t.shape[0]):
         a1, a2, a3 = euler_from_half_angles(t[s, 0], t[s, 1], t[s, 2], x[s, 0], i, j, k, intrinsic)
         fo[s, 0], fo[s, 1], fo[s, 2] = a1 * scale, a2 * scale, a3 * scale
 
 
-def _euler_from_quaternion_batch(q, out, i, j, k, intrinsic, scale):
+def _euler_from_quaternion_batch(q, out, convention, scale):
     """Batch schedule of ``_euler_from_quaternion_kernel`` (see ``run_staged``)."""
     fq, fo = q.reshape(-1, 4), out.reshape(-1, 3)
     return run_staged(
         fq.shape[0], 3,
-        lambda a, b, y, x: _euler_arguments_kernel(fq[a:b], y, x, i, j, k, intrinsic),
+        lambda a, b, y, x: _euler_arguments_kernel(fq[a:b], y, x, convention),
         atan2_in_place,
-        lambda a, b, t, x: _euler_from_half_angles_kernel(t, x, fo[a:b], i, j, k, intrinsic, scale))
+        lambda a, b, t, x: _euler_from_half_angles_kernel(t, x, fo[a:b], convention, scale))
 
 
 @jit
-def _singularity_margin_kernel(q, out, i, j, k, intrinsic):
+def _singularity_margin_kernel(q, out, convention):
+    i, j, k, intrinsic = unpack_convention(convention)
     fq, fo = q.reshape(-1, 4), out.reshape(-1)
     for s in range(fq.shape[0]):
         bad = quaternion_status(fq, s, 0)
@@ -243,21 +254,27 @@ def _singularity_margin_kernel(q, out, i, j, k, intrinsic):
 
 # ------------------------------------------------------------ public API
 
-_KERNEL_ARGUMENTS = {name: spec.axes + (spec.intrinsic,) for name, spec in SEQUENCE_TABLE.items()}
+def convention_code(spec):
+    """One integer for the kernels: ``i | j << 2 | k << 4 | intrinsic << 6``."""
+    i, j, k = spec.axes
+    return i | j << 2 | k << 4 | int(spec.intrinsic) << 6
 
 
-def _sequence_arguments(seq):
-    """Kernel arguments ``(i, j, k, intrinsic)`` of ``seq``; ValueError if invalid."""
+_CONVENTIONS = {name: convention_code(spec) for name, spec in SEQUENCE_TABLE.items()}
+
+
+def _convention(seq):
+    """The kernels' convention code of ``seq``; ValueError if it is not one of the 24."""
     try:
-        return _KERNEL_ARGUMENTS[seq]
+        return _CONVENTIONS[seq]
     except (KeyError, TypeError):
         parse_sequence(seq)  # raises the explanatory ValueError
         raise
 
 
 def _from_angles(angles, seq, degrees, out_trailing):
-    return call_unary(_from_euler_kernel, angles, 'angles', (3,), out_trailing, *_sequence_arguments(seq),
-                      _RADIANS_PER_DEGREE if degrees else 1.0)
+    return call_unary(_from_euler_kernel, angles, 'angles', (3,), out_trailing,
+                      _convention(seq), _RADIANS_PER_DEGREE if degrees else 1.0)
 
 
 def quaternion_from_euler(angles, seq, *, degrees=False):
@@ -343,7 +360,7 @@ def euler_from_quaternion(q, seq, *, degrees=False):
     .. [1] E. Bernardes and S. Viollet, PLOS ONE 17(11), e0276302, 2022.
     """
     return call_unary(_euler_from_quaternion_kernel, q, 'q', (4,), (3,),
-                      *_sequence_arguments(seq), _DEGREES_PER_RADIAN if degrees else 1.0,
+                      _convention(seq), _DEGREES_PER_RADIAN if degrees else 1.0,
                       batch_kernel=_euler_from_quaternion_batch)
 
 
@@ -371,11 +388,11 @@ def euler_from_matrix(R, seq, *, degrees=False,
         Angles as in :func:`euler_from_quaternion` (computed through the
         quaternion: no ``asin`` of a matrix element).
     """
-    arguments = _sequence_arguments(seq)
+    convention = _convention(seq)
     q, m = flat_quaternions_from_matrices(R, orthonormal_tolerance, non_orthonormal)
     out = np.empty(m.shape[:-2] + (3,))
     kernel = _euler_from_quaternion_batch if is_batch(q) else _euler_from_quaternion_kernel
-    kernel(q, out, *arguments, _DEGREES_PER_RADIAN if degrees else 1.0)
+    kernel(q, out, convention, _DEGREES_PER_RADIAN if degrees else 1.0)
     return out
 
 
@@ -398,4 +415,4 @@ def euler_singularity_margin(q, seq):
         exact to an ulp even for tiny margins. Compare with a threshold to flag
         samples whose first and third angles are ill-conditioned.
     """
-    return call_unary(_singularity_margin_kernel, q, 'q', (4,), (), *_sequence_arguments(seq))
+    return call_unary(_singularity_margin_kernel, q, 'q', (4,), (), _convention(seq))

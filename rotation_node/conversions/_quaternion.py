@@ -84,15 +84,22 @@ def vector_norm(x, y, z):
 
 
 @jit
-def canonical_unit_quaternion(x, y, z, w):
+def needs_sign_flip(x, y, z, w):
     """
-    Unit quaternion with w > 0, or w == 0 and the first non-zero of x, y, z > 0.
+    Whether ``-q`` is the canonical sign of ``q``.
 
-    The rule makes the output unique: q and -q map to the same result.
+    Canonical: w > 0, or w == 0 and the first non-zero of x, y, z > 0. The rule
+    makes the output unique: q and -q map to the same result.
     """
+    return w < 0.0 or (w == 0.0 and (x < 0.0 or (x == 0.0 and (y < 0.0 or (y == 0.0 and z < 0.0)))))
+
+
+@jit
+def canonical_unit_quaternion(x, y, z, w):
+    """Unit quaternion with the canonical sign (see :func:`needs_sign_flip`)."""
     x, y, z, w = scaled_quaternion(x, y, z, w)
     n = math.sqrt(x * x + y * y + z * z + w * w)
-    if w < 0.0 or (w == 0.0 and (x < 0.0 or (x == 0.0 and (y < 0.0 or (y == 0.0 and z < 0.0))))):
+    if needs_sign_flip(x, y, z, w):
         n = -n
     return x / n, y / n, z / n, w / n + 0.0  # + 0.0 turns w = -0.0 into 0.0
 
@@ -227,10 +234,6 @@ def _rotate_kernel(q, v, out):
 
 # ------------------------------------------------------------ public API
 
-def _result(out):
-    return out[()] if out.ndim == 0 else out
-
-
 # Inputs with at least this many float64 elements use a kernel's batch
 # schedule, where it has one.
 BATCH_SIZE = 4096
@@ -337,6 +340,15 @@ def _run(kernel, inputs, trailings, out, out_trailing, args):
     return -1
 
 
+_FLOAT64 = np.dtype(np.float64)
+
+
+def _single_sample(x, trailing):
+    """Whether ``x`` is one sample that needs no conversion: the fast path of a call."""
+    return (type(x) is np.ndarray and x.shape == trailing and x.dtype == _FLOAT64
+            and x.flags.c_contiguous)
+
+
 def call_unary(kernel, x, name, trailing, out_trailing, *args, batch_kernel=None):
     """
     Validate ``x``, run ``kernel(x, out, *args)``, raise for a bad sample.
@@ -344,17 +356,23 @@ def call_unary(kernel, x, name, trailing, out_trailing, *args, batch_kernel=None
     ``out`` gets ``x``'s leading shape followed by ``out_trailing``; a 0-d
     result is returned as a scalar. Large inputs go to ``batch_kernel``
     (same signature) where one is given, and large batches are split across
-    threads.
+    threads. A single float64 sample skips straight to the kernel, which
+    checks its values.
     """
-    a = float_array(x, name, trailing)
-    out = np.empty(a.shape[:a.ndim - len(trailing)] + out_trailing)
-    if a.size < BATCH_SIZE:
-        bad = kernel(a, out, *args)
+    if _single_sample(x, trailing):
+        out = np.empty(out_trailing)
+        bad = kernel(x, out, *args)
+        a = x
     else:
-        bad = _run(batch_kernel or kernel, (a,), (trailing,), out, out_trailing, args)
+        a = float_array(x, name, trailing)
+        out = np.empty(a.shape[:a.ndim - len(trailing)] + out_trailing)
+        if a.size < BATCH_SIZE:
+            bad = kernel(a, out, *args)
+        else:
+            bad = _run(batch_kernel or kernel, (a,), (trailing,), out, out_trailing, args)
     if bad >= 0:
         raise_sample_error(bad, (name,), (a,), (trailing,))
-    return _result(out)
+    return out[()] if out.ndim == 0 else out
 
 
 def call_binary(kernel, x, y, names, trailings, out_trailing, *args):
@@ -362,15 +380,23 @@ def call_binary(kernel, x, y, names, trailings, out_trailing, *args):
     Validate and broadcast ``x`` and ``y``, run ``kernel(x, y, out, *args)``, raise if bad.
 
     ``out`` gets the common leading shape followed by ``out_trailing``; large
-    batches are split across threads.
+    batches are split across threads; single float64 samples skip the checks
+    that the kernel makes anyway.
     """
-    a, b = broadcast_pair(float_array(x, names[0], trailings[0]),
-                          float_array(y, names[1], trailings[1]), *trailings)
-    out = np.empty(a.shape[:a.ndim - len(trailings[0])] + out_trailing)
-    bad = _run(kernel, (a, b), trailings, out, out_trailing, args)
+    if type(y) is float and trailings[1] == ():   # e.g. one axis and its angle
+        y = np.array(y)
+    if _single_sample(x, trailings[0]) and _single_sample(y, trailings[1]):
+        a, b = x, y
+        out = np.empty(out_trailing)
+        bad = kernel(a, b, out, *args)
+    else:
+        a, b = broadcast_pair(float_array(x, names[0], trailings[0]),
+                              float_array(y, names[1], trailings[1]), *trailings)
+        out = np.empty(a.shape[:a.ndim - len(trailings[0])] + out_trailing)
+        bad = _run(kernel, (a, b), trailings, out, out_trailing, args)
     if bad >= 0:
         raise_sample_error(bad, names, (a, b), trailings)
-    return _result(out)
+    return out[()] if out.ndim == 0 else out
 
 
 def quaternion_product(p, q):
