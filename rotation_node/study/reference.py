@@ -11,8 +11,11 @@ Errors are geodesic angles between rotations,
 ``2 atan2(|vec(p* q)|, |scalar(p* q)|)`` (NUMERICS.md; never ``acos``, which
 floors at ~1e-8), reported in units of :data:`EPS`.
 
-Only the study uses this module (mpmath is a study and test dependency, never a
-runtime one); ``test/mp_reference.py`` holds the same formulas for the tests.
+The study and the tests use this module (mpmath is a study and test
+dependency, never a runtime one): the per-sample functions (``product``,
+``quaternion_from_rotation_vector``, ``quaternion_from_euler``,
+``nearest_rotation_quaternion``, ``distance``) expect to run at
+:data:`DIGITS` digits (``mpmath.workdps``), the batch functions set it.
 """
 import math
 
@@ -29,7 +32,7 @@ EPS32 = float(np.finfo(np.float32).eps)
 _mpf = mpmath.mpf
 
 
-def _product(p, q):
+def product(p, q):
     """Hamilton product ``p (x) q`` of two mp quaternions (x, y, z, w)."""
     px, py, pz, pw = p
     qx, qy, qz, qw = q
@@ -39,12 +42,13 @@ def _product(p, q):
             pw * qw - px * qx - py * qy - pz * qz)
 
 
-def _normalized(q):
+def normalized(q):
+    """The unit quaternion ``q / |q|`` (mp)."""
     norm = mpmath.sqrt(sum(c * c for c in q))
     return tuple(c / norm for c in q)
 
 
-def _exact(values):
+def exact(values):
     """Return the values (any float dtype) as exact mp numbers."""
     return [_mpf(float(v)) for v in values]
 
@@ -55,6 +59,42 @@ def _reference(rows, build):
     finite = np.isfinite(rows.reshape(len(rows), -1)).all(axis=1)
     with mpmath.workdps(DIGITS):
         return [build(row) if ok else None for row, ok in zip(rows, finite)]
+
+
+def quaternion_from_rotation_vector(v):
+    """Exact quaternion of one rotation vector (exponential map)."""
+    vector = exact(v)
+    angle = mpmath.sqrt(sum(c * c for c in vector))
+    if not angle:
+        return (_mpf(0), _mpf(0), _mpf(0), _mpf(1))
+    k = mpmath.sin(angle / 2) / angle
+    return tuple(c * k for c in vector) + (mpmath.cos(angle / 2),)
+
+
+def quaternion_from_euler(angles, seq):
+    """Exact quaternion of one triple of Euler angles of ``seq``."""
+    factors = []
+    for axis, angle in zip(seq.lower(), exact(angles)):
+        factor = [_mpf(0), _mpf(0), _mpf(0), mpmath.cos(angle / 2)]
+        factor['xyz'.index(axis)] = mpmath.sin(angle / 2)
+        factors.append(factor)
+    if seq.islower():
+        factors.reverse()
+    return product(product(factors[0], factors[1]), factors[2])
+
+
+def nearest_rotation_quaternion(matrix):
+    """Exact quaternion of the rotation nearest to one 3x3 float matrix (det > 0)."""
+    return _quaternion_from_orthonormal(_nearest_rotation([exact(row) for row in matrix]))
+
+
+def distance(p, q):
+    """Geodesic angle between two mp quaternions of any norm; None if one is zero."""
+    e = product((-p[0], -p[1], -p[2], p[3]), q)
+    vector = mpmath.sqrt(e[0] ** 2 + e[1] ** 2 + e[2] ** 2)
+    if not (vector or e[3]):
+        return None
+    return 2 * mpmath.atan2(vector, abs(e[3]))
 
 
 def quaternions(q):
@@ -73,8 +113,8 @@ def quaternions(q):
 
     """
     def build(row):
-        values = _exact(row)
-        return _normalized(values) if any(values) else None
+        values = exact(row)
+        return normalized(values) if any(values) else None
     return _reference(q, build)
 
 
@@ -93,14 +133,7 @@ def quaternions_from_rotation_vectors(v):
         Unit quaternions; None for rows with a NaN or Inf.
 
     """
-    def build(row):
-        vector = _exact(row)
-        angle = mpmath.sqrt(sum(c * c for c in vector))
-        if not angle:
-            return (_mpf(0), _mpf(0), _mpf(0), _mpf(1))
-        k = mpmath.sin(angle / 2) / angle
-        return tuple(c * k for c in vector) + (mpmath.cos(angle / 2),)
-    return _reference(v, build)
+    return _reference(v, quaternion_from_rotation_vector)
 
 
 def quaternions_from_euler(angles, seq):
@@ -121,19 +154,7 @@ def quaternions_from_euler(angles, seq):
         Unit quaternions; None for rows with a NaN or Inf.
 
     """
-    axes = ['xyz'.index(a) for a in seq.lower()]
-
-    def build(row):
-        factors = []
-        for axis, angle in zip(axes, _exact(row)):
-            half = angle / 2
-            factor = [_mpf(0), _mpf(0), _mpf(0), mpmath.cos(half)]
-            factor[axis] = mpmath.sin(half)
-            factors.append(factor)
-        if seq.islower():
-            factors.reverse()
-        return _product(_product(factors[0], factors[1]), factors[2])
-    return _reference(angles, build)
+    return _reference(angles, lambda row: quaternion_from_euler(row, seq))
 
 
 def _nearest_rotation(m):
@@ -171,7 +192,7 @@ def _quaternion_from_orthonormal(x):
     else:
         q = (x[0][2] + x[2][0], x[1][2] + x[2][1], 1 + x[2][2] - x[0][0] - x[1][1],
              x[1][0] - x[0][1])
-    return _normalized(q)
+    return normalized(q)
 
 
 def quaternions_from_nearest_rotation(m):
@@ -192,10 +213,7 @@ def quaternions_from_nearest_rotation(m):
         Unit quaternions; None for matrices with a NaN or Inf.
 
     """
-    def build(matrix):
-        rows = [_exact(row) for row in matrix]
-        return _quaternion_from_orthonormal(_nearest_rotation(rows))
-    return _reference(m, build)
+    return _reference(m, nearest_rotation_quaternion)
 
 
 def errors_in_eps(estimates, truths):
@@ -219,8 +237,7 @@ def errors_in_eps(estimates, truths):
         for index, (p, q) in enumerate(zip(estimates, truths)):
             if p is None:
                 continue
-            e = _product((-p[0], -p[1], -p[2], p[3]), q)
-            vector = mpmath.sqrt(e[0] ** 2 + e[1] ** 2 + e[2] ** 2)
-            if vector or e[3]:
-                errors[index] = float(2 * mpmath.atan2(vector, abs(e[3]))) / EPS
+            angle = distance(p, q)
+            if angle is not None:
+                errors[index] = float(angle) / EPS
     return errors
