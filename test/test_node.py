@@ -406,3 +406,27 @@ def test_namespace_and_input_remapping(namespaced, rotation):
 def test_ctrl_c_exits_cleanly(namespaced):
     assert namespaced.stop() == 0
     assert 'Traceback' not in namespaced.process.output
+
+
+def test_issue_warnings_are_throttled_per_reason():
+    """A flood of one problem logs it once per period and cannot hide another problem."""
+    import rclpy
+    from rclpy.context import Context
+    from rotation_node.node import RotationNode
+    context = Context()
+    rclpy.init(context=context)
+    try:
+        node = RotationNode(context=context)
+        logged = []
+
+        class Logger:
+            def warning(self, text):
+                logged.append(text)
+        node.get_logger = Logger
+        for _ in range(1000):
+            node._log_issue('non_unit_quaternion', 'normalised')
+        node._log_issue('zero_quaternion', 'dropped')
+        assert logged == ['normalised [non_unit_quaternion]', 'dropped [zero_quaternion]']
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
