@@ -23,6 +23,7 @@ from rcl_interfaces.msg import (
     FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult)
 from rclpy.exceptions import (
     InvalidParameterTypeException, InvalidParameterValueException)
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -95,7 +96,11 @@ class RotationNode(Node):
             raise ParameterError(str(exc)) from None
         warm_up_conversions()
         self._configure(None, self.params)
-        self._diagnostics_publisher = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        # No QoS event handlers on the diagnostics publisher: each handler is one more
+        # entity that rclpy's executor re-examines at every wake-up, i.e. every message.
+        self._diagnostics_publisher = self.create_publisher(
+            DiagnosticArray, '/diagnostics', 10,
+            event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
         self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
 
     # Parameters --------------------------------------------------------------------
