@@ -95,13 +95,20 @@ def needs_sign_flip(x, y, z, w):
 
 
 @jit
-def canonical_unit_quaternion(x, y, z, w):
-    """Unit quaternion with the canonical sign (see :func:`needs_sign_flip`)."""
+def unit_quaternion(x, y, z, w):
+    """``q / |q|`` with its sign kept; any non-zero norm (exact power-of-two rescaling first)."""
     x, y, z, w = scaled_quaternion(x, y, z, w)
     n = math.sqrt(x * x + y * y + z * z + w * w)
+    return x / n, y / n, z / n, w / n
+
+
+@jit
+def canonical_unit_quaternion(x, y, z, w):
+    """Unit quaternion with the canonical sign (see :func:`needs_sign_flip`)."""
+    x, y, z, w = unit_quaternion(x, y, z, w)
     if needs_sign_flip(x, y, z, w):
-        n = -n
-    return x / n, y / n, z / n, w / n + 0.0  # + 0.0 turns w = -0.0 into 0.0
+        x, y, z, w = -x, -y, -z, -w
+    return x, y, z, w + 0.0  # + 0.0 turns w = -0.0 into 0.0
 
 
 @jit

@@ -22,17 +22,9 @@ import math
 
 from ..conversions._matrix import matrix_defect
 from ..conversions._quaternion import (call_binary, first_status, jit, product, quaternion_status,
-                                       scaled_quaternion, status, vector_status)
+                                       status, unit_quaternion, vector_status)
 from ..conversions._validation import NON_FINITE, OK
 from ._validation import is_world_frame
-
-
-@jit
-def unit_quaternion(x, y, z, w):
-    """``q / |q|`` with its sign kept; any non-zero norm (exact power-of-two rescaling first)."""
-    x, y, z, w = scaled_quaternion(x, y, z, w)
-    n = math.sqrt(x * x + y * y + z * z + w * w)
-    return x / n, y / n, z / n, w / n
 
 
 # ----------------------------------------------------------------- kernels
