@@ -93,3 +93,33 @@ def test_float32_roundoff_passes_default_tolerance_in_raise_mode(rng):
     m = rc.matrix_from_quaternion(rng.normal(size=(20, 4))).astype(np.float32)
     q = rc.quaternion_from_matrix(m, non_orthonormal='raise')
     assert q.shape == (20, 4)
+
+
+@pytest.mark.parametrize('count', [1, 7, 3000])   # one matrix, a few, a batch (>= BATCH_SAMPLES)
+def test_every_from_matrix_conversion_is_the_quaternion_path(rng, count):
+    # Exact, slightly noisy (Newton-Schulz) and far-from-orthonormal (eigenvector method) matrices:
+    # the fused single call, its fallback and the batch route must all give the same answers.
+    exact = rc.matrix_from_quaternion(rng.normal(size=(count, 4)))
+    kinds = [exact, exact + rng.normal(scale=1e-9, size=exact.shape),
+             exact + rng.normal(scale=0.4, size=exact.shape)]
+    for m in kinds:
+        m = m[np.linalg.det(m) > 0]
+        if count == 1:
+            m = m.reshape(-1, 3, 3)[:1].reshape(3, 3) if m.size else exact[0]
+        q = rc.quaternion_from_matrix(m)
+        assert np.array_equal(rc.euler_from_matrix(m, 'ZYX', degrees=True),
+                              rc.euler_from_quaternion(q, 'ZYX', degrees=True))
+        assert np.array_equal(rc.rotation_vector_from_matrix(m), rc.rotation_vector_from_quaternion(q))
+        for got, expected in zip(rc.axis_angle_from_matrix(m), rc.axis_angle_from_quaternion(q)):
+            assert np.array_equal(got, expected)
+
+
+def test_from_matrix_conversions_name_the_bad_matrix():
+    m = np.stack([np.eye(3)] * 3)
+    m[2, 1, 1] = np.nan
+    for function in (rc.rotation_vector_from_matrix, rc.axis_angle_from_matrix,
+                     lambda r: rc.euler_from_matrix(r, 'xyz')):
+        with pytest.raises(ValueError, match=r'`R` at index \(2,\) has a NaN'):
+            function(m)
+    with pytest.raises(ValueError, match="`non_orthonormal` to be 'project' or 'raise', got 'snap'"):
+        rc.euler_from_matrix(np.eye(3), 'xyz', non_orthonormal='snap')

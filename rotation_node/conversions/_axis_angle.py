@@ -15,11 +15,13 @@ import math
 
 import numpy as np
 
-from ._matrix import DEFAULT_ORTHONORMAL_TOLERANCE, flat_quaternions_from_matrices, store_rotation
-from ._quaternion import (call_binary, call_unary, half_angle_atan2, jit, needs_sign_flip,
-                          quaternion_status, scaled_quaternion, status, vector_norm,
-                          vector_status)
-from ._validation import NON_FINITE, ZERO_NORM
+from ._matrix import (DEFAULT_ORTHONORMAL_TOLERANCE, convert_matrices,
+                      quaternion_from_matrix_kernel, store_rotation)
+from ._quaternion import (STAGE_CHUNK, call_binary, call_unary, half_angle_atan2, jit,
+                          needs_sign_flip, quaternion_status, scaled_quaternion, status,
+                          vector_defect, vector_norm, vector_status)
+from ._trigonometry import sin_cos, sin_cos_in_place_kernel
+from ._validation import NON_FINITE, OK, ZERO_NORM
 
 
 @jit
@@ -51,33 +53,17 @@ def axis_angle_quaternion(ax, ay, az, half_angle_sin, half_angle_cos):
 
 
 @jit
-def half_angle_sin_cos(angle):
-    """
-    ``sin(angle/2)`` and ``cos(angle/2)`` from one ``tan(angle/4)`` (one libm call, not two).
-
-    With ``t = tan(angle/4)``: ``sin = 2t / (1 + t^2)``, ``cos = (1 - t^2) / (1 + t^2)``.
-    Both are within a few ulps in absolute terms, which is what a unit
-    quaternion's rotation depends on (``1 - t^2`` cancels only where ``cos``
-    itself is near 0). ``t^2`` cannot overflow: ``angle/4`` is never within
-    1e-154 of a pole of ``tan`` in float64.
-    """
-    t = math.tan(0.25 * angle)
-    tt = t * t
-    return 2.0 * t / (1.0 + tt), (1.0 - tt) / (1.0 + tt)
-
-
-@jit
 def quaternion_from_rotation_vector_scalar(vx, vy, vz):
     """Exponential map: unit canonical quaternion of the rotation vector ``v``."""
     theta = vector_norm(vx, vy, vz)
-    half_sin, half_cos = half_angle_sin_cos(theta)
+    half_sin, half_cos = sin_cos(0.5 * theta)
     return rotation_vector_quaternion(vx, vy, vz, theta, half_sin, half_cos)
 
 
 @jit
 def quaternion_from_axis_angle_scalar(ax, ay, az, angle):
     """Unit canonical quaternion of a rotation by ``angle`` about a non-zero axis."""
-    half_sin, half_cos = half_angle_sin_cos(angle)
+    half_sin, half_cos = sin_cos(0.5 * angle)
     return axis_angle_quaternion(ax, ay, az, half_sin, half_cos)
 
 
@@ -101,30 +87,53 @@ def rotation_vector_from_quaternion_scalar(x, y, z, w):
 
 
 # ----------------------------------------------------------------- kernels
-# The exponential-map kernels write quaternions or matrices, as ``out`` is
-# shaped (..., 4) or (..., 3, 3). (numpy's float64 sin/cos are no faster than
-# libm's here, so unlike Euler angles these have no staged batch schedule.)
+# The exponential maps have two schedules with the same formulas: one fused
+# loop for small inputs, and for batches a staged one that collects the half
+# angles of a chunk, takes their sines and cosines in one vectorised loop
+# (``sin_cos_in_place_kernel``) and then builds the rotations.
 
 @jit
-def _axis_angle_status(fa, ft, s):
-    bad = vector_status(fa, s, 0)
-    if bad < 0 and fa[s, 0] == 0.0 and fa[s, 1] == 0.0 and fa[s, 2] == 0.0:
-        bad = status(s, 0, ZERO_NORM)
-    if bad < 0 and not math.isfinite(ft[s]):
-        bad = status(s, 1, NON_FINITE)
-    return bad
+def _axis_angle_status(ax, ay, az, angle, s):
+    """Status of sample ``s``: axis (argument 0) finite and non-zero, angle (1) finite."""
+    code = vector_defect(ax, ay, az)
+    if code == OK and ax == 0.0 and ay == 0.0 and az == 0.0:
+        code = ZERO_NORM
+    if code != OK:
+        return status(s, 0, code)
+    return -1 if math.isfinite(angle) else status(s, 1, NON_FINITE)
 
 
 @jit
 def _from_axis_angle_kernel(axis, angle, out):
-    fa, ft = axis.reshape(-1, 3), angle.reshape(-1)
+    fa, ft = axis.reshape(-1, 3), np.asarray(angle).reshape(-1)   # angle may be a float
     fo = out.reshape(fa.shape[0], -1)
     for s in range(fa.shape[0]):
-        bad = _axis_angle_status(fa, ft, s)
+        bad = _axis_angle_status(fa[s, 0], fa[s, 1], fa[s, 2], ft[s], s)
         if bad >= 0:
             return bad
         x, y, z, w = quaternion_from_axis_angle_scalar(fa[s, 0], fa[s, 1], fa[s, 2], ft[s])
         store_rotation(fo, s, x, y, z, w)
+    return -1
+
+
+@jit
+def _from_axis_angle_batch_kernel(axis, angle, out):
+    fa, ft = axis.reshape(-1, 3), np.asarray(angle).reshape(-1)   # angle may be a float
+    n = fa.shape[0]
+    fo = out.reshape(n, -1)
+    half_sin, half_cos = np.empty(min(n, STAGE_CHUNK)), np.empty(min(n, STAGE_CHUNK))
+    for start in range(0, n, STAGE_CHUNK):
+        stop = min(n, start + STAGE_CHUNK)
+        for s in range(start, stop):
+            bad = _axis_angle_status(fa[s, 0], fa[s, 1], fa[s, 2], ft[s], s)
+            if bad >= 0:
+                return bad
+            half_sin[s - start] = 0.5 * ft[s]
+        sin_cos_in_place_kernel(half_sin[:stop - start], half_cos[:stop - start])
+        for s in range(start, stop):
+            x, y, z, w = axis_angle_quaternion(fa[s, 0], fa[s, 1], fa[s, 2],
+                                               half_sin[s - start], half_cos[s - start])
+            store_rotation(fo, s, x, y, z, w)
     return -1
 
 
@@ -138,6 +147,28 @@ def _from_rotation_vector_kernel(v, out):
             return bad
         x, y, z, w = quaternion_from_rotation_vector_scalar(fv[s, 0], fv[s, 1], fv[s, 2])
         store_rotation(fo, s, x, y, z, w)
+    return -1
+
+
+@jit
+def _from_rotation_vector_batch_kernel(v, out):
+    fv = v.reshape(-1, 3)
+    n = fv.shape[0]
+    fo = out.reshape(n, -1)
+    half_sin, half_cos = np.empty(min(n, STAGE_CHUNK)), np.empty(min(n, STAGE_CHUNK))
+    for start in range(0, n, STAGE_CHUNK):
+        stop = min(n, start + STAGE_CHUNK)
+        for s in range(start, stop):
+            bad = vector_status(fv, s, 0)
+            if bad >= 0:
+                return bad
+            half_sin[s - start] = 0.5 * vector_norm(fv[s, 0], fv[s, 1], fv[s, 2])
+        sin_cos_in_place_kernel(half_sin[:stop - start], half_cos[:stop - start])
+        for s in range(start, stop):
+            vx, vy, vz = fv[s, 0], fv[s, 1], fv[s, 2]
+            x, y, z, w = rotation_vector_quaternion(vx, vy, vz, vector_norm(vx, vy, vz),
+                                                    half_sin[s - start], half_cos[s - start])
+            store_rotation(fo, s, x, y, z, w)
     return -1
 
 
@@ -167,10 +198,29 @@ def rotation_vector_kernel(q, out):
     return -1
 
 
+@jit
+def _axis_angle_from_matrix_kernel(m, out, tolerance):
+    """``quaternion_from_matrix_kernel`` then axis-angle, in one call (see ``convert_matrices``)."""
+    q = np.empty((m.size // 9, 4))
+    bad = quaternion_from_matrix_kernel(m, q, tolerance)
+    return bad if bad != -1 else axis_angle_kernel(q, out)
+
+
+@jit
+def _rotation_vector_from_matrix_kernel(m, out, tolerance):
+    """``quaternion_from_matrix_kernel`` then the logarithm map, in one call."""
+    q = np.empty((m.size // 9, 4))
+    bad = quaternion_from_matrix_kernel(m, q, tolerance)
+    return bad if bad != -1 else rotation_vector_kernel(q, out)
+
+
 # ------------------------------------------------------------ public API
 
-def _scalar(angle):
-    return angle[()] if angle.ndim == 0 else angle
+def _split_axis_angle(packed):
+    """``(axis, angle)`` from ``(..., 4)`` rows ``(x, y, z, angle)``; one sample gives a scalar angle."""
+    if packed.ndim == 1:
+        return packed[:3], packed[3]
+    return packed[..., :3], packed[..., 3]
 
 
 def quaternion_from_axis_angle(axis, angle):
@@ -195,7 +245,7 @@ def quaternion_from_axis_angle(axis, angle):
         Wrong shape, NaN/Inf, or a zero axis.
     """
     return call_binary(_from_axis_angle_kernel, axis, angle, ('axis', 'angle'), ((3,), ()),
-                       (4,))
+                       (4,), batch_kernel=_from_axis_angle_batch_kernel)
 
 
 def matrix_from_axis_angle(axis, angle):
@@ -215,7 +265,7 @@ def matrix_from_axis_angle(axis, angle):
         Body-to-world rotation matrices.
     """
     return call_binary(_from_axis_angle_kernel, axis, angle, ('axis', 'angle'), ((3,), ()),
-                       (3, 3))
+                       (3, 3), batch_kernel=_from_axis_angle_batch_kernel)
 
 
 def axis_angle_from_quaternion(q):
@@ -235,7 +285,7 @@ def axis_angle_from_quaternion(q):
         Angles in [0, pi], ``2 atan2(|q_v|, |q_s|)``: ~1 ulp for every angle.
     """
     packed = call_unary(axis_angle_kernel, q, 'q', (4,), (4,))
-    return packed[..., :3], _scalar(packed[..., 3])
+    return _split_axis_angle(packed)
 
 
 def axis_angle_from_matrix(R, *, orthonormal_tolerance=DEFAULT_ORTHONORMAL_TOLERANCE,
@@ -258,10 +308,9 @@ def axis_angle_from_matrix(R, *, orthonormal_tolerance=DEFAULT_ORTHONORMAL_TOLER
     angle : ndarray, shape (...)
         Angles in [0, pi].
     """
-    q, m = flat_quaternions_from_matrices(R, orthonormal_tolerance, non_orthonormal)
-    packed = np.empty(m.shape[:-2] + (4,))
-    axis_angle_kernel(q, packed)
-    return packed[..., :3], _scalar(packed[..., 3])
+    packed = convert_matrices(R, orthonormal_tolerance, non_orthonormal, (4,),
+                              _axis_angle_from_matrix_kernel, axis_angle_kernel)
+    return _split_axis_angle(packed)
 
 
 def quaternion_from_rotation_vector(v):
@@ -279,7 +328,8 @@ def quaternion_from_rotation_vector(v):
         Unit quaternions (x, y, z, w), canonical; exact to ~1 ulp from
         ``|v| = 0`` (identity) up.
     """
-    return call_unary(_from_rotation_vector_kernel, v, 'v', (3,), (4,))
+    return call_unary(_from_rotation_vector_kernel, v, 'v', (3,), (4,),
+                      batch_kernel=_from_rotation_vector_batch_kernel)
 
 
 def matrix_from_rotation_vector(v):
@@ -297,7 +347,8 @@ def matrix_from_rotation_vector(v):
         Body-to-world rotation matrices. Computed through the quaternion, so
         no ``(1 - cos t) / t^2`` cancellation.
     """
-    return call_unary(_from_rotation_vector_kernel, v, 'v', (3,), (3, 3))
+    return call_unary(_from_rotation_vector_kernel, v, 'v', (3,), (3, 3),
+                      batch_kernel=_from_rotation_vector_batch_kernel)
 
 
 def rotation_vector_from_quaternion(q):
@@ -336,7 +387,5 @@ def rotation_vector_from_matrix(R, *, orthonormal_tolerance=DEFAULT_ORTHONORMAL_
         Rotation vectors with norm in [0, pi]; exact near pi, where ``acos``
         of the trace loses everything.
     """
-    q, m = flat_quaternions_from_matrices(R, orthonormal_tolerance, non_orthonormal)
-    out = np.empty(m.shape[:-2] + (3,))
-    rotation_vector_kernel(q, out)
-    return out
+    return convert_matrices(R, orthonormal_tolerance, non_orthonormal, (3,),
+                            _rotation_vector_from_matrix_kernel, rotation_vector_kernel)

@@ -25,9 +25,11 @@ import math
 
 import numpy as np
 
-from ._matrix import DEFAULT_ORTHONORMAL_TOLERANCE, flat_quaternions_from_matrices, store_rotation
-from ._quaternion import (atan2_in_place, call_unary, is_batch, jit, product, quaternion_status,
+from ._matrix import (DEFAULT_ORTHONORMAL_TOLERANCE, convert_matrices,
+                      quaternion_from_matrix_kernel, store_rotation)
+from ._quaternion import (atan2_in_place, call_unary, jit, product, quaternion_status,
                           run_staged, scaled_quaternion, vector_status)
+from ._trigonometry import sin_cos
 from ._validation import SEQUENCE_TABLE, parse_sequence
 
 _TWO_PI = 2.0 * math.pi
@@ -38,8 +40,7 @@ _RADIANS_PER_DEGREE = math.pi / 180.0
 @jit
 def _elementary(axis, angle):
     """Quaternion of a rotation by ``angle`` about coordinate axis ``axis`` (0, 1, 2)."""
-    s = math.sin(0.5 * angle)
-    c = math.cos(0.5 * angle)
+    s, c = sin_cos(0.5 * angle)
     if axis == 0:
         return s, 0.0, 0.0, c
     if axis == 1:
@@ -240,6 +241,14 @@ def _euler_from_quaternion_batch(q, out, convention, scale):
 
 
 @jit
+def _euler_from_matrix_kernel(m, out, tolerance, convention, scale):
+    """``quaternion_from_matrix_kernel`` then Euler angles, in one call (see ``convert_matrices``)."""
+    q = np.empty((m.size // 9, 4))
+    bad = quaternion_from_matrix_kernel(m, q, tolerance)
+    return bad if bad != -1 else _euler_from_quaternion_kernel(q, out, convention, scale)
+
+
+@jit
 def _singularity_margin_kernel(q, out, convention):
     i, j, k, intrinsic = unpack_convention(convention)
     fq, fo = q.reshape(-1, 4), out.reshape(-1)
@@ -388,12 +397,10 @@ def euler_from_matrix(R, seq, *, degrees=False,
         Angles as in :func:`euler_from_quaternion` (computed through the
         quaternion: no ``asin`` of a matrix element).
     """
-    convention = _convention(seq)
-    q, m = flat_quaternions_from_matrices(R, orthonormal_tolerance, non_orthonormal)
-    out = np.empty(m.shape[:-2] + (3,))
-    kernel = _euler_from_quaternion_batch if is_batch(q) else _euler_from_quaternion_kernel
-    kernel(q, out, convention, _DEGREES_PER_RADIAN if degrees else 1.0)
-    return out
+    return convert_matrices(R, orthonormal_tolerance, non_orthonormal, (3,),
+                            _euler_from_matrix_kernel, _euler_from_quaternion_kernel,
+                            _convention(seq), _DEGREES_PER_RADIAN if degrees else 1.0,
+                            batch_kernel=_euler_from_quaternion_batch)
 
 
 def euler_singularity_margin(q, seq):

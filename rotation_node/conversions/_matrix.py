@@ -26,8 +26,8 @@ import math
 
 import numpy as np
 
-from ._quaternion import (call_unary, canonical_kernel, canonical_unit_quaternion, jit,
-                          quaternion_status, scaled_quaternion, status)
+from ._quaternion import (call_unary, canonical_kernel, canonical_unit_quaternion, is_batch,
+                          is_single_sample, jit, quaternion_status, scaled_quaternion, status)
 from ._validation import (NON_FINITE, NOT_ORTHONORMAL, NOT_ROTATION, OK, float_array,
                           raise_sample_error)
 
@@ -50,9 +50,10 @@ def matrix_entries(x, y, z, w):
 @jit
 def store_matrix(fo, s, x, y, z, w):
     """Write ``R(q)`` into row ``s`` of ``fo`` (shape (n, 9), row-major matrices)."""
-    e = matrix_entries(x, y, z, w)
-    for c in range(9):
-        fo[s, c] = e[c]
+    # One unpacking assignment: indexing the tuple in a loop would spill it
+    # to the stack and cost ~2x the whole kernel.
+    (fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3], fo[s, 4], fo[s, 5],
+     fo[s, 6], fo[s, 7], fo[s, 8]) = matrix_entries(x, y, z, w)
 
 
 @jit
@@ -152,36 +153,36 @@ def _matrix_from_quaternion_kernel(q, out):
 
 
 @jit
-def quaternion_from_matrix_kernel(m, out, tolerance, project):
+def quaternion_from_matrix_kernel(m, out, tolerance):
     """
-    Quaternions of matrices (any leading shape) into ``out`` (n, 4).
+    Quaternions of matrices (any leading shape) into ``out`` (same leading shape, 4).
 
     Returns the status of the first bad sample, or ``-1 - count`` where
     ``count`` rows of ``out`` are NaN: matrices too far from orthonormal for
     Newton-Schulz, left for the eigenvector method. A matrix deviating from
-    orthonormality by more than ``tolerance`` is an error unless ``project``;
+    orthonormality by more than ``tolerance`` is an error (``inf``: none is);
     every matrix deviating by more than rounding is replaced by its nearest
     rotation before Markley's formula is applied.
     """
-    fm = m.reshape(-1, 3, 3)
+    fm, fo = m.reshape(-1, 3, 3), out.reshape(-1, 4)
     count = 0
-    x = np.empty((3, 3))
-    work = np.empty((3, 3))
+    scratch = np.empty((2, 3, 3))   # one allocation: this kernel also serves single matrices
+    x, work = scratch[0], scratch[1]
     for s in range(fm.shape[0]):
         code = matrix_defect(fm[s])
         if code != OK:
             return status(s, 0, code)
         deviation = orthonormality_deviation(fm[s])
-        if deviation > tolerance and not project:
+        if deviation > tolerance:
             return status(s, 0, NOT_ORTHONORMAL)
         if deviation <= EXACT_ORTHONORMAL:
-            out[s, 0], out[s, 1], out[s, 2], out[s, 3] = quaternion_from_orthonormal(fm[s])
+            fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3] = quaternion_from_orthonormal(fm[s])
             continue
         x[:, :] = fm[s]
         if deviation < NEWTON_SCHULZ_LIMIT and newton_schulz_orthonormalize(x, work):
-            out[s, 0], out[s, 1], out[s, 2], out[s, 3] = quaternion_from_orthonormal(x)
+            fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3] = quaternion_from_orthonormal(x)
         else:
-            out[s, :] = np.nan
+            fo[s, :] = np.nan
             count += 1
     return -1 - count
 
@@ -249,28 +250,85 @@ def matrix_from_quaternion(q):
     return call_unary(_matrix_from_quaternion_kernel, q, 'q', (4,), (3, 3))
 
 
-def flat_quaternions_from_matrices(matrix, orthonormal_tolerance, non_orthonormal, name='R'):
-    """
-    Validated quaternions of ``matrix``, flat ``(n, 4)``, and the validated matrix array.
+_PROJECT = {'project': True, 'raise': False}
 
-    Shared by every ``*_from_matrix`` function.
-    """
-    if non_orthonormal not in ('project', 'raise'):
+
+def _kernel_tolerance(orthonormal_tolerance, non_orthonormal):
+    """The kernels' ``tolerance``: the deviation beyond which a matrix is an error."""
+    if type(non_orthonormal) is str and non_orthonormal == 'project' \
+            and orthonormal_tolerance >= 0.0:   # the default, first
+        return math.inf
+    project = _PROJECT.get(non_orthonormal) if type(non_orthonormal) is str else None
+    if project is None:
         raise ValueError(
             f"Expected `non_orthonormal` to be 'project' or 'raise', got {non_orthonormal!r}.")
     if not orthonormal_tolerance >= 0.0:
         raise ValueError(
             f'Expected `orthonormal_tolerance` >= 0, got {orthonormal_tolerance!r}.')
-    m = float_array(matrix, name, (3, 3))
+    return math.inf if project else float(orthonormal_tolerance)
+
+
+def convert_matrices(R, orthonormal_tolerance, non_orthonormal, out_trailing,
+                     fused_kernel, quaternion_kernel, *args, batch_kernel=None):
+    """
+    The body of every ``*_from_matrix`` conversion: a kernel on the quaternions of ``R``.
+
+    Parameters
+    ----------
+    R : array_like, shape (..., 3, 3)
+        The public argument.
+    orthonormal_tolerance, non_orthonormal
+        As in :func:`quaternion_from_matrix` (validated here).
+    out_trailing : tuple of int
+        Trailing shape of the output per matrix.
+    fused_kernel : callable
+        ``fused_kernel(m, out, tolerance, *args)``: both steps in one compiled
+        call (``quaternion_from_matrix_kernel`` then ``quaternion_kernel``), for
+        inputs below ``BATCH_SAMPLES`` matrices, such as a single matrix. Returns a
+        status like ``quaternion_from_matrix_kernel``'s; below -1 (some matrix
+        needs the eigenvector method) the two-step route takes over.
+    quaternion_kernel : callable or None
+        ``quaternion_kernel(q, out, *args)`` on the flat quaternions; None
+        returns the quaternions.
+    batch_kernel : callable, optional
+        Used instead of ``quaternion_kernel`` for ``BATCH_SAMPLES`` matrices or more.
+
+    Returns
+    -------
+    ndarray
+        ``R``'s leading shape followed by ``out_trailing``.
+    """
+    tolerance = _kernel_tolerance(orthonormal_tolerance, non_orthonormal)
+    if is_single_sample(R, (3, 3)):
+        m, shape, batch = R, out_trailing, False
+    else:
+        m = float_array(R, 'R', (3, 3))
+        shape, batch = m.shape[:-2] + out_trailing, is_batch(m, (3, 3))
+    if not batch:
+        out = np.empty(shape)
+        bad = fused_kernel(m, out, tolerance, *args)
+        if bad >= 0:
+            raise_sample_error(bad, ('R',), (m,), ((3, 3),))
+        if bad == -1:
+            return out
+    q = _flat_quaternions(m, tolerance)
+    if quaternion_kernel is None:   # the quaternions are the result
+        return q.reshape(shape)
+    out = np.empty(shape)
+    (batch_kernel if batch_kernel is not None and batch else quaternion_kernel)(q, out, *args)
+    return out
+
+
+def _flat_quaternions(m, tolerance):
+    """Quaternions (n, 4) of the validated matrices ``m``, eigenvector method included."""
     q = np.empty((m.size // 9, 4))
-    bad = quaternion_from_matrix_kernel(m, q, float(orthonormal_tolerance),
-                                        non_orthonormal == 'project')
+    bad = quaternion_from_matrix_kernel(m, q, tolerance)
     if bad >= 0:
-        raise_sample_error(bad, (name,), (m,), ((3, 3),))
+        raise_sample_error(bad, ('R',), (m,), ((3, 3),))
     if bad < -1:
         rows = np.isnan(q[:, 3])
         q[rows] = nearest_rotation_quaternions(m.reshape(-1, 3, 3)[rows])
-    return q, m
+    return q
 
 
 def quaternion_from_matrix(R, *, orthonormal_tolerance=DEFAULT_ORTHONORMAL_TOLERANCE,
@@ -315,7 +373,7 @@ def quaternion_from_matrix(R, *, orthonormal_tolerance=DEFAULT_ORTHONORMAL_TOLER
     .. [2] I. Y. Bar-Itzhack, "New Method for Extracting the Quaternion from a
        Rotation Matrix", JGCD 23(6), 2000.
     """
-    q, m = flat_quaternions_from_matrices(R, orthonormal_tolerance, non_orthonormal)
-    return q.reshape(m.shape[:-2] + (4,))
+    return convert_matrices(R, orthonormal_tolerance, non_orthonormal, (4,),
+                            quaternion_from_matrix_kernel, None)
 
 

@@ -23,7 +23,13 @@ from numba import njit
 
 from ._validation import NON_FINITE, OK, ZERO_NORM, broadcast_pair, float_array, raise_sample_error
 
-jit = njit(cache=True, nogil=True, error_model='numpy')
+# Every compiled function is inlined into its callers (numba IR inlining, not
+# left to LLVM). A helper that is called rather than inlined costs a call per
+# sample and, when an array is live across it (the kernels' inputs and
+# outputs always are), an atomic reference-count increment and decrement per
+# call: 2-4x the whole per-sample cost of most kernels, measured.
+# (Inlined callees cannot be called with ``*args``.)
+jit = njit(cache=True, nogil=True, error_model='numpy', inline='always')
 
 
 @jit
@@ -241,16 +247,18 @@ def _rotate_kernel(q, v, out):
 
 # ------------------------------------------------------------ public API
 
-# Inputs with at least this many float64 elements use a kernel's batch
-# schedule, where it has one.
-BATCH_SIZE = 4096
+# Inputs of at least this many samples use a kernel's batch schedule, where
+# it has one (the same count for every input type, so that a conversion and
+# its route through quaternions agree bit for bit).
+BATCH_SAMPLES = 1024
+
+
+def is_batch(a, trailing):
+    """Whether ``a`` (samples of shape ``trailing``) is large enough for a batch schedule."""
+    return a.size >= BATCH_SAMPLES * math.prod(trailing)
+
 # Samples per chunk of a staged batch: the intermediates stay in cache.
 STAGE_CHUNK = 4096
-
-
-def is_batch(a):
-    """Whether the array ``a`` is large enough for the batch schedule of a kernel."""
-    return a.size >= BATCH_SIZE
 
 
 def run_staged(n, width, first, transcendental, second):
@@ -350,7 +358,7 @@ def _run(kernel, inputs, trailings, out, out_trailing, args):
 _FLOAT64 = np.dtype(np.float64)
 
 
-def _single_sample(x, trailing):
+def is_single_sample(x, trailing):
     """Whether ``x`` is one sample that needs no conversion: the fast path of a call."""
     return (type(x) is np.ndarray and x.shape == trailing and x.dtype == _FLOAT64
             and x.flags.c_contiguous)
@@ -366,14 +374,14 @@ def call_unary(kernel, x, name, trailing, out_trailing, *args, batch_kernel=None
     threads. A single float64 sample skips straight to the kernel, which
     checks its values.
     """
-    if _single_sample(x, trailing):
+    if is_single_sample(x, trailing):
         out = np.empty(out_trailing)
         bad = kernel(x, out, *args)
         a = x
     else:
         a = float_array(x, name, trailing)
         out = np.empty(a.shape[:a.ndim - len(trailing)] + out_trailing)
-        if a.size < BATCH_SIZE:
+        if not is_batch(a, trailing):
             bad = kernel(a, out, *args)
         else:
             bad = _run(batch_kernel or kernel, (a,), (trailing,), out, out_trailing, args)
@@ -382,17 +390,19 @@ def call_unary(kernel, x, name, trailing, out_trailing, *args, batch_kernel=None
     return out[()] if out.ndim == 0 else out
 
 
-def call_binary(kernel, x, y, names, trailings, out_trailing, *args):
+def call_binary(kernel, x, y, names, trailings, out_trailing, *args, batch_kernel=None):
     """
     Validate and broadcast ``x`` and ``y``, run ``kernel(x, y, out, *args)``, raise if bad.
 
     ``out`` gets the common leading shape followed by ``out_trailing``; large
-    batches are split across threads; single float64 samples skip the checks
-    that the kernel makes anyway.
+    inputs go to ``batch_kernel`` where one is given, and large batches are
+    split across threads; single float64 samples skip the checks that the
+    kernel makes anyway.
     """
-    if type(y) is float and trailings[1] == ():   # e.g. one axis and its angle
-        y = np.array(y)
-    if _single_sample(x, trailings[0]) and _single_sample(y, trailings[1]):
+    if is_single_sample(x, trailings[0]) and (
+            is_single_sample(y, trailings[1]) or (trailings[1] == () and isinstance(y, float))):
+        # One sample (a float for a scalar argument, e.g. one axis and its
+        # angle: such kernels take ``np.asarray`` of it).
         a, b = x, y
         out = np.empty(out_trailing)
         bad = kernel(a, b, out, *args)
@@ -400,9 +410,12 @@ def call_binary(kernel, x, y, names, trailings, out_trailing, *args):
         a, b = broadcast_pair(float_array(x, names[0], trailings[0]),
                               float_array(y, names[1], trailings[1]), *trailings)
         out = np.empty(a.shape[:a.ndim - len(trailings[0])] + out_trailing)
-        bad = _run(kernel, (a, b), trailings, out, out_trailing, args)
+        if not is_batch(a, trailings[0]):
+            bad = kernel(a, b, out, *args)
+        else:
+            bad = _run(batch_kernel or kernel, (a, b), trailings, out, out_trailing, args)
     if bad >= 0:
-        raise_sample_error(bad, names, (a, b), trailings)
+        raise_sample_error(bad, names, (a, np.asarray(b)), trailings)
     return out[()] if out.ndim == 0 else out
 
 

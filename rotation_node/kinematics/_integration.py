@@ -120,7 +120,8 @@ def _integrate_kernel(q0, rates, h, out, method):
         out[b, 0, 0], out[b, 0, 1], out[b, 0, 2], out[b, 0, 3] = x, y, z, w
         for k in range(h.shape[0]):
             dx, dy, dz, dw = _increment(method, h[k], rates[b, k])
-            x, y, z, w = canonical_unit_quaternion(*product(x, y, z, w, dx, dy, dz, dw))
+            x, y, z, w = product(x, y, z, w, dx, dy, dz, dw)
+            x, y, z, w = canonical_unit_quaternion(x, y, z, w)
             out[b, k + 1, 0], out[b, k + 1, 1], out[b, k + 1, 2], out[b, k + 1, 3] = x, y, z, w
 
 
