@@ -250,22 +250,15 @@ def matrix_from_quaternion(q):
     return call_unary(_matrix_from_quaternion_kernel, q, 'q', (4,), (3, 3))
 
 
-_PROJECT = {'project': True, 'raise': False}
-
-
 def _kernel_tolerance(orthonormal_tolerance, non_orthonormal):
     """The kernels' ``tolerance``: the deviation beyond which a matrix is an error."""
-    if type(non_orthonormal) is str and non_orthonormal == 'project' \
-            and orthonormal_tolerance >= 0.0:   # the default, first
-        return math.inf
-    project = _PROJECT.get(non_orthonormal) if type(non_orthonormal) is str else None
-    if project is None:
+    if type(non_orthonormal) is not str or non_orthonormal not in ('project', 'raise'):
         raise ValueError(
             f"Expected `non_orthonormal` to be 'project' or 'raise', got {non_orthonormal!r}.")
     if not orthonormal_tolerance >= 0.0:
         raise ValueError(
             f'Expected `orthonormal_tolerance` >= 0, got {orthonormal_tolerance!r}.')
-    return math.inf if project else float(orthonormal_tolerance)
+    return math.inf if non_orthonormal == 'project' else float(orthonormal_tolerance)
 
 
 def convert_matrices(R, orthonormal_tolerance, non_orthonormal, out_trailing,
