@@ -123,3 +123,6 @@ def test_from_matrix_conversions_name_the_bad_matrix():
             function(m)
     with pytest.raises(ValueError, match="`non_orthonormal` to be 'project' or 'raise', got 'snap'"):
         rc.euler_from_matrix(np.eye(3), 'xyz', non_orthonormal='snap')
+    for tolerance in (-1e-6, float('nan'), '1e-6', np.array([1e-6, 1e-3])):
+        with pytest.raises(ValueError, match='`orthonormal_tolerance` to be a number >= 0'):
+            rc.quaternion_from_matrix(np.eye(3), orthonormal_tolerance=tolerance)

@@ -15,10 +15,10 @@ import math
 
 import numpy as np
 
-from ._matrix import (DEFAULT_ORTHONORMAL_TOLERANCE, convert_matrices,
-                      quaternion_from_matrix_kernel, store_rotation)
+from ._matrix import (DEFAULT_ORTHONORMAL_TOLERANCE, EIGENVECTOR_PENDING, convert_matrices,
+                      quaternion_of_matrix, store_rotation)
 from ._quaternion import (STAGE_CHUNK, call_binary, call_unary, half_angle_atan2, jit,
-                          needs_sign_flip, quaternion_status, scaled_quaternion, status,
+                          needs_sign_flip, quaternion_status, samples, scaled_quaternion, status,
                           vector_defect, vector_norm, vector_status)
 from ._trigonometry import sin_cos, sin_cos_in_place_kernel
 from ._validation import NON_FINITE, OK, ZERO_NORM
@@ -105,7 +105,7 @@ def _axis_angle_status(ax, ay, az, angle, s):
 
 @jit
 def _from_axis_angle_kernel(axis, angle, out):
-    fa, ft = axis.reshape(-1, 3), np.asarray(angle).reshape(-1)   # angle may be a float
+    fa, ft = samples(axis, 1), samples(np.asarray(angle), 0)   # angle may be a float
     fo = out.reshape(fa.shape[0], -1)
     for s in range(fa.shape[0]):
         bad = _axis_angle_status(fa[s, 0], fa[s, 1], fa[s, 2], ft[s], s)
@@ -118,7 +118,7 @@ def _from_axis_angle_kernel(axis, angle, out):
 
 @jit
 def _from_axis_angle_batch_kernel(axis, angle, out):
-    fa, ft = axis.reshape(-1, 3), np.asarray(angle).reshape(-1)   # angle may be a float
+    fa, ft = samples(axis, 1), samples(np.asarray(angle), 0)   # angle may be a float
     n = fa.shape[0]
     fo = out.reshape(n, -1)
     half_sin, half_cos = np.empty(min(n, STAGE_CHUNK)), np.empty(min(n, STAGE_CHUNK))
@@ -139,7 +139,7 @@ def _from_axis_angle_batch_kernel(axis, angle, out):
 
 @jit
 def _from_rotation_vector_kernel(v, out):
-    fv = v.reshape(-1, 3)
+    fv = samples(v, 1)
     fo = out.reshape(fv.shape[0], -1)
     for s in range(fv.shape[0]):
         bad = vector_status(fv, s, 0)
@@ -152,7 +152,7 @@ def _from_rotation_vector_kernel(v, out):
 
 @jit
 def _from_rotation_vector_batch_kernel(v, out):
-    fv = v.reshape(-1, 3)
+    fv = samples(v, 1)
     n = fv.shape[0]
     fo = out.reshape(n, -1)
     half_sin, half_cos = np.empty(min(n, STAGE_CHUNK)), np.empty(min(n, STAGE_CHUNK))
@@ -173,45 +173,67 @@ def _from_rotation_vector_batch_kernel(v, out):
 
 
 @jit
+def _store_axis_angle(fo, s, x, y, z, w):
+    """``(axis, angle)`` of ``q`` into row ``s`` of ``fo`` (n, 4)."""
+    fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3] = axis_angle_from_quaternion_scalar(x, y, z, w)
+
+
+@jit
+def _store_rotation_vector(fo, s, x, y, z, w):
+    """The rotation vector of ``q`` into row ``s`` of ``fo`` (n, 3)."""
+    fo[s, 0], fo[s, 1], fo[s, 2] = rotation_vector_from_quaternion_scalar(x, y, z, w)
+
+
+@jit
 def axis_angle_kernel(q, out):
     """``(x, y, z, angle)`` of quaternions into ``out`` (..., 4); returns the status."""
-    fq, fo = q.reshape(-1, 4), out.reshape(-1, 4)
+    fq, fo = samples(q, 1), samples(out, 1)
     for s in range(fq.shape[0]):
         bad = quaternion_status(fq, s, 0)
         if bad >= 0:
             return bad
-        fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3] = axis_angle_from_quaternion_scalar(
-            fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3])
+        _store_axis_angle(fo, s, fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3])
     return -1
 
 
 @jit
 def rotation_vector_kernel(q, out):
     """Rotation vectors of quaternions into ``out`` (..., 3); returns the status."""
-    fq, fo = q.reshape(-1, 4), out.reshape(-1, 3)
+    fq, fo = samples(q, 1), samples(out, 1)
     for s in range(fq.shape[0]):
         bad = quaternion_status(fq, s, 0)
         if bad >= 0:
             return bad
-        fo[s, 0], fo[s, 1], fo[s, 2] = rotation_vector_from_quaternion_scalar(
-            fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3])
+        _store_rotation_vector(fo, s, fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3])
     return -1
 
 
 @jit
 def _axis_angle_from_matrix_kernel(m, out, tolerance):
-    """``quaternion_from_matrix_kernel`` then axis-angle, in one call (see ``convert_matrices``)."""
-    q = np.empty((m.size // 9, 4))
-    bad = quaternion_from_matrix_kernel(m, q, tolerance)
-    return bad if bad != -1 else axis_angle_kernel(q, out)
+    """Axis-angle of matrices, one loop (the fused kernel of ``convert_matrices``)."""
+    fm, fo = samples(m, 2), samples(out, 1)
+    pending = 0
+    for s in range(fm.shape[0]):
+        bad, x, y, z, w = quaternion_of_matrix(fm, s, tolerance)
+        if bad >= 0:
+            return bad
+        pending += bad == EIGENVECTOR_PENDING
+        _store_axis_angle(fo, s, x, y, z, w)
+    return -1 - pending
 
 
 @jit
 def _rotation_vector_from_matrix_kernel(m, out, tolerance):
-    """``quaternion_from_matrix_kernel`` then the logarithm map, in one call."""
-    q = np.empty((m.size // 9, 4))
-    bad = quaternion_from_matrix_kernel(m, q, tolerance)
-    return bad if bad != -1 else rotation_vector_kernel(q, out)
+    """Rotation vectors of matrices, one loop (the fused kernel of ``convert_matrices``)."""
+    fm, fo = samples(m, 2), samples(out, 1)
+    pending = 0
+    for s in range(fm.shape[0]):
+        bad, x, y, z, w = quaternion_of_matrix(fm, s, tolerance)
+        if bad >= 0:
+            return bad
+        pending += bad == EIGENVECTOR_PENDING
+        _store_rotation_vector(fo, s, x, y, z, w)
+    return -1 - pending
 
 
 # ------------------------------------------------------------ public API

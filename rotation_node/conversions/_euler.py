@@ -23,12 +23,10 @@ References
 """
 import math
 
-import numpy as np
-
-from ._matrix import (DEFAULT_ORTHONORMAL_TOLERANCE, convert_matrices,
-                      quaternion_from_matrix_kernel, store_rotation)
+from ._matrix import (DEFAULT_ORTHONORMAL_TOLERANCE, EIGENVECTOR_PENDING, convert_matrices,
+                      quaternion_of_matrix, store_rotation)
 from ._quaternion import (atan2_in_place, call_unary, jit, product, quaternion_status,
-                          run_staged, scaled_quaternion, vector_status)
+                          run_staged, samples, scaled_quaternion, vector_status)
 from ._trigonometry import sin_cos
 from ._validation import SEQUENCE_TABLE, parse_sequence
 
@@ -176,15 +174,17 @@ def singularity_margin_scalar(x, y, z, w, i, j, k, intrinsic):
 
 @jit
 def unpack_convention(convention):
-    """Axes ``(i, j, k)`` and intrinsic flag packed by :func:`convention_code`."""
-    return convention & 3, (convention >> 2) & 3, (convention >> 4) & 3, (convention >> 6) == 1
+    """Axes ``(i, j, k)``, intrinsic flag and degrees flag packed by :func:`convention_code`."""
+    return (convention & 3, (convention >> 2) & 3, (convention >> 4) & 3,
+            (convention >> 6) & 1 == 1, (convention >> 7) == 1)
 
 
 @jit
-def _from_euler_kernel(angles, out, convention, scale):
+def _from_euler_kernel(angles, out, convention):
     """Quaternions or matrices (as ``out`` is (..., 4) or (..., 3, 3)) of Euler angles."""
-    i, j, k, intrinsic = unpack_convention(convention)
-    fa = angles.reshape(-1, 3)
+    i, j, k, intrinsic, degrees = unpack_convention(convention)
+    scale = _RADIANS_PER_DEGREE if degrees else 1.0
+    fa = samples(angles, 1)
     fo = out.reshape(fa.shape[0], -1)
     for s in range(fa.shape[0]):
         bad = vector_status(fa, s, 0)
@@ -197,22 +197,28 @@ def _from_euler_kernel(angles, out, convention, scale):
 
 
 @jit
-def _euler_from_quaternion_kernel(q, out, convention, scale):
-    i, j, k, intrinsic = unpack_convention(convention)
-    fq, fo = q.reshape(-1, 4), out.reshape(-1, 3)
+def _store_euler(fo, s, x, y, z, w, convention):
+    """Euler angles of ``q`` (radians or degrees, as ``convention`` says) into row ``s`` of ``fo``."""
+    i, j, k, intrinsic, degrees = unpack_convention(convention)
+    scale = _DEGREES_PER_RADIAN if degrees else 1.0
+    a1, a2, a3 = euler_from_quaternion_scalar(x, y, z, w, i, j, k, intrinsic)
+    fo[s, 0], fo[s, 1], fo[s, 2] = a1 * scale, a2 * scale, a3 * scale
+
+
+@jit
+def _euler_from_quaternion_kernel(q, out, convention):
+    fq, fo = samples(q, 1), samples(out, 1)
     for s in range(fq.shape[0]):
         bad = quaternion_status(fq, s, 0)
         if bad >= 0:
             return bad
-        a1, a2, a3 = euler_from_quaternion_scalar(fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3],
-                                                  i, j, k, intrinsic)
-        fo[s, 0], fo[s, 1], fo[s, 2] = a1 * scale, a2 * scale, a3 * scale
+        _store_euler(fo, s, fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3], convention)
     return -1
 
 
 @jit
 def _euler_arguments_kernel(fq, y, x, convention):
-    i, j, k, intrinsic = unpack_convention(convention)
+    i, j, k, intrinsic, _ = unpack_convention(convention)
     for s in range(fq.shape[0]):
         bad = quaternion_status(fq, s, 0)
         if bad >= 0:
@@ -223,35 +229,42 @@ def _euler_arguments_kernel(fq, y, x, convention):
 
 
 @jit
-def _euler_from_half_angles_kernel(t, x, fo, convention, scale):
-    i, j, k, intrinsic = unpack_convention(convention)
+def _euler_from_half_angles_kernel(t, x, fo, convention):
+    i, j, k, intrinsic, degrees = unpack_convention(convention)
+    scale = _DEGREES_PER_RADIAN if degrees else 1.0
     for s in range(t.shape[0]):
         a1, a2, a3 = euler_from_half_angles(t[s, 0], t[s, 1], t[s, 2], x[s, 0], i, j, k, intrinsic)
         fo[s, 0], fo[s, 1], fo[s, 2] = a1 * scale, a2 * scale, a3 * scale
 
 
-def _euler_from_quaternion_batch(q, out, convention, scale):
+def _euler_from_quaternion_batch(q, out, convention):
     """Batch schedule of ``_euler_from_quaternion_kernel`` (see ``run_staged``)."""
-    fq, fo = q.reshape(-1, 4), out.reshape(-1, 3)
+    fq, fo = samples(q, 1), samples(out, 1)
     return run_staged(
         fq.shape[0], 3,
         lambda a, b, y, x: _euler_arguments_kernel(fq[a:b], y, x, convention),
         atan2_in_place,
-        lambda a, b, t, x: _euler_from_half_angles_kernel(t, x, fo[a:b], convention, scale))
+        lambda a, b, t, x: _euler_from_half_angles_kernel(t, x, fo[a:b], convention))
 
 
 @jit
-def _euler_from_matrix_kernel(m, out, tolerance, convention, scale):
-    """``quaternion_from_matrix_kernel`` then Euler angles, in one call (see ``convert_matrices``)."""
-    q = np.empty((m.size // 9, 4))
-    bad = quaternion_from_matrix_kernel(m, q, tolerance)
-    return bad if bad != -1 else _euler_from_quaternion_kernel(q, out, convention, scale)
+def _euler_from_matrix_kernel(m, out, tolerance, convention):
+    """Euler angles of matrices, one loop (the fused kernel of ``convert_matrices``)."""
+    fm, fo = samples(m, 2), samples(out, 1)
+    pending = 0
+    for s in range(fm.shape[0]):
+        bad, x, y, z, w = quaternion_of_matrix(fm, s, tolerance)
+        if bad >= 0:
+            return bad
+        pending += bad == EIGENVECTOR_PENDING
+        _store_euler(fo, s, x, y, z, w, convention)
+    return -1 - pending
 
 
 @jit
 def _singularity_margin_kernel(q, out, convention):
-    i, j, k, intrinsic = unpack_convention(convention)
-    fq, fo = q.reshape(-1, 4), out.reshape(-1)
+    i, j, k, intrinsic, _ = unpack_convention(convention)
+    fq, fo = samples(q, 1), samples(out, 0)
     for s in range(fq.shape[0]):
         bad = quaternion_status(fq, s, 0)
         if bad >= 0:
@@ -263,27 +276,29 @@ def _singularity_margin_kernel(q, out, convention):
 
 # ------------------------------------------------------------ public API
 
-def convention_code(spec):
-    """One integer for the kernels: ``i | j << 2 | k << 4 | intrinsic << 6``."""
+def convention_code(spec, degrees=False):
+    """One integer for the kernels: ``i | j << 2 | k << 4 | intrinsic << 6 | degrees << 7``."""
     i, j, k = spec.axes
-    return i | j << 2 | k << 4 | int(spec.intrinsic) << 6
+    return i | j << 2 | k << 4 | int(spec.intrinsic) << 6 | int(degrees) << 7
 
 
 _CONVENTIONS = {name: convention_code(spec) for name, spec in SEQUENCE_TABLE.items()}
+_DEGREES_FLAG = 1 << 7
 
 
-def _convention(seq):
-    """The kernels' convention code of ``seq``; ValueError if it is not one of the 24."""
+def _convention(seq, degrees=False):
+    """The kernels' code of ``seq`` and the angle unit; ValueError if ``seq`` is not one of the 24."""
     try:
-        return _CONVENTIONS[seq]
+        code = _CONVENTIONS[seq]
     except (KeyError, TypeError):
         parse_sequence(seq)  # raises the explanatory ValueError
         raise
+    return (code | _DEGREES_FLAG) if degrees else code
 
 
 def _from_angles(angles, seq, degrees, out_trailing):
     return call_unary(_from_euler_kernel, angles, 'angles', (3,), out_trailing,
-                      _convention(seq), _RADIANS_PER_DEGREE if degrees else 1.0)
+                      _convention(seq, degrees))
 
 
 def quaternion_from_euler(angles, seq, *, degrees=False):
@@ -368,8 +383,7 @@ def euler_from_quaternion(q, seq, *, degrees=False):
     ----------
     .. [1] E. Bernardes and S. Viollet, PLOS ONE 17(11), e0276302, 2022.
     """
-    return call_unary(_euler_from_quaternion_kernel, q, 'q', (4,), (3,),
-                      _convention(seq), _DEGREES_PER_RADIAN if degrees else 1.0,
+    return call_unary(_euler_from_quaternion_kernel, q, 'q', (4,), (3,), _convention(seq, degrees),
                       batch_kernel=_euler_from_quaternion_batch)
 
 
@@ -399,8 +413,7 @@ def euler_from_matrix(R, seq, *, degrees=False,
     """
     return convert_matrices(R, orthonormal_tolerance, non_orthonormal, (3,),
                             _euler_from_matrix_kernel, _euler_from_quaternion_kernel,
-                            _convention(seq), _DEGREES_PER_RADIAN if degrees else 1.0,
-                            batch_kernel=_euler_from_quaternion_batch)
+                            _convention(seq, degrees), batch_kernel=_euler_from_quaternion_batch)
 
 
 def euler_singularity_margin(q, seq):

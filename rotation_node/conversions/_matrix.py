@@ -27,7 +27,8 @@ import math
 import numpy as np
 
 from ._quaternion import (call_unary, canonical_kernel, canonical_unit_quaternion, is_batch,
-                          is_single_sample, jit, quaternion_status, scaled_quaternion, status)
+                          is_single_sample, jit, quaternion_status, samples, scaled_quaternion,
+                          status)
 from ._validation import (NON_FINITE, NOT_ORTHONORMAL, NOT_ROTATION, OK, float_array,
                           raise_sample_error)
 
@@ -71,79 +72,140 @@ EXACT_ORTHONORMAL = 1e-15
 # Newton-Schulz converges for deviations below 1 (singular values in (0, sqrt 3));
 # beyond this the eigenvector method is used instead.
 NEWTON_SCHULZ_LIMIT = 0.5
+# Status of a matrix left for the eigenvector method (see quaternion_of_matrix).
+EIGENVECTOR_PENDING = -2
+
+# The per-matrix functions take a matrix as a 9-tuple of its row-major
+# entries: a single matrix then lives in registers, with no scratch array and
+# no view per step.
 
 
 @jit
-def orthonormality_deviation(m):
-    """Largest absolute element of ``m^T m - I``."""
-    worst = 0.0
-    for a in range(3):
-        for b in range(a, 3):
-            g = m[0, a] * m[0, b] + m[1, a] * m[1, b] + m[2, a] * m[2, b]
-            if a == b:
-                g -= 1.0
-            worst = max(worst, abs(g))
-    return worst
+def matrix_at(fm, s):
+    """Matrix ``s`` of ``fm`` (shape (n, 3, 3)) as a 9-tuple, row-major."""
+    return (fm[s, 0, 0], fm[s, 0, 1], fm[s, 0, 2],
+            fm[s, 1, 0], fm[s, 1, 1], fm[s, 1, 2],
+            fm[s, 2, 0], fm[s, 2, 1], fm[s, 2, 2])
 
 
 @jit
 def matrix_defect(m):
-    """Defect code of a 3x3 matrix: NON_FINITE, NOT_ROTATION (det <= 0) or OK."""
-    for r in range(3):
-        for c in range(3):
-            if not math.isfinite(m[r, c]):
-                return NON_FINITE
-    det = (m[0, 0] * (m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1])
-           - m[0, 1] * (m[1, 0] * m[2, 2] - m[1, 2] * m[2, 0])
-           + m[0, 2] * (m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0]))
+    """Defect code of a matrix (9-tuple): NON_FINITE, NOT_ROTATION (det <= 0) or OK."""
+    m00, m01, m02, m10, m11, m12, m20, m21, m22 = m
+    if not (math.isfinite(m00) and math.isfinite(m01) and math.isfinite(m02)
+            and math.isfinite(m10) and math.isfinite(m11) and math.isfinite(m12)
+            and math.isfinite(m20) and math.isfinite(m21) and math.isfinite(m22)):
+        return NON_FINITE
+    det = (m00 * (m11 * m22 - m12 * m21)
+           - m01 * (m10 * m22 - m12 * m20)
+           + m02 * (m10 * m21 - m11 * m20))
     if not det > 0.0:
         return NOT_ROTATION
     return OK
 
 
 @jit
-def newton_schulz_orthonormalize(x, work):
-    """
-    Replace ``x`` by its orthogonal polar factor (the nearest rotation when det > 0).
+def gram_entries(m):
+    """The six distinct entries of ``m^T m`` (9-tuple): g00, g11, g22, g01, g02, g12."""
+    m00, m01, m02, m10, m11, m12, m20, m21, m22 = m
+    return (m00 * m00 + m10 * m10 + m20 * m20,
+            m01 * m01 + m11 * m11 + m21 * m21,
+            m02 * m02 + m12 * m12 + m22 * m22,
+            m00 * m01 + m10 * m11 + m20 * m21,
+            m00 * m02 + m10 * m12 + m20 * m22,
+            m01 * m02 + m11 * m12 + m21 * m22)
 
-    Iterates ``X <- X (3 I - X^T X) / 2`` (Bjorck and Bowie 1971), which
-    converges quadratically from any deviation below 1; returns whether the
-    deviation fell to rounding level within the iteration budget.
+
+@jit
+def orthonormality_deviation(m):
+    """Largest absolute element of ``m^T m - I`` (9-tuple)."""
+    g00, g11, g22, g01, g02, g12 = gram_entries(m)
+    return max(abs(g00 - 1.0), abs(g11 - 1.0), abs(g22 - 1.0), abs(g01), abs(g02), abs(g12))
+
+
+@jit
+def newton_schulz_step(m):
+    """One step ``X <- X (3 I - X^T X) / 2`` of Bjorck and Bowie's iteration (9-tuple)."""
+    m00, m01, m02, m10, m11, m12, m20, m21, m22 = m
+    g00, g11, g22, g01, g02, g12 = gram_entries(m)
+    w00, w11, w22 = 1.5 - 0.5 * g00, 1.5 - 0.5 * g11, 1.5 - 0.5 * g22
+    w01, w02, w12 = -0.5 * g01, -0.5 * g02, -0.5 * g12
+    return (m00 * w00 + m01 * w01 + m02 * w02,
+            m00 * w01 + m01 * w11 + m02 * w12,
+            m00 * w02 + m01 * w12 + m02 * w22,
+            m10 * w00 + m11 * w01 + m12 * w02,
+            m10 * w01 + m11 * w11 + m12 * w12,
+            m10 * w02 + m11 * w12 + m12 * w22,
+            m20 * w00 + m21 * w01 + m22 * w02,
+            m20 * w01 + m21 * w11 + m22 * w12,
+            m20 * w02 + m21 * w12 + m22 * w22)
+
+
+@jit
+def newton_schulz_orthonormalized(m):
+    """
+    ``(converged, x)``: the orthogonal polar factor of ``m`` (9-tuple) by Newton-Schulz.
+
+    The iteration converges quadratically from any deviation below 1 (the
+    nearest rotation when det > 0); ``converged`` says whether the deviation
+    fell to rounding level within the iteration budget.
     """
     for _ in range(12):
-        deviation = orthonormality_deviation(x)
-        if deviation <= EXACT_ORTHONORMAL:
-            return True
-        for a in range(3):
-            for b in range(3):
-                g = x[0, a] * x[0, b] + x[1, a] * x[1, b] + x[2, a] * x[2, b]
-                work[a, b] = (1.5 if a == b else 0.0) - 0.5 * g
-        for r in range(3):
-            x0, x1, x2 = x[r, 0], x[r, 1], x[r, 2]
-            for c in range(3):
-                x[r, c] = x0 * work[0, c] + x1 * work[1, c] + x2 * work[2, c]
-    return orthonormality_deviation(x) <= EXACT_ORTHONORMAL
+        if orthonormality_deviation(m) <= EXACT_ORTHONORMAL:
+            return True, m
+        m = newton_schulz_step(m)
+    return orthonormality_deviation(m) <= EXACT_ORTHONORMAL, m
 
 
 @jit
 def quaternion_from_orthonormal(m):
-    """Markley's quaternion of a rotation matrix, unit and canonical."""
-    m00, m11, m22 = m[0, 0], m[1, 1], m[2, 2]
+    """Markley's quaternion of a rotation matrix (9-tuple), unit and canonical."""
+    m00, m01, m02, m10, m11, m12, m20, m21, m22 = m
     trace = m00 + m11 + m22
     if trace >= m00 and trace >= m11 and trace >= m22:
-        x, y, z, w = m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1], 1.0 + trace
+        x, y, z, w = m21 - m12, m02 - m20, m10 - m01, 1.0 + trace
     elif m00 >= m11 and m00 >= m22:
-        x, y, z, w = 1.0 + m00 - m11 - m22, m[0, 1] + m[1, 0], m[0, 2] + m[2, 0], m[2, 1] - m[1, 2]
+        x, y, z, w = 1.0 + m00 - m11 - m22, m01 + m10, m02 + m20, m21 - m12
     elif m11 >= m22:
-        x, y, z, w = m[0, 1] + m[1, 0], 1.0 + m11 - m00 - m22, m[1, 2] + m[2, 1], m[0, 2] - m[2, 0]
+        x, y, z, w = m01 + m10, 1.0 + m11 - m00 - m22, m12 + m21, m02 - m20
     else:
-        x, y, z, w = m[0, 2] + m[2, 0], m[1, 2] + m[2, 1], 1.0 + m22 - m00 - m11, m[1, 0] - m[0, 1]
+        x, y, z, w = m02 + m20, m12 + m21, 1.0 + m22 - m00 - m11, m10 - m01
     return canonical_unit_quaternion(x, y, z, w)
 
 
 @jit
+def quaternion_of_matrix(fm, s, tolerance):
+    """
+    ``(bad, x, y, z, w)``: the quaternion of the rotation nearest to matrix ``s`` of ``fm``.
+
+    ``bad`` is -1 when the quaternion is there, the status of the matrix's
+    defect (NaN/Inf, det <= 0, deviation from orthonormality beyond
+    ``tolerance``), or ``EIGENVECTOR_PENDING`` (the quaternion is NaN) for a
+    matrix too far from orthonormal for Newton-Schulz, left for
+    :func:`nearest_rotation_quaternions`. A matrix deviating by more than
+    rounding is replaced by its nearest rotation before Markley's formula.
+    """
+    nan = math.nan
+    m = matrix_at(fm, s)
+    code = matrix_defect(m)
+    if code != OK:
+        return status(s, 0, code), nan, nan, nan, nan
+    deviation = orthonormality_deviation(m)
+    if deviation > tolerance:
+        return status(s, 0, NOT_ORTHONORMAL), nan, nan, nan, nan
+    if not deviation <= EXACT_ORTHONORMAL:
+        converged = False
+        if deviation < NEWTON_SCHULZ_LIMIT:
+            converged, m = newton_schulz_orthonormalized(m)
+        if not converged:
+            return EIGENVECTOR_PENDING, nan, nan, nan, nan
+    x, y, z, w = quaternion_from_orthonormal(m)
+    return -1, x, y, z, w
+
+
+@jit
 def _matrix_from_quaternion_kernel(q, out):
-    fq, fo = q.reshape(-1, 4), out.reshape(-1, 9)
+    fq, fo = samples(q, 1), out.reshape(-1, 9)
     for s in range(fq.shape[0]):
         bad = quaternion_status(fq, s, 0)
         if bad >= 0:
@@ -157,34 +219,20 @@ def quaternion_from_matrix_kernel(m, out, tolerance):
     """
     Quaternions of matrices (any leading shape) into ``out`` (same leading shape, 4).
 
-    Returns the status of the first bad sample, or ``-1 - count`` where
-    ``count`` rows of ``out`` are NaN: matrices too far from orthonormal for
-    Newton-Schulz, left for the eigenvector method. A matrix deviating from
-    orthonormality by more than ``tolerance`` is an error (``inf``: none is);
-    every matrix deviating by more than rounding is replaced by its nearest
-    rotation before Markley's formula is applied.
+    Returns the status of the first bad sample, or ``-1 - pending`` where
+    ``pending`` rows of ``out`` are NaN: matrices left for the eigenvector
+    method (see :func:`quaternion_of_matrix`; ``tolerance`` ``inf`` accepts
+    every deviation).
     """
-    fm, fo = m.reshape(-1, 3, 3), out.reshape(-1, 4)
-    count = 0
-    scratch = np.empty((2, 3, 3))   # one allocation: this kernel also serves single matrices
-    x, work = scratch[0], scratch[1]
+    fm, fo = samples(m, 2), samples(out, 1)
+    pending = 0
     for s in range(fm.shape[0]):
-        code = matrix_defect(fm[s])
-        if code != OK:
-            return status(s, 0, code)
-        deviation = orthonormality_deviation(fm[s])
-        if deviation > tolerance:
-            return status(s, 0, NOT_ORTHONORMAL)
-        if deviation <= EXACT_ORTHONORMAL:
-            fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3] = quaternion_from_orthonormal(fm[s])
-            continue
-        x[:, :] = fm[s]
-        if deviation < NEWTON_SCHULZ_LIMIT and newton_schulz_orthonormalize(x, work):
-            fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3] = quaternion_from_orthonormal(x)
-        else:
-            fo[s, :] = np.nan
-            count += 1
-    return -1 - count
+        bad, x, y, z, w = quaternion_of_matrix(fm, s, tolerance)
+        if bad >= 0:
+            return bad
+        pending += bad == EIGENVECTOR_PENDING
+        fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3] = x, y, z, w
+    return -1 - pending
 
 
 def nearest_rotation_quaternions(m):
@@ -252,13 +300,20 @@ def matrix_from_quaternion(q):
 
 def _kernel_tolerance(orthonormal_tolerance, non_orthonormal):
     """The kernels' ``tolerance``: the deviation beyond which a matrix is an error."""
-    if type(non_orthonormal) is not str or non_orthonormal not in ('project', 'raise'):
+    try:
+        valid = bool(orthonormal_tolerance >= 0.0)
+    except (TypeError, ValueError):   # not a number, or an array
+        valid = False
+    if not valid:
         raise ValueError(
-            f"Expected `non_orthonormal` to be 'project' or 'raise', got {non_orthonormal!r}.")
-    if not orthonormal_tolerance >= 0.0:
-        raise ValueError(
-            f'Expected `orthonormal_tolerance` >= 0, got {orthonormal_tolerance!r}.')
-    return math.inf if non_orthonormal == 'project' else float(orthonormal_tolerance)
+            f'Expected `orthonormal_tolerance` to be a number >= 0, got {orthonormal_tolerance!r}.')
+    if type(non_orthonormal) is str:
+        if non_orthonormal == 'project':
+            return math.inf
+        if non_orthonormal == 'raise':
+            return float(orthonormal_tolerance)
+    raise ValueError(
+        f"Expected `non_orthonormal` to be 'project' or 'raise', got {non_orthonormal!r}.")
 
 
 def convert_matrices(R, orthonormal_tolerance, non_orthonormal, out_trailing,
@@ -275,11 +330,12 @@ def convert_matrices(R, orthonormal_tolerance, non_orthonormal, out_trailing,
     out_trailing : tuple of int
         Trailing shape of the output per matrix.
     fused_kernel : callable
-        ``fused_kernel(m, out, tolerance, *args)``: both steps in one compiled
-        call (``quaternion_from_matrix_kernel`` then ``quaternion_kernel``), for
-        inputs below ``BATCH_SAMPLES`` matrices, such as a single matrix. Returns a
-        status like ``quaternion_from_matrix_kernel``'s; below -1 (some matrix
-        needs the eigenvector method) the two-step route takes over.
+        ``fused_kernel(m, out, tolerance, *args)``: both steps in one loop
+        (:func:`quaternion_of_matrix`, then the conversion of each quaternion
+        in registers), for inputs below ``BATCH_SAMPLES`` matrices, such as a
+        single matrix. Returns a status like ``quaternion_from_matrix_kernel``'s;
+        below -1 (some matrix needs the eigenvector method) the two-step route
+        takes over.
     quaternion_kernel : callable or None
         ``quaternion_kernel(q, out, *args)`` on the flat quaternions; None
         returns the quaternions.
@@ -299,11 +355,11 @@ def convert_matrices(R, orthonormal_tolerance, non_orthonormal, out_trailing,
         shape, batch = m.shape[:-2] + out_trailing, is_batch(m, (3, 3))
     if not batch:
         out = np.empty(shape)
-        bad = fused_kernel(m, out, tolerance, *args)
-        if bad >= 0:
-            raise_sample_error(bad, ('R',), (m,), ((3, 3),))
+        bad = fused_kernel(*((m, out, tolerance) + args))   # cheaper than f(m, out, t, *args)
         if bad == -1:
             return out
+        if bad >= 0:
+            raise_sample_error(bad, ('R',), (m,), ((3, 3),))
     q = _flat_quaternions(m, tolerance)
     if quaternion_kernel is None:   # the quaternions are the result
         return q.reshape(shape)

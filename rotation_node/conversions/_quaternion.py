@@ -19,7 +19,9 @@ import os
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.core.errors import TypingError
+from numba.extending import overload
 
 from ._validation import NON_FINITE, OK, ZERO_NORM, broadcast_pair, float_array, raise_sample_error
 
@@ -30,6 +32,34 @@ from ._validation import NON_FINITE, OK, ZERO_NORM, broadcast_pair, float_array,
 # call: 2-4x the whole per-sample cost of most kernels, measured.
 # (Inlined callees cannot be called with ``*args``.)
 jit = njit(cache=True, nogil=True, error_model='numpy', inline='always')
+
+
+def samples(a, sample_ndim):
+    """
+    The C-contiguous ``a`` as a stack of samples: shape ``(n,) + a.shape[-sample_ndim:]``.
+
+    How kernels see their arguments, whatever the leading shape. In compiled
+    code (the overload below) one sample and a one-dimensional stack are
+    viewed for free; only more leading dimensions take a ``reshape``, which
+    calls a C helper in numba (~30 ns, as much as a whole sample's
+    conversion). ``sample_ndim`` must be a constant.
+    """
+    return a.reshape((-1,) + a.shape[a.ndim - sample_ndim:])
+
+
+@overload(samples, inline='always', prefer_literal=True)
+def _samples_overload(a, sample_ndim):
+    if not isinstance(sample_ndim, types.IntegerLiteral):
+        raise TypingError('samples(): `sample_ndim` must be a constant.')
+    k = sample_ndim.literal_value
+    if not (isinstance(a, types.Array) and a.layout == 'C' and a.ndim >= k):
+        raise TypingError(f'samples(): expected a C-contiguous array of >= {k} dimensions, got {a}.')
+    if a.ndim == k:   # one sample
+        return lambda a, sample_ndim: a[None, ...]
+    if a.ndim == k + 1:   # already a stack
+        return lambda a, sample_ndim: a
+    start = a.ndim - k
+    return lambda a, sample_ndim: a.reshape((-1,) + a.shape[start:])
 
 
 @jit
@@ -185,7 +215,7 @@ def vector_status(fv, s, argument):
 
 @jit
 def _product_kernel(p, q, out):
-    fp, fq, fo = p.reshape(-1, 4), q.reshape(-1, 4), out.reshape(-1, 4)
+    fp, fq, fo = samples(p, 1), samples(q, 1), samples(out, 1)
     for s in range(fp.shape[0]):
         bad = first_status(quaternion_status(fp, s, 0), quaternion_status(fq, s, 1))
         if bad >= 0:
@@ -197,7 +227,7 @@ def _product_kernel(p, q, out):
 
 @jit
 def _conjugate_kernel(q, out):
-    fq, fo = q.reshape(-1, 4), out.reshape(-1, 4)
+    fq, fo = samples(q, 1), samples(out, 1)
     for s in range(fq.shape[0]):
         bad = quaternion_status(fq, s, 0)
         if bad >= 0:
@@ -209,7 +239,7 @@ def _conjugate_kernel(q, out):
 @jit
 def canonical_kernel(q, out):
     """Canonical unit quaternions of ``q`` into ``out``; returns the status."""
-    fq, fo = q.reshape(-1, 4), out.reshape(-1, 4)
+    fq, fo = samples(q, 1), samples(out, 1)
     for s in range(fq.shape[0]):
         bad = quaternion_status(fq, s, 0)
         if bad >= 0:
@@ -221,7 +251,7 @@ def canonical_kernel(q, out):
 
 @jit
 def _distance_kernel(p, q, out):
-    fp, fq, fo = p.reshape(-1, 4), q.reshape(-1, 4), out.reshape(-1)
+    fp, fq, fo = samples(p, 1), samples(q, 1), samples(out, 0)
     for s in range(fp.shape[0]):
         bad = first_status(quaternion_status(fp, s, 0), quaternion_status(fq, s, 1))
         if bad >= 0:
@@ -235,7 +265,7 @@ def _distance_kernel(p, q, out):
 
 @jit
 def _rotate_kernel(q, v, out):
-    fq, fv, fo = q.reshape(-1, 4), v.reshape(-1, 3), out.reshape(-1, 3)
+    fq, fv, fo = samples(q, 1), samples(v, 1), samples(out, 1)
     for s in range(fq.shape[0]):
         bad = first_status(quaternion_status(fq, s, 0), vector_status(fv, s, 1))
         if bad >= 0:
@@ -360,7 +390,9 @@ _FLOAT64 = np.dtype(np.float64)
 
 def is_single_sample(x, trailing):
     """Whether ``x`` is one sample that needs no conversion: the fast path of a call."""
-    return (type(x) is np.ndarray and x.shape == trailing and x.dtype == _FLOAT64
+    # ``is``: every native float64 array shares numpy's one float64 dtype; an
+    # equal but distinct dtype object just takes the general path.
+    return (type(x) is np.ndarray and x.shape == trailing and x.dtype is _FLOAT64
             and x.flags.c_contiguous)
 
 
@@ -376,7 +408,9 @@ def call_unary(kernel, x, name, trailing, out_trailing, *args, batch_kernel=None
     """
     if is_single_sample(x, trailing):
         out = np.empty(out_trailing)
-        bad = kernel(x, out, *args)
+        bad = kernel(*((x, out) + args))   # one tuple: cheaper than f(x, out, *args)
+        if bad < 0:
+            return out if out_trailing else out[()]
         a = x
     else:
         a = float_array(x, name, trailing)
@@ -405,7 +439,7 @@ def call_binary(kernel, x, y, names, trailings, out_trailing, *args, batch_kerne
         # angle: such kernels take ``np.asarray`` of it).
         a, b = x, y
         out = np.empty(out_trailing)
-        bad = kernel(a, b, out, *args)
+        bad = kernel(*((a, b, out) + args))   # one tuple: cheaper than f(a, b, out, *args)
     else:
         a, b = broadcast_pair(float_array(x, names[0], trailings[0]),
                               float_array(y, names[1], trailings[1]), *trailings)

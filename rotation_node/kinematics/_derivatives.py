@@ -20,9 +20,9 @@ they are the least-squares angular velocity for a noisy derivative.
 """
 import math
 
-from ..conversions._matrix import matrix_defect
+from ..conversions._matrix import matrix_at, matrix_defect
 from ..conversions._quaternion import (call_binary, first_status, jit, product, quaternion_status,
-                                       status, unit_quaternion, vector_status)
+                                       samples, status, unit_quaternion, vector_status)
 from ..conversions._validation import NON_FINITE, OK
 from ._validation import is_world_frame
 
@@ -35,7 +35,7 @@ from ._validation import is_world_frame
 @jit
 def _matrix_status(fm, s, argument):
     """Status of the matrix ``fm[s]``: NaN/Inf or ``det <= 0`` (-1 when fine)."""
-    code = matrix_defect(fm[s])
+    code = matrix_defect(matrix_at(fm, s))
     return -1 if code == OK else status(s, argument, code)
 
 
@@ -50,7 +50,7 @@ def _finite_status(fa, s, argument):
 
 @jit
 def _quaternion_derivative_kernel(q, omega, out, world):
-    fq, fw, fo = q.reshape(-1, 4), omega.reshape(-1, 3), out.reshape(-1, 4)
+    fq, fw, fo = samples(q, 1), samples(omega, 1), samples(out, 1)
     for s in range(fq.shape[0]):
         bad = first_status(quaternion_status(fq, s, 0), vector_status(fw, s, 1))
         if bad >= 0:
@@ -66,7 +66,7 @@ def _quaternion_derivative_kernel(q, omega, out, world):
 
 @jit
 def _angular_velocity_from_quaternion_derivative_kernel(q, q_dot, out, world):
-    fq, fd, fo = q.reshape(-1, 4), q_dot.reshape(-1, 4), out.reshape(-1, 3)
+    fq, fd, fo = samples(q, 1), samples(q_dot, 1), samples(out, 1)
     for s in range(fq.shape[0]):
         bad = first_status(quaternion_status(fq, s, 0), _finite_status(fd, s, 1))
         if bad >= 0:
@@ -82,7 +82,7 @@ def _angular_velocity_from_quaternion_derivative_kernel(q, q_dot, out, world):
 
 @jit
 def _matrix_derivative_kernel(R, omega, out, world):
-    fm, fw, fo = R.reshape(-1, 3, 3), omega.reshape(-1, 3), out.reshape(-1, 3, 3)
+    fm, fw, fo = samples(R, 2), samples(omega, 1), samples(out, 2)
     for s in range(fm.shape[0]):
         bad = first_status(_matrix_status(fm, s, 0), vector_status(fw, s, 1))
         if bad >= 0:
@@ -104,7 +104,7 @@ def _matrix_derivative_kernel(R, omega, out, world):
 
 @jit
 def _angular_velocity_from_matrix_derivative_kernel(R, R_dot, out, world):
-    fm, fd, fo = R.reshape(-1, 3, 3), R_dot.reshape(-1, 3, 3), out.reshape(-1, 3)
+    fm, fd, fo = samples(R, 2), samples(R_dot, 2), samples(out, 1)
     for s in range(fm.shape[0]):
         bad = first_status(_matrix_status(fm, s, 0), _finite_status(fd, s, 1))
         if bad >= 0:

@@ -46,7 +46,7 @@ import warnings
 import numpy as np
 
 from ..conversions import parse_sequence
-from ..conversions._quaternion import call_binary, first_status, jit, vector_status
+from ..conversions._quaternion import call_binary, first_status, jit, samples, vector_status
 from ._validation import is_world_frame
 
 #: Default ``singularity_threshold`` (rad), ~sqrt(eps): closer to gimbal lock
@@ -92,7 +92,7 @@ def _jacobian_angles(angles, scale, reverse, world):
 
 @jit
 def _angular_velocity_kernel(angles, rates, out, i, j, n, parity, proper, reverse, world, scale):
-    fa, fr, fo = angles.reshape(-1, 3), rates.reshape(-1, 3), out.reshape(-1, 3)
+    fa, fr, fo = samples(angles, 1), samples(rates, 1), samples(out, 1)
     for s in range(fa.shape[0]):
         bad = first_status(vector_status(fa, s, 0), vector_status(fr, s, 1))
         if bad >= 0:
@@ -116,7 +116,7 @@ def _angular_velocity_kernel(angles, rates, out, i, j, n, parity, proper, revers
 def _euler_rates_kernel(angles, omega, out, i, j, n, parity, proper, reverse, world, scale,
                         sin_threshold, singular):
     """Fill ``out``, count the near-singular samples into ``singular[0]``; return the status."""
-    fa, fw, fo = angles.reshape(-1, 3), omega.reshape(-1, 3), out.reshape(-1, 3)
+    fa, fw, fo = samples(angles, 1), samples(omega, 1), samples(out, 1)
     for s in range(fa.shape[0]):
         bad = first_status(vector_status(fa, s, 0), vector_status(fw, s, 1))
         if bad >= 0:

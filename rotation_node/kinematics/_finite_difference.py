@@ -12,7 +12,8 @@ It aliases when the true rotation per step reaches pi (``|w| h >= pi``).
 import numpy as np
 
 from ..conversions._axis_angle import rotation_vector_from_quaternion_scalar
-from ..conversions._quaternion import jit, product, quaternion_status, scaled_quaternion
+from ..conversions._quaternion import (jit, product, quaternion_status, samples,
+                                       scaled_quaternion)
 from ..conversions._validation import float_array, raise_sample_error
 from ._validation import is_world_frame, sample_times
 
@@ -20,7 +21,7 @@ from ._validation import is_world_frame, sample_times
 @jit
 def _finite_difference_kernel(q, h, out, world):
     n = h.shape[0] + 1
-    fq, fo = q.reshape(-1, 4), out.reshape(-1, 3)
+    fq, fo = samples(q, 1), samples(out, 1)
     for series in range(fq.shape[0] // n):
         first = series * n
         bad = quaternion_status(fq, first, 0)
