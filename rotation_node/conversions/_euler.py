@@ -276,14 +276,14 @@ def _singularity_margin_kernel(q, out, convention):
 
 # ------------------------------------------------------------ public API
 
-def convention_code(spec, degrees=False):
-    """One integer for the kernels: ``i | j << 2 | k << 4 | intrinsic << 6 | degrees << 7``."""
+def convention_code(spec):
+    """One integer for the kernels: ``i | j << 2 | k << 4 | intrinsic << 6`` (degrees: ``| 1 << 7``)."""
     i, j, k = spec.axes
-    return i | j << 2 | k << 4 | int(spec.intrinsic) << 6 | int(degrees) << 7
+    return i | j << 2 | k << 4 | int(spec.intrinsic) << 6
 
 
 _CONVENTIONS = {name: convention_code(spec) for name, spec in SEQUENCE_TABLE.items()}
-_DEGREES_FLAG = 1 << 7
+_DEGREES_FLAG = 1 << 7   # angles in degrees rather than radians
 
 
 def _convention(seq, degrees=False):
