@@ -117,17 +117,23 @@ def gram_entries(m):
 
 
 @jit
-def orthonormality_deviation(m):
-    """Largest absolute element of ``m^T m - I`` (9-tuple)."""
-    g00, g11, g22, g01, g02, g12 = gram_entries(m)
+def gram_deviation(g):
+    """Largest absolute element of ``m^T m - I`` from its entries ``g`` (:func:`gram_entries`)."""
+    g00, g11, g22, g01, g02, g12 = g
     return max(abs(g00 - 1.0), abs(g11 - 1.0), abs(g22 - 1.0), abs(g01), abs(g02), abs(g12))
 
 
 @jit
-def newton_schulz_step(m):
-    """One step ``X <- X (3 I - X^T X) / 2`` of Bjorck and Bowie's iteration (9-tuple)."""
+def orthonormality_deviation(m):
+    """Largest absolute element of ``m^T m - I`` (9-tuple)."""
+    return gram_deviation(gram_entries(m))
+
+
+@jit
+def newton_schulz_step(m, g):
+    """One step ``X <- X (3 I - X^T X) / 2`` of Bjorck and Bowie's iteration; ``g``: X^T X's entries."""
     m00, m01, m02, m10, m11, m12, m20, m21, m22 = m
-    g00, g11, g22, g01, g02, g12 = gram_entries(m)
+    g00, g11, g22, g01, g02, g12 = g
     w00, w11, w22 = 1.5 - 0.5 * g00, 1.5 - 0.5 * g11, 1.5 - 0.5 * g22
     w01, w02, w12 = -0.5 * g01, -0.5 * g02, -0.5 * g12
     return (m00 * w00 + m01 * w01 + m02 * w02,
@@ -148,12 +154,14 @@ def newton_schulz_orthonormalized(m):
 
     The iteration converges quadratically from any deviation below 1 (the
     nearest rotation when det > 0); ``converged`` says whether the deviation
-    fell to rounding level within the iteration budget.
+    fell to rounding level within the iteration budget. Each step uses the
+    Gram matrix its convergence test computed.
     """
     for _ in range(12):
-        if orthonormality_deviation(m) <= EXACT_ORTHONORMAL:
+        g = gram_entries(m)
+        if gram_deviation(g) <= EXACT_ORTHONORMAL:
             return True, m
-        m = newton_schulz_step(m)
+        m = newton_schulz_step(m, g)
     return orthonormality_deviation(m) <= EXACT_ORTHONORMAL, m
 
 
