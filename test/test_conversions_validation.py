@@ -151,6 +151,24 @@ def test_single_sample_shapes():
     assert axis.shape == (3,) and np.ndim(angle) == 0
 
 
+def test_single_samples_equal_their_batch_rows_in_every_form(rng):
+    # The single-sample path computes scalar results into shape (1,) and passes
+    # a scalar argument as a float; neither may change a bit or a type.
+    q = rng.normal(size=(6, 4))
+    margins, distances = rc.euler_singularity_margin(q, 'ZXZ'), rc.quaternion_distance(q, q[::-1])
+    for s in range(6):
+        margin, distance = rc.euler_singularity_margin(q[s], 'ZXZ'), rc.quaternion_distance(q[s], q[5 - s])
+        assert type(margin) is np.float64 and margin == margins[s]
+        assert type(distance) is np.float64 and distance == distances[s]
+    axis, angle = rng.normal(size=(6, 3)), rng.uniform(-4, 4, 6)
+    expected = rc.quaternion_from_axis_angle(axis, angle)
+    for s in range(6):
+        for form in (float(angle[s]), angle[s], np.array(angle[s]), np.array([angle[s]])[0]):
+            assert np.array_equal(rc.quaternion_from_axis_angle(axis[s], form), expected[s])
+    with pytest.raises(ValueError, match='angle'):
+        rc.quaternion_from_axis_angle(axis[0], np.array(np.nan))
+
+
 def test_empty_batch():
     assert rc.matrix_from_quaternion(np.zeros((0, 4))).shape == (0, 3, 3)
     assert rc.euler_from_matrix(np.zeros((0, 3, 3)), 'xyz').shape == (0, 3)

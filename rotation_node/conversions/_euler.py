@@ -413,7 +413,7 @@ def euler_from_matrix(R, seq, *, degrees=False,
     """
     return convert_matrices(R, orthonormal_tolerance, non_orthonormal, (3,),
                             _euler_from_matrix_kernel, _euler_from_quaternion_kernel,
-                            _convention(seq, degrees), batch_kernel=_euler_from_quaternion_batch)
+                            _convention(seq, degrees), _euler_from_quaternion_batch)
 
 
 def euler_singularity_margin(q, seq):

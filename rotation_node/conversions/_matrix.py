@@ -27,7 +27,7 @@ import math
 import numpy as np
 
 from ._quaternion import (call_unary, canonical_kernel, canonical_unit_quaternion, is_batch,
-                          is_single_sample, jit, quaternion_status, samples, scaled_quaternion,
+                          is_single_sample, jit, new_array, quaternion_status, samples, scaled_quaternion,
                           status)
 from ._validation import (NON_FINITE, NOT_ORTHONORMAL, NOT_ROTATION, OK, float_array,
                           raise_sample_error)
@@ -325,7 +325,7 @@ def _kernel_tolerance(orthonormal_tolerance, non_orthonormal):
 
 
 def convert_matrices(R, orthonormal_tolerance, non_orthonormal, out_trailing,
-                     fused_kernel, quaternion_kernel, *args, batch_kernel=None):
+                     fused_kernel, quaternion_kernel, convention=None, batch_kernel=None):
     """
     The body of every ``*_from_matrix`` conversion: a kernel on the quaternions of ``R``.
 
@@ -338,15 +338,19 @@ def convert_matrices(R, orthonormal_tolerance, non_orthonormal, out_trailing,
     out_trailing : tuple of int
         Trailing shape of the output per matrix.
     fused_kernel : callable
-        ``fused_kernel(m, out, tolerance, *args)``: both steps in one loop
+        ``fused_kernel(m, out, tolerance[, convention])``: both steps in one loop
         (:func:`quaternion_of_matrix`, then the conversion of each quaternion
         in registers), for inputs below ``BATCH_SAMPLES`` matrices, such as a
         single matrix. Returns a status like ``quaternion_from_matrix_kernel``'s;
         below -1 (some matrix needs the eigenvector method) the two-step route
         takes over.
     quaternion_kernel : callable or None
-        ``quaternion_kernel(q, out, *args)`` on the flat quaternions; None
-        returns the quaternions.
+        ``quaternion_kernel(q, out[, convention])`` on the flat quaternions;
+        None returns the quaternions.
+    convention : int, optional
+        The Euler kernels' convention code, passed on to both kernels (a
+        named argument rather than ``*args``: unpacking those costs ~50 ns of
+        a ~1.2 us single-sample call).
     batch_kernel : callable, optional
         Used instead of ``quaternion_kernel`` for ``BATCH_SAMPLES`` matrices or more.
 
@@ -362,8 +366,11 @@ def convert_matrices(R, orthonormal_tolerance, non_orthonormal, out_trailing,
         m = float_array(R, 'R', (3, 3))
         shape, batch = m.shape[:-2] + out_trailing, is_batch(m, (3, 3))
     if not batch:
-        out = np.empty(shape)
-        bad = fused_kernel(*((m, out, tolerance) + args))   # cheaper than f(m, out, t, *args)
+        out = new_array(shape)
+        if convention is None:
+            bad = fused_kernel(m, out, tolerance)
+        else:
+            bad = fused_kernel(m, out, tolerance, convention)
         if bad == -1:
             return out
         if bad >= 0:
@@ -372,7 +379,11 @@ def convert_matrices(R, orthonormal_tolerance, non_orthonormal, out_trailing,
     if quaternion_kernel is None:   # the quaternions are the result
         return q.reshape(shape)
     out = np.empty(shape)
-    (batch_kernel if batch_kernel is not None and batch else quaternion_kernel)(q, out, *args)
+    kernel = batch_kernel if batch_kernel is not None and batch else quaternion_kernel
+    if convention is None:
+        kernel(q, out)
+    else:
+        kernel(q, out, convention)
     return out
 
 
