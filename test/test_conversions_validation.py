@@ -167,6 +167,8 @@ def test_single_samples_equal_their_batch_rows_in_every_form(rng):
             assert np.array_equal(rc.quaternion_from_axis_angle(axis[s], form), expected[s])
     with pytest.raises(ValueError, match='angle'):
         rc.quaternion_from_axis_angle(axis[0], np.array(np.nan))
+    with pytest.raises(ValueError, match='`v`'):   # a float where a vector belongs
+        rc.rotate_vector(q[0], 1.0)
 
 
 def test_empty_batch():

@@ -27,8 +27,8 @@ import math
 import numpy as np
 
 from ._quaternion import (call_unary, canonical_kernel, canonical_unit_quaternion, is_batch,
-                          is_single_sample, jit, new_array, quaternion_status, samples, scaled_quaternion,
-                          status)
+                          is_single_sample, jit, new_array, quaternion_status, samples,
+                          scaled_quaternion, status)
 from ._validation import (NON_FINITE, NOT_ORTHONORMAL, NOT_ROTATION, OK, float_array,
                           raise_sample_error)
 

@@ -447,9 +447,11 @@ def call_binary(kernel, x, y, names, trailings, out_trailing, *args, batch_kerne
     split across threads; single float64 samples skip the checks that the
     kernel makes anyway.
     """
-    if trailings[1] == () and (isinstance(y, float) or is_single_sample(y, ())):
+    scalar_y = trailings[1] == ()
+    if scalar_y and (isinstance(y, float) or is_single_sample(y, ())):
         y = float(y)   # one scalar argument (an angle): kernels take ``np.asarray`` of it
-    if is_single_sample(x, trailings[0]) and (type(y) is float or is_single_sample(y, trailings[1])):
+    if is_single_sample(x, trailings[0]) and (
+            type(y) is float if scalar_y else is_single_sample(y, trailings[1])):
         a, b = x, y
         out = new_array(out_trailing or _ONE)
         bad = kernel(*((a, b, out) + args))   # one tuple: cheaper than f(a, b, out, *args)
