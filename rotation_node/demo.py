@@ -143,11 +143,12 @@ def _run_live(scene_bag, live_bag, params, topic, expected, log):
 def _read(bag, topics):
     """{topic: (stamps_ns, values)} of the converted outputs in a bag."""
     from rotation_node.bag.mcap_io import BagReader
+    from rotation_node.stamps import header_stamp_ns
     columns = {t: ([], []) for t in topics}
     for record in BagReader(bag).messages(topics=list(topics)):
         msg = record.message()
         stamps, values = columns[record.topic]
-        stamps.append(msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
+        stamps.append(header_stamp_ns(msg.header))
         if hasattr(msg, 'quaternion'):
             q = msg.quaternion
             values.append((q.x, q.y, q.z, q.w))
