@@ -33,7 +33,7 @@ from rotation_node.errors import ParameterError
 from rotation_node.parameters import (
     NODE_NAME, PARAMETERS, PARAMETERS_BY_NAME, NodeParameters)
 from rotation_node.pipeline import (
-    DROP_REASONS, SKIP_REASONS, ConversionPipeline, warm_up_conversions)
+    SKIP_REASONS, ConversionPipeline, warm_up_conversions)
 
 DIAGNOSTICS_PERIOD_S = 1.0
 ISSUE_LOG_PERIOD_S = 5.0
@@ -182,7 +182,8 @@ class RotationNode(Node):
             'received': stats.received,
             'published': stats.published,
             'dropped': totals[0],
-            **{f'dropped.{reason}': stats.dropped[reason] for reason in DROP_REASONS},
+            **{f'dropped.{reason}': stats.dropped[reason]
+               for reason in self._pipeline.drop_reasons},
             'skipped': totals[1],
             **{f'skipped.{reason}': stats.skipped[reason] for reason in SKIP_REASONS},
             'normalised': stats.normalised,

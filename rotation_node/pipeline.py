@@ -200,7 +200,7 @@ class ConversionPipeline:
         self._input = messages.INPUTS[params.input_type]
         self._outputs = [messages.OUTPUTS[name] for name in params.outputs]
         self._builders = {output.name: output.message.build for output in self._outputs}
-        self._samples = self._input.sample_stream(params)
+        self._samples = self._input.sample_stream(params, report=self._stream_dropped)
         self._transforms = [transform for transform in
                             (factory(params) for factory in SAMPLE_TRANSFORMS)
                             if transform is not None]
@@ -217,6 +217,11 @@ class ConversionPipeline:
     def input_type(self) -> type:
         """Message class of the input."""
         return self._input.message_class
+
+    @property
+    def drop_reasons(self) -> Tuple[str, ...]:
+        """Reasons counted in ``stats.dropped``: :data:`DROP_REASONS` and the input type's."""
+        return DROP_REASONS + self._input.drop_reasons
 
     @property
     def output_types(self) -> Dict[str, type]:
@@ -295,6 +300,11 @@ class ConversionPipeline:
             return []
         self.stats.published += len(outputs)
         return outputs
+
+    def _stream_dropped(self, reason, detail):
+        """Count what the input type's stream could not use (its own reasons)."""
+        self.stats.dropped[reason] += 1
+        self._report(reason, detail)
 
     def _report(self, reason, detail):
         if self._on_issue is not None:
