@@ -76,10 +76,13 @@ class RotationNode(Node):
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         defaults = self.params.to_ros()
+        # rclpy checks each declared parameter on its own, in this order: input_type comes
+        # last, so that the parameters of its input type (tf.*) are set when it is checked.
+        in_order = sorted(PARAMETERS, key=lambda spec: spec.name == 'input_type')
         try:
             self.declare_parameters('', [
                 (spec.name, defaults[spec.name], parameter_descriptor(spec))
-                for spec in PARAMETERS])
+                for spec in in_order])
         except (InvalidParameterValueException, InvalidParameterTypeException) as exc:
             self.destroy_node()
             raise ParameterError(str(exc)) from None
