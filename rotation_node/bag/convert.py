@@ -36,7 +36,7 @@ def output_topic(input_topic, output_name):
 
 def _input_streams(reader, input_type, topics):
     """
-    The streams to convert: ``{topic: {bag topic: the input type's topic name}}``.
+    Return the streams to convert: ``{topic: {bag topic: the input type's topic name}}``.
 
     A stream is named by its first topic: the given ones, checked, or by default
     every topic of the input type that is not another one's companion. An input
