@@ -118,7 +118,10 @@ class RotationNode(Node):
         qos_changed = previous is None or qos != qos_profile(previous)
         stats = None if self._pipeline is None else self._pipeline.stats
         self._pipeline = ConversionPipeline(params, on_issue=self._log_issue, stats=stats)
-        if qos_changed or params.input_type != previous.input_type:
+        # The new pipeline's input stream starts empty; a stateful one (tf) subscribes
+        # again, so that its latched topics (/tf_static) are delivered to it again.
+        stateful = messages.INPUTS[params.input_type].stream is not None
+        if qos_changed or stateful or params.input_type != previous.input_type:
             for subscription in self._subscriptions:
                 self.destroy_subscription(subscription)
             self._subscriptions = [

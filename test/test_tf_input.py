@@ -19,6 +19,8 @@ import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import QuaternionStamped, TransformStamped, Vector3Stamped
 from rclpy.duration import Duration
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from scipy.spatial.transform import Rotation, Slerp
 from tf2_msgs.msg import TFMessage
@@ -339,3 +341,40 @@ def test_missing_frame_and_cycle_keep_the_node_alive_and_show_on_diagnostics():
             assert node.stop() == 0, node.output
     assert "'base_link' does not exist" in node.output and '[tf_unknown_frame]' in node.output
     assert 'loop: base_link -> odom -> base_link' in node.output
+
+
+@pytest.mark.timeout(180)
+def test_a_parameter_change_keeps_the_static_transforms():
+    namespace = '/tf_reconfigured'
+    identity = (0.0, 0.0, 0.0, 1.0)
+    with TestNode('tf_reconfigure_client') as client:
+        eulers = client.collect(Vector3Stamped, f'{namespace}/euler', 100)
+        static_publisher = client.node.create_publisher(TFMessage, '/tf_static', QoSProfile(
+            depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        publisher = client.node.create_publisher(TFMessage, '/tf', 100)
+        static_publisher.publish(tf_message(transform(
+            'base_link', 'imu_link', 0, Rotation.from_euler('x', 90, degrees=True))))
+        node = _start_node(client, namespace, {
+            'input_type': 'tf', 'tf.parent_frame': 'map', 'tf.child_frame': 'imu_link'})
+        with node:
+            parameters = AsyncParameterClient(client.node, f'{namespace}/rotation_node')
+            assert parameters.wait_for_services(timeout_sec=START_TIMEOUT_S), node.output
+
+            def euler_after(stamp_ns):
+                """Publish map -> base_link at increasing stamps until an output arrives."""
+                count = len(eulers)
+                for k in range(100):
+                    publisher.publish(tf_message(
+                        transform('map', 'base_link', stamp_ns + k * S, identity)))
+                    if client.spin_until(lambda: len(eulers) > count, timeout=0.2):
+                        return _vector(eulers[-1])
+                pytest.fail(f'no output:\n{node.output}')
+
+            np.testing.assert_allclose(euler_after(T0), [np.pi / 2, 0.0, 0.0], atol=1e-15)
+            # A new pipeline for the new parameters: the static transform must reach it too.
+            future = parameters.set_parameters([Parameter('euler.degrees', value=True)])
+            assert client.spin_until(future.done, timeout=10.0)
+            assert future.result().results[0].successful
+            np.testing.assert_allclose(euler_after(T0 + 1000 * S), [90.0, 0.0, 0.0],
+                                       atol=1e-12)
+            assert node.stop() == 0, node.output
