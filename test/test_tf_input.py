@@ -38,6 +38,7 @@ S = 1_000_000_000
 T0 = 1_700_000_000 * S + 250_000_000
 ANGLE_BOUND = 1e-14   # rad, composed and interpolated chain against scipy
 START_TIMEOUT_S = 60.0
+IDENTITY = (0.0, 0.0, 0.0, 1.0)
 CHAIN = NodeParameters(input_type='tf', tf_parent_frame='map', tf_child_frame='imu_link',
                        outputs=('quaternion', 'angular_velocity'), qos_depth=1000)
 
@@ -190,16 +191,15 @@ def test_a_static_chain_is_published_at_time_zero_when_it_changes():
 def test_failures_are_counted_by_reason_and_name_the_frames():
     params = NodeParameters(input_type='tf', tf_parent_frame='map', tf_child_frame='base_link',
                             outputs=('euler',))
-    identity = (0.0, 0.0, 0.0, 1.0)
     sequence = [
-        tf_message(transform('map', 'odom', T0, identity)),                 # base_link unknown
-        tf_message(transform('odom', 'base_link', T0 + 2 * S, identity)),   # no data at T0
-        tf_message(transform('world', 'base_link', T0 + 3 * S, identity)),  # two trees
-        tf_message(transform('base_link', 'odom', T0 + 4 * S, identity),    # a loop
-                   transform('odom', 'base_link', T0 + 4 * S, identity)),
-        tf_message(transform('map', 'odom', T0 + 5 * S, identity),          # mended
-                   transform('odom', 'base_link', T0 + 5 * S, identity)),
-        tf_message(transform('map', 'map', T0 + 6 * S, identity),           # ignored by tf2
+        tf_message(transform('map', 'odom', T0, IDENTITY)),                 # base_link unknown
+        tf_message(transform('odom', 'base_link', T0 + 2 * S, IDENTITY)),   # no data at T0
+        tf_message(transform('world', 'base_link', T0 + 3 * S, IDENTITY)),  # two trees
+        tf_message(transform('base_link', 'odom', T0 + 4 * S, IDENTITY),    # a loop
+                   transform('odom', 'base_link', T0 + 4 * S, IDENTITY)),
+        tf_message(transform('map', 'odom', T0 + 5 * S, IDENTITY),          # mended
+                   transform('odom', 'base_link', T0 + 5 * S, IDENTITY)),
+        tf_message(transform('map', 'map', T0 + 6 * S, IDENTITY),           # ignored by tf2
                    transform('map', 'odom', T0 + 6 * S, (0.0, 0.0, 0.0, 2.0))),
     ]
     pipeline, outputs, issues = run_pipeline(params, [('/tf', msg) for msg in sequence])
@@ -234,6 +234,13 @@ def _diagnostics_values(diagnostics, name_prefix):
     return {}
 
 
+def _tf_publishers(client):
+    """Publishers of /tf_static (latched, as tf2_ros's static broadcaster) and /tf."""
+    static = client.node.create_publisher(TFMessage, '/tf_static', QoSProfile(
+        depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    return static, client.node.create_publisher(TFMessage, '/tf', 1000)
+
+
 def _start_node(client, namespace, parameters):
     args = [script('rotation_node'), '--ros-args', '-r', f'__ns:={namespace}']
     for name, value in parameters.items():
@@ -253,9 +260,7 @@ def test_live_node_and_convert_match_scipy_and_each_other(tmp_path, rng):
         quaternions = client.collect(QuaternionStamped, f'{namespace}/quaternion', 1000)
         rates = client.collect(Vector3Stamped, f'{namespace}/angular_velocity', 1000)
         diagnostics = client.collect(DiagnosticArray, '/diagnostics', 100)
-        static_publisher = client.node.create_publisher(TFMessage, '/tf_static', QoSProfile(
-            depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
-        publisher = client.node.create_publisher(TFMessage, '/tf', 1000)
+        static_publisher, publisher = _tf_publishers(client)
         static_publisher.publish(chain.static_message)   # before the node: it is latched
         node = _start_node(client, namespace, {
             'input_type': 'tf', 'tf.parent_frame': 'map', 'tf.child_frame': 'imu_link',
@@ -310,11 +315,10 @@ def test_live_node_and_convert_match_scipy_and_each_other(tmp_path, rng):
 @pytest.mark.timeout(180)
 def test_missing_frame_and_cycle_keep_the_node_alive_and_show_on_diagnostics():
     namespace = '/tf_faults'
-    identity = (0.0, 0.0, 0.0, 1.0)
     with TestNode('tf_fault_publisher') as client:
         eulers = client.collect(Vector3Stamped, f'{namespace}/euler', 100)
         diagnostics = client.collect(DiagnosticArray, '/diagnostics', 100)
-        publisher = client.node.create_publisher(TFMessage, '/tf', 100)
+        _, publisher = _tf_publishers(client)
         node = _start_node(client, namespace, {
             'input_type': 'tf', 'tf.parent_frame': 'map', 'tf.child_frame': 'base_link'})
         with node:
@@ -325,15 +329,15 @@ def test_missing_frame_and_cycle_keep_the_node_alive_and_show_on_diagnostics():
                     values = _diagnostics_values(diagnostics, f'{namespace}/rotation_node')
                     return int(values.get(f'dropped.{reason}', 0)) >= 1
                 return check
-            publisher.publish(tf_message(transform('map', 'odom', T0, identity)))
+            publisher.publish(tf_message(transform('map', 'odom', T0, IDENTITY)))
             assert client.spin_until(counted('tf_unknown_frame'), timeout=20), node.output
-            publisher.publish(tf_message(transform('base_link', 'odom', T0 + S, identity),
-                                         transform('odom', 'base_link', T0 + S, identity)))
+            publisher.publish(tf_message(transform('base_link', 'odom', T0 + S, IDENTITY),
+                                         transform('odom', 'base_link', T0 + S, IDENTITY)))
             assert client.spin_until(counted('tf_cycle'), timeout=20), node.output
             assert node.alive()
             # Mended: the node converts again.
-            publisher.publish(tf_message(transform('map', 'odom', T0 + 2 * S, identity),
-                                         transform('odom', 'base_link', T0 + 2 * S, identity)))
+            publisher.publish(tf_message(transform('map', 'odom', T0 + 2 * S, IDENTITY),
+                                         transform('odom', 'base_link', T0 + 2 * S, IDENTITY)))
             assert client.spin_until(lambda: len(eulers) >= 1, timeout=20), node.output
             assert header_stamp_ns(eulers[0].header) == T0 + 2 * S
             values = _diagnostics_values(diagnostics, f'{namespace}/rotation_node')
@@ -346,12 +350,9 @@ def test_missing_frame_and_cycle_keep_the_node_alive_and_show_on_diagnostics():
 @pytest.mark.timeout(180)
 def test_a_parameter_change_keeps_the_static_transforms():
     namespace = '/tf_reconfigured'
-    identity = (0.0, 0.0, 0.0, 1.0)
     with TestNode('tf_reconfigure_client') as client:
         eulers = client.collect(Vector3Stamped, f'{namespace}/euler', 100)
-        static_publisher = client.node.create_publisher(TFMessage, '/tf_static', QoSProfile(
-            depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
-        publisher = client.node.create_publisher(TFMessage, '/tf', 100)
+        static_publisher, publisher = _tf_publishers(client)
         static_publisher.publish(tf_message(transform(
             'base_link', 'imu_link', 0, Rotation.from_euler('x', 90, degrees=True))))
         node = _start_node(client, namespace, {
@@ -365,7 +366,7 @@ def test_a_parameter_change_keeps_the_static_transforms():
                 count = len(eulers)
                 for k in range(100):
                     publisher.publish(tf_message(
-                        transform('map', 'base_link', stamp_ns + k * S, identity)))
+                        transform('map', 'base_link', stamp_ns + k * S, IDENTITY)))
                     if client.spin_until(lambda: len(eulers) > count, timeout=0.2):
                         return _vector(eulers[-1])
                 pytest.fail(f'no output:\n{node.output}')
