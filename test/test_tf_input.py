@@ -25,7 +25,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile
 from scipy.spatial.transform import Rotation, Slerp
 from tf2_msgs.msg import TFMessage
 
-from rotation_node.bag.convert import output_topic
+from rotation_node.bag.convert import convert, output_topic
 from rotation_node.bag.mcap_io import BagReader, BagWriter
 from rotation_node.errors import ParameterError
 from rotation_node.parameters import NodeParameters
@@ -379,3 +379,26 @@ def test_a_parameter_change_keeps_the_static_transforms():
             np.testing.assert_allclose(euler_after(T0 + 1000 * S), [90.0, 0.0, 0.0],
                                        atol=1e-12)
             assert node.stop() == 0, node.output
+
+
+def test_convert_pairs_each_tf_topic_with_its_static_topic(tmp_path, rng):
+    chain = Chain(rng, seconds=0.5)
+    other = Chain(rng, seconds=0.5)
+    bag = tmp_path / 'robots.mcap'
+    with BagWriter(bag) as writer:
+        for prefix, robot in (('/robot1', chain), ('', other)):
+            writer.write(f'{prefix}/tf_static', robot.static_message, T0 - S)
+            for k, msg in enumerate(robot.dynamic_messages):
+                writer.write(f'{prefix}/tf', msg, T0 + k * 1_000_000)
+    stats = convert(bag, tmp_path / 'both.mcap', CHAIN)
+    assert sorted(stats) == ['/robot1/tf', '/tf']   # the static topics go with their pair
+    for topic, robot in (('/robot1/tf', chain), ('/tf', other)):
+        with BagReader(tmp_path / 'both.mcap') as reader:
+            quaternions = [r.message() for r in reader.messages([f'{topic}/quaternion'])]
+            rates = [r.message() for r in reader.messages([f'{topic}/angular_velocity'])]
+        check_against_oracle(robot, quaternions, rates)
+    stats = convert(bag, tmp_path / 'one.mcap', CHAIN, topics=['/robot1/tf'])
+    assert list(stats) == ['/robot1/tf']
+    assert stats['/robot1/tf'].received == 1 + len(chain.dynamic_messages)
+    with BagReader(tmp_path / 'one.mcap') as reader:
+        assert '/tf/quaternion' not in reader.topics
