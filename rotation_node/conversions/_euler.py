@@ -227,7 +227,7 @@ def _euler_from_quaternion_batch_kernel(q, out, convention):
     quaternions and forms the three ``atan2`` argument pairs of each, one
     vectorised loop evaluates them all (:func:`atan2_in_place_kernel`), and a
     last loop turns the half angles into Euler angles. The formulas are the
-    fused kernel's; only ``atan2`` is the branch-free one (0.7 ulp against
+    fused kernel's; only ``atan2`` is the branch-free one (0.8 ulp against
     the C library's 0.5), so results may differ from the single-sample path
     in the last bit.
     """
