@@ -64,7 +64,7 @@ _INTERVAL_BOUNDARIES = [0.4375, 0.6875, 1.1875, 2.4375, 1.0, 0.5, 1.5]
 
 
 def _atan2_arguments(rng):
-    """(y, x) pairs: ordinary, near every interval boundary, tiny and huge ratios and magnitudes."""
+    """(y, x) pairs: ordinary, near every interval boundary, tiny and huge ratios and sizes."""
     n = 400
     sign = rng.choice([-1.0, 1.0], (2, n))
     x = rng.uniform(0.1, 10, n)
