@@ -41,7 +41,7 @@ nanoseconds (as ``builtin_interfaces/Time`` ``sec * 10**9 + nanosec``).
 """
 import math
 from bisect import bisect_right
-from typing import List, NamedTuple, Optional, Sequence, Tuple
+from typing import Dict, List, NamedTuple, Optional, Sequence, Set, Tuple, Union
 
 import numpy as np
 
@@ -190,7 +190,7 @@ class _DynamicEdge:
 
     def __init__(self, sample: _Sample):
         self.samples = [sample]
-        self._stamps = [sample.stamp_ns]
+        self._stamps: List[int] = [sample.stamp_ns]
 
     def insert(self, sample: _Sample, cache_time_ns: int) -> bool:
         newest = self._stamps[-1]
@@ -282,8 +282,9 @@ class TfOrientationBuffer:
             raise ValueError(f'Expected `cache_time_ns` to be a non-negative int, '
                              f'got {cache_time_ns!r}.')
         self.cache_time_ns = cache_time_ns
-        self._frames = set()   # every frame named by a sample, as parent or child
-        self._edges = {}       # child -> _StaticEdge or _DynamicEdge (to its parent)
+        self._frames: Set[str] = set()   # every frame named by a sample, as parent or child
+        # child -> the edge to its parent
+        self._edges: Dict[str, Union[_StaticEdge, _DynamicEdge]] = {}
 
     def __contains__(self, frame: str) -> bool:
         """Whether ``frame`` appears in a sample (as a parent or a child)."""
@@ -445,7 +446,7 @@ class TfOrientationBuffer:
         source_to_top = _IDENTITY
         frame = top_parent = source
         walked = [source]
-        extrapolation = None
+        extrapolation: Optional[ExtrapolationError] = None
         while True:
             edge = self._edges.get(frame)
             if edge is None:

@@ -16,7 +16,7 @@ The registry entry (:data:`rotation_node.messages.INPUTS` ``['tf']``) names
 this stream, :func:`check_parameters` and :data:`DROP_REASONS`. This module
 does not import rclpy: the header class is looked up when a stream is created.
 """
-from typing import Any, Callable, Tuple
+from typing import Any, Callable, Optional, Tuple
 
 import numpy as np
 
@@ -24,7 +24,7 @@ from rotation_node.errors import ParameterError
 from rotation_node.stamps import split_ns, stamp_ns
 from rotation_node.tf_buffer import (
     CycleError, ExtrapolationError, NotConnectedError, RejectedTransformError, TfLookupError,
-    TfOrientationBuffer, UnknownFrameError)
+    TfOrientation, TfOrientationBuffer, UnknownFrameError)
 
 TF_UNKNOWN_FRAME = 'tf_unknown_frame'
 TF_NOT_CONNECTED = 'tf_not_connected'
@@ -87,7 +87,7 @@ class TfSampleStream:
         self._static_topic = TF_STATIC_TOPIC.name
         self._sample = Sample
         self._header_class = message_class('std_msgs/msg/Header')
-        self._previous = None   # TfOrientation of the previous sample
+        self._previous: Optional[TfOrientation] = None   # that of the previous sample
 
     def __call__(self, topic: str, msg: Any) -> Tuple[Any, ...]:
         """
