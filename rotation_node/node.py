@@ -2,8 +2,9 @@
 The orientation-conversion node (console script ``rotation_node``).
 
 Subscribes the relative topic ``input`` (type chosen by the ``input_type``
-parameter) and publishes each output listed in ``outputs`` on the relative
-topic of the same name; the conversion itself is
+parameter; ``input_type: tf`` subscribes ``/tf`` and ``/tf_static`` instead)
+and publishes each output listed in ``outputs`` on the relative topic of the
+same name; the conversion itself is
 :class:`rotation_node.pipeline.ConversionPipeline`, the same code that
 ``rotation_bag convert`` runs on bags. Parameters are declared from the table in
 :mod:`rotation_node.parameters`; a change at runtime is validated first, then
