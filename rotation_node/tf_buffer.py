@@ -39,14 +39,15 @@ sample's rotation is normalised when stored (tf2 accepts norms within 1% of one
 and uses them as given; the rotation is the same). Times are integer
 nanoseconds (as ``builtin_interfaces/Time`` ``sec * 10**9 + nanosec``).
 """
-import math
 from bisect import bisect_right
+import math
 from typing import Dict, List, NamedTuple, Optional, Sequence, Set, Tuple, Union
 
 import numpy as np
 
 from rotation_node import conversions
 from rotation_node.errors import RotationNodeError
+from rotation_node.stamps import seconds_text
 
 DEFAULT_CACHE_TIME_NS = 10_000_000_000
 """How long a dynamic edge keeps its samples behind the newest one (tf2's default, 10 s)."""
@@ -225,7 +226,7 @@ class _DynamicEdge:
                 return samples[0]
             raise ExtrapolationError(
                 f'edge {samples[0].parent} -> {child}: lookup would require extrapolation '
-                f'at time {format_stamp(time_ns)} s, but only time {format_stamp(stamps[0])} s '
+                f'at time {seconds_text(time_ns)} s, but only time {seconds_text(stamps[0])} s '
                 'is in the buffer')
         if time_ns == stamps[-1]:
             return samples[-1]
@@ -234,13 +235,13 @@ class _DynamicEdge:
         if time_ns > stamps[-1]:
             raise ExtrapolationError(
                 f'edge {samples[-1].parent} -> {child}: lookup would require extrapolation '
-                f'into the future: requested time {format_stamp(time_ns)} s but the latest '
-                f'data is at time {format_stamp(stamps[-1])} s')
+                f'into the future: requested time {seconds_text(time_ns)} s but the latest '
+                f'data is at time {seconds_text(stamps[-1])} s')
         if time_ns < stamps[0]:
             raise ExtrapolationError(
                 f'edge {samples[0].parent} -> {child}: lookup would require extrapolation '
-                f'into the past: requested time {format_stamp(time_ns)} s but the earliest '
-                f'data is at time {format_stamp(stamps[0])} s')
+                f'into the past: requested time {seconds_text(time_ns)} s but the earliest '
+                f'data is at time {seconds_text(stamps[0])} s')
         index = bisect_right(stamps, time_ns) - 1
         older, newer = samples[index], samples[index + 1]
         if older.parent != newer.parent or older.stamp_ns == time_ns:
@@ -248,13 +249,6 @@ class _DynamicEdge:
         fraction = (time_ns - older.stamp_ns) / (newer.stamp_ns - older.stamp_ns)
         return _Sample(time_ns, slerp(older.quaternion, newer.quaternion, fraction),
                        older.parent)
-
-
-def format_stamp(stamp_ns: int) -> str:
-    """Return ``stamp_ns`` as seconds with nine decimals, exactly (no float rounding)."""
-    sign = '-' if stamp_ns < 0 else ''
-    seconds, nanoseconds = divmod(abs(stamp_ns), 1_000_000_000)
-    return f'{sign}{seconds}.{nanoseconds:09d}'
 
 
 # ---------------------------------------------------------------------------- buffer
@@ -315,7 +309,8 @@ class TfOrientationBuffer:
         RejectedTransformError
             tf2 would ignore this sample: ``reason`` is ``self_transform``,
             ``no_child_frame_id``, ``no_frame_id``, ``nan_input``,
-            ``denormalized_quaternion`` or ``old_data``. Nothing is changed.
+            ``denormalized_quaternion`` or ``old_data``. The edge is unchanged
+            (an old sample's frames are known from then on, as in tf2).
 
         """
         if not isinstance(stamp_ns, int):
@@ -349,9 +344,9 @@ class TfOrientationBuffer:
             newest = edge.latest()[0]
             raise RejectedTransformError(
                 'old_data',
-                f'transform {parent!r} -> {child!r} ignored: stamp {format_stamp(stamp_ns)} s is '
-                f'more than the cache time {format_stamp(self.cache_time_ns)} s before the '
-                f'newest sample of that edge ({format_stamp(newest)} s)')
+                f'transform {parent!r} -> {child!r} ignored: stamp {seconds_text(stamp_ns)} s is '
+                f'more than the cache time {seconds_text(self.cache_time_ns)} s before the '
+                f'newest sample of that edge ({seconds_text(newest)} s)')
 
     def lookup_orientation(self, parent: str, child: str, stamp_ns: int = 0) -> TfOrientation:
         """
@@ -482,7 +477,7 @@ class TfOrientationBuffer:
                 raise ExtrapolationError(f'{extrapolation}, looking up {source!r} in {target!r}')
             raise NotConnectedError(
                 f'frames {target!r} and {source!r} are not connected at time '
-                f'{format_stamp(time_ns)} s: the tree of {source!r} ends at {top_parent!r}, '
+                f'{seconds_text(time_ns)} s: the tree of {source!r} ends at {top_parent!r}, '
                 f'the tree of {target!r} at {frame!r}')
         return conversions.quaternion_product(
             conversions.quaternion_conjugate(target_to_top), source_to_top)

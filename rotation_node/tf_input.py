@@ -99,6 +99,7 @@ class TfSampleStream:
             ``'/tf_static'`` for static transforms, ``'/tf'`` for dynamic ones
             (the input type's topic names, before any remapping).
         msg : tf2_msgs/msg/TFMessage or any object with its fields
+            The transforms to add.
 
         Returns
         -------

@@ -9,11 +9,10 @@ tf2's ``TimeCache`` (``cache.cpp``) and ``BufferCore`` (``buffer_core.cpp``).
 """
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation, Slerp
-
 from rotation_node.tf_buffer import (
-    DEFAULT_CACHE_TIME_NS, MAX_GRAPH_DEPTH, CycleError, ExtrapolationError, NotConnectedError,
-    RejectedTransformError, TfLookupError, TfOrientationBuffer, UnknownFrameError, slerp)
+    CycleError, DEFAULT_CACHE_TIME_NS, ExtrapolationError, MAX_GRAPH_DEPTH, NotConnectedError,
+    RejectedTransformError, slerp, TfLookupError, TfOrientationBuffer, UnknownFrameError)
+from scipy.spatial.transform import Rotation, Slerp
 
 S = 1_000_000_000                  # nanoseconds per second
 T0 = 1_700_000_000 * S + 123_456   # a wall-clock origin: stamps are integer nanoseconds

@@ -13,26 +13,24 @@ cycle are counted on /diagnostics while the node keeps running.
 """
 import subprocess
 
-import numpy as np
-import pytest
-import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import QuaternionStamped, TransformStamped, Vector3Stamped
+import numpy as np
+import pytest
 from rclpy.duration import Duration
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, QoSProfile
-from scipy.spatial.transform import Rotation, Slerp
-from tf2_msgs.msg import TFMessage
-
+from ros_harness import RosProcess, script, TestNode
 from rotation_node.bag.convert import convert, output_topic
 from rotation_node.bag.mcap_io import BagReader, BagWriter
 from rotation_node.errors import ParameterError
 from rotation_node.parameters import NodeParameters
 from rotation_node.pipeline import ConversionPipeline
 from rotation_node.stamps import header_stamp_ns, split_ns
-
-from ros_harness import RosProcess, TestNode, script
+from scipy.spatial.transform import Rotation, Slerp
+from tf2_msgs.msg import TFMessage
+import yaml
 
 S = 1_000_000_000
 T0 = 1_700_000_000 * S + 250_000_000
@@ -44,7 +42,7 @@ CHAIN = NodeParameters(input_type='tf', tf_parent_frame='map', tf_child_frame='i
 
 
 def transform(parent, child, stamp_ns, rotation):
-    """A TransformStamped of the edge ``parent -> child`` (rotation: scipy, or x, y, z, w)."""
+    """Return a TransformStamped of the edge ``parent -> child`` (scipy or x, y, z, w)."""
     msg = TransformStamped()
     msg.header.frame_id, msg.child_frame_id = parent, child
     msg.header.stamp.sec, msg.header.stamp.nanosec = split_ns(stamp_ns)
@@ -78,7 +76,7 @@ class Chain:
         self.rows = rows
 
     def lookup_times(self):
-        """The distinct, increasing common times after each /tf message (tf2's Time(0))."""
+        """Return the distinct, increasing common times after each /tf message (Time(0))."""
         newest, earliest, times = {}, {}, []
         for t, parent, child, _ in self.rows:
             newest[child] = t
@@ -90,7 +88,7 @@ class Chain:
         return times
 
     def orientation(self, t):
-        """Oracle: imu_link in map at time ``t`` (scipy slerp of each dynamic edge)."""
+        """Return the oracle: imu_link in map at time ``t`` (scipy slerp of each edge)."""
         def edge(stamps, quaternions):
             seconds = (stamps - T0) * 1e-9
             return Slerp(seconds, Rotation.from_quat(quaternions))((t - T0) * 1e-9)
@@ -117,7 +115,7 @@ def _vector(msg):
 
 
 def check_against_oracle(chain, quaternions, rates):
-    """The outputs (stamped messages) hold the oracle's orientations and rates."""
+    """Check that the outputs (stamped messages) hold the oracle's orientations and rates."""
     times = chain.lookup_times()
     assert [header_stamp_ns(m.header) for m in quaternions] == times
     assert all(m.header.frame_id == 'map' for m in quaternions)
@@ -226,7 +224,7 @@ def test_parameters_are_required_for_tf():
 # The live node and convert ---------------------------------------------------------
 
 def _diagnostics_values(diagnostics, name_prefix):
-    """The latest /diagnostics values of the node, as a dict."""
+    """Return the latest /diagnostics values of the node, as a dict."""
     for array in reversed(diagnostics):
         for status in array.status:
             if status.name.startswith(name_prefix):
@@ -235,7 +233,7 @@ def _diagnostics_values(diagnostics, name_prefix):
 
 
 def _tf_publishers(client):
-    """Publishers of /tf_static (latched, as tf2_ros's static broadcaster) and /tf."""
+    """Return publishers of /tf_static (latched, as tf2_ros's static broadcaster) and /tf."""
     static = client.node.create_publisher(TFMessage, '/tf_static', QoSProfile(
         depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
     return static, client.node.create_publisher(TFMessage, '/tf', 1000)
