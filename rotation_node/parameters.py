@@ -17,11 +17,11 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Callable, Mapping, Optional
 
-import yaml
-
 from rotation_node import messages
 from rotation_node.conversions import parse_sequence
 from rotation_node.errors import ParameterError
+from rotation_node.ros_yaml import load_ros_yaml
+from rotation_node.validation import describe_value, did_you_mean
 
 NODE_NAME = 'rotation_node'
 
@@ -122,6 +122,8 @@ _TYPE_NAMES = {
 
 
 def _checked_type(spec, value):
+    if spec.type is tuple and value is None:
+        value = ()   # ROS gives an empty list in a parameters file (outputs: []) as no value
     if spec.type is tuple:
         ok = isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value)
         value = tuple(value) if ok else value
@@ -132,7 +134,7 @@ def _checked_type(spec, value):
     if not ok:
         raise ParameterError(
             f"parameter '{spec.name}': expected {_TYPE_NAMES[spec.type]}, "
-            f'got {type(value).__name__} {value!r}')
+            f'got {describe_value(value)}')
     if spec.type is float and not math.isfinite(value):
         raise ParameterError(f"parameter '{spec.name}': must be finite, got {value!r}")
     return value
@@ -255,8 +257,8 @@ class NodeParameters:
         for name, value in values.items():
             if name not in PARAMETERS_BY_NAME:
                 raise ParameterError(
-                    f"unknown parameter '{name}'; the node's parameters are "
-                    f"{', '.join(PARAMETERS_BY_NAME)}")
+                    f"unknown parameter '{name}'{did_you_mean(name, PARAMETERS_BY_NAME)}; "
+                    f"the node's parameters are {', '.join(PARAMETERS_BY_NAME)}")
             changes[PARAMETERS_BY_NAME[name].attribute] = value
         return replace(self, **changes)
 
@@ -270,17 +272,6 @@ PARAMETERS = tuple(replace(f.metadata['spec'], attribute=f.name) for f in fields
 """The parameter table: one :class:`ParameterSpec` per :class:`NodeParameters` field."""
 
 PARAMETERS_BY_NAME = {spec.name: spec for spec in PARAMETERS}
-
-
-class _RosYamlLoader(yaml.SafeLoader):
-    """YAML loader that reads numbers the way ROS (rcl_yaml_param_parser) does."""
-
-
-# YAML 1.1 (PyYAML) reads 1e-3 as a string; rcl reads it as a double, as people mean it.
-_RosYamlLoader.add_implicit_resolver(
-    'tag:yaml.org,2002:float',
-    re.compile(r'^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$'),
-    list('-+0123456789'))
 
 
 def parameters_from_yaml(path, node_name: str = NODE_NAME) -> NodeParameters:
@@ -319,21 +310,17 @@ def parameters_from_yaml(path, node_name: str = NODE_NAME) -> NodeParameters:
 
     """
     path = Path(path)
-    try:
-        document = yaml.load(path.read_text(), Loader=_RosYamlLoader)
-    except OSError as exc:
-        raise ParameterError(f'parameters file {path}: cannot read it ({exc.strerror})') from None
-    except yaml.YAMLError as exc:
-        raise ParameterError(f'parameters file {path}: invalid YAML: {exc}') from None
+    document = load_ros_yaml(path, f'parameters file {path}', ParameterError)
     if not isinstance(document, dict):
         raise ParameterError(f'parameters file {path}: expected a mapping of node names')
     fq_name = node_name if node_name.startswith('/') else '/' + node_name
     sections = [(key, value) for key, value in document.items()
                 if _node_key_matches(str(key), fq_name)]
     if not sections:
+        found = ', '.join(repr(str(key)) for key in document) or 'none'
         raise ParameterError(
-            f"parameters file {path}: no section for node '{fq_name}' "
-            f"(expected a key such as '{node_name}:' or '/**:')")
+            f"parameters file {path}: no section for node '{fq_name}' (its sections: {found}; "
+            f"key it '{fq_name}:', '/**/{fq_name.rsplit('/', 1)[-1]}:' or '/**:')")
     values = {}
     for key, section in sections:
         if not isinstance(section, dict) or not isinstance(section.get('ros__parameters'), dict):

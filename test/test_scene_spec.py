@@ -192,7 +192,7 @@ def test_scene_must_be_a_mapping(data):
 
 
 @pytest.mark.parametrize('text, message', [
-    ('duration: 1.0\nrate: [10\n', 'not valid YAML'),
+    ('duration: 1.0\nrate: [10\n', 'invalid YAML'),
     ('duration: 1.0\nrate: 10\nrate: 20\n', "duplicate key 'rate'"),
     ('duration: 1.0\nrate: 10\n', 'motion: missing'),
 ])
@@ -216,5 +216,5 @@ def test_exponent_without_a_dot_is_a_number(tmp_path):
 
 
 def test_load_scene_missing_file(tmp_path):
-    with pytest.raises(SceneError, match='cannot read scene file'):
+    with pytest.raises(SceneError, match='cannot read it'):
         spec.load_scene(tmp_path / 'absent.yaml')
