@@ -34,8 +34,8 @@ OUTPUTS = tuple(messages.OUTPUTS)
 FRAMES = ('body', 'world')
 RELIABILITIES = ('reliable', 'best_effort')
 
-# Parameters every rclpy node declares by itself; a parameters file may set them.
-_ROS_BUILTIN_PARAMETERS = frozenset({'use_sim_time', 'start_type_description_service'})
+ROS_BUILTIN_PARAMETERS = frozenset({'use_sim_time', 'start_type_description_service'})
+"""Parameters every rclpy node declares by itself; a parameters file may set them."""
 
 
 @dataclass(frozen=True)
@@ -256,9 +256,7 @@ class NodeParameters:
         changes = {}
         for name, value in values.items():
             if name not in PARAMETERS_BY_NAME:
-                raise ParameterError(
-                    f"unknown parameter '{name}'{did_you_mean(name, PARAMETERS_BY_NAME)}; "
-                    f"the node's parameters are {', '.join(PARAMETERS_BY_NAME)}")
+                raise unknown_parameter_error(name)
             changes[PARAMETERS_BY_NAME[name].attribute] = value
         return replace(self, **changes)
 
@@ -272,6 +270,18 @@ PARAMETERS = tuple(replace(f.metadata['spec'], attribute=f.name) for f in fields
 """The parameter table: one :class:`ParameterSpec` per :class:`NodeParameters` field."""
 
 PARAMETERS_BY_NAME = {spec.name: spec for spec in PARAMETERS}
+
+
+def unknown_parameter_error(name: str, where: str = '') -> ParameterError:
+    """
+    Return the error for a name that is not a parameter of the node.
+
+    It names the nearest parameter (``difflib``) and lists them all; ``where``
+    (e.g. ``' in -p euler.sequense:=xyz'``) follows the name.
+    """
+    return ParameterError(
+        f"unknown parameter '{name}'{where}{did_you_mean(name, PARAMETERS_BY_NAME)}; "
+        f"the node's parameters are {', '.join(PARAMETERS_BY_NAME)}")
 
 
 def parameters_from_yaml(path, node_name: str = NODE_NAME) -> NodeParameters:
@@ -327,7 +337,7 @@ def parameters_from_yaml(path, node_name: str = NODE_NAME) -> NodeParameters:
             raise ParameterError(
                 f"parameters file {path}: section '{key}' needs a 'ros__parameters:' mapping")
         values.update(_flattened(section['ros__parameters']))
-    for name in _ROS_BUILTIN_PARAMETERS.intersection(values):
+    for name in ROS_BUILTIN_PARAMETERS.intersection(values):
         del values[name]
     try:
         return NodeParameters.from_ros(values)

@@ -11,8 +11,8 @@ Plain (unquoted) scalars are typed as ROS 2 types them in parameters files
   octal ``017``), within int64, is an integer;
 - otherwise a number as C ``strtod`` reads it (``0.5``, ``.5e-3``, ``1e3``,
   ``1.``, ``inf``, ``nan``, hexadecimal ``0x1p-3``), or ``.inf``, ``-.inf``,
-  ``.nan``, is a float; one beyond the float range (or that underflows to
-  zero) is not a number;
+  ``.nan``, is a float; one beyond the float range, or one that rounds to a
+  value below the normal range (``5e-324``, ``1e-400``), is not a number;
 - anything else is a string (``1_000`` and ``1_0e3`` included, as in ROS);
   quoted scalars are always strings. An empty scalar, ``~`` and ``null`` are
   None.
@@ -24,6 +24,9 @@ than :data:`MAX_DEPTH` is refused before it is built.
 """
 import math
 import re
+import sys
+from decimal import Decimal
+from fractions import Fraction
 from typing import Any, Type
 
 import yaml
@@ -110,17 +113,26 @@ def _strtod(text):
             return text
         sign, infinity, _ = match.groups()
         return (-1.0 if sign == '-' else 1.0) * (math.inf if infinity else math.nan)
-    if math.isinf(value) or (value == 0.0 and _has_non_zero_digit(text)):
-        return text   # strtod's ERANGE: beyond the float range, or underflow to zero
+    if math.isinf(value) or (abs(value) < sys.float_info.min and not _exact(text, value)):
+        return text   # strtod's ERANGE: beyond the float range, or rounded below it
     return value
 
 
-def _has_non_zero_digit(number):
-    """Whether the significand of a decimal or hexadecimal number text is not zero."""
-    number = number.strip().lstrip('+-')
-    if number[:2] in ('0x', '0X'):
-        return any(c not in '0.' for c in re.split('[pP]', number[2:])[0])
-    return any(c not in '0.' for c in re.split('[eE]', number)[0])
+def _exact(number, value):
+    """Whether the float ``value`` is exactly the decimal or hexadecimal ``number`` text."""
+    digits = number.strip().lstrip('+-')
+    hexadecimal = digits[:2] in ('0x', '0X')
+    parts = re.split('[pP]' if hexadecimal else '[eE]', digits, maxsplit=1)
+    significand, exponent = parts[0][2 if hexadecimal else 0:], parts[1:] or ['0']
+    if value == 0.0:   # exact for a zero significand only (and a huge exponent costs nothing)
+        return not significand.strip('0.')
+    if hexadecimal:
+        whole, _, fraction = significand.partition('.')
+        exact = (Fraction(int(whole + fraction, 16), 16 ** len(fraction))
+                 * Fraction(2) ** int(exponent[0]))
+    else:
+        exact = Fraction(Decimal(digits))
+    return Fraction(abs(value)) == exact
 
 
 class _RosLoader(yaml.SafeLoader):

@@ -118,7 +118,7 @@ def test_range_ends_and_every_output_are_accepted(name, value):
 
 def test_shipped_config_holds_every_parameter_at_its_default():
     assert parameters_from_yaml(CONFIG) == NodeParameters()
-    section = yaml.safe_load(CONFIG.read_text())[NODE_NAME]['ros__parameters']
+    section = yaml.safe_load(CONFIG.read_text())[f'/**/{NODE_NAME}']['ros__parameters']
 
     def names(mapping, prefix=''):
         for key, value in mapping.items():
