@@ -64,6 +64,31 @@ def test_replaced_rejects_an_unknown_name():
         NodeParameters().replaced({'euler.sequnce': 'ZYX'})
 
 
+@pytest.mark.parametrize('name, nearest', [
+    ('euler.sequnce', " (did you mean 'euler.sequence'?)"),
+    ('qos.reliable', " (did you mean 'qos.reliability'?)"),
+    ('outptus', " (did you mean 'outputs'?)"),
+    ('zzz', '')])
+def test_an_unknown_name_names_the_nearest_parameter(name, nearest):
+    with pytest.raises(ParameterError) as error:
+        NodeParameters().replaced({name: 'x'})
+    assert str(error.value).startswith(f"unknown parameter '{name}'{nearest}; the node's "
+                                       'parameters are input_type, outputs, euler.sequence')
+
+
+@pytest.mark.parametrize('value', [[], (), None])
+def test_no_outputs_is_reported_as_an_empty_list(value):
+    with pytest.raises(ParameterError, match="'outputs': list at least one output; choose from "
+                                             'quaternion, euler'):
+        NodeParameters(outputs=value)
+
+
+def test_a_long_value_is_described_briefly():
+    with pytest.raises(ParameterError) as error:
+        NodeParameters(euler_degrees='x' * 1_000_000)
+    assert len(str(error.value)) < 200 and '(1000002 characters)' in str(error.value)
+
+
 # Validation -----------------------------------------------------------------------
 
 @pytest.mark.parametrize('sequence', SEQUENCES)
