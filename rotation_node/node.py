@@ -47,8 +47,7 @@ from rotation_node.bag.qos import qos_profile
 from rotation_node.errors import ParameterError
 from rotation_node.parameters import (
     NODE_NAME, PARAMETERS, PARAMETERS_BY_NAME, ROS_BUILTIN_PARAMETERS, NodeParameters,
-    parameters_from_yaml, unknown_parameter_error)
-from rotation_node.ros_yaml import load_ros_yaml
+    parameters_file_sections, parameters_from_yaml, unknown_parameter_error)
 from rotation_node.pipeline import (
     DROP_REASONS, SKIP_REASONS, ConversionPipeline, warm_up_conversions)
 
@@ -310,7 +309,7 @@ def main(args: Optional[Sequence[str]] = None) -> int:
     files = _parameters_files(argv)
     try:   # before rclpy reads the files, whose own errors are many lines long
         for path in files:
-            load_ros_yaml(path, f'parameters file {path}', ParameterError)
+            parameters_file_sections(path)
         _check_parameter_names(argv)
     except ParameterError as exc:
         print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)

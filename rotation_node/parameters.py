@@ -320,29 +320,68 @@ def parameters_from_yaml(path, node_name: str = NODE_NAME) -> NodeParameters:
 
     """
     path = Path(path)
-    document = load_ros_yaml(path, f'parameters file {path}', ParameterError)
-    if not isinstance(document, dict):
-        raise ParameterError(f'parameters file {path}: expected a mapping of node names')
     fq_name = node_name if node_name.startswith('/') else '/' + node_name
-    sections = [(key, value) for key, value in document.items()
-                if _node_key_matches(str(key), fq_name)]
-    if not sections:
-        found = ', '.join(repr(str(key)) for key in document) or 'none'
+    sections = parameters_file_sections(path)
+    matching = [values for key, values in sections if _node_key_matches(key, fq_name)]
+    if not matching:
+        found = ', '.join(repr(key) for key, _ in sections) or 'none'
         raise ParameterError(
             f"parameters file {path}: no section for node '{fq_name}' (its sections: {found}; "
             f"key it '{fq_name}:', '/**/{fq_name.rsplit('/', 1)[-1]}:' or '/**:')")
     values = {}
-    for key, section in sections:
-        if not isinstance(section, dict) or not isinstance(section.get('ros__parameters'), dict):
-            raise ParameterError(
-                f"parameters file {path}: section '{key}' needs a 'ros__parameters:' mapping")
-        values.update(_flattened(section['ros__parameters']))
+    for section in matching:
+        values.update(section)
     for name in ROS_BUILTIN_PARAMETERS.intersection(values):
         del values[name]
     try:
         return NodeParameters.from_ros(values)
     except ParameterError as exc:
         raise ParameterError(f'parameters file {path}: {exc}') from None
+
+
+def parameters_file_sections(path) -> list:
+    """
+    Read the sections of a ROS 2 parameters file, for any node.
+
+    Node keys may nest as namespaces (``robot: {rotation_node: {ros__parameters:
+    ...}}`` is the section ``robot/rotation_node``), as rcl reads them.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Returns
+    -------
+    list of (str, dict)
+        ``(node key, {parameter name: value})`` in file order, nested parameter
+        names joined with ``'.'``.
+
+    Raises
+    ------
+    ParameterError
+        The file cannot be read, is not valid YAML, is not a mapping of node
+        names, or a node key holds no ``ros__parameters`` mapping.
+
+    """
+    document = load_ros_yaml(path, f'parameters file {path}', ParameterError)
+    if not isinstance(document, dict):
+        raise ParameterError(f'parameters file {path}: expected a mapping of node names')
+    sections = []
+
+    def read(prefix, mapping):
+        for key, value in mapping.items():
+            name = f'{prefix}/{str(key).strip("/")}' if prefix else str(key)
+            if isinstance(value, dict) and isinstance(value.get('ros__parameters'), dict):
+                sections.append((name, _flattened(value['ros__parameters'])))
+            elif (isinstance(value, dict) and value and 'ros__parameters' not in value
+                    and all(isinstance(child, dict) for child in value.values())):
+                read(name, value)   # a namespace of node keys
+            else:
+                raise ParameterError(
+                    f"parameters file {path}: section '{name}' needs a 'ros__parameters:' "
+                    'mapping')
+    read('', document)
+    return sections
 
 
 def _flattened(mapping, prefix=''):

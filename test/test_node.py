@@ -402,6 +402,9 @@ BAD_PARAMETERS_FILES = {
     'empty outputs': ('/**:\n  ros__parameters:\n    outputs: []\n', [],
                       "parameter 'outputs': list at least one output"),
     'malformed': ('rotation_node: [unclosed\n', [], 'invalid YAML (line 2, column 1)'),
+    'malformed section of another node': (
+        '/**/rotation_node:\n  ros__parameters: {}\nother_node:\n  rate: 5\n', [],
+        "section 'other_node' needs a 'ros__parameters:' mapping"),
     'missing': (None, [], 'cannot read it (No such file or directory)'),
 }
 

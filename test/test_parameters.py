@@ -217,6 +217,21 @@ def test_a_namespaced_node_name_is_matched(tmp_path):
         parameters_from_yaml(write(tmp_path, text))
 
 
+def test_nested_namespace_keys_are_sections(tmp_path):
+    text = 'robot:\n  rotation_node:\n    ros__parameters:\n      qos.depth: 5\n'
+    assert parameters_from_yaml(write(tmp_path, text), '/robot/rotation_node').qos_depth == 5
+    with pytest.raises(ParameterError, match=r"no section for node '/rotation_node' \(its "
+                                             r"sections: 'robot/rotation_node'; key it"):
+        parameters_from_yaml(write(tmp_path, text))
+
+
+def test_a_malformed_section_of_another_node_is_an_error(tmp_path):
+    """The whole file is refused, for every node, as rcl does: by the node and convert."""
+    text = '/**/rotation_node:\n  ros__parameters: {}\nother_node:\n  rate: 5\n'
+    with pytest.raises(ParameterError, match="section 'other_node' needs a 'ros__param"):
+        parameters_from_yaml(write(tmp_path, text))
+
+
 @pytest.mark.parametrize('text', ['1e-3', '1.0e-3', '0.001', '.001'])
 def test_exponent_floats_are_read_as_ros_reads_them(tmp_path, text):
     path = write(tmp_path, f'/**:\n  ros__parameters:\n    quaternion.norm_tolerance: {text}\n')
