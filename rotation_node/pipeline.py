@@ -130,6 +130,10 @@ class Value(NamedTuple):
     method : str
         Name of the :class:`ConversionPipeline` method
         ``method(sample, values) -> value or None`` that computes it.
+    reads : tuple of str
+        The optional :class:`~rotation_node.messages.Sample` fields it reads
+        (``'angular_velocity'``, ``'covariance'``): input messages are read into
+        them only when a value computed reads them.
 
     """
 
@@ -137,11 +141,12 @@ class Value(NamedTuple):
     requires: Tuple[str, ...]
     uses: Tuple[str, ...]
     method: str
+    reads: Tuple[str, ...] = ()
 
 
 VALUES = (
     Value(ORIENTATION, (), (), '_orientation'),
-    Value(ANGULAR_VELOCITY, (), (ORIENTATION,), '_angular_velocity'),
+    Value(ANGULAR_VELOCITY, (), (ORIENTATION,), '_angular_velocity', ('angular_velocity',)),
     Value(OUTPUT_QUATERNION, (ORIENTATION,), (), '_output_quaternion'),
     Value(EULER_ANGLES, (ORIENTATION,), (), '_euler_angles'),
     Value(PUBLISHED_EULER, (EULER_ANGLES,), (), '_published_euler'),
@@ -201,14 +206,15 @@ class ConversionPipeline:
         self._outputs = [messages.OUTPUTS[name] for name in params.outputs]
         self._builders = {output.name: output.message.build for output in self._outputs}
         plan = _needed_values(params.outputs)
-        reads_angular_velocity = any(value.name == ANGULAR_VELOCITY for value in plan)
-        self._samples = self._input.sample_stream(
-            params, angular_velocity=reads_angular_velocity)
+        reads = {field for value in plan for field in value.reads}
+        sample_fields = {'angular_velocity': 'angular_velocity' in reads,
+                         'covariance': 'covariance' in reads}
+        self._samples = self._input.sample_stream(params, **sample_fields)
         self._transforms = [transform for transform in
                             (factory(params) for factory in SAMPLE_TRANSFORMS)
                             if transform is not None]
         # A plain input without transforms: one sample per message, read directly.
-        self._read = (self._input.sample_reader(angular_velocity=reads_angular_velocity)
+        self._read = (self._input.sample_reader(**sample_fields)
                       if self._input.stream is None and not self._transforms else None)
         self._plan = [(value.name, value.requires, getattr(self, value.method))
                       for value in plan]
