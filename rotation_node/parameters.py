@@ -105,8 +105,8 @@ class ParameterSpec:
             for item in (value if self.type is tuple else (value,)):
                 if item not in self.choices:
                     raise ParameterError(
-                        f"parameter '{self.name}': {item!r} is not allowed; "
-                        f'{self.constraints}')
+                        f"parameter '{self.name}': {item!r} is not allowed"
+                        f'{did_you_mean(item, self.choices)}; {self.constraints}')
         if self.bounds is not None and not self.bounds[0] <= value <= self.bounds[1]:
             raise ParameterError(
                 f"parameter '{self.name}': {value!r} is out of range; "

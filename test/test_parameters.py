@@ -76,6 +76,14 @@ def test_an_unknown_name_names_the_nearest_parameter(name, nearest):
                                        'parameters are input_type, outputs, euler.sequence')
 
 
+def test_a_value_not_allowed_names_the_nearest_choice():
+    with pytest.raises(ParameterError, match=r"'outputs': 'eulr' is not allowed \(did you mean "
+                                             r"'euler'\?\); each one of: quaternion, euler"):
+        NodeParameters(outputs=('quaternion', 'eulr'))
+    with pytest.raises(ParameterError, match=r"'input_type': 'gps' is not allowed; one of"):
+        NodeParameters(input_type='gps')
+
+
 @pytest.mark.parametrize('value', [[], (), None])
 def test_no_outputs_is_reported_as_an_empty_list(value):
     with pytest.raises(ParameterError, match="'outputs': list at least one output; choose from "

@@ -148,8 +148,8 @@ def _subset(choices):
                              f'got {describe_value(value)}')
         for name in value:
             if name not in choices:
-                raise SceneError(
-                    f'{path}: unknown entry {name!r}; expected one of {list(choices)}')
+                raise SceneError(f'{path}: unknown entry {name!r}{did_you_mean(name, choices)}; '
+                                 f'expected one of {list(choices)}')
         if len(set(value)) != len(value):
             raise SceneError(f'{path}: entries must be distinct, got {list(value)}')
         return tuple(value)
