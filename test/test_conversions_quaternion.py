@@ -88,6 +88,21 @@ def test_distance_hard_cases_against_mpmath(rng):
         assert abs(d - truth) <= 4 * mpr.EPS * max(truth, 1e-300) + 1e-300
 
 
+def test_distance_of_a_rotation_to_itself_is_exactly_zero(rng):
+    """Reported: quaternion_distance(q, q) was 2.3e-17 for [0.1, 0.1, 0.6, 0.9], up to 1.6e-16."""
+    assert rc.quaternion_distance([0.1, 0.1, 0.6, 0.9], [0.1, 0.1, 0.6, 0.9]) == 0.0
+    q = np.concatenate([rng.normal(size=(2000, 4)), hard_quaternions(rng, 500)])
+    assert np.all(rc.quaternion_distance(q, q) == 0.0)
+    assert np.all(rc.quaternion_distance(q, -q) == 0.0)
+    assert all(rc.quaternion_distance(x, s * x) == 0.0 for x in q[::50] for s in (1.0, -1.0))
+
+
+@settings(max_examples=200, deadline=None)
+@given(q=nonzero_quaternions, sign=st.sampled_from([1.0, -1.0]))
+def test_distance_to_the_same_or_negated_quaternion_is_zero(q, sign):
+    assert rc.quaternion_distance(q, sign * np.asarray(q)) == 0.0
+
+
 def test_rotate_vector_matches_matrix(rng):
     q = rng.normal(size=(40, 4))
     v = rng.normal(size=(40, 3))

@@ -25,8 +25,9 @@ import math
 
 from ._matrix import (DEFAULT_ORTHONORMAL_TOLERANCE, EIGENVECTOR_PENDING, convert_matrices,
                       quaternion_of_matrix, store_rotation)
-from ._quaternion import (atan2_in_place, call_unary, jit, product, quaternion_status,
-                          run_staged, samples, scaled_quaternion, vector_status)
+from ._quaternion import (atan2_in_place, call_unary, jit, needs_sign_flip, product,
+                          quaternion_status, run_staged, samples, scaled_quaternion,
+                          vector_status)
 from ._trigonometry import sin_cos
 from ._validation import SEQUENCE_TABLE, parse_sequence
 
@@ -58,7 +59,7 @@ def quaternion_from_euler_scalar(a1, a2, a3, i, j, k, intrinsic):
     else:  # R3 R2 R1
         x, y, z, w = product(e3x, e3y, e3z, e3w, e2x, e2y, e2z, e2w)
         x, y, z, w = product(x, y, z, w, e1x, e1y, e1z, e1w)
-    if w < 0.0:
+    if needs_sign_flip(x, y, z, w):
         return -x, -y, -z, -w
     return x, y, z, w + 0.0
 
@@ -140,9 +141,9 @@ def euler_from_half_angles(half_middle, half_sum, half_diff, h_ab, i, j, k, intr
     elif h_ab == 0.0:
         half_sum = half_diff if intrinsic else -half_diff
     first = _wrap(half_sum - half_diff)
-    third = _wrap(half_sum + half_diff)
+    # The sign before the wrap: wrapping first would turn +pi into -pi.
+    third = _wrap(half_sum + half_diff if proper else sign * (half_sum + half_diff))
     if not proper:
-        third = third * sign
         middle -= 0.5 * math.pi
     if intrinsic:
         return third, middle, first

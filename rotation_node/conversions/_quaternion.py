@@ -157,6 +157,21 @@ def product(px, py, pz, pw, qx, qy, qz, qw):
 
 
 @jit
+def conjugate_product(px, py, pz, pw, qx, qy, qz, qw):
+    """
+    ``p* (x) q``, the rotation from ``p`` to ``q``, with each cancelling pair grouped.
+
+    The vector part is ``(p_s q_v - q_s p_v) - p_v x q_v``: each bracket is a
+    difference of the same two products when ``q = +-p``, so the vector part of
+    a rotation relative to itself is exactly zero.
+    """
+    return ((pw * qx - px * qw) - (py * qz - pz * qy),
+            (pw * qy - py * qw) - (pz * qx - px * qz),
+            (pw * qz - pz * qw) - (px * qy - py * qx),
+            pw * qw + px * qx + py * qy + pz * qz)
+
+
+@jit
 def rotated_vector(x, y, z, w, vx, vy, vz):
     """
     ``R(q) v`` for a unit quaternion: ``v + w t + u x t`` with ``t = 2 u x v``.
@@ -258,7 +273,7 @@ def _distance_kernel(p, q, out):
             return bad
         px, py, pz, pw = scaled_quaternion(fp[s, 0], fp[s, 1], fp[s, 2], fp[s, 3])
         qx, qy, qz, qw = scaled_quaternion(fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3])
-        ex, ey, ez, ew = product(-px, -py, -pz, pw, qx, qy, qz, qw)
+        ex, ey, ez, ew = conjugate_product(px, py, pz, pw, qx, qy, qz, qw)
         fo[s] = half_angle_atan2(vector_norm(ex, ey, ez), ew)
     return -1
 
