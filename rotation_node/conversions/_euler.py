@@ -25,9 +25,10 @@ import math
 
 from ._matrix import (DEFAULT_ORTHONORMAL_TOLERANCE, EIGENVECTOR_PENDING, convert_matrices,
                       quaternion_of_matrix, store_rotation)
-from ._quaternion import (atan2_in_place, call_unary, jit, needs_sign_flip, product,
-                          quaternion_status, run_staged, samples, scaled_quaternion,
+from ._quaternion import (needs_sign_flip, product, quaternion_status, scaled_quaternion,
                           vector_status)
+from ._runtime import (FLAT_IN, FLAT_OUT, FLOAT, INT, ROWS_IN, ROWS_OUT, atan2_in_place,
+                       call_unary, jit, kernel, matrix_samples, run_staged, samples)
 from ._trigonometry import sin_cos
 from ._validation import SEQUENCE_TABLE, parse_sequence
 
@@ -181,12 +182,10 @@ def unpack_convention(convention):
 
 
 @jit
-def _from_euler_kernel(angles, out, convention):
-    """Quaternions or matrices (as ``out`` is (..., 4) or (..., 3, 3)) of Euler angles."""
+def _rotations_from_euler(fa, fo, convention):
+    """Quaternions or matrices (as ``fo`` is (n, 4) or (n, 9)) of the Euler angles ``fa`` (n, 3)."""
     i, j, k, intrinsic, degrees = unpack_convention(convention)
     scale = _RADIANS_PER_DEGREE if degrees else 1.0
-    fa = samples(angles, 1)
-    fo = out.reshape(fa.shape[0], -1)
     for s in range(fa.shape[0]):
         bad = vector_status(fa, s, 0)
         if bad >= 0:
@@ -195,6 +194,16 @@ def _from_euler_kernel(angles, out, convention):
             fa[s, 0] * scale, fa[s, 1] * scale, fa[s, 2] * scale, i, j, k, intrinsic)
         store_rotation(fo, s, x, y, z, w)
     return -1
+
+
+@kernel(FLAT_IN, FLAT_OUT, INT)
+def _quaternion_from_euler_kernel(angles, out, convention):
+    return _rotations_from_euler(samples(angles, 3), samples(out, 4), convention)
+
+
+@kernel(FLAT_IN, ROWS_OUT, INT)
+def _matrix_from_euler_kernel(angles, out, convention):
+    return _rotations_from_euler(samples(angles, 3), samples(out, 9), convention)
 
 
 @jit
@@ -206,9 +215,9 @@ def _store_euler(fo, s, x, y, z, w, convention):
     fo[s, 0], fo[s, 1], fo[s, 2] = a1 * scale, a2 * scale, a3 * scale
 
 
-@jit
+@kernel(FLAT_IN, FLAT_OUT, INT)
 def _euler_from_quaternion_kernel(q, out, convention):
-    fq, fo = samples(q, 1), samples(out, 1)
+    fq, fo = samples(q, 4), samples(out, 3)
     for s in range(fq.shape[0]):
         bad = quaternion_status(fq, s, 0)
         if bad >= 0:
@@ -217,7 +226,7 @@ def _euler_from_quaternion_kernel(q, out, convention):
     return -1
 
 
-@jit
+@kernel(ROWS_IN, ROWS_OUT, ROWS_OUT, INT)
 def _euler_arguments_kernel(fq, y, x, convention):
     i, j, k, intrinsic, _ = unpack_convention(convention)
     for s in range(fq.shape[0]):
@@ -229,7 +238,7 @@ def _euler_arguments_kernel(fq, y, x, convention):
     return -1
 
 
-@jit
+@kernel(ROWS_IN, ROWS_IN, ROWS_OUT, INT, returns=None)
 def _euler_from_half_angles_kernel(t, x, fo, convention):
     i, j, k, intrinsic, degrees = unpack_convention(convention)
     scale = _DEGREES_PER_RADIAN if degrees else 1.0
@@ -240,7 +249,7 @@ def _euler_from_half_angles_kernel(t, x, fo, convention):
 
 def _euler_from_quaternion_batch(q, out, convention):
     """Batch schedule of ``_euler_from_quaternion_kernel`` (see ``run_staged``)."""
-    fq, fo = samples(q, 1), samples(out, 1)
+    fq, fo = samples(q, 4), samples(out, 3)
     return run_staged(
         fq.shape[0], 3,
         lambda a, b, y, x: _euler_arguments_kernel(fq[a:b], y, x, convention),
@@ -248,10 +257,10 @@ def _euler_from_quaternion_batch(q, out, convention):
         lambda a, b, t, x: _euler_from_half_angles_kernel(t, x, fo[a:b], convention))
 
 
-@jit
+@kernel(ROWS_IN, FLAT_OUT, FLOAT, INT)
 def _euler_from_matrix_kernel(m, out, tolerance, convention):
     """Euler angles of matrices, one loop (the fused kernel of ``convert_matrices``)."""
-    fm, fo = samples(m, 2), samples(out, 1)
+    fm, fo = matrix_samples(m), samples(out, 3)
     pending = 0
     for s in range(fm.shape[0]):
         bad, x, y, z, w = quaternion_of_matrix(fm, s, tolerance)
@@ -262,10 +271,10 @@ def _euler_from_matrix_kernel(m, out, tolerance, convention):
     return -1 - pending
 
 
-@jit
+@kernel(FLAT_IN, FLAT_OUT, INT)
 def _singularity_margin_kernel(q, out, convention):
     i, j, k, intrinsic, _ = unpack_convention(convention)
-    fq, fo = samples(q, 1), samples(out, 0)
+    fq, fo = samples(q, 4), samples(out, 0)
     for s in range(fq.shape[0]):
         bad = quaternion_status(fq, s, 0)
         if bad >= 0:
@@ -298,8 +307,8 @@ def _convention(seq, degrees=False):
 
 
 def _from_angles(angles, seq, degrees, out_trailing):
-    return call_unary(_from_euler_kernel, angles, 'angles', (3,), out_trailing,
-                      _convention(seq, degrees))
+    kernel_ = _matrix_from_euler_kernel if out_trailing == (3, 3) else _quaternion_from_euler_kernel
+    return call_unary(kernel_, angles, 'angles', (3,), out_trailing, _convention(seq, degrees))
 
 
 def quaternion_from_euler(angles, seq, *, degrees=False):

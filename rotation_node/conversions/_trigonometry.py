@@ -25,7 +25,7 @@ rotation in practice: 5e5 rad is 80000 turns).
 """
 import math
 
-from ._quaternion import jit
+from ._runtime import jit
 
 # fdlibm k_sin.c and k_cos.c.
 _S1 = -1.66666666666666324348e-01

@@ -47,8 +47,9 @@ def float_array(x, name, trailing):
     Returns
     -------
     ndarray
-        The values; a copy only where a conversion or reordering was needed.
-        Kernels flatten it to ``(n, *trailing)`` themselves (a free view).
+        The values, C-contiguous and aligned; a copy only where a conversion,
+        reordering or realignment was needed. Read-only arrays are used as
+        they are.
 
     Raises
     ------
@@ -65,7 +66,13 @@ def float_array(x, name, trailing):
     if a.shape[a.ndim - k:] != trailing or a.ndim < k:
         raise ValueError(
             f'Expected `{name}` to have shape {_SHAPE_TEXT[trailing]}, got {a.shape}.')
-    return a if a.flags.c_contiguous else np.ascontiguousarray(a)
+    return kernel_ready(a)
+
+
+def kernel_ready(a):
+    """``a`` itself if it is C-contiguous and aligned (as compiled kernels take it), else such a copy."""
+    flags = a.flags
+    return a if flags.c_contiguous and flags.aligned else np.array(a, order='C')
 
 
 def broadcast_pair(a, b, trailing_a, trailing_b):
