@@ -28,6 +28,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from rotation_node.conversions.warm_up import warm_up
 from rotation_node.errors import ParameterError
 from rotation_node.parameters import (
     NODE_NAME, PARAMETERS, PARAMETERS_BY_NAME, NodeParameters)
@@ -212,6 +213,9 @@ def main(args=None):
     node = None
     try:
         node = RotationNode()
+        # Every kernel compiled now (loaded from the disk cache where cached;
+        # compiled and cached on a first start), not on the first messages.
+        warm_up()
         # The ~1e5 objects of rclpy, numpy and numba live as long as the process: keep
         # them out of the cyclic collector, whose full passes over them stall a
         # callback for ~50 ms (50 messages at 1 kHz).

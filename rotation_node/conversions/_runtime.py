@@ -33,14 +33,13 @@ or wherever ``NUMBA_CACHE_DIR`` says.
 """
 import math
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from numba import njit, types
 from numba.core.errors import RequireLiteralValue, TypingError
-from numba.core.imputils import impl_ret_borrowed
 from numba.extending import intrinsic, overload
-from numba.np.arrayobj import make_array, populate_array
 
 from ._validation import broadcast_pair, float_array, raise_sample_error
 
@@ -49,8 +48,11 @@ from ._validation import broadcast_pair, float_array, raise_sample_error
 # sample and, when an array is live across it (the kernels' inputs and
 # outputs always are), an atomic reference-count increment and decrement per
 # call: 2-4x the whole per-sample cost of most kernels, measured.
-# (Inlined callees cannot be called with ``*args``.)
-jit = njit(cache=True, nogil=True, error_model='numpy', inline='always')
+# (Inlined callees cannot be called with ``*args``.) Only kernels are cached
+# on disk (:func:`kernel`): an inlined helper is compiled into its callers,
+# and a cache would cost each helper a directory probe at import.
+jit = njit(nogil=True, error_model='numpy', inline='always')
+_cached_jit = njit(cache=True, nogil=True, error_model='numpy', inline='always')
 
 
 # ------------------------------------------------------------ kernel types
@@ -72,10 +74,16 @@ STATUS = types.int64
 KERNELS = []
 
 
+_compiling = threading.Lock()
+
+
 def _compile(dispatcher):
     """Compile ``dispatcher`` for its one signature (from the disk cache if there), then no more."""
-    dispatcher.compile(dispatcher.kernel_signature)
-    dispatcher.disable_compile()
+    with _compiling:   # threads of one large batch may all make the first call
+        if not dispatcher.kernel_compiled:
+            dispatcher.compile(dispatcher.kernel_signature)
+            dispatcher.disable_compile()
+            dispatcher.kernel_compiled = True
 
 
 def kernel(*argument_types, returns=STATUS):
@@ -102,8 +110,9 @@ def kernel(*argument_types, returns=STATUS):
     signature = (types.none if returns is None else returns)(*argument_types)
 
     def decorate(py_func):
-        dispatcher = jit(py_func)
+        dispatcher = _cached_jit(py_func)
         dispatcher.kernel_signature = signature
+        dispatcher.kernel_compiled = False
 
         def compile_on_first_call(*args, **kwargs):
             # numba calls this when no compiled signature matches the arguments,
@@ -158,6 +167,9 @@ def _stack_view(typingctx, a, rows, columns):
     result = a.copy(ndim=1 + len(trailing), layout='C')
 
     def codegen(context, builder, signature, args):
+        # Imported here, when a kernel is compiled: not needed to load one from the cache.
+        from numba.core.imputils import impl_ret_borrowed
+        from numba.np.arrayobj import make_array, populate_array
         source = make_array(signature.args[0])(context, builder, args[0])
         view = make_array(signature.return_type)(context, builder)
         intp = context.get_value_type(types.intp)
