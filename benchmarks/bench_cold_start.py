@@ -34,8 +34,10 @@ TARGET = 2.0
 CONVERSIONS = {
     'euler_from_quaternion': ('rc.euler_from_quaternion(x, "xyz")',
                               'Rotation.from_quat(x).as_euler("xyz")'),
-    'matrix_from_quaternion': ('rc.matrix_from_quaternion(x)', 'Rotation.from_quat(x).as_matrix()'),
-    'quaternion_from_matrix': ('rc.quaternion_from_matrix(x)', 'Rotation.from_matrix(x).as_quat()'),
+    'matrix_from_quaternion': ('rc.matrix_from_quaternion(x)',
+                               'Rotation.from_quat(x).as_matrix()'),
+    'quaternion_from_matrix': ('rc.quaternion_from_matrix(x)',
+                               'Rotation.from_matrix(x).as_quat()'),
     'quaternion_from_euler': ('rc.quaternion_from_euler(x, "ZYX")',
                               'Rotation.from_euler("ZYX", x).as_quat()'),
     'rotation_vector_from_quaternion': ('rc.rotation_vector_from_quaternion(x)',

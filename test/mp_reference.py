@@ -48,7 +48,11 @@ def rotation_distance(p, q):
 
 
 def is_canonical(q):
-    """Whether every quaternion of ``q`` (..., 4) has the documented sign: w > 0, or w == 0 and the first non-zero of x, y, z > 0."""
+    """
+    Whether every quaternion of ``q`` (..., 4) has the documented sign.
+
+    That is w > 0, or w == 0 and the first non-zero of x, y, z > 0.
+    """
     for x in np.asarray(q, dtype=float).reshape(-1, 4):
         first = next((c for c in x if c != 0.0), 0.0)
         if not (x[3] > 0.0 or (x[3] == 0.0 and first > 0.0)):

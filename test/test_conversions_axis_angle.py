@@ -135,7 +135,7 @@ def test_batch_schedule_reports_the_first_bad_sample(rng):
 
 
 def _grid_quaternions():
-    """Quaternions with components in {0, +-1/2, +-sqrt(1/2), +-1} (unit or not): w == 0 and w < 0 included."""
+    """Quaternions with components in {0, +-1/2, +-sqrt(1/2), +-1}, unit or not, any sign of w."""
     values = (0.0, 0.5, -0.5, np.sqrt(0.5), -np.sqrt(0.5), 1.0, -1.0)
     q = np.stack(np.meshgrid(values, values, values, values, indexing='ij'), -1).reshape(-1, 4)
     return q[np.abs(q).max(axis=1) > 0]

@@ -247,7 +247,7 @@ GRID_ANGLES = np.stack(np.meshgrid(_STEPS, _STEPS, _STEPS, indexing='ij'), -1).r
 
 
 def _signed_unit_quaternions():
-    """Every quaternion with components in {0, +-1/2, +-sqrt(1/2), +-1} that is unit: 48 rotations, both signs."""
+    """The unit quaternions with components in {0, +-1/2, +-sqrt(1/2), +-1}: 48 rotations, +-q."""
     values = (0.0, 0.5, -0.5, np.sqrt(0.5), -np.sqrt(0.5), 1.0, -1.0)
     q = np.stack(np.meshgrid(values, values, values, values, indexing='ij'), -1).reshape(-1, 4)
     return q[np.abs(np.einsum('ij,ij->i', q, q) - 1.0) <= 1e-15]
@@ -259,7 +259,8 @@ GRID_QUATERNIONS = _signed_unit_quaternions()
 def _assert_in_documented_ranges(angles, seq):
     angles = np.asarray(angles).reshape(-1, 3)
     outer = angles[:, [0, 2]]
-    assert np.all((outer > -np.pi) & (outer <= np.pi)), outer[~((outer > -np.pi) & (outer <= np.pi))]
+    inside = (outer > -np.pi) & (outer <= np.pi)
+    assert np.all(inside), outer[~inside]
     if rc.parse_sequence(seq).proper:
         assert np.all((angles[:, 1] >= 0.0) & (angles[:, 1] <= np.pi))
     else:

@@ -1,4 +1,4 @@
-"""Tests of rotation_node.conversions._quaternion: product, conjugate, canonical form, distance, rotation."""
+"""Tests of rotation_node.conversions._quaternion: product, conjugate, canonical, distance."""
 import numpy as np
 import pytest
 from hypothesis import given, settings

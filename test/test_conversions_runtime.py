@@ -109,7 +109,8 @@ def _public_calls():
     yield 'rotate_vector', lambda x: rc.rotate_vector(x, V)
     yield 'matrix_from_quaternion', rc.matrix_from_quaternion
     yield 'euler_from_quaternion', lambda x: rc.euler_from_quaternion(x, 'ZYX')
-    yield 'euler_from_quaternion degrees', lambda x: rc.euler_from_quaternion(x, 'xyz', degrees=True)
+    yield 'euler_from_quaternion degrees', \
+        lambda x: rc.euler_from_quaternion(x, 'xyz', degrees=True)
     yield 'euler_singularity_margin', lambda x: rc.euler_singularity_margin(x, 'zxz')
     yield 'axis_angle_from_quaternion', rc.axis_angle_from_quaternion
     yield 'rotation_vector_from_quaternion', rc.rotation_vector_from_quaternion
@@ -210,7 +211,7 @@ def _dispatchers(module):
 
 
 def test_every_kernel_called_from_python_is_declared():
-    """A compiled loop that Python calls (a name ending in _kernel) has its one declared signature."""
+    """A compiled loop that Python calls (named ..._kernel) has its one declared signature."""
     declared = set(map(id, KERNELS))
     for module_name in _MODULES:
         module = importlib.import_module(module_name)
@@ -245,7 +246,7 @@ def test_importing_conversions_loads_nothing_beyond_numpy_and_numba():
 
 
 def test_kernels_are_cached_in_the_user_cache_where_the_package_is_read_only(tmp_path):
-    """Where the in-tree cache is unusable (a system install), numba's user-wide directory is used."""
+    """Where the in-tree cache is unusable (a system install), the user-wide one is used."""
     env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path))
     env.pop('NUMBA_CACHE_DIR', None)
     code = ('from numba.core import caching\n'

@@ -106,7 +106,7 @@ def _axis_angle_status(ax, ay, az, angle, s):
 
 @jit
 def _rotations_from_axis_angle(fa, ft, angle, fo):
-    """Rotations about the axes ``fa`` (n, 3) by ``ft`` (n,), or by ``angle`` if ``ft`` is empty."""
+    """Rotations about axes ``fa`` (n, 3) by ``ft`` (n,), or by ``angle`` if ``ft`` is empty."""
     for s in range(fa.shape[0]):
         t = ft[s] if ft.shape[0] else angle
         bad = _axis_angle_status(fa[s, 0], fa[s, 1], fa[s, 2], t, s)

@@ -183,7 +183,7 @@ def unpack_convention(convention):
 
 @jit
 def _rotations_from_euler(fa, fo, convention):
-    """Quaternions or matrices (as ``fo`` is (n, 4) or (n, 9)) of the Euler angles ``fa`` (n, 3)."""
+    """Quaternions or matrices (``fo`` (n, 4) or (n, 9)) of the Euler angles ``fa`` (n, 3)."""
     i, j, k, intrinsic, degrees = unpack_convention(convention)
     scale = _RADIANS_PER_DEGREE if degrees else 1.0
     for s in range(fa.shape[0]):
@@ -307,7 +307,8 @@ def _convention(seq, degrees=False):
 
 
 def _from_angles(angles, seq, degrees, out_trailing):
-    kernel_ = _matrix_from_euler_kernel if out_trailing == (3, 3) else _quaternion_from_euler_kernel
+    matrices = out_trailing == (3, 3)
+    kernel_ = _matrix_from_euler_kernel if matrices else _quaternion_from_euler_kernel
     return call_unary(kernel_, angles, 'angles', (3,), out_trailing, _convention(seq, degrees))
 
 

@@ -26,7 +26,8 @@ import math
 
 import numpy as np
 
-from ._quaternion import canonical_kernel, canonical_unit_quaternion, quaternion_status, scaled_quaternion
+from ._quaternion import (canonical_kernel, canonical_unit_quaternion, quaternion_status,
+                          scaled_quaternion)
 from ._runtime import (FLAT_IN, FLAT_OUT, FLOAT, ROWS_IN, ROWS_OUT, call_unary, is_batch,
                        is_single_sample, jit, kernel, kernel_layout, matrix_samples, new_array,
                        samples, status)
@@ -390,7 +391,11 @@ def convert_matrices(R, orthonormal_tolerance, non_orthonormal, out_trailing,
 
 
 def _flat_quaternions(a, m, tolerance):
-    """Quaternions (n, 4) of the validated matrices ``a``, ``m`` their canonical layout, eigenvector method included."""
+    """
+    Quaternions (n, 4) of the validated matrices ``a``, eigenvector method included.
+
+    ``m`` is ``a`` in the canonical layout (3 n, 3).
+    """
     q = np.empty((m.shape[0] // 3, 4))
     bad = quaternion_from_matrix_kernel(m, q.reshape(-1), tolerance)
     if bad >= 0:
@@ -445,5 +450,3 @@ def quaternion_from_matrix(R, *, orthonormal_tolerance=DEFAULT_ORTHONORMAL_TOLER
     """
     return convert_matrices(R, orthonormal_tolerance, non_orthonormal, (4,),
                             quaternion_from_matrix_kernel, None)
-
-

@@ -78,7 +78,7 @@ _compiling = threading.Lock()
 
 
 def _compile(dispatcher):
-    """Compile ``dispatcher`` for its one signature (from the disk cache if there), then no more."""
+    """Compile ``dispatcher`` for its one signature (or load it from the disk cache), once."""
     with _compiling:   # threads of one large batch may all make the first call
         if not dispatcher.kernel_compiled:
             dispatcher.compile(dispatcher.kernel_signature)
@@ -146,7 +146,7 @@ def compile_kernels(kernels=None):
 # ------------------------------------------------------------ sample views
 
 def kernel_layout(a, trailing):
-    """The canonical layout (a view) of the C-contiguous ``a`` with samples of shape ``trailing``."""
+    """The canonical layout (a view) of the C-contiguous ``a`` of samples of shape ``trailing``."""
     if len(trailing) <= 1:
         return a.reshape(-1)
     return a.reshape((-1,) + trailing[1:])
@@ -158,7 +158,7 @@ def _rows_per_sample(trailing):
 
 @intrinsic
 def _stack_view(typingctx, a, rows, columns):
-    """``a`` (C-contiguous) viewed as ``(n,)``, ``(n, rows)`` or ``(n, rows, columns)``; no copy, no call."""
+    """C-contiguous ``a`` viewed as ``(n,)``, ``(n, rows)`` or ``(n, rows, columns)``: no copy."""
     if not (isinstance(a, types.Array) and a.layout == 'C'):
         raise TypingError(f'samples(): expected a C-contiguous array, got {a}.')
     if not (isinstance(rows, types.IntegerLiteral) and isinstance(columns, types.IntegerLiteral)):
@@ -203,7 +203,7 @@ def _samples_overload(a, width):
 
 
 def matrix_samples(a):
-    """The canonical matrices ``a`` (3 n, 3), or any C-contiguous ``9 n`` values, as ``(n, 3, 3)``."""
+    """The canonical matrices ``a`` (3 n, 3), or any C-contiguous 9 n values, as (n, 3, 3)."""
     return a.reshape(-1, 3, 3)
 
 
@@ -319,7 +319,7 @@ def set_threads(n):
 
 def _run(kernel_, inputs, trailings, out, out_trailing, args):
     """
-    Run ``kernel_(*inputs, out, *args)`` on canonical arrays, split across threads for large batches.
+    Run ``kernel_(*inputs, out, *args)`` on canonical arrays, in threads for large batches.
 
     The parts are whole samples: rows ``lo r:hi r`` of an argument with ``r``
     rows per sample.

@@ -2,11 +2,11 @@
 Argument checks at the public boundary of :mod:`rotation_node.conversions`.
 
 Public functions validate once, here: they turn array_like arguments into
-C-contiguous float64 arrays with the right trailing shape; the compiled kernels
-flatten them to ``(n, *trailing)`` and give the output the input's leading
-shape, so a single sample costs little more than one kernel call. Per-sample checks (finiteness, zero norm, determinant) run
-inside the compiled kernels, which report the first bad sample as
-a status ``(flat_index << 4) | (argument << 3) | defect`` (negative when every
+C-contiguous, aligned float64 arrays with the right trailing shape, which the
+kernels take in their canonical layout (see ``_runtime``). Per-sample checks
+(finiteness, zero norm, determinant) run inside the compiled kernels, which
+report the first bad sample as a status
+``(flat_index << 4) | (argument << 3) | defect`` (negative when every
 sample is fine); :func:`raise_sample_error` turns it into a ``ValueError``
 that names the argument, the sample and what was wrong.
 """
@@ -70,7 +70,7 @@ def float_array(x, name, trailing):
 
 
 def kernel_ready(a):
-    """``a`` itself if it is C-contiguous and aligned (as compiled kernels take it), else such a copy."""
+    """``a`` itself if C-contiguous and aligned (as compiled kernels take it), else such a copy."""
     flags = a.flags
     return a if flags.c_contiguous and flags.aligned else np.array(a, order='C')
 

@@ -1,5 +1,5 @@
 """
-Compile and cache every kernel of the library once: ``python -m rotation_node.conversions.warm_up``.
+Compile and cache every kernel once: ``python -m rotation_node.conversions.warm_up``.
 
 Each kernel (conversions and kinematics) is compiled for its one signature
 and written to numba's disk cache, so that no later process compiles: a first

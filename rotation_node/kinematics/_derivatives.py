@@ -21,9 +21,9 @@ they are the least-squares angular velocity for a noisy derivative.
 import math
 
 from ..conversions.kernels import (BOOL, FLAT_IN, FLAT_OUT, NON_FINITE, OK, ROWS_IN, ROWS_OUT,
-                                   call_binary, first_status, jit, kernel, matrix_at, matrix_defect,
-                                   matrix_samples, product, quaternion_status, samples, status,
-                                   unit_quaternion, vector_status)
+                                   call_binary, first_status, jit, kernel, matrix_at,
+                                   matrix_defect, matrix_samples, product, quaternion_status,
+                                   samples, status, unit_quaternion, vector_status)
 from ._validation import is_world_frame
 
 
