@@ -362,14 +362,17 @@ def convert_matrices(R, orthonormal_tolerance, non_orthonormal, out_trailing,
         ``R``'s leading shape followed by ``out_trailing``.
     """
     tolerance = _kernel_tolerance(orthonormal_tolerance, non_orthonormal)
-    single = is_single_sample(R, (3, 3))   # then already in the canonical layout
-    a = R if single else float_array(R, 'R', (3, 3))
-    m = a if single else kernel_layout(a, (3, 3))
-    shape = out_trailing if single else a.shape[:-2] + out_trailing
-    batch = not single and is_batch(a, (3, 3))
+    if is_single_sample(R, (3, 3)):   # already in the canonical layout, as is its result
+        a = m = R
+        shape, batch, out = out_trailing, False, new_array(out_trailing)
+        flat_out = out
+    else:
+        a = float_array(R, 'R', (3, 3))
+        m = kernel_layout(a, (3, 3))
+        shape, batch = a.shape[:-2] + out_trailing, is_batch(a, (3, 3))
+        out = np.empty(shape)
+        flat_out = kernel_layout(out, out_trailing)
     if not batch:
-        out = new_array(shape)
-        flat_out = out if single else kernel_layout(out, out_trailing)
         if convention is None:
             bad = fused_kernel(m, flat_out, tolerance)
         else:
@@ -381,12 +384,11 @@ def convert_matrices(R, orthonormal_tolerance, non_orthonormal, out_trailing,
     q = _flat_quaternions(a, m, tolerance)
     if quaternion_kernel is None:   # the quaternions are the result
         return q.reshape(shape)
-    out = np.empty(shape)
     kernel_ = batch_kernel if batch_kernel is not None and batch else quaternion_kernel
     if convention is None:
-        kernel_(q.reshape(-1), kernel_layout(out, out_trailing))
+        kernel_(q.reshape(-1), flat_out)
     else:
-        kernel_(q.reshape(-1), kernel_layout(out, out_trailing), convention)
+        kernel_(q.reshape(-1), flat_out, convention)
     return out
 
 
