@@ -25,7 +25,7 @@ import statistics
 import subprocess
 import sys
 
-import numpy as np
+from _machine import cpu_model, print_machine
 
 TARGET = 2.0
 
@@ -73,29 +73,6 @@ def _run(kind, import_line, call):
     return import_time, calls_time
 
 
-def cpu_model():
-    """The CPU model name (Linux /proc/cpuinfo), or the platform's processor string."""
-    try:
-        with open('/proc/cpuinfo') as f:
-            for line in f:
-                if line.startswith('model name'):
-                    return line.split(':', 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or 'unknown CPU'
-
-
-def numpy_simd():
-    """numpy's SIMD level: the CPU features its dispatched loops use here."""
-    try:
-        from numpy._core._multiarray_umath import __cpu_baseline__, __cpu_dispatch__, \
-            __cpu_features__
-    except ImportError:   # older numpy
-        return 'unknown'
-    used = [f for f in __cpu_dispatch__ if __cpu_features__.get(f)]
-    return f'baseline {" ".join(__cpu_baseline__)}; dispatched {" ".join(used) or "none"}'
-
-
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--rounds', type=int, default=5, help='fresh process pairs per conversion')
@@ -104,8 +81,7 @@ def main(argv=None):
 
     import numba
     import scipy
-    print(f'CPU: {cpu_model()}, {len(__import__("os").sched_getaffinity(0))} CPUs; '
-          f'numpy {np.__version__} SIMD: {numpy_simd()}')
+    print_machine()
     print(f'Python {platform.python_version()}, numba {numba.__version__}, '
           f'scipy {scipy.__version__}')
     check = subprocess.run([sys.executable, '-m', 'rotation_node.conversions.warm_up'],
@@ -137,8 +113,8 @@ def main(argv=None):
           f'{"met" if worst <= TARGET else "not met"})')
     if args.json:
         with open(args.json, 'w') as f:
-            json.dump({'cpu': cpu_model(), 'numpy_simd': numpy_simd(), 'results': results,
-                       'worst_ratio': worst}, f, indent=1)
+            json.dump({'cpu': cpu_model(), 'results': results, 'worst_ratio': worst}, f,
+                      indent=1)
     return 0
 
 

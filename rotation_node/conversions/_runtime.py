@@ -13,8 +13,7 @@ kernel shares:
 - the canonical layout (:func:`kernel_layout`) and the compiled views of it
   (:func:`samples`, :func:`matrix_samples`);
 - status packing (:func:`status`, :func:`first_status`);
-- batch schedules: staged transcendental functions (:func:`run_staged`) and
-  the thread pool (:func:`set_threads`);
+- batch schedules: the chunk size and the thread pool (:func:`set_threads`);
 - the one Python-side path from public arguments to kernels
   (:func:`call_unary`, :func:`call_binary`).
 
@@ -239,55 +238,8 @@ def is_batch(a, trailing):
     return a.size >= BATCH_SAMPLES * math.prod(trailing)
 
 
-# Samples per chunk of a staged batch: the intermediates stay in cache.
+# Samples per chunk of a batch schedule: the intermediates stay in cache.
 STAGE_CHUNK = 4096
-
-
-def run_staged(n, width, first, transcendental, second):
-    """
-    Run a kernel split around vectorised transcendental functions, chunk by chunk.
-
-    The batch schedule of a kernel whose scalar formula calls libm (``atan2``,
-    ``sin``, ``cos``): a compiled loop computes the arguments, numpy's SIMD
-    ufuncs (< 1 ulp, several times faster than scalar libm calls) evaluate
-    them, and a second compiled loop finishes the formula. The formulas are
-    the fused kernel's own scalar functions; only the schedule differs.
-
-    Parameters
-    ----------
-    n : int
-        Number of samples.
-    width : int
-        Arguments per sample.
-    first : callable
-        ``first(start, stop, y, x) -> status`` validates samples
-        ``start:stop`` and fills the arguments ``y`` and ``x`` (``(m, width)``).
-    transcendental : callable
-        ``transcendental(y, x)`` evaluates in place, e.g. :func:`atan2_in_place`.
-    second : callable
-        ``second(start, stop, y, x)`` turns the results into output.
-
-    Returns
-    -------
-    int
-        The status of the first bad sample (with its index among the ``n``), or -1.
-    """
-    y = np.empty((min(n, STAGE_CHUNK), width))
-    x = np.empty_like(y)
-    for start in range(0, n, STAGE_CHUNK):
-        stop = min(n, start + STAGE_CHUNK)
-        yc, xc = y[:stop - start], x[:stop - start]
-        bad = first(start, stop, yc, xc)
-        if bad >= 0:
-            return bad + (start << 4)
-        transcendental(yc, xc)
-        second(start, stop, yc, xc)
-    return -1
-
-
-def atan2_in_place(y, x):
-    """``y <- atan2(y, x)``."""
-    np.arctan2(y, x, out=y)
 
 
 # Batches of at least this many samples are split across threads (the kernels

@@ -4,7 +4,7 @@ Compile and cache every kernel once: ``python -m rotation_node.conversions.warm_
 Each kernel (conversions and kinematics) is compiled for its one signature
 and written to numba's disk cache, so that no later process compiles: a first
 call then costs a cache load, not seconds of compilation. ``./run.sh`` runs
-this after installing; the node runs it on start (a no-op when cached).
+this after installing.
 """
 import argparse
 import sys
