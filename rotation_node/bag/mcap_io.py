@@ -40,7 +40,7 @@ from rotation_node.bag.atomic_file import AtomicFile
 from rotation_node.bag.compression import ZSTD_MAGIC, decompressed_message
 from rotation_node.bag.cdr import message_encoder
 from rotation_node.bag.message_types import (
-    message_class, message_definition, split_type_name, type_hash, type_name_of)
+    message_class, message_definition, type_hash, type_name_of)
 from rotation_node.errors import BagError
 
 PROFILE = 'ros2'
@@ -250,12 +250,15 @@ class BagWriter:
         ------
         BagError
             If the topic is already registered or the type name is invalid or
-            (with ``definition=None``) not installed.
+            (with ``definition=None``) not installed. A topic with its own
+            ``definition`` is registered with its type name as given, for
+            copying topics of any bag unchanged.
 
         """
         if metadata.name in self._channels:
             raise BagError(f'topic {metadata.name} is already registered in {self.path}')
-        split_type_name(metadata.type_name)
+        # A topic copied with its own schema keeps its type name as stored
+        # (even a short or unknown one); others need an installed 'pkg/msg/Type'.
         definition = (message_definition(metadata.type_name) if metadata.definition is None
                       else metadata.definition)
         schema_key = (metadata.type_name, metadata.definition_encoding, definition)
@@ -266,7 +269,8 @@ class BagWriter:
                 data=definition.encode())
             self._schema_ids[schema_key] = schema_id
         channel_id = self._writer.register_channel(
-            topic=metadata.name, message_encoding=MESSAGE_ENCODING, schema_id=schema_id,
+            topic=metadata.name, message_encoding=metadata.serialization_format,
+            schema_id=schema_id,
             metadata={
                 'offered_qos_profiles': metadata.offered_qos_profiles,
                 'topic_type_hash': (type_hash(metadata.type_name) if metadata.type_hash is None
@@ -373,7 +377,7 @@ class BagWriter:
                 'topic_metadata': {
                     'name': topic.name,
                     'type': topic.type_name,
-                    'serialization_format': MESSAGE_ENCODING,
+                    'serialization_format': topic.serialization_format,
                     'offered_qos_profiles': yaml.safe_load(topic.offered_qos_profiles) or [],
                     'type_description_hash': (type_hash(topic.type_name)
                                               if topic.type_hash is None else topic.type_hash),

@@ -15,7 +15,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from rotation_node.bag.atomic_file import AtomicFile
-from rotation_node.bag.mcap_io import BagReader
+from rotation_node.bag.reader import open_bag
 from rotation_node.conversions import parse_sequence
 from rotation_node.errors import BagError
 from rotation_node.parameters import NodeParameters
@@ -86,7 +86,8 @@ def _time_ns(record, msg):
     return header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
 
 
-def plot_topic(bag_path, topic, output_path, *, params=None, overwrite=False):
+def plot_topic(bag_path, topic, output_path, *, params=None, overwrite=False, strict=False,
+               report=None):
     """
     Draw ``topic`` of ``bag_path`` over time into the PNG ``output_path``.
 
@@ -101,6 +102,11 @@ def plot_topic(bag_path, topic, output_path, *, params=None, overwrite=False):
         frame for the labels. The node's defaults if omitted.
     overwrite : bool, optional
         Replace an existing ``output_path``.
+    strict : bool, optional
+        Refuse an unfinished recording instead of plotting what it holds.
+    report : callable, optional
+        ``report(line)`` receives the input's notes (an unfinished recording,
+        a renamed topic).
 
     Returns
     -------
@@ -115,7 +121,11 @@ def plot_topic(bag_path, topic, output_path, *, params=None, overwrite=False):
 
     """
     params = NodeParameters() if params is None else params
-    with AtomicFile(output_path, overwrite=overwrite) as output, BagReader(bag_path) as reader:
+    with open_bag(bag_path, strict=strict) as reader, \
+            AtomicFile(output_path, overwrite=overwrite) as output:
+        for note in reader.notes if report is not None else ():
+            report(note)
+        topic = reader.topic_name(topic)
         records = reader.messages([topic])
         panels = _panels(reader.topics[topic], topic.rsplit('/', 1)[-1], params)
         times, values = [], [[] for _ in panels]

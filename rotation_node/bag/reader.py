@@ -123,7 +123,7 @@ class _Sqlite3File:
             metadata = TopicMetadata(
                 name=connection.topic, type_name=connection.msgtype,
                 offered_qos_profiles=rosbags_qos_yaml(connection.ext.offered_qos_profiles),
-                type_hash=connection.digest or None,
+                type_hash=connection.digest,
                 serialization_format=connection.ext.serialization_format,
                 **_definition(connection.msgtype, connection.msgdef))
             self.topic_metadata.setdefault(connection.topic, metadata)
@@ -341,8 +341,10 @@ class InputBag:
         streams = [source.messages(sorted(originals & source_topics))
                    for source, source_topics in zip(self._sources, self._source_topics)
                    if originals & source_topics]
-        merged = (streams[0] if len(streams) == 1
-                  else heapq.merge(*streams, key=operator.attrgetter('log_time_ns')))
+        if len(streams) <= 1:
+            merged = streams[0] if streams else iter(())
+        else:
+            merged = heapq.merge(*streams, key=operator.attrgetter('log_time_ns'))
         return self._renamed(merged) if self.renames else merged
 
     def _renamed(self, records):
