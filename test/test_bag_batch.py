@@ -90,10 +90,11 @@ def test_parallel_processes_one_line_per_bag_and_a_bad_bag_fails_alone(
     for path, good in inputs:
         line, = [line for line in per_bag if line.startswith(path)]
         if good:
-            assert line.startswith(f'{path} -> {out / os.path.basename(path)}: /imu ')
-            assert '-> /imu/euler' not in line and '(/imu/euler, /imu/quaternion)' in line
+            assert line.startswith(f'{path} -> {out / os.path.basename(path)}: rosbag2 '
+                                   'directory (')
+            assert '; /imu ' in line and ' messages (/imu/euler, /imu/quaternion)' in line
         else:
-            assert line == f'{path}: error: {path}: text file, not a bag (readable: rosbag2 ' \
+            assert line == f'{path}: error: text file, not a bag (readable: rosbag2 ' \
                            'directories, MCAP, sqlite3 and ROS 1 bags)'
     assert _outputs(out) == expected
 

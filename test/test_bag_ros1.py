@@ -70,7 +70,7 @@ def test_messages_become_ros2_messages_with_the_values_written(ros1_bag):
     from sensor_msgs.msg import Imu
     path, written = ros1_bag
     with open_bag(path) as bag:
-        assert bag.description == 'ROS 1 bag' and bag.compression == 'lz4'
+        assert bag.description == 'ROS 1 bag (lz4 chunks)' and bag.compression == 'lz4'
         assert bag.topics == {'/imu': 'sensor_msgs/msg/Imu',
                               '/ORB_SLAM/pose': 'geometry_msgs/msg/PoseStamped',
                               '/custom': 'my_msgs/msg/Thing'}

@@ -120,12 +120,18 @@ def convert_bag(input_path: str, output_path: str, params, *, topics=None,
                             strict=strict, report=notes.append, progress_stream=no_progress_bar)
     except RotationNodeError as error:
         return BagResult(os.fspath(input_path), os.fspath(output_path), False,
-                         f'{input_path}: error: {" ".join(str(error).split())}')
-    prefix = f'{input_path}: '
-    details = [_summary(stats, params),
-               *(note[len(prefix):] if note.startswith(prefix) else note for note in notes)]
+                         f'{input_path}: error: {_without_path(str(error), input_path)}')
+    description, *notes = (_without_path(note, input_path) for note in notes)
     return BagResult(os.fspath(input_path), os.fspath(output_path), True,
-                     f'{input_path} -> {output_path}: ' + '; '.join(d for d in details if d))
+                     f'{input_path} -> {output_path}: ' + '; '.join(
+                         [description, _summary(stats, params), *notes]))
+
+
+def _without_path(line, path):
+    """``line`` on one line, without a leading ``<path>: `` (the bag's line names it)."""
+    line = ' '.join(line.split())
+    prefix = f'{os.fspath(path)}: '
+    return line[len(prefix):] if line.startswith(prefix) else line
 
 
 def convert_bags(input_paths: Sequence[str], output_directory: str, params, *, jobs: int = 1,

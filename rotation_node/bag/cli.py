@@ -53,8 +53,11 @@ def _convert(args, ros_args):
         _convert_many(args, inputs, output, params)
         return
     from rotation_node.bag.convert import convert, output_topic
+    notes = []   # printed once the bag is written: a failure stays one line
     stats = convert(inputs[0], output, params, topics=args.topic, overwrite=args.force,
-                    strict=args.strict, report=_say)
+                    strict=args.strict, report=notes.append)
+    for note in notes:
+        _say(note)
     for topic, topic_stats in stats.items():
         outputs = ', '.join(output_topic(topic, name) for name in params.outputs)
         notes = [f'{reason} {count}' for reason, count in
@@ -89,8 +92,11 @@ def _plot(args, ros_args):
     output = args.output or (
         os.path.splitext(os.path.basename(args.input))[0] + args.topic.replace('/', '_') + '.png')
     params = None if args.params is None else parameters_from_yaml(args.params)
+    notes = []
     count = plot_topic(args.input, args.topic, output, params=params, overwrite=args.force,
-                       strict=args.strict, report=_say)
+                       strict=args.strict, report=notes.append)
+    for note in notes:
+        _say(note)
     _say(f'plotted {count} messages of {args.topic} to {output}')
 
 

@@ -89,8 +89,10 @@ def convert(input_path, output_path, params, *, topics=None, overwrite=False,
     strict : bool, optional
         Refuse an unfinished recording instead of converting what it holds.
     report : callable, optional
-        ``report(line)`` receives the input's notes (an unfinished recording,
-        a renamed topic) once it is opened, before anything is written.
+        ``report(line)`` receives what the input is (``<path>: rosbag2
+        directory (mcap, 3 files), 5000 messages``) and its notes (an
+        unfinished recording, a renamed topic) once it is opened, before
+        anything is written.
 
     Returns
     -------
@@ -108,8 +110,11 @@ def convert(input_path, output_path, params, *, topics=None, overwrite=False,
     with open_bag(input_path, strict=strict) as reader:
         if _same_path(input_path, output_path):
             raise BagError(f'output {output_path} is the input bag')
-        for note in reader.notes if report is not None else ():
-            report(note)
+        if report is not None:
+            report(f'{reader.path}: {reader.description}, '
+                   f'{sum(reader.message_counts.values())} messages')
+            for note in reader.notes:
+                report(note)
         input_type_name = messages.INPUTS[params.input_type].type_name
         pipelines = {topic: ConversionPipeline(params)
                      for topic in _input_topics(reader, input_type_name, topics)}

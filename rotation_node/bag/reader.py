@@ -489,18 +489,21 @@ def open_bag(path, *, strict: bool = False) -> InputBag:
                                f'but the files hold {", ".join(sorted(set(storages)))}')
             storage = layout.storage or storages[0]
             compression = 'zstd' if layout.compression_mode else None
-            description = (f'rosbag2 directory ({storage}, {len(layout.files)} file'
-                           f'{"s" if len(layout.files) != 1 else ""}'
-                           + (f', zstd {layout.compression_mode} compression'
-                              if layout.compression_mode else '') + ')')
+            details = [storage, f'{len(layout.files)} file{"s" if len(layout.files) != 1 else ""}']
+            if layout.compression_mode:
+                details.append(f'zstd {layout.compression_mode} compression')
+            details.extend(_chunk_compression(opener.sources))
+            description = f'rosbag2 directory ({", ".join(details)})'
             bag = InputBag(path, description, opener.sources, compression=compression,
                            note=layout.note)
         else:
             _, storage = opener.open_file(path)
             compressed = os.path.isfile(path) and _starts_with(path, ZSTD_MAGIC)
+            details = ['zstd file compression'] if compressed else []
+            details.extend(_chunk_compression(opener.sources))
             description = {'mcap': 'MCAP file', 'sqlite3': 'sqlite3 file',
                            'ROS 1': 'ROS 1 bag'}[storage] + (
-                ' (zstd file compression)' if compressed else '')
+                f' ({", ".join(details)})' if details else '')
             bag = InputBag(path, description, opener.sources,
                            compression='zstd' if compressed else None)
     except BaseException:
@@ -508,6 +511,12 @@ def open_bag(path, *, strict: bool = False) -> InputBag:
         raise
     bag._tmpdir = opener.tmpdir
     return bag
+
+
+def _chunk_compression(sources):
+    """``['zstd chunks']`` (or lz4, bz2...) if the storage files compress their chunks."""
+    names = sorted({source.compression for source in sources} - {'none'})
+    return [f'{"/".join(names)} chunks'] if names else []
 
 
 def _starts_with(path, magic):
