@@ -1,19 +1,25 @@
 """
-Command line ``rotation_bag``: record, play, convert and plot MCAP bags.
+Command line ``rotation_bag``: record, play, convert and plot bags.
 
 Usage::
 
     rotation_bag record OUT.mcap --topics /imu [/odom ...] [--duration S] [--force]
-    rotation_bag play IN.mcap [--rate R] [--topics T ...] [--loop] [--delay S]
-                      [--wait-for-subscribers]
-    rotation_bag convert IN.mcap OUT.mcap --params config/params.yaml [--topic T ...] [--force]
-    rotation_bag plot IN.mcap --topic /imu/euler [-o plot.png] [--params FILE] [--force]
+    rotation_bag play IN [--rate R] [--topics T ...] [--loop] [--delay S]
+                      [--wait-for-subscribers] [--strict]
+    rotation_bag convert IN OUT --params config/params.yaml [--topic T ...] [--force]
+                         [--strict]
+    rotation_bag convert IN1 IN2 ... OUTDIR --params FILE [--jobs N] [...]
+    rotation_bag plot IN --topic /imu/euler [-o plot.png] [--params FILE] [--force] [--strict]
 
-``record`` and ``play`` accept ``--ros-args ...`` (remapping, namespace, ...).
-Bad input (a missing, truncated or corrupt bag, an unknown message type, a
-topic not in the bag, an invalid parameters file, an existing output) ends
-with one line on stderr naming the problem and exit status 1; no output file
-is left behind and the input is never modified.
+``IN`` is any bag :func:`rotation_node.bag.reader.open_bag` reads (a rosbag2
+directory, MCAP, sqlite3, split, compressed, ROS 1, an unfinished recording;
+see docs/bags.md). ``record`` and ``play`` accept ``--ros-args ...``
+(remapping, namespace, ...). Bad input (a missing, unsupported, truncated or
+corrupt bag, an unknown message type, a topic not in the bag, an invalid
+parameters file, an existing output) ends with one line on stderr naming the
+problem and exit status 1; no output file is left behind and the input is
+never modified. With several inputs, each bag gets one line and the exit
+status is 1 if any failed.
 """
 import argparse
 import os
@@ -117,7 +123,7 @@ def _positive_int(text):
 def build_parser():
     """The argument parser of ``rotation_bag``."""
     parser = argparse.ArgumentParser(
-        prog=PROG, description='Record, play, convert and plot ROS 2 MCAP bags.')
+        prog=PROG, description='Record, play, convert and plot ROS 2 bags.')
     commands = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
 
     record = commands.add_parser('record', help='record live topics to an MCAP bag')
@@ -129,7 +135,8 @@ def build_parser():
     record.set_defaults(run=_record)
 
     play = commands.add_parser('play', help='publish the messages of a bag')
-    play.add_argument('input', metavar='IN.mcap')
+    play.add_argument('input', metavar='IN', help='any bag (rosbag2 directory, .mcap, .db3, '
+                                                  'ROS 1 .bag...)')
     play.add_argument('--rate', type=float, default=1.0, metavar='R',
                       help='speed factor on the recorded timing; 0: as fast as the '
                            'subscribers acknowledge, lossless on reliable QoS (default 1)')
@@ -147,11 +154,13 @@ def build_parser():
 
     convert = commands.add_parser(
         'convert', help="add the node's outputs for the input topics to a copy of a bag",
+        usage=f'{PROG} convert IN [IN ...] OUT --params FILE [--topic T] [--force] [--strict] '
+              '[--jobs N]',
         description="Write a copy of each input bag with the node's outputs for its input "
                     'topics. IN OUT converts one bag; IN1 IN2 ... OUTDIR (or IN OUTDIR, an '
                     'existing directory that is not a bag) converts each input into '
                     'OUTDIR/<input name>, one line per bag.')
-    convert.add_argument('paths', nargs='+', metavar='IN ... OUT',
+    convert.add_argument('paths', nargs='+', metavar='PATH',
                          help='input bags (rosbag2 directory, .mcap, .db3, ROS 1 .bag, '
                               'compressed or split), then the output bag or directory')
     convert.add_argument('--params', required=True, metavar='FILE',
@@ -168,8 +177,9 @@ def build_parser():
                               'processes (default 1)')
     convert.set_defaults(run=_convert)
 
-    plot = commands.add_parser('plot', help='plot a (converted) topic over time as a PNG')
-    plot.add_argument('input', metavar='IN.mcap')
+    plot = commands.add_parser('plot', help='plot a topic (input or converted) over time as a PNG')
+    plot.add_argument('input', metavar='IN', help='any bag (rosbag2 directory, .mcap, .db3, '
+                                                  'ROS 1 .bag...)')
     plot.add_argument('--topic', required=True, metavar='T')
     plot.add_argument('-o', '--output', metavar='PNG',
                       help='default: <bag name><topic with / as _>.png')
