@@ -12,25 +12,24 @@ import os
 import sqlite3
 import subprocess
 
-import numpy as np
-import pytest
-import zstandard
 from bag_helpers import (
-    imu_messages, interleaved, random_message, rosbags_rows, serialized_rows,
-    write_rosbag2, write_split_rosbag2)
+    imu_messages, interleaved, random_message, rosbags_rows, serialized_rows, write_rosbag2,
+    write_split_rosbag2)
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
+import numpy as np
+import pytest
 from ros_harness import script
-from rosbags.typesys import Stores, get_typestore
-from scipy.spatial.transform import Rotation
-from sensor_msgs.msg import JointState
-
+from rosbags.typesys import get_typestore, Stores
 from rotation_node.bag.cli import main
 from rotation_node.bag.convert import convert
 from rotation_node.bag.message_types import message_definition
 from rotation_node.bag.reader import open_bag
 from rotation_node.errors import BagError
 from rotation_node.parameters import NodeParameters
+from scipy.spatial.transform import Rotation
+from sensor_msgs.msg import JointState
+import zstandard
 
 PARAMS = NodeParameters(input_type='imu', outputs=('euler', 'matrix'), euler_sequence='ZYX')
 PARAMS_YAML = """rotation_node:
@@ -46,7 +45,7 @@ LAYOUT_IDS = [f'{storage}-{mode or "plain"}' for storage, mode in LAYOUTS]
 
 @pytest.fixture
 def rows(rng):
-    """An Imu topic and a JointState topic (variable length, copied unchanged), interleaved."""
+    """Return rows of an Imu topic and a JointState topic (copied unchanged), interleaved."""
     joints = []
     for i in range(40):
         msg = random_message(JointState, rng)
@@ -109,9 +108,9 @@ def test_split_bag_is_one_stream_and_converts_as_unsplit(tmp_path, rows, storage
 
 
 def _check_against_scipy(records, rows, publish_offset=0):
-    """Copied topics byte-identical; /imu/euler and /imu/matrix equal to scipy's."""
-    from rclpy.serialization import deserialize_message
+    """Check copied topics byte-identical, /imu/euler and /imu/matrix equal to scipy's."""
     from geometry_msgs.msg import Vector3Stamped
+    from rclpy.serialization import deserialize_message
     from sensor_msgs.msg import Imu
     from std_msgs.msg import Float64MultiArray
     by_topic = {}
@@ -237,7 +236,7 @@ def test_odd_schemas_matter_only_for_converted_topics(tmp_path, rows, rng):
                   for _, c, m in after.iter_messages(topics=list(schemas))]
     assert copied == [(t, d, lt, lt - 5) for t, _, d, lt in odd]
     # Converting one of them is what fails, naming it.
-    with pytest.raises(BagError, match="topic /custom .* is my_msgs/msg/Custom, but input_type"):
+    with pytest.raises(BagError, match='topic /custom .* is my_msgs/msg/Custom, but input_type'):
         convert(source, tmp_path / 'again.mcap', PARAMS, topics=['/custom'])
 
 
@@ -316,7 +315,7 @@ def _snapshot(directory):
 
 
 def test_play_maps_invalid_topic_names_and_does_not_die(tmp_path, rows):
-    """play publishes /imu-raw as /imu_raw with a note, never an InvalidTopicNameException."""
+    """Play publishes /imu-raw as /imu_raw with a note, never InvalidTopicNameException."""
     renamed = [('/imu-raw' if t == '/imu' else t, *rest) for t, *rest in rows[:30]]
     path = write_rosbag2(tmp_path / 'bag', renamed)
     result = subprocess.run([script('rotation_bag'), 'play', str(path), '--rate', '1000'],

@@ -10,20 +10,19 @@ import pytest
 from rclpy.serialization import deserialize_message
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag1 import Writer
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore
-from scipy.spatial.transform import Rotation
-
+from rosbags.typesys import get_types_from_msg, get_typestore, Stores
 from rotation_node.bag.convert import convert
 from rotation_node.bag.qos import qos_profiles_from_yaml
 from rotation_node.bag.reader import open_bag
 from rotation_node.parameters import NodeParameters
+from scipy.spatial.transform import Rotation
 
 T0 = 1_600_000_000
 
 
 @pytest.fixture
 def ros1_bag(tmp_path, rng):
-    """A ROS 1 bag (lz4 chunks): /imu, a latched /ORB-SLAM/pose, a /custom type; and its values."""
+    """Write a ROS 1 bag (lz4): /imu, a latched /ORB-SLAM/pose, a /custom type; its values."""
     store = get_typestore(Stores.ROS1_NOETIC)
     store.register(get_types_from_msg('int32 a\nstring b\n', 'my_msgs/msg/Thing'))
     types = store.types
@@ -42,11 +41,11 @@ def ros1_bag(tmp_path, rng):
         custom = writer.add_connection('/custom', 'my_msgs/msg/Thing', typestore=store)
         for i, q in enumerate(rotations.as_quat()):
             stamp = time(sec=T0 + i // 10, nanosec=(i % 10) * 100_000_000)
-            values = dict(orientation_covariance=rng.normal(size=9),
-                          angular_velocity=rng.normal(size=3),
-                          angular_velocity_covariance=rng.normal(size=9),
-                          linear_acceleration=rng.normal(size=3),
-                          linear_acceleration_covariance=rng.normal(size=9))
+            values = {'orientation_covariance': rng.normal(size=9),
+                      'angular_velocity': rng.normal(size=3),
+                      'angular_velocity_covariance': rng.normal(size=9),
+                      'linear_acceleration': rng.normal(size=3),
+                      'linear_acceleration_covariance': rng.normal(size=9)}
             msg = types['sensor_msgs/msg/Imu'](
                 header(seq=1000 + i, stamp=stamp, frame_id='imu_link'), quaternion(*q),
                 values['orientation_covariance'], vector(*values['angular_velocity']),

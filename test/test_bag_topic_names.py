@@ -4,11 +4,11 @@ Tests of rotation_node.bag.topic_names: the one rule that maps input topic names
 The oracle is rclpy's own validation of fully qualified topic names (what a
 publisher would raise ``InvalidTopicNameException`` for).
 """
+from hypothesis import given
+from hypothesis import strategies as st
 import pytest
-from hypothesis import given, strategies as st
 from rclpy.exceptions import InvalidTopicNameException
 from rclpy.validate_full_topic_name import validate_full_topic_name
-
 from rotation_node.bag.topic_names import is_valid_topic_name, ros2_topic_name, topic_renames
 
 

@@ -98,8 +98,12 @@ def convert_bag(input_path: str, output_path: str, params, *, topics=None,
 
     Parameters
     ----------
-    input_path, output_path : str
+    input_path : str
+        Any bag :func:`rotation_node.bag.reader.open_bag` reads.
+    output_path : str
+        The output bag (must not exist unless ``overwrite``).
     params : rotation_node.parameters.NodeParameters
+        The node's parameters, as for :func:`rotation_node.bag.convert.convert`.
     topics : list of str, optional
         As for :func:`rotation_node.bag.convert.convert`.
     overwrite, strict : bool, optional
@@ -143,9 +147,11 @@ def convert_bags(input_paths: Sequence[str], output_directory: str, params, *, j
     Parameters
     ----------
     input_paths : sequence of str
+        The bags, any :func:`rotation_node.bag.reader.open_bag` reads.
     output_directory : str
         Created if missing; outputs are named by :func:`batch_output_path`.
     params : rotation_node.parameters.NodeParameters
+        The node's parameters, for every bag.
     jobs : int, optional
         Worker processes (``1``: one after the other in this process).
     topics, overwrite, strict

@@ -96,6 +96,6 @@ def decompress_file(source: str, target: str) -> None:
 
 
 def stored_name(path: str) -> str:
-    """The name of a storage file without a ``.zstd`` file-compression suffix."""
+    """Return the name of a storage file without a ``.zstd`` file-compression suffix."""
     base = os.path.basename(path)
     return base[:-len('.zstd')] if base.endswith('.zstd') else base

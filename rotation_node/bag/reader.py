@@ -34,23 +34,22 @@ import dataclasses
 import heapq
 import operator
 import os
+from pathlib import Path
 import re
 import sqlite3
 import tempfile
-import urllib.parse
-from pathlib import Path
 from typing import Iterator, List, Optional
-
-import yaml
+import urllib.parse
 
 from rotation_node.bag.compression import (
-    LZ4_MAGIC, ZSTD_MAGIC, ZstdError, decompress_file, decompressed_message, stored_name,
-    zstd_prefix)
+    decompress_file, decompressed_message, LZ4_MAGIC, stored_name, ZSTD_MAGIC, zstd_prefix,
+    ZstdError)
 from rotation_node.bag.mcap_io import BagMessage, BagReader, TopicMetadata
 from rotation_node.bag.message_types import message_definition
 from rotation_node.bag.qos import rosbags_qos_yaml
 from rotation_node.bag.topic_names import topic_renames
 from rotation_node.errors import BagError
+import yaml
 
 METADATA_FILE = 'metadata.yaml'
 #: rosbag2 storage plugins this package reads.
@@ -64,7 +63,7 @@ _ROSBAG2_TABLES = {'topics', 'messages'}
 
 
 def _file_kind(prefix: bytes) -> str:
-    """What the first bytes of a file that is not a bag say it is, for the error line."""
+    """Say what a file that is not a bag is, from its first bytes (for the error line)."""
     if prefix.startswith(LZ4_MAGIC):
         return 'lz4-compressed file (rosbag2 compresses files with zstd)'
     if prefix.startswith(b'\x1f\x8b'):
@@ -86,7 +85,7 @@ def _file_kind(prefix: bytes) -> str:
 
 
 def _sqlite_tables(path: str) -> set:
-    """The table names of a SQLite database, read-only (the file is never changed)."""
+    """Return the table names of a SQLite database, read-only (the file is never changed)."""
     uri = f'file:{urllib.parse.quote(os.path.abspath(path))}?mode=ro&immutable=1'
     try:
         with contextlib.closing(sqlite3.connect(uri, uri=True)) as database:
@@ -410,7 +409,7 @@ class _Opener:
         return source
 
     def _open_ros1(self, path, shown, version):
-        from rotation_node.bag.ros1 import SUPPORTED_VERSION, Ros1Bag
+        from rotation_node.bag.ros1 import Ros1Bag, SUPPORTED_VERSION
         if version != SUPPORTED_VERSION:
             raise BagError(f'{shown}: ROS 1 bag, version {version} (supported: '
                            f'{SUPPORTED_VERSION})')
@@ -455,6 +454,7 @@ def open_bag(path, *, strict: bool = False) -> InputBag:
     Parameters
     ----------
     path : str or os.PathLike
+        A rosbag2 directory or a storage file (MCAP, sqlite3, ROS 1, zstd).
     strict : bool, optional
         Refuse an unfinished recording (``--strict``) instead of reading what
         it holds.

@@ -15,18 +15,16 @@ message, also used as the publish time.
 """
 import contextlib
 import io
-import struct
 from pathlib import Path
+import struct
 
-from rosbags.convert.converter import (
-    LATCH, STATIC_MSGTYPE_RENAMES, generate_message_converter)
+from rosbags.convert.converter import generate_message_converter, LATCH, STATIC_MSGTYPE_RENAMES
 from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.rosbag1 import ReaderError
 from rosbags.rosbag1.reader import decompressors as ros1_decompressors
 from rosbags.serde import SerdeError
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+from rosbags.typesys import get_types_from_msg, get_typestore, Stores
 from rosbags.typesys.base import TypesysError
-
 from rotation_node.bag.mcap_io import BagMessage, TopicMetadata
 from rotation_node.bag.message_types import message_class
 from rotation_node.bag.qos import rosbags_qos_yaml
