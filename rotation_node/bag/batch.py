@@ -225,13 +225,12 @@ def convert_bags_on_dask(client, input_paths: Sequence[str], output_directory: s
     Returns
     -------
     list of BagResult
-        In the order the bags finished.
+        As :func:`convert_bags` returns them.
 
     Raises
     ------
     BagError
-        If two inputs would share an output or the output directory cannot
-        be created.
+        As :func:`convert_bags` raises it.
     TimeoutError
         If ``timeout`` passes first (the remaining tasks are cancelled).
 

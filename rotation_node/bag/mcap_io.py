@@ -425,6 +425,24 @@ class BagWriter:
             self.abort()
 
 
+def checked_topics(topics, available, path):
+    """
+    Return ``topics`` as a list, each checked to be one of ``available`` (the topics of a bag).
+
+    Raises
+    ------
+    BagError
+        Naming the missing topics, the bag ``path`` and the topics it has.
+
+    """
+    topics = list(topics)
+    missing = [topic for topic in topics if topic not in available]
+    if missing:
+        raise BagError(f'topic {", ".join(missing)} not in {path} '
+                       f'(it has {", ".join(sorted(available)) or "no topics"})')
+    return topics
+
+
 class _Scan:
     """
     A linear scan of an MCAP file, record by record, as its writer wrote them.
@@ -628,11 +646,7 @@ class BagReader:
 
         """
         if topics is not None:
-            topics = list(topics)
-            missing = [topic for topic in topics if topic not in self.topics]
-            if missing:
-                raise BagError(f'topic {", ".join(missing)} not in {self.path} '
-                               f'(it has {", ".join(sorted(self.topics)) or "no topics"})')
+            topics = checked_topics(topics, self.topics, self.path)
         if self._scan_count is None:
             return self._indexed_messages(topics)
         records = self._scanned_messages(topics)

@@ -44,9 +44,10 @@ import urllib.parse
 from rotation_node.bag.compression import (
     decompress_file, decompressed_message, LZ4_MAGIC, stored_name, ZSTD_MAGIC, zstd_prefix,
     ZstdError)
-from rotation_node.bag.mcap_io import BagMessage, BagReader, TopicMetadata
+from rotation_node.bag.mcap_io import BagMessage, BagReader, checked_topics, TopicMetadata
 from rotation_node.bag.message_types import message_definition
 from rotation_node.bag.qos import rosbags_qos_yaml
+from rotation_node.bag.rosbags_input import RosbagsInput
 from rotation_node.bag.topic_names import topic_renames
 from rotation_node.errors import BagError
 import yaml
@@ -95,60 +96,39 @@ def _sqlite_tables(path: str) -> set:
         raise BagError(f'{path}: damaged sqlite3 database: {error}') from None
 
 
-class _Sqlite3File:
+def _sqlite3_file(path):
     """
-    One rosbag2 sqlite3 storage file, read with ``rosbags``.
+    Open one rosbag2 sqlite3 storage file with ``rosbags``.
 
-    The interface of :class:`rotation_node.bag.mcap_io.BagReader`. sqlite3
-    stores one time per message, the receive time: it is also the publish time.
+    Messages compressed by rosbag2 (``message`` mode) are decompressed.
+
+    Raises
+    ------
+    BagError
+        If the database has no rosbag2 tables or cannot be read.
+
     """
-
-    def __init__(self, path):
-        from rosbags.rosbag2.errors import ReaderError
-        from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
-        self.path = path
-        self.recovered = None
-        self.compression = 'none'
-        if not _ROSBAG2_TABLES <= _sqlite_tables(path):
-            raise BagError(f'{path}: sqlite3 database without rosbag2 tables')
-        self._errors = (ReaderError, ZstdError)
-        self._reader = Sqlite3Reader(Path(path))
-        try:
-            self._reader.open()
-        except self._errors as error:
-            raise BagError(f'{path}: cannot read rosbag2 sqlite3 storage: {error}') from None
-        self.topic_metadata, self.message_counts, self._connections = {}, {}, {}
-        for connection in self._reader.connections:
-            metadata = TopicMetadata(
+    from rosbags.rosbag2.errors import ReaderError
+    from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
+    if not _ROSBAG2_TABLES <= _sqlite_tables(path):
+        raise BagError(f'{path}: sqlite3 database without rosbag2 tables')
+    reader = Sqlite3Reader(Path(path))
+    try:
+        reader.open()
+    except ReaderError as error:
+        raise BagError(f'{path}: cannot read rosbag2 sqlite3 storage: {error}') from None
+    try:
+        return RosbagsInput(path, reader, (ReaderError, ZstdError), [
+            (connection, TopicMetadata(
                 name=connection.topic, type_name=connection.msgtype,
                 offered_qos_profiles=rosbags_qos_yaml(connection.ext.offered_qos_profiles),
                 type_hash=connection.digest,
                 serialization_format=connection.ext.serialization_format,
-                **_definition(connection.msgtype, connection.msgdef))
-            self.topic_metadata.setdefault(connection.topic, metadata)
-            self.message_counts[connection.topic] = (
-                self.message_counts.get(connection.topic, 0) + connection.msgcount)
-            self._connections.setdefault(connection.topic, []).append(connection)
-        self.topics = {topic: m.type_name for topic, m in self.topic_metadata.items()}
-
-    def messages(self, topics=None):
-        """Iterate over the messages in log-time order (see ``BagReader.messages``)."""
-        topics = list(self.topics) if topics is None else list(topics)
-        connections = [c for topic in topics for c in self._connections[topic]]
-        return self._messages(connections) if connections else iter(())
-
-    def _messages(self, connections):
-        type_names = self.topics
-        try:
-            for connection, time_ns, data in self._reader.messages(connections):
-                yield BagMessage(connection.topic, type_names[connection.topic],
-                                 decompressed_message(data), time_ns, time_ns)
-        except self._errors as error:
-            raise BagError(f'{self.path} is corrupt: {type(error).__name__}: {error}') from None
-
-    def close(self):
-        """Close the database."""
-        self._reader.close()
+                **_definition(connection.msgtype, connection.msgdef)), decompressed_message)
+            for connection in reader.connections])
+    except BaseException:
+        reader.close()
+        raise
 
 
 def _definition(type_name, msgdef):
@@ -303,10 +283,7 @@ class InputBag:
             If the bag has no such topic (under either name).
 
         """
-        name = self.renames.get(name, name)
-        if name not in self.topics:
-            raise BagError(f'topic {name} not in {self.path} '
-                           f'(it has {", ".join(sorted(self.topics)) or "no topics"})')
+        name, = checked_topics([self.renames.get(name, name)], self.topics, self.path)
         return name
 
     def messages(self, topics=None) -> Iterator[BagMessage]:
@@ -318,21 +295,9 @@ class InputBag:
         (decompressed, converted from ROS 1), except for topics of another
         serialization format, which are as stored.
 
-        Parameters
-        ----------
-        topics : iterable of str, optional
-            Only these topics (their names here or in the bag); all by default.
-
-        Yields
-        ------
-        rotation_node.bag.mcap_io.BagMessage
-
-        Raises
-        ------
-        BagError
-            If a topic is not in the bag (raised at once) or a storage file
-            turns out to be corrupt (raised when it is reached).
-
+        ``topics`` (their names here or in the bag) selects topics, as for
+        :meth:`rotation_node.bag.mcap_io.BagReader.messages`, which also
+        says what is raised.
         """
         wanted = (set(self._original) if topics is None
                   else {self.topic_name(topic) for topic in topics})
@@ -391,7 +356,7 @@ class _Opener:
         if prefix.startswith(_MCAP_MAGIC):
             return self._add(BagReader(path, strict=self.strict)), 'mcap'
         if prefix.startswith(_SQLITE_MAGIC):
-            return self._add(_Sqlite3File(path)), 'sqlite3'
+            return self._add(_sqlite3_file(path)), 'sqlite3'
         version = _ROS1_MAGIC.match(prefix)
         if version is not None:
             return self._open_ros1(path, shown, version[1].decode()), 'ROS 1'
@@ -409,11 +374,11 @@ class _Opener:
         return source
 
     def _open_ros1(self, path, shown, version):
-        from rotation_node.bag.ros1 import Ros1Bag, SUPPORTED_VERSION
+        from rotation_node.bag.ros1 import open_ros1_bag, SUPPORTED_VERSION
         if version != SUPPORTED_VERSION:
             raise BagError(f'{shown}: ROS 1 bag, version {version} (supported: '
                            f'{SUPPORTED_VERSION})')
-        return self._add(Ros1Bag(path))
+        return self._add(open_ros1_bag(path))
 
     def _open_zstd(self, path, shown):
         """rosbag2's file compression: decompress to a temporary file, then open that."""
