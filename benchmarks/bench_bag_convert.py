@@ -49,6 +49,8 @@ import time
 
 import numpy as np
 
+from _machine import print_machine
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 PARAMS_FILE = os.path.join(HERE, os.pardir, 'config', 'params.yaml')
 TOPIC = '/imu'
@@ -196,24 +198,6 @@ def _remove(path):
         shutil.rmtree(path)
     elif os.path.exists(path):
         os.unlink(path)
-
-
-def machine():
-    """CPU model and numpy's SIMD extensions, for reading the numbers."""
-    import platform
-    model = platform.processor() or platform.machine()
-    try:
-        with open('/proc/cpuinfo') as cpuinfo:
-            model = next(line.split(':', 1)[1].strip() for line in cpuinfo
-                         if line.startswith('model name'))
-    except (OSError, StopIteration):
-        pass
-    try:
-        from numpy._core._multiarray_umath import __cpu_features__ as features
-        simd = ' '.join(name for name, on in features.items() if on) or 'none'
-    except ImportError:
-        simd = 'unknown'
-    print(f'CPU: {model}, {os.cpu_count()} cores; numpy {np.__version__} SIMD: {simd}')
 
 
 def convert_ours(source, output):
@@ -426,7 +410,7 @@ def main():
         _child(*args.child)
         return
     sizes = [100, 1_000, 10_000, 100_000, 200_000] + ([1_000_000] if args.million else [])
-    machine()
+    print_machine()
     with tempfile.TemporaryDirectory() as directory:
         if not args.formats_only:
             compare(directory, args.messages, args.repeat)
