@@ -95,8 +95,8 @@ def _convert_many(args, inputs, output_directory, params):
 def _plot(args, ros_args):
     from rotation_node.bag.plot import plot_topic
     from rotation_node.parameters import parameters_from_yaml
-    output = args.output or (
-        os.path.splitext(os.path.basename(args.input))[0] + args.topic.replace('/', '_') + '.png')
+    bag_name = os.path.splitext(os.path.basename(os.path.normpath(args.input)))[0]
+    output = args.output or bag_name + args.topic.replace('/', '_') + '.png'
     params = None if args.params is None else parameters_from_yaml(args.params)
     notes = []
     count = plot_topic(args.input, args.topic, output, params=params, overwrite=args.force,
