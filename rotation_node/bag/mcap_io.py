@@ -34,6 +34,7 @@ from mcap.reader import SeekingReader
 from mcap.records import Channel, Chunk, Message, Schema
 from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
+from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.serialization import deserialize_message, serialize_message
 
 from rotation_node.bag.atomic_file import AtomicFile
@@ -51,6 +52,8 @@ ROSBAG2_METADATA_VERSION = 9
 LIBRARY = f'rotation_node bag; mcap-python/{mcap.__version__}'
 
 _MAX_TIMESTAMP = 2**64 - 1
+#: What rclpy's deserialize_message raises for data that is not a valid message.
+_RMWError = rclpy_implementation.RMWError
 # What the mcap library raises for a damaged file: its own McapError (bad
 # magic, short reads, missing ids...), CRCValidationError, struct.error for
 # short fixed-size fields, UnicodeDecodeError for strings, and failed chunk
@@ -161,7 +164,7 @@ class BagMessage:
                                        message_type=message_class(self.type_name))
         try:
             return decode(self.data)
-        except Exception as error:  # rclpy raises bare RuntimeError/TypeError on bad CDR
+        except (_RMWError, BagError) as error:   # rclpy's error for bad CDR; cdr's own
             raise BagError(
                 f'message on {self.topic} at {self.log_time_ns} ns is not a valid '
                 f'{self.type_name}: {error}') from None
