@@ -276,6 +276,12 @@ BAD_INPUTS = {
         '  relative_file_paths: [plugin_0.cdr]\n')),
         "plugin: rosbag2 storage plugin 'cdr_file' is not installed"),
     'killed.mcap': (None, 'killed.mcap: unfinished recording (no MCAP summary or footer)'),
+    'lost': (lambda path: (path.mkdir(), (path / 'metadata.yaml').write_text(
+        'rosbag2_bagfile_information:\n  version: 9\n  storage_identifier: mcap\n'
+        '  relative_file_paths: [lost_0.mcap]\n')),
+        'lost: storage file lost_0.mcap listed in metadata.yaml is missing'),
+    'folder': (lambda path: (path.mkdir(), (path / 'readme.txt').write_text('hi\n')),
+               'folder: directory without metadata.yaml or storage files'),
 }
 
 
