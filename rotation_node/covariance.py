@@ -292,7 +292,8 @@ def rotation_vector_covariance_from_quaternion_covariance(quaternion, covariance
         Bad ``frame``; wrong shape, NaN/Inf or zero quaternion, naming the argument.
     """
     m = _tangent_basis(_unit_quaternion(quaternion), _frame_is_world(frame))
-    return 4.0 * _congruence(np.swapaxes(m, -1, -2), finite_array(covariance, 'covariance', (4, 4)))
+    sigma = finite_array(covariance, 'covariance', (4, 4))
+    return 4.0 * _congruence(np.swapaxes(m, -1, -2), sigma)
 
 
 def world_rotation_vector_covariance(quaternion, body_covariance) -> np.ndarray:

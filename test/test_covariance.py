@@ -93,7 +93,7 @@ def test_euler_covariance_matches_central_difference_of_scipy(rng, seq, frame):
         j_inv = (wrapped(plus - minus) / (2 * FD_STEP)).T
         expected = j_inv @ sigma @ j_inv.T
         err = relative_difference(got, expected)
-        assert err < 1e-8, f'{seq} {frame} at {a}: Euler covariance vs finite differences {err:.2e}'
+        assert err < 1e-8, f'{seq} {frame} at {a}: vs finite differences {err:.2e}'
 
 
 @pytest.mark.parametrize('frame', FRAMES)
@@ -208,10 +208,10 @@ def test_world_and_body_covariances_are_related_by_the_orientation(rng):
         angles = rc.euler_from_quaternion(q, seq)
         with warnings.catch_warnings():
             warnings.simplefilter('error', EulerSingularityWarning)
-            from_world = cv.euler_covariance_from_rotation_vector_covariance(angles, world, seq,
-                                                                              'world')
-            from_body = cv.euler_covariance_from_rotation_vector_covariance(angles, body, seq,
-                                                                             'body')
+            from_world = cv.euler_covariance_from_rotation_vector_covariance(
+                angles, world, seq, 'world')
+            from_body = cv.euler_covariance_from_rotation_vector_covariance(
+                angles, body, seq, 'body')
         assert relative_difference(from_world, from_body) < 1e-10
 
 
