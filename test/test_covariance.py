@@ -290,3 +290,20 @@ def test_gimbal_lock_is_nan_with_a_warning_and_grows_as_one_over_margin_squared(
 def test_bad_input_raises_value_error_naming_the_argument(call, message):
     with pytest.raises(ValueError, match=message):
         call()
+
+
+def test_linearisation_ratio_is_largest_std_over_margin(rng):
+    sigma = np.diag([1e-4, 9e-4, 4e-4])  # largest std 0.03 rad
+    rot = Rotation.random(random_state=2).as_matrix()
+    rotated = rot @ sigma @ rot.T  # same eigenvalues
+    angles = np.array([[0.3, 1.0, -2.0], [0.3, np.pi / 2, 0.0], [0.3, -1.5, 0.0]])
+    ratio = cv.euler_linearisation_ratio(angles, rotated, 'xyz')
+    assert np.allclose(ratio[[0, 2]], 0.03 / np.array([np.pi / 2 - 1.0, np.pi / 2 - 1.5]),
+                       rtol=1e-12)
+    assert ratio[1] == np.inf or ratio[1] > 1e14
+    proper = cv.euler_linearisation_ratio([[0.0, 0.2, 0.0], [0.0, np.pi - 0.1, 0.0]], sigma,
+                                          'ZXZ')
+    assert np.allclose(proper, [0.03 / 0.2, 0.03 / 0.1], rtol=1e-12)
+    in_degrees = cv.euler_linearisation_ratio(np.degrees(angles[0]), rotated, 'xyz', True)
+    assert np.isclose(in_degrees, ratio[0], rtol=1e-12)
+    assert cv.euler_linearisation_ratio([0, np.pi / 2, 0], np.zeros((3, 3)), 'xyz') == 0.0
