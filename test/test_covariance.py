@@ -15,27 +15,16 @@ from scipy.spatial.transform import Rotation
 from rotation_node import conversions as rc
 from rotation_node import covariance as cv
 from rotation_node.kinematics import EulerSingularityWarning
+from test_kinematics_euler_rates import random_angles, singular_middle_angles
 
 EPS = np.finfo(float).eps
 FRAMES = ('world', 'body')
 CONVENTIONS = [(seq, frame) for seq in rc.SEQUENCES for frame in FRAMES]
 FD_STEP = 1e-5
-MARGIN = 0.2  # rad from gimbal lock
 # A correlated tangent covariance, standard deviations about 1e-3 rad.
 CHOLESKY = 1e-3 * np.array([[1.0, 0.0, 0.0], [0.5, 0.8, 0.0], [-0.3, 0.2, 1.2]])
 SIGMA = CHOLESKY @ CHOLESKY.T
 MC_SAMPLES = 10 ** 6
-
-
-def singular_middle_angles(seq):
-    return (0.0, np.pi) if rc.parse_sequence(seq).proper else (-np.pi / 2, np.pi / 2)
-
-
-def random_angles(rng, seq, n, margin=MARGIN):
-    angles = rng.uniform(-np.pi, np.pi, size=(n, 3))
-    low, high = singular_middle_angles(seq)
-    angles[:, 1] = rng.uniform(low + margin, high - margin, size=n)
-    return angles
 
 
 def random_covariance(rng, n, scale=1e-3):
