@@ -206,10 +206,23 @@ def euler_covariance_from_rotation_vector_covariance(
     world = _frame_is_world(frame)
     a = finite_array(angles, 'angles', (3,))
     sigma = finite_array(covariance, 'covariance', (3, 3))
-    with warnings.catch_warnings():
-        warnings.simplefilter('ignore', EulerSingularityWarning)
+    # One row of angles per column of J^-1: equal leading shapes need no broadcast copy.
+    rows = np.repeat(a[..., None, :], 3, axis=-2)
+    frame_name = 'world' if world else 'body'
+    try:
+        near = (_middle_margin(a, parse_sequence(seq), degrees)
+                <= float(singularity_threshold) * (1.0 + 1e-9))
+    except (TypeError, ValueError):
+        near = True   # the call below names what was wrong
+    if np.any(near):   # the warning below replaces the Euler rates' one
+        with warnings.catch_warnings():
+            warnings.simplefilter('ignore', EulerSingularityWarning)
+            columns = euler_rates_from_angular_velocity(
+                rows, _IDENTITY, seq, frame_name, degrees,
+                singularity_threshold=singularity_threshold)
+    else:
         columns = euler_rates_from_angular_velocity(
-            a[..., None, :], _IDENTITY, seq, 'world' if world else 'body', degrees,
+            rows, _IDENTITY, seq, frame_name, degrees,
             singularity_threshold=singularity_threshold)
     out = _congruence(np.swapaxes(columns, -1, -2), sigma)
     singular = np.isnan(columns[..., 0, 0])
@@ -221,6 +234,13 @@ def euler_covariance_from_rotation_vector_covariance(
             f'of gimbal lock in {seq!r}: their Euler covariance is unbounded and returned as '
             'NaN.', EulerSingularityWarning, stacklevel=2)
     return out
+
+
+def _middle_margin(angles: np.ndarray, spec, degrees: bool) -> np.ndarray:
+    """Distance (rad) of the middle angle from its singular values, in [0, pi/2]."""
+    middle = np.radians(angles[..., 1]) if degrees else angles[..., 1]
+    c, s = np.abs(np.cos(middle)), np.abs(np.sin(middle))
+    return np.arctan2(s, c) if spec.proper else np.arctan2(c, s)
 
 
 def euler_linearisation_ratio(angles, covariance, seq: str, degrees: bool = False) -> np.ndarray:
@@ -258,13 +278,14 @@ def euler_linearisation_ratio(angles, covariance, seq: str, degrees: bool = Fals
     """
     a = finite_array(angles, 'angles', (3,))
     sigma = finite_array(covariance, 'covariance', (3, 3))
-    middle = np.radians(a[..., 1]) if degrees else a[..., 1]
-    c, s = np.abs(np.cos(middle)), np.abs(np.sin(middle))
-    margin = np.arctan2(s, c) if parse_sequence(seq).proper else np.arctan2(c, s)
+    margin = _middle_margin(a, parse_sequence(seq), degrees)
     largest = np.linalg.eigvalsh(0.5 * (sigma + np.swapaxes(sigma, -1, -2)))[..., -1]
-    with np.errstate(divide='ignore', invalid='ignore'):
-        ratio = np.sqrt(np.maximum(largest, 0.0)) / margin
-    return np.where(largest > 0.0, ratio, 0.0)
+    std = np.sqrt(np.maximum(largest, 0.0))
+    # std / margin, with 0 / 0 = 0 (no uncertainty) and std / 0 = inf (gimbal lock)
+    std, margin = np.broadcast_arrays(std, margin)
+    out = np.where(std > 0.0, np.inf, 0.0)
+    np.divide(std, margin, out=out, where=margin > 0.0)
+    return out
 
 
 def _tangent_basis(q: np.ndarray, world: bool) -> np.ndarray:

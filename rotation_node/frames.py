@@ -165,12 +165,16 @@ class FrameConversion:
             Wrong shape or NaN/Inf, naming ``quaternion``.
         """
         q = finite_array(quaternion, 'quaternion', (4,))
-        x, y, z, w = np.moveaxis(q, -1, 0)
+        single = q.ndim == 1   # Python floats: a tenth of the time of numpy's small arrays
+        x, y, z, w = q.tolist() if single else np.moveaxis(q, -1, 0)
         if self.changes_body:
             x, y, z, w = w, z, -y, -x
         if self.changes_world:
             x, y, z, w = (_HALF_SQRT2 * (w + z), _HALF_SQRT2 * (w - z), _HALF_SQRT2 * (y - x),
                           -_HALF_SQRT2 * (x + y))
+        if single:
+            sign = -1.0 if w < 0.0 else 1.0
+            return np.array([sign * x + 0.0, sign * y + 0.0, sign * z + 0.0, sign * w + 0.0])
         out = np.stack(np.broadcast_arrays(x, y, z, w), axis=-1)
         return np.where(out[..., 3:] < 0.0, -out, out) + 0.0
 
