@@ -16,6 +16,7 @@ def finite_array(x, name: str, trailing: tuple) -> np.ndarray:
     ValueError
         If ``x`` is not numeric, its shape does not end in ``trailing`` or an
         element is NaN or infinite; the message names the argument.
+
     """
     a = float_array(x, name, trailing)
     finite = np.isfinite(a)

@@ -53,8 +53,9 @@ import numpy as np
 
 from ._arrays import finite_array
 from .conversions import matrix_from_quaternion, parse_sequence
-from .kinematics import (DEFAULT_SINGULARITY_THRESHOLD, EulerSingularityWarning,
-                         angular_velocity_from_euler_rates, euler_rates_from_angular_velocity)
+from .kinematics import (
+    angular_velocity_from_euler_rates, DEFAULT_SINGULARITY_THRESHOLD,
+    euler_rates_from_angular_velocity, EulerSingularityWarning)
 
 __all__ = [
     'body_rotation_vector_covariance', 'euler_covariance_from_rotation_vector_covariance',
@@ -68,7 +69,7 @@ _IDENTITY = np.eye(3)
 
 
 def _congruence(a: np.ndarray, sigma: np.ndarray) -> np.ndarray:
-    """``a sigma a^T`` over leading dimensions, made exactly symmetric."""
+    """Return ``a sigma a^T`` over leading dimensions, made exactly symmetric."""
     out = a @ sigma @ np.swapaxes(a, -1, -2)
     return 0.5 * (out + np.swapaxes(out, -1, -2))
 
@@ -114,6 +115,7 @@ def rotation_vector_covariance_jacobian(angles, seq: str, frame: str = 'world',
     ------
     ValueError
         Bad ``seq`` or ``frame``; wrong shape or NaN/Inf ``angles``.
+
     """
     world = _frame_is_world(frame)
     a = finite_array(angles, 'angles', (3,))
@@ -153,6 +155,7 @@ def rotation_vector_covariance_from_euler_covariance(angles, covariance, seq: st
     ------
     ValueError
         Bad ``seq`` or ``frame``; wrong shape or NaN/Inf, naming the argument.
+
     """
     sigma = finite_array(covariance, 'covariance', (3, 3))
     return _congruence(rotation_vector_covariance_jacobian(angles, seq, frame, degrees), sigma)
@@ -202,6 +205,7 @@ def euler_covariance_from_rotation_vector_covariance(
     ValueError
         Bad ``seq``, ``frame`` or ``singularity_threshold``; wrong shape or
         NaN/Inf, naming the argument.
+
     """
     world = _frame_is_world(frame)
     a = finite_array(angles, 'angles', (3,))
@@ -237,7 +241,7 @@ def euler_covariance_from_rotation_vector_covariance(
 
 
 def _middle_margin(angles: np.ndarray, spec, degrees: bool) -> np.ndarray:
-    """Distance (rad) of the middle angle from its singular values, in [0, pi/2]."""
+    """Return the distance (rad) of the middle angle from its singular values, in [0, pi/2]."""
     middle = np.radians(angles[..., 1]) if degrees else angles[..., 1]
     c, s = np.abs(np.cos(middle)), np.abs(np.sin(middle))
     return np.arctan2(s, c) if spec.proper else np.arctan2(c, s)
@@ -275,6 +279,7 @@ def euler_linearisation_ratio(angles, covariance, seq: str, degrees: bool = Fals
     ------
     ValueError
         Bad ``seq``; wrong shape or NaN/Inf, naming the argument.
+
     """
     a = finite_array(angles, 'angles', (3,))
     sigma = finite_array(covariance, 'covariance', (3, 3))
@@ -289,7 +294,7 @@ def euler_linearisation_ratio(angles, covariance, seq: str, degrees: bool = Fals
 
 
 def _tangent_basis(q: np.ndarray, world: bool) -> np.ndarray:
-    """``M`` (..., 4, 3): orthonormal columns, ``dq = M d / 2``, for unit ``q``."""
+    """Return ``M`` (..., 4, 3): orthonormal columns, ``dq = M d / 2``, for unit ``q``."""
     x, y, z, w = np.moveaxis(q, -1, 0)
     s = 1.0 if world else -1.0  # w I - s [v]x
     m = np.empty(q.shape[:-1] + (4, 3))
@@ -325,6 +330,7 @@ def quaternion_covariance_from_rotation_vector_covariance(quaternion, covariance
     ------
     ValueError
         Bad ``frame``; wrong shape, NaN/Inf or zero quaternion, naming the argument.
+
     """
     m = _tangent_basis(_unit_quaternion(quaternion), _frame_is_world(frame))
     return 0.25 * _congruence(m, finite_array(covariance, 'covariance', (3, 3)))
@@ -356,6 +362,7 @@ def rotation_vector_covariance_from_quaternion_covariance(quaternion, covariance
     ------
     ValueError
         Bad ``frame``; wrong shape, NaN/Inf or zero quaternion, naming the argument.
+
     """
     m = _tangent_basis(_unit_quaternion(quaternion), _frame_is_world(frame))
     sigma = finite_array(covariance, 'covariance', (4, 4))
@@ -378,6 +385,7 @@ def world_rotation_vector_covariance(quaternion, body_covariance) -> np.ndarray:
     ndarray, shape (..., 3, 3)
         ``R_hat Sigma_body R_hat^T``: the covariance of ``d`` in
         ``R = exp([d]x) R_hat``.
+
     """
     r = matrix_from_quaternion(_unit_quaternion(quaternion))
     return _congruence(r, finite_array(body_covariance, 'body_covariance', (3, 3)))
@@ -399,6 +407,7 @@ def body_rotation_vector_covariance(quaternion, world_covariance) -> np.ndarray:
     ndarray, shape (..., 3, 3)
         ``R_hat^T Sigma_world R_hat``: the covariance of ``d`` in
         ``R = R_hat exp([d]x)``.
+
     """
     r = matrix_from_quaternion(_unit_quaternion(quaternion))
     return _congruence(np.swapaxes(r, -1, -2),

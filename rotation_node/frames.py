@@ -94,6 +94,7 @@ class FrameConversion:
     array([0.        , 0.        , 0.70710678, 0.70710678])
     >>> to_px4.inverse == FrameConversion('ned', 'frd', 'enu', 'flu')
     True
+
     """
 
     source_world: str = 'enu'
@@ -110,22 +111,22 @@ class FrameConversion:
 
     @property
     def changes_world(self) -> bool:
-        """Whether the world frame changes (ENU <-> NED)."""
+        """Tell whether the world frame changes (ENU <-> NED)."""
         return self.source_world != self.target_world
 
     @property
     def changes_body(self) -> bool:
-        """Whether the body frame changes (FLU <-> FRD)."""
+        """Tell whether the body frame changes (FLU <-> FRD)."""
         return self.source_body != self.target_body
 
     @property
     def is_identity(self) -> bool:
-        """Whether nothing changes."""
+        """Tell whether nothing changes."""
         return not (self.changes_world or self.changes_body)
 
     @property
     def inverse(self) -> 'FrameConversion':
-        """The conversion back, from the target frames to the source frames."""
+        """Return the conversion back, from the target frames to the source frames."""
         return FrameConversion(self.target_world, self.target_body,
                                self.source_world, self.source_body)
 
@@ -138,16 +139,16 @@ class FrameConversion:
         return _BODY_FLIP if self.changes_body else _IDENTITY
 
     def world_matrix(self) -> np.ndarray:
-        """The 3x3 signed permutation that maps world coordinates (``P`` or ``I``)."""
+        """Return the 3x3 signed permutation that maps world coordinates (``P`` or ``I``)."""
         return _signed_permutation_matrix(self._world)
 
     def body_matrix(self) -> np.ndarray:
-        """The 3x3 signed permutation that maps body coordinates (``B`` or ``I``)."""
+        """Return the 3x3 signed permutation that maps body coordinates (``B`` or ``I``)."""
         return _signed_permutation_matrix(self._body)
 
     def quaternion(self, quaternion) -> np.ndarray:
         """
-        The orientation ``(x, y, z, w)`` in the target frames.
+        Return the orientation ``(x, y, z, w)`` in the target frames.
 
         Parameters
         ----------
@@ -163,6 +164,7 @@ class FrameConversion:
         ------
         ValueError
             Wrong shape or NaN/Inf, naming ``quaternion``.
+
         """
         q = finite_array(quaternion, 'quaternion', (4,))
         single = q.ndim == 1   # Python floats: a tenth of the time of numpy's small arrays
@@ -180,7 +182,7 @@ class FrameConversion:
 
     def matrix(self, matrix) -> np.ndarray:
         """
-        The body-to-world rotation matrix in the target frames, ``P R B`` (exact).
+        Return the body-to-world rotation matrix in the target frames, ``P R B`` (exact).
 
         Parameters
         ----------
@@ -195,6 +197,7 @@ class FrameConversion:
         ------
         ValueError
             Wrong shape or NaN/Inf, naming ``matrix``.
+
         """
         m = finite_array(matrix, 'matrix', (3, 3))
         (wi, ws), (bi, bs) = self._world, self._body
@@ -202,11 +205,12 @@ class FrameConversion:
 
     def world_vector(self, vector) -> np.ndarray:
         """
-        A vector in world coordinates (world angular velocity, position) in the target world.
+        Return a world-coordinate vector (world angular velocity, position) in the target world.
 
         Parameters
         ----------
         vector : array_like, shape (..., 3)
+            Coordinates in the source frame.
 
         Returns
         -------
@@ -217,16 +221,18 @@ class FrameConversion:
         ------
         ValueError
             Wrong shape or NaN/Inf, naming ``vector``.
+
         """
         return _permute_vector(finite_array(vector, 'vector', (3,)), self._world)
 
     def body_vector(self, vector) -> np.ndarray:
         """
-        A vector in body coordinates (body angular velocity) in the target body frame.
+        Return a body-coordinate vector (body angular velocity) in the target body frame.
 
         Parameters
         ----------
         vector : array_like, shape (..., 3)
+            Coordinates in the source frame.
 
         Returns
         -------
@@ -237,16 +243,18 @@ class FrameConversion:
         ------
         ValueError
             Wrong shape or NaN/Inf, naming ``vector``.
+
         """
         return _permute_vector(finite_array(vector, 'vector', (3,)), self._body)
 
     def world_covariance(self, covariance) -> np.ndarray:
         """
-        A covariance of world-frame quantities (fixed-axes rotation vector) in the target world.
+        Return a world-frame covariance (fixed-axes rotation vector) in the target world.
 
         Parameters
         ----------
         covariance : array_like, shape (..., 3, 3)
+            Covariance in the source frame.
 
         Returns
         -------
@@ -257,16 +265,18 @@ class FrameConversion:
         ------
         ValueError
             Wrong shape or NaN/Inf, naming ``covariance``.
+
         """
         return _permute_covariance(finite_array(covariance, 'covariance', (3, 3)), self._world)
 
     def body_covariance(self, covariance) -> np.ndarray:
         """
-        A covariance of body-frame quantities (body rotation vector) in the target body frame.
+        Return a body-frame covariance (body-axes rotation vector) in the target body frame.
 
         Parameters
         ----------
         covariance : array_like, shape (..., 3, 3)
+            Covariance in the source frame.
 
         Returns
         -------
@@ -277,6 +287,7 @@ class FrameConversion:
         ------
         ValueError
             Wrong shape or NaN/Inf, naming ``covariance``.
+
         """
         return _permute_covariance(finite_array(covariance, 'covariance', (3, 3)), self._body)
 

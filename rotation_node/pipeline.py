@@ -461,7 +461,7 @@ class ConversionPipeline:
 
     def _orientation_covariance(self, sample, values):
         """
-        The input's rotation-vector covariance in the output frames, or None if unknown.
+        Return the input's rotation-vector covariance in the output frames, or None if unknown.
 
         About the world axes (``covariance.frame`` fixed) or the body axes (body).
         """
@@ -484,7 +484,7 @@ class ConversionPipeline:
         return self._frames.body_covariance(sigma)
 
     def _euler_covariance(self, sample, values):
-        """The first-order Euler covariance, or None near gimbal lock or beyond linearity."""
+        """Return the first-order Euler covariance, or None near gimbal lock or beyond linearity."""
         params = self.params
         angles, sigma = values[EULER_ANGLES], values[ORIENTATION_COVARIANCE]
         with warnings.catch_warnings():   # counted and reported below instead

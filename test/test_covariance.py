@@ -10,11 +10,10 @@ import warnings
 
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
-
 from rotation_node import conversions as rc
 from rotation_node import covariance as cv
 from rotation_node.kinematics import EulerSingularityWarning
+from scipy.spatial.transform import Rotation
 from test_kinematics_euler_rates import random_angles, singular_middle_angles
 
 EPS = np.finfo(float).eps
@@ -103,7 +102,7 @@ def test_quaternion_jacobian_matches_central_difference_of_scipy(rng, frame):
 
 
 def monte_carlo_orientation(rng):
-    """An orientation at least 0.3 rad from gimbal lock in all 24 conventions."""
+    """Return an orientation at least 0.3 rad from gimbal lock in all 24 conventions."""
     for q in Rotation.random(200, random_state=11).as_quat():
         if all(rc.euler_singularity_margin(q, seq) > 0.3 for seq in rc.SEQUENCES):
             return q

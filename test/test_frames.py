@@ -11,12 +11,11 @@ import itertools
 import mpmath as mp
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
-
 from rotation_node import conversions as rc
 from rotation_node import covariance as cv
-from rotation_node.frames import (BODY_FRAMES, ENU_FLU_FROM_NED_FRD, FrameConversion,
-                                  NED_FRD_FROM_ENU_FLU, WORLD_FRAMES)
+from rotation_node.frames import (
+    BODY_FRAMES, ENU_FLU_FROM_NED_FRD, FrameConversion, NED_FRD_FROM_ENU_FLU, WORLD_FRAMES)
+from scipy.spatial.transform import Rotation
 
 EPS = np.finfo(float).eps
 mp.mp.dps = 40

@@ -351,7 +351,7 @@ PX4_FRAMES = {'frames_input_world': 'ned', 'frames_input_body': 'frd'}
 
 
 def px4_imu(rotation, omega_body, covariance, covariance_frame='fixed'):
-    """The Imu message of the same motion and uncertainty written in NED/FRD."""
+    """Return the Imu message of the same motion and uncertainty written in NED/FRD."""
     r = NED_FROM_ENU @ rotation.as_matrix() @ FRD_FROM_FLU
     block = FRD_FROM_FLU if covariance_frame == 'body' else NED_FROM_ENU
     cov = block @ np.reshape(covariance, (3, 3)) @ block.T

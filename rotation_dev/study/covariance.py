@@ -14,13 +14,12 @@ covariance can be trusted.
 :func:`measure` returns the rows, :func:`covariance_markdown` the section of
 ``accuracy.md`` and :func:`covariance_png` the plot.
 """
+from dataclasses import dataclass
 import io
 import math
-from dataclasses import dataclass
 from typing import List, Sequence
 
 import numpy as np
-
 from rotation_node import conversions as rc
 from rotation_node.covariance import euler_covariance_from_rotation_vector_covariance
 
@@ -73,7 +72,7 @@ class CovarianceRow:
 
     @property
     def worst_error(self) -> float:
-        """The largest ``|linear / sampled - 1|`` of the three angles."""
+        """Return the largest ``|linear / sampled - 1|`` of the three angles."""
         return float(np.abs(self.relative_errors).max())
 
     @property
@@ -116,6 +115,7 @@ def measure(quick: bool = False) -> List[CovarianceRow]:
     -------
     list of CovarianceRow
         The sigma sweep, then the margin sweeps.
+
     """
     rng = np.random.default_rng(SEED)
     samples = QUICK_SAMPLES if quick else SAMPLES
@@ -144,11 +144,12 @@ def _table(rows: Sequence[CovarianceRow]) -> List[str]:
 
 def trusted_ratio(rows: Sequence[CovarianceRow], tolerance: float = 0.1) -> float:
     """
-    The largest ``sigma / margin`` below which every measured row is within ``tolerance``.
+    Return the largest ``sigma / margin`` below which every row is within ``tolerance``.
 
     Parameters
     ----------
     rows : sequence of CovarianceRow
+        From :func:`measure`.
     tolerance : float, optional
         Relative error of the standard deviations.
 
@@ -157,6 +158,7 @@ def trusted_ratio(rows: Sequence[CovarianceRow], tolerance: float = 0.1) -> floa
     float
         The ratio of the last row (sorted by ratio) before the first one beyond
         ``tolerance``; the largest ratio measured if none is.
+
     """
     ordered = sorted(rows, key=lambda r: r.ratio)
     trusted = ordered[0].ratio
@@ -169,7 +171,7 @@ def trusted_ratio(rows: Sequence[CovarianceRow], tolerance: float = 0.1) -> floa
 
 def covariance_markdown(rows: Sequence[CovarianceRow], heading: str = '##') -> str:
     """
-    The study section: what was measured, the two tables and the verdict.
+    Return the study section: what was measured, the two tables and the verdict.
 
     Parameters
     ----------
@@ -182,6 +184,7 @@ def covariance_markdown(rows: Sequence[CovarianceRow], heading: str = '##') -> s
     -------
     str
         Markdown, ending with a newline.
+
     """
     sigma_rows = [r for r in rows if r.sweep == 'sigma']
     margin_rows = [r for r in rows if r.sweep == 'margin']
@@ -230,6 +233,7 @@ def covariance_png(rows: Sequence[CovarianceRow]) -> bytes:
     Returns
     -------
     bytes
+
     """
     import matplotlib
     matplotlib.use('Agg')
