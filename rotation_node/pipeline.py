@@ -500,6 +500,11 @@ class ConversionPipeline:
                        f'of {params.euler_sequence!r}: uncertainty outputs skipped (unbounded '
                        'there)')
             return None
+        # sigma_max^2 <= trace: only above it can the ratio exceed the limit (saves eigvalsh)
+        limit = params.covariance_max_linearisation_ratio * float(
+            conversions.euler_singularity_margin(values[ORIENTATION], params.euler_sequence))
+        if np.trace(sigma) <= limit * limit:
+            return result
         ratio = float(covariance.euler_linearisation_ratio(
             angles, sigma, params.euler_sequence, degrees=params.euler_degrees))
         if not ratio <= params.covariance_max_linearisation_ratio:
