@@ -484,7 +484,7 @@ class ConversionPipeline:
         return self._frames.body_covariance(sigma)
 
     def _euler_covariance(self, sample, values):
-        """Return the first-order Euler covariance, or None near gimbal lock or beyond linearity."""
+        """Return the first-order Euler covariance; None near gimbal lock or past linearity."""
         params = self.params
         angles, sigma = values[EULER_ANGLES], values[ORIENTATION_COVARIANCE]
         with warnings.catch_warnings():   # counted and reported below instead
