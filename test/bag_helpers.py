@@ -98,8 +98,11 @@ def plain(value):
 
 
 def imu_messages(rng, count, *, period_ns=10_000_000, start_ns=1_700_000_000_000_000_000,
-                 frame_id='imu_link'):
-    """Imu messages at a fixed rate: random unit orientations, angular velocities."""
+                 frame_id='imu_link', orientation_variance=(1e-6, 2e-6, 4e-6)):
+    """Imu messages at a fixed rate: random unit orientations, angular velocities.
+
+    The orientation covariance is ``diag(orientation_variance)`` (rad^2).
+    """
     from sensor_msgs.msg import Imu
     messages = []
     quaternions = rng.normal(size=(count, 4))
@@ -110,6 +113,7 @@ def imu_messages(rng, count, *, period_ns=10_000_000, start_ns=1_700_000_000_000
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(start_ns + i * period_ns, 10**9)
         msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w = q
         msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z = w
+        msg.orientation_covariance[0::4] = orientation_variance
         messages.append(msg)
     return messages
 

@@ -39,7 +39,9 @@ def converted(tmp_path_factory):
 
 
 @pytest.mark.parametrize('topic, panels', [
-    ('/imu', 2), *[(f'/imu/{name}', 2 if name == 'axis_angle' else 1) for name in OUTPUTS]])
+    ('/imu', 2),
+    *[(f'/imu/{name}', 2 if name in ('axis_angle', 'euler_covariance') else 1)
+      for name in OUTPUTS]])
 def test_plots_every_output(tmp_path, converted, topic, panels):
     png = tmp_path / 'plot.png'
     assert plot_topic(converted, topic, png, params=PARAMS) == 200
