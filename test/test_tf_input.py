@@ -24,7 +24,9 @@ from rclpy.qos import DurabilityPolicy, QoSProfile
 from ros_harness import RosProcess, script, TestNode
 from rotation_node.bag.convert import convert, output_topic
 from rotation_node.bag.mcap_io import BagReader, BagWriter
-from rotation_node.errors import ParameterError
+from rotation_node.bag.plot import plot_series, plot_topic
+from rotation_node.bag.reader import open_bag
+from rotation_node.errors import BagError, ParameterError
 from rotation_node.parameters import NodeParameters
 from rotation_node.pipeline import ConversionPipeline
 from rotation_node.stamps import header_stamp_ns, split_ns
@@ -400,3 +402,21 @@ def test_convert_pairs_each_tf_topic_with_its_static_topic(tmp_path, rng):
     assert stats['/robot1/tf'].received == 1 + len(chain.dynamic_messages)
     with BagReader(tmp_path / 'one.mcap') as reader:
         assert '/tf/quaternion' not in reader.topics
+
+
+def test_plot_draws_the_converted_orientation_and_refuses_the_tf_topic(tmp_path, rng):
+    chain = Chain(rng, seconds=0.5)
+    bag, converted = tmp_path / 'tf.mcap', tmp_path / 'converted.mcap'
+    with BagWriter(bag) as writer:
+        writer.write('/tf_static', chain.static_message, T0 - S)
+        for k, msg in enumerate(chain.dynamic_messages):
+            writer.write('/tf', msg, T0 + k * 1_000_000)
+    params = CHAIN.replaced({'outputs': ['euler']})
+    convert(bag, converted, params)
+    with open_bag(converted) as reader:
+        times_ns, _, (angles,) = plot_series(reader, '/tf/euler', params)
+    assert list(times_ns) == chain.lookup_times()
+    expected = [chain.orientation(t).as_euler('xyz') for t in chain.lookup_times()]
+    np.testing.assert_allclose(angles, expected, rtol=0, atol=1e-12)
+    with pytest.raises(BagError, match='convert it with input_type tf first'):
+        plot_topic(converted, '/tf', tmp_path / 'tf.png', params=params)
