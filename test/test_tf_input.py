@@ -13,6 +13,7 @@ cycle are counted on /diagnostics while the node keeps running.
 """
 import subprocess
 
+from bag_helpers import write_rosbag2
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import QuaternionStamped, TransformStamped, Vector3Stamped
 import numpy as np
@@ -21,6 +22,7 @@ from rclpy.duration import Duration
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, QoSProfile
+from rclpy.serialization import serialize_message
 from ros_harness import RosProcess, script, TestNode
 from rotation_node.bag.convert import convert, output_topic
 from rotation_node.bag.mcap_io import BagReader, BagWriter
@@ -420,3 +422,18 @@ def test_plot_draws_the_converted_orientation_and_refuses_the_tf_topic(tmp_path,
     np.testing.assert_allclose(angles, expected, rtol=0, atol=1e-12)
     with pytest.raises(BagError, match='convert it with input_type tf first'):
         plot_topic(converted, '/tf', tmp_path / 'tf.png', params=params)
+
+
+@pytest.mark.parametrize('storage', ['sqlite3', 'mcap'])
+def test_a_rosbag2_directory_written_by_rosbags_converts(tmp_path, rng, storage):
+    chain = Chain(rng, seconds=1.0)
+    type_name = 'tf2_msgs/msg/TFMessage'
+    rows = [('/tf_static', type_name, serialize_message(chain.static_message), T0 - S)]
+    rows += [('/tf', type_name, serialize_message(msg), T0 + k * 1_000_000)
+             for k, msg in enumerate(chain.dynamic_messages)]
+    bag = write_rosbag2(tmp_path / 'bag', rows, storage=storage)
+    convert(bag, tmp_path / 'out.mcap', CHAIN)
+    with BagReader(tmp_path / 'out.mcap') as reader:
+        check_against_oracle(
+            chain, [r.message() for r in reader.messages(['/tf/quaternion'])],
+            [r.message() for r in reader.messages(['/tf/angular_velocity'])])
