@@ -406,6 +406,15 @@ BAD_PARAMETERS_FILES = {
         '/**/rotation_node:\n  ros__parameters: {}\nother_node:\n  rate: 5\n', [],
         "section 'other_node' needs a 'ros__parameters:' mapping"),
     'missing': (None, [], 'cannot read it (No such file or directory)'),
+    # What rcl itself refuses, in a traceback, unless the node refuses it first:
+    'invalid node name': ('rotation-node:\n  ros__parameters:\n    qos.depth: 5\n', [],
+                          "section 'rotation-node': 'rotation-node' is not a node name"),
+    'mixed list': ('/**:\n  ros__parameters:\n    outputs: [euler, 1]\n', [],
+                   "'outputs': a list must hold values of one type, got int, str"),
+    'no value': ('/**:\n  ros__parameters:\n    qos.depth:\n', [],
+                 "parameter 'qos.depth' has no value"),
+    'alias': ('/**:\n  ros__parameters:\n    a: &x 1\n    b: *x\n', [],
+              'aliases (*name) are not allowed in a parameters file'),
 }
 
 
