@@ -27,6 +27,8 @@ import operator
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, NamedTuple, Optional, Sequence, Tuple
 
+import numpy as np
+
 from rotation_node import conversions, kinematics
 
 # Forms of an input orientation.
@@ -49,8 +51,14 @@ ANGULAR_VELOCITY = 'angular_velocity'
 """Angular velocity (rad/s) in ``angular_velocity.output_frame``, measured or differenced."""
 EULER_RATES = 'euler_rates'
 """Time derivatives of the Euler angles; unavailable near gimbal lock."""
+ORIENTATION_COVARIANCE = 'orientation_covariance'
+"""Rotation-vector covariance (3 x 3 array, rad^2) in the output frames, about the axes of
+``covariance.frame``; unavailable when the input carries none or it is unknown (all zeros)."""
+EULER_COVARIANCE = 'euler_covariance'
+"""First-order covariance (3 x 3 array) of the Euler angles, rad^2 or deg^2 with
+``euler.degrees``; unavailable near gimbal lock or past ``covariance.max_linearisation_ratio``."""
 PIPELINE_VALUES = (ORIENTATION, OUTPUT_QUATERNION, EULER_ANGLES, PUBLISHED_EULER,
-                   ANGULAR_VELOCITY, EULER_RATES)
+                   ANGULAR_VELOCITY, EULER_RATES, ORIENTATION_COVARIANCE, EULER_COVARIANCE)
 
 
 class Sample(NamedTuple):
@@ -395,6 +403,30 @@ QUATERNION_STAMPED = OutputMessage(
     lambda msg: _xyzw(msg.quaternion), stamped_numbers=True)
 
 
+def _build_vector3_with_covariance(header, numbers):
+    message = _message_class('sensor_msgs/msg/MagneticField')()
+    message.header = header
+    vector = message.magnetic_field
+    vector.x, vector.y, vector.z = (float(v) for v in numbers[:3])
+    message.magnetic_field_covariance = [float(v) for v in numbers[3:]]
+    return message
+
+
+VECTOR3_WITH_COVARIANCE = OutputMessage(
+    'sensor_msgs/msg/MagneticField', _build_vector3_with_covariance,
+    lambda msg: (*_xyz(msg.magnetic_field), *msg.magnetic_field_covariance),
+    stamped_numbers=True)
+"""A stamped 3-vector with its 3 x 3 covariance (row-major), as sensor_msgs/MagneticField.
+
+The only standard ROS message type that is exactly a header, a float64 3-vector
+and its full float64 3 x 3 covariance: fixed layout (encoded without building a
+message), mean and covariance in one message under the input's header. The
+types that carry an orientation covariance (Imu, PoseWithCovariance) are
+avoided on purpose: theirs is defined as a covariance of rotations about fixed
+axes, and an Euler-angle covariance there would be misread.
+"""
+
+
 def float64_multi_array(dimensions: Sequence[Tuple[str, int, int]]) -> OutputMessage:
     """
     Return the :class:`OutputMessage` of a std_msgs/Float64MultiArray with a fixed layout.
@@ -486,6 +518,21 @@ def _axis_angle(params, q):
     return (*axis.tolist(), float(angle))
 
 
+def _euler_stddev(params, covariance):
+    return np.sqrt(np.diagonal(covariance))
+
+
+def _euler_with_covariance(params, angles, covariance):
+    return (*angles, *covariance.ravel().tolist())
+
+
+def _euler_covariance_panels(params):
+    unit = _angle_unit(params)
+    return [*_euler_panels('Euler angles', '')(params),
+            Panel(f'Euler angle covariance, sequence {params.euler_sequence}', unit + '^2',
+                  tuple(f'C{row}{col}' for row in (1, 2, 3) for col in (1, 2, 3)), 3)]
+
+
 def _quaternion_rate(params, q, omega):
     return kinematics.quaternion_derivative(q, omega, frame=params.angular_velocity_output_frame)
 
@@ -532,6 +579,20 @@ _OUTPUT_LIST = (
         'quaternion_rate', QUATERNION_STAMPED, (OUTPUT_QUATERNION, ANGULAR_VELOCITY),
         _quaternion_rate, 'dq/dt (1/s) of the published quaternion',
         lambda params: [Panel('Quaternion rate', '1/s', _XYZW)]),
+    OutputType(
+        'euler_stddev', VECTOR3_STAMPED, (EULER_COVARIANCE,), _euler_stddev,
+        'one standard deviation of each angle of `euler.sequence` (first order, from the '
+        "input's orientation covariance about `covariance.frame` axes; degrees with "
+        '`euler.degrees`); inputs with a covariance only',
+        _euler_panels('Euler angle standard deviations', '')),
+    OutputType(
+        'euler_covariance', VECTOR3_WITH_COVARIANCE, (PUBLISHED_EULER, EULER_COVARIANCE),
+        _euler_with_covariance,
+        '`sensor_msgs/MagneticField` used as a stamped vector with covariance: '
+        '`magnetic_field` = the Euler angles (as `euler`), `magnetic_field_covariance` = their '
+        '3 x 3 covariance, row-major (rad^2, or deg^2 with `euler.degrees`); inputs with a '
+        'covariance only',
+        _euler_covariance_panels),
 )
 
 OUTPUTS = {entry.name: entry for entry in _OUTPUT_LIST}

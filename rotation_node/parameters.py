@@ -20,6 +20,7 @@ from typing import Any, Callable, Mapping, Optional
 from rotation_node import messages
 from rotation_node.conversions import parse_sequence
 from rotation_node.errors import ParameterError
+from rotation_node.frames import BODY_FRAMES, WORLD_FRAMES
 from rotation_node.ros_yaml import load_ros_yaml
 from rotation_node.validation import describe_value, did_you_mean
 
@@ -32,6 +33,7 @@ OUTPUTS = tuple(messages.OUTPUTS)
 """Values allowed in ``outputs``: the outputs of :data:`rotation_node.messages.OUTPUTS`."""
 
 FRAMES = ('body', 'world')
+COVARIANCE_FRAMES = ('fixed', 'body')
 RELIABILITIES = ('reliable', 'best_effort')
 
 ROS_BUILTIN_PARAMETERS = frozenset({'use_sim_time', 'start_type_description_service'})
@@ -224,6 +226,32 @@ class NodeParameters:
         'angular_velocity.output_frame', 'body',
         'Frame of the angular_velocity output',
         choices=FRAMES)
+    covariance_frame: str = _parameter(
+        'covariance.frame', 'fixed',
+        'Axes of the input orientation covariance: fixed (rotation about the world axes, '
+        'REP 145) or body (about the body axes)',
+        choices=COVARIANCE_FRAMES)
+    covariance_max_linearisation_ratio: float = _parameter(
+        'covariance.max_linearisation_ratio', 0.3,
+        'Largest orientation standard deviation over distance from gimbal lock (rad/rad) for '
+        'which euler_stddev and euler_covariance are published (about 10 % accurate at 0.3)',
+        bounds=(0.0, 1e6))
+    frames_input_world: str = _parameter(
+        'frames.input_world', 'enu',
+        'World frame convention of the input: enu (x east, y north, z up; REP 103) or ned',
+        choices=WORLD_FRAMES)
+    frames_input_body: str = _parameter(
+        'frames.input_body', 'flu',
+        'Body frame convention of the input: flu (x forward, y left, z up; REP 103) or frd',
+        choices=BODY_FRAMES)
+    frames_output_world: str = _parameter(
+        'frames.output_world', 'enu',
+        'World frame convention of the outputs: enu or ned',
+        choices=WORLD_FRAMES)
+    frames_output_body: str = _parameter(
+        'frames.output_body', 'flu',
+        'Body frame convention of the outputs: flu or frd',
+        choices=BODY_FRAMES)
     qos_reliability: str = _parameter(
         'qos.reliability', 'reliable',
         'Reliability of the input subscription and of the output publishers',

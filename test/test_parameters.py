@@ -33,6 +33,8 @@ def test_the_issue_names_every_parameter():
         'input_type', 'outputs', 'euler.sequence', 'euler.degrees', 'euler.unwrap',
         'euler.singularity_threshold', 'quaternion.continuity', 'quaternion.norm_tolerance',
         'angular_velocity.input_frame', 'angular_velocity.output_frame',
+        'covariance.frame', 'covariance.max_linearisation_ratio', 'frames.input_world',
+        'frames.input_body', 'frames.output_world', 'frames.output_body',
         'qos.reliability', 'qos.depth'}
 
 
@@ -41,6 +43,9 @@ def test_defaults_follow_ros_conventions():
     assert params.euler_sequence == 'xyz'                 # roll, pitch, yaw (REP 103)
     assert params.angular_velocity_input_frame == 'body'  # REP 145
     assert params.euler_degrees is False                  # REP 103: radians
+    assert params.covariance_frame == 'fixed'             # REP 145: about fixed axes
+    assert (params.frames_input_world, params.frames_input_body, params.frames_output_world,
+            params.frames_output_body) == ('enu', 'flu', 'enu', 'flu')   # REP 103
 
 
 def test_ros_names_round_trip():
