@@ -9,6 +9,8 @@ avoid_ros_namespace_conventions, policies by name (``keep_last``) and durations
 as ``{sec, nsec}``. Bags written before version 9 hold the policies as
 integers; both are read.
 """
+from typing import Any, Iterable
+
 import yaml
 from rclpy.duration import Duration
 from rclpy.qos import (
@@ -91,6 +93,26 @@ def qos_profiles_yaml(profiles):
         'avoid_ros_namespace_conventions': bool(profile.avoid_ros_namespace_conventions),
     } for profile in profiles]
     return yaml.safe_dump(entries, sort_keys=False, default_flow_style=False).rstrip('\n')
+
+
+def rosbags_qos_yaml(profiles: Iterable[Any]) -> str:
+    """
+    Serialise QoS profiles as the ``rosbags`` package parses them to rosbag2's YAML.
+
+    Parameters
+    ----------
+    profiles : list of rosbags.interfaces.Qos
+        E.g. the ``offered_qos_profiles`` of a rosbags connection.
+
+    Returns
+    -------
+    str
+        A YAML list in the format of ``qos_profiles_yaml``, ``'[]'`` for none.
+
+    """
+    from rosbags.rosbag2.metadata import dump_qos_v9
+    return yaml.safe_dump(dump_qos_v9(list(profiles)), sort_keys=False,
+                          default_flow_style=False).rstrip('\n')
 
 
 def _policy(entry, key, policy_type):

@@ -28,7 +28,8 @@ _DEFECT_TEXT = {
     NOT_ORTHONORMAL: 'is not orthonormal within `orthonormal_tolerance`',
 }
 
-_SHAPE_TEXT = {(): '(...)', (3,): '(..., 3)', (4,): '(..., 4)', (3, 3): '(..., 3, 3)'}
+_SHAPE_TEXT = {(): '(...)', (3,): '(..., 3)', (4,): '(..., 4)', (3, 3): '(..., 3, 3)',
+               (4, 4): '(..., 4, 4)'}
 
 
 def float_array(x, name, trailing):
