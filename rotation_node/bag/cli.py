@@ -1,19 +1,24 @@
 """
-Command line ``rotation_bag``: record, play, convert and plot MCAP bags.
+Command line ``rotation_bag``: record, play, convert and plot ROS 2 bags.
 
 Usage::
 
-    rotation_bag record OUT.mcap --topics /imu [/odom ...] [--duration S] [--force]
+    rotation_bag record OUT --topics /imu [/odom ...] [--duration S] [--compression C] [--force]
     rotation_bag play IN.mcap [--rate R] [--topics T ...] [--loop] [--delay S]
                       [--wait-for-subscribers]
-    rotation_bag convert IN.mcap OUT.mcap --params config/params.yaml [--topic T ...] [--force]
+    rotation_bag convert IN.mcap OUT --params config/params.yaml [--topic T ...]
+                         [--compression C] [--force]
     rotation_bag plot IN.mcap --topic /imu/euler [-o plot.png] [--params FILE] [--force]
 
+An output ``OUT`` is a rosbag2 directory, or a single MCAP file if it ends in
+``.mcap``; it is written as ``OUT.part`` and renamed when complete.
 ``record`` and ``play`` accept ``--ros-args ...`` (remapping, namespace, ...).
-Bad input (a missing, truncated or corrupt bag, an unknown message type, a
-topic not in the bag, an invalid parameters file, an existing output) ends
-with one line on stderr naming the problem and exit status 1; no output file
-is left behind and the input is never modified.
+Every failure (a missing, truncated or corrupt bag, an unknown message type, a
+topic not in the bag or not a valid name, an invalid parameters file, an
+existing output, a full disk) ends with one line on stderr naming the problem
+and exit status 1; Ctrl-C and SIGTERM with one line and 130 or 143. No
+output file is left behind (``record`` keeps what it recorded: on a full disk
+as a closed bag) and the input is never modified.
 """
 import argparse
 import os
@@ -21,17 +26,18 @@ import sys
 
 from rclpy.utilities import remove_ros_args
 
+from rotation_node.bag.stop_signal import exit_status, interrupt_on_stop_signals, signal_name
 from rotation_node.errors import RotationNodeError
 
 PROG = 'rotation_bag'
 EXIT_ERROR = 1
-EXIT_INTERRUPTED = 130
+COMPRESSION_CHOICES = ('zstd', 'lz4', 'none')
 
 
 def _record(args, ros_args):
     from rotation_node.bag.record import record
     counts = record(args.output, args.topics, duration=args.duration, overwrite=args.force,
-                    ros_args=ros_args)
+                    compression=args.compression, ros_args=ros_args)
     _say(f'wrote {sum(counts.values())} messages to {args.output}: ' +
          (', '.join(f'{topic} {count}' for topic, count in counts.items()) or 'no topics'))
 
@@ -46,7 +52,8 @@ def _convert(args, ros_args):
     from rotation_node.bag.convert import convert, output_topic
     from rotation_node.parameters import parameters_from_yaml
     params = parameters_from_yaml(args.params)
-    stats = convert(args.input, args.output, params, topics=args.topic, overwrite=args.force)
+    stats = convert(args.input, args.output, params, topics=args.topic, overwrite=args.force,
+                    compression=args.compression)
     for topic, topic_stats in stats.items():
         outputs = ', '.join(output_topic(topic, name) for name in params.outputs)
         notes = [f'{reason} {count}' for reason, count in
@@ -79,11 +86,14 @@ def build_parser():
     commands = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
 
     record = commands.add_parser('record', help='record live topics to an MCAP bag')
-    record.add_argument('output', metavar='OUT.mcap')
+    record.add_argument('output', metavar='OUT',
+                        help='rosbag2 directory to create, or a single MCAP file *.mcap')
     record.add_argument('--topics', nargs='+', required=True, metavar='TOPIC')
     record.add_argument('--duration', type=float, metavar='S',
                         help='stop after S seconds (default: at Ctrl-C or SIGTERM)')
-    record.add_argument('--force', action='store_true', help='overwrite OUT.mcap')
+    record.add_argument('--compression', choices=COMPRESSION_CHOICES, default='zstd',
+                        help='MCAP chunk compression (default zstd, as ros2 bag record)')
+    record.add_argument('--force', action='store_true', help='replace OUT')
     record.set_defaults(run=_record)
 
     play = commands.add_parser('play', help='publish the messages of a bag')
@@ -103,13 +113,16 @@ def build_parser():
     convert = commands.add_parser(
         'convert', help="add the node's outputs for the input topics to a copy of a bag")
     convert.add_argument('input', metavar='IN.mcap')
-    convert.add_argument('output', metavar='OUT.mcap')
+    convert.add_argument('output', metavar='OUT',
+                         help='rosbag2 directory to create, or a single MCAP file *.mcap')
     convert.add_argument('--params', required=True, metavar='FILE',
                          help="the node's parameters file (rotation_node: ros__parameters: ...)")
     convert.add_argument('--topic', action='append', metavar='T',
                          help='input topic to convert (repeatable; default: every topic of '
                               'the input_type)')
-    convert.add_argument('--force', action='store_true', help='overwrite OUT.mcap')
+    convert.add_argument('--compression', choices=COMPRESSION_CHOICES,
+                         help="MCAP chunk compression (default: the input's)")
+    convert.add_argument('--force', action='store_true', help='replace OUT')
     convert.set_defaults(run=_convert)
 
     plot = commands.add_parser('plot', help='plot a (converted) topic over time as a PNG')
@@ -130,12 +143,20 @@ def main(argv=None):
     argv = sys.argv if argv is None else [PROG, *argv]
     args = build_parser().parse_args(remove_ros_args(argv)[1:])
     try:
+        interrupt_on_stop_signals()
         args.run(args, argv)
-    except RotationNodeError as error:
-        # One line, whatever the message holds (YAML errors span several).
-        print(f'{PROG} {args.command}: error: {" ".join(str(error).split())}', file=sys.stderr)
+    except (RotationNodeError, OSError) as error:
+        _error(args, error)
         return EXIT_ERROR
-    except KeyboardInterrupt:
-        print(f'{PROG} {args.command}: interrupted', file=sys.stderr)
-        return EXIT_INTERRUPTED
+    except KeyboardInterrupt as interrupt:
+        print(f'{PROG} {args.command}: interrupted ({signal_name(interrupt)})', file=sys.stderr)
+        return exit_status(interrupt)
     return 0
+
+
+def _error(args, error):
+    """Print ``error`` on one line, whatever it holds (YAML errors span several)."""
+    if isinstance(error, OSError) and not isinstance(error, RotationNodeError):
+        where = f'{error.filename}: ' if error.filename else ''
+        error = f'{where}{error.strerror or error}'
+    print(f'{PROG} {args.command}: error: {" ".join(str(error).split())}', file=sys.stderr)

@@ -19,10 +19,11 @@ took most of the time.
 import os
 
 from rotation_node.bag.cdr import fixed_layout_codec, float64_multi_array_encoder
-from rotation_node.bag.mcap_io import BagReader, BagWriter, TopicMetadata
+from rotation_node.bag.mcap_io import BagReader, TopicMetadata
 from rotation_node.bag.message_types import type_name_of
 from rotation_node.bag.progress import ProgressBar
 from rotation_node.bag.qos import qos_profiles_yaml
+from rotation_node.bag.writer import BagWriter
 from rotation_node.errors import BagError
 from rotation_node.node import qos_profile
 from rotation_node.pipeline import (
@@ -65,23 +66,37 @@ def _input_topics(reader, input_type_name, topics):
     return list(dict.fromkeys(topics))
 
 
+def _check_output(input_path, output_path):
+    """Refuse an output that is the input bag or would replace the directory holding it."""
+    if os.path.exists(output_path) and os.path.samefile(input_path, output_path):
+        raise BagError(f'output {output_path} is the input bag')
+    output_directory = os.path.realpath(output_path) + os.sep
+    if os.path.realpath(input_path).startswith(output_directory):
+        raise BagError(f'output {output_path} holds the input bag {input_path}')
+
+
 def convert(input_path, output_path, params, *, topics=None, overwrite=False,
-            progress_stream=None):
+            compression=None, progress_stream=None):
     """
     Write ``output_path``: the input bag plus the node's outputs for its input topics.
 
     Parameters
     ----------
     input_path, output_path : str or os.PathLike
-        MCAP bags; the output is written to a temporary file and renamed, so a
-        failure never leaves a partial file, and the input is only read.
+        The input MCAP bag; the output bag, a rosbag2 directory or a single
+        MCAP file if it ends in ``.mcap``. The output is written as
+        ``<output>.part`` and renamed when complete; a failure or a signal
+        removes it; the input is only read.
     params : rotation_node.parameters.NodeParameters
         As loaded from the node's parameters file.
     topics : list of str, optional
         Topics to convert; by default every topic of the type ``params.input_type``
         names.
     overwrite : bool, optional
-        Replace an existing output file.
+        Replace an existing output (atomically, once the new one is complete).
+    compression : str, optional
+        Chunk compression of the output, ``'zstd'``, ``'lz4'`` or ``'none'``;
+        the input's by default.
     progress_stream : file, optional
         Where to draw the progress bar (only if it is a terminal); stderr by default.
 
@@ -95,12 +110,13 @@ def convert(input_path, output_path, params, *, topics=None, overwrite=False,
     BagError
         If the input is unreadable or corrupt, a topic is missing or of the
         wrong type, an output topic already exists in the input, or the output
-        exists (without ``overwrite``) or is the input.
+        exists (without ``overwrite``), is being written by another process
+        (``<output>.part`` exists) or is the input; a ``DiskFullError`` if the
+        disk fills (no output is left then).
 
     """
     with BagReader(input_path) as reader:
-        if os.path.exists(output_path) and os.path.samefile(input_path, output_path):
-            raise BagError(f'output {output_path} is the input bag')
+        _check_output(input_path, output_path)
         input_type_name = type_name_of(input_message_type(params.input_type))
         pipelines = {topic: ConversionPipeline(params)
                      for topic in _input_topics(reader, input_type_name, topics)}
@@ -119,7 +135,8 @@ def convert(input_path, output_path, params, *, topics=None, overwrite=False,
         if clashes:
             raise BagError(f'output topic {", ".join(clashes)} is already in {reader.path}')
 
-        with BagWriter(output_path, overwrite=overwrite) as writer, \
+        compression = reader.chunk_compression if compression is None else compression
+        with BagWriter(output_path, overwrite=overwrite, compression=compression) as writer, \
                 ProgressBar(sum(reader.message_counts.values()), stream=progress_stream,
                             label='converting ') as progress:
             for metadata in [*reader.topic_metadata.values(), *new_topics]:

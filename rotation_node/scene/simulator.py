@@ -26,7 +26,7 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
 from sensor_msgs.msg import Imu
 
-from rotation_node.bag.mcap_io import BagWriter
+from rotation_node.bag.writer import BagWriter
 
 from .effects import UNKNOWN_COVARIANCE, SensorStream, apply_effects
 from .motions import motion_truth
@@ -152,7 +152,8 @@ def write_bag(simulation, path, *, overwrite=False):
     ----------
     simulation : Simulation
     path : str or os.PathLike
-        The ``.mcap`` file; it appears only once completely written.
+        A rosbag2 directory, or a single MCAP file if it ends in ``.mcap``;
+        it appears only once completely written.
     overwrite : bool, optional
         Replace an existing file. Default False.
 
