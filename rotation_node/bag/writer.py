@@ -368,7 +368,8 @@ class BagWriter:
         ------
         DiskFullError
             If the chunk and the space needed to close the bag do not fit on
-            the disk: the chunk is dropped, nothing of it is written.
+            the disk: as many of its first messages as fit are written, the
+            others dropped.
         BagError
             If writing failed otherwise (the bag cannot be closed then).
 
@@ -379,18 +380,10 @@ class BagWriter:
             self._flush_due = now + self._chunk_period_s
         if not pending:
             return
-        chunk_size = (self._pending_bytes + _MESSAGE_OVERHEAD * len(pending)
-                      + self._registered_bytes + _CHUNK_OVERHEAD)
-        try:
-            self._output.reserve(chunk_size + self._summary_reserve())
-        except OSError as error:
-            if error.errno != errno.ENOSPC:
-                self._fail(error)
-            dropped = len(pending)
-            self._drop_pending()
-            raise DiskFullError(
-                f'disk full writing {self.path}: kept {self.message_count} messages, '
-                f'{dropped} not written', kept=self.message_count, dropped=dropped) from None
+        fitting = self._reserve_chunk(pending)
+        dropped = len(pending) - fitting
+        if dropped:
+            pending = pending[:fitting]
         add_message = self._writer.add_message
         counts = self._counts
         try:
@@ -408,9 +401,40 @@ class BagWriter:
                 self._start_ns = log_time_ns
             if log_time_ns > self._end_ns:
                 self._end_ns = log_time_ns
-        self._chunk_count += 1
-        self._registered_bytes = 0
+        if pending:
+            self._chunk_count += 1
+            self._registered_bytes = 0
         self._drop_pending()
+        if dropped:
+            raise DiskFullError(
+                f'disk full writing {self.path}: kept {self.message_count} messages, '
+                f'{dropped} not written', kept=self.message_count, dropped=dropped)
+
+    def _reserve_chunk(self, pending):
+        """
+        Reserve the space for a chunk of ``pending`` and for closing the bag.
+
+        Returns
+        -------
+        int
+            How many of the first messages of ``pending`` fit: all of them, or
+            on a full disk the most of the halves tried (0 if none).
+
+        """
+        count = len(pending)
+        data_bytes = self._pending_bytes
+        while count:
+            chunk_size = (data_bytes + _MESSAGE_OVERHEAD * count + self._registered_bytes
+                          + _CHUNK_OVERHEAD)
+            try:
+                self._output.reserve(chunk_size + self._summary_reserve())
+                return count
+            except OSError as error:
+                if error.errno != errno.ENOSPC:
+                    self._fail(error)
+            count //= 2
+            data_bytes = sum(len(message[2]) for message in pending[:count])
+        return 0
 
     def _drop_pending(self):
         self._pending = []
