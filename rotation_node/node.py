@@ -213,9 +213,9 @@ def _text(value):
 
 def main(args=None):
     """Run the node until Ctrl-C; return 1 if a parameter value is invalid."""
-    rclpy.init(args=args)
     node = None
     try:
+        rclpy.init(args=args)
         node = RotationNode()
         # The ~1e5 objects of rclpy, numpy and numba live as long as the process: keep
         # them out of the cyclic collector, whose full passes over them stall a

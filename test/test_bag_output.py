@@ -126,7 +126,7 @@ def test_two_concurrent_converts_one_fails_with_one_line(workspace, tmp_path):
 
 @pytest.mark.parametrize('filesystem', ['tmpfs', 'injected'])
 def test_full_disk_is_one_line_and_leaves_nothing(workspace, tmp_path, monkeypatch, capsys,
-                                                   filesystem):
+                                                  filesystem):
     if filesystem == 'tmpfs':
         if not can_mount():
             pytest.skip('cannot mount a tmpfs here (the injected case covers the logic)')

@@ -251,7 +251,7 @@ class BagOutput:
     @staticmethod
     def check_absent(path, *, overwrite=False) -> None:
         """
-        Raise ``BagError`` if the output ``path`` exists (and not ``overwrite``) or is being written.
+        Raise ``BagError`` if ``path`` exists (without ``overwrite``) or is being written.
 
         A check before a long computation; the creation itself is exclusive
         whatever happens between the two.
