@@ -48,13 +48,14 @@ def main(argv=None):
         interrupt_on_stop_signals()
         # Imported here: a Ctrl-C while numpy and rclpy load is then one line too.
         from rotation_node.bag.output import BagOutput
-        from .simulator import simulate, write_bag
+        from .simulator import write_scene_bag
         from .spec import load_scene
-        # Checked again when the bag is opened; here it saves simulating for nothing.
+        # Checked again when the bag is opened; here it saves loading the scene for nothing.
         BagOutput.check_absent(args.output, overwrite=args.force)
         scene = load_scene(args.scene)
-        simulation = simulate(scene, args.seed)
-        write_bag(simulation, args.output, overwrite=args.force)
+        # Streamed: memory does not grow with the scene's length.
+        n, published = write_scene_bag(scene, args.output, seed=args.seed,
+                                       overwrite=args.force)
     except (RotationNodeError, OSError) as exc:
         one_line = ' '.join(str(exc).split())
         print(f'rotation_scene: error: {one_line}', file=sys.stderr)
@@ -62,8 +63,6 @@ def main(argv=None):
     except KeyboardInterrupt as interrupt:
         print(f'rotation_scene: interrupted ({signal_name(interrupt)})', file=sys.stderr)
         return exit_status(interrupt)
-    n = len(simulation.time)
-    published = int(simulation.sensor.published.sum())
     effects = ', '.join(scene.effects) or 'none'
     print(f'{args.output}: {n} samples over {scene.duration:g} s at {scene.rate:g} Hz, '
           f'motion {scene.motion.type}, effects {effects}; '
