@@ -209,5 +209,7 @@ def test_streamed_simulation_memory_does_not_grow_with_the_scene(tmp_path):
         finally:
             tracemalloc.stop()
 
+    peak_bytes(1.0)   # compiles the integrator first: its allocations are not the scene's
     short, long = peak_bytes(10.0), peak_bytes(80.0)   # 10 001 and 80 001 samples
-    assert long < 1.3 * short, (short, long)
+    # All at once, the 80 s scene alone holds ~30 MB of arrays; in blocks ~1 MB at any length.
+    assert long < 1.3 * short < 4 << 20, (short, long)
