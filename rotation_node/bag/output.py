@@ -244,6 +244,10 @@ class BagOutput:
             if not self.single_file and os.path.isdir(self.part_path):
                 _remove(self.part_path)
             raise BagError(f'cannot create output {self.path}: {error.strerror}') from None
+        except BaseException:   # Ctrl-C, SIGTERM between creating the directory and the file
+            if not self.single_file:
+                _remove(self.part_path)
+            raise
         self.stream = os.fdopen(descriptor, 'wb')
         self._can_reserve = True
         self.closed = False

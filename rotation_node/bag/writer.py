@@ -187,6 +187,9 @@ class BagWriter:
         except OSError as error:
             self._output.discard()
             raise BagError(f'cannot write output {self.path}: {error.strerror}') from None
+        except BaseException:   # Ctrl-C, SIGTERM: no writer to abort yet
+            self._output.discard()
+            raise
 
     @property
     def message_count(self):
