@@ -16,6 +16,7 @@ import os
 import subprocess
 import time
 
+import pytest
 from mcap.exceptions import McapError
 from mcap.records import Channel, Message
 from mcap.stream_reader import StreamReader
@@ -66,6 +67,30 @@ def limited_allocation(monkeypatch, limit_bytes):
         return True
 
     monkeypatch.setattr(output, 'allocate', allocate)
+
+
+#: The two ways a test fills the disk: a real small file system, or the injected failure.
+FULL_DISKS = ('tmpfs', 'injected')
+
+
+@contextlib.contextmanager
+def small_disk(kind, directory, size_bytes, monkeypatch):
+    """
+    Yield ``directory`` (created), where writing a bag fails beyond ``size_bytes``.
+
+    ``kind`` is ``'tmpfs'`` (a real tmpfs of that size; the test is skipped
+    where none can be mounted, the injected case covering the same code) or
+    ``'injected'`` (:func:`limited_allocation`).
+    """
+    if kind == 'tmpfs':
+        if not can_mount():
+            pytest.skip('cannot mount a tmpfs here (the injected case covers the logic)')
+        with small_filesystem(directory, size_bytes):
+            yield directory
+    else:
+        os.makedirs(directory, exist_ok=True)
+        limited_allocation(monkeypatch, size_bytes)
+        yield directory
 
 
 def linear_scan(path):

@@ -13,7 +13,7 @@ import subprocess
 
 import numpy as np
 import pytest
-from fault_helpers import can_mount, limited_allocation, linear_scan, small_filesystem, wait_for
+from fault_helpers import FULL_DISKS, linear_scan, small_disk, wait_for
 from ros_harness import script
 from sensor_msgs.msg import Imu
 
@@ -124,21 +124,13 @@ def test_two_concurrent_converts_one_fails_with_one_line(workspace, tmp_path):
             == linear_scan(workspace / 'reference' / 'out.mcap'))
 
 
-@pytest.mark.parametrize('filesystem', ['tmpfs', 'injected'])
+@pytest.mark.parametrize('disk', FULL_DISKS)
 def test_full_disk_is_one_line_and_leaves_nothing(workspace, tmp_path, monkeypatch, capsys,
-                                                  filesystem):
-    if filesystem == 'tmpfs':
-        if not can_mount():
-            pytest.skip('cannot mount a tmpfs here (the injected case covers the logic)')
-        context = small_filesystem(tmp_path / 'small', 2 << 20)
-    else:
-        limited_allocation(monkeypatch, 2 << 20)
-        os.mkdir(tmp_path / 'small')
-        context = open(os.devnull)
-    with context:
-        status = main(['convert', str(workspace / 'in.mcap'), str(tmp_path / 'small' / 'out'),
+                                                  disk):
+    with small_disk(disk, tmp_path / 'small', 2 << 20, monkeypatch) as small:
+        status = main(['convert', str(workspace / 'in.mcap'), str(small / 'out'),
                        '--params', str(workspace / 'params.yaml')])
-        assert os.listdir(tmp_path / 'small') == []
+        assert os.listdir(small) == []
     assert status == 1
     line, = capsys.readouterr().err.splitlines()
     assert line.startswith('rotation_bag convert: error: disk full writing ')

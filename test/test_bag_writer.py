@@ -10,7 +10,7 @@ import pathlib
 
 import pytest
 import yaml
-from fault_helpers import can_mount, limited_allocation, linear_scan, small_filesystem
+from fault_helpers import FULL_DISKS, linear_scan, small_disk
 from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 from std_msgs.msg import String
@@ -154,22 +154,12 @@ def test_failure_removes_the_part_unless_keep_unfinished(tmp_path, rng):
     assert len(linear_scan(tmp_path / 'kept.mcap.part')) == 50
 
 
-@pytest.mark.parametrize('filesystem', ['tmpfs', 'injected'])
-def test_full_disk_keeps_a_valid_bag_of_what_was_written(tmp_path, rng, monkeypatch,
-                                                          filesystem):
+@pytest.mark.parametrize('disk', FULL_DISKS)
+def test_full_disk_keeps_a_valid_bag_of_what_was_written(tmp_path, rng, monkeypatch, disk):
     limit = 256 * 1024
-    if filesystem == 'tmpfs':
-        if not can_mount():
-            pytest.skip('cannot mount a tmpfs here (the injected case covers the logic)')
-        directory = tmp_path / 'small'
-        context = small_filesystem(directory, limit)
-    else:
-        directory = tmp_path
-        limited_allocation(monkeypatch, limit)
-        context = open(os.devnull)
     monkeypatch.setattr(writer_module, 'CHUNK_SIZE', 16 * 1024)
     messages = _strings(rng, 4000)
-    with context:
+    with small_disk(disk, tmp_path / 'small', limit, monkeypatch) as directory:
         path = directory / 'full'
         writer = BagWriter(path, compression='none', keep_unfinished=True)
         with pytest.raises(DiskFullError) as caught:
@@ -183,8 +173,7 @@ def test_full_disk_keeps_a_valid_bag_of_what_was_written(tmp_path, rng, monkeypa
         recovered = _rosbags_messages(path)
         assert len(recovered) == kept
         assert [(t, s) for t, s, _ in recovered] == [(t, s) for t, _, s in messages[:kept]]
-        if filesystem == 'injected':
-            assert os.path.getsize(path / 'full_0.mcap') <= limit
+        assert os.path.getsize(path / 'full_0.mcap') <= limit
 
 
 def test_output_and_part_are_exclusive(tmp_path):

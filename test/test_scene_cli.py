@@ -5,7 +5,7 @@ import subprocess
 
 import numpy as np
 import pytest
-from fault_helpers import can_mount, limited_allocation, linear_scan, small_filesystem, wait_for
+from fault_helpers import FULL_DISKS, linear_scan, small_disk, wait_for
 
 from ros_harness import script
 from rotation_node.bag.mcap_io import BagReader
@@ -167,20 +167,12 @@ def test_signal_removes_the_part_and_says_so_on_one_line(long_scene, tmp_path, s
     assert os.listdir(tmp_path) == []
 
 
-@pytest.mark.parametrize('filesystem', ['tmpfs', 'injected'])
+@pytest.mark.parametrize('disk', FULL_DISKS)
 def test_full_disk_is_one_line_and_leaves_nothing(long_scene, tmp_path, monkeypatch, capsys,
-                                                  filesystem):
-    if filesystem == 'tmpfs':
-        if not can_mount():
-            pytest.skip('cannot mount a tmpfs here (the injected case covers the logic)')
-        context = small_filesystem(tmp_path / 'small', 256 * 1024)
-    else:
-        limited_allocation(monkeypatch, 256 * 1024)
-        os.mkdir(tmp_path / 'small')
-        context = open(os.devnull)
-    with context:
-        status = main([str(long_scene / 'scene.yaml'), str(tmp_path / 'small' / 'out')])
-        assert os.listdir(tmp_path / 'small') == []
+                                                  disk):
+    with small_disk(disk, tmp_path / 'small', 256 * 1024, monkeypatch) as small:
+        status = main([str(long_scene / 'scene.yaml'), str(small / 'out')])
+        assert os.listdir(small) == []
     assert status == 1
     line, = capsys.readouterr().err.splitlines()
     assert line.startswith('rotation_scene: error: disk full writing ')
