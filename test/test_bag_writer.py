@@ -201,3 +201,30 @@ def test_overwrite_replaces_a_file_or_directory_atomically(tmp_path, rng, name):
     _write(path, messages, overwrite=True)
     assert len(_rosbags_messages(path)) == 7
     assert os.listdir(tmp_path) == [name]
+
+
+def test_metadata_yaml_qos_profiles_are_read_by_rosbags(tmp_path):
+    from rclpy.duration import Duration
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from rosbags.interfaces import QosDurability, QosReliability
+
+    from rotation_node.bag.mcap_io import TopicMetadata
+    from rotation_node.bag.qos import qos_profiles_yaml
+
+    offered = QoSProfile(depth=7, reliability=ReliabilityPolicy.BEST_EFFORT,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                         deadline=Duration(seconds=2, nanoseconds=5))
+    path = tmp_path / 'qos'
+    with BagWriter(path) as writer:
+        writer.add_topic(TopicMetadata('/text', 'std_msgs/msg/String',
+                                       qos_profiles_yaml([offered])))
+        writer.write('/text', String(data='x'), T0)
+    info = yaml.safe_load((path / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    stored, = info['topics_with_message_count'][0]['topic_metadata']['offered_qos_profiles']
+    assert (stored['reliability'], stored['durability'], stored['deadline']) == (
+        'best_effort', 'transient_local', {'sec': 2, 'nsec': 5})
+    with AnyReader([pathlib.Path(path)]) as reader:
+        qos, = reader.connections[0].ext.offered_qos_profiles
+    assert (qos.reliability, qos.durability, qos.depth) == (
+        QosReliability.BEST_EFFORT, QosDurability.TRANSIENT_LOCAL, 7)
+    assert (qos.deadline.sec, qos.deadline.nsec) == (2, 5)
