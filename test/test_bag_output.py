@@ -6,6 +6,7 @@ seeded random point of the output (the ``.part`` then holds a byte prefix of
 the complete bag, whose messages a linear scan recovers in order), SIGTERM (no
 file left, one line, status 143), two converts of the same output at once
 (exactly one fails, with one line), and a full disk (one line, nothing left).
+Also: the output's chunk compression follows the input's unless told.
 """
 import os
 import signal
@@ -14,6 +15,7 @@ import subprocess
 import numpy as np
 import pytest
 from fault_helpers import FULL_DISKS, linear_scan, small_disk, wait_for
+from mcap.reader import make_reader
 from ros_harness import script
 from sensor_msgs.msg import Imu
 
@@ -163,3 +165,18 @@ def test_rename_replacing_swaps_files_and_directories(tmp_path):
     (tmp_path / 'file').write_text('file')
     rename_replacing(str(tmp_path / 'file'), str(tmp_path / 'old'))
     assert os.listdir(tmp_path) == ['old'] and (tmp_path / 'old').read_text() == 'file'
+
+
+@pytest.mark.parametrize('option, expected', [(None, 'lz4'), ('zstd', 'zstd'), ('none', '')])
+def test_convert_compresses_as_its_input_unless_told(workspace, tmp_path, option, expected):
+    source = tmp_path / 'lz4.mcap'
+    with BagWriter(source, compression='lz4') as writer:
+        for topic, _, _, data in linear_scan(workspace / 'in.mcap')[:3000]:
+            writer.write_serialized(topic, 'sensor_msgs/msg/Imu', data, T0)
+    output = tmp_path / 'out.mcap'
+    convert(source, output, parameters_from_yaml(workspace / 'params.yaml'),
+            compression=option)
+    with open(output, 'rb') as stream:
+        summary = make_reader(stream).get_summary()
+    assert {index.compression for index in summary.chunk_indexes} == {expected}
+    assert len(linear_scan(output)) == 3 * 3000   # the input and its two outputs

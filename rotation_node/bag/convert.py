@@ -121,7 +121,7 @@ def convert(input_path, output_path, params, *, topics=None, overwrite=False,
         if clashes:
             raise BagError(f'output topic {", ".join(clashes)} is already in {reader.path}')
 
-        compression = reader.chunk_compression if compression is None else compression
+        compression = reader.compression if compression is None else compression
         with BagWriter(output_path, overwrite=overwrite, compression=compression) as writer, \
                 ProgressBar(sum(reader.message_counts.values()), stream=progress_stream,
                             label='converting ') as progress:

@@ -152,7 +152,7 @@ class BagReader:
         ``{topic: TopicMetadata}`` as stored (schema text, QoS YAML, hash).
     message_counts : dict
         ``{topic: number of messages}``.
-    chunk_compression : str
+    compression : str
         The compression of the file's chunks: ``'zstd'``, ``'lz4'`` or
         ``'none'`` (the first chunk's; ``'none'`` without chunks).
 
@@ -200,7 +200,7 @@ class BagReader:
             self.message_counts[channel.topic] = (
                 self.message_counts.get(channel.topic, 0) + counts.get(channel.id, 0))
         self.topics = {topic: m.type_name for topic, m in self.topic_metadata.items()}
-        self.chunk_compression = next(
+        self.compression = next(
             (index.compression or 'none' for index in summary.chunk_indexes), 'none')
 
     def _topic_metadata(self, channel, schema):
