@@ -10,11 +10,12 @@ import pathlib
 
 import pytest
 import yaml
-from fault_helpers import FULL_DISKS, linear_scan, small_disk
+from fault_helpers import FULL_DISKS, can_mount, linear_scan, small_disk, small_filesystem
 from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 from std_msgs.msg import String
 
+from rotation_node.bag import output as output_module
 from rotation_node.bag import writer as writer_module
 from rotation_node.bag.mcap_io import BagReader
 from rotation_node.bag.writer import BagWriter
@@ -228,3 +229,29 @@ def test_metadata_yaml_qos_profiles_are_read_by_rosbags(tmp_path):
     assert (qos.reliability, qos.durability, qos.depth) == (
         QosReliability.BEST_EFFORT, QosDurability.TRANSIENT_LOCAL, 7)
     assert (qos.deadline.sec, qos.deadline.nsec) == (2, 5)
+
+
+@pytest.mark.skipif(not can_mount(), reason='needs a tmpfs mount (root)')
+@pytest.mark.parametrize('keep_unfinished', [True, False])
+def test_full_disk_without_reservation_is_a_write_error(tmp_path, rng, monkeypatch,
+                                                         keep_unfinished):
+    """On a file system without fallocate a full disk shows as a failed write."""
+    monkeypatch.setattr(output_module, 'allocate', lambda descriptor, offset, length: False)
+    monkeypatch.setattr(writer_module, 'CHUNK_SIZE', 16 * 1024)
+    messages = _strings(rng, 4000)
+    with small_filesystem(tmp_path / 'small', 256 * 1024) as small:
+        writer = BagWriter(small / 'full', compression='none', keep_unfinished=keep_unfinished)
+        with pytest.raises(BagError, match='cannot write output .*full: No space left on '
+                                           'device') as caught:
+            with writer:
+                for topic, msg, stamp in messages:
+                    writer.write(topic, msg, stamp)
+        if keep_unfinished:
+            assert 'what was written is in' in str(caught.value)
+            assert os.listdir(small) == ['full.part']
+            recovered = linear_scan(small / 'full.part' / 'full_0.mcap')
+            assert 0 < len(recovered) < len(messages)
+            assert [(t, s) for t, s, _, _ in recovered] == [
+                (t, s) for t, _, s in messages[:len(recovered)]]
+        else:
+            assert os.listdir(small) == []

@@ -445,7 +445,8 @@ class BagWriter:
 
     def _fail(self, error):
         self._failed = True
-        raise BagError(f'cannot write output {self.path}: {error.strerror}') from None
+        kept = (f'; what was written is in {self.part_path}' if self.keep_unfinished else '')
+        raise BagError(f'cannot write output {self.path}: {error.strerror}{kept}') from None
 
     def rosbag2_metadata(self):
         """
