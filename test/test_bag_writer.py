@@ -234,7 +234,7 @@ def test_metadata_yaml_qos_profiles_are_read_by_rosbags(tmp_path):
 @pytest.mark.skipif(not can_mount(), reason='needs a tmpfs mount (root)')
 @pytest.mark.parametrize('keep_unfinished', [True, False])
 def test_full_disk_without_reservation_is_a_write_error(tmp_path, rng, monkeypatch,
-                                                         keep_unfinished):
+                                                        keep_unfinished):
     """On a file system without fallocate a full disk shows as a failed write."""
     monkeypatch.setattr(output_module, 'allocate', lambda descriptor, offset, length: False)
     monkeypatch.setattr(writer_module, 'CHUNK_SIZE', 16 * 1024)
