@@ -74,7 +74,7 @@ def _size(path):
         return 0
 
 
-@pytest.mark.parametrize('seed', [1, 2])
+@pytest.mark.parametrize('seed', [1])
 def test_sigkill_leaves_a_part_holding_a_prefix_of_the_bag(workspace, tmp_path, seed):
     reference = (workspace / 'reference' / 'out.mcap').read_bytes()
     threshold = int(np.random.default_rng(seed).uniform(0.05, 0.6) * len(reference))
