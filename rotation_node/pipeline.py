@@ -130,6 +130,10 @@ class Value(NamedTuple):
     method : str
         Name of the :class:`ConversionPipeline` method
         ``method(sample, values) -> value or None`` that computes it.
+    reads : tuple of str
+        The optional :class:`~rotation_node.messages.Sample` fields it reads
+        (``'angular_velocity'``, ``'covariance'``): input messages are read into
+        them only when a value computed reads them.
 
     """
 
@@ -137,11 +141,12 @@ class Value(NamedTuple):
     requires: Tuple[str, ...]
     uses: Tuple[str, ...]
     method: str
+    reads: Tuple[str, ...] = ()
 
 
 VALUES = (
     Value(ORIENTATION, (), (), '_orientation'),
-    Value(ANGULAR_VELOCITY, (), (ORIENTATION,), '_angular_velocity'),
+    Value(ANGULAR_VELOCITY, (), (ORIENTATION,), '_angular_velocity', ('angular_velocity',)),
     Value(OUTPUT_QUATERNION, (ORIENTATION,), (), '_output_quaternion'),
     Value(EULER_ANGLES, (ORIENTATION,), (), '_euler_angles'),
     Value(PUBLISHED_EULER, (EULER_ANGLES,), (), '_published_euler'),
@@ -200,12 +205,21 @@ class ConversionPipeline:
         self._input = messages.INPUTS[params.input_type]
         self._outputs = [messages.OUTPUTS[name] for name in params.outputs]
         self._builders = {output.name: output.message.build for output in self._outputs}
-        self._samples = self._input.sample_stream(params)
+        plan = _needed_values(params.outputs)
+        reads = {field for value in plan for field in value.reads}
+        sample_fields = {'angular_velocity': 'angular_velocity' in reads,
+                         'covariance': 'covariance' in reads}
+        self._samples = self._input.sample_stream(params, **sample_fields)
         self._transforms = [transform for transform in
                             (factory(params) for factory in SAMPLE_TRANSFORMS)
                             if transform is not None]
+        # A plain input without transforms: one sample per message, read directly.
+        self._read = (self._input.sample_reader(**sample_fields)
+                      if self._input.stream is None and not self._transforms else None)
         self._plan = [(value.name, value.requires, getattr(self, value.method))
-                      for value in _needed_values(params.outputs)]
+                      for value in plan]
+        self._output_plan = [(output.name, output.needs, output.compute)
+                             for output in self._outputs]
         self._angle_period = 360.0 if params.euler_degrees else 2.0 * math.pi
         # Per-stream state.
         self._previous_quaternion = None     # last orientation, for the finite difference
@@ -275,26 +289,27 @@ class ConversionPipeline:
 
         """
         self.stats.received += 1
-        results = []
-        for sample in self._samples(topic, msg):
+        if self._read is not None:
+            samples = (self._read(msg),)
+        else:
+            samples = self._samples(topic, msg)
             for transform in self._transforms:
-                sample = transform(sample)
-            results += self._process_sample(sample)
+                samples = [transform(sample) for sample in samples]
+        results = []
+        for sample in samples:
+            try:
+                outputs = self._converted(sample)
+            except _Dropped as drop:
+                self.stats.dropped[drop.reason] += 1
+                self._report(drop.reason, str(drop))
+                continue
+            except ValueError as exc:   # a conversion rejected a value the checks let through
+                self.stats.dropped[CONVERSION_ERROR] += 1
+                self._report(CONVERSION_ERROR, f'message dropped: {exc}')
+                continue
+            self.stats.published += len(outputs)
+            results += outputs
         return results
-
-    def _process_sample(self, sample):
-        try:
-            outputs = self._converted(sample)
-        except _Dropped as drop:
-            self.stats.dropped[drop.reason] += 1
-            self._report(drop.reason, str(drop))
-            return []
-        except ValueError as exc:   # a conversion rejected a value the checks let through
-            self.stats.dropped[CONVERSION_ERROR] += 1
-            self._report(CONVERSION_ERROR, f'message dropped: {exc}')
-            return []
-        self.stats.published += len(outputs)
-        return outputs
 
     def _report(self, reason, detail):
         if self._on_issue is not None:
@@ -308,17 +323,27 @@ class ConversionPipeline:
         """The outputs of one sample: every needed value once, then each output from them."""
         values = {}
         for name, requires, compute in self._plan:
-            available = True
             for required in requires:
                 if values[required] is None:
-                    available = False
+                    values[name] = None
                     break
-            values[name] = compute(sample, values) if available else None
+            else:
+                values[name] = compute(sample, values)
         params, header, outputs = self.params, sample.header, []
-        for output in self._outputs:
-            needed = [values[name] for name in output.needs]
-            if not any(value is None for value in needed):
-                outputs.append((output.name, header, output.compute(params, *needed)))
+        for name, needs, compute in self._output_plan:
+            if compute is None:   # the one value needed, as it is
+                value = values[needs[0]]
+                if value is not None:
+                    outputs.append((name, header, value))
+                continue
+            needed = []
+            for need in needs:
+                value = values[need]
+                if value is None:
+                    break
+                needed.append(value)
+            else:
+                outputs.append((name, header, compute(params, *needed)))
         if values[ORIENTATION] is None and len(outputs) < len(self._outputs):
             self._skip(ORIENTATION_UNKNOWN,
                        'orientation unknown (Imu orientation_covariance[0] == -1): '
