@@ -4,7 +4,8 @@ Tests of rotation_node.bag.output: exclusive creation, atomic renames, what a cr
 Fault injection on real ``rotation_bag convert`` processes: SIGKILL at a
 seeded random point of the output (the ``.part`` then holds a byte prefix of
 the complete bag, whose messages a linear scan recovers in order), SIGTERM (no
-file left, one line, status 143), two converts of the same output at once
+file left, one line, status 143; for many bags with --jobs, the workers stop
+too), two converts of the same output at once
 (exactly one fails, with one line), and a full disk (one line, nothing left).
 Also: the output's chunk compression follows the input's unless told.
 """
@@ -109,6 +110,34 @@ def test_sigterm_removes_the_part_and_says_so_on_one_line(workspace, tmp_path):
     assert process.returncode == 143, stderr
     assert stderr.splitlines() == ['rotation_bag convert: interrupted (SIGTERM)']
     assert os.listdir(tmp_path) == []
+
+
+def test_sigterm_stops_a_many_bag_convert_and_its_workers(workspace, tmp_path):
+    """SIGTERM to ``convert A B C OUTDIR --jobs 2``: the workers stop too, no .part is left."""
+    inputs = []
+    for name in ('a', 'b', 'c'):
+        os.symlink(workspace / 'in.mcap', tmp_path / f'{name}.mcap')
+        inputs.append(tmp_path / f'{name}.mcap')
+    many = tmp_path / 'many'
+    process = subprocess.Popen(
+        [script('rotation_bag'), 'convert', *inputs, many, '--params',
+         workspace / 'params.yaml', '--jobs', '2'],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert wait_for(lambda: _size(many / 'a.part' / 'a_0.mcap') > 1 << 20
+                        or process.poll() is not None, timeout=90)
+        process.send_signal(signal.SIGTERM)
+    finally:
+        _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 143, stderr
+    *done, last = stderr.splitlines()
+    assert last == 'rotation_bag convert: interrupted (SIGTERM)'
+    # A bag that finished before the signal is complete and has its line; nothing else is left.
+    finished = sorted(os.listdir(many))
+    assert [line.split(' -> ')[1].split(':')[0] for line in done] == [
+        str(many / name) for name in finished]
+    for name in finished:
+        assert sorted(os.listdir(many / name)) == ['metadata.yaml', f'{name}_0.mcap']
 
 
 def test_two_concurrent_converts_one_fails_with_one_line(workspace, tmp_path):

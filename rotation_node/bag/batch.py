@@ -13,12 +13,15 @@ import concurrent.futures
 import dataclasses
 import multiprocessing
 import os
+import signal
 from typing import Callable, List, Optional, Sequence
 
-from rotation_node.bag.stop_signal import interrupt_on_stop_signals
+from rotation_node.bag.stop_signal import Terminated
 from rotation_node.errors import BagError, RotationNodeError
 
 _STORAGE_SUFFIXES = ('.zstd', '.mcap', '.db3', '.bag')
+_converting = False   # in a worker process: whether it is converting a bag now
+_stopped = False      # in a worker process: whether SIGTERM came (no further bag is started)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -195,21 +198,56 @@ def convert_bags(input_paths: Sequence[str], output_directory: str, params, *, j
     # Fresh interpreters ("spawn"): forking a process that runs threads (numba's,
     # the conversion thread pool) can deadlock the child.
     context = multiprocessing.get_context('spawn')
-    # A worker stopped by SIGTERM (or Ctrl-C) removes its unfinished output, as convert does.
     with concurrent.futures.ProcessPoolExecutor(max_workers=min(jobs, len(input_paths)),
                                                 mp_context=context,
-                                                initializer=interrupt_on_stop_signals) as pool:
-        futures = [pool.submit(convert_bag, input_path, output_path, params, topics=topics,
-                               overwrite=overwrite, strict=strict, compression=compression)
+                                                initializer=_init_worker) as pool:
+        futures = [pool.submit(_convert_bag_in_worker, input_path, output_path, params,
+                               topics=topics, overwrite=overwrite, strict=strict,
+                               compression=compression)
                    for input_path, output_path in zip(input_paths, outputs)]
         try:
             for future in concurrent.futures.as_completed(futures):
                 results.append(future.result())
                 on_result(results[-1])
-        except BaseException:
+        except BaseException:   # Ctrl-C, SIGTERM: stop the workers too
+            for process in list((getattr(pool, '_processes', None) or {}).values()):
+                process.terminate()
             pool.shutdown(wait=True, cancel_futures=True)
             raise
     return results
+
+
+def _init_worker():
+    """
+    Set a worker process's signals: Ctrl-C is the parent's, SIGTERM stops the worker.
+
+    The parent, interrupted, sends SIGTERM to its workers: a conversion then
+    stops as ``rotation_bag convert`` does on SIGTERM (its unfinished output
+    removed), and no queued bag is started; an idle worker exits at once.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _stop_worker)
+
+
+def _stop_worker(signal_number, frame):
+    global _stopped
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)   # the clean-up is not interrupted
+    _stopped = True
+    if _converting:
+        raise Terminated()
+    os._exit(128 + signal_number)
+
+
+def _convert_bag_in_worker(*args, **kwargs):
+    """:func:`convert_bag` in a worker process, stoppable by SIGTERM (see ``_init_worker``)."""
+    global _converting
+    if _stopped:   # a bag queued before the parent was interrupted
+        raise Terminated()
+    _converting = True
+    try:
+        return convert_bag(*args, **kwargs)
+    finally:
+        _converting = False
 
 
 def convert_bags_on_dask(client, input_paths: Sequence[str], output_directory: str, params, *,
