@@ -98,15 +98,20 @@ def test_sigkill_leaves_a_part_holding_a_prefix_of_the_bag(workspace, tmp_path, 
     assert recovered == linear_scan(workspace / 'reference' / 'out.mcap')[:len(recovered)]
 
 
-def test_sigterm_removes_the_part_and_says_so_on_one_line(workspace, tmp_path):
-    output = tmp_path / 'out'
-    process = _convert(workspace, output)
+def _sigterm_once_written(process, storage_file):
+    """SIGTERM ``process`` once ``storage_file`` (in a ``.part``) holds 1 MiB; return stderr."""
     try:
-        assert wait_for(lambda: _size(tmp_path / 'out.part' / 'out_0.mcap') > 1 << 20
-                        or process.poll() is not None, timeout=90)
+        assert wait_for(lambda: _size(storage_file) > 1 << 20 or process.poll() is not None,
+                        timeout=90)
         process.send_signal(signal.SIGTERM)
     finally:
         _, stderr = process.communicate(timeout=60)
+    return stderr
+
+
+def test_sigterm_removes_the_part_and_says_so_on_one_line(workspace, tmp_path):
+    process = _convert(workspace, tmp_path / 'out')
+    stderr = _sigterm_once_written(process, tmp_path / 'out.part' / 'out_0.mcap')
     assert process.returncode == 143, stderr
     assert stderr.splitlines() == ['rotation_bag convert: interrupted (SIGTERM)']
     assert os.listdir(tmp_path) == []
@@ -123,12 +128,7 @@ def test_sigterm_stops_a_many_bag_convert_and_its_workers(workspace, tmp_path):
         [script('rotation_bag'), 'convert', *inputs, many, '--params',
          workspace / 'params.yaml', '--jobs', '2'],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        assert wait_for(lambda: _size(many / 'a.part' / 'a_0.mcap') > 1 << 20
-                        or process.poll() is not None, timeout=90)
-        process.send_signal(signal.SIGTERM)
-    finally:
-        _, stderr = process.communicate(timeout=60)
+    stderr = _sigterm_once_written(process, many / 'a.part' / 'a_0.mcap')
     assert process.returncode == 143, stderr
     *done, last = stderr.splitlines()
     assert last == 'rotation_bag convert: interrupted (SIGTERM)'
