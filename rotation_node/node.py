@@ -2,12 +2,26 @@
 The orientation-conversion node (console script ``rotation_node``).
 
 Subscribes the relative topic ``input`` (type chosen by the ``input_type``
-parameter) and publishes each output listed in ``outputs`` on the relative
-topic of the same name; the conversion itself is
+parameter; ``input_type: tf`` subscribes ``/tf`` and ``/tf_static`` instead)
+and publishes each output listed in ``outputs`` on the relative topic of the
+same name; the conversion itself is
 :class:`rotation_node.pipeline.ConversionPipeline`, the same code that
-``rotation_bag convert`` runs on bags. Parameters are declared from the table in
-:mod:`rotation_node.parameters`; a change at runtime is validated first, then
-takes effect on the next message. Counters and the current conventions are
+``rotation_bag convert`` runs on bags. The subscribed topics and the message
+types come from :mod:`rotation_node.messages`.
+
+Parameters are declared from the table in :mod:`rotation_node.parameters`. At
+start-up the node reads its ``--params-file`` files itself with the loader
+``rotation_bag convert`` uses, so both accept and reject the same files: an
+unreadable or malformed file, a file without a section for this node, an
+unknown parameter (in a file or ``-p``) or an invalid value ends the process
+with one line on stderr and exit status 1.
+
+At runtime, ROS 2 applies parameter changes as its services define: a
+``set_parameters`` request with several parameters checks and applies each
+one on its own (some may be applied while others are rejected), while
+``set_parameters_atomically`` applies all of them or none. Every value is
+checked against the table before it is accepted; an accepted change takes
+effect on the next message. Counters and the current conventions are
 published on ``/diagnostics`` once a second.
 
 Run it with, for example::
@@ -15,7 +29,9 @@ Run it with, for example::
     rotation_node --ros-args -r input:=/imu/data -p outputs:='[euler, angular_velocity]'
 """
 import gc
+import sys
 import time
+from typing import List, Optional, Sequence
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -26,21 +42,74 @@ from rclpy.exceptions import (
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from rotation_node import messages
+from rotation_node.bag.qos import qos_profile
 from rotation_node.errors import ParameterError
 from rotation_node.parameters import (
-    NODE_NAME, PARAMETERS, PARAMETERS_BY_NAME, NodeParameters)
+    NODE_NAME, PARAMETERS, PARAMETERS_BY_NAME, ROS_BUILTIN_PARAMETERS, NodeParameters,
+    parameters_file_sections, parameters_from_yaml, unknown_parameter_error)
 from rotation_node.pipeline import (
-    DROP_REASONS, SKIP_REASONS, ConversionPipeline, warm_up_conversions)
+    SKIP_REASONS, ConversionPipeline, warm_up_conversions)
 
 DIAGNOSTICS_PERIOD_S = 1.0
 ISSUE_LOG_PERIOD_S = 5.0
 
-_RELIABILITY = {
-    'reliable': ReliabilityPolicy.RELIABLE,
-    'best_effort': ReliabilityPolicy.BEST_EFFORT,
-}
+
+# ROS arguments (after --ros-args, up to --) that take a value, and those that do not.
+_ROS_FLAGS_WITH_VALUE = frozenset((
+    '-r', '--remap', '-p', '--param', '--params-file', '-e', '--enclave', '--log-level',
+    '--log-file-name', '--log-config-file'))
+
+
+def ros_arguments(args: Sequence[str]) -> List[tuple]:
+    """
+    Return the ``(flag, value)`` pairs of the ROS arguments in a command line.
+
+    Parameters
+    ----------
+    args : sequence of str
+        The command line (``sys.argv``); ROS arguments are those after each
+        ``--ros-args``, up to the next ``--``.
+
+    Returns
+    -------
+    list of (str, str or None)
+        E.g. ``[('--params-file', 'a.yaml'), ('-p', 'qos.depth:=5')]``; flags
+        without a value (``--disable-stdout-logs``) with None.
+
+    """
+    pairs, in_ros_args, index = [], False, 0
+    while index < len(args):
+        token = args[index]
+        if token == '--ros-args':
+            in_ros_args = True
+        elif token == '--':
+            in_ros_args = False
+        elif in_ros_args:
+            if token in _ROS_FLAGS_WITH_VALUE and index + 1 < len(args):
+                pairs.append((token, args[index + 1]))
+                index += 1
+            else:
+                pairs.append((token, None))
+        index += 1
+    return pairs
+
+
+def _parameters_files(args):
+    return [value for flag, value in ros_arguments(args) if flag == '--params-file']
+
+
+def check_parameter_names(args: Sequence[str]) -> None:
+    """Raise ParameterError for a ``-p [NODE:]NAME:=VALUE`` naming no parameter of the node."""
+    known = {*PARAMETERS_BY_NAME, *ROS_BUILTIN_PARAMETERS}
+    for flag, value in ros_arguments(args):
+        if flag in ('-p', '--param') and value is not None:
+            node, _, name = value.split(':=', 1)[0].rpartition(':')   # [node:]name:=value
+            if node not in ('', NODE_NAME):
+                continue   # a parameter of another node of the process
+            if name not in known:
+                raise unknown_parameter_error(name, f' in {flag} {value}')
 
 
 def parameter_descriptor(spec) -> ParameterDescriptor:
@@ -57,29 +126,35 @@ def parameter_descriptor(spec) -> ParameterDescriptor:
     return descriptor
 
 
-def qos_profile(params: NodeParameters) -> QoSProfile:
-    """Return the QoS of the input subscription and the output publishers."""
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST, depth=params.qos_depth,
-        reliability=_RELIABILITY[params.qos_reliability])
-
-
 class RotationNode(Node):
     """
     Convert orientations and angular velocities from ``input`` to the configured outputs.
 
+    Parameters
+    ----------
+    parameters_files : sequence of str, optional
+        The node's ``--params-file`` files: each must have a section for this
+        node, setting only its parameters, to valid values.
+
     Raises
     ------
     ParameterError
-        An initial parameter value (from ``-p`` or a parameters file) is invalid.
+        A parameters file is invalid for this node, or an initial parameter value
+        (from ``-p`` or a parameters file) is invalid.
 
     """
 
-    def __init__(self, **kwargs):
+    def __init__(self, parameters_files: Sequence[str] = (), **kwargs):
         super().__init__(NODE_NAME, **kwargs)
+        try:
+            for path in parameters_files:   # as rotation_bag convert reads them
+                parameters_from_yaml(path, self.get_fully_qualified_name())
+        except ParameterError:
+            self.destroy_node()
+            raise
         self.params = NodeParameters()
         self._pipeline = None
-        self._subscription = None
+        self._subscriptions = []
         self._output_publishers = {}
         self._next_issue_log = {}   # reason -> monotonic time of its next allowed warning
         self._reported = (0, 0)   # dropped and skipped totals at the last diagnostics
@@ -87,10 +162,13 @@ class RotationNode(Node):
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         defaults = self.params.to_ros()
+        # rclpy checks each declared parameter on its own, in this order: input_type comes
+        # last, so that the parameters of its input type (tf.*) are set when it is checked.
+        in_order = sorted(PARAMETERS, key=lambda spec: spec.name == 'input_type')
         try:
             self.declare_parameters('', [
                 (spec.name, defaults[spec.name], parameter_descriptor(spec))
-                for spec in PARAMETERS])
+                for spec in in_order])
         except (InvalidParameterValueException, InvalidParameterTypeException) as exc:
             self.destroy_node()
             raise ParameterError(str(exc)) from None
@@ -126,11 +204,15 @@ class RotationNode(Node):
         qos_changed = previous is None or qos != qos_profile(previous)
         stats = None if self._pipeline is None else self._pipeline.stats
         self._pipeline = ConversionPipeline(params, on_issue=self._log_issue, stats=stats)
-        if qos_changed or params.input_type != previous.input_type:
-            if self._subscription is not None:
-                self.destroy_subscription(self._subscription)
-            self._subscription = self.create_subscription(
-                self._pipeline.input_type, 'input', self._on_input, qos)
+        # The new pipeline's input stream starts empty; a stateful one (tf) subscribes
+        # again, so that its latched topics (/tf_static) are delivered to it again.
+        stateful = messages.INPUTS[params.input_type].stream is not None
+        if qos_changed or stateful or params.input_type != previous.input_type:
+            for subscription in self._subscriptions:
+                self.destroy_subscription(subscription)
+            self._subscriptions = [
+                self._subscribe(self._pipeline.input_type, topic, params)
+                for topic in messages.INPUTS[params.input_type].topics]
         for name in list(self._output_publishers):
             if qos_changed or name not in params.outputs:
                 self.destroy_publisher(self._output_publishers.pop(name))
@@ -138,14 +220,29 @@ class RotationNode(Node):
             if name not in self._output_publishers:
                 self._output_publishers[name] = self.create_publisher(message_type, name, qos)
         self.get_logger().info(
-            f'converting {params.input_type} messages on {self._subscription.topic_name} '
+            f'converting {params.input_type} messages on {self._input_topic_names()} '
             f'to {", ".join(params.outputs)} (euler.sequence {params.euler_sequence}, '
             f'{"degrees" if params.euler_degrees else "radians"})')
 
+    def _subscribe(self, message_type, topic, params):
+        """Subscribe one topic of the input type; its messages go to the pipeline."""
+        name = topic.name
+        if name == messages.INPUT_TOPIC.name:   # the common case without a closure
+            callback = self._on_input
+        else:
+            def callback(msg):
+                self._on_input(msg, name)
+        return self.create_subscription(
+            message_type, name, callback,
+            qos_profile(params, transient_local=topic.transient_local))
+
+    def _input_topic_names(self):
+        return ', '.join(subscription.topic_name for subscription in self._subscriptions)
+
     # Messages ----------------------------------------------------------------------
 
-    def _on_input(self, msg):
-        for name, output in self._pipeline.process(msg):
+    def _on_input(self, msg, topic=messages.INPUT_TOPIC.name):
+        for name, output in self._pipeline.process(msg, topic):
             self._output_publishers[name].publish(output)
 
     def _log_issue(self, reason, detail):
@@ -173,11 +270,12 @@ class RotationNode(Node):
         else:
             level, message = DiagnosticStatus.OK, 'converting'
         values = {
-            'input_topic': self._subscription.topic_name,
+            'input_topic': self._input_topic_names(),
             'received': stats.received,
             'published': stats.published,
             'dropped': totals[0],
-            **{f'dropped.{reason}': stats.dropped[reason] for reason in DROP_REASONS},
+            **{f'dropped.{reason}': stats.dropped[reason]
+               for reason in self._pipeline.drop_reasons},
             'skipped': totals[1],
             **{f'skipped.{reason}': stats.skipped[reason] for reason in SKIP_REASONS},
             'normalised': stats.normalised,
@@ -206,12 +304,30 @@ def _text(value):
     return str(value)
 
 
-def main(args=None):
-    """Run the node until Ctrl-C; return 1 if a parameter value is invalid."""
-    rclpy.init(args=args)
+def main(args: Optional[Sequence[str]] = None) -> int:
+    """
+    Run the node until Ctrl-C.
+
+    Returns
+    -------
+    int
+        0 after Ctrl-C or shutdown; 1 if a parameters file or an initial parameter
+        value is invalid (one line on stderr says which).
+
+    """
+    argv = sys.argv if args is None else list(args)
+    files = _parameters_files(argv)
+    try:   # before rclpy reads the files, whose own errors are many lines long
+        for path in files:
+            parameters_file_sections(path)
+        check_parameter_names(argv)
+    except ParameterError as exc:
+        print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
+        return 1
     node = None
     try:
-        node = RotationNode()
+        rclpy.init(args=args)
+        node = RotationNode(parameters_files=files)
         # The ~1e5 objects of rclpy, numpy and numba live as long as the process: keep
         # them out of the cyclic collector, whose full passes over them stall a
         # callback for ~50 ms (50 messages at 1 kHz).
@@ -220,7 +336,7 @@ def main(args=None):
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except ParameterError as exc:
-        rclpy.logging.get_logger(NODE_NAME).fatal(f'invalid parameter: {exc}')
+        print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
         return 1
     finally:
         if node is not None:

@@ -12,7 +12,12 @@ import subprocess
 import sys
 import time
 
+from rotation_node import messages
+
 BIN = os.path.dirname(sys.executable)
+
+PLAIN_INPUT_TYPES = tuple(name for name, entry in messages.INPUTS.items() if entry.stream is None)
+"""Input types read one sample from each message on ``input`` (:func:`make_input_message`)."""
 
 
 def script(name):
@@ -107,48 +112,59 @@ class TestNode:
         self.close()
 
 
+# Orientation covariance written into the inputs that carry one (rad^2, row-major):
+# standard deviations about 1e-3 rad, correlated.
+INPUT_COVARIANCE = (1.0e-6, 0.3e-6, -0.2e-6,
+                    0.3e-6, 2.0e-6, 0.1e-6,
+                    -0.2e-6, 0.1e-6, 1.5e-6)
+
+
 def make_input_message(input_type, rotation, *, omega=(0.0, 0.0, 0.0), stamp_ns=0,
-                       frame_id='', sequence='xyz', degrees=False):
+                       frame_id='', sequence='xyz', degrees=False, covariance=INPUT_COVARIANCE):
     """
     Return an input message of the node's ``input_type`` holding ``rotation``.
 
     ``rotation`` is a scipy ``Rotation`` (the tests' oracle); ``omega`` goes into
-    the angular-velocity field of Imu and Odometry; ``sequence`` and ``degrees``
-    give the Euler convention of an ``euler`` input.
+    the angular-velocity field of the types that carry one; ``sequence`` and
+    ``degrees`` give the Euler convention of an Euler-angle input; ``covariance``
+    (9 numbers, row-major) goes into the orientation covariance block of the
+    types that carry one. The fields written are those the input type's entry
+    in rotation_node.messages names.
     """
-    from rotation_node.pipeline import input_message_type
-    msg = input_message_type(input_type)()
-    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
+    import operator
+    from rotation_node import messages
+    from rotation_node.stamps import split_ns
+    entry = messages.INPUTS[input_type]
+    msg = entry.message_class()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = split_ns(stamp_ns)
     msg.header.frame_id = frame_id
-    fields = {
-        'quaternion': lambda m: m.quaternion,
-        'pose': lambda m: m.pose.orientation,
-        'pose_with_covariance': lambda m: m.pose.pose.orientation,
-        'imu': lambda m: m.orientation,
-        'odometry': lambda m: m.pose.pose.orientation,
-        'transform': lambda m: m.transform.rotation,
-    }
-    if input_type in fields:
-        q = fields[input_type](msg)
-        q.x, q.y, q.z, q.w = (float(v) for v in rotation.as_quat())
+    target = operator.attrgetter(entry.orientation_field)(msg)
+    if entry.orientation_form == messages.QUATERNION:
+        target.x, target.y, target.z, target.w = (float(v) for v in rotation.as_quat())
     else:
-        values = (rotation.as_euler(sequence, degrees=degrees) if input_type == 'euler'
-                  else rotation.as_rotvec())
-        msg.vector.x, msg.vector.y, msg.vector.z = (float(v) for v in values)
-    rate = {'imu': lambda m: m.angular_velocity, 'odometry': lambda m: m.twist.twist.angular}
-    if input_type in rate:
-        w = rate[input_type](msg)
+        values = (rotation.as_euler(sequence, degrees=degrees)
+                  if entry.orientation_form == messages.EULER else rotation.as_rotvec())
+        target.x, target.y, target.z = (float(v) for v in values)
+    if entry.angular_velocity_field is not None:
+        w = operator.attrgetter(entry.angular_velocity_field)(msg)
         w.x, w.y, w.z = (float(v) for v in omega)
+    if entry.covariance_field is not None:
+        block = operator.attrgetter(entry.covariance_field)(msg)
+        for index, value in zip(entry.covariance_indices, covariance):
+            block[index] = float(value)
     return msg
 
 
 def oracle_output(name, rotation, omega_body=(0.0, 0.0, 0.0), *, sequence='xyz',
-                  degrees=False, frame='body'):
+                  degrees=False, frame='body', covariance=INPUT_COVARIANCE,
+                  covariance_frame='fixed'):
     """
     Expected values of the node output ``name``, computed independently with scipy.
 
     ``rotation`` (scipy ``Rotation``) turns at the constant body rate
-    ``omega_body``; rates are central differences of scipy's conversions.
+    ``omega_body``; rates are central differences of scipy's conversions. The
+    Euler covariance is ``J Sigma J^T`` with ``J`` the central differences of
+    scipy's Euler angles w.r.t. a rotation vector about the fixed or body axes.
     Returns a flat array laid out as :func:`output_values` reads the message.
     """
     import numpy as np
@@ -178,6 +194,17 @@ def oracle_output(name, rotation, omega_body=(0.0, 0.0, 0.0), *, sequence='xyz',
         step = moved(h).as_euler(sequence) - moved(-h).as_euler(sequence)
         rates = (np.remainder(step + np.pi, 2 * np.pi) - np.pi) / (2 * h)
         return np.degrees(rates) if degrees else rates
+    if name in ('euler_stddev', 'euler_covariance'):
+        steps = Rotation.from_rotvec(h * np.vstack([np.eye(3), -np.eye(3)]))
+        moved = steps * rotation if covariance_frame == 'fixed' else rotation * steps
+        angles = moved.as_euler(sequence)
+        jacobian = (np.remainder(angles[:3] - angles[3:] + np.pi, 2 * np.pi) - np.pi).T / (2 * h)
+        euler_cov = jacobian @ np.reshape(covariance, (3, 3)) @ jacobian.T
+        if degrees:
+            euler_cov = euler_cov * (180 / np.pi) ** 2
+        if name == 'euler_stddev':
+            return np.sqrt(np.diagonal(euler_cov))
+        return np.concatenate([rotation.as_euler(sequence, degrees=degrees), euler_cov.ravel()])
     if name == 'quaternion_rate':
         ahead, behind = moved(h).as_quat(), moved(-h).as_quat()
         ahead, behind = (p if np.dot(p, q) > 0 else -p for p in (ahead, behind))
@@ -186,12 +213,9 @@ def oracle_output(name, rotation, omega_body=(0.0, 0.0, 0.0), *, sequence='xyz',
 
 
 def output_values(msg):
-    """Return the numbers of an output message as a flat array."""
+    """Return the numbers of an output message as a flat array (as its output builds it)."""
     import numpy as np
-    if hasattr(msg, 'quaternion'):
-        q = msg.quaternion
-        return np.array([q.x, q.y, q.z, q.w])
-    if hasattr(msg, 'vector'):
-        v = msg.vector
-        return np.array([v.x, v.y, v.z])
-    return np.array(msg.data)
+    from rotation_node import messages
+    from rotation_node.bag.message_types import type_name_of
+    numbers = {o.type_name: o.message.numbers for o in messages.OUTPUTS.values()}
+    return np.array(numbers[type_name_of(type(msg))](msg), dtype=float)

@@ -6,27 +6,34 @@ converted input topic ``T`` the outputs the live node would publish, on
 ``T/<output name>`` (``/imu/euler``): the same ``ConversionPipeline`` with the
 same parameters, one pipeline per input topic, fed in log-time order (the
 order of reception). Converted messages get the log and publish times of the
-input message they come from.
+input message they come from. An input type with several topics is one stream
+per first topic: ``input_type: tf`` converts ``/tf`` together with
+``/tf_static`` (``T`` with ``T_static``), and writes ``/tf/euler``...
 The bag is streamed, never loaded: memory does not grow with its length.
+The input is any bag :func:`rotation_node.bag.reader.open_bag` reads (a
+rosbag2 directory, MCAP, sqlite3, split, compressed, ROS 1, an unfinished
+recording); topics that are not converted are copied unchanged, with their
+schema and metadata as stored, under their ROS 2 names
+(:mod:`rotation_node.bag.topic_names`).
 
 The input messages are decoded by :mod:`rotation_node.bag.cdr` into
-read-only views (every input type has a fixed layout), which
+read-only views where their type has a fixed layout, which
 :meth:`~rotation_node.pipeline.ConversionPipeline.process_values` reads as it
-reads rclpy messages, and the values it returns are encoded by ``cdr``
-directly: the live node's conversions, without building rclpy messages, which
-took most of the time.
+reads rclpy messages, and the numbers it returns are encoded by each output's
+encoder (:meth:`rotation_node.messages.OutputMessage.encoder`): the live
+node's conversions, without building rclpy messages where the types allow it.
 """
 import os
 
-from rotation_node.bag.cdr import fixed_layout_codec, float64_multi_array_encoder
-from rotation_node.bag.mcap_io import BagReader, BagWriter, TopicMetadata
-from rotation_node.bag.message_types import type_name_of
+from rotation_node import messages
+from rotation_node.bag.cdr import fixed_layout_codec
+from rotation_node.bag.mcap_io import TopicMetadata
 from rotation_node.bag.progress import ProgressBar
-from rotation_node.bag.qos import qos_profiles_yaml
+from rotation_node.bag.qos import qos_profile, qos_profiles_yaml
+from rotation_node.bag.reader import open_bag
+from rotation_node.bag.writer import BagWriter
 from rotation_node.errors import BagError
-from rotation_node.node import qos_profile
-from rotation_node.pipeline import (
-    MULTI_ARRAY_LAYOUTS, OUTPUT_MESSAGE_TYPES, ConversionPipeline, input_message_type)
+from rotation_node.pipeline import ConversionPipeline
 
 
 def output_topic(input_topic, output_name):
@@ -34,56 +41,88 @@ def output_topic(input_topic, output_name):
     return f'{input_topic.rstrip("/")}/{output_name}'
 
 
-def _output_encoder(name):
+def _input_streams(reader, input_type, topics):
     """
-    Return the type name of output ``name`` and its ``encode(header, values) -> CDR bytes``.
+    Return the streams to convert: ``{topic: {bag topic: the input type's topic name}}``.
 
-    The counterpart of the pipeline's message builders, from the values of
-    :meth:`~rotation_node.pipeline.ConversionPipeline.process_values`.
+    A stream is named by its first topic: the given ones, checked, or by default
+    every topic of the input type that is not another one's companion. An input
+    type with several topics (``/tf`` and ``/tf_static``) finds the others in
+    the bag by their suffix to the first one's name: ``T`` and ``T_static``.
     """
-    type_name = type_name_of(OUTPUT_MESSAGE_TYPES[name])
-    if name in MULTI_ARRAY_LAYOUTS:   # no header
-        encode_data = float64_multi_array_encoder(MULTI_ARRAY_LAYOUTS[name])
-        return type_name, lambda header, values: encode_data(values)
-    return type_name, fixed_layout_codec(type_name).stamped_encoder()
+    first, *others = input_type.topics
+    type_name = input_type.type_name
 
+    def companions(topic):
+        return {topic + other.name[len(first.name):]: other.name for other in others
+                if other.name.startswith(first.name)}
 
-def _input_topics(reader, input_type_name, topics):
-    """The topics to convert: the given ones, checked, or every topic of the input type."""
     if topics is None:
-        topics = [topic for topic, type_name in reader.topics.items()
-                  if type_name == input_type_name]
+        candidates = [topic for topic, name in reader.topics.items() if name == type_name]
+        companion_topics = {c for topic in candidates for c in companions(topic)}
+        topics = [topic for topic in candidates if topic not in companion_topics]
         if not topics:
-            raise BagError(f'{reader.path} has no {input_type_name} topic to convert '
+            raise BagError(f'{reader.path} has no {type_name} topic to convert '
                            f'(its topics: {reader.topics})')
-        return topics
-    reader.messages(topics)   # raises if a topic is not in the bag
-    for topic in topics:
-        if reader.topics[topic] != input_type_name:
-            raise BagError(f'topic {topic} in {reader.path} is {reader.topics[topic]}, '
-                           f'but input_type expects {input_type_name}')
-    return list(dict.fromkeys(topics))
+    else:
+        topics = [reader.topic_name(topic) for topic in topics]   # raises if not in the bag
+        for topic in topics:
+            if reader.topics[topic] != type_name:
+                raise BagError(f'topic {topic} in {reader.path} is {reader.topics[topic]}, '
+                               f'but input_type expects {type_name}')
+    streams = {}
+    for topic in dict.fromkeys(topics):
+        streams[topic] = {topic: first.name}
+        for companion, name in companions(topic).items():
+            if reader.topics.get(companion) == type_name:
+                streams[topic][companion] = name
+    return streams
+
+
+def _check_output(input_path, output_path):
+    """Refuse an output that is the input bag, inside it, or replaces the directory holding it."""
+    if os.path.exists(output_path) and os.path.samefile(input_path, output_path):
+        raise BagError(f'output {output_path} is the input bag')
+    real_input, real_output = os.path.realpath(input_path), os.path.realpath(output_path)
+    if real_input.startswith(real_output + os.sep):
+        raise BagError(f'output {output_path} holds the input bag {input_path}')
+    if os.path.isdir(input_path) and real_output.startswith(real_input + os.sep):
+        raise BagError(f'output {output_path} is inside the input bag {input_path}')
 
 
 def convert(input_path, output_path, params, *, topics=None, overwrite=False,
-            progress_stream=None):
+            compression=None, progress_stream=None, strict=False, report=None):
     """
     Write ``output_path``: the input bag plus the node's outputs for its input topics.
 
     Parameters
     ----------
-    input_path, output_path : str or os.PathLike
-        MCAP bags; the output is written to a temporary file and renamed, so a
-        failure never leaves a partial file, and the input is only read.
+    input_path : str or os.PathLike
+        Any bag :func:`rotation_node.bag.reader.open_bag` reads; only read.
+    output_path : str or os.PathLike
+        The output bag, a rosbag2 directory or a single MCAP file if it ends
+        in ``.mcap``. It is written as ``<output>.part`` and renamed when
+        complete; a failure or a signal removes it.
     params : rotation_node.parameters.NodeParameters
         As loaded from the node's parameters file.
     topics : list of str, optional
-        Topics to convert; by default every topic of the type ``params.input_type``
-        names.
+        Topics to convert (their names in the bag or their ROS 2 names); by
+        default every topic of the type ``params.input_type`` names (for a type
+        with several topics, the first of each group: ``/tf``, not ``/tf_static``).
     overwrite : bool, optional
-        Replace an existing output file.
+        Replace an existing output (atomically, once the new one is complete).
+    compression : str, optional
+        Chunk compression of the output, ``'zstd'``, ``'lz4'`` or ``'none'``;
+        the input's by default.
     progress_stream : file, optional
         Where to draw the progress bar (only if it is a terminal); stderr by default.
+    strict : bool, optional
+        Refuse an unfinished recording instead of converting what it holds.
+    report : callable, optional
+        ``report(line)`` receives what the input is (``<path>: rosbag2
+        directory (mcap, 3 files), 5000 messages``) and its notes (an
+        unfinished recording, a renamed topic) once it is opened, before
+        anything is written.
 
     Returns
     -------
@@ -95,18 +134,29 @@ def convert(input_path, output_path, params, *, topics=None, overwrite=False,
     BagError
         If the input is unreadable or corrupt, a topic is missing or of the
         wrong type, an output topic already exists in the input, or the output
-        exists (without ``overwrite``) or is the input.
+        exists (without ``overwrite``), is being written by another process
+        (``<output>.part`` exists) or is the input; a ``DiskFullError`` if the
+        disk fills (no output is left then).
 
     """
-    with BagReader(input_path) as reader:
-        if os.path.exists(output_path) and os.path.samefile(input_path, output_path):
-            raise BagError(f'output {output_path} is the input bag')
-        input_type_name = type_name_of(input_message_type(params.input_type))
-        pipelines = {topic: ConversionPipeline(params)
-                     for topic in _input_topics(reader, input_type_name, topics)}
-        input_codec = fixed_layout_codec(input_type_name)
+    with open_bag(input_path, strict=strict) as reader:
+        _check_output(input_path, output_path)
+        if report is not None:
+            report(f'{reader.path}: {reader.description}, '
+                   f'{sum(reader.message_counts.values())} messages')
+            for note in reader.notes:
+                report(note)
+        input_type = messages.INPUTS[params.input_type]
+        streams = _input_streams(reader, input_type, topics)
+        pipelines = {topic: ConversionPipeline(params) for topic in streams}
+        # {bag topic: (its stream's first topic, the input type's name for it)}
+        routes = {bag_topic: (topic, name) for topic, stream in streams.items()
+                  for bag_topic, name in stream.items()}
+        input_codec = fixed_layout_codec(input_type.type_name)
         decode = None if input_codec is None else input_codec.decode
-        encoders = {name: _output_encoder(name) for name in params.outputs}
+        encoders = {name: (messages.OUTPUTS[name].type_name,
+                           messages.OUTPUTS[name].message.encoder())
+                    for name in params.outputs}
         # {input topic: {output name: (output topic, type name, encode)}}
         outputs = {topic: {name: (output_topic(topic, name), *encoder)
                            for name, encoder in encoders.items()}
@@ -119,7 +169,8 @@ def convert(input_path, output_path, params, *, topics=None, overwrite=False,
         if clashes:
             raise BagError(f'output topic {", ".join(clashes)} is already in {reader.path}')
 
-        with BagWriter(output_path, overwrite=overwrite) as writer, \
+        compression = reader.compression if compression is None else compression
+        with BagWriter(output_path, overwrite=overwrite, compression=compression) as writer, \
                 ProgressBar(sum(reader.message_counts.values()), stream=progress_stream,
                             label='converting ') as progress:
             for metadata in [*reader.topic_metadata.values(), *new_topics]:
@@ -128,10 +179,12 @@ def convert(input_path, output_path, params, *, topics=None, overwrite=False,
                 log_time_ns, publish_time_ns = record.log_time_ns, record.publish_time_ns
                 writer.write_serialized(record.topic, record.type_name, record.data,
                                         log_time_ns, publish_time_ns)
-                pipeline = pipelines.get(record.topic)
-                if pipeline is not None:
-                    topic_outputs = outputs[record.topic]
-                    for name, header, values in pipeline.process_values(record.message(decode)):
+                route = routes.get(record.topic)
+                if route is not None:
+                    stream, input_topic = route
+                    topic_outputs = outputs[stream]
+                    for name, header, values in pipelines[stream].process_values(
+                            record.message(decode), input_topic):
                         topic, type_name, encode = topic_outputs[name]
                         writer.write_serialized(topic, type_name, encode(header, values),
                                                 log_time_ns, publish_time_ns)

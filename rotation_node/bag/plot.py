@@ -1,92 +1,135 @@
 """
 Plot a topic of a bag over time as a PNG (``rotation_bag plot``).
 
-Meant for converted topics: ``.../euler`` (Euler angles, in the units and
-sequence of the parameters the bag was converted with), ``.../angular_velocity``,
-``.../euler_rates``, ``.../rotation_vector``, ``.../quaternion``,
-``.../quaternion_rate``, ``.../axis_angle``, ``.../matrix``, and also raw
-``sensor_msgs/msg/Imu`` (orientation quaternion and angular velocity). The
-time axis is the header stamp where the message has one, else the log time,
-in seconds since the first message.
+Meant for converted topics: a topic that ``rotation_bag convert`` wrote for
+the output ``NAME`` of an input topic ``T`` (``T/NAME``, ``T`` in the bag,
+the type the output's) is drawn as that output of
+:data:`rotation_node.messages.OUTPUTS` declares (Euler angles in the units and
+sequence of the parameters the bag was converted with). A topic of any input
+type (Imu, Odometry, the Pose and Transform types, QuaternionStamped...) is
+drawn as its orientation, as Euler angles of the parameters' sequence, and its
+angular velocity where it has one; where the orientation is unknown (an Imu's
+``orientation_covariance[0] == -1``) or invalid (NaN, a zero quaternion) the
+plot has a gap. A type several input types share (Vector3Stamped) is read as
+``input_type`` of the parameters. The time axis is the header stamp where the
+message has one, else the log time, in seconds since the first message.
 """
+import math
+from typing import Any, Tuple
+
 import numpy as np
 # A bare Figure renders PNG with the Agg backend and never touches pyplot's
 # global state or a display.
 from matplotlib.figure import Figure
 
+from rotation_node import conversions, messages
 from rotation_node.bag.atomic_file import AtomicFile
-from rotation_node.bag.mcap_io import BagReader
-from rotation_node.conversions import parse_sequence
+from rotation_node.bag.convert import output_topic
+from rotation_node.bag.reader import open_bag
 from rotation_node.errors import BagError
 from rotation_node.parameters import NodeParameters
-
-_ORDINALS = ('1st', '2nd', '3rd')
-_XYZ = ('x', 'y', 'z')
-_XYZW = ('x', 'y', 'z', 'w')
+from rotation_node.stamps import header_stamp_ns
 
 
-def _xyz(vector):
-    return (vector.x, vector.y, vector.z)
+def _converted_output(topics, topic):
+    """The output whose ``convert`` topic ``topic`` is (checked against the bag), or None."""
+    parent, _, name = topic.rpartition('/')
+    output = messages.OUTPUTS.get(name)
+    if (output is None or parent not in topics or topics[topic] != output.type_name
+            or output_topic(parent, name) != topic):
+        return None
+    return output
 
 
-def _xyzw(quaternion):
-    return (quaternion.x, quaternion.y, quaternion.z, quaternion.w)
+def _input_type(type_name, params):
+    """The plain input type of a topic of ``type_name`` (``input_type`` if it is one)."""
+    candidates = [entry for entry in messages.INPUTS.values()
+                  if entry.type_name == type_name and entry.stream is None]
+    preferred = [entry for entry in candidates if entry.name == params.input_type]
+    return (preferred or candidates or [None])[0]
 
 
-def _stamped_vector(msg):
-    return _xyz(msg.vector)
-
-
-def _panels(type_name, output_name, params):
+def _input_orientation(entry, params):
     """
-    What to draw for a topic: a list of ``(title, unit, labels, extract)``.
+    ``euler(orientation) -> 3 angles`` of an input type's orientation form, NaN if unusable.
 
-    ``extract(msg)`` returns the values of one panel for one message.
+    The Euler angles of the parameters' sequence and unit, computed by the
+    library's conversions as the node computes its ``euler`` output; NaN
+    where the orientation is unknown (None), not finite, or a zero quaternion.
     """
-    angle_unit = 'deg' if params.euler_degrees else 'rad'
-    if type_name == 'geometry_msgs/msg/Vector3Stamped':
-        if output_name in ('euler', 'euler_rates'):
-            seq = parse_sequence(params.euler_sequence)
-            kind = 'intrinsic' if seq.intrinsic else 'extrinsic'
-            labels = [f'{ordinal} ({letter})'
-                      for ordinal, letter in zip(_ORDINALS, params.euler_sequence)]
-            title, unit = (('Euler angles', angle_unit) if output_name == 'euler'
-                           else ('Euler angle rates', f'{angle_unit}/s'))
-            return [(f'{title}, sequence {params.euler_sequence} ({kind})', unit, labels,
-                     _stamped_vector)]
-        if output_name == 'angular_velocity':
-            return [(f'Angular velocity ({params.angular_velocity_output_frame} frame)',
-                     'rad/s', _XYZ, _stamped_vector)]
-        if output_name == 'rotation_vector':
-            return [('Rotation vector', 'rad', _XYZ, _stamped_vector)]
-        return [('Vector', '', _XYZ, _stamped_vector)]
-    if type_name == 'geometry_msgs/msg/QuaternionStamped':
-        title, unit = (('Quaternion rate', '1/s') if output_name == 'quaternion_rate'
-                       else ('Quaternion', ''))
-        return [(title, unit, _XYZW, lambda msg: _xyzw(msg.quaternion))]
-    if type_name == 'std_msgs/msg/Float64MultiArray':
-        if output_name == 'axis_angle':
-            return [('Rotation axis', '', _XYZ, lambda msg: msg.data[:3]),
-                    ('Rotation angle', 'rad', ('angle',), lambda msg: msg.data[3:4])]
-        if output_name == 'matrix':
-            labels = [f'R{row}{col}' for row in (1, 2, 3) for col in (1, 2, 3)]
-            return [('Rotation matrix (body to world)', '', labels, lambda msg: msg.data)]
-    if type_name == 'sensor_msgs/msg/Imu':
-        return [('Orientation quaternion', '', _XYZW,
-                 lambda msg: _xyzw(msg.orientation)),
-                ('Angular velocity', 'rad/s', _XYZ, lambda msg: _xyz(msg.angular_velocity))]
-    raise BagError(f'cannot plot {type_name}; plottable: Vector3Stamped, QuaternionStamped, '
-                   'Float64MultiArray (axis_angle, matrix) and Imu topics')
+    sequence, degrees = params.euler_sequence, params.euler_degrees
+    unknown = (math.nan,) * 3
+    if entry.orientation_form == messages.EULER:
+        def quaternion(angles):
+            return conversions.quaternion_from_euler(angles, sequence, degrees=degrees)
+    elif entry.orientation_form == messages.ROTATION_VECTOR:
+        quaternion = conversions.quaternion_from_rotation_vector
+    else:
+        def quaternion(q):
+            return q if any(q) else None
+
+    def euler(orientation):
+        if orientation is None or not all(map(math.isfinite, orientation)):
+            return unknown
+        q = quaternion(orientation)
+        if q is None:
+            return unknown
+        return tuple(conversions.euler_from_quaternion(q, sequence, degrees=degrees))
+    return euler
+
+
+def _input_panels(entry, params):
+    """
+    ``(panels, numbers)`` of a topic of a plain input type.
+
+    Its orientation as Euler angles (the ``euler`` output's panel), then its
+    angular velocity where the type has one (NaN where unknown).
+    """
+    euler, read = _input_orientation(entry, params), entry.sample_reader()
+    panels = [panel._replace(title=f'Orientation as {panel.title}')
+              for panel in messages.OUTPUTS['euler'].panels(params)]
+    if entry.angular_velocity_field is None:
+        return panels, lambda msg: euler(read(msg).orientation)
+    panels.append(messages.Panel('Angular velocity', 'rad/s', ('x', 'y', 'z'), 3))
+    unknown = (math.nan,) * 3
+
+    def numbers(msg):
+        sample = read(msg)
+        return (*euler(sample.orientation), *(sample.angular_velocity or unknown))
+    return panels, numbers
+
+
+def _panels(topics, topic, params):
+    """
+    What to draw for a topic: ``(panels, numbers)``.
+
+    ``panels`` are :class:`rotation_node.messages.Panel`; ``numbers(msg)`` gives the
+    numbers of one message that they index.
+    """
+    output = _converted_output(topics, topic)
+    if output is not None:
+        return output.panels(params), output.message.numbers
+    entry = _input_type(topics[topic], params)
+    if entry is not None:
+        return _input_panels(entry, params)
+    plottable = sorted({e.type_name for e in messages.INPUTS.values() if e.stream is None})
+    streams = [e.name for e in messages.INPUTS.values()
+               if e.type_name == topics[topic] and e.stream is not None]
+    hint = (f' (convert it with input_type {streams[0]} first, then plot an output)'
+            if streams else '')
+    raise BagError(f'cannot plot {topics[topic]}{hint}: plottable are the outputs '
+                   f'rotation_bag convert writes and topics of {", ".join(plottable)}')
 
 
 def _time_ns(record, msg):
     header = getattr(msg, 'header', None)
     if header is None:
         return record.log_time_ns
-    return header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
+    return header_stamp_ns(header)
 
 
-def plot_topic(bag_path, topic, output_path, *, params=None, overwrite=False):
+def plot_topic(bag_path, topic, output_path, *, params=None, overwrite=False, strict=False,
+               report=None):
     """
     Draw ``topic`` of ``bag_path`` over time into the PNG ``output_path``.
 
@@ -101,6 +144,11 @@ def plot_topic(bag_path, topic, output_path, *, params=None, overwrite=False):
         frame for the labels. The node's defaults if omitted.
     overwrite : bool, optional
         Replace an existing ``output_path``.
+    strict : bool, optional
+        Refuse an unfinished recording instead of plotting what it holds.
+    report : callable, optional
+        ``report(line)`` receives the input's notes (an unfinished recording,
+        a renamed topic).
 
     Returns
     -------
@@ -115,20 +163,58 @@ def plot_topic(bag_path, topic, output_path, *, params=None, overwrite=False):
 
     """
     params = NodeParameters() if params is None else params
-    with AtomicFile(output_path, overwrite=overwrite) as output, BagReader(bag_path) as reader:
-        records = reader.messages([topic])
-        panels = _panels(reader.topics[topic], topic.rsplit('/', 1)[-1], params)
-        times, values = [], [[] for _ in panels]
-        for record in records:
-            msg = record.message()
-            times.append(_time_ns(record, msg))
-            for series, (_, _, _, extract) in zip(values, panels):
-                series.append(tuple(extract(msg)))
-        if not times:
-            raise BagError(f'topic {topic} in {bag_path} has no messages to plot')
-        _draw(topic, np.asarray(times, dtype=np.int64), values, panels).savefig(
+    with open_bag(bag_path, strict=strict) as reader, \
+            AtomicFile(output_path, overwrite=overwrite) as output:
+        for note in reader.notes if report is not None else ():
+            report(note)
+        times_ns, panels, values = plot_series(reader, topic, params)
+        _draw(reader.topic_name(topic), times_ns, values, panels).savefig(
             output.stream, format='png', dpi=110)
-    return len(times)
+    return len(times_ns)
+
+
+def plot_series(reader: Any, topic: str,
+                params: NodeParameters) -> Tuple[np.ndarray, list, list]:
+    """
+    Return what ``plot`` draws for a topic: ``(times_ns, panels, values)``.
+
+    Parameters
+    ----------
+    reader : rotation_node.bag.reader.InputBag
+    topic : str
+        Its name in the bag or its ROS 2 name.
+    params : rotation_node.parameters.NodeParameters
+        Euler sequence and units (of the plotted Euler angles, and for reading
+        Euler-angle inputs).
+
+    Returns
+    -------
+    times_ns : numpy.ndarray of int64
+        Header stamp (log time for messages without header) of each message.
+    panels : list of rotation_node.messages.Panel
+    values : list of numpy.ndarray
+        Per panel, shape ``(messages, len(panel.labels))``; NaN where a value
+        is unknown or invalid (left as a gap in the plot).
+
+    Raises
+    ------
+    BagError
+        If the topic is not in the bag, has no messages or cannot be plotted.
+
+    """
+    topic = reader.topic_name(topic)
+    records = reader.messages([topic])
+    panels, numbers = _panels(reader.topics, topic, params)
+    times, rows = [], []
+    for record in records:
+        msg = record.message()
+        times.append(_time_ns(record, msg))
+        rows.append(numbers(msg))
+    if not times:
+        raise BagError(f'topic {topic} in {reader.path} has no messages to plot')
+    table = np.asarray(rows, dtype=float)
+    return (np.asarray(times, dtype=np.int64), panels,
+            [table[:, panel.start:panel.start + len(panel.labels)] for panel in panels])
 
 
 def _draw(topic, times_ns, values, panels):
@@ -136,13 +222,13 @@ def _draw(topic, times_ns, values, panels):
     seconds = (times_ns - times_ns[0]) * 1e-9
     figure = Figure(figsize=(10, 3.2 * len(panels) + 0.6), layout='constrained')
     axes = figure.subplots(len(panels), 1, sharex=True, squeeze=False)
-    for ax, series, (title, unit, labels, _) in zip(axes[:, 0], values, panels):
-        for column, label in zip(np.asarray(series, dtype=float).T, labels):
+    for ax, series, panel in zip(axes[:, 0], values, panels):
+        for column, label in zip(series.T, panel.labels):
             ax.plot(seconds, column, label=label, linewidth=1.0)
-        ax.set_title(title)
-        ax.set_ylabel(unit or 'value')
+        ax.set_title(panel.title)
+        ax.set_ylabel(panel.unit or 'value')
         ax.grid(True, alpha=0.3)
-        ax.legend(loc='upper right', fontsize='small', ncols=min(len(labels), 5))
+        ax.legend(loc='upper right', fontsize='small', ncols=min(len(panel.labels), 5))
     axes[-1, 0].set_xlabel('time since first message [s]')
     figure.suptitle(f'{topic}  ({len(seconds)} messages, {seconds[-1]:.3f} s)')
     return figure

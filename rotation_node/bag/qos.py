@@ -1,5 +1,5 @@
 """
-QoS profiles as rosbag2 stores them, and the profiles record and play use.
+QoS profiles as rosbag2 stores them, and the profiles the node, record and play use.
 
 rosbag2 (metadata version 9, Jazzy) stores the QoS profiles offered by a
 topic's publishers in the MCAP channel metadata ``offered_qos_profiles`` as a
@@ -9,12 +9,15 @@ avoid_ros_namespace_conventions, policies by name (``keep_last``) and durations
 as ``{sec, nsec}``. Bags written before version 9 hold the policies as
 integers; both are read.
 """
+from typing import Any, Iterable
+
 import yaml
 from rclpy.duration import Duration
 from rclpy.qos import (
     DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy)
 
 from rotation_node.errors import BagError
+from rotation_node.stamps import split_ns
 
 _POLICIES = (
     ('history', HistoryPolicy),
@@ -23,7 +26,10 @@ _POLICIES = (
     ('liveliness', LivelinessPolicy),
 )
 _DURATIONS = ('deadline', 'lifespan', 'liveliness_lease_duration')
-_NS_PER_S = 1_000_000_000
+_RELIABILITY = {
+    'reliable': ReliabilityPolicy.RELIABLE,
+    'best_effort': ReliabilityPolicy.BEST_EFFORT,
+}
 
 #: Depth of the reliable queue ``play`` offers at ``--rate 0``, and that
 #: ``record`` requests: deep enough that a burst never overwrites unread samples.
@@ -31,8 +37,38 @@ DEEP_QUEUE_DEPTH = 10_000
 
 
 def _duration_yaml(duration):
-    seconds, nanoseconds = divmod(duration.nanoseconds, _NS_PER_S)
+    seconds, nanoseconds = split_ns(duration.nanoseconds)
     return {'sec': seconds, 'nsec': nanoseconds}
+
+
+def qos_profile(params, *, transient_local: bool = False) -> QoSProfile:
+    """
+    Return the QoS of the node's input subscriptions and output publishers.
+
+    ``rotation_bag convert`` stores it as the offered QoS of the topics it adds.
+
+    Parameters
+    ----------
+    params : rotation_node.parameters.NodeParameters
+        ``qos.reliability`` and ``qos.depth`` (keep last).
+    transient_local : bool, optional
+        An input topic of latched data (``/tf_static``): reliable, keep all and
+        transient local, whatever the parameters, so that every message its
+        publishers keep for late subscribers arrives (only a reliable reader
+        gets them); volatile with the parameters' reliability and depth otherwise.
+
+    Returns
+    -------
+    rclpy.qos.QoSProfile
+
+    """
+    if transient_local:
+        return QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST, depth=params.qos_depth,
+        reliability=_RELIABILITY[params.qos_reliability],
+        durability=DurabilityPolicy.VOLATILE)
 
 
 def qos_profiles_yaml(profiles):
@@ -62,6 +98,26 @@ def qos_profiles_yaml(profiles):
         'avoid_ros_namespace_conventions': bool(profile.avoid_ros_namespace_conventions),
     } for profile in profiles]
     return yaml.safe_dump(entries, sort_keys=False, default_flow_style=False).rstrip('\n')
+
+
+def rosbags_qos_yaml(profiles: Iterable[Any]) -> str:
+    """
+    Serialise QoS profiles as the ``rosbags`` package parses them to rosbag2's YAML.
+
+    Parameters
+    ----------
+    profiles : list of rosbags.interfaces.Qos
+        E.g. the ``offered_qos_profiles`` of a rosbags connection.
+
+    Returns
+    -------
+    str
+        A YAML list in the format of ``qos_profiles_yaml``, ``'[]'`` for none.
+
+    """
+    from rosbags.rosbag2.metadata import dump_qos_v9
+    return yaml.safe_dump(dump_qos_v9(list(profiles)), sort_keys=False,
+                          default_flow_style=False).rstrip('\n')
 
 
 def _policy(entry, key, policy_type):

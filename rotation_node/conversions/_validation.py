@@ -2,11 +2,11 @@
 Argument checks at the public boundary of :mod:`rotation_node.conversions`.
 
 Public functions validate once, here: they turn array_like arguments into
-C-contiguous float64 arrays with the right trailing shape; the compiled kernels
-flatten them to ``(n, *trailing)`` and give the output the input's leading
-shape, so a single sample costs little more than one kernel call. Per-sample checks (finiteness, zero norm, determinant) run
-inside the compiled kernels, which report the first bad sample as
-a status ``(flat_index << 4) | (argument << 3) | defect`` (negative when every
+C-contiguous, aligned, writable float64 arrays with the right trailing shape, which the
+kernels take in their canonical layout (see ``_runtime``). Per-sample checks
+(finiteness, zero norm, determinant) run inside the compiled kernels, which
+report the first bad sample as a status
+``(flat_index << 4) | (argument << 3) | defect`` (negative when every
 sample is fine); :func:`raise_sample_error` turns it into a ``ValueError``
 that names the argument, the sample and what was wrong.
 """
@@ -28,7 +28,8 @@ _DEFECT_TEXT = {
     NOT_ORTHONORMAL: 'is not orthonormal within `orthonormal_tolerance`',
 }
 
-_SHAPE_TEXT = {(): '(...)', (3,): '(..., 3)', (4,): '(..., 4)', (3, 3): '(..., 3, 3)'}
+_SHAPE_TEXT = {(): '(...)', (3,): '(..., 3)', (4,): '(..., 4)', (3, 3): '(..., 3, 3)',
+               (4, 4): '(..., 4, 4)'}
 
 
 def float_array(x, name, trailing):
@@ -47,8 +48,8 @@ def float_array(x, name, trailing):
     Returns
     -------
     ndarray
-        The values; a copy only where a conversion or reordering was needed.
-        Kernels flatten it to ``(n, *trailing)`` themselves (a free view).
+        The values, C-contiguous, aligned and writable; a copy only where a
+        conversion, reordering, realignment or a read-only input needed one.
 
     Raises
     ------
@@ -65,7 +66,12 @@ def float_array(x, name, trailing):
     if a.shape[a.ndim - k:] != trailing or a.ndim < k:
         raise ValueError(
             f'Expected `{name}` to have shape {_SHAPE_TEXT[trailing]}, got {a.shape}.')
-    return a if a.flags.c_contiguous else np.ascontiguousarray(a)
+    return kernel_ready(a)
+
+
+def kernel_ready(a):
+    """``a`` itself if C-contiguous, aligned and writable (as kernels take it), else such a copy."""
+    return a if a.flags.carray else np.array(a, order='C')
 
 
 def broadcast_pair(a, b, trailing_a, trailing_b):
@@ -86,8 +92,8 @@ def broadcast_pair(a, b, trailing_a, trailing_b):
     except ValueError:
         raise ValueError(
             f'Leading shapes of the arguments do not broadcast: {lead_a} and {lead_b}.') from None
-    return (np.ascontiguousarray(np.broadcast_to(a, lead + trailing_a)),
-            np.ascontiguousarray(np.broadcast_to(b, lead + trailing_b)))
+    return (kernel_ready(np.broadcast_to(a, lead + trailing_a)),
+            kernel_ready(np.broadcast_to(b, lead + trailing_b)))
 
 
 def raise_sample_error(status, names, arrays, trailings):

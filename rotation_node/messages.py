@@ -1,0 +1,652 @@
+"""
+The message types the node reads and writes, each declared once.
+
+:data:`INPUTS` has one :class:`InputType` per value of the ``input_type``
+parameter: the ROS message type, the topics it is subscribed on, and where
+its header, orientation, angular velocity and orientation covariance are read.
+:data:`OUTPUTS` has one :class:`OutputType` per value allowed in ``outputs``:
+the ROS message type, the named pipeline values it is computed from, how it is
+built as an rclpy message and CDR-encoded, and how ``rotation_bag plot`` draws
+it. The parameter table, the pipeline, the node, ``rotation_bag convert`` and
+``plot``, the test harness and the documentation tables are derived from these
+two tables, so a new input or output type is one entry here (and, for an output
+that needs a new intermediate value, that value in the pipeline).
+
+An input message becomes zero or more :class:`Sample` objects (header,
+orientation, optional angular velocity and covariance). A plain input type
+reads one sample from each message through the fields it names; an input type
+that needs per-stream state (several topics, a buffer) gives a ``stream``
+factory instead, which returns a function ``(topic, message) -> samples``.
+
+This module does not import rclpy: message classes and the CDR encoders are
+looked up when first used.
+"""
+import functools
+import math
+import operator
+from dataclasses import dataclass
+from typing import Any, Callable, Iterable, NamedTuple, Optional, Sequence, Tuple
+
+import numpy as np
+
+from rotation_node import conversions, kinematics, tf_input
+
+# Forms of an input orientation.
+QUATERNION = 'quaternion'
+EULER = 'euler'
+ROTATION_VECTOR = 'rotation_vector'
+ORIENTATION_FORMS = (QUATERNION, EULER, ROTATION_VECTOR)
+
+# Named per-message values of the pipeline that outputs are computed from
+# (rotation_node.pipeline computes them; an output lists those it needs).
+ORIENTATION = 'orientation'
+"""Input orientation as a quaternion array (x, y, z, w), any non-zero scale."""
+OUTPUT_QUATERNION = 'output_quaternion'
+"""Unit output quaternion: w >= 0, or sign-continuous with ``quaternion.continuity``."""
+EULER_ANGLES = 'euler_angles'
+"""Euler angles of ``euler.sequence`` (array), first and third wrapped to (-pi, pi]."""
+PUBLISHED_EULER = 'published_euler'
+"""The Euler angles as published: first and third unwrapped with ``euler.unwrap``."""
+ANGULAR_VELOCITY = 'angular_velocity'
+"""Angular velocity (rad/s) in ``angular_velocity.output_frame``, measured or differenced."""
+EULER_RATES = 'euler_rates'
+"""Time derivatives of the Euler angles; unavailable near gimbal lock."""
+ORIENTATION_COVARIANCE = 'orientation_covariance'
+"""Rotation-vector covariance (3 x 3 array, rad^2) in the output frames, about the axes of
+``covariance.frame``; unavailable when the input carries none or it is unknown (all zeros)."""
+EULER_COVARIANCE = 'euler_covariance'
+"""First-order covariance (3 x 3 array) of the Euler angles, rad^2 or deg^2 with
+``euler.degrees``; unavailable near gimbal lock or past ``covariance.max_linearisation_ratio``."""
+PIPELINE_VALUES = (ORIENTATION, OUTPUT_QUATERNION, EULER_ANGLES, PUBLISHED_EULER,
+                   ANGULAR_VELOCITY, EULER_RATES, ORIENTATION_COVARIANCE, EULER_COVARIANCE)
+
+
+class Sample(NamedTuple):
+    """
+    One orientation sample read from an input message.
+
+    Attributes
+    ----------
+    header : std_msgs/Header or any object with ``stamp.sec``, ``stamp.nanosec`` and ``frame_id``
+        Stamp and frame of the sample; stamped outputs carry it.
+    orientation : tuple of float or None
+        The orientation in the input type's form: ``(x, y, z, w)`` of a
+        quaternion, or ``(x, y, z)`` of Euler angles or a rotation vector.
+        None when the message says the orientation is unknown.
+    angular_velocity : tuple of float or None
+        ``(x, y, z)`` rad/s in ``angular_velocity.input_frame``; None when the
+        input carries none (the pipeline then differences orientations).
+    covariance : tuple of float or None
+        Orientation covariance, 3 x 3 row-major (rad^2, about the x, y, z axes),
+        for input types that carry one; None otherwise or when not requested.
+
+    """
+
+    header: Any
+    orientation: Optional[Tuple[float, ...]]
+    angular_velocity: Optional[Tuple[float, float, float]] = None
+    covariance: Optional[Tuple[float, ...]] = None
+
+
+SampleStream = Callable[[str, Any], Iterable[Sample]]
+"""``(topic name, message) -> samples`` of one input stream (the :class:`InputTopic` name)."""
+
+Report = Callable[[str, str], None]
+"""``report(reason, detail)``: a stream's message gave no sample, and why (counted as dropped)."""
+
+
+class InputTopic(NamedTuple):
+    """
+    A topic an input type is subscribed on.
+
+    Attributes
+    ----------
+    name : str
+        Topic name, relative (``'input'``) or absolute (``'/tf'``), remappable
+        with ``-r``.
+    transient_local : bool
+        Latched data such as ``/tf_static``: subscribe reliable, keep all, with
+        transient-local durability, so that what publishers sent before the
+        subscription arrives too; volatile with the ``qos`` parameters otherwise.
+
+    """
+
+    name: str
+    transient_local: bool = False
+
+
+INPUT_TOPIC = InputTopic('input')
+TF_TOPIC = InputTopic('/tf')
+TF_STATIC_TOPIC = InputTopic('/tf_static', transient_local=True)
+
+
+_XYZ = ('x', 'y', 'z')
+_XYZW = ('x', 'y', 'z', 'w')
+
+
+def _xyzw(quaternion):
+    return (quaternion.x, quaternion.y, quaternion.z, quaternion.w)
+
+
+def _xyz(vector):
+    return (vector.x, vector.y, vector.z)
+
+
+@dataclass(frozen=True)
+class InputType:
+    """
+    One value of ``input_type``: a message type and how a sample is read from it.
+
+    Attributes
+    ----------
+    name : str
+        The parameter value, e.g. ``'imu'``.
+    type_name : str
+        ROS message type, e.g. ``'sensor_msgs/msg/Imu'``.
+    orientation_form : str
+        :data:`QUATERNION`, :data:`EULER` (angles of ``euler.sequence``, in
+        degrees with ``euler.degrees``) or :data:`ROTATION_VECTOR` (rad).
+    orientation_field : str
+        Dotted path of the orientation field: a Quaternion, or a Vector3 for
+        the other forms.
+    angular_velocity_field : str, optional
+        Dotted path of a Vector3 angular velocity (rad/s); None if the type has
+        none (the angular velocity is then differenced from orientations).
+    covariance_field : str, optional
+        Dotted path of the covariance array holding the orientation covariance.
+    covariance_indices : tuple of int
+        Indices in that array of the 3 x 3 orientation block, row-major.
+    orientation_unknown_field, angular_velocity_unknown_field : str, optional
+        Dotted path of an array whose first element is -1 when the message holds
+        no orientation (angular velocity), as sensor_msgs/Imu marks it in its
+        covariances (REP 145).
+    notes : str
+        What else a user needs to know, for the documentation tables.
+    topics : tuple of InputTopic
+        Topics subscribed; one topic ``input`` for a plain type.
+    stream : callable, optional
+        ``stream(params, report) -> SampleStream`` for a type whose samples need
+        per-stream state (several topics, a buffer): called once per input
+        stream; ``report`` is a :data:`Report`. None for a plain type, which
+        reads one sample per message from the fields above.
+    parameters : tuple of str
+        ROS names of the parameters used only by this input type.
+    check_parameters : callable, optional
+        ``check(params)``: raises ParameterError when this type's parameters are
+        missing or inconsistent (called on every parameter change with this type).
+    drop_reasons : tuple of str
+        Reasons its stream reports, counted with the pipeline's dropped messages.
+
+    """
+
+    name: str
+    type_name: str
+    orientation_form: str
+    orientation_field: str
+    angular_velocity_field: Optional[str] = None
+    covariance_field: Optional[str] = None
+    covariance_indices: Tuple[int, ...] = tuple(range(9))
+    orientation_unknown_field: Optional[str] = None
+    angular_velocity_unknown_field: Optional[str] = None
+    notes: str = ''
+    topics: Tuple[InputTopic, ...] = (INPUT_TOPIC,)
+    stream: Optional[Callable[[Any, Report], SampleStream]] = None
+    parameters: Tuple[str, ...] = ()
+    check_parameters: Optional[Callable[[Any], None]] = None
+    drop_reasons: Tuple[str, ...] = ()
+
+    @property
+    def message_class(self) -> type:
+        """The rclpy message class of :attr:`type_name`."""
+        return _message_class(self.type_name)
+
+    @property
+    def angular_velocity_source(self) -> str:
+        """Where the angular velocity comes from, in words (for the documentation)."""
+        if self.angular_velocity_field is None:
+            return 'finite difference'
+        return f'`{self.angular_velocity_field}`'
+
+    def sample_reader(self, *, angular_velocity: bool = True,
+                      covariance: bool = False) -> Callable[[Any], Sample]:
+        """
+        Return ``read(message) -> Sample`` of a plain input type.
+
+        Parameters
+        ----------
+        angular_velocity : bool, optional
+            Read the angular velocity (None in the samples otherwise).
+        covariance : bool, optional
+            Read the orientation covariance too (only types with a
+            ``covariance_field``; None otherwise).
+
+        """
+        new = tuple.__new__   # Sample's own __new__ is a Python function: slower
+        components = _XYZW if self.orientation_form == QUATERNION else _XYZ
+        orientation = operator.attrgetter(   # one C call returns the tuple
+            *(f'{self.orientation_field}.{c}' for c in components))
+        unknown = _optional_getter(self.orientation_unknown_field)
+        rate = rate_unknown = None
+        if angular_velocity and self.angular_velocity_field is not None:
+            rate = operator.attrgetter(*(f'{self.angular_velocity_field}.{c}' for c in _XYZ))
+            rate_unknown = _optional_getter(self.angular_velocity_unknown_field)
+        block = None
+        if covariance and self.covariance_field is not None:
+            block = _covariance_block(self.covariance_field, self.covariance_indices)
+        if unknown is None and rate is None and block is None:
+            return lambda msg: new(Sample, (msg.header, orientation(msg), None, None))
+
+        def read(msg):
+            return new(Sample, (
+                msg.header,
+                None if unknown is not None and unknown(msg)[0] == -1.0 else orientation(msg),
+                None if rate is None or (rate_unknown is not None and rate_unknown(msg)[0] == -1.0)
+                else rate(msg),
+                None if block is None else block(msg)))
+        return read
+
+    def sample_stream(self, params: Any, *, angular_velocity: bool = True,
+                      covariance: bool = False,
+                      report: Optional[Report] = None) -> SampleStream:
+        """
+        Return the function that turns messages of one input stream into samples.
+
+        Call it once per stream: a stateful input type keeps its state in it.
+
+        Parameters
+        ----------
+        params : rotation_node.parameters.NodeParameters
+        angular_velocity, covariance : bool, optional
+            As for :meth:`sample_reader`; a stateful type may always read them.
+        report : callable, optional
+            ``report(reason, detail)`` for each message or part of one that a
+            stateful type could not use (one of :attr:`drop_reasons`).
+
+        """
+        if self.stream is not None:
+            return self.stream(params, report or _report_nothing)
+        read = self.sample_reader(angular_velocity=angular_velocity, covariance=covariance)
+        return lambda topic, msg: (read(msg),)
+
+
+def _report_nothing(reason, detail):
+    """Discard a stream's report."""
+
+
+def _optional_getter(path):
+    return None if path is None else operator.attrgetter(path)
+
+
+def _covariance_block(path, indices):
+    get = operator.attrgetter(path)
+    pick = operator.itemgetter(*indices)
+    return lambda msg: tuple(float(v) for v in pick(get(msg)))
+
+
+_POSE_ROTATION_BLOCK = (21, 22, 23, 27, 28, 29, 33, 34, 35)   # rows/columns 3-5 of 6 x 6
+
+_INPUT_LIST = (
+    InputType('quaternion', 'geometry_msgs/msg/QuaternionStamped', QUATERNION, 'quaternion'),
+    InputType('pose', 'geometry_msgs/msg/PoseStamped', QUATERNION, 'pose.orientation'),
+    InputType('pose_with_covariance', 'geometry_msgs/msg/PoseWithCovarianceStamped', QUATERNION,
+              'pose.pose.orientation', covariance_field='pose.covariance',
+              covariance_indices=_POSE_ROTATION_BLOCK),
+    InputType('imu', 'sensor_msgs/msg/Imu', QUATERNION, 'orientation',
+              angular_velocity_field='angular_velocity',
+              covariance_field='orientation_covariance',
+              orientation_unknown_field='orientation_covariance',
+              angular_velocity_unknown_field='angular_velocity_covariance',
+              notes='orientation unknown when `orientation_covariance[0] == -1`; angular '
+                    'velocity by finite difference when `angular_velocity_covariance[0] == -1`'),
+    InputType('odometry', 'nav_msgs/msg/Odometry', QUATERNION, 'pose.pose.orientation',
+              angular_velocity_field='twist.twist.angular', covariance_field='pose.covariance',
+              covariance_indices=_POSE_ROTATION_BLOCK),
+    InputType('transform', 'geometry_msgs/msg/TransformStamped', QUATERNION,
+              'transform.rotation'),
+    InputType('euler', 'geometry_msgs/msg/Vector3Stamped', EULER, 'vector',
+              notes='x, y, z = first, second, third angle of `euler.sequence` '
+                    '(degrees with `euler.degrees`)'),
+    InputType('rotation_vector', 'geometry_msgs/msg/Vector3Stamped', ROTATION_VECTOR, 'vector',
+              notes='axis times angle (rad)'),
+    InputType('tf', 'tf2_msgs/msg/TFMessage', QUATERNION, 'transforms',
+              notes='subscribes `/tf` and `/tf_static`; the orientation of `tf.child_frame` in '
+                    '`tf.parent_frame` composed along the TF tree, as tf2 '
+                    '`lookupTransform(parent, child, Time(0))` gives it, stamped with that '
+                    'time ([docs/tf.md](docs/tf.md))',
+              topics=(TF_TOPIC, TF_STATIC_TOPIC), stream=tf_input.TfSampleStream,
+              parameters=('tf.parent_frame', 'tf.child_frame'),
+              check_parameters=tf_input.check_parameters, drop_reasons=tf_input.DROP_REASONS),
+)
+
+INPUTS = {entry.name: entry for entry in _INPUT_LIST}
+"""The input types by ``input_type`` value, in documentation order."""
+
+
+# Output messages -------------------------------------------------------------------
+
+
+class Panel(NamedTuple):
+    """
+    One panel of a ``rotation_bag plot`` figure.
+
+    Attributes
+    ----------
+    title, unit : str
+    labels : tuple of str
+        One per line drawn.
+    start : int
+        Index of the first number drawn in the message's numbers; ``len(labels)`` follow.
+
+    """
+
+    title: str
+    unit: str
+    labels: Tuple[str, ...]
+    start: int = 0
+
+
+@dataclass(frozen=True)
+class OutputMessage:
+    """
+    How the numbers of an output become a message of one type, and back.
+
+    Attributes
+    ----------
+    type_name : str
+        ROS message type.
+    build : callable
+        ``build(header, numbers) -> rclpy message``.
+    numbers : callable
+        ``numbers(message) -> sequence of float``: the numbers ``build`` was given
+        (works on rclpy messages and CDR views).
+    stamped_numbers : bool
+        The type is a std_msgs/Header followed by the numbers only, which
+        :mod:`rotation_node.bag.cdr` encodes without building a message.
+    layout : object, optional
+        std_msgs/MultiArrayLayout of a Float64MultiArray type.
+
+    """
+
+    type_name: str
+    build: Callable[[Any, Sequence[float]], Any]
+    numbers: Callable[[Any], Sequence[float]]
+    stamped_numbers: bool = False
+    layout: Any = None
+
+    @property
+    def message_class(self) -> type:
+        """The rclpy message class of :attr:`type_name`."""
+        return _message_class(self.type_name)
+
+    def encoder(self) -> Callable[[Any, Sequence[float]], bytes]:
+        """
+        Return ``encode(header, numbers) -> bytes``: the CDR of the built message.
+
+        Without building an rclpy message where the type allows it; the bytes
+        are those of ``rotation_node.bag.cdr.message_encoder`` for the built
+        message, or rclpy's serialisation for types that module cannot encode.
+        """
+        from rotation_node.bag import cdr
+        if self.stamped_numbers:
+            return cdr.fixed_layout_codec(self.type_name).stamped_encoder()
+        if self.layout is not None:
+            encode_data = cdr.float64_multi_array_encoder(self.layout)
+            return lambda header, numbers: encode_data(numbers)
+        encode = cdr.message_encoder(self.type_name)
+        if encode is None:
+            from rclpy.serialization import serialize_message
+            encode = serialize_message
+        build = self.build
+        return lambda header, numbers: encode(build(header, numbers))
+
+
+@functools.lru_cache(maxsize=None)
+def _message_class(type_name):
+    from rotation_node.bag.message_types import message_class
+    return message_class(type_name)
+
+
+def _build_vector3_stamped(header, numbers):
+    message = _message_class('geometry_msgs/msg/Vector3Stamped')()
+    message.header = header
+    vector = message.vector
+    vector.x, vector.y, vector.z = (float(v) for v in numbers)
+    return message
+
+
+def _build_quaternion_stamped(header, numbers):
+    message = _message_class('geometry_msgs/msg/QuaternionStamped')()
+    message.header = header
+    quaternion = message.quaternion
+    quaternion.x, quaternion.y, quaternion.z, quaternion.w = (float(v) for v in numbers)
+    return message
+
+
+VECTOR3_STAMPED = OutputMessage(
+    'geometry_msgs/msg/Vector3Stamped', _build_vector3_stamped,
+    lambda msg: _xyz(msg.vector), stamped_numbers=True)
+QUATERNION_STAMPED = OutputMessage(
+    'geometry_msgs/msg/QuaternionStamped', _build_quaternion_stamped,
+    lambda msg: _xyzw(msg.quaternion), stamped_numbers=True)
+
+
+def _build_vector3_with_covariance(header, numbers):
+    message = _message_class('sensor_msgs/msg/MagneticField')()
+    message.header = header
+    vector = message.magnetic_field
+    vector.x, vector.y, vector.z = (float(v) for v in numbers[:3])
+    message.magnetic_field_covariance = [float(v) for v in numbers[3:]]
+    return message
+
+
+VECTOR3_WITH_COVARIANCE = OutputMessage(
+    'sensor_msgs/msg/MagneticField', _build_vector3_with_covariance,
+    lambda msg: (*_xyz(msg.magnetic_field), *msg.magnetic_field_covariance),
+    stamped_numbers=True)
+"""A stamped 3-vector with its 3 x 3 covariance (row-major), as sensor_msgs/MagneticField.
+
+The only standard ROS message type that is exactly a header, a float64 3-vector
+and its full float64 3 x 3 covariance: fixed layout (encoded without building a
+message), mean and covariance in one message under the input's header. The
+types that carry an orientation covariance (Imu, PoseWithCovariance) are
+avoided on purpose: theirs is defined as a covariance of rotations about fixed
+axes, and an Euler-angle covariance there would be misread.
+"""
+
+
+def float64_multi_array(dimensions: Sequence[Tuple[str, int, int]]) -> OutputMessage:
+    """
+    Return the :class:`OutputMessage` of a std_msgs/Float64MultiArray with a fixed layout.
+
+    Parameters
+    ----------
+    dimensions : sequence of (label, size, stride)
+        The layout's dimensions, outermost first; ``data_offset`` is 0.
+
+    Notes
+    -----
+    Float64MultiArray has no header: these outputs carry no stamp or frame_id.
+
+    """
+    from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
+    layout = MultiArrayLayout(
+        dim=[MultiArrayDimension(label=label, size=size, stride=stride)
+             for label, size, stride in dimensions], data_offset=0)
+
+    def build(header, numbers):
+        message = Float64MultiArray()
+        message.layout = layout
+        message.data = numbers
+        return message
+    return OutputMessage('std_msgs/msg/Float64MultiArray', build, lambda msg: msg.data,
+                         layout=layout)
+
+
+@dataclass(frozen=True)
+class OutputType:
+    """
+    One value allowed in ``outputs``: what is published and how it is computed.
+
+    Attributes
+    ----------
+    name : str
+        The value in ``outputs``, and the relative topic it is published on.
+    message : OutputMessage
+        Message type, building, encoding.
+    needs : tuple of str
+        Named pipeline values (:data:`PIPELINE_VALUES`) the output is computed
+        from; the output is skipped for a message where one is unavailable.
+    compute : callable or None
+        ``compute(params, *values) -> numbers``, ``values`` those of ``needs`` in
+        order, ``numbers`` in the order :attr:`OutputMessage.build` takes them;
+        None to publish the one value needed as it is.
+    description : str
+        The published numbers in words, for the documentation tables.
+    panels : callable
+        ``panels(params) -> list of Panel``: how ``rotation_bag plot`` draws it.
+
+    """
+
+    name: str
+    message: OutputMessage
+    needs: Tuple[str, ...]
+    compute: Optional[Callable[..., Sequence[float]]]
+    description: str
+    panels: Callable[[Any], list]
+
+    @property
+    def type_name(self) -> str:
+        """ROS message type of the output."""
+        return self.message.type_name
+
+    @property
+    def message_class(self) -> type:
+        """The rclpy message class of the output."""
+        return self.message.message_class
+
+
+def _angle_unit(params):
+    return 'deg' if params.euler_degrees else 'rad'
+
+
+def _euler_panels(title, unit_suffix):
+    def panels(params):
+        from rotation_node.conversions import parse_sequence
+        kind = 'intrinsic' if parse_sequence(params.euler_sequence).intrinsic else 'extrinsic'
+        labels = tuple(f'{ordinal} ({letter})' for ordinal, letter
+                       in zip(('1st', '2nd', '3rd'), params.euler_sequence))
+        return [Panel(f'{title}, sequence {params.euler_sequence} ({kind})',
+                      _angle_unit(params) + unit_suffix, labels)]
+    return panels
+
+
+def _axis_angle(params, q):
+    axis, angle = conversions.axis_angle_from_quaternion(q)
+    return (*axis.tolist(), float(angle))
+
+
+def _euler_stddev(params, covariance):
+    return np.sqrt(np.diagonal(covariance))
+
+
+def _euler_with_covariance(params, angles, covariance):
+    return (*angles, *covariance.ravel().tolist())
+
+
+def _euler_covariance_panels(params):
+    unit = _angle_unit(params)
+    return [*_euler_panels('Euler angles', '')(params),
+            Panel(f'Euler angle covariance, sequence {params.euler_sequence}', unit + '^2',
+                  tuple(f'C{row}{col}' for row in (1, 2, 3) for col in (1, 2, 3)), 3)]
+
+
+def _quaternion_rate(params, q, omega):
+    return kinematics.quaternion_derivative(q, omega, frame=params.angular_velocity_output_frame)
+
+
+_OUTPUT_LIST = (
+    OutputType(
+        'quaternion', QUATERNION_STAMPED, (OUTPUT_QUATERNION,), None,
+        'unit quaternion, w >= 0 (or sign-continuous over time with `quaternion.continuity`)',
+        lambda params: [Panel('Quaternion', '', _XYZW)]),
+    OutputType(
+        'euler', VECTOR3_STAMPED, (PUBLISHED_EULER,), None,
+        'x, y, z = first, second, third angle of `euler.sequence`; first and third in '
+        '(-pi, pi] (or unwrapped with `euler.unwrap`), the middle in [-pi/2, pi/2] '
+        '(Tait-Bryan) or [0, pi] (proper Euler); degrees with `euler.degrees`',
+        _euler_panels('Euler angles', '')),
+    OutputType(
+        'rotation_vector', VECTOR3_STAMPED, (ORIENTATION,),
+        lambda params, q: conversions.rotation_vector_from_quaternion(q),
+        'unit axis times angle in [0, pi] (rad)',
+        lambda params: [Panel('Rotation vector', 'rad', _XYZ)]),
+    OutputType(
+        'axis_angle', float64_multi_array([('axis_angle', 4, 4)]), (ORIENTATION,), _axis_angle,
+        '`[x, y, z, angle]`: unit axis and angle in [0, pi] (rad), axis (1, 0, 0) for the '
+        'identity; one layout dimension `axis_angle` (size 4); no header',
+        lambda params: [Panel('Rotation axis', '', _XYZ),
+                        Panel('Rotation angle', 'rad', ('angle',), 3)]),
+    OutputType(
+        'matrix', float64_multi_array([('rows', 3, 9), ('cols', 3, 3)]), (ORIENTATION,),
+        lambda params, q: conversions.matrix_from_quaternion(q).ravel().tolist(),
+        'the rotation matrix (body to world) row-major; layout dimensions `rows` (size 3, '
+        'stride 9) and `cols` (size 3, stride 3); no header',
+        lambda params: [Panel('Rotation matrix (body to world)', '',
+                              tuple(f'R{row}{col}' for row in (1, 2, 3) for col in (1, 2, 3)))]),
+    OutputType(
+        'angular_velocity', VECTOR3_STAMPED, (ANGULAR_VELOCITY,), None,
+        'rad/s in `angular_velocity.output_frame`',
+        lambda params: [Panel(f'Angular velocity ({params.angular_velocity_output_frame} '
+                              'frame)', 'rad/s', _XYZ)]),
+    OutputType(
+        'euler_rates', VECTOR3_STAMPED, (EULER_RATES,), None,
+        'time derivatives of the three Euler angles (rad/s, or deg/s with `euler.degrees`)',
+        _euler_panels('Euler angle rates', '/s')),
+    OutputType(
+        'quaternion_rate', QUATERNION_STAMPED, (OUTPUT_QUATERNION, ANGULAR_VELOCITY),
+        _quaternion_rate, 'dq/dt (1/s) of the published quaternion',
+        lambda params: [Panel('Quaternion rate', '1/s', _XYZW)]),
+    OutputType(
+        'euler_stddev', VECTOR3_STAMPED, (EULER_COVARIANCE,), _euler_stddev,
+        'one standard deviation of each angle of `euler.sequence` (first order, from the '
+        "input's orientation covariance about `covariance.frame` axes; degrees with "
+        '`euler.degrees`); inputs with a covariance only',
+        _euler_panels('Euler angle standard deviations', '')),
+    OutputType(
+        'euler_covariance', VECTOR3_WITH_COVARIANCE, (PUBLISHED_EULER, EULER_COVARIANCE),
+        _euler_with_covariance,
+        '`sensor_msgs/MagneticField` used as a stamped vector with covariance: '
+        '`magnetic_field` = the Euler angles (as `euler`), `magnetic_field_covariance` = their '
+        '3 x 3 covariance, row-major (rad^2, or deg^2 with `euler.degrees`); inputs with a '
+        'covariance only',
+        _euler_covariance_panels),
+)
+
+OUTPUTS = {entry.name: entry for entry in _OUTPUT_LIST}
+"""The output types by name, in documentation order."""
+
+
+def input_panels(input_type: InputType, params: Any) -> list:
+    """
+    Return how ``rotation_bag plot`` draws a topic of a plain input type.
+
+    The numbers drawn are :func:`sample_numbers` of each message's sample.
+    """
+    if input_type.orientation_form == QUATERNION:
+        panels = [Panel('Orientation quaternion', '', _XYZW)]
+    elif input_type.orientation_form == EULER:
+        panels = _euler_panels('Euler angles', '')(params)
+    else:
+        panels = [Panel('Rotation vector', 'rad', _XYZ)]
+    if input_type.angular_velocity_field is not None:
+        panels.append(Panel('Angular velocity', 'rad/s', _XYZ, len(panels[0].labels)))
+    return panels
+
+
+def sample_numbers(input_type: InputType, sample: Sample) -> Tuple[float, ...]:
+    """Return the orientation, then any angular velocity, of a sample (NaN where unknown)."""
+    width = 4 if input_type.orientation_form == QUATERNION else 3
+    numbers = sample.orientation or (math.nan,) * width
+    if input_type.angular_velocity_field is not None:
+        numbers = (*numbers, *(sample.angular_velocity or (math.nan,) * 3))
+    return numbers
