@@ -10,7 +10,7 @@ import mp_reference as mpr
 from rotation_node import conversions as rc
 from rotation_node.hard_cases import hard_matrices, hard_quaternions, hard_rotation_vectors
 
-BOUND = 8  # eps, geodesic error of one conversion (issue 2)
+BOUND = 8  # eps, geodesic error of one conversion (the documented bound)
 ROUND_TRIP = 16
 
 

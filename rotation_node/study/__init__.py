@@ -1,9 +1,9 @@
 """
 The accuracy-vs-time study and the performance summary (``rotation_bench``).
 
-Every conversion method users choose between (the seed page's formulas,
+Every conversion method users choose between (the textbook formulas,
 Shepperd, Markley, SVD, tf2, PlotJuggler, transforms3d, scipy and this
-package) is measured side by side on the hard cases of NUMERICS.md: time per
+package) is measured side by side on the hard cases of docs/numerics.md: time per
 rotation against worst error in eps, the error taken against a 40-digit
 mpmath truth. The attitude integrators are measured against exact truth over a
 range of steps, and the repository's benchmarks are run for their ratios.

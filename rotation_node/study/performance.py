@@ -34,7 +34,7 @@ BENCHMARKS_DIR = os.path.join(
 #: How the documents spell the interpreter in a command.
 PYTHON = '.venv/bin/python'
 #: bench_conversions' target for the single-sample ratio: package / scipy's
-#: ``Rotation.from_quat(q).as_euler(seq)``, issue 2's reference (its batch targets
+#: ``Rotation.from_quat(q).as_euler(seq)``, the single-sample reference (its batch targets
 #: are in its results).
 SINGLE_SAMPLE_TARGET = 0.10
 
