@@ -31,7 +31,7 @@ shift || true
 case "$cmd" in
   main)
     ensure_env
-    exec "$venv/bin/python" -m rotation_node.demo "$@"
+    exec "$venv/bin/python" -m rotation_dev.demo "$@"
     ;;
   test)
     ensure_env

@@ -8,7 +8,8 @@ package_name = 'rotation_node'
 setup(
     name=package_name,
     version='0.1.0',
-    packages=find_packages(exclude=['test', 'test.*']),
+    # The runtime package only: rotation_dev (study, demo, hard cases) stays in the checkout.
+    packages=find_packages(include=['rotation_node', 'rotation_node.*']),
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
@@ -26,7 +27,6 @@ setup(
             'rotation_node = rotation_node.node:main',
             'rotation_bag = rotation_node.bag.cli:main',
             'rotation_scene = rotation_node.scene.cli:main',
-            'rotation_bench = rotation_node.study.cli:main',
         ],
     },
 )

@@ -25,6 +25,8 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('RCUTILS_COLORIZED_OUTPUT', '0')
 
 sys.path.insert(0, os.path.dirname(__file__))
+# The development tools of the checkout (rotation_dev: hard cases, study, demo).
+sys.path.append(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 @pytest.fixture

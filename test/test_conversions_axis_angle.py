@@ -8,7 +8,7 @@ from scipy.spatial.transform import Rotation
 
 import mp_reference as mpr
 from rotation_node import conversions as rc
-from rotation_node.hard_cases import hard_matrices, hard_quaternions, hard_rotation_vectors
+from rotation_dev.hard_cases import hard_matrices, hard_quaternions, hard_rotation_vectors
 
 BOUND = 8  # eps, geodesic error of one conversion (issue 2)
 ROUND_TRIP = 16

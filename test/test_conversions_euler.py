@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 
 import mp_reference as mpr
 from rotation_node import conversions as rc
-from rotation_node.hard_cases import hard_quaternions, near_gimbal_lock_angles
+from rotation_dev.hard_cases import hard_quaternions, near_gimbal_lock_angles
 
 BOUND = 8
 ROUND_TRIP = 16

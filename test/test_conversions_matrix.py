@@ -6,7 +6,7 @@ from scipy.spatial.transform import Rotation
 
 import mp_reference as mpr
 from rotation_node import conversions as rc
-from rotation_node.hard_cases import diagonal_rotations, hard_matrices, hard_quaternions, noisy_matrices
+from rotation_dev.hard_cases import diagonal_rotations, hard_matrices, hard_quaternions, noisy_matrices
 
 BOUND = 8
 ROUND_TRIP = 16

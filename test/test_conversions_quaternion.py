@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 import mp_reference as mpr
 from rotation_node import conversions as rc
 from rotation_node.conversions._quaternion import samples
-from rotation_node.hard_cases import hard_quaternions
+from rotation_dev.hard_cases import hard_quaternions
 
 finite = st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False)
 nonzero_quaternions = arrays(np.float64, 4, elements=finite).filter(

@@ -16,7 +16,7 @@ import pytest
 from ros_harness import RosProcess, TestNode
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-EXECUTABLES = ('rotation_node', 'rotation_bag', 'rotation_scene', 'rotation_bench')
+EXECUTABLES = ('rotation_node', 'rotation_bag', 'rotation_scene')
 SITE = os.path.join('lib', f'python{sys.version_info[0]}.{sys.version_info[1]}', 'site-packages')
 
 

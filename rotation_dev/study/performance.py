@@ -26,11 +26,10 @@ import tempfile
 import time
 from typing import Optional, Tuple
 
+from rotation_dev.paths import BENCHMARKS_DIR, REPOSITORY
+
 from .report import markdown_table
 
-#: The repository's benchmarks (a source checkout; they are not installed).
-BENCHMARKS_DIR = os.path.join(
-    os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), 'benchmarks')
 #: How the documents spell the interpreter in a command.
 PYTHON = '.venv/bin/python'
 #: bench_conversions' target for the single-sample ratio: package / scipy's
@@ -179,7 +178,7 @@ def run_benchmark(benchmark, quick):
             process = subprocess.run(
                 [sys.executable, os.path.join(BENCHMARKS_DIR, benchmark.script), *args, *extra],
                 capture_output=True, text=True, timeout=benchmark.timeout,
-                cwd=os.path.dirname(BENCHMARKS_DIR))
+                cwd=REPOSITORY)
         except subprocess.TimeoutExpired:
             return BenchmarkRun(benchmark, command, 'failed', benchmark.timeout,
                                 detail=f'timed out after {benchmark.timeout:.0f} s')
@@ -264,7 +263,7 @@ def performance_markdown(runs, *, quick, command, environment):
     quick : bool
         Whether this is a ``--quick`` run.
     command : str
-        The ``rotation_bench`` command that wrote the document.
+        The command that wrote the document.
     environment : str
         Machine and versions.
 
