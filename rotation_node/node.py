@@ -15,6 +15,7 @@ Run it with, for example::
     rotation_node --ros-args -r input:=/imu/data -p outputs:='[euler, angular_velocity]'
 """
 import gc
+import sys
 import time
 
 import rclpy
@@ -206,8 +207,21 @@ def _text(value):
     return str(value)
 
 
+def usage() -> str:
+    """Return the text ``rotation_node --help`` prints: how to run it, its parameters."""
+    return ('usage: rotation_node [--ros-args [-r input:=TOPIC] [-p NAME:=VALUE]... '
+            '[--params-file FILE]]\n\n'
+            'Convert the orientations on the topic "input" and publish the outputs listed in '
+            'the parameter "outputs".\nParameters: '
+            + ', '.join(spec.name for spec in PARAMETERS) + '.\n')
+
+
 def main(args=None):
     """Run the node until Ctrl-C; return 1 if a parameter value is invalid."""
+    if {'-h', '--help'} & set(rclpy.utilities.remove_ros_args(
+            sys.argv if args is None else args)[1:]):
+        print(usage(), end='')
+        return 0
     rclpy.init(args=args)
     node = None
     try:
