@@ -69,7 +69,7 @@ def _run_live(scene_bag, live_bag, params, topic, expected, log):
     from rclpy.executors import SingleThreadedExecutor
 
     from rotation_node.bag.qos import recording_qos
-    from rotation_node.pipeline import OUTPUT_MESSAGE_TYPES
+    from rotation_node import messages
     context = Context()
     rclpy.init(context=context)
     watcher = rclpy.create_node('rotation_demo_watcher', context=context)
@@ -102,7 +102,7 @@ def _run_live(scene_bag, live_bag, params, topic, expected, log):
                    120, 'rotation_node to advertise its outputs')
         for t, name in zip(out_topics, OUTPUTS):
             offered = [i.qos_profile for i in watcher.get_publishers_info_by_topic(t)]
-            watcher.create_subscription(OUTPUT_MESSAGE_TYPES[name], t, count(t),
+            watcher.create_subscription(messages.OUTPUTS[name].message_class, t, count(t),
                                         recording_qos(offered))
         recorder = start([_script('rotation_bag'), 'record', live_bag, '--force',
                           '--topics', *out_topics])
@@ -135,11 +135,12 @@ def _run_live(scene_bag, live_bag, params, topic, expected, log):
 def _read(bag, topics):
     """{topic: (stamps_ns, values)} of the converted outputs in a bag."""
     from rotation_node.bag.mcap_io import BagReader
+    from rotation_node.stamps import header_stamp_ns
     columns = {t: ([], []) for t in topics}
     for record in BagReader(bag).messages(topics=list(topics)):
         msg = record.message()
         stamps, values = columns[record.topic]
-        stamps.append(msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
+        stamps.append(header_stamp_ns(msg.header))
         if hasattr(msg, 'quaternion'):
             q = msg.quaternion
             values.append((q.x, q.y, q.z, q.w))

@@ -27,8 +27,9 @@ from rclpy.exceptions import (
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from rotation_node import messages
+from rotation_node.bag.qos import qos_profile
 from rotation_node.errors import ParameterError
 from rotation_node.parameters import (
     NODE_NAME, PARAMETERS, PARAMETERS_BY_NAME, NodeParameters)
@@ -37,11 +38,6 @@ from rotation_node.pipeline import (
 
 DIAGNOSTICS_PERIOD_S = 1.0
 ISSUE_LOG_PERIOD_S = 5.0
-
-_RELIABILITY = {
-    'reliable': ReliabilityPolicy.RELIABLE,
-    'best_effort': ReliabilityPolicy.BEST_EFFORT,
-}
 
 
 def parameter_descriptor(spec) -> ParameterDescriptor:
@@ -56,13 +52,6 @@ def parameter_descriptor(spec) -> ParameterDescriptor:
         descriptor.integer_range = [
             IntegerRange(from_value=spec.bounds[0], to_value=spec.bounds[1], step=1)]
     return descriptor
-
-
-def qos_profile(params: NodeParameters) -> QoSProfile:
-    """Return the QoS of the input subscription and the output publishers."""
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST, depth=params.qos_depth,
-        reliability=_RELIABILITY[params.qos_reliability])
 
 
 class RotationNode(Node):
@@ -80,7 +69,7 @@ class RotationNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         self.params = NodeParameters()
         self._pipeline = None
-        self._subscription = None
+        self._subscriptions = []
         self._output_publishers = {}
         self._next_issue_log = {}   # reason -> monotonic time of its next allowed warning
         self._reported = (0, 0)   # dropped and skipped totals at the last diagnostics
@@ -128,10 +117,11 @@ class RotationNode(Node):
         stats = None if self._pipeline is None else self._pipeline.stats
         self._pipeline = ConversionPipeline(params, on_issue=self._log_issue, stats=stats)
         if qos_changed or params.input_type != previous.input_type:
-            if self._subscription is not None:
-                self.destroy_subscription(self._subscription)
-            self._subscription = self.create_subscription(
-                self._pipeline.input_type, 'input', self._on_input, qos)
+            for subscription in self._subscriptions:
+                self.destroy_subscription(subscription)
+            self._subscriptions = [
+                self._subscribe(self._pipeline.input_type, topic, params)
+                for topic in messages.INPUTS[params.input_type].topics]
         for name in list(self._output_publishers):
             if qos_changed or name not in params.outputs:
                 self.destroy_publisher(self._output_publishers.pop(name))
@@ -139,14 +129,29 @@ class RotationNode(Node):
             if name not in self._output_publishers:
                 self._output_publishers[name] = self.create_publisher(message_type, name, qos)
         self.get_logger().info(
-            f'converting {params.input_type} messages on {self._subscription.topic_name} '
+            f'converting {params.input_type} messages on {self._input_topic_names()} '
             f'to {", ".join(params.outputs)} (euler.sequence {params.euler_sequence}, '
             f'{"degrees" if params.euler_degrees else "radians"})')
 
+    def _subscribe(self, message_type, topic, params):
+        """Subscribe one topic of the input type; its messages go to the pipeline."""
+        name = topic.name
+        if name == messages.INPUT_TOPIC.name:   # the common case without a closure
+            callback = self._on_input
+        else:
+            def callback(msg):
+                self._on_input(msg, name)
+        return self.create_subscription(
+            message_type, name, callback,
+            qos_profile(params, transient_local=topic.transient_local))
+
+    def _input_topic_names(self):
+        return ', '.join(subscription.topic_name for subscription in self._subscriptions)
+
     # Messages ----------------------------------------------------------------------
 
-    def _on_input(self, msg):
-        for name, output in self._pipeline.process(msg):
+    def _on_input(self, msg, topic=messages.INPUT_TOPIC.name):
+        for name, output in self._pipeline.process(msg, topic):
             self._output_publishers[name].publish(output)
 
     def _log_issue(self, reason, detail):
@@ -174,7 +179,7 @@ class RotationNode(Node):
         else:
             level, message = DiagnosticStatus.OK, 'converting'
         values = {
-            'input_topic': self._subscription.topic_name,
+            'input_topic': self._input_topic_names(),
             'received': stats.received,
             'published': stats.published,
             'dropped': totals[0],

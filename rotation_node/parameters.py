@@ -19,24 +19,17 @@ from typing import Any, Callable, Mapping, Optional
 
 import yaml
 
+from rotation_node import messages
 from rotation_node.conversions import parse_sequence
 from rotation_node.errors import ParameterError
 
 NODE_NAME = 'rotation_node'
 
-INPUT_TYPES = (
-    'quaternion', 'pose', 'pose_with_covariance', 'imu', 'odometry', 'transform',
-    'euler', 'rotation_vector')
-"""Values of ``input_type``: the message type subscribed on ``input``."""
+INPUT_TYPES = tuple(messages.INPUTS)
+"""Values of ``input_type``: the input types of :data:`rotation_node.messages.INPUTS`."""
 
-ORIENTATION_OUTPUTS = ('quaternion', 'euler', 'rotation_vector', 'axis_angle', 'matrix')
-"""Outputs computed from the orientation alone."""
-
-ANGULAR_VELOCITY_OUTPUTS = ('angular_velocity', 'euler_rates', 'quaternion_rate')
-"""Outputs that need the angular velocity (from the input, or by finite difference)."""
-
-OUTPUTS = ORIENTATION_OUTPUTS + ANGULAR_VELOCITY_OUTPUTS
-"""Values allowed in ``outputs``; each is published on the relative topic of that name."""
+OUTPUTS = tuple(messages.OUTPUTS)
+"""Values allowed in ``outputs``: the outputs of :data:`rotation_node.messages.OUTPUTS`."""
 
 FRAMES = ('body', 'world')
 RELIABILITIES = ('reliable', 'best_effort')

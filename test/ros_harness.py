@@ -113,31 +113,26 @@ def make_input_message(input_type, rotation, *, omega=(0.0, 0.0, 0.0), stamp_ns=
     Return an input message of the node's ``input_type`` holding ``rotation``.
 
     ``rotation`` is a scipy ``Rotation`` (the tests' oracle); ``omega`` goes into
-    the angular-velocity field of Imu and Odometry; ``sequence`` and ``degrees``
-    give the Euler convention of an ``euler`` input.
+    the angular-velocity field of the types that carry one; ``sequence`` and
+    ``degrees`` give the Euler convention of an Euler-angle input. The fields
+    written are those the input type's entry in rotation_node.messages names.
     """
-    from rotation_node.pipeline import input_message_type
-    msg = input_message_type(input_type)()
-    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
+    import operator
+    from rotation_node import messages
+    from rotation_node.stamps import split_ns
+    entry = messages.INPUTS[input_type]
+    msg = entry.message_class()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = split_ns(stamp_ns)
     msg.header.frame_id = frame_id
-    fields = {
-        'quaternion': lambda m: m.quaternion,
-        'pose': lambda m: m.pose.orientation,
-        'pose_with_covariance': lambda m: m.pose.pose.orientation,
-        'imu': lambda m: m.orientation,
-        'odometry': lambda m: m.pose.pose.orientation,
-        'transform': lambda m: m.transform.rotation,
-    }
-    if input_type in fields:
-        q = fields[input_type](msg)
-        q.x, q.y, q.z, q.w = (float(v) for v in rotation.as_quat())
+    target = operator.attrgetter(entry.orientation_field)(msg)
+    if entry.orientation_form == messages.QUATERNION:
+        target.x, target.y, target.z, target.w = (float(v) for v in rotation.as_quat())
     else:
-        values = (rotation.as_euler(sequence, degrees=degrees) if input_type == 'euler'
-                  else rotation.as_rotvec())
-        msg.vector.x, msg.vector.y, msg.vector.z = (float(v) for v in values)
-    rate = {'imu': lambda m: m.angular_velocity, 'odometry': lambda m: m.twist.twist.angular}
-    if input_type in rate:
-        w = rate[input_type](msg)
+        values = (rotation.as_euler(sequence, degrees=degrees)
+                  if entry.orientation_form == messages.EULER else rotation.as_rotvec())
+        target.x, target.y, target.z = (float(v) for v in values)
+    if entry.angular_velocity_field is not None:
+        w = operator.attrgetter(entry.angular_velocity_field)(msg)
         w.x, w.y, w.z = (float(v) for v in omega)
     return msg
 
@@ -186,12 +181,9 @@ def oracle_output(name, rotation, omega_body=(0.0, 0.0, 0.0), *, sequence='xyz',
 
 
 def output_values(msg):
-    """Return the numbers of an output message as a flat array."""
+    """Return the numbers of an output message as a flat array (as its output builds it)."""
     import numpy as np
-    if hasattr(msg, 'quaternion'):
-        q = msg.quaternion
-        return np.array([q.x, q.y, q.z, q.w])
-    if hasattr(msg, 'vector'):
-        v = msg.vector
-        return np.array([v.x, v.y, v.z])
-    return np.array(msg.data)
+    from rotation_node import messages
+    from rotation_node.bag.message_types import type_name_of
+    numbers = {o.type_name: o.message.numbers for o in messages.OUTPUTS.values()}
+    return np.array(numbers[type_name_of(type(msg))](msg), dtype=float)

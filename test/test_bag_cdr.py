@@ -22,7 +22,7 @@ from rotation_node.bag.cdr import (
     CDR_LE, fixed_layout_codec, float64_multi_array_encoder, message_encoder)
 from rotation_node.bag.message_types import message_class
 from rotation_node.errors import BagError
-from rotation_node.pipeline import MULTI_ARRAY_LAYOUTS
+from rotation_node.messages import OUTPUTS
 
 PIPELINE_TYPES = [   # inputs, and the stamped outputs
     'sensor_msgs/msg/Imu',
@@ -263,9 +263,11 @@ def test_stamped_encoder_rejects_the_wrong_count_of_numbers():
         encode(header, [1.0, 2.0])
 
 
-LAYOUTS = {**MULTI_ARRAY_LAYOUTS, 'labels 0..4 characters': MultiArrayLayout(
-    dim=[MultiArrayDimension(label='abcd'[:n], size=n, stride=7 * n) for n in range(5)],
-    data_offset=3)}
+LAYOUTS = {
+    **{name: output.message.layout for name, output in OUTPUTS.items() if output.message.layout},
+    'labels 0..4 characters': MultiArrayLayout(
+        dim=[MultiArrayDimension(label='abcd'[:n], size=n, stride=7 * n) for n in range(5)],
+        data_offset=3)}
 
 
 @pytest.mark.parametrize('count', [0, 1, 4, 9])

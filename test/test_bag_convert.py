@@ -23,15 +23,16 @@ from rotation_node.bag.convert import convert, output_topic
 from rotation_node.bag.mcap_io import BagReader, BagWriter
 from rotation_node.bag.message_types import type_name_of
 from rotation_node.bag.qos import qos_profiles_from_yaml
+from rotation_node.bag.qos import qos_profile
 from rotation_node.errors import BagError
-from rotation_node.node import qos_profile
+from rotation_node.messages import OUTPUTS as OUTPUT_TYPES
 from rotation_node.parameters import INPUT_TYPES, NodeParameters, parameters_from_yaml
-from rotation_node.pipeline import OUTPUT_MESSAGE_TYPES, ConversionPipeline
+from rotation_node.pipeline import ConversionPipeline
 
 OUTPUTS = ('euler', 'quaternion', 'angular_velocity')
 PARAMS = NodeParameters(input_type='imu', outputs=OUTPUTS, euler_sequence='ZYX',
                         euler_degrees=True, qos_depth=1000)
-ALL_OUTPUTS = tuple(OUTPUT_MESSAGE_TYPES)
+ALL_OUTPUTS = tuple(OUTPUT_TYPES)
 
 
 def _write_bag(path, streams):
@@ -213,7 +214,7 @@ def test_live_node_round_trip_equals_convert(tmp_path, rng):
             assert [plain(r.message()) for r in reader.messages()] == [plain(m) for m in messages]
 
         # 2. Play it into the node, record the node's outputs.
-        received = {topic: client.collect(OUTPUT_MESSAGE_TYPES[topic.rsplit('/', 1)[-1]],
+        received = {topic: client.collect(OUTPUT_TYPES[topic.rsplit('/', 1)[-1]].message_class,
                                           topic, QoSProfile(depth=count))
                     for topic in output_topics}
         node_args = [script('rotation_node'), '--ros-args', '--params-file', params_file,

@@ -17,8 +17,9 @@ from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from scipy.spatial.transform import Rotation
 
+from rotation_node.messages import OUTPUTS as OUTPUT_TYPES
 from rotation_node.parameters import INPUT_TYPES, OUTPUTS, PARAMETERS, NodeParameters
-from rotation_node.pipeline import OUTPUT_MESSAGE_TYPES, input_message_type
+from rotation_node.pipeline import input_message_type
 
 from ros_harness import (
     RosProcess, TestNode, make_input_message, oracle_output, output_values, script)
@@ -52,7 +53,8 @@ class NodeUnderTest:
         self.received = {name: [] for name in OUTPUTS}
         self.subscriptions = {
             name: ros.node.create_subscription(
-                OUTPUT_MESSAGE_TYPES[name], self.topic(name), self.received[name].append, 100)
+                OUTPUT_TYPES[name].message_class, self.topic(name),
+                self.received[name].append, 100)
             for name in OUTPUTS}
         if not self.parameters.wait_for_services(timeout_sec=START_TIMEOUT_S):
             self.stop()
@@ -103,7 +105,7 @@ class NodeUnderTest:
         else:
             received = {name: [] for name in expected_counts}
             subscriptions = [
-                node.create_subscription(OUTPUT_MESSAGE_TYPES[name], self.topic(name),
+                node.create_subscription(OUTPUT_TYPES[name].message_class, self.topic(name),
                                          received[name].append, qos)
                 for name in expected_counts]
         publisher = node.create_publisher(

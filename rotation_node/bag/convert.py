@@ -10,42 +10,26 @@ input message they come from.
 The bag is streamed, never loaded: memory does not grow with its length.
 
 The input messages are decoded by :mod:`rotation_node.bag.cdr` into
-read-only views (every input type has a fixed layout), which
+read-only views where their type has a fixed layout, which
 :meth:`~rotation_node.pipeline.ConversionPipeline.process_values` reads as it
-reads rclpy messages, and the values it returns are encoded by ``cdr``
-directly: the live node's conversions, without building rclpy messages, which
-took most of the time.
+reads rclpy messages, and the numbers it returns are encoded by each output's
+encoder (:meth:`rotation_node.messages.OutputMessage.encoder`): the live
+node's conversions, without building rclpy messages where the types allow it.
 """
 import os
 
-from rotation_node.bag.cdr import fixed_layout_codec, float64_multi_array_encoder
+from rotation_node import messages
+from rotation_node.bag.cdr import fixed_layout_codec
 from rotation_node.bag.mcap_io import BagReader, BagWriter, TopicMetadata
-from rotation_node.bag.message_types import type_name_of
 from rotation_node.bag.progress import ProgressBar
-from rotation_node.bag.qos import qos_profiles_yaml
+from rotation_node.bag.qos import qos_profile, qos_profiles_yaml
 from rotation_node.errors import BagError
-from rotation_node.node import qos_profile
-from rotation_node.pipeline import (
-    MULTI_ARRAY_LAYOUTS, OUTPUT_MESSAGE_TYPES, ConversionPipeline, input_message_type)
+from rotation_node.pipeline import ConversionPipeline
 
 
 def output_topic(input_topic, output_name):
     """Topic of the output ``output_name`` of ``input_topic``: ``/imu`` -> ``/imu/euler``."""
     return f'{input_topic.rstrip("/")}/{output_name}'
-
-
-def _output_encoder(name):
-    """
-    Return the type name of output ``name`` and its ``encode(header, values) -> CDR bytes``.
-
-    The counterpart of the pipeline's message builders, from the values of
-    :meth:`~rotation_node.pipeline.ConversionPipeline.process_values`.
-    """
-    type_name = type_name_of(OUTPUT_MESSAGE_TYPES[name])
-    if name in MULTI_ARRAY_LAYOUTS:   # no header
-        encode_data = float64_multi_array_encoder(MULTI_ARRAY_LAYOUTS[name])
-        return type_name, lambda header, values: encode_data(values)
-    return type_name, fixed_layout_codec(type_name).stamped_encoder()
 
 
 def _input_topics(reader, input_type_name, topics):
@@ -101,12 +85,14 @@ def convert(input_path, output_path, params, *, topics=None, overwrite=False,
     with BagReader(input_path) as reader:
         if os.path.exists(output_path) and os.path.samefile(input_path, output_path):
             raise BagError(f'output {output_path} is the input bag')
-        input_type_name = type_name_of(input_message_type(params.input_type))
+        input_type_name = messages.INPUTS[params.input_type].type_name
         pipelines = {topic: ConversionPipeline(params)
                      for topic in _input_topics(reader, input_type_name, topics)}
         input_codec = fixed_layout_codec(input_type_name)
         decode = None if input_codec is None else input_codec.decode
-        encoders = {name: _output_encoder(name) for name in params.outputs}
+        encoders = {name: (messages.OUTPUTS[name].type_name,
+                           messages.OUTPUTS[name].message.encoder())
+                    for name in params.outputs}
         # {input topic: {output name: (output topic, type name, encode)}}
         outputs = {topic: {name: (output_topic(topic, name), *encoder)
                            for name, encoder in encoders.items()}

@@ -1,89 +1,73 @@
 """
 Plot a topic of a bag over time as a PNG (``rotation_bag plot``).
 
-Meant for converted topics: ``.../euler`` (Euler angles, in the units and
-sequence of the parameters the bag was converted with), ``.../angular_velocity``,
-``.../euler_rates``, ``.../rotation_vector``, ``.../quaternion``,
-``.../quaternion_rate``, ``.../axis_angle``, ``.../matrix``, and also raw
-``sensor_msgs/msg/Imu`` (orientation quaternion and angular velocity). The
-time axis is the header stamp where the message has one, else the log time,
-in seconds since the first message.
+Meant for converted topics: a topic that ``rotation_bag convert`` wrote for
+the output ``NAME`` of an input topic ``T`` (``T/NAME``, ``T`` in the bag,
+the type the output's) is drawn as that output of
+:data:`rotation_node.messages.OUTPUTS` declares (Euler angles in the units and
+sequence of the parameters the bag was converted with). A topic of an input
+type (``sensor_msgs/msg/Imu``...) is drawn as its orientation and angular
+velocity; a type several input types share (Vector3Stamped) is read as
+``input_type`` of the parameters. The time axis is the header stamp where the
+message has one, else the log time, in seconds since the first message.
 """
 import numpy as np
 # A bare Figure renders PNG with the Agg backend and never touches pyplot's
 # global state or a display.
 from matplotlib.figure import Figure
 
+from rotation_node import messages
 from rotation_node.bag.atomic_file import AtomicFile
+from rotation_node.bag.convert import output_topic
 from rotation_node.bag.mcap_io import BagReader
-from rotation_node.conversions import parse_sequence
 from rotation_node.errors import BagError
 from rotation_node.parameters import NodeParameters
-
-_ORDINALS = ('1st', '2nd', '3rd')
-_XYZ = ('x', 'y', 'z')
-_XYZW = ('x', 'y', 'z', 'w')
+from rotation_node.stamps import header_stamp_ns
 
 
-def _xyz(vector):
-    return (vector.x, vector.y, vector.z)
+def _converted_output(topics, topic):
+    """The output whose ``convert`` topic ``topic`` is (checked against the bag), or None."""
+    parent, _, name = topic.rpartition('/')
+    output = messages.OUTPUTS.get(name)
+    if (output is None or parent not in topics or topics[topic] != output.type_name
+            or output_topic(parent, name) != topic):
+        return None
+    return output
 
 
-def _xyzw(quaternion):
-    return (quaternion.x, quaternion.y, quaternion.z, quaternion.w)
+def _input_type(type_name, params):
+    """The plain input type of a topic of ``type_name`` (``input_type`` if it is one)."""
+    candidates = [entry for entry in messages.INPUTS.values()
+                  if entry.type_name == type_name and entry.stream is None]
+    preferred = [entry for entry in candidates if entry.name == params.input_type]
+    return (preferred or candidates or [None])[0]
 
 
-def _stamped_vector(msg):
-    return _xyz(msg.vector)
-
-
-def _panels(type_name, output_name, params):
+def _panels(topics, topic, params):
     """
-    What to draw for a topic: a list of ``(title, unit, labels, extract)``.
+    What to draw for a topic: ``(panels, numbers)``.
 
-    ``extract(msg)`` returns the values of one panel for one message.
+    ``panels`` are :class:`rotation_node.messages.Panel`; ``numbers(msg)`` gives the
+    numbers of one message that they index.
     """
-    angle_unit = 'deg' if params.euler_degrees else 'rad'
-    if type_name == 'geometry_msgs/msg/Vector3Stamped':
-        if output_name in ('euler', 'euler_rates'):
-            seq = parse_sequence(params.euler_sequence)
-            kind = 'intrinsic' if seq.intrinsic else 'extrinsic'
-            labels = [f'{ordinal} ({letter})'
-                      for ordinal, letter in zip(_ORDINALS, params.euler_sequence)]
-            title, unit = (('Euler angles', angle_unit) if output_name == 'euler'
-                           else ('Euler angle rates', f'{angle_unit}/s'))
-            return [(f'{title}, sequence {params.euler_sequence} ({kind})', unit, labels,
-                     _stamped_vector)]
-        if output_name == 'angular_velocity':
-            return [(f'Angular velocity ({params.angular_velocity_output_frame} frame)',
-                     'rad/s', _XYZ, _stamped_vector)]
-        if output_name == 'rotation_vector':
-            return [('Rotation vector', 'rad', _XYZ, _stamped_vector)]
-        return [('Vector', '', _XYZ, _stamped_vector)]
-    if type_name == 'geometry_msgs/msg/QuaternionStamped':
-        title, unit = (('Quaternion rate', '1/s') if output_name == 'quaternion_rate'
-                       else ('Quaternion', ''))
-        return [(title, unit, _XYZW, lambda msg: _xyzw(msg.quaternion))]
-    if type_name == 'std_msgs/msg/Float64MultiArray':
-        if output_name == 'axis_angle':
-            return [('Rotation axis', '', _XYZ, lambda msg: msg.data[:3]),
-                    ('Rotation angle', 'rad', ('angle',), lambda msg: msg.data[3:4])]
-        if output_name == 'matrix':
-            labels = [f'R{row}{col}' for row in (1, 2, 3) for col in (1, 2, 3)]
-            return [('Rotation matrix (body to world)', '', labels, lambda msg: msg.data)]
-    if type_name == 'sensor_msgs/msg/Imu':
-        return [('Orientation quaternion', '', _XYZW,
-                 lambda msg: _xyzw(msg.orientation)),
-                ('Angular velocity', 'rad/s', _XYZ, lambda msg: _xyz(msg.angular_velocity))]
-    raise BagError(f'cannot plot {type_name}; plottable: Vector3Stamped, QuaternionStamped, '
-                   'Float64MultiArray (axis_angle, matrix) and Imu topics')
+    output = _converted_output(topics, topic)
+    if output is not None:
+        return output.panels(params), output.message.numbers
+    entry = _input_type(topics[topic], params)
+    if entry is not None:
+        read = entry.sample_reader()
+        return (messages.input_panels(entry, params),
+                lambda msg: messages.sample_numbers(entry, read(msg)))
+    plottable = sorted({e.type_name for e in messages.INPUTS.values()})
+    raise BagError(f'cannot plot {topics[topic]}: plottable are the outputs rotation_bag '
+                   f'convert writes and topics of {", ".join(plottable)}')
 
 
 def _time_ns(record, msg):
     header = getattr(msg, 'header', None)
     if header is None:
         return record.log_time_ns
-    return header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
+    return header_stamp_ns(header)
 
 
 def plot_topic(bag_path, topic, output_path, *, params=None, overwrite=False):
@@ -117,13 +101,14 @@ def plot_topic(bag_path, topic, output_path, *, params=None, overwrite=False):
     params = NodeParameters() if params is None else params
     with AtomicFile(output_path, overwrite=overwrite) as output, BagReader(bag_path) as reader:
         records = reader.messages([topic])
-        panels = _panels(reader.topics[topic], topic.rsplit('/', 1)[-1], params)
+        panels, numbers = _panels(reader.topics, topic, params)
         times, values = [], [[] for _ in panels]
         for record in records:
             msg = record.message()
             times.append(_time_ns(record, msg))
-            for series, (_, _, _, extract) in zip(values, panels):
-                series.append(tuple(extract(msg)))
+            msg_numbers = numbers(msg)
+            for series, panel in zip(values, panels):
+                series.append(tuple(msg_numbers[panel.start:panel.start + len(panel.labels)]))
         if not times:
             raise BagError(f'topic {topic} in {bag_path} has no messages to plot')
         _draw(topic, np.asarray(times, dtype=np.int64), values, panels).savefig(
@@ -136,13 +121,13 @@ def _draw(topic, times_ns, values, panels):
     seconds = (times_ns - times_ns[0]) * 1e-9
     figure = Figure(figsize=(10, 3.2 * len(panels) + 0.6), layout='constrained')
     axes = figure.subplots(len(panels), 1, sharex=True, squeeze=False)
-    for ax, series, (title, unit, labels, _) in zip(axes[:, 0], values, panels):
-        for column, label in zip(np.asarray(series, dtype=float).T, labels):
+    for ax, series, panel in zip(axes[:, 0], values, panels):
+        for column, label in zip(np.asarray(series, dtype=float).T, panel.labels):
             ax.plot(seconds, column, label=label, linewidth=1.0)
-        ax.set_title(title)
-        ax.set_ylabel(unit or 'value')
+        ax.set_title(panel.title)
+        ax.set_ylabel(panel.unit or 'value')
         ax.grid(True, alpha=0.3)
-        ax.legend(loc='upper right', fontsize='small', ncols=min(len(labels), 5))
+        ax.legend(loc='upper right', fontsize='small', ncols=min(len(panel.labels), 5))
     axes[-1, 0].set_xlabel('time since first message [s]')
     figure.suptitle(f'{topic}  ({len(seconds)} messages, {seconds[-1]:.3f} s)')
     return figure

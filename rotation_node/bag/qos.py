@@ -1,5 +1,5 @@
 """
-QoS profiles as rosbag2 stores them, and the profiles record and play use.
+QoS profiles as rosbag2 stores them, and the profiles the node, record and play use.
 
 rosbag2 (metadata version 9, Jazzy) stores the QoS profiles offered by a
 topic's publishers in the MCAP channel metadata ``offered_qos_profiles`` as a
@@ -15,6 +15,7 @@ from rclpy.qos import (
     DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy)
 
 from rotation_node.errors import BagError
+from rotation_node.stamps import split_ns
 
 _POLICIES = (
     ('history', HistoryPolicy),
@@ -23,7 +24,10 @@ _POLICIES = (
     ('liveliness', LivelinessPolicy),
 )
 _DURATIONS = ('deadline', 'lifespan', 'liveliness_lease_duration')
-_NS_PER_S = 1_000_000_000
+_RELIABILITY = {
+    'reliable': ReliabilityPolicy.RELIABLE,
+    'best_effort': ReliabilityPolicy.BEST_EFFORT,
+}
 
 #: Depth of the reliable queue ``play`` offers at ``--rate 0``, and that
 #: ``record`` requests: deep enough that a burst never overwrites unread samples.
@@ -31,8 +35,33 @@ DEEP_QUEUE_DEPTH = 10_000
 
 
 def _duration_yaml(duration):
-    seconds, nanoseconds = divmod(duration.nanoseconds, _NS_PER_S)
+    seconds, nanoseconds = split_ns(duration.nanoseconds)
     return {'sec': seconds, 'nsec': nanoseconds}
+
+
+def qos_profile(params, *, transient_local: bool = False) -> QoSProfile:
+    """
+    Return the QoS of the node's input subscriptions and output publishers.
+
+    ``rotation_bag convert`` stores it as the offered QoS of the topics it adds.
+
+    Parameters
+    ----------
+    params : rotation_node.parameters.NodeParameters
+        ``qos.reliability`` and ``qos.depth`` (keep last).
+    transient_local : bool, optional
+        Transient-local durability (an input topic of latched data); volatile otherwise.
+
+    Returns
+    -------
+    rclpy.qos.QoSProfile
+
+    """
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST, depth=params.qos_depth,
+        reliability=_RELIABILITY[params.qos_reliability],
+        durability=(DurabilityPolicy.TRANSIENT_LOCAL if transient_local
+                    else DurabilityPolicy.VOLATILE))
 
 
 def qos_profiles_yaml(profiles):

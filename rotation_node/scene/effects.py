@@ -33,11 +33,10 @@ import dataclasses
 import numpy as np
 
 from rotation_node.conversions import quaternion_from_rotation_vector, quaternion_product
+from rotation_node.stamps import NS_PER_S as _NS_PER_S
 
 #: ``sensor_msgs/Imu``: covariance element 0 set to -1 means "no estimate".
 UNKNOWN_COVARIANCE = -1.0
-
-_NS_PER_S = 1_000_000_000
 
 
 @dataclasses.dataclass(frozen=True)

@@ -22,17 +22,16 @@ import dataclasses
 from typing import Mapping
 
 import numpy as np
-from builtin_interfaces.msg import Time
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
 from sensor_msgs.msg import Imu
 
 from rotation_node.bag.mcap_io import BagWriter
+from rotation_node.stamps import NS_PER_S as _NS_PER_S
+from rotation_node.stamps import time_message as _time_message
 
 from .effects import UNKNOWN_COVARIANCE, SensorStream, apply_effects
 from .motions import motion_truth
 from .spec import TRUTH_ANGULAR_VELOCITY_TOPIC, TRUTH_ORIENTATION_TOPIC, Scene
-
-_NS_PER_S = 1_000_000_000
 
 
 @dataclasses.dataclass(frozen=True)
@@ -116,11 +115,6 @@ def simulate(scene, seed=0):
     return Simulation(scene=scene, seed=int(seed), stamp_ns=stamp_ns, time=time,
                       truth_orientation=q, truth_angular_velocity=w,
                       sensor=sensor, effect_masks=masks)
-
-
-def _time_message(stamp_ns):
-    seconds, nanoseconds = divmod(int(stamp_ns), _NS_PER_S)
-    return Time(sec=seconds, nanosec=nanoseconds)
 
 
 def _set_quaternion(message, q):

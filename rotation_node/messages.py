@@ -1,0 +1,555 @@
+"""
+The message types the node reads and writes, each declared once.
+
+:data:`INPUTS` has one :class:`InputType` per value of the ``input_type``
+parameter: the ROS message type, the topics it is subscribed on, and where
+its header, orientation, angular velocity and orientation covariance are read.
+:data:`OUTPUTS` has one :class:`OutputType` per value allowed in ``outputs``:
+the ROS message type, the named pipeline values it is computed from, how it is
+built as an rclpy message and CDR-encoded, and how ``rotation_bag plot`` draws
+it. The parameter table, the pipeline, the node, ``rotation_bag convert`` and
+``plot``, the test harness and the documentation tables are derived from these
+two tables, so a new input or output type is one entry here (and, for an output
+that needs a new intermediate value, that value in the pipeline).
+
+An input message becomes zero or more :class:`Sample` objects (header,
+orientation, optional angular velocity and covariance). A plain input type
+reads one sample from each message through the fields it names; an input type
+that needs per-stream state (several topics, a buffer) gives a ``stream``
+factory instead, which returns a function ``(topic, message) -> samples``.
+
+This module does not import rclpy: message classes and the CDR encoders are
+looked up when first used.
+"""
+import functools
+import math
+import operator
+from dataclasses import dataclass
+from typing import Any, Callable, Iterable, NamedTuple, Optional, Sequence, Tuple
+
+from rotation_node import conversions, kinematics
+
+# Forms of an input orientation.
+QUATERNION = 'quaternion'
+EULER = 'euler'
+ROTATION_VECTOR = 'rotation_vector'
+ORIENTATION_FORMS = (QUATERNION, EULER, ROTATION_VECTOR)
+
+# Named per-message values of the pipeline that outputs are computed from
+# (rotation_node.pipeline computes them; an output lists those it needs).
+ORIENTATION = 'orientation'
+"""Input orientation as a quaternion array (x, y, z, w), any non-zero scale."""
+OUTPUT_QUATERNION = 'output_quaternion'
+"""Unit output quaternion: w >= 0, or sign-continuous with ``quaternion.continuity``."""
+EULER_ANGLES = 'euler_angles'
+"""Euler angles of ``euler.sequence`` (array), first and third wrapped to (-pi, pi]."""
+PUBLISHED_EULER = 'published_euler'
+"""The Euler angles as published: first and third unwrapped with ``euler.unwrap``."""
+ANGULAR_VELOCITY = 'angular_velocity'
+"""Angular velocity (rad/s) in ``angular_velocity.output_frame``, measured or differenced."""
+EULER_RATES = 'euler_rates'
+"""Time derivatives of the Euler angles; unavailable near gimbal lock."""
+PIPELINE_VALUES = (ORIENTATION, OUTPUT_QUATERNION, EULER_ANGLES, PUBLISHED_EULER,
+                   ANGULAR_VELOCITY, EULER_RATES)
+
+
+class Sample(NamedTuple):
+    """
+    One orientation sample read from an input message.
+
+    Attributes
+    ----------
+    header : std_msgs/Header or any object with ``stamp.sec``, ``stamp.nanosec`` and ``frame_id``
+        Stamp and frame of the sample; stamped outputs carry it.
+    orientation : tuple of float or None
+        The orientation in the input type's form: ``(x, y, z, w)`` of a
+        quaternion, or ``(x, y, z)`` of Euler angles or a rotation vector.
+        None when the message says the orientation is unknown.
+    angular_velocity : tuple of float or None
+        ``(x, y, z)`` rad/s in ``angular_velocity.input_frame``; None when the
+        input carries none (the pipeline then differences orientations).
+    covariance : tuple of float or None
+        Orientation covariance, 3 x 3 row-major (rad^2, about the x, y, z axes),
+        for input types that carry one; None otherwise or when not requested.
+
+    """
+
+    header: Any
+    orientation: Optional[Tuple[float, ...]]
+    angular_velocity: Optional[Tuple[float, float, float]] = None
+    covariance: Optional[Tuple[float, ...]] = None
+
+
+SampleStream = Callable[[str, Any], Iterable[Sample]]
+"""``(relative topic name, message) -> samples`` of one input stream."""
+
+
+class InputTopic(NamedTuple):
+    """
+    A topic an input type is subscribed on.
+
+    Attributes
+    ----------
+    name : str
+        Relative topic name (``'input'``), remappable with ``-r``.
+    transient_local : bool
+        Subscribe with transient-local durability (latched data such as
+        ``/tf_static``); volatile otherwise.
+
+    """
+
+    name: str
+    transient_local: bool = False
+
+
+INPUT_TOPIC = InputTopic('input')
+
+
+def _xyzw(quaternion):
+    return (quaternion.x, quaternion.y, quaternion.z, quaternion.w)
+
+
+def _xyz(vector):
+    return (vector.x, vector.y, vector.z)
+
+
+@dataclass(frozen=True)
+class InputType:
+    """
+    One value of ``input_type``: a message type and how a sample is read from it.
+
+    Attributes
+    ----------
+    name : str
+        The parameter value, e.g. ``'imu'``.
+    type_name : str
+        ROS message type, e.g. ``'sensor_msgs/msg/Imu'``.
+    orientation_form : str
+        :data:`QUATERNION`, :data:`EULER` (angles of ``euler.sequence``, in
+        degrees with ``euler.degrees``) or :data:`ROTATION_VECTOR` (rad).
+    orientation_field : str
+        Dotted path of the orientation field: a Quaternion, or a Vector3 for
+        the other forms.
+    angular_velocity_field : str, optional
+        Dotted path of a Vector3 angular velocity (rad/s); None if the type has
+        none (the angular velocity is then differenced from orientations).
+    covariance_field : str, optional
+        Dotted path of the covariance array holding the orientation covariance.
+    covariance_indices : tuple of int
+        Indices in that array of the 3 x 3 orientation block, row-major.
+    orientation_unknown, angular_velocity_unknown : callable, optional
+        ``message -> bool``: the message says the field holds no data.
+    notes : str
+        What else a user needs to know, for the documentation tables.
+    topics : tuple of InputTopic
+        Topics subscribed; one topic ``input`` for a plain type.
+    stream : callable, optional
+        ``stream(params) -> SampleStream`` for a type whose samples need per-stream
+        state (several topics, a buffer): called once per input stream. None for a
+        plain type, which reads one sample per message from the fields above.
+    parameters : tuple of str
+        ROS names of the parameters used only by this input type.
+
+    """
+
+    name: str
+    type_name: str
+    orientation_form: str
+    orientation_field: str
+    angular_velocity_field: Optional[str] = None
+    covariance_field: Optional[str] = None
+    covariance_indices: Tuple[int, ...] = tuple(range(9))
+    orientation_unknown: Optional[Callable[[Any], bool]] = None
+    angular_velocity_unknown: Optional[Callable[[Any], bool]] = None
+    notes: str = ''
+    topics: Tuple[InputTopic, ...] = (INPUT_TOPIC,)
+    stream: Optional[Callable[[Any], SampleStream]] = None
+    parameters: Tuple[str, ...] = ()
+
+    @property
+    def message_class(self) -> type:
+        """The rclpy message class of :attr:`type_name`."""
+        return _message_class(self.type_name)
+
+    @property
+    def angular_velocity_source(self) -> str:
+        """Where the angular velocity comes from, in words (for the documentation)."""
+        if self.angular_velocity_field is None:
+            return 'finite difference'
+        return f'`{self.angular_velocity_field}`'
+
+    def sample_reader(self, *, covariance: bool = False) -> Callable[[Any], Sample]:
+        """
+        Return ``read(message) -> Sample`` of a plain input type.
+
+        Parameters
+        ----------
+        covariance : bool, optional
+            Read the orientation covariance too (only types with a
+            ``covariance_field``; None otherwise).
+
+        """
+        orientation = operator.attrgetter(self.orientation_field)
+        as_tuple = _xyzw if self.orientation_form == QUATERNION else _xyz
+        orientation_unknown = self.orientation_unknown
+        rate = (None if self.angular_velocity_field is None
+                else operator.attrgetter(self.angular_velocity_field))
+        rate_unknown = self.angular_velocity_unknown
+        block = None
+        if covariance and self.covariance_field is not None:
+            block = _covariance_block(self.covariance_field, self.covariance_indices)
+
+        def read(msg):
+            known = orientation_unknown is None or not orientation_unknown(msg)
+            omega = None
+            if rate is not None and (rate_unknown is None or not rate_unknown(msg)):
+                omega = _xyz(rate(msg))
+            return Sample(msg.header, as_tuple(orientation(msg)) if known else None, omega,
+                          None if block is None else block(msg))
+        return read
+
+    def sample_stream(self, params: Any, *, covariance: bool = False) -> SampleStream:
+        """
+        Return the function that turns messages of one input stream into samples.
+
+        Call it once per stream: a stateful input type keeps its state in it.
+
+        Parameters
+        ----------
+        params : rotation_node.parameters.NodeParameters
+        covariance : bool, optional
+            Read the orientation covariance into the samples.
+
+        """
+        if self.stream is not None:
+            return self.stream(params)
+        read = self.sample_reader(covariance=covariance)
+        return lambda topic, msg: (read(msg),)
+
+
+def _covariance_block(path, indices):
+    get = operator.attrgetter(path)
+    pick = operator.itemgetter(*indices)
+    return lambda msg: tuple(float(v) for v in pick(get(msg)))
+
+
+def _imu_orientation_unknown(msg):
+    return msg.orientation_covariance[0] == -1.0
+
+
+def _imu_angular_velocity_unknown(msg):
+    return msg.angular_velocity_covariance[0] == -1.0
+
+
+_POSE_ROTATION_BLOCK = (21, 22, 23, 27, 28, 29, 33, 34, 35)   # rows/columns 3-5 of 6 x 6
+
+_INPUT_LIST = (
+    InputType('quaternion', 'geometry_msgs/msg/QuaternionStamped', QUATERNION, 'quaternion'),
+    InputType('pose', 'geometry_msgs/msg/PoseStamped', QUATERNION, 'pose.orientation'),
+    InputType('pose_with_covariance', 'geometry_msgs/msg/PoseWithCovarianceStamped', QUATERNION,
+              'pose.pose.orientation', covariance_field='pose.covariance',
+              covariance_indices=_POSE_ROTATION_BLOCK),
+    InputType('imu', 'sensor_msgs/msg/Imu', QUATERNION, 'orientation',
+              angular_velocity_field='angular_velocity',
+              covariance_field='orientation_covariance',
+              orientation_unknown=_imu_orientation_unknown,
+              angular_velocity_unknown=_imu_angular_velocity_unknown,
+              notes='orientation unknown when `orientation_covariance[0] == -1`; angular '
+                    'velocity by finite difference when `angular_velocity_covariance[0] == -1`'),
+    InputType('odometry', 'nav_msgs/msg/Odometry', QUATERNION, 'pose.pose.orientation',
+              angular_velocity_field='twist.twist.angular', covariance_field='pose.covariance',
+              covariance_indices=_POSE_ROTATION_BLOCK),
+    InputType('transform', 'geometry_msgs/msg/TransformStamped', QUATERNION,
+              'transform.rotation'),
+    InputType('euler', 'geometry_msgs/msg/Vector3Stamped', EULER, 'vector',
+              notes='x, y, z = first, second, third angle of `euler.sequence` '
+                    '(degrees with `euler.degrees`)'),
+    InputType('rotation_vector', 'geometry_msgs/msg/Vector3Stamped', ROTATION_VECTOR, 'vector',
+              notes='axis times angle (rad)'),
+)
+
+INPUTS = {entry.name: entry for entry in _INPUT_LIST}
+"""The input types by ``input_type`` value, in documentation order."""
+
+
+# Output messages -------------------------------------------------------------------
+
+
+class Panel(NamedTuple):
+    """
+    One panel of a ``rotation_bag plot`` figure.
+
+    Attributes
+    ----------
+    title, unit : str
+    labels : tuple of str
+        One per line drawn.
+    start : int
+        Index of the first number drawn in the message's numbers; ``len(labels)`` follow.
+
+    """
+
+    title: str
+    unit: str
+    labels: Tuple[str, ...]
+    start: int = 0
+
+
+@dataclass(frozen=True)
+class OutputMessage:
+    """
+    How the numbers of an output become a message of one type, and back.
+
+    Attributes
+    ----------
+    type_name : str
+        ROS message type.
+    build : callable
+        ``build(header, numbers) -> rclpy message``.
+    numbers : callable
+        ``numbers(message) -> sequence of float``: the numbers ``build`` was given
+        (works on rclpy messages and CDR views).
+    stamped_numbers : bool
+        The type is a std_msgs/Header followed by the numbers only, which
+        :mod:`rotation_node.bag.cdr` encodes without building a message.
+    layout : object, optional
+        std_msgs/MultiArrayLayout of a Float64MultiArray type.
+
+    """
+
+    type_name: str
+    build: Callable[[Any, Sequence[float]], Any]
+    numbers: Callable[[Any], Sequence[float]]
+    stamped_numbers: bool = False
+    layout: Any = None
+
+    @property
+    def message_class(self) -> type:
+        """The rclpy message class of :attr:`type_name`."""
+        return _message_class(self.type_name)
+
+    def encoder(self) -> Callable[[Any, Sequence[float]], bytes]:
+        """
+        Return ``encode(header, numbers) -> bytes``: the CDR of the built message.
+
+        Without building an rclpy message where the type allows it; the bytes
+        are those of ``rotation_node.bag.cdr.message_encoder`` for the built
+        message, or rclpy's serialisation for types that module cannot encode.
+        """
+        from rotation_node.bag import cdr
+        if self.stamped_numbers:
+            return cdr.fixed_layout_codec(self.type_name).stamped_encoder()
+        if self.layout is not None:
+            encode_data = cdr.float64_multi_array_encoder(self.layout)
+            return lambda header, numbers: encode_data(numbers)
+        encode = cdr.message_encoder(self.type_name)
+        if encode is None:
+            from rclpy.serialization import serialize_message
+            encode = serialize_message
+        build = self.build
+        return lambda header, numbers: encode(build(header, numbers))
+
+
+@functools.lru_cache(maxsize=None)
+def _message_class(type_name):
+    from rotation_node.bag.message_types import message_class
+    return message_class(type_name)
+
+
+def _build_vector3_stamped(header, numbers):
+    message = _message_class('geometry_msgs/msg/Vector3Stamped')()
+    message.header = header
+    vector = message.vector
+    vector.x, vector.y, vector.z = (float(v) for v in numbers)
+    return message
+
+
+def _build_quaternion_stamped(header, numbers):
+    message = _message_class('geometry_msgs/msg/QuaternionStamped')()
+    message.header = header
+    quaternion = message.quaternion
+    quaternion.x, quaternion.y, quaternion.z, quaternion.w = (float(v) for v in numbers)
+    return message
+
+
+VECTOR3_STAMPED = OutputMessage(
+    'geometry_msgs/msg/Vector3Stamped', _build_vector3_stamped,
+    lambda msg: _xyz(msg.vector), stamped_numbers=True)
+QUATERNION_STAMPED = OutputMessage(
+    'geometry_msgs/msg/QuaternionStamped', _build_quaternion_stamped,
+    lambda msg: _xyzw(msg.quaternion), stamped_numbers=True)
+
+
+def float64_multi_array(dimensions: Sequence[Tuple[str, int, int]]) -> OutputMessage:
+    """
+    Return the :class:`OutputMessage` of a std_msgs/Float64MultiArray with a fixed layout.
+
+    Parameters
+    ----------
+    dimensions : sequence of (label, size, stride)
+        The layout's dimensions, outermost first; ``data_offset`` is 0.
+
+    Notes
+    -----
+    Float64MultiArray has no header: these outputs carry no stamp or frame_id.
+
+    """
+    from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
+    layout = MultiArrayLayout(
+        dim=[MultiArrayDimension(label=label, size=size, stride=stride)
+             for label, size, stride in dimensions], data_offset=0)
+
+    def build(header, numbers):
+        message = Float64MultiArray()
+        message.layout = layout
+        message.data = numbers
+        return message
+    return OutputMessage('std_msgs/msg/Float64MultiArray', build, lambda msg: msg.data,
+                         layout=layout)
+
+
+@dataclass(frozen=True)
+class OutputType:
+    """
+    One value allowed in ``outputs``: what is published and how it is computed.
+
+    Attributes
+    ----------
+    name : str
+        The value in ``outputs``, and the relative topic it is published on.
+    message : OutputMessage
+        Message type, building, encoding.
+    needs : tuple of str
+        Named pipeline values (:data:`PIPELINE_VALUES`) the output is computed
+        from; the output is skipped for a message where one is unavailable.
+    compute : callable
+        ``compute(params, *values) -> numbers``, ``values`` those of ``needs`` in
+        order, ``numbers`` in the order :attr:`OutputMessage.build` takes them.
+    description : str
+        The published numbers in words, for the documentation tables.
+    panels : callable
+        ``panels(params) -> list of Panel``: how ``rotation_bag plot`` draws it.
+
+    """
+
+    name: str
+    message: OutputMessage
+    needs: Tuple[str, ...]
+    compute: Callable[..., Sequence[float]]
+    description: str
+    panels: Callable[[Any], list]
+
+    @property
+    def type_name(self) -> str:
+        """ROS message type of the output."""
+        return self.message.type_name
+
+    @property
+    def message_class(self) -> type:
+        """The rclpy message class of the output."""
+        return self.message.message_class
+
+
+def _value(params, value):
+    return value
+
+
+def _angle_unit(params):
+    return 'deg' if params.euler_degrees else 'rad'
+
+
+def _euler_panels(title, unit_suffix):
+    def panels(params):
+        from rotation_node.conversions import parse_sequence
+        kind = 'intrinsic' if parse_sequence(params.euler_sequence).intrinsic else 'extrinsic'
+        labels = tuple(f'{ordinal} ({letter})' for ordinal, letter
+                       in zip(('1st', '2nd', '3rd'), params.euler_sequence))
+        return [Panel(f'{title}, sequence {params.euler_sequence} ({kind})',
+                      _angle_unit(params) + unit_suffix, labels)]
+    return panels
+
+
+def _axis_angle(params, q):
+    axis, angle = conversions.axis_angle_from_quaternion(q)
+    return (*axis.tolist(), float(angle))
+
+
+def _quaternion_rate(params, q, omega):
+    return kinematics.quaternion_derivative(q, omega, frame=params.angular_velocity_output_frame)
+
+
+_XYZ = ('x', 'y', 'z')
+_XYZW = ('x', 'y', 'z', 'w')
+
+_OUTPUT_LIST = (
+    OutputType(
+        'quaternion', QUATERNION_STAMPED, (OUTPUT_QUATERNION,), _value,
+        'unit quaternion, w >= 0 (or sign-continuous over time with `quaternion.continuity`)',
+        lambda params: [Panel('Quaternion', '', _XYZW)]),
+    OutputType(
+        'euler', VECTOR3_STAMPED, (PUBLISHED_EULER,), _value,
+        'x, y, z = first, second, third angle of `euler.sequence`; first and third in '
+        '(-pi, pi] (or unwrapped with `euler.unwrap`), the middle in [-pi/2, pi/2] '
+        '(Tait-Bryan) or [0, pi] (proper Euler); degrees with `euler.degrees`',
+        _euler_panels('Euler angles', '')),
+    OutputType(
+        'rotation_vector', VECTOR3_STAMPED, (ORIENTATION,),
+        lambda params, q: conversions.rotation_vector_from_quaternion(q),
+        'unit axis times angle in [0, pi] (rad)',
+        lambda params: [Panel('Rotation vector', 'rad', _XYZ)]),
+    OutputType(
+        'axis_angle', float64_multi_array([('axis_angle', 4, 4)]), (ORIENTATION,), _axis_angle,
+        '`[x, y, z, angle]`: unit axis and angle in [0, pi] (rad), axis (1, 0, 0) for the '
+        'identity; one layout dimension `axis_angle` (size 4); no header',
+        lambda params: [Panel('Rotation axis', '', _XYZ),
+                        Panel('Rotation angle', 'rad', ('angle',), 3)]),
+    OutputType(
+        'matrix', float64_multi_array([('rows', 3, 9), ('cols', 3, 3)]), (ORIENTATION,),
+        lambda params, q: conversions.matrix_from_quaternion(q).ravel().tolist(),
+        'the rotation matrix (body to world) row-major; layout dimensions `rows` (size 3, '
+        'stride 9) and `cols` (size 3, stride 3); no header',
+        lambda params: [Panel('Rotation matrix (body to world)', '',
+                              tuple(f'R{row}{col}' for row in (1, 2, 3) for col in (1, 2, 3)))]),
+    OutputType(
+        'angular_velocity', VECTOR3_STAMPED, (ANGULAR_VELOCITY,), _value,
+        'rad/s in `angular_velocity.output_frame`',
+        lambda params: [Panel(f'Angular velocity ({params.angular_velocity_output_frame} '
+                              'frame)', 'rad/s', _XYZ)]),
+    OutputType(
+        'euler_rates', VECTOR3_STAMPED, (EULER_RATES,), _value,
+        'time derivatives of the three Euler angles (rad/s, or deg/s with `euler.degrees`)',
+        _euler_panels('Euler angle rates', '/s')),
+    OutputType(
+        'quaternion_rate', QUATERNION_STAMPED, (OUTPUT_QUATERNION, ANGULAR_VELOCITY),
+        _quaternion_rate, 'dq/dt (1/s) of the published quaternion',
+        lambda params: [Panel('Quaternion rate', '1/s', _XYZW)]),
+)
+
+OUTPUTS = {entry.name: entry for entry in _OUTPUT_LIST}
+"""The output types by name, in documentation order."""
+
+
+def input_panels(input_type: InputType, params: Any) -> list:
+    """
+    Return how ``rotation_bag plot`` draws a topic of a plain input type.
+
+    The numbers drawn are :func:`sample_numbers` of each message's sample.
+    """
+    if input_type.orientation_form == QUATERNION:
+        panels = [Panel('Orientation quaternion', '', _XYZW)]
+    elif input_type.orientation_form == EULER:
+        panels = _euler_panels('Euler angles', '')(params)
+    else:
+        panels = [Panel('Rotation vector', 'rad', _XYZ)]
+    if input_type.angular_velocity_field is not None:
+        panels.append(Panel('Angular velocity', 'rad/s', _XYZ, len(panels[0].labels)))
+    return panels
+
+
+def sample_numbers(input_type: InputType, sample: Sample) -> Tuple[float, ...]:
+    """Return the orientation, then any angular velocity, of a sample (NaN where unknown)."""
+    width = 4 if input_type.orientation_form == QUATERNION else 3
+    numbers = sample.orientation or (math.nan,) * width
+    if input_type.angular_velocity_field is not None:
+        numbers = (*numbers, *(sample.angular_velocity or (math.nan,) * 3))
+    return numbers
