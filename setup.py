@@ -21,7 +21,8 @@ setup(
     zip_safe=False,
     maintainer='rotation_node developers',
     maintainer_email='dev@rotation-node.invalid',
-    description='Exact, fast rotation and angular-velocity conversions for ROS 2 topics and MCAP bags.',
+    description='Exact, fast rotation and angular-velocity conversions for ROS 2 topics and '
+                'MCAP bags.',
     license='Apache-2.0',
     entry_points={
         'console_scripts': [

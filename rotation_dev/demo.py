@@ -23,7 +23,6 @@ import sys
 import time
 
 import numpy as np
-
 from rotation_dev.paths import config_path
 from rotation_node import conversions as rc
 
@@ -67,9 +66,8 @@ def _run_live(scene_bag, live_bag, params, topic, expected, log):
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
-
-    from rotation_node.bag.qos import recording_qos
     from rotation_node import messages
+    from rotation_node.bag.qos import recording_qos
     context = Context()
     rclpy.init(context=context)
     watcher = rclpy.create_node('rotation_demo_watcher', context=context)
@@ -114,7 +112,7 @@ def _run_live(scene_bag, live_bag, params, topic, expected, log):
         if player.returncode != 0:
             raise RuntimeError('rotation_bag play failed (see the log)')
         try:
-            spin_until(lambda: min(received.values()) >= expected, 30, 'the node\'s outputs')
+            spin_until(lambda: min(received.values()) >= expected, 30, "the node's outputs")
         except RuntimeError:
             pass  # the summary reports what is missing
         executor.spin_once(timeout_sec=DISCOVERY_SETTLE_S)  # the recorder is as fast as we are

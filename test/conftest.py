@@ -9,8 +9,8 @@ test starts so that subprocesses started by tests inherit them.
 import os
 import sys
 
-import pytest
 from hypothesis import settings
+import pytest
 
 # CI runs the same examples every time (a new random counterexample must not
 # turn an unrelated change red); locally every run explores new ones.

@@ -64,7 +64,7 @@ class LaunchContext:
 
 
 def _modules(share_directories):
-    """The stand-in modules, with ``get_package_share_directory`` over ``share_directories``."""
+    """Return the stand-in modules; ``get_package_share_directory`` reads ``share_directories``."""
     def get_package_share_directory(package_name):
         if package_name not in share_directories:
             raise LookupError(f"package '{package_name}' not found")  # PackageNotFoundError
@@ -92,7 +92,7 @@ def _modules(share_directories):
 
 def launch_description(path, share_directories):
     """
-    Run a launch file's ``generate_launch_description()`` with the stand-ins.
+    Load a launch file with the stand-ins and return the description it generates.
 
     Parameters
     ----------

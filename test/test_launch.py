@@ -11,9 +11,8 @@ fully qualified name, as rcl would match them.
 from importlib import metadata
 from pathlib import Path
 
-import pytest
-
 from launch_stubs import declared_arguments, launch_description, launched_nodes
+import pytest
 from rotation_node.errors import ParameterError
 from rotation_node.parameters import NodeParameters, parameters_from_yaml
 
@@ -49,7 +48,7 @@ def _load(name, share=None):
 
 
 def _node_parameters(node):
-    """The node's parameters as rcl resolves them: its parameters file, then the overrides."""
+    """Return the node's parameters as rcl resolves them: its parameters file, then overrides."""
     fq_name = '/'.join(('', *filter(None, [node.namespace.strip('/')]), node.name))
     params_file, *overrides = node.parameters
     assert Path(params_file).is_file(), f'parameters file {params_file} does not exist'

@@ -17,12 +17,11 @@ import subprocess
 import sys
 import xml.etree.ElementTree as ElementTree
 
+from launch_stubs import launch_description, launched_nodes
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
-
-from launch_stubs import launch_description, launched_nodes
 from ros_harness import RosProcess, TestNode
+from scipy.spatial.transform import Rotation
 
 ROOT = Path(__file__).resolve().parent.parent
 EXECUTABLES = ('rotation_node', 'rotation_bag', 'rotation_scene')
@@ -66,7 +65,7 @@ def _copy_sources(destination):
 
 @pytest.fixture(scope='module')
 def oracle_blocker(tmp_path_factory):
-    """A directory that, first on PYTHONPATH, makes every test oracle fail to import."""
+    """Return a directory that, first on PYTHONPATH, makes every test oracle fail to import."""
     directory = tmp_path_factory.mktemp('no_oracles')
     for name in ORACLES:
         (directory / name).mkdir()
@@ -98,7 +97,7 @@ def colcon_install(tmp_path_factory):
 
 @pytest.fixture(scope='module')
 def pip_install(tmp_path_factory):
-    """A non-editable ``pip install`` of a copy of the package; return its prefix."""
+    """Install a copy of the package with a non-editable ``pip install``; return its prefix."""
     sources = _copy_sources(tmp_path_factory.mktemp('pip_src') / 'rotation_node')
     prefix = tmp_path_factory.mktemp('pip_prefix')
     result = subprocess.run(
@@ -142,8 +141,8 @@ def test_installed_launch_files_find_their_parameters_files(colcon_install):
         assert params_file.is_file() and params_file.is_relative_to(share), launch_file.name
 
 
-def test_installed_node_starts_without_oracles_and_stops_on_ctrl_c(colcon_install,
-                                                                  oracle_blocker):
+def test_installed_node_starts_without_oracles_and_stops_on_ctrl_c(
+        colcon_install, oracle_blocker):
     env = {'PYTHONPATH': _pythonpath(oracle_blocker, colcon_install / SITE,
                                      *filter(None, [os.environ.get('PYTHONPATH')]))}
     exe = colcon_install / 'lib' / 'rotation_node' / 'rotation_node'
@@ -233,7 +232,7 @@ def _package_xml_keys(*tags):
 
 
 def _missing_keys(imports, declared, local):
-    """The imports whose key is not declared: ``{module: (key, file)}``."""
+    """Return the imports whose key is not declared: ``{module: (key, file)}``."""
     missing = {}
     for module, path in imports.items():
         if module in local:

@@ -13,10 +13,9 @@ import sys
 import time
 
 import pytest
-
-from rotation_node.kinematics import INTEGRATION_METHODS
 from rotation_dev.paths import REPOSITORY
 from rotation_dev.study import integration, measure, methods
+from rotation_node.kinematics import INTEGRATION_METHODS
 
 STUDY = (sys.executable, '-m', 'rotation_dev.study')
 #: Bound on one quick run (it takes about a minute on an idle machine).
@@ -66,7 +65,7 @@ def _section(sections, prefix):
 
 
 def _number(cell):
-    """The first number of a cell (``'1.4e+16 (3 rad)'`` -> 1.4e16); NaN if there is none."""
+    """Return the first number of a cell (``'1.4e+16 (3 rad)'`` -> 1.4e16), or NaN."""
     match = re.search(r'[-+]?\d+(\.\d+)?(e[-+]?\d+)?', cell)
     return float(match.group(0)) if match else math.nan
 

@@ -11,9 +11,8 @@ import os
 import subprocess
 import sys
 
-from rosbags.typesys import get_typestore, Stores
-
 from ros_harness import RosProcess, TestNode
+from rosbags.typesys import get_typestore, Stores
 
 #: Environment of a process started from a shell that knows nothing of ROS: the ROS
 #: wheels' start-up hook (``ros_wheels_bootstrapper``) sets the library path afresh.
@@ -49,7 +48,7 @@ def build():
 
 
 def _fields(transforms):
-    """The test tuple of each transform of a TFMessage (rclpy's or rosbags')."""
+    """Return the test tuple of each transform of a TFMessage (rclpy's or rosbags')."""
     return tuple(
         (t.header.frame_id, t.child_frame_id, t.header.stamp.sec, t.header.stamp.nanosec,
          (t.transform.translation.x, t.transform.translation.y, t.transform.translation.z),

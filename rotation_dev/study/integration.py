@@ -26,7 +26,6 @@ import dataclasses
 from typing import Tuple
 
 import numpy as np
-
 from rotation_dev.paths import config_path
 from rotation_node.conversions import quaternion_distance
 from rotation_node.kinematics import integrate_angular_velocity, INTEGRATION_METHODS

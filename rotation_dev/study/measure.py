@@ -26,10 +26,10 @@ from typing import Callable, Dict, Optional, Tuple
 import warnings
 
 import numpy as np
-
+from rotation_dev.hard_cases import (
+    hard_matrices, hard_quaternions, hard_rotation_vectors, near_gimbal_lock_angles,
+    noisy_matrices)
 from rotation_node import conversions as rc
-from rotation_dev.hard_cases import (hard_matrices, hard_quaternions, hard_rotation_vectors,
-                                      near_gimbal_lock_angles, noisy_matrices)
 
 from . import methods, reference
 

@@ -303,8 +303,8 @@ def performance_markdown(runs, *, quick, command, environment):
             summary, growth = _library_tables(run.results)
             parts += [
                 'Single sample: time per call, validation included (shape (4,), (3,) or (3, 3)); '
-                'the best turn of 200 calls, in turns interleaved with scipy\'s same conversion and '
-                'the reference, over several passes through all rows.'
+                "the best turn of 200 calls, in turns interleaved with scipy's same conversion "
+                'and the reference, over several passes through all rows.'
                 ' Batch: time per rotation. Ratio = package / scipy (lower is better); '
                 'speed-up = scipy / package (higher is better).', '', summary, '',
                 'Time per rotation (ns) as the batch grows, package / scipy:', '', growth]
