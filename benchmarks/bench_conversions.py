@@ -11,7 +11,14 @@ For every conversion it prints, measured in this run on this machine:
   conversion), measured next to each row;
 - batch of 10^6: time per rotation for both and the speed-up scipy / package
   (target >= 2, >= 3 for Euler angles);
+- memory floor: the time numpy takes to read the batch's input bytes and
+  write its output bytes once (``_machine.copy_floor``), per rotation, and the
+  package's batch time as a multiple of it;
 - growth: time per rotation from 10^2 to 10^6 samples for both.
+
+The first lines say where it ran: CPU model, the SIMD levels numpy found
+(its ``arctan2``, for one, is SIMD only with AVX-512) and the CPU numba
+compiled the kernels for.
 
 Times are the best of several repeats (``timeit``), after a warm-up call that
 also loads the compiled kernels. Single samples are timed in turns of 200
@@ -25,11 +32,11 @@ import argparse
 import json
 import math
 import sys
-import timeit
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from _machine import best_seconds, copy_floor, print_machine
 from rotation_node import conversions as rc
 
 SEQ = 'xyz'
@@ -46,38 +53,52 @@ def _inputs(n, rng):
     }
 
 
-# name -> (package call, scipy call, target batch speed-up)
+# name -> (package call, scipy call, target batch speed-up, the inputs it reads)
 CONVERSIONS = {
     'matrix_from_quaternion': (lambda d: rc.matrix_from_quaternion(d['q']),
-                               lambda d: Rotation.from_quat(d['q']).as_matrix(), 2.0),
+                               lambda d: Rotation.from_quat(d['q']).as_matrix(), 2.0, ('q',)),
     'quaternion_from_matrix': (lambda d: rc.quaternion_from_matrix(d['R']),
-                               lambda d: Rotation.from_matrix(d['R']).as_quat(), 2.0),
+                               lambda d: Rotation.from_matrix(d['R']).as_quat(), 2.0, ('R',)),
     'euler_from_quaternion': (lambda d: rc.euler_from_quaternion(d['q'], SEQ),
-                              lambda d: Rotation.from_quat(d['q']).as_euler(SEQ), 3.0),
+                              lambda d: Rotation.from_quat(d['q']).as_euler(SEQ), 3.0, ('q',)),
     'quaternion_from_euler': (lambda d: rc.quaternion_from_euler(d['angles'], SEQ),
-                              lambda d: Rotation.from_euler(SEQ, d['angles']).as_quat(), 3.0),
+                              lambda d: Rotation.from_euler(SEQ, d['angles']).as_quat(),
+                              3.0, ('angles',)),
     'euler_from_matrix': (lambda d: rc.euler_from_matrix(d['R'], SEQ),
-                          lambda d: Rotation.from_matrix(d['R']).as_euler(SEQ), 3.0),
+                          lambda d: Rotation.from_matrix(d['R']).as_euler(SEQ), 3.0, ('R',)),
     'matrix_from_euler': (lambda d: rc.matrix_from_euler(d['angles'], SEQ),
-                          lambda d: Rotation.from_euler(SEQ, d['angles']).as_matrix(), 3.0),
+                          lambda d: Rotation.from_euler(SEQ, d['angles']).as_matrix(),
+                          3.0, ('angles',)),
     'rotation_vector_from_quaternion': (lambda d: rc.rotation_vector_from_quaternion(d['q']),
-                                        lambda d: Rotation.from_quat(d['q']).as_rotvec(), 2.0),
+                                        lambda d: Rotation.from_quat(d['q']).as_rotvec(),
+                                        2.0, ('q',)),
     'quaternion_from_rotation_vector': (lambda d: rc.quaternion_from_rotation_vector(d['v']),
-                                        lambda d: Rotation.from_rotvec(d['v']).as_quat(), 2.0),
+                                        lambda d: Rotation.from_rotvec(d['v']).as_quat(),
+                                        2.0, ('v',)),
     'rotation_vector_from_matrix': (lambda d: rc.rotation_vector_from_matrix(d['R']),
-                                    lambda d: Rotation.from_matrix(d['R']).as_rotvec(), 2.0),
+                                    lambda d: Rotation.from_matrix(d['R']).as_rotvec(),
+                                    2.0, ('R',)),
     'matrix_from_rotation_vector': (lambda d: rc.matrix_from_rotation_vector(d['v']),
-                                    lambda d: Rotation.from_rotvec(d['v']).as_matrix(), 2.0),
+                                    lambda d: Rotation.from_rotvec(d['v']).as_matrix(),
+                                    2.0, ('v',)),
     'axis_angle_from_quaternion': (lambda d: rc.axis_angle_from_quaternion(d['q']),
-                                   lambda d: Rotation.from_quat(d['q']).as_rotvec(), 2.0),
+                                   lambda d: Rotation.from_quat(d['q']).as_rotvec(), 2.0, ('q',)),
     'quaternion_from_axis_angle': (lambda d: rc.quaternion_from_axis_angle(d['axis'], d['angle']),
                                    lambda d: Rotation.from_rotvec(
-                                       d['axis'] * d['angle'][..., None]).as_quat(), 2.0),
+                                       d['axis'] * d['angle'][..., None]).as_quat(),
+                                   2.0, ('axis', 'angle')),
 }
 
 
 def _best_time(function, data, number, repeat):
-    return min(timeit.repeat(lambda: function(data), number=number, repeat=repeat)) / number
+    return best_seconds(lambda: function(data), number, repeat)
+
+
+def _floor_time(function, keys, data, repeat):
+    """Best time of :func:`copy_floor` for ``function``'s inputs and outputs."""
+    outputs = function(data)
+    size = sum(np.size(a) for a in (outputs if isinstance(outputs, tuple) else (outputs,)))
+    return best_seconds(copy_floor([data[key] for key in keys], (size,)), 1, repeat)
 
 
 def _interleaved_best_times(functions, data, number, repeat):
@@ -112,24 +133,26 @@ def main(argv=None):
     results = {}
 
     passes, turns = 4, 5 * repeat
+    print_machine()
     print(f'rotation_node.conversions vs scipy {__import__("scipy").__version__} '
           f'(numpy {np.__version__}); batches best of {repeat}; single samples best of '
           f'{passes} passes over all rows x {turns} interleaved turns of 200 calls')
     print('single: ratio = ours / scipy Rotation.from_quat(q).as_euler(seq), the reference '
           'of issue 2, measured next to each row')
-    for ours, theirs, _ in CONVERSIONS.values():
+    for ours, theirs, *_ in CONVERSIONS.values():
         ours(single), theirs(single), ours(batches[sizes[-1]])  # warm up, load kernels
     # Single samples: many short turns, in several passes through all rows, so
     # that neither a slow second nor a slow phase of the machine decides a row.
     single_best = {name: [math.inf] * 3 for name in CONVERSIONS}
     for _ in range(passes):
-        for name, (ours, theirs, _) in CONVERSIONS.items():
+        for name, (ours, theirs, *_) in CONVERSIONS.items():
             times = _interleaved_best_times((ours, theirs, _reference), single, 200, turns)
             single_best[name] = [min(a, b) for a, b in zip(single_best[name], times)]
 
     print(f'\n{"conversion":34s} {"single: ours":>13s} {"scipy":>9s} {"ref.":>9s} {"ratio":>7s}   '
-          f'{"10^%d: ours" % largest:>12s} {"scipy":>9s} {"speed-up":>9s}')
-    for name, (ours, theirs, target) in CONVERSIONS.items():
+          f'{"10^%d: ours" % largest:>12s} {"scipy":>9s} {"speed-up":>9s} {"floor":>8s} '
+          f'{"/floor":>7s}')
+    for name, (ours, theirs, target, keys) in CONVERSIONS.items():
         single_ours, single_scipy, single_reference = single_best[name]
         growth = {}
         for n in sizes:
@@ -137,6 +160,7 @@ def main(argv=None):
             growth[n] = (_best_time(ours, batches[n], number, repeat) / n,
                          _best_time(theirs, batches[n], number, repeat) / n)
         batch_ours, batch_scipy = growth[sizes[-1]]
+        floor = _floor_time(ours, keys, batches[sizes[-1]], repeat) / sizes[-1]
         results[name] = {
             'single_us': single_ours * 1e6, 'single_scipy_us': single_scipy * 1e6,
             'single_reference_us': single_reference * 1e6,
@@ -144,13 +168,15 @@ def main(argv=None):
             'single_ratio_same_call': single_ours / single_scipy,
             'batch_n': sizes[-1], 'batch_ns': batch_ours * 1e9, 'batch_scipy_ns': batch_scipy * 1e9,
             'batch_speedup': batch_scipy / batch_ours, 'batch_target': target,
+            'floor_ns': floor * 1e9, 'floor_ratio': batch_ours / floor,
             'growth_ns': {str(n): [o * 1e9, s * 1e9] for n, (o, s) in growth.items()},
         }
         r = results[name]
         print(f'{name:34s} {r["single_us"]:10.2f} us {r["single_scipy_us"]:6.2f} us '
               f'{r["single_reference_us"]:6.2f} us {r["single_ratio"]:7.3f}   '
               f'{r["batch_ns"]:9.1f} ns {r["batch_scipy_ns"]:6.1f} ns '
-              f'{r["batch_speedup"]:8.1f}x')
+              f'{r["batch_speedup"]:8.1f}x {r["floor_ns"]:5.1f} ns '
+              f'{r["floor_ratio"]:6.1f}x')
 
     print('\ntime per rotation (ns) as the batch grows, ours / scipy')
     print(f'{"conversion":34s} ' + ' '.join(f'{"10^%d" % int(np.log10(n)):>13s}' for n in sizes))
@@ -162,6 +188,10 @@ def main(argv=None):
     misses = [n for n, r in results.items() if r['batch_speedup'] < r['batch_target']]
     print(f'\nworst single-sample ratio: {worst_single:.3f} (target <= 0.10)')
     print(f'batch targets missed: {", ".join(misses) if misses else "none"}')
+    worst_floor = max(results.items(), key=lambda item: item[1]['floor_ratio'])
+    print(f'memory floor: every batch of 10^{largest} within '
+          f'{worst_floor[1]["floor_ratio"]:.1f}x of the time to read its input and write its '
+          f'output once (numpy copy, one thread), worst {worst_floor[0]}')
     if args.json:
         with open(args.json, 'w') as f:
             json.dump(results, f, indent=1)

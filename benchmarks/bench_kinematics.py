@@ -7,24 +7,27 @@ Printed, all measured in this run on this machine:
 1. single sample (what the node does per message): time per call, validation
    included, of each public function and of a peer doing the same job without
    validation (numpy formula or scipy), and the ratio package / peer;
-2. batch of 10^5 samples: time per sample for both and the speed-up peer / package;
+2. batch of 10^5 samples: time per sample for both, the speed-up peer /
+   package, and the memory floor (numpy reading the inputs and writing an
+   output of the same size once) with the package's time as a multiple of it;
 3. attitude integration on coning motion (NUMERICS.md): for each method the
    largest geodesic error at 100 and 200 steps over 2 s, the observed order
    log2(e100 / e200), rate evaluations per step and time per step; scipy's
    ``solve_ivp`` (RK45, adaptive) on the same problem as the peer.
 
-Times are the best of several ``timeit`` repeats after a warm-up call (which
+The first lines say where it ran (CPU model, numpy's SIMD levels, the CPU
+numba compiled for). Times are the best of several ``timeit`` repeats after a warm-up call (which
 also loads the compiled kernels). Usage::
 
     .venv/bin/python benchmarks/bench_kinematics.py [--quick]
 """
 import argparse
-import timeit
 
 import numpy as np
 from scipy.integrate import solve_ivp
 from scipy.spatial.transform import Rotation
 
+from _machine import best_seconds, copy_floor, print_machine
 from rotation_node import conversions as rc
 from rotation_node import kinematics as rk
 
@@ -34,7 +37,7 @@ EVALUATIONS = {'euler': 1, 'midpoint_exp': 1, 'rk4': 3, 'magnus4': 2, 'coning2':
 
 def best_time(function, number, repeat):
     function()
-    return min(timeit.repeat(function, number=number, repeat=repeat)) / number
+    return best_seconds(function, number, repeat)
 
 
 # ---------------------------------------------------------------- peers (no validation)
@@ -115,6 +118,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     number, repeat = (1000, 3) if args.quick else (5000, 5)
     rng = np.random.default_rng(1)
+    print_machine()
 
     q = rc.canonical_quaternion(rng.normal(size=4))
     q2 = np.stack([q, rc.quaternion_product(q, rc.quaternion_from_rotation_vector([0, 0, 0.01]))])
@@ -149,20 +153,24 @@ def main(argv=None):
     angle_batch = rng.uniform(-1.2, 1.2, size=(n, 3))
     t_series = np.arange(n) * 0.01
     series = rk.integrate_angular_velocity(qs[0], ws * 0.1, t_series, method='euler')
-    batch = [
+    batch = [   # name, package, peer, the package's inputs
         ('quaternion_derivative', lambda: rk.quaternion_derivative(qs, ws),
-         lambda: numpy_quaternion_derivative(qs, ws)),
+         lambda: numpy_quaternion_derivative(qs, ws), (qs, ws)),
         ('euler_rates_from_angular_velocity', lambda: rk.euler_rates_from_angular_velocity(
-            angle_batch, ws, 'xyz'), lambda: numpy_euler_rates_xyz(angle_batch, ws)),
+            angle_batch, ws, 'xyz'), lambda: numpy_euler_rates_xyz(angle_batch, ws),
+         (angle_batch, ws)),
         ('angular_velocity_from_quaternions', lambda: rk.angular_velocity_from_quaternions(
-            series, t_series), lambda: scipy_finite_difference(series, 0.01)),
+            series, t_series), lambda: scipy_finite_difference(series, 0.01), (series, t_series)),
     ]
     print(f'\n2. batch of {n} (ns per sample)')
-    print(f'   {"function":46s} {"package":>8s} {"peer":>8s}  speed-up')
-    for name, ours, peer in batch:
+    print(f'   {"function":46s} {"package":>8s} {"peer":>8s}  speed-up {"floor":>7s} '
+          f'{"/floor":>7s}')
+    for name, ours, peer, inputs in batch:
         t_ours = best_time(ours, 1, max(3, repeat // 2)) / n
         t_peer = best_time(peer, 1, max(3, repeat // 2)) / n
-        print(f'   {name:46s} {t_ours * 1e9:8.1f} {t_peer * 1e9:8.1f}  {t_peer / t_ours:6.1f}x')
+        t_floor = best_time(copy_floor(inputs, ours().shape), 1, max(3, repeat // 2)) / n
+        print(f'   {name:46s} {t_ours * 1e9:8.1f} {t_peer * 1e9:8.1f}  {t_peer / t_ours:6.1f}x '
+              f'{t_floor * 1e9:7.2f} {t_ours / t_floor:6.1f}x')
 
     print(f'\n3. coning motion, {DURATION:g} s (half-angle {CONE_HALF_ANGLE}, {CONE_RATE} rad/s), '
           'rate function')

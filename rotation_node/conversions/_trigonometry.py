@@ -1,10 +1,14 @@
 """
-``sin`` and ``cos`` of one angle together, in compiled code that vectorises.
+``sin`` and ``cos`` of one angle together, and ``atan2``, in compiled code that vectorises.
 
-numba calls the C library's scalar ``sin`` and ``cos`` (PyPI's llvmlite has no
-SVML), ~15 ns each here, and a call inside a loop stops LLVM from vectorising
-it. Every conversion that builds a rotation from an angle needs both, so this
-module evaluates them the way fdlibm does, with arithmetic only:
+numba calls the C library's scalar ``sin``, ``cos`` and ``atan2`` (PyPI's
+llvmlite has no SVML), ~15-20 ns each here, and a call inside a loop stops
+LLVM from vectorising it; numpy's ``arctan2`` is SIMD only on AVX-512
+machines and calls the same scalar C function elsewhere. This module
+evaluates them the way fdlibm does, with arithmetic and selects only, so that
+a loop of them compiles to SIMD code on any x86-64 (or other) machine.
+
+``sin`` and ``cos``:
 
 - Cody-Waite reduction ``r = a - n pi/2`` with pi/2 split in two (33 + 53
   bits, so ``n * PIO2_HI`` is exact for ``|n| < 2^20``), keeping the rounding
@@ -22,8 +26,32 @@ Round-to-nearest uses the ``1.5 * 2^52`` trick, which is exact under numba's
 default strict floating point. Beyond ``|a| = REDUCTION_LIMIT`` the reduction
 would lose accuracy, and :func:`sin_cos` falls back to the C library (no
 rotation in practice: 5e5 rad is 80000 turns).
+
+``atan2`` (:func:`atan2`): fdlibm's ``atan`` polynomial on ``|r| < 0.47``
+after reducing ``t = |y| / |x|`` to ``r = (t - c) / (1 + c t)`` about
+``c = 0, 1/2, 1, 3/2`` or ``inf``, with three changes that make it both
+branch-free and more accurate than fdlibm (within 0.8 ulp against 300-bit
+mpmath, 0.76 the worst found, next to ``t = 7/16``; fdlibm's own reduction
+~1.3 ulp measured the same way):
+
+- ``r``'s numerator and denominator are formed from ``|x|`` and ``|y|``
+  rather than from the rounded ``t``, exactly as unevaluated sums (Sterbenz
+  subtractions and Fast2Sum), and the rounding error of the quotient is
+  recovered with a fused multiply-add: ``r + r_lo`` is the reduced argument to
+  ~2^-100;
+- ``pi - atan(c)`` for ``x < 0`` comes from a table of double-double
+  constants instead of a final subtraction from pi;
+- the interval is chosen by comparing ``|y|`` with ``c |x|``, the table entry
+  by selects, and arguments beyond ``2^1000`` or below ``2^-900`` are first
+  scaled by a power of two (exact), so no special case takes a branch.
+
+Signed zeros are handled as C's ``atan2`` does (``atan2(+-0, -0) = +-pi``);
+arguments must be finite.
 """
 import math
+
+from numba import types
+from numba.extending import intrinsic
 
 from ._quaternion import jit
 
@@ -104,3 +132,125 @@ def sin_cos_in_place_kernel(a, cos_out):
     else:
         for i in range(a.shape[0]):
             a[i], cos_out[i] = reduced_sin_cos(a[i])
+
+
+@intrinsic
+def fused_multiply_add(typingctx, a, b, c):
+    """``a * b + c`` rounded once (LLVM's ``fma``; a C library call on CPUs without FMA)."""
+    signature = types.float64(types.float64, types.float64, types.float64)
+
+    def codegen(context, builder, signature, args):
+        return builder.fma(*args)
+
+    return signature, codegen
+
+
+# fdlibm s_atan.c: atan(r) = r - r^3 (T0 + T1 r^2 + ... + T10 r^20) on |r| <= 7/16.
+_T0 = 3.33333333333329318027e-01
+_T1 = -1.99999999998764832476e-01
+_T2 = 1.42857142725034663711e-01
+_T3 = -1.11111104054623557880e-01
+_T4 = 9.09088713343650656196e-02
+_T5 = -7.69187620504482999495e-02
+_T6 = 6.66107313738753120669e-02
+_T7 = -5.83357013379057348645e-02
+_T8 = 4.97687799461593236017e-02
+_T9 = -3.65315727442169155270e-02
+_T10 = 1.62858201153657823623e-02
+# atan(c) (x >= 0) and pi - atan(c) (x < 0) as hi + lo, for c = 0, 1/2, 1, 3/2, inf
+# (300-bit mpmath, rounded to nearest; the x >= 0 values are fdlibm's atanhi/atanlo).
+_ATAN_0, _ATAN_0_LO = 0.0, 0.0
+_ATAN_HALF, _ATAN_HALF_LO = 0.4636476090008061, 2.2698777452961687e-17
+_ATAN_1, _ATAN_1_LO = 0.7853981633974483, 3.061616997868383e-17
+_ATAN_3HALVES, _ATAN_3HALVES_LO = 0.982793723247329, 1.3903311031230998e-17
+_ATAN_INF, _ATAN_INF_LO = 1.5707963267948966, 6.123233995736766e-17
+_PI_MINUS_ATAN_0, _PI_MINUS_ATAN_0_LO = 3.141592653589793, 1.2246467991473532e-16
+_PI_MINUS_ATAN_HALF, _PI_MINUS_ATAN_HALF_LO = 2.677945044588987, 1.5527705369303147e-16
+_PI_MINUS_ATAN_1, _PI_MINUS_ATAN_1_LO = 2.356194490192345, 9.184850993605148e-17
+_PI_MINUS_ATAN_3HALVES, _PI_MINUS_ATAN_3HALVES_LO = 2.158798930342464, 2.1958367134601997e-16
+# Arguments scaled (by a power of two) into [2^-900, 2^1000]: the sums below
+# cannot overflow and the fused multiply-add's residual cannot underflow.
+_TINY, _SCALE_UP = 2.0 ** -900, 2.0 ** 600
+_HUGE, _SCALE_DOWN = 2.0 ** 1000, 2.0 ** -8
+
+
+@jit
+def _reduced_atan_argument(ax, ay):
+    """
+    ``|y| / |x|`` reduced about ``c``: ``(num, num_lo, den, den_lo)`` and the interval flags.
+
+    ``(num + num_lo) / (den + den_lo)`` equals ``(t - c) / (1 + c t)`` for
+    ``t = ay / ax`` exactly (each pair is an unevaluated sum), with ``c`` the
+    first flag set of ``(c = inf, c = 3/2, c = 1, c = 1/2)``, else 0.
+    """
+    beyond_2, beyond_1, beyond_half, beyond_0 = (ay > 2.4375 * ax, ay > 1.1875 * ax,
+                                                 ay > 0.6875 * ax, ay > 0.4375 * ax)
+    two_ax, two_ay = ax + ax, ay + ay
+    # c = 3/2: (2ay - 3ax) / (2ax + 3ay), 3ax and 3ay by Fast2Sum, 2ay - 3ax exact (Sterbenz).
+    three_ax = two_ax + ax
+    three_ax_lo = ax - (three_ax - two_ax)
+    three_ay = two_ay + ay
+    three_ay_lo = ay - (three_ay - two_ay)
+    den_3halves = three_ay + two_ax
+    den_3halves_lo = (two_ax - (den_3halves - three_ay)) + three_ay_lo
+    # c = 1: (ay - ax) / (ay + ax), the difference exact (Sterbenz), the sum by Fast2Sum.
+    den_1 = ay + ax
+    den_1_lo = min(ax, ay) - (den_1 - max(ax, ay))
+    # c = 1/2: (2ay - ax) / (2ax + ay), the difference exact, the sum by Fast2Sum.
+    den_half = two_ax + ay
+    den_half_lo = ay - (den_half - two_ax)
+    if beyond_2:       # c = inf: -ax / ay
+        return -ax, 0.0, ay, 0.0, beyond_2, beyond_1, beyond_half, beyond_0
+    if beyond_1:
+        return (two_ay - three_ax, -three_ax_lo, den_3halves, den_3halves_lo,
+                beyond_2, beyond_1, beyond_half, beyond_0)
+    if beyond_half:
+        return ay - ax, 0.0, den_1, den_1_lo, beyond_2, beyond_1, beyond_half, beyond_0
+    if beyond_0:
+        return two_ay - ax, 0.0, den_half, den_half_lo, beyond_2, beyond_1, beyond_half, beyond_0
+    return ay, 0.0, ax, 0.0, beyond_2, beyond_1, beyond_half, beyond_0
+
+
+@jit
+def atan2(y, x):
+    """
+    ``atan2(y, x)`` of finite ``y`` and ``x`` to 0.8 ulp, without calls or branches.
+
+    See the module for the method. Values and signed zeros as C's ``atan2``.
+    """
+    ax, ay = abs(x), abs(y)
+    largest = max(ax, ay)
+    scale = _SCALE_UP if largest < _TINY else (_SCALE_DOWN if largest > _HUGE else 1.0)
+    ax, ay = ax * scale, ay * scale
+    num, num_lo, den, den_lo, c_inf, c_3halves, c_1, c_half = _reduced_atan_argument(ax, ay)
+    den = 1.0 if den == 0.0 else den     # x = y = 0: r = 0
+    negative_x = math.copysign(1.0, x) < 0.0
+    if negative_x:
+        hi = (_ATAN_INF if c_inf else _PI_MINUS_ATAN_3HALVES if c_3halves else
+              _PI_MINUS_ATAN_1 if c_1 else _PI_MINUS_ATAN_HALF if c_half else _PI_MINUS_ATAN_0)
+        lo = (_ATAN_INF_LO if c_inf else _PI_MINUS_ATAN_3HALVES_LO if c_3halves else
+              _PI_MINUS_ATAN_1_LO if c_1 else _PI_MINUS_ATAN_HALF_LO if c_half else
+              _PI_MINUS_ATAN_0_LO)
+    else:
+        hi = (_ATAN_INF if c_inf else _ATAN_3HALVES if c_3halves else
+              _ATAN_1 if c_1 else _ATAN_HALF if c_half else _ATAN_0)
+        lo = (_ATAN_INF_LO if c_inf else _ATAN_3HALVES_LO if c_3halves else
+              _ATAN_1_LO if c_1 else _ATAN_HALF_LO if c_half else _ATAN_0_LO)
+    inverse = 1.0 / den
+    r = num * inverse
+    # The exact quotient is r + r_lo: the residual num - r den is exact (fma).
+    r_lo = (fused_multiply_add(-r, den, num) + num_lo - r * den_lo) * inverse
+    r = -r if negative_x else r       # pi - atan(c) - atan(r)
+    r_lo = -r_lo if negative_x else r_lo
+    z = r * r
+    w = z * z
+    odd = z * (_T0 + w * (_T2 + w * (_T4 + w * (_T6 + w * (_T8 + w * _T10)))))
+    even = w * (_T1 + w * (_T3 + w * (_T5 + w * (_T7 + w * _T9))))
+    return math.copysign(hi - ((r * (odd + even) - (lo + r_lo)) - r), y)
+
+
+@jit
+def atan2_in_place_kernel(y, x):
+    """``y <- atan2(y, x)`` for 1-d float64 arrays of finite values: one vectorised loop."""
+    for i in range(y.shape[0]):
+        y[i] = atan2(y[i], x[i])
