@@ -28,7 +28,7 @@ TRANSFORMS = (
      (-0.5, 0.5, -0.5, 0.5)),
 )
 
-BUILD_MESSAGE = f'''
+BUILD_MESSAGE = f"""
 from geometry_msgs.msg import TransformStamped
 from tf2_msgs.msg import TFMessage
 
@@ -44,7 +44,7 @@ def build():
         q.x, q.y, q.z, q.w = rotation
         transforms.append(t)
     return TFMessage(transforms=transforms)
-'''
+"""
 
 
 def _fields(transforms):

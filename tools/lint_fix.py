@@ -50,7 +50,7 @@ def sort_imports(paths):
 def fix_docstrings(paths):
     """Fix D413, D401 and D403 findings; return the findings left to a person."""
     todo = {}
-    pattern = (r"(\S+\.py):(\d+) (?:in .*|at module level): (D401|D403|D413): "
+    pattern = (r'(\S+\.py):(\d+) (?:in .*|at module level): (D401|D403|D413): '
                r".*?(?:found '(.*)'\))?$")
     for m in findings('ament_pep257', paths, pattern):
         todo.setdefault(m.group(1), []).append((int(m.group(2)), m.group(3), m.group(4)))
