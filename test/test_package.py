@@ -147,9 +147,12 @@ def test_installed_node_starts_without_oracles_and_stops_on_ctrl_c(
                                      *filter(None, [os.environ.get('PYTHONPATH')]))}
     exe = colcon_install / 'lib' / 'rotation_node' / 'rotation_node'
     with TestNode() as client, RosProcess([exe], env=env) as node:
-        appeared = client.spin_until(
-            lambda: 'rotation_node' in client.node.get_node_names(), timeout=60)
-        assert appeared, node.stop()
+        # Ready once it subscribes to its input, after compiling its kernels (a Ctrl-C
+        # while numba compiles can be lost in a ctypes callback).
+        ready = client.spin_until(lambda: client.node.count_subscribers('/input') > 0,
+                                  timeout=120)
+        assert ready, node.stop()
+        assert 'rotation_node' in client.node.get_node_names()
         assert node.stop() == 0, node.output
 
 
