@@ -23,6 +23,7 @@ ensure_env() {
   "$venv/bin/python" -m pip install --quiet -r requirements.txt
   "$venv/bin/python" -m pip install --quiet --no-deps -e .
   tools/build_tf2_msgs.sh "$venv"
+  "$venv/bin/python" -m rotation_node.conversions.warm_up   # compile and cache every kernel once
   echo "$want" > "$venv/.installed"
 }
 

@@ -5,9 +5,22 @@ Subscribes the relative topic ``input`` (type chosen by the ``input_type``
 parameter) and publishes each output listed in ``outputs`` on the relative
 topic of the same name; the conversion itself is
 :class:`rotation_node.pipeline.ConversionPipeline`, the same code that
-``rotation_bag convert`` runs on bags. Parameters are declared from the table in
-:mod:`rotation_node.parameters`; a change at runtime is validated first, then
-takes effect on the next message. Counters and the current conventions are
+``rotation_bag convert`` runs on bags. The subscribed topics and the message
+types come from :mod:`rotation_node.messages`.
+
+Parameters are declared from the table in :mod:`rotation_node.parameters`. At
+start-up the node reads its ``--params-file`` files itself with the loader
+``rotation_bag convert`` uses, so both accept and reject the same files: an
+unreadable or malformed file, a file without a section for this node, an
+unknown parameter (in a file or ``-p``) or an invalid value ends the process
+with one line on stderr and exit status 1.
+
+At runtime, ROS 2 applies parameter changes as its services define: a
+``set_parameters`` request with several parameters checks and applies each
+one on its own (some may be applied while others are rejected), while
+``set_parameters_atomically`` applies all of them or none. Every value is
+checked against the table before it is accepted; an accepted change takes
+effect on the next message. Counters and the current conventions are
 published on ``/diagnostics`` once a second.
 
 Run it with, for example::
@@ -17,6 +30,7 @@ Run it with, for example::
 import gc
 import sys
 import time
+from typing import List, Optional, Sequence
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -32,12 +46,67 @@ from rotation_node import messages
 from rotation_node.bag.qos import qos_profile
 from rotation_node.errors import ParameterError
 from rotation_node.parameters import (
-    NODE_NAME, PARAMETERS, PARAMETERS_BY_NAME, NodeParameters)
+    NODE_NAME, PARAMETERS, PARAMETERS_BY_NAME, ROS_BUILTIN_PARAMETERS, NodeParameters,
+    parameters_file_sections, parameters_from_yaml, unknown_parameter_error)
 from rotation_node.pipeline import (
     DROP_REASONS, SKIP_REASONS, ConversionPipeline, warm_up_conversions)
 
 DIAGNOSTICS_PERIOD_S = 1.0
 ISSUE_LOG_PERIOD_S = 5.0
+
+
+# ROS arguments (after --ros-args, up to --) that take a value, and those that do not.
+_ROS_FLAGS_WITH_VALUE = frozenset((
+    '-r', '--remap', '-p', '--param', '--params-file', '-e', '--enclave', '--log-level',
+    '--log-file-name', '--log-config-file'))
+
+
+def ros_arguments(args: Sequence[str]) -> List[tuple]:
+    """
+    Return the ``(flag, value)`` pairs of the ROS arguments in a command line.
+
+    Parameters
+    ----------
+    args : sequence of str
+        The command line (``sys.argv``); ROS arguments are those after each
+        ``--ros-args``, up to the next ``--``.
+
+    Returns
+    -------
+    list of (str, str or None)
+        E.g. ``[('--params-file', 'a.yaml'), ('-p', 'qos.depth:=5')]``; flags
+        without a value (``--disable-stdout-logs``) with None.
+
+    """
+    pairs, in_ros_args, index = [], False, 0
+    while index < len(args):
+        token = args[index]
+        if token == '--ros-args':
+            in_ros_args = True
+        elif token == '--':
+            in_ros_args = False
+        elif in_ros_args:
+            if token in _ROS_FLAGS_WITH_VALUE and index + 1 < len(args):
+                pairs.append((token, args[index + 1]))
+                index += 1
+            else:
+                pairs.append((token, None))
+        index += 1
+    return pairs
+
+
+def _parameters_files(args):
+    return [value for flag, value in ros_arguments(args) if flag == '--params-file']
+
+
+def _check_parameter_names(args):
+    """Raise ParameterError for a ``-p NAME:=VALUE`` naming no parameter of the node."""
+    known = {*PARAMETERS_BY_NAME, *ROS_BUILTIN_PARAMETERS}
+    for flag, value in ros_arguments(args):
+        if flag in ('-p', '--param') and value is not None:
+            name = value.split(':=', 1)[0]
+            if name not in known:
+                raise unknown_parameter_error(name, f' in {flag} {value}')
 
 
 def parameter_descriptor(spec) -> ParameterDescriptor:
@@ -58,15 +127,28 @@ class RotationNode(Node):
     """
     Convert orientations and angular velocities from ``input`` to the configured outputs.
 
+    Parameters
+    ----------
+    parameters_files : sequence of str, optional
+        The node's ``--params-file`` files: each must have a section for this
+        node, setting only its parameters, to valid values.
+
     Raises
     ------
     ParameterError
-        An initial parameter value (from ``-p`` or a parameters file) is invalid.
+        A parameters file is invalid for this node, or an initial parameter value
+        (from ``-p`` or a parameters file) is invalid.
 
     """
 
-    def __init__(self, **kwargs):
+    def __init__(self, parameters_files: Sequence[str] = (), **kwargs):
         super().__init__(NODE_NAME, **kwargs)
+        try:
+            for path in parameters_files:   # as rotation_bag convert reads them
+                parameters_from_yaml(path, self.get_fully_qualified_name())
+        except ParameterError:
+            self.destroy_node()
+            raise
         self.params = NodeParameters()
         self._pipeline = None
         self._subscriptions = []
@@ -221,16 +303,33 @@ def usage() -> str:
             + ', '.join(spec.name for spec in PARAMETERS) + '.\n')
 
 
-def main(args=None):
-    """Run the node until Ctrl-C; return 1 if a parameter value is invalid."""
-    if {'-h', '--help'} & set(rclpy.utilities.remove_ros_args(
-            sys.argv if args is None else args)[1:]):
+def main(args: Optional[Sequence[str]] = None) -> int:
+    """
+    Run the node until Ctrl-C (``--help``: print its usage).
+
+    Returns
+    -------
+    int
+        0 after Ctrl-C or shutdown; 1 if a parameters file or an initial parameter
+        value is invalid (one line on stderr says which).
+
+    """
+    argv = sys.argv if args is None else list(args)
+    if {'-h', '--help'} & set(rclpy.utilities.remove_ros_args(argv)[1:]):
         print(usage(), end='')
         return 0
+    files = _parameters_files(argv)
+    try:   # before rclpy reads the files, whose own errors are many lines long
+        for path in files:
+            parameters_file_sections(path)
+        _check_parameter_names(argv)
+    except ParameterError as exc:
+        print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
+        return 1
     rclpy.init(args=args)
     node = None
     try:
-        node = RotationNode()
+        node = RotationNode(parameters_files=files)
         # The ~1e5 objects of rclpy, numpy and numba live as long as the process: keep
         # them out of the cyclic collector, whose full passes over them stall a
         # callback for ~50 ms (50 messages at 1 kHz).
@@ -239,7 +338,7 @@ def main(args=None):
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except ParameterError as exc:
-        rclpy.logging.get_logger(NODE_NAME).fatal(f'invalid parameter: {exc}')
+        print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
         return 1
     finally:
         if node is not None:
