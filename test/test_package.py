@@ -154,7 +154,9 @@ def test_installed_node_starts_without_oracles_and_stops_on_ctrl_c(
         # while numba compiles can be lost in a ctypes callback).
         ready = client.spin_until(lambda: client.node.count_subscribers('/input') > 0,
                                   timeout=120)
-        assert ready, node.stop()
+        if not ready:
+            node.stop()
+            pytest.fail(f'no subscription to /input within 120 s; the node said:\n{node.output}')
         assert 'rotation_node' in client.node.get_node_names()
         assert node.stop() == 0, node.output
 
