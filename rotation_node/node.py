@@ -294,6 +294,19 @@ def _text(value):
     return str(value)
 
 
+def _non_ros_arguments(arguments: Sequence[str]) -> List[str]:
+    """Return the arguments outside ``--ros-args ... [--]`` (without parsing the ROS ones)."""
+    outside, in_ros_args = [], False
+    for argument in arguments:
+        if argument == '--ros-args':
+            in_ros_args = True
+        elif argument == '--' and in_ros_args:
+            in_ros_args = False
+        elif not in_ros_args:
+            outside.append(argument)
+    return outside
+
+
 def usage() -> str:
     """Return the text ``rotation_node --help`` prints: how to run it, its parameters."""
     return ('usage: rotation_node [--ros-args [-r input:=TOPIC] [-p NAME:=VALUE]... '
@@ -315,7 +328,7 @@ def main(args: Optional[Sequence[str]] = None) -> int:
 
     """
     argv = sys.argv if args is None else list(args)
-    if {'-h', '--help'} & set(rclpy.utilities.remove_ros_args(argv)[1:]):
+    if {'-h', '--help'} & set(_non_ros_arguments(argv[1:])):
         print(usage(), end='')
         return 0
     files = _parameters_files(argv)
