@@ -32,24 +32,22 @@ import sys
 import time
 from typing import List, Optional, Sequence
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (
     FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult)
-from rclpy.exceptions import (
-    InvalidParameterTypeException, InvalidParameterValueException)
+import rclpy
 from rclpy.event_handler import PublisherEventCallbacks
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-
 from rotation_node import messages
 from rotation_node.bag.qos import qos_profile
 from rotation_node.errors import ParameterError
 from rotation_node.parameters import (
-    NODE_NAME, PARAMETERS, PARAMETERS_BY_NAME, ROS_BUILTIN_PARAMETERS, NodeParameters,
-    parameters_file_sections, parameters_from_yaml, unknown_parameter_error)
+    NODE_NAME, NodeParameters, PARAMETERS, PARAMETERS_BY_NAME, parameters_file_sections,
+    parameters_from_yaml, ROS_BUILTIN_PARAMETERS, unknown_parameter_error)
 from rotation_node.pipeline import (
-    DROP_REASONS, SKIP_REASONS, ConversionPipeline, warm_up_conversions)
+    ConversionPipeline, DROP_REASONS, SKIP_REASONS, warm_up_conversions)
 
 DIAGNOSTICS_PERIOD_S = 1.0
 ISSUE_LOG_PERIOD_S = 5.0

@@ -8,10 +8,9 @@ uses too), so the errors measured are the package's own. Quaternions are
 """
 import mpmath as mp
 import numpy as np
-
-from rotation_dev.study.reference import (DIGITS, EPS, distance, exact, nearest_rotation_quaternion,
-                                           normalized, quaternion_from_euler,
-                                           quaternion_from_rotation_vector)
+from rotation_dev.study.reference import (
+    DIGITS, distance, EPS, exact, nearest_rotation_quaternion, normalized, quaternion_from_euler,
+    quaternion_from_rotation_vector)
 
 mp.mp.dps = DIGITS
 mpf_vector = exact

@@ -40,7 +40,7 @@ def output_topic(input_topic, output_name):
 
 
 def _input_topics(reader, input_type_name, topics):
-    """The topics to convert: the given ones, checked, or every topic of the input type."""
+    """Return the topics to convert: the given ones, checked, or every topic of the input type."""
     if topics is None:
         topics = [topic for topic, type_name in reader.topics.items()
                   if type_name == input_type_name]
