@@ -13,7 +13,7 @@ from bag_helpers import imu_messages, plain, stamp_ns
 import pytest
 from rclpy.duration import Duration
 from rclpy.qos import QoSProfile
-from ros_harness import make_input_message, RosProcess, script, TestNode
+from ros_harness import make_input_message, PLAIN_INPUT_TYPES, RosProcess, script, TestNode
 from rotation_node.bag.cdr import message_encoder
 from rotation_node.bag.convert import convert, output_topic
 from rotation_node.bag.mcap_io import BagReader, BagWriter
@@ -22,7 +22,7 @@ from rotation_node.bag.qos import qos_profile, qos_profiles_from_yaml
 from rotation_node.errors import BagError
 from rotation_node.messages import INPUTS
 from rotation_node.messages import OUTPUTS as OUTPUT_TYPES
-from rotation_node.parameters import INPUT_TYPES, NodeParameters, parameters_from_yaml
+from rotation_node.parameters import NodeParameters, parameters_from_yaml
 from rotation_node.pipeline import ConversionPipeline
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import Imu
@@ -85,7 +85,7 @@ def test_convert_adds_pipeline_outputs_and_copies_everything(tmp_path, rng):
         assert offered == qos_profile(PARAMS)
 
 
-@pytest.mark.parametrize('input_type', INPUT_TYPES)
+@pytest.mark.parametrize('input_type', PLAIN_INPUT_TYPES)
 def test_every_input_type_and_output_is_the_pipelines_byte_for_byte(tmp_path, rng, input_type):
     """``convert`` reads cdr views and encodes values: the same bytes as process()'s messages."""
     params = NodeParameters(input_type=input_type, outputs=ALL_OUTPUTS, euler_unwrap=True,

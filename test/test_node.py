@@ -17,12 +17,12 @@ from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from ros_harness import (
-    make_input_message, oracle_output, output_values, RosProcess, script, TestNode)
+    make_input_message, oracle_output, output_values, PLAIN_INPUT_TYPES, RosProcess, script,
+    TestNode)
 from rotation_node.errors import ParameterError
 from rotation_node.messages import OUTPUTS as OUTPUT_TYPES
 from rotation_node.node import check_parameter_names, ros_arguments
-from rotation_node.parameters import (
-    INPUT_TYPES, NodeParameters, OUTPUTS, PARAMETERS, parameters_from_yaml)
+from rotation_node.parameters import NodeParameters, OUTPUTS, PARAMETERS, parameters_from_yaml
 from rotation_node.pipeline import input_message_type
 from scipy.spatial.transform import Rotation
 
@@ -177,7 +177,7 @@ def assert_output(out, name, rotation, omega=OMEGA_BODY, **convention):
 
 # Inputs, outputs, headers ----------------------------------------------------------
 
-@pytest.mark.parametrize('input_type', INPUT_TYPES)
+@pytest.mark.parametrize('input_type', PLAIN_INPUT_TYPES)
 def test_each_input_type(node, input_type, rotation):
     node.configure({'input_type': input_type, 'outputs': ['quaternion', 'euler']})
     msg = make_input_message(input_type, rotation, stamp_ns=STAMP_NS + 123, frame_id='base')

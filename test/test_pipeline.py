@@ -11,9 +11,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 import numpy as np
 import pytest
-from ros_harness import INPUT_COVARIANCE, make_input_message, oracle_output, output_values
+from ros_harness import (
+    INPUT_COVARIANCE, make_input_message, oracle_output, output_values, PLAIN_INPUT_TYPES)
 from rotation_node.conversions import SEQUENCES
-from rotation_node.parameters import INPUT_TYPES, NodeParameters, OUTPUTS
+from rotation_node.parameters import NodeParameters, OUTPUTS
 from rotation_node.pipeline import (
     ConversionPipeline, COVARIANCE_UNKNOWN, EULER_COVARIANCE_NEAR_SINGULAR,
     EULER_COVARIANCE_NOT_LINEAR, EULER_RATES_NEAR_SINGULAR, input_message_type,
@@ -72,7 +73,7 @@ def test_input_type_selects_the_message_class(input_type, expected):
     assert pipeline(input_type=input_type).input_type is message_type
 
 
-@pytest.mark.parametrize('input_type', INPUT_TYPES)
+@pytest.mark.parametrize('input_type', PLAIN_INPUT_TYPES)
 def test_every_input_type_gives_its_orientation_with_the_header(input_type, rotation):
     p = pipeline(input_type=input_type, outputs=['quaternion'])
     msg = make_input_message(input_type, rotation, stamp_ns=STAMP_NS, frame_id=FRAME_ID)
