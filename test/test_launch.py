@@ -13,7 +13,6 @@ from pathlib import Path
 
 from launch_stubs import declared_arguments, launch_description, launched_nodes
 import pytest
-from rotation_node.errors import ParameterError
 from rotation_node.parameters import NodeParameters, parameters_from_yaml
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -25,22 +24,6 @@ ARGUMENTS = {
     'rotation_node.launch.py': ('input_topic', 'input_type', 'params_file', 'namespace'),
     'tf_euler.launch.py': ('parent_frame', 'child_frame', 'params_file', 'namespace'),
 }
-
-
-def _tf_input_available():
-    """Whether this tree's parameters know ``input_type: tf`` and its two frames."""
-    try:
-        NodeParameters.from_ros({'input_type': 'tf', 'tf.parent_frame': 'map',
-                                 'tf.child_frame': 'base_link'})
-    except ParameterError:
-        return False
-    return True
-
-
-#: The /tf input and its tf.* parameters come with the TF buffer; until they are in
-#: the tree, the TF example's parameters cannot validate (strict: passes => reported).
-NEEDS_TF_INPUT = pytest.mark.xfail(not _tf_input_available(), strict=True,
-                                   reason='input_type tf is not in this tree yet')
 
 
 def _load(name, share=None):
@@ -111,7 +94,6 @@ def test_rotation_node_launch_arguments_reach_the_node(tmp_path):
     assert _node_parameters(node).input_type == 'odometry'
 
 
-@NEEDS_TF_INPUT
 @pytest.mark.parametrize('namespace', ['', 'robot1'])
 def test_tf_euler_launch_defaults_validate(namespace):
     (node,) = launched_nodes(_load('tf_euler.launch.py'), {'namespace': namespace})
@@ -119,7 +101,6 @@ def test_tf_euler_launch_defaults_validate(namespace):
     assert (resolved.input_type, resolved.outputs) == ('tf', ('euler',))
 
 
-@NEEDS_TF_INPUT
 def test_tf_euler_launch_frames_reach_the_node():
     (node,) = launched_nodes(_load('tf_euler.launch.py'),
                              {'parent_frame': 'odom', 'child_frame': 'imu_link'})
