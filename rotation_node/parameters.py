@@ -32,7 +32,7 @@ OUTPUTS = tuple(messages.OUTPUTS)
 """Values allowed in ``outputs``: the outputs of :data:`rotation_node.messages.OUTPUTS`."""
 
 FRAMES = ('body', 'world')
-RELIABILITIES = ('reliable', 'best_effort')
+RELIABILITIES = ('auto', 'reliable', 'best_effort')
 
 # Parameters every rclpy node declares by itself; a parameters file may set them.
 _ROS_BUILTIN_PARAMETERS = frozenset({'use_sim_time', 'start_type_description_service'})
@@ -223,12 +223,13 @@ class NodeParameters:
         'Frame of the angular_velocity output',
         choices=FRAMES)
     qos_reliability: str = _parameter(
-        'qos.reliability', 'reliable',
-        'Reliability of the input subscription and of the output publishers',
+        'qos.reliability', 'auto',
+        'Reliability of the input subscriptions and output publishers; auto: inputs adapt '
+        'reliability and durability to what the publishers offer, outputs are reliable',
         choices=RELIABILITIES)
     qos_depth: int = _parameter(
-        'qos.depth', 10,
-        'History depth (keep last) of the input subscription and of the output publishers',
+        'qos.depth', 1000,
+        'History depth (keep last) of the input subscriptions and of the output publishers',
         bounds=(1, 10000))
 
     def __post_init__(self):
