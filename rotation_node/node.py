@@ -24,8 +24,10 @@ from rcl_interfaces.msg import (
     FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult)
 from rclpy.exceptions import (
     InvalidParameterTypeException, InvalidParameterValueException)
-from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+from rclpy.event_handler import (
+    PublisherEventCallbacks, QoSSubscriptionEventType, SubscriptionEventCallbacks)
 from rclpy.executors import ExternalShutdownException
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.qos import (
     DurabilityPolicy, QoSPolicyKind, ReliabilityPolicy, qos_policy_name_from_kind)
@@ -47,6 +49,8 @@ ISSUE_LOG_PERIOD_S = 5.0
 HANDOFF_CHECK_S = 0.05
 HANDOFF_QUIET_S = 0.25
 HANDOFF_MAX_S = 2.0
+# Messages taken in one callback at most, beyond the one the executor took.
+DRAIN_MAX = 100
 
 
 def parameter_descriptor(spec) -> ParameterDescriptor:
@@ -108,6 +112,7 @@ class RotationNode(Node):
         self._publish = {}              # output name -> publish(bytes)
         self._encoders = {}             # output name -> encode(header, numbers) -> bytes
         self._handoff_timer = None
+        self._message_lost = {}         # input subscription -> its message-lost event handle
         self._next_issue_log = {}   # reason -> monotonic time of its next allowed warning
         self._reported = (0, 0, 0)   # dropped, skipped and lost totals at the last diagnostics
         # Registered before declaring, so the initial values pass the same checks.
@@ -155,7 +160,7 @@ class RotationNode(Node):
         if previous is None or params.input_type != previous.input_type:
             for state in self._inputs:
                 self._finish_handoff(state)
-                self.destroy_subscription(state.subscription)
+                self._destroy_input_subscription(state, state.subscription)
             codec = fixed_layout_codec(input_type.type_name)
             self._decode = None if codec is None else codec.decode
             self._inputs = [_TopicInput(topic, _memory(params)) for topic in input_type.topics]
@@ -172,7 +177,11 @@ class RotationNode(Node):
         for name in params.outputs:
             if name not in self._output_publishers:
                 output = messages.OUTPUTS[name]
-                publisher = self.create_publisher(output.message_class, name, output_qos)
+                # Without QoS event handlers (as the diagnostics publisher): a
+                # subscriber that cannot match reports it itself.
+                publisher = self.create_publisher(
+                    output.message_class, name, output_qos,
+                    event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
                 self._output_publishers[name] = publisher
                 self._publish[name] = publisher.publish
                 self._encoders[name] = output.message.encoder()
@@ -232,12 +241,16 @@ class RotationNode(Node):
             self._finish_handoff(state)
         state.generation += 1
         callbacks = SubscriptionEventCallbacks(
-            incompatible_qos=functools.partial(self._on_incompatible_qos, state),
-            message_lost=functools.partial(self._on_message_lost, state))
+            incompatible_qos=functools.partial(self._on_incompatible_qos, state))
         subscription = self.create_subscription(
             self._pipeline.input_type, state.name,
             functools.partial(self._on_input, state, state.generation), qos,
             event_callbacks=callbacks, raw=self._decode is not None)
+        # The message-lost status is read once a second, not waited on: an event handler
+        # is one more entity the executor examines at every wake-up.
+        with subscription.handle:
+            self._message_lost[subscription] = _rclpy.EventHandle(
+                subscription.handle, QoSSubscriptionEventType.RCL_SUBSCRIPTION_MESSAGE_LOST)
         if state.subscription is not None:
             state.retiring = state.subscription
             state.handoff_started = state.retiring_heard = time.monotonic()
@@ -250,7 +263,7 @@ class RotationNode(Node):
         """Destroy the retiring subscription; accept what the new one delivered meanwhile."""
         if state.retiring is None:
             return
-        self.destroy_subscription(state.retiring)
+        self._destroy_input_subscription(state, state.retiring)
         state.retiring = None
         pending, state.pending = state.pending, []
         state.pending_identities.clear()
@@ -278,8 +291,17 @@ class RotationNode(Node):
                 f'qos.reliability {self.params.qos_reliability}; its messages are not received '
                 f'(qos.reliability auto adapts to it)'))
 
-    def _on_message_lost(self, state, event):
-        state.lost_events += event.total_count_change
+    def _count_message_lost(self, state, subscription):
+        """Add the message-lost events of ``subscription`` since the last call to ``state``."""
+        event = self._message_lost.get(subscription)
+        if event is not None:
+            with event:
+                state.lost_events += event.take_event().total_count_change
+
+    def _destroy_input_subscription(self, state, subscription):
+        self._count_message_lost(state, subscription)
+        self._message_lost.pop(subscription).destroy_when_not_in_use()
+        self.destroy_subscription(subscription)
 
     def _input_topic_names(self):
         return ', '.join(state.subscription.topic_name for state in self._inputs)
@@ -301,6 +323,8 @@ class RotationNode(Node):
                 return
             self._finish_handoff(state)   # the new subscription has caught up
         self._accept(state, data, info)
+        if state.retiring is None:
+            self._drain(state)
 
     def _accept(self, state, data, info):
         """Convert a message not seen before and publish its outputs."""
@@ -317,6 +341,22 @@ class RotationNode(Node):
         publish, encoders = self._publish, self._encoders
         for name, header, numbers in self._pipeline.process_values(data, state.name):
             publish[name](encoders[name](header, numbers))
+
+    def _drain(self, state):
+        """
+        Take and convert what else is queued on ``state``'s subscription, up to a bound.
+
+        One executor wake-up then serves every message that arrived meanwhile; rclpy's
+        executor costs more per wake-up than the conversion of a message.
+        """
+        subscription, take = state.subscription, state.subscription.handle.take_message
+        message_type, raw = subscription.msg_type, subscription.raw
+        for _ in range(DRAIN_MAX):
+            with subscription.handle:
+                taken = take(message_type, raw)
+            if taken is None:
+                return
+            self._accept(state, *taken)
 
     def _log_issue(self, reason, detail):
         # Throttled here, once per ISSUE_LOG_PERIOD_S for each reason (so a flood of one
@@ -338,6 +378,9 @@ class RotationNode(Node):
         self._publish_diagnostics()
 
     def _publish_diagnostics(self):
+        for state in self._inputs:
+            for subscription in (state.subscription, state.retiring):
+                self._count_message_lost(state, subscription)
         stats = self._pipeline.stats
         gaps = sum(state.reception.lost for state in self._inputs)
         events = sum(state.lost_events for state in self._inputs)
