@@ -19,6 +19,7 @@ ensure_env() {
   "$venv/bin/python" -m pip install --quiet --upgrade pip
   "$venv/bin/python" -m pip install --quiet -r requirements.txt
   "$venv/bin/python" -m pip install --quiet --no-deps -e .
+  "$venv/bin/python" -m rotation_node.conversions.warm_up   # compile and cache every kernel once
   echo "$want" > "$venv/.installed"
 }
 

@@ -24,9 +24,18 @@ may be shared; wall time would measure the neighbours too):
    and what the rclpy stages that ``cdr`` replaces would cost;
 3. time and peak memory of ours from 10^2 to 2*10^5 messages (10^6 with
    ``--million``), each size converted in a fresh process so that its peak RSS
-   is its own; memory that does not grow with the bag length means streaming.
+   is its own; memory that does not grow with the bag length means streaming;
+4. each input format (a rosbag2 mcap directory with zstd chunks, a rosbag2
+   sqlite3 directory, a ROS 1 bag, beside the MCAP file), the same messages:
+   ours (``convert``, which reads them all) against a naive pipeline that
+   reads them with rosbags (``AnyReader``, messages deserialised), converts
+   with scipy and serialises with rosbags, in the same run; and the peak
+   memory of ours at two bag lengths, each in a fresh process.
 
-Run: ``.venv/bin/python benchmarks/bench_bag_convert.py [--messages N] [--repeat R] [--million]``.
+The CPU model and numpy's SIMD level are printed first.
+
+Run: ``.venv/bin/python benchmarks/bench_bag_convert.py [--messages N] [--repeat R] [--million]
+[--formats-only]``.
 """
 import argparse
 import gc
@@ -39,6 +48,8 @@ import threading
 import time
 
 import numpy as np
+
+from _machine import print_machine
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 PARAMS_FILE = os.path.join(HERE, os.pardir, 'config', 'params.yaml')
@@ -70,6 +81,123 @@ def write_imu_bag(path, count, seed=0):
                 v.x, v.y, v.z = w
                 writer.write_serialized(TOPIC, 'sensor_msgs/msg/Imu', serialize_message(msg),
                                         stamp_ns + 1_000_000)
+
+
+FORMATS = ('mcap file', 'rosbag2 mcap zstd', 'rosbag2 sqlite3', 'ROS 1 bag')
+
+
+def write_format_bag(directory, fmt, count, seed=0):
+    """The Imu bag of ``write_imu_bag`` in format ``fmt`` (written by rosbags); its path."""
+    from pathlib import Path
+
+    from rosbags.rosbag1 import Writer as Ros1Writer
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
+    from rosbags.typesys import Stores, get_typestore
+
+    from rotation_node.bag.mcap_io import BagReader
+    name = fmt.replace(' ', '_')
+    mcap_path = os.path.join(directory, f'{name}.mcap')
+    write_imu_bag(mcap_path, count, seed)
+    if fmt == 'mcap file':
+        return mcap_path
+    ros2 = get_typestore(Stores.ROS2_JAZZY)
+    path = Path(directory, name + ('.bag' if fmt == 'ROS 1 bag' else ''))
+    with BagReader(mcap_path) as reader:
+        records = reader.messages()
+        if fmt == 'ROS 1 bag':
+            ros1 = get_typestore(Stores.ROS1_NOETIC)
+            with Ros1Writer(path) as writer:
+                connection = writer.add_connection(TOPIC, 'sensor_msgs/msg/Imu', typestore=ros1)
+                for record in records:
+                    writer.write(connection, record.log_time_ns,
+                                 ros2.cdr_to_ros1(record.data, 'sensor_msgs/msg/Imu'))
+        else:
+            writer = Writer(path, version=9, storage_plugin=(
+                StoragePlugin.MCAP if 'mcap' in fmt else StoragePlugin.SQLITE3))
+            if 'zstd' in fmt:
+                writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+            with writer:
+                connection = writer.add_connection(TOPIC, 'sensor_msgs/msg/Imu', typestore=ros2)
+                for record in records:
+                    writer.write(connection, record.log_time_ns, record.data)
+    os.unlink(mcap_path)
+    return str(path)
+
+
+def convert_naive_rosbags(source, output):
+    """The same output with rosbags (read, deserialise, serialise) and scipy, per message."""
+    from pathlib import Path
+
+    from mcap.writer import Writer
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+    from scipy.spatial.transform import Rotation
+
+    from rotation_node.bag.message_types import message_definition
+    ros2 = get_typestore(Stores.ROS2_JAZZY)
+    Vector3Stamped = ros2.types['geometry_msgs/msg/Vector3Stamped']
+    Vector3 = ros2.types['geometry_msgs/msg/Vector3']
+    with AnyReader([Path(source)]) as reader, open(output, 'wb') as stream:
+        writer = Writer(stream)
+        writer.start(profile='ros2', library='naive')
+        channels = {}
+        for topic, type_name in ((TOPIC, 'sensor_msgs/msg/Imu'),
+                                 (TOPIC + '/euler', 'geometry_msgs/msg/Vector3Stamped')):
+            schema = writer.register_schema(type_name, 'ros2msg',
+                                            message_definition(type_name).encode())
+            channels[topic] = writer.register_channel(topic, 'cdr', schema)
+        for connection, log_time, raw in reader.messages():
+            imu = reader.deserialize(raw, connection.msgtype)
+            data = raw if reader.is2 else ros2.ros1_to_cdr(raw, 'sensor_msgs/msg/Imu')
+            writer.add_message(channels[TOPIC], log_time=log_time, data=bytes(data),
+                               publish_time=log_time)
+            q = imu.orientation
+            roll, pitch, yaw = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_euler('xyz')
+            header = ros2.types['std_msgs/msg/Header'](stamp=imu.header.stamp,
+                                                       frame_id=imu.header.frame_id)
+            euler = Vector3Stamped(header=header, vector=Vector3(x=roll, y=pitch, z=yaw))
+            data = ros2.serialize_cdr(euler, 'geometry_msgs/msg/Vector3Stamped')
+            writer.add_message(channels[TOPIC + '/euler'], log_time=log_time,
+                               publish_time=log_time, data=bytes(data))
+        writer.finish()
+
+
+def formats(directory, count, repeat, sizes):
+    """Every input format: ours against the rosbags naive pipeline; memory at two lengths."""
+    print(f'\n## Input formats, {count} Imu messages -> + /imu/euler (best of {repeat}, CPU s)')
+    print(f'{"format":20s} {"ours":>7s} {"us/msg":>7s} {"naive":>7s} {"us/msg":>7s} '
+          f'{"naive/ours":>10s}')
+    for fmt in FORMATS:
+        source = write_format_bag(directory, fmt, count)
+        convert_ours(source, os.path.join(directory, 'warm.mcap'))   # numba compilation
+        runs = {'ours': [], 'naive': []}
+        for _ in range(repeat):
+            for name, function in (('ours', convert_ours), ('naive', convert_naive_rosbags)):
+                seconds, _ = _timed(function, source, os.path.join(directory, f'{name}.mcap'))
+                runs[name].append(seconds)
+        ours, naive = min(runs['ours']), min(runs['naive'])
+        print(f'{fmt:20s} {ours:7.2f} {ours / count * 1e6:7.1f} {naive:7.2f} '
+              f'{naive / count * 1e6:7.1f} {naive / ours:9.2f}x')
+        _remove(source)
+    print('\n## Input formats: peak memory growth of ours (fresh process each; MiB)')
+    print(f'{"format":20s} ' + ' '.join(f'{f"{n} msgs":>16s}' for n in sizes))
+    for fmt in FORMATS:
+        growth = []
+        for size in sizes:
+            source = write_format_bag(directory, fmt, size, seed=3)
+            stats = _run_child(source, os.path.join(directory, 'child_out.mcap'))
+            growth.append(stats['peak_mib'] - stats['baseline_mib'])
+            _remove(source)
+        print(f'{fmt:20s} ' + ' '.join(f'{g:16.1f}' for g in growth))
+
+
+def _remove(path):
+    import shutil
+    if os.path.isdir(path):
+        shutil.rmtree(path)
+    elif os.path.exists(path):
+        os.unlink(path)
 
 
 def convert_ours(source, output):
@@ -248,6 +376,13 @@ def _child(source, output):
                       'peak_mib': sampler.peak_mib}))
 
 
+def _run_child(source, output):
+    result = subprocess.run([sys.executable, __file__, '--child', source, output],
+                            check=True, capture_output=True, text=True)
+    _remove(output)
+    return json.loads(result.stdout.strip().splitlines()[-1])
+
+
 def scaling(directory, sizes):
     """Time and peak memory of ``convert`` against the number of messages."""
     print('\n## Scaling (each size in a fresh process)')
@@ -256,14 +391,10 @@ def scaling(directory, sizes):
     for count in sizes:
         source = os.path.join(directory, f'scale_{count}.mcap')
         write_imu_bag(source, count, seed=2)
-        result = subprocess.run(
-            [sys.executable, __file__, '--child', source, source + '.out.mcap'],
-            check=True, capture_output=True, text=True)
-        stats = json.loads(result.stdout.strip().splitlines()[-1])
+        stats = _run_child(source, source + '.out.mcap')
         print(f'{count:9d} {stats["seconds"]:9.2f} {stats["seconds"] / count * 1e6:8.1f} '
               f'{stats["baseline_mib"]:15.1f} {stats["peak_mib"] - stats["baseline_mib"]:16.1f}')
         os.unlink(source)
-        os.unlink(source + '.out.mcap')
 
 
 def main():
@@ -271,16 +402,21 @@ def main():
     parser.add_argument('--messages', type=int, default=200_000)
     parser.add_argument('--repeat', type=int, default=3, help='runs of each in the comparison')
     parser.add_argument('--million', action='store_true', help='also scale to 10^6 messages')
+    parser.add_argument('--formats-only', action='store_true',
+                        help='only the input-format comparison (section 4)')
     parser.add_argument('--child', nargs=2, metavar=('SOURCE', 'OUTPUT'), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
         _child(*args.child)
         return
     sizes = [100, 1_000, 10_000, 100_000, 200_000] + ([1_000_000] if args.million else [])
+    print_machine()
     with tempfile.TemporaryDirectory() as directory:
-        compare(directory, args.messages, args.repeat)
-        breakdown(directory)
-        scaling(directory, sizes)
+        if not args.formats_only:
+            compare(directory, args.messages, args.repeat)
+            breakdown(directory)
+            scaling(directory, sizes)
+        formats(directory, args.messages, args.repeat, [args.messages // 10, args.messages])
 
 
 if __name__ == '__main__':

@@ -27,6 +27,8 @@ import operator
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, NamedTuple, Optional, Sequence, Tuple
 
+import numpy as np
+
 from rotation_node import conversions, kinematics
 
 # Forms of an input orientation.
@@ -49,8 +51,14 @@ ANGULAR_VELOCITY = 'angular_velocity'
 """Angular velocity (rad/s) in ``angular_velocity.output_frame``, measured or differenced."""
 EULER_RATES = 'euler_rates'
 """Time derivatives of the Euler angles; unavailable near gimbal lock."""
+ORIENTATION_COVARIANCE = 'orientation_covariance'
+"""Rotation-vector covariance (3 x 3 array, rad^2) in the output frames, about the axes of
+``covariance.frame``; unavailable when the input carries none or it is unknown (all zeros)."""
+EULER_COVARIANCE = 'euler_covariance'
+"""First-order covariance (3 x 3 array) of the Euler angles, rad^2 or deg^2 with
+``euler.degrees``; unavailable near gimbal lock or past ``covariance.max_linearisation_ratio``."""
 PIPELINE_VALUES = (ORIENTATION, OUTPUT_QUATERNION, EULER_ANGLES, PUBLISHED_EULER,
-                   ANGULAR_VELOCITY, EULER_RATES)
+                   ANGULAR_VELOCITY, EULER_RATES, ORIENTATION_COVARIANCE, EULER_COVARIANCE)
 
 
 class Sample(NamedTuple):
@@ -103,6 +111,10 @@ class InputTopic(NamedTuple):
 
 
 INPUT_TOPIC = InputTopic('input')
+
+
+_XYZ = ('x', 'y', 'z')
+_XYZW = ('x', 'y', 'z', 'w')
 
 
 def _xyzw(quaternion):
@@ -178,37 +190,48 @@ class InputType:
             return 'finite difference'
         return f'`{self.angular_velocity_field}`'
 
-    def sample_reader(self, *, covariance: bool = False) -> Callable[[Any], Sample]:
+    def sample_reader(self, *, angular_velocity: bool = True,
+                      covariance: bool = False) -> Callable[[Any], Sample]:
         """
         Return ``read(message) -> Sample`` of a plain input type.
 
         Parameters
         ----------
+        angular_velocity : bool, optional
+            Read the angular velocity (None in the samples otherwise).
         covariance : bool, optional
             Read the orientation covariance too (only types with a
             ``covariance_field``; None otherwise).
 
         """
-        orientation = operator.attrgetter(self.orientation_field)
-        as_tuple = _xyzw if self.orientation_form == QUATERNION else _xyz
-        orientation_unknown = self.orientation_unknown
-        rate = (None if self.angular_velocity_field is None
-                else operator.attrgetter(self.angular_velocity_field))
-        rate_unknown = self.angular_velocity_unknown
+        new = tuple.__new__   # Sample's own __new__ is a Python function: slower
+        components = _XYZW if self.orientation_form == QUATERNION else _XYZ
+        orientation = operator.attrgetter(   # one C call returns the tuple
+            *(f'{self.orientation_field}.{c}' for c in components))
+        unknown = self.orientation_unknown
+        rate = None
+        if angular_velocity and self.angular_velocity_field is not None:
+            rate = operator.attrgetter(*(f'{self.angular_velocity_field}.{c}' for c in _XYZ))
+            if self.angular_velocity_unknown is not None:
+                rate_unknown, read_rate = self.angular_velocity_unknown, rate
+
+                def rate(msg):
+                    return None if rate_unknown(msg) else read_rate(msg)
         block = None
         if covariance and self.covariance_field is not None:
             block = _covariance_block(self.covariance_field, self.covariance_indices)
+        if unknown is None and rate is None and block is None:
+            return lambda msg: new(Sample, (msg.header, orientation(msg), None, None))
 
         def read(msg):
-            known = orientation_unknown is None or not orientation_unknown(msg)
-            omega = None
-            if rate is not None and (rate_unknown is None or not rate_unknown(msg)):
-                omega = _xyz(rate(msg))
-            return Sample(msg.header, as_tuple(orientation(msg)) if known else None, omega,
-                          None if block is None else block(msg))
+            return new(Sample, (msg.header, None if unknown is not None and unknown(msg)
+                                else orientation(msg),
+                                None if rate is None else rate(msg),
+                                None if block is None else block(msg)))
         return read
 
-    def sample_stream(self, params: Any, *, covariance: bool = False) -> SampleStream:
+    def sample_stream(self, params: Any, *, angular_velocity: bool = True,
+                      covariance: bool = False) -> SampleStream:
         """
         Return the function that turns messages of one input stream into samples.
 
@@ -217,13 +240,13 @@ class InputType:
         Parameters
         ----------
         params : rotation_node.parameters.NodeParameters
-        covariance : bool, optional
-            Read the orientation covariance into the samples.
+        angular_velocity, covariance : bool, optional
+            As for :meth:`sample_reader`; a stateful type may always read them.
 
         """
         if self.stream is not None:
             return self.stream(params)
-        read = self.sample_reader(covariance=covariance)
+        read = self.sample_reader(angular_velocity=angular_velocity, covariance=covariance)
         return lambda topic, msg: (read(msg),)
 
 
@@ -380,6 +403,30 @@ QUATERNION_STAMPED = OutputMessage(
     lambda msg: _xyzw(msg.quaternion), stamped_numbers=True)
 
 
+def _build_vector3_with_covariance(header, numbers):
+    message = _message_class('sensor_msgs/msg/MagneticField')()
+    message.header = header
+    vector = message.magnetic_field
+    vector.x, vector.y, vector.z = (float(v) for v in numbers[:3])
+    message.magnetic_field_covariance = [float(v) for v in numbers[3:]]
+    return message
+
+
+VECTOR3_WITH_COVARIANCE = OutputMessage(
+    'sensor_msgs/msg/MagneticField', _build_vector3_with_covariance,
+    lambda msg: (*_xyz(msg.magnetic_field), *msg.magnetic_field_covariance),
+    stamped_numbers=True)
+"""A stamped 3-vector with its 3 x 3 covariance (row-major), as sensor_msgs/MagneticField.
+
+The only standard ROS message type that is exactly a header, a float64 3-vector
+and its full float64 3 x 3 covariance: fixed layout (encoded without building a
+message), mean and covariance in one message under the input's header. The
+types that carry an orientation covariance (Imu, PoseWithCovariance) are
+avoided on purpose: theirs is defined as a covariance of rotations about fixed
+axes, and an Euler-angle covariance there would be misread.
+"""
+
+
 def float64_multi_array(dimensions: Sequence[Tuple[str, int, int]]) -> OutputMessage:
     """
     Return the :class:`OutputMessage` of a std_msgs/Float64MultiArray with a fixed layout.
@@ -422,9 +469,10 @@ class OutputType:
     needs : tuple of str
         Named pipeline values (:data:`PIPELINE_VALUES`) the output is computed
         from; the output is skipped for a message where one is unavailable.
-    compute : callable
+    compute : callable or None
         ``compute(params, *values) -> numbers``, ``values`` those of ``needs`` in
-        order, ``numbers`` in the order :attr:`OutputMessage.build` takes them.
+        order, ``numbers`` in the order :attr:`OutputMessage.build` takes them;
+        None to publish the one value needed as it is.
     description : str
         The published numbers in words, for the documentation tables.
     panels : callable
@@ -435,7 +483,7 @@ class OutputType:
     name: str
     message: OutputMessage
     needs: Tuple[str, ...]
-    compute: Callable[..., Sequence[float]]
+    compute: Optional[Callable[..., Sequence[float]]]
     description: str
     panels: Callable[[Any], list]
 
@@ -448,10 +496,6 @@ class OutputType:
     def message_class(self) -> type:
         """The rclpy message class of the output."""
         return self.message.message_class
-
-
-def _value(params, value):
-    return value
 
 
 def _angle_unit(params):
@@ -474,20 +518,32 @@ def _axis_angle(params, q):
     return (*axis.tolist(), float(angle))
 
 
+def _euler_stddev(params, covariance):
+    return np.sqrt(np.diagonal(covariance))
+
+
+def _euler_with_covariance(params, angles, covariance):
+    return (*angles, *covariance.ravel().tolist())
+
+
+def _euler_covariance_panels(params):
+    unit = _angle_unit(params)
+    return [*_euler_panels('Euler angles', '')(params),
+            Panel(f'Euler angle covariance, sequence {params.euler_sequence}', unit + '^2',
+                  tuple(f'C{row}{col}' for row in (1, 2, 3) for col in (1, 2, 3)), 3)]
+
+
 def _quaternion_rate(params, q, omega):
     return kinematics.quaternion_derivative(q, omega, frame=params.angular_velocity_output_frame)
 
 
-_XYZ = ('x', 'y', 'z')
-_XYZW = ('x', 'y', 'z', 'w')
-
 _OUTPUT_LIST = (
     OutputType(
-        'quaternion', QUATERNION_STAMPED, (OUTPUT_QUATERNION,), _value,
+        'quaternion', QUATERNION_STAMPED, (OUTPUT_QUATERNION,), None,
         'unit quaternion, w >= 0 (or sign-continuous over time with `quaternion.continuity`)',
         lambda params: [Panel('Quaternion', '', _XYZW)]),
     OutputType(
-        'euler', VECTOR3_STAMPED, (PUBLISHED_EULER,), _value,
+        'euler', VECTOR3_STAMPED, (PUBLISHED_EULER,), None,
         'x, y, z = first, second, third angle of `euler.sequence`; first and third in '
         '(-pi, pi] (or unwrapped with `euler.unwrap`), the middle in [-pi/2, pi/2] '
         '(Tait-Bryan) or [0, pi] (proper Euler); degrees with `euler.degrees`',
@@ -511,18 +567,32 @@ _OUTPUT_LIST = (
         lambda params: [Panel('Rotation matrix (body to world)', '',
                               tuple(f'R{row}{col}' for row in (1, 2, 3) for col in (1, 2, 3)))]),
     OutputType(
-        'angular_velocity', VECTOR3_STAMPED, (ANGULAR_VELOCITY,), _value,
+        'angular_velocity', VECTOR3_STAMPED, (ANGULAR_VELOCITY,), None,
         'rad/s in `angular_velocity.output_frame`',
         lambda params: [Panel(f'Angular velocity ({params.angular_velocity_output_frame} '
                               'frame)', 'rad/s', _XYZ)]),
     OutputType(
-        'euler_rates', VECTOR3_STAMPED, (EULER_RATES,), _value,
+        'euler_rates', VECTOR3_STAMPED, (EULER_RATES,), None,
         'time derivatives of the three Euler angles (rad/s, or deg/s with `euler.degrees`)',
         _euler_panels('Euler angle rates', '/s')),
     OutputType(
         'quaternion_rate', QUATERNION_STAMPED, (OUTPUT_QUATERNION, ANGULAR_VELOCITY),
         _quaternion_rate, 'dq/dt (1/s) of the published quaternion',
         lambda params: [Panel('Quaternion rate', '1/s', _XYZW)]),
+    OutputType(
+        'euler_stddev', VECTOR3_STAMPED, (EULER_COVARIANCE,), _euler_stddev,
+        'one standard deviation of each angle of `euler.sequence` (first order, from the '
+        "input's orientation covariance about `covariance.frame` axes; degrees with "
+        '`euler.degrees`); inputs with a covariance only',
+        _euler_panels('Euler angle standard deviations', '')),
+    OutputType(
+        'euler_covariance', VECTOR3_WITH_COVARIANCE, (PUBLISHED_EULER, EULER_COVARIANCE),
+        _euler_with_covariance,
+        '`sensor_msgs/MagneticField` used as a stamped vector with covariance: '
+        '`magnetic_field` = the Euler angles (as `euler`), `magnetic_field_covariance` = their '
+        '3 x 3 covariance, row-major (rad^2, or deg^2 with `euler.degrees`); inputs with a '
+        'covariance only',
+        _euler_covariance_panels),
 )
 
 OUTPUTS = {entry.name: entry for entry in _OUTPUT_LIST}

@@ -5,9 +5,22 @@ Subscribes the relative topic ``input`` (type chosen by the ``input_type``
 parameter) and publishes each output listed in ``outputs`` on the relative
 topic of the same name; the conversion itself is
 :class:`rotation_node.pipeline.ConversionPipeline`, the same code that
-``rotation_bag convert`` runs on bags. Parameters are declared from the table in
-:mod:`rotation_node.parameters`; a change at runtime is validated first, then
-takes effect on the next message. Counters and the current conventions are
+``rotation_bag convert`` runs on bags. The subscribed topics and the message
+types come from :mod:`rotation_node.messages`.
+
+Parameters are declared from the table in :mod:`rotation_node.parameters`. At
+start-up the node reads its ``--params-file`` files itself with the loader
+``rotation_bag convert`` uses, so both accept and reject the same files: an
+unreadable or malformed file, a file without a section for this node, an
+unknown parameter (in a file or ``-p``) or an invalid value ends the process
+with one line on stderr and exit status 1.
+
+At runtime, ROS 2 applies parameter changes as its services define: a
+``set_parameters`` request with several parameters checks and applies each
+one on its own (some may be applied while others are rejected), while
+``set_parameters_atomically`` applies all of them or none. Every value is
+checked against the table before it is accepted; an accepted change takes
+effect on the next message. Counters and the current conventions are
 published on ``/diagnostics`` once a second.
 
 Run it with, for example::
@@ -16,7 +29,9 @@ Run it with, for example::
 """
 import functools
 import gc
+import sys
 import time
+from typing import List, Optional, Sequence
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -37,7 +52,8 @@ from rotation_node.bag.cdr import fixed_layout_codec
 from rotation_node.bag.qos import AUTO, input_qos, qos_profile
 from rotation_node.errors import BagError, ParameterError
 from rotation_node.parameters import (
-    NODE_NAME, PARAMETERS, PARAMETERS_BY_NAME, NodeParameters)
+    NODE_NAME, PARAMETERS, PARAMETERS_BY_NAME, ROS_BUILTIN_PARAMETERS, NodeParameters,
+    parameters_file_sections, parameters_from_yaml, unknown_parameter_error)
 from rotation_node.pipeline import (
     CONVERSION_ERROR, DROP_REASONS, SKIP_REASONS, ConversionPipeline, warm_up_conversions)
 from rotation_node.reception import Reception, message_identity
@@ -51,6 +67,60 @@ HANDOFF_QUIET_S = 0.25
 HANDOFF_MAX_S = 2.0
 # Messages taken in one callback at most, beyond the one the executor took.
 DRAIN_MAX = 100
+
+
+# ROS arguments (after --ros-args, up to --) that take a value, and those that do not.
+_ROS_FLAGS_WITH_VALUE = frozenset((
+    '-r', '--remap', '-p', '--param', '--params-file', '-e', '--enclave', '--log-level',
+    '--log-file-name', '--log-config-file'))
+
+
+def ros_arguments(args: Sequence[str]) -> List[tuple]:
+    """
+    Return the ``(flag, value)`` pairs of the ROS arguments in a command line.
+
+    Parameters
+    ----------
+    args : sequence of str
+        The command line (``sys.argv``); ROS arguments are those after each
+        ``--ros-args``, up to the next ``--``.
+
+    Returns
+    -------
+    list of (str, str or None)
+        E.g. ``[('--params-file', 'a.yaml'), ('-p', 'qos.depth:=5')]``; flags
+        without a value (``--disable-stdout-logs``) with None.
+
+    """
+    pairs, in_ros_args, index = [], False, 0
+    while index < len(args):
+        token = args[index]
+        if token == '--ros-args':
+            in_ros_args = True
+        elif token == '--':
+            in_ros_args = False
+        elif in_ros_args:
+            if token in _ROS_FLAGS_WITH_VALUE and index + 1 < len(args):
+                pairs.append((token, args[index + 1]))
+                index += 1
+            else:
+                pairs.append((token, None))
+        index += 1
+    return pairs
+
+
+def _parameters_files(args):
+    return [value for flag, value in ros_arguments(args) if flag == '--params-file']
+
+
+def _check_parameter_names(args):
+    """Raise ParameterError for a ``-p NAME:=VALUE`` naming no parameter of the node."""
+    known = {*PARAMETERS_BY_NAME, *ROS_BUILTIN_PARAMETERS}
+    for flag, value in ros_arguments(args):
+        if flag in ('-p', '--param') and value is not None:
+            name = value.split(':=', 1)[0]
+            if name not in known:
+                raise unknown_parameter_error(name, f' in {flag} {value}')
 
 
 def parameter_descriptor(spec) -> ParameterDescriptor:
@@ -95,15 +165,28 @@ class RotationNode(Node):
     """
     Convert orientations and angular velocities from ``input`` to the configured outputs.
 
+    Parameters
+    ----------
+    parameters_files : sequence of str, optional
+        The node's ``--params-file`` files: each must have a section for this
+        node, setting only its parameters, to valid values.
+
     Raises
     ------
     ParameterError
-        An initial parameter value (from ``-p`` or a parameters file) is invalid.
+        A parameters file is invalid for this node, or an initial parameter value
+        (from ``-p`` or a parameters file) is invalid.
 
     """
 
-    def __init__(self, **kwargs):
+    def __init__(self, parameters_files: Sequence[str] = (), **kwargs):
         super().__init__(NODE_NAME, **kwargs)
+        try:
+            for path in parameters_files:   # as rotation_bag convert reads them
+                parameters_from_yaml(path, self.get_fully_qualified_name())
+        except ParameterError:
+            self.destroy_node()
+            raise
         self.params = NodeParameters()
         self._pipeline = None
         self._inputs = []               # one _TopicInput per topic of the input type
@@ -196,12 +279,15 @@ class RotationNode(Node):
         """
         Return the QoS to subscribe ``state``'s topic with, given the ``offered`` profiles.
 
-        With ``qos.reliability: auto``, adapted to them; ``incompatible_policy`` (a
-        publisher the current subscription cannot match offers less of it) lowers that
-        policy even before the graph shows the publisher.
+        With ``qos.reliability: auto``, adapted to them (kept as they are while no
+        publisher is known); ``incompatible_policy`` (a publisher the current
+        subscription cannot match offers less of it) lowers that policy even before
+        the graph shows the publisher.
         """
         qos = input_qos(self.params, offered, transient_local=state.topic.transient_local)
-        if self.params.qos_reliability == AUTO and qos == state.qos:
+        if self.params.qos_reliability == AUTO and state.qos is not None:
+            if not offered:
+                qos.reliability, qos.durability = state.qos.reliability, state.qos.durability
             if incompatible_policy == QoSPolicyKind.RELIABILITY:
                 qos.reliability = ReliabilityPolicy.BEST_EFFORT
             elif incompatible_policy == QoSPolicyKind.DURABILITY:
@@ -219,8 +305,6 @@ class RotationNode(Node):
     def _adapt(self, state, incompatible_policy=None):
         """Subscribe ``state``'s topic again if the publishers need another QoS; log it once."""
         offered = self._offered(state)
-        if not offered and incompatible_policy is None:
-            return   # keep the QoS of the last publishers until new ones appear
         qos = self._input_qos(state, offered, incompatible_policy)
         if qos == state.qos:
             return
@@ -446,12 +530,30 @@ def _text(value):
     return str(value)
 
 
-def main(args=None):
-    """Run the node until Ctrl-C; return 1 if a parameter value is invalid."""
+def main(args: Optional[Sequence[str]] = None) -> int:
+    """
+    Run the node until Ctrl-C.
+
+    Returns
+    -------
+    int
+        0 after Ctrl-C or shutdown; 1 if a parameters file or an initial parameter
+        value is invalid (one line on stderr says which).
+
+    """
+    argv = sys.argv if args is None else list(args)
+    files = _parameters_files(argv)
+    try:   # before rclpy reads the files, whose own errors are many lines long
+        for path in files:
+            parameters_file_sections(path)
+        _check_parameter_names(argv)
+    except ParameterError as exc:
+        print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
+        return 1
     rclpy.init(args=args)
     node = None
     try:
-        node = RotationNode()
+        node = RotationNode(parameters_files=files)
         # The ~1e5 objects of rclpy, numpy and numba live as long as the process: keep
         # them out of the cyclic collector, whose full passes over them stall a
         # callback for ~50 ms (50 messages at 1 kHz).
@@ -459,8 +561,12 @@ def main(args=None):
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except _rclpy.RCLError:
+        if rclpy.ok():
+            raise
+        # Ctrl-C during start-up: the context was shut down under a graph query.
     except ParameterError as exc:
-        rclpy.logging.get_logger(NODE_NAME).fatal(f'invalid parameter: {exc}')
+        print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
         return 1
     finally:
         if node is not None:

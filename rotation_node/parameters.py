@@ -17,11 +17,12 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Callable, Mapping, Optional
 
-import yaml
-
 from rotation_node import messages
 from rotation_node.conversions import parse_sequence
 from rotation_node.errors import ParameterError
+from rotation_node.frames import BODY_FRAMES, WORLD_FRAMES
+from rotation_node.ros_yaml import load_ros_yaml
+from rotation_node.validation import describe_value, did_you_mean
 
 NODE_NAME = 'rotation_node'
 
@@ -32,10 +33,11 @@ OUTPUTS = tuple(messages.OUTPUTS)
 """Values allowed in ``outputs``: the outputs of :data:`rotation_node.messages.OUTPUTS`."""
 
 FRAMES = ('body', 'world')
+COVARIANCE_FRAMES = ('fixed', 'body')
 RELIABILITIES = ('auto', 'reliable', 'best_effort')
 
-# Parameters every rclpy node declares by itself; a parameters file may set them.
-_ROS_BUILTIN_PARAMETERS = frozenset({'use_sim_time', 'start_type_description_service'})
+ROS_BUILTIN_PARAMETERS = frozenset({'use_sim_time', 'start_type_description_service'})
+"""Parameters every rclpy node declares by itself; a parameters file may set them."""
 
 
 @dataclass(frozen=True)
@@ -105,8 +107,8 @@ class ParameterSpec:
             for item in (value if self.type is tuple else (value,)):
                 if item not in self.choices:
                     raise ParameterError(
-                        f"parameter '{self.name}': {item!r} is not allowed; "
-                        f'{self.constraints}')
+                        f"parameter '{self.name}': {item!r} is not allowed"
+                        f'{did_you_mean(item, self.choices)}; {self.constraints}')
         if self.bounds is not None and not self.bounds[0] <= value <= self.bounds[1]:
             raise ParameterError(
                 f"parameter '{self.name}': {value!r} is out of range; "
@@ -122,6 +124,8 @@ _TYPE_NAMES = {
 
 
 def _checked_type(spec, value):
+    if spec.type is tuple and value is None:
+        value = ()   # ROS gives an empty list in a parameters file (outputs: []) as no value
     if spec.type is tuple:
         ok = isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value)
         value = tuple(value) if ok else value
@@ -132,7 +136,7 @@ def _checked_type(spec, value):
     if not ok:
         raise ParameterError(
             f"parameter '{spec.name}': expected {_TYPE_NAMES[spec.type]}, "
-            f'got {type(value).__name__} {value!r}')
+            f'got {describe_value(value)}')
     if spec.type is float and not math.isfinite(value):
         raise ParameterError(f"parameter '{spec.name}': must be finite, got {value!r}")
     return value
@@ -222,6 +226,32 @@ class NodeParameters:
         'angular_velocity.output_frame', 'body',
         'Frame of the angular_velocity output',
         choices=FRAMES)
+    covariance_frame: str = _parameter(
+        'covariance.frame', 'fixed',
+        'Axes of the input orientation covariance: fixed (rotation about the world axes, '
+        'REP 145) or body (about the body axes)',
+        choices=COVARIANCE_FRAMES)
+    covariance_max_linearisation_ratio: float = _parameter(
+        'covariance.max_linearisation_ratio', 0.3,
+        'Largest orientation standard deviation over distance from gimbal lock (rad/rad) for '
+        'which euler_stddev and euler_covariance are published (about 10 % accurate at 0.3)',
+        bounds=(0.0, 1e6))
+    frames_input_world: str = _parameter(
+        'frames.input_world', 'enu',
+        'World frame convention of the input: enu (x east, y north, z up; REP 103) or ned',
+        choices=WORLD_FRAMES)
+    frames_input_body: str = _parameter(
+        'frames.input_body', 'flu',
+        'Body frame convention of the input: flu (x forward, y left, z up; REP 103) or frd',
+        choices=BODY_FRAMES)
+    frames_output_world: str = _parameter(
+        'frames.output_world', 'enu',
+        'World frame convention of the outputs: enu or ned',
+        choices=WORLD_FRAMES)
+    frames_output_body: str = _parameter(
+        'frames.output_body', 'flu',
+        'Body frame convention of the outputs: flu or frd',
+        choices=BODY_FRAMES)
     qos_reliability: str = _parameter(
         'qos.reliability', 'auto',
         'Reliability of the input subscriptions and output publishers; auto: inputs adapt '
@@ -255,9 +285,7 @@ class NodeParameters:
         changes = {}
         for name, value in values.items():
             if name not in PARAMETERS_BY_NAME:
-                raise ParameterError(
-                    f"unknown parameter '{name}'; the node's parameters are "
-                    f"{', '.join(PARAMETERS_BY_NAME)}")
+                raise unknown_parameter_error(name)
             changes[PARAMETERS_BY_NAME[name].attribute] = value
         return replace(self, **changes)
 
@@ -273,15 +301,16 @@ PARAMETERS = tuple(replace(f.metadata['spec'], attribute=f.name) for f in fields
 PARAMETERS_BY_NAME = {spec.name: spec for spec in PARAMETERS}
 
 
-class _RosYamlLoader(yaml.SafeLoader):
-    """YAML loader that reads numbers the way ROS (rcl_yaml_param_parser) does."""
+def unknown_parameter_error(name: str, where: str = '') -> ParameterError:
+    """
+    Return the error for a name that is not a parameter of the node.
 
-
-# YAML 1.1 (PyYAML) reads 1e-3 as a string; rcl reads it as a double, as people mean it.
-_RosYamlLoader.add_implicit_resolver(
-    'tag:yaml.org,2002:float',
-    re.compile(r'^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$'),
-    list('-+0123456789'))
+    It names the nearest parameter (``difflib``) and lists them all; ``where``
+    (e.g. ``' in -p euler.sequense:=xyz'``) follows the name.
+    """
+    return ParameterError(
+        f"unknown parameter '{name}'{where}{did_you_mean(name, PARAMETERS_BY_NAME)}; "
+        f"the node's parameters are {', '.join(PARAMETERS_BY_NAME)}")
 
 
 def parameters_from_yaml(path, node_name: str = NODE_NAME) -> NodeParameters:
@@ -320,33 +349,68 @@ def parameters_from_yaml(path, node_name: str = NODE_NAME) -> NodeParameters:
 
     """
     path = Path(path)
-    try:
-        document = yaml.load(path.read_text(), Loader=_RosYamlLoader)
-    except OSError as exc:
-        raise ParameterError(f'parameters file {path}: cannot read it ({exc.strerror})') from None
-    except yaml.YAMLError as exc:
-        raise ParameterError(f'parameters file {path}: invalid YAML: {exc}') from None
-    if not isinstance(document, dict):
-        raise ParameterError(f'parameters file {path}: expected a mapping of node names')
     fq_name = node_name if node_name.startswith('/') else '/' + node_name
-    sections = [(key, value) for key, value in document.items()
-                if _node_key_matches(str(key), fq_name)]
-    if not sections:
+    sections = parameters_file_sections(path)
+    matching = [values for key, values in sections if _node_key_matches(key, fq_name)]
+    if not matching:
+        found = ', '.join(repr(key) for key, _ in sections) or 'none'
         raise ParameterError(
-            f"parameters file {path}: no section for node '{fq_name}' "
-            f"(expected a key such as '{node_name}:' or '/**:')")
+            f"parameters file {path}: no section for node '{fq_name}' (its sections: {found}; "
+            f"key it '{fq_name}:', '/**/{fq_name.rsplit('/', 1)[-1]}:' or '/**:')")
     values = {}
-    for key, section in sections:
-        if not isinstance(section, dict) or not isinstance(section.get('ros__parameters'), dict):
-            raise ParameterError(
-                f"parameters file {path}: section '{key}' needs a 'ros__parameters:' mapping")
-        values.update(_flattened(section['ros__parameters']))
-    for name in _ROS_BUILTIN_PARAMETERS.intersection(values):
+    for section in matching:
+        values.update(section)
+    for name in ROS_BUILTIN_PARAMETERS.intersection(values):
         del values[name]
     try:
         return NodeParameters.from_ros(values)
     except ParameterError as exc:
         raise ParameterError(f'parameters file {path}: {exc}') from None
+
+
+def parameters_file_sections(path) -> list:
+    """
+    Read the sections of a ROS 2 parameters file, for any node.
+
+    Node keys may nest as namespaces (``robot: {rotation_node: {ros__parameters:
+    ...}}`` is the section ``robot/rotation_node``), as rcl reads them.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Returns
+    -------
+    list of (str, dict)
+        ``(node key, {parameter name: value})`` in file order, nested parameter
+        names joined with ``'.'``.
+
+    Raises
+    ------
+    ParameterError
+        The file cannot be read, is not valid YAML, is not a mapping of node
+        names, or a node key holds no ``ros__parameters`` mapping.
+
+    """
+    document = load_ros_yaml(path, f'parameters file {path}', ParameterError)
+    if not isinstance(document, dict):
+        raise ParameterError(f'parameters file {path}: expected a mapping of node names')
+    sections = []
+
+    def read(prefix, mapping):
+        for key, value in mapping.items():
+            name = f'{prefix}/{str(key).strip("/")}' if prefix else str(key)
+            if isinstance(value, dict) and isinstance(value.get('ros__parameters'), dict):
+                sections.append((name, _flattened(value['ros__parameters'])))
+            elif (isinstance(value, dict) and value and 'ros__parameters' not in value
+                    and all(isinstance(child, dict) for child in value.values())):
+                read(name, value)   # a namespace of node keys
+            else:
+                raise ParameterError(
+                    f"parameters file {path}: section '{name}' needs a 'ros__parameters:' "
+                    'mapping')
+    read('', document)
+    return sections
 
 
 def _flattened(mapping, prefix=''):

@@ -35,10 +35,11 @@ from typing import Any, Callable, Dict, List, NamedTuple, Optional, Tuple
 
 import numpy as np
 
-from rotation_node import conversions, kinematics, messages
+from rotation_node import conversions, covariance, kinematics, messages
+from rotation_node.frames import FrameConversion
 from rotation_node.messages import (
-    ANGULAR_VELOCITY, EULER_ANGLES, EULER_RATES, ORIENTATION, OUTPUT_QUATERNION,
-    PUBLISHED_EULER, Sample)
+    ANGULAR_VELOCITY, EULER_ANGLES, EULER_COVARIANCE, EULER_RATES, ORIENTATION,
+    ORIENTATION_COVARIANCE, OUTPUT_QUATERNION, PUBLISHED_EULER, Sample)
 from rotation_node.parameters import INPUT_TYPES, OUTPUTS, NodeParameters
 from rotation_node.stamps import header_stamp_ns, seconds_text
 
@@ -51,11 +52,16 @@ ORIENTATION_UNKNOWN = 'orientation_unknown'
 NON_FINITE_ANGULAR_VELOCITY = 'non_finite_angular_velocity'
 TIMESTAMP_NOT_INCREASING = 'timestamp_not_increasing'
 EULER_RATES_NEAR_SINGULAR = 'euler_rates_near_singular'
+COVARIANCE_UNKNOWN = 'covariance_unknown'
+NON_FINITE_COVARIANCE = 'non_finite_covariance'
+EULER_COVARIANCE_NEAR_SINGULAR = 'euler_covariance_near_singular'
+EULER_COVARIANCE_NOT_LINEAR = 'euler_covariance_not_linear'
 # A message whose quaternion was normalised (counted in PipelineStats.normalised).
 NON_UNIT_QUATERNION = 'non_unit_quaternion'
 DROP_REASONS = (NON_FINITE_ORIENTATION, ZERO_QUATERNION, CONVERSION_ERROR)
 SKIP_REASONS = (ORIENTATION_UNKNOWN, NON_FINITE_ANGULAR_VELOCITY, TIMESTAMP_NOT_INCREASING,
-                EULER_RATES_NEAR_SINGULAR)
+                EULER_RATES_NEAR_SINGULAR, COVARIANCE_UNKNOWN, NON_FINITE_COVARIANCE,
+                EULER_COVARIANCE_NEAR_SINGULAR, EULER_COVARIANCE_NOT_LINEAR)
 
 SAMPLE_TRANSFORMS: List[Callable[[NodeParameters], Optional[Callable[[Sample], Sample]]]] = []
 """
@@ -90,7 +96,9 @@ class PipelineStats:
     skipped : collections.Counter
         Input samples of which some outputs could not be computed, by reason
         (``orientation_unknown``, ``non_finite_angular_velocity``,
-        ``timestamp_not_increasing``, ``euler_rates_near_singular``).
+        ``timestamp_not_increasing``, ``euler_rates_near_singular``,
+        ``covariance_unknown``, ``non_finite_covariance``,
+        ``euler_covariance_near_singular``, ``euler_covariance_not_linear``).
     normalised : int
         Input quaternions further than ``quaternion.norm_tolerance`` from unit length.
     near_singular : int
@@ -130,6 +138,10 @@ class Value(NamedTuple):
     method : str
         Name of the :class:`ConversionPipeline` method
         ``method(sample, values) -> value or None`` that computes it.
+    reads : tuple of str
+        The optional :class:`~rotation_node.messages.Sample` fields it reads
+        (``'angular_velocity'``, ``'covariance'``): input messages are read into
+        them only when a value computed reads them.
 
     """
 
@@ -137,15 +149,18 @@ class Value(NamedTuple):
     requires: Tuple[str, ...]
     uses: Tuple[str, ...]
     method: str
+    reads: Tuple[str, ...] = ()
 
 
 VALUES = (
     Value(ORIENTATION, (), (), '_orientation'),
-    Value(ANGULAR_VELOCITY, (), (ORIENTATION,), '_angular_velocity'),
+    Value(ANGULAR_VELOCITY, (), (ORIENTATION,), '_angular_velocity', ('angular_velocity',)),
     Value(OUTPUT_QUATERNION, (ORIENTATION,), (), '_output_quaternion'),
     Value(EULER_ANGLES, (ORIENTATION,), (), '_euler_angles'),
     Value(PUBLISHED_EULER, (EULER_ANGLES,), (), '_published_euler'),
     Value(EULER_RATES, (EULER_ANGLES, ANGULAR_VELOCITY), (), '_euler_rates'),
+    Value(ORIENTATION_COVARIANCE, (ORIENTATION,), (), '_orientation_covariance', ('covariance',)),
+    Value(EULER_COVARIANCE, (EULER_ANGLES, ORIENTATION_COVARIANCE), (), '_euler_covariance'),
 )
 """The per-message values, each after those it requires or uses."""
 
@@ -200,12 +215,24 @@ class ConversionPipeline:
         self._input = messages.INPUTS[params.input_type]
         self._outputs = [messages.OUTPUTS[name] for name in params.outputs]
         self._builders = {output.name: output.message.build for output in self._outputs}
-        self._samples = self._input.sample_stream(params)
+        plan = _needed_values(params.outputs)
+        reads = {field for value in plan for field in value.reads}
+        sample_fields = {'angular_velocity': 'angular_velocity' in reads,
+                         'covariance': 'covariance' in reads}
+        self._samples = self._input.sample_stream(params, **sample_fields)
         self._transforms = [transform for transform in
                             (factory(params) for factory in SAMPLE_TRANSFORMS)
                             if transform is not None]
+        # A plain input without transforms: one sample per message, read directly.
+        self._read = (self._input.sample_reader(**sample_fields)
+                      if self._input.stream is None and not self._transforms else None)
         self._plan = [(value.name, value.requires, getattr(self, value.method))
-                      for value in _needed_values(params.outputs)]
+                      for value in plan]
+        self._output_plan = [(output.name, output.needs, output.compute)
+                             for output in self._outputs]
+        frames = FrameConversion(params.frames_input_world, params.frames_input_body,
+                                 params.frames_output_world, params.frames_output_body)
+        self._frames = None if frames.is_identity else frames
         self._angle_period = 360.0 if params.euler_degrees else 2.0 * math.pi
         # Per-stream state.
         self._previous_quaternion = None     # last orientation, for the finite difference
@@ -275,26 +302,27 @@ class ConversionPipeline:
 
         """
         self.stats.received += 1
-        results = []
-        for sample in self._samples(topic, msg):
+        if self._read is not None:
+            samples = (self._read(msg),)
+        else:
+            samples = self._samples(topic, msg)
             for transform in self._transforms:
-                sample = transform(sample)
-            results += self._process_sample(sample)
+                samples = [transform(sample) for sample in samples]
+        results = []
+        for sample in samples:
+            try:
+                outputs = self._converted(sample)
+            except _Dropped as drop:
+                self.stats.dropped[drop.reason] += 1
+                self._report(drop.reason, str(drop))
+                continue
+            except ValueError as exc:   # a conversion rejected a value the checks let through
+                self.stats.dropped[CONVERSION_ERROR] += 1
+                self._report(CONVERSION_ERROR, f'message dropped: {exc}')
+                continue
+            self.stats.published += len(outputs)
+            results += outputs
         return results
-
-    def _process_sample(self, sample):
-        try:
-            outputs = self._converted(sample)
-        except _Dropped as drop:
-            self.stats.dropped[drop.reason] += 1
-            self._report(drop.reason, str(drop))
-            return []
-        except ValueError as exc:   # a conversion rejected a value the checks let through
-            self.stats.dropped[CONVERSION_ERROR] += 1
-            self._report(CONVERSION_ERROR, f'message dropped: {exc}')
-            return []
-        self.stats.published += len(outputs)
-        return outputs
 
     def _report(self, reason, detail):
         if self._on_issue is not None:
@@ -308,17 +336,27 @@ class ConversionPipeline:
         """The outputs of one sample: every needed value once, then each output from them."""
         values = {}
         for name, requires, compute in self._plan:
-            available = True
             for required in requires:
                 if values[required] is None:
-                    available = False
+                    values[name] = None
                     break
-            values[name] = compute(sample, values) if available else None
+            else:
+                values[name] = compute(sample, values)
         params, header, outputs = self.params, sample.header, []
-        for output in self._outputs:
-            needed = [values[name] for name in output.needs]
-            if not any(value is None for value in needed):
-                outputs.append((output.name, header, output.compute(params, *needed)))
+        for name, needs, compute in self._output_plan:
+            if compute is None:   # the one value needed, as it is
+                value = values[needs[0]]
+                if value is not None:
+                    outputs.append((name, header, value))
+                continue
+            needed = []
+            for need in needs:
+                value = values[need]
+                if value is None:
+                    break
+                needed.append(value)
+            else:
+                outputs.append((name, header, compute(params, *needed)))
         if values[ORIENTATION] is None and len(outputs) < len(self._outputs):
             self._skip(ORIENTATION_UNKNOWN,
                        'orientation unknown (Imu orientation_covariance[0] == -1): '
@@ -337,18 +375,20 @@ class ConversionPipeline:
             raise _Dropped(NON_FINITE_ORIENTATION,
                            f'message dropped: {form} {orientation} has a NaN or Inf component')
         if form == messages.EULER:
-            return conversions.quaternion_from_euler(
+            q = conversions.quaternion_from_euler(
                 orientation, self.params.euler_sequence, degrees=self.params.euler_degrees)
-        if form == messages.ROTATION_VECTOR:
-            return conversions.quaternion_from_rotation_vector(orientation)
-        norm = math.hypot(*orientation)
-        if norm == 0.0:
-            raise _Dropped(ZERO_QUATERNION, 'message dropped: zero quaternion')
-        if abs(norm - 1.0) > self.params.quaternion_norm_tolerance:
-            self.stats.normalised += 1
-            self._report(NON_UNIT_QUATERNION,
-                         f'quaternion {orientation} has norm {norm:.9g}; normalised')
-        return np.array(orientation)
+        elif form == messages.ROTATION_VECTOR:
+            q = conversions.quaternion_from_rotation_vector(orientation)
+        else:
+            norm = math.hypot(*orientation)
+            if norm == 0.0:
+                raise _Dropped(ZERO_QUATERNION, 'message dropped: zero quaternion')
+            if abs(norm - 1.0) > self.params.quaternion_norm_tolerance:
+                self.stats.normalised += 1
+                self._report(NON_UNIT_QUATERNION,
+                             f'quaternion {orientation} has norm {norm:.9g}; normalised')
+            q = np.array(orientation)
+        return q if self._frames is None else self._frames.quaternion(q)
 
     def _angular_velocity(self, sample, values):
         """
@@ -366,7 +406,11 @@ class ConversionPipeline:
                            f'angular velocity {omega} has a NaN or Inf component: '
                            'angular-velocity outputs skipped')
                 return None
-            if self.params.angular_velocity_input_frame == frame:
+            input_frame = self.params.angular_velocity_input_frame
+            if self._frames is not None:
+                omega = (self._frames.world_vector(omega) if input_frame == 'world'
+                         else self._frames.body_vector(omega))
+            if input_frame == frame:
                 return np.array(omega)
             if q is None:
                 return None   # the frame change needs the orientation
@@ -439,6 +483,64 @@ class ConversionPipeline:
             return None
         return rates
 
+    def _orientation_covariance(self, sample, values):
+        """
+        Return the input's rotation-vector covariance in the output frames, or None if unknown.
+
+        About the world axes (``covariance.frame`` fixed) or the body axes (body).
+        """
+        block = sample.covariance
+        if block is None or not any(block):
+            self._skip(COVARIANCE_UNKNOWN,
+                       'orientation covariance unknown (all zeros, or none in this input '
+                       'type): uncertainty outputs skipped')
+            return None
+        if not all(map(math.isfinite, block)):
+            self._skip(NON_FINITE_COVARIANCE,
+                       f'orientation covariance {block} has a NaN or Inf element: '
+                       'uncertainty outputs skipped')
+            return None
+        sigma = np.array(block).reshape(3, 3)
+        if self._frames is None:
+            return sigma
+        if self.params.covariance_frame == 'fixed':
+            return self._frames.world_covariance(sigma)
+        return self._frames.body_covariance(sigma)
+
+    def _euler_covariance(self, sample, values):
+        """Return the first-order Euler covariance; None near gimbal lock or past linearity."""
+        params = self.params
+        angles, sigma = values[EULER_ANGLES], values[ORIENTATION_COVARIANCE]
+        with warnings.catch_warnings():   # counted and reported below instead
+            warnings.simplefilter('ignore', kinematics.EulerSingularityWarning)
+            result = covariance.euler_covariance_from_rotation_vector_covariance(
+                angles, sigma, params.euler_sequence,
+                'world' if params.covariance_frame == 'fixed' else 'body',
+                degrees=params.euler_degrees,
+                singularity_threshold=params.euler_singularity_threshold)
+        if math.isnan(result[0, 0]):
+            self._skip(EULER_COVARIANCE_NEAR_SINGULAR,
+                       f'within {params.euler_singularity_threshold:g} rad of gimbal lock '
+                       f'of {params.euler_sequence!r}: uncertainty outputs skipped (unbounded '
+                       'there)')
+            return None
+        # sigma_max^2 <= trace: only above it can the ratio exceed the limit (saves eigvalsh)
+        limit = params.covariance_max_linearisation_ratio * float(
+            conversions.euler_singularity_margin(values[ORIENTATION], params.euler_sequence))
+        if np.trace(sigma) <= limit * limit:
+            return result
+        ratio = float(covariance.euler_linearisation_ratio(
+            angles, sigma, params.euler_sequence, degrees=params.euler_degrees))
+        if not ratio <= params.covariance_max_linearisation_ratio:
+            self._skip(EULER_COVARIANCE_NOT_LINEAR,
+                       f'orientation standard deviation is {ratio:.3g} x its distance from '
+                       f'gimbal lock of {params.euler_sequence!r}, more than '
+                       'covariance.max_linearisation_ratio = '
+                       f'{params.covariance_max_linearisation_ratio:g}: the first-order Euler '
+                       'covariance would be wrong; uncertainty outputs skipped')
+            return None
+        return result
+
 
 def warm_up_conversions() -> None:
     """
@@ -458,3 +560,6 @@ def warm_up_conversions() -> None:
                 msg = pipeline.input_type()
                 msg.header.stamp.nanosec = nanosec
                 pipeline.process(msg)
+    angles = np.zeros(3)   # the input messages above carry no covariance
+    covariance.euler_covariance_from_rotation_vector_covariance(angles, np.eye(3), 'xyz')
+    covariance.euler_linearisation_ratio(angles, np.eye(3), 'xyz')

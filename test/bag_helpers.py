@@ -9,6 +9,7 @@ Python lists/dicts so that two independent decoders can be compared with ``==``.
 """
 import array
 import dataclasses
+import shutil
 import string
 import types
 
@@ -97,8 +98,11 @@ def plain(value):
 
 
 def imu_messages(rng, count, *, period_ns=10_000_000, start_ns=1_700_000_000_000_000_000,
-                 frame_id='imu_link'):
-    """Imu messages at a fixed rate: random unit orientations, angular velocities."""
+                 frame_id='imu_link', orientation_variance=(1e-6, 2e-6, 4e-6)):
+    """Imu messages at a fixed rate: random unit orientations, angular velocities.
+
+    The orientation covariance is ``diag(orientation_variance)`` (rad^2).
+    """
     from sensor_msgs.msg import Imu
     messages = []
     quaternions = rng.normal(size=(count, 4))
@@ -109,6 +113,7 @@ def imu_messages(rng, count, *, period_ns=10_000_000, start_ns=1_700_000_000_000
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(start_ns + i * period_ns, 10**9)
         msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w = q
         msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z = w
+        msg.orientation_covariance[0::4] = orientation_variance
         messages.append(msg)
     return messages
 
@@ -116,3 +121,95 @@ def imu_messages(rng, count, *, period_ns=10_000_000, start_ns=1_700_000_000_000
 def stamp_ns(msg):
     """Header stamp of a message in integer nanoseconds."""
     return msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+
+
+# Bags written by independent writers: the rosbags package (rosbag2 directories,
+# ROS 1 bags) and the mcap library, from messages serialized by rclpy.
+
+def serialized_rows(topic, messages, *, log_offset_ns=1_000_000):
+    """``[(topic, type name, rclpy CDR bytes, log time)]``; log time = stamp + offset."""
+    from rclpy.serialization import serialize_message
+
+    from rotation_node.bag.message_types import type_name_of
+    return [(topic, type_name_of(type(msg)), serialize_message(msg),
+             stamp_ns(msg) + log_offset_ns) for msg in messages]
+
+
+def interleaved(*row_lists):
+    """Rows of several topics in log-time order (ties in argument order)."""
+    return sorted((row for rows in row_lists for row in rows), key=lambda row: row[3])
+
+
+def write_rosbag2(path, rows, *, storage='mcap', compression=None, qos=None):
+    """
+    Write ``rows`` with the rosbags writer as a rosbag2 directory (metadata version 9).
+
+    ``compression``: None, ``'file'``, ``'message'`` (zstd, as rosbag2) or
+    ``'storage'`` (zstd chunks, mcap only). ``qos``: {topic: [rosbags Qos]}.
+    """
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
+    from rosbags.typesys import Stores, get_typestore
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    writer = Writer(path, version=9, storage_plugin=StoragePlugin[storage.upper()])
+    if compression:
+        writer.set_compression(CompressionMode[compression.upper()], CompressionFormat.ZSTD)
+    connections = {}
+    with writer:
+        for topic, type_name, data, log_time in rows:
+            if topic not in connections:
+                connections[topic] = writer.add_connection(
+                    topic, type_name, typestore=typestore,
+                    offered_qos_profiles=(qos or {}).get(topic, ()))
+            writer.write(connections[topic], log_time, data)
+    return path
+
+
+def write_split_rosbag2(path, rows, parts, **options):
+    """
+    A rosbag2 directory of ``parts`` storage files (as ``ros2 bag record --max-bag-size``).
+
+    Each part is written by :func:`write_rosbag2`; ``metadata.yaml`` lists them
+    in order, with the per-file and per-topic counts rosbag2 writes.
+    """
+    import yaml
+    bounds = np.linspace(0, len(rows), parts + 1).astype(int)
+    path.mkdir()
+    info, files = None, []
+    for index, (start, stop) in enumerate(zip(bounds[:-1], bounds[1:])):
+        part = write_rosbag2(path.parent / f'{path.name}.part{index}', rows[start:stop],
+                             **options)
+        part_info = yaml.safe_load((part / 'metadata.yaml').read_text())[
+            'rosbag2_bagfile_information']
+        name, = part_info['relative_file_paths']
+        new_name = f'{path.name}_{index}' + name[len(part.name):]
+        (part / name).rename(path / new_name)
+        files.append({**part_info['files'][0], 'path': new_name})
+        if info is None:
+            info = part_info
+        else:
+            counts = {t['topic_metadata']['name']: t for t in info['topics_with_message_count']}
+            for topic in part_info['topics_with_message_count']:
+                known = counts.get(topic['topic_metadata']['name'])
+                if known is None:
+                    info['topics_with_message_count'].append(topic)
+                else:
+                    known['message_count'] += topic['message_count']
+        shutil.rmtree(part)
+    start = min(f['starting_time']['nanoseconds_since_epoch'] for f in files)
+    end = max(f['starting_time']['nanoseconds_since_epoch'] + f['duration']['nanoseconds']
+              for f in files)
+    info.update(relative_file_paths=[f['path'] for f in files], files=files,
+                message_count=len(rows), starting_time={'nanoseconds_since_epoch': start},
+                duration={'nanoseconds': end - start})
+    (path / 'metadata.yaml').write_text(
+        yaml.safe_dump({'rosbag2_bagfile_information': info}, sort_keys=False))
+    return path
+
+
+def rosbags_rows(path):
+    """``[(topic, data, log time)]`` of a bag as the rosbags reader reads it (an oracle)."""
+    from rosbags.rosbag2 import Reader
+    with Reader(path) as reader:
+        return [(connection.topic, bytes(data), time_ns)
+                for connection, time_ns, data in reader.messages()]

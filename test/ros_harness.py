@@ -107,15 +107,24 @@ class TestNode:
         self.close()
 
 
+# Orientation covariance written into the inputs that carry one (rad^2, row-major):
+# standard deviations about 1e-3 rad, correlated.
+INPUT_COVARIANCE = (1.0e-6, 0.3e-6, -0.2e-6,
+                    0.3e-6, 2.0e-6, 0.1e-6,
+                    -0.2e-6, 0.1e-6, 1.5e-6)
+
+
 def make_input_message(input_type, rotation, *, omega=(0.0, 0.0, 0.0), stamp_ns=0,
-                       frame_id='', sequence='xyz', degrees=False):
+                       frame_id='', sequence='xyz', degrees=False, covariance=INPUT_COVARIANCE):
     """
     Return an input message of the node's ``input_type`` holding ``rotation``.
 
     ``rotation`` is a scipy ``Rotation`` (the tests' oracle); ``omega`` goes into
     the angular-velocity field of the types that carry one; ``sequence`` and
-    ``degrees`` give the Euler convention of an Euler-angle input. The fields
-    written are those the input type's entry in rotation_node.messages names.
+    ``degrees`` give the Euler convention of an Euler-angle input; ``covariance``
+    (9 numbers, row-major) goes into the orientation covariance block of the
+    types that carry one. The fields written are those the input type's entry
+    in rotation_node.messages names.
     """
     import operator
     from rotation_node import messages
@@ -134,16 +143,23 @@ def make_input_message(input_type, rotation, *, omega=(0.0, 0.0, 0.0), stamp_ns=
     if entry.angular_velocity_field is not None:
         w = operator.attrgetter(entry.angular_velocity_field)(msg)
         w.x, w.y, w.z = (float(v) for v in omega)
+    if entry.covariance_field is not None:
+        block = operator.attrgetter(entry.covariance_field)(msg)
+        for index, value in zip(entry.covariance_indices, covariance):
+            block[index] = float(value)
     return msg
 
 
 def oracle_output(name, rotation, omega_body=(0.0, 0.0, 0.0), *, sequence='xyz',
-                  degrees=False, frame='body'):
+                  degrees=False, frame='body', covariance=INPUT_COVARIANCE,
+                  covariance_frame='fixed'):
     """
     Expected values of the node output ``name``, computed independently with scipy.
 
     ``rotation`` (scipy ``Rotation``) turns at the constant body rate
-    ``omega_body``; rates are central differences of scipy's conversions.
+    ``omega_body``; rates are central differences of scipy's conversions. The
+    Euler covariance is ``J Sigma J^T`` with ``J`` the central differences of
+    scipy's Euler angles w.r.t. a rotation vector about the fixed or body axes.
     Returns a flat array laid out as :func:`output_values` reads the message.
     """
     import numpy as np
@@ -173,6 +189,17 @@ def oracle_output(name, rotation, omega_body=(0.0, 0.0, 0.0), *, sequence='xyz',
         step = moved(h).as_euler(sequence) - moved(-h).as_euler(sequence)
         rates = (np.remainder(step + np.pi, 2 * np.pi) - np.pi) / (2 * h)
         return np.degrees(rates) if degrees else rates
+    if name in ('euler_stddev', 'euler_covariance'):
+        steps = Rotation.from_rotvec(h * np.vstack([np.eye(3), -np.eye(3)]))
+        moved = steps * rotation if covariance_frame == 'fixed' else rotation * steps
+        angles = moved.as_euler(sequence)
+        jacobian = (np.remainder(angles[:3] - angles[3:] + np.pi, 2 * np.pi) - np.pi).T / (2 * h)
+        euler_cov = jacobian @ np.reshape(covariance, (3, 3)) @ jacobian.T
+        if degrees:
+            euler_cov = euler_cov * (180 / np.pi) ** 2
+        if name == 'euler_stddev':
+            return np.sqrt(np.diagonal(euler_cov))
+        return np.concatenate([rotation.as_euler(sequence, degrees=degrees), euler_cov.ravel()])
     if name == 'quaternion_rate':
         ahead, behind = moved(h).as_quat(), moved(-h).as_quat()
         ahead, behind = (p if np.dot(p, q) > 0 else -p for p in (ahead, behind))

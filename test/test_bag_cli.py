@@ -76,8 +76,8 @@ def _run(capsys, *argv):
 @pytest.mark.parametrize('damage, args, match', [
     (None, ['missing.mcap', 'out.mcap', '--params', 'params.yaml'],
      'cannot open bag missing.mcap'),
-    ('truncated', ['imu.mcap', 'out.mcap', '--params', 'params.yaml'],
-     'imu.mcap is not a valid MCAP file'),
+    ('truncated', ['imu.mcap', 'out.mcap', '--params', 'params.yaml', '--strict'],
+     'imu.mcap: unfinished recording (no MCAP summary or footer)'),
     ('corrupt', ['imu.mcap', 'out.mcap', '--params', 'params.yaml'], 'imu.mcap is corrupt'),
     (None, ['imu.mcap', 'out.mcap', '--params', 'params.yaml', '--topic', '/nope'],
      'topic /nope not in imu.mcap'),

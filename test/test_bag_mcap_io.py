@@ -339,14 +339,36 @@ def _damaged(source, how):
     return bytes(data)
 
 
-@pytest.mark.parametrize('how', ['empty', 'text', 'truncated_0.1', 'truncated_0.5',
-                                 'truncated_0.999', 'overwritten_chunk'])
-def test_damaged_file_raises_bag_error(tmp_path, mixed_bag, how):
+@pytest.mark.parametrize('how, reason', [
+    ('empty', r'damaged.mcap: empty file \(0 bytes\)'),
+    ('text', 'damaged.mcap is not a valid MCAP file: .*invalid magic'),
+    ('overwritten_chunk', 'damaged.mcap is corrupt: .*crc')])
+def test_damaged_file_raises_bag_error(tmp_path, mixed_bag, how, reason):
     path = tmp_path / 'damaged.mcap'
     path.write_bytes(_damaged(mixed_bag[0], how))
-    with pytest.raises(BagError, match='damaged.mcap'):
+    with pytest.raises(BagError, match=reason):
         reader = BagReader(path)
         list(reader.messages())
+
+
+@pytest.mark.parametrize('fraction', [0.1, 0.5, 0.999])
+def test_truncated_file_reads_as_unfinished_recording(tmp_path, mixed_bag, fraction):
+    """A file cut short (no summary, no footer) gives the messages of its complete chunks."""
+    path = tmp_path / 'cut.mcap'
+    path.write_bytes(_damaged(mixed_bag[0], f'truncated_{fraction}'))
+    with pytest.raises(BagError, match=r'cut.mcap: unfinished recording .*\(--strict\)'):
+        BagReader(path, strict=True)
+    with BagReader(mixed_bag[0]) as complete:
+        every = [(m.topic, m.data, m.log_time_ns, m.publish_time_ns)
+                 for m in complete.messages()]
+    with BagReader(path) as reader:
+        recovered = [(m.topic, m.data, m.log_time_ns, m.publish_time_ns)
+                     for m in reader.messages()]
+        assert reader.recovered == len(recovered) == sum(reader.message_counts.values())
+    # Whatever was recovered is the start of the recording, byte for byte.
+    assert recovered == every[:len(recovered)]
+    if fraction == 0.999:   # only the summary and footer are missing
+        assert recovered == every
 
 
 @pytest.mark.parametrize('make', ['missing', 'directory'])
@@ -358,7 +380,8 @@ def test_unreadable_path_raises_bag_error(tmp_path, make):
         BagReader(path)
 
 
-def test_non_cdr_channel_rejected(tmp_path):
+def test_non_cdr_channel_listed_and_read_as_stored(tmp_path):
+    """A channel of another recorder is read as it is (to be copied), not decoded."""
     from mcap.writer import Writer
     path = tmp_path / 'json.mcap'
     with open(path, 'wb') as stream:
@@ -368,8 +391,14 @@ def test_non_cdr_channel_rejected(tmp_path):
         channel = writer.register_channel('/json', 'json', schema)
         writer.add_message(channel, log_time=1, data=b'{}', publish_time=1)
         writer.finish()
-    with pytest.raises(BagError, match="/json .* message encoding 'json', expected 'cdr'"):
-        BagReader(path)
+    reader = BagReader(path)
+    metadata = reader.topic_metadata['/json']
+    assert (metadata.type_name, metadata.definition, metadata.definition_encoding,
+            metadata.serialization_format) == ('Thing', '{}', 'jsonschema', 'json')
+    record, = reader.messages()
+    assert (record.data, record.log_time_ns) == (b'{}', 1)
+    with pytest.raises(BagError, match="invalid message type name 'Thing'"):
+        record.message()
 
 
 def test_qos_yaml_from_bag_parses_to_profiles(mixed_bag):

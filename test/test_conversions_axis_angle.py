@@ -132,3 +132,38 @@ def test_batch_schedule_reports_the_first_bad_sample(rng):
     v[8000, 1] = np.nan
     with pytest.raises(ValueError, match=r'`v` at index \(8000,\) has a NaN'):
         rc.quaternion_from_rotation_vector(v)
+
+
+def _grid_quaternions():
+    """Quaternions with components in {0, +-1/2, +-sqrt(1/2), +-1}, unit or not, any sign of w."""
+    values = (0.0, 0.5, -0.5, np.sqrt(0.5), -np.sqrt(0.5), 1.0, -1.0)
+    q = np.stack(np.meshgrid(values, values, values, values, indexing='ij'), -1).reshape(-1, 4)
+    return q[np.abs(q).max(axis=1) > 0]
+
+
+def test_angles_are_in_zero_to_pi_on_every_route():
+    q = _grid_quaternions()
+    m = rc.matrix_from_quaternion(q)
+    many = np.tile(q, (2, 1))
+    angles = [rc.axis_angle_from_quaternion(q)[1], rc.axis_angle_from_quaternion(many)[1],
+              rc.axis_angle_from_matrix(m)[1],
+              np.array([rc.axis_angle_from_quaternion(x)[1] for x in q]),
+              np.array([rc.axis_angle_from_matrix(x)[1] for x in m])]
+    for a in angles:
+        assert np.all((a >= 0.0) & (a <= np.pi))
+    truth = mpr.rotation_distance(q / np.linalg.norm(q, axis=1, keepdims=True), [0, 0, 0, 1])
+    assert np.max(np.abs(angles[0] - truth)) <= 1e-15
+
+
+def test_quaternions_from_axis_angle_and_rotation_vectors_are_canonical():
+    steps = np.arange(-8, 9) * (np.pi / 2)
+    axes = np.concatenate([np.eye(3), -np.eye(3), [[1.0, 1.0, 0.0], [0.0, -1.0, 1.0]]])
+    axis = np.repeat(axes, len(steps), axis=0)
+    angle = np.tile(steps, len(axes))
+    for q in (rc.quaternion_from_axis_angle(axis, angle),
+              rc.quaternion_from_rotation_vector(axis * angle[:, None]),
+              rc.quaternion_from_axis_angle(np.tile(axis, (80, 1)), np.tile(angle, 80))):
+        assert mpr.is_canonical(q)
+    q = _grid_quaternions()
+    assert mpr.is_canonical(rc.canonical_quaternion(q))
+    assert mpr.is_canonical(rc.quaternion_from_matrix(rc.matrix_from_quaternion(q)))

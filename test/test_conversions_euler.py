@@ -264,3 +264,106 @@ def test_batch_schedule_reports_the_first_bad_sample(rng):
     q[9000, 1] = 1.0
     with pytest.raises(ValueError, match=r'`q` at index \(9500,\)'):
         rc.euler_from_quaternion(q, 'zyx')
+
+
+# ------------------------------------------- documented ranges, exactly
+# At multiples of pi/2 the rounding of each atan2 decides whether an outer
+# angle comes out as +pi or -pi (only +pi is in range) and whether a quaternion
+# has w == 0 exactly: the inputs below sit on those branches.
+
+_STEPS = np.arange(-4, 5) * (np.pi / 2)   # -2 pi .. 2 pi in steps of pi/2
+GRID_ANGLES = np.stack(np.meshgrid(_STEPS, _STEPS, _STEPS, indexing='ij'), -1).reshape(-1, 3)
+
+
+def _signed_unit_quaternions():
+    """The unit quaternions with components in {0, +-1/2, +-sqrt(1/2), +-1}: 48 rotations, +-q."""
+    values = (0.0, 0.5, -0.5, np.sqrt(0.5), -np.sqrt(0.5), 1.0, -1.0)
+    q = np.stack(np.meshgrid(values, values, values, values, indexing='ij'), -1).reshape(-1, 4)
+    return q[np.abs(np.einsum('ij,ij->i', q, q) - 1.0) <= 1e-15]
+
+
+GRID_QUATERNIONS = _signed_unit_quaternions()
+
+
+def _assert_in_documented_ranges(angles, seq):
+    angles = np.asarray(angles).reshape(-1, 3)
+    outer = angles[:, [0, 2]]
+    inside = (outer > -np.pi) & (outer <= np.pi)
+    assert np.all(inside), outer[~inside]
+    if rc.parse_sequence(seq).proper:
+        assert np.all((angles[:, 1] >= 0.0) & (angles[:, 1] <= np.pi))
+    else:
+        assert np.all((angles[:, 1] >= -np.pi / 2) & (angles[:, 1] <= np.pi / 2))
+
+
+def _assert_same_rotations(angles, seq, q):
+    """The angles are the rotations ``q`` (scipy as the independent oracle)."""
+    back = Rotation.from_euler(seq, np.asarray(angles).reshape(-1, 3)).as_quat()
+    assert np.max(mpr.rotation_distance(back, np.asarray(q).reshape(-1, 4))) <= 1e-14
+
+
+def _euler_every_path(q, seq):
+    """Euler angles of the quaternions ``q`` by every route and schedule: (name, angles) pairs."""
+    m = Rotation.from_quat(q).as_matrix()
+    many = np.tile(q, (-(-1100 // len(q)), 1))   # >= BATCH_SAMPLES: the staged schedule
+    return [
+        ('quaternion, one by one', np.array([rc.euler_from_quaternion(x, seq) for x in q])),
+        ('quaternion, small batch', rc.euler_from_quaternion(q, seq)),
+        ('quaternion, large batch', rc.euler_from_quaternion(many, seq)[:len(q)]),
+        ('matrix, one by one', np.array([rc.euler_from_matrix(x, seq) for x in m])),
+        ('matrix, small batch', rc.euler_from_matrix(m, seq)),
+        ('matrix, large batch', rc.euler_from_matrix(np.tile(m, (len(many) // len(q), 1, 1)),
+                                                     seq)[:len(q)]),
+    ]
+
+
+@pytest.mark.parametrize('seq', SEQUENCES)
+def test_outer_angles_are_never_minus_pi_at_multiples_of_half_pi(seq):
+    """Reported: euler_from_quaternion([1, 0, 0, 0], 'XYZ') gave -pi as its first angle."""
+    q = np.concatenate([GRID_QUATERNIONS, Rotation.from_euler(seq, GRID_ANGLES).as_quat(),
+                        rc.quaternion_from_euler(GRID_ANGLES, seq)])
+    for _, angles in _euler_every_path(q, seq):
+        _assert_in_documented_ranges(angles, seq)
+        _assert_same_rotations(angles, seq, q)
+    degrees = np.concatenate([rc.euler_from_quaternion(q, seq, degrees=True),
+                              [rc.euler_from_quaternion(x, seq, degrees=True) for x in q[::5]]])
+    assert np.all((degrees[:, [0, 2]] > -180.0) & (degrees[:, [0, 2]] <= 180.0))
+
+
+@pytest.mark.parametrize('seq, q, expected', [
+    ('XYZ', [1, 0, 0, 0], [np.pi, 0, 0]),
+    ('xzy', [0, 1, 0, 0], [0, 0, np.pi]),
+    ('zyx', [0, 0, 1, 0], [np.pi, 0, 0]),
+    ('ZXY', [0, 0, 1, 0], [np.pi, 0, 0]),
+])
+def test_reported_minus_pi_cases(seq, q, expected):
+    assert np.array_equal(rc.euler_from_quaternion(q, seq), expected)
+    assert np.array_equal(rc.euler_from_matrix(Rotation.from_quat(q).as_matrix(), seq), expected)
+
+
+_NEAR_STEP = st.tuples(st.integers(-4, 4), st.integers(-2, 2)).map(
+    lambda kn: float(np.nextafter(kn[0] * (np.pi / 2), np.inf * kn[1])) if kn[1] else
+    kn[0] * (np.pi / 2))
+
+
+@settings(max_examples=300, deadline=None)
+@given(angles=st.tuples(_NEAR_STEP, _NEAR_STEP, _NEAR_STEP), seq=st.sampled_from(SEQUENCES),
+       through_matrix=st.booleans())
+def test_ranges_hold_at_and_next_to_multiples_of_half_pi(angles, seq, through_matrix):
+    q = Rotation.from_euler(seq, angles).as_quat()
+    if through_matrix:
+        got = rc.euler_from_matrix(Rotation.from_quat(q).as_matrix(), seq)
+    else:
+        got = rc.euler_from_quaternion(q, seq)
+    _assert_in_documented_ranges(got, seq)
+    _assert_same_rotations(got, seq, q)
+    ours = rc.quaternion_from_euler(angles, seq)
+    assert mpr.is_canonical(ours)
+    _assert_in_documented_ranges(rc.euler_from_quaternion(ours, seq), seq)
+
+
+@pytest.mark.parametrize('seq', SEQUENCES)
+def test_quaternions_from_euler_are_canonical_on_the_grid(seq):
+    q = rc.quaternion_from_euler(GRID_ANGLES, seq)
+    assert all(mpr.is_canonical(x) for x in q)
+    assert all(mpr.is_canonical(rc.quaternion_from_euler(a, seq)) for a in GRID_ANGLES[::7])

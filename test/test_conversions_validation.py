@@ -178,8 +178,8 @@ def test_empty_batch():
 
 @pytest.fixture
 def two_threads():
-    from rotation_node.conversions import _quaternion
-    before = _quaternion._threads
+    from rotation_node.conversions import _runtime
+    before = _runtime._threads
     rc.set_threads(2)
     yield
     rc.set_threads(before)

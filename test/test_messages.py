@@ -215,3 +215,18 @@ def test_an_input_stage_transform_changes_every_sample(monkeypatch):
     msg.quaternion.x, msg.quaternion.y, msg.quaternion.z, msg.quaternion.w = rotation.as_quat()
     (_, out), = p.process(msg)
     np.testing.assert_allclose(out.data, (turn * rotation).as_matrix().ravel(), atol=1e-12)
+
+
+@pytest.mark.parametrize('outputs, reads_rate', [
+    (('euler',), False), (('angular_velocity',), True), (('quaternion_rate', 'matrix'), True)])
+def test_samples_carry_the_angular_velocity_only_when_a_value_reads_it(
+        monkeypatch, outputs, reads_rate):
+    seen = []
+    monkeypatch.setattr(pipeline, 'SAMPLE_TRANSFORMS',
+                        [lambda params: lambda sample: seen.append(sample) or sample])
+    p = pipeline.ConversionPipeline(NodeParameters(input_type='imu', outputs=outputs))
+    msg = message_class('sensor_msgs/msg/Imu')()
+    msg.orientation.w, msg.angular_velocity.z = 1.0, 0.5
+    p.process(msg)
+    assert seen[0].angular_velocity == ((0.0, 0.0, 0.5) if reads_rate else None)
+    assert seen[0].covariance is None   # no value reads it yet

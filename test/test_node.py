@@ -6,6 +6,7 @@ parameter (defaults plus its own changes) through the node's parameter service,
 so tests do not depend on each other's settings. Values are compared with scipy
 (``ros_harness.oracle_output``); test_pipeline.py covers the conversions in depth.
 """
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -17,8 +18,11 @@ from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from scipy.spatial.transform import Rotation
 
+from rotation_node.errors import ParameterError
 from rotation_node.messages import OUTPUTS as OUTPUT_TYPES
-from rotation_node.parameters import INPUT_TYPES, OUTPUTS, PARAMETERS, NodeParameters
+from rotation_node.node import ros_arguments
+from rotation_node.parameters import (
+    INPUT_TYPES, OUTPUTS, PARAMETERS, NodeParameters, parameters_from_yaml)
 from rotation_node.pipeline import input_message_type
 
 from ros_harness import (
@@ -386,6 +390,61 @@ def test_an_invalid_initial_value_exits_non_zero_with_the_reason(args, message):
     assert process.stop() == 1
     assert message in process.output
     assert 'Traceback' not in process.output
+
+
+BAD_PARAMETERS_FILES = {
+    'misspelt key': ('/**/rotation_node:\n  ros__parameters:\n    euler:\n      sequense: ZYX\n',
+                     [], "unknown parameter 'euler.sequense' (did you mean 'euler.sequence'?)"),
+    'no section': ('other_node:\n  ros__parameters:\n    qos.depth: 5\n', [],
+                   "no section for node '/rotation_node'"),
+    'no section in the namespace': ('rotation_node:\n  ros__parameters:\n    qos.depth: 5\n',
+                                    ['-r', '__ns:=/robot'],
+                                    "no section for node '/robot/rotation_node'"),
+    'empty outputs': ('/**:\n  ros__parameters:\n    outputs: []\n', [],
+                      "parameter 'outputs': list at least one output"),
+    'malformed': ('rotation_node: [unclosed\n', [], 'invalid YAML (line 2, column 1)'),
+    'malformed section of another node': (
+        '/**/rotation_node:\n  ros__parameters: {}\nother_node:\n  rate: 5\n', [],
+        "section 'other_node' needs a 'ros__parameters:' mapping"),
+    'missing': (None, [], 'cannot read it (No such file or directory)'),
+}
+
+
+@pytest.mark.parametrize('name', BAD_PARAMETERS_FILES)
+def test_node_and_convert_reject_the_same_parameters_files(tmp_path, name):
+    text, args, message = BAD_PARAMETERS_FILES[name]
+    path = tmp_path / 'params.yaml'
+    if text is not None:
+        path.write_text(text)
+    result = subprocess.run(
+        [script('rotation_node'), '--ros-args', *args, '--params-file', str(path)],
+        capture_output=True, text=True, timeout=START_TIMEOUT_S)
+    assert result.returncode == 1
+    assert result.stderr.startswith('rotation_node: error: ') and result.stderr.count('\n') == 1
+    assert message in result.stderr and 'Traceback' not in result.stdout
+    namespace = '/robot' if args else ''
+    with pytest.raises(ParameterError) as convert_error:   # what rotation_bag convert reads
+        parameters_from_yaml(path, f'{namespace}/rotation_node')
+    assert result.stderr == f'rotation_node: error: {convert_error.value}\n'
+
+
+def test_an_unknown_parameter_on_the_command_line_names_the_nearest():
+    result = subprocess.run(
+        [script('rotation_node'), '--ros-args', '-p', 'qos.dept:=5'],
+        capture_output=True, text=True, timeout=START_TIMEOUT_S)
+    assert result.returncode == 1
+    assert result.stderr == (
+        "rotation_node: error: unknown parameter 'qos.dept' in -p qos.dept:=5 (did you mean "
+        f"'qos.depth'?); the node's parameters are {', '.join(p.name for p in PARAMETERS)}\n")
+
+
+def test_ros_arguments_are_read_as_rcl_reads_them():
+    args = ['rotation_node', '--params-file', 'not-ros.yaml', '--ros-args', '-r', '__ns:=/a',
+            '--params-file', 'a.yaml', '--disable-stdout-logs', '-p', 'x:=--params-file', '--',
+            'app', '--ros-args', '--params-file', 'b.yaml']
+    assert ros_arguments(args) == [
+        ('-r', '__ns:=/a'), ('--params-file', 'a.yaml'), ('--disable-stdout-logs', None),
+        ('-p', 'x:=--params-file'), ('--params-file', 'b.yaml')]
 
 
 @pytest.fixture(scope='module')

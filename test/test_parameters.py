@@ -33,6 +33,8 @@ def test_the_issue_names_every_parameter():
         'input_type', 'outputs', 'euler.sequence', 'euler.degrees', 'euler.unwrap',
         'euler.singularity_threshold', 'quaternion.continuity', 'quaternion.norm_tolerance',
         'angular_velocity.input_frame', 'angular_velocity.output_frame',
+        'covariance.frame', 'covariance.max_linearisation_ratio', 'frames.input_world',
+        'frames.input_body', 'frames.output_world', 'frames.output_body',
         'qos.reliability', 'qos.depth'}
 
 
@@ -41,6 +43,9 @@ def test_defaults_follow_ros_conventions():
     assert params.euler_sequence == 'xyz'                 # roll, pitch, yaw (REP 103)
     assert params.angular_velocity_input_frame == 'body'  # REP 145
     assert params.euler_degrees is False                  # REP 103: radians
+    assert params.covariance_frame == 'fixed'             # REP 145: about fixed axes
+    assert (params.frames_input_world, params.frames_input_body, params.frames_output_world,
+            params.frames_output_body) == ('enu', 'flu', 'enu', 'flu')   # REP 103
 
 
 def test_ros_names_round_trip():
@@ -62,6 +67,39 @@ def test_replaced_changes_only_the_named_parameters():
 def test_replaced_rejects_an_unknown_name():
     with pytest.raises(ParameterError, match="unknown parameter 'euler.sequnce'"):
         NodeParameters().replaced({'euler.sequnce': 'ZYX'})
+
+
+@pytest.mark.parametrize('name, nearest', [
+    ('euler.sequnce', " (did you mean 'euler.sequence'?)"),
+    ('qos.reliable', " (did you mean 'qos.reliability'?)"),
+    ('outptus', " (did you mean 'outputs'?)"),
+    ('zzz', '')])
+def test_an_unknown_name_names_the_nearest_parameter(name, nearest):
+    with pytest.raises(ParameterError) as error:
+        NodeParameters().replaced({name: 'x'})
+    assert str(error.value).startswith(f"unknown parameter '{name}'{nearest}; the node's "
+                                       'parameters are input_type, outputs, euler.sequence')
+
+
+def test_a_value_not_allowed_names_the_nearest_choice():
+    with pytest.raises(ParameterError, match=r"'outputs': 'eulr' is not allowed \(did you mean "
+                                             r"'euler'\?\); each one of: quaternion, euler"):
+        NodeParameters(outputs=('quaternion', 'eulr'))
+    with pytest.raises(ParameterError, match=r"'input_type': 'gps' is not allowed; one of"):
+        NodeParameters(input_type='gps')
+
+
+@pytest.mark.parametrize('value', [[], (), None])
+def test_no_outputs_is_reported_as_an_empty_list(value):
+    with pytest.raises(ParameterError, match="'outputs': list at least one output; choose from "
+                                             'quaternion, euler'):
+        NodeParameters(outputs=value)
+
+
+def test_a_long_value_is_described_briefly():
+    with pytest.raises(ParameterError) as error:
+        NodeParameters(euler_degrees='x' * 1_000_000)
+    assert len(str(error.value)) < 200 and '(1000002 characters)' in str(error.value)
 
 
 # Validation -----------------------------------------------------------------------
@@ -118,7 +156,7 @@ def test_range_ends_and_every_output_are_accepted(name, value):
 
 def test_shipped_config_holds_every_parameter_at_its_default():
     assert parameters_from_yaml(CONFIG) == NodeParameters()
-    section = yaml.safe_load(CONFIG.read_text())[NODE_NAME]['ros__parameters']
+    section = yaml.safe_load(CONFIG.read_text())[f'/**/{NODE_NAME}']['ros__parameters']
 
     def names(mapping, prefix=''):
         for key, value in mapping.items():
@@ -189,6 +227,21 @@ def test_a_namespaced_node_name_is_matched(tmp_path):
     text = NESTED.replace('rotation_node:', '/robot/rotation_node:', 1)
     assert parameters_from_yaml(write(tmp_path, text), '/robot/rotation_node') == EXPECTED
     with pytest.raises(ParameterError, match="no section for node '/rotation_node'"):
+        parameters_from_yaml(write(tmp_path, text))
+
+
+def test_nested_namespace_keys_are_sections(tmp_path):
+    text = 'robot:\n  rotation_node:\n    ros__parameters:\n      qos.depth: 5\n'
+    assert parameters_from_yaml(write(tmp_path, text), '/robot/rotation_node').qos_depth == 5
+    with pytest.raises(ParameterError, match=r"no section for node '/rotation_node' \(its "
+                                             r"sections: 'robot/rotation_node'; key it"):
+        parameters_from_yaml(write(tmp_path, text))
+
+
+def test_a_malformed_section_of_another_node_is_an_error(tmp_path):
+    """The whole file is refused, for every node, as rcl does: by the node and convert."""
+    text = '/**/rotation_node:\n  ros__parameters: {}\nother_node:\n  rate: 5\n'
+    with pytest.raises(ParameterError, match="section 'other_node' needs a 'ros__param"):
         parameters_from_yaml(write(tmp_path, text))
 
 

@@ -17,11 +17,12 @@ from std_msgs.msg import Float64MultiArray
 from rotation_node.conversions import SEQUENCES
 from rotation_node.parameters import INPUT_TYPES, OUTPUTS, NodeParameters
 from rotation_node.pipeline import (
-    EULER_RATES_NEAR_SINGULAR, NON_FINITE_ANGULAR_VELOCITY, NON_FINITE_ORIENTATION, NON_UNIT_QUATERNION,
-    ORIENTATION_UNKNOWN, TIMESTAMP_NOT_INCREASING, ZERO_QUATERNION, ConversionPipeline,
-    input_message_type)
+    COVARIANCE_UNKNOWN, EULER_COVARIANCE_NEAR_SINGULAR, EULER_COVARIANCE_NOT_LINEAR,
+    EULER_RATES_NEAR_SINGULAR, NON_FINITE_ANGULAR_VELOCITY, NON_FINITE_COVARIANCE,
+    NON_FINITE_ORIENTATION, NON_UNIT_QUATERNION, ORIENTATION_UNKNOWN, TIMESTAMP_NOT_INCREASING,
+    ZERO_QUATERNION, ConversionPipeline, input_message_type)
 
-from ros_harness import make_input_message, oracle_output, output_values
+from ros_harness import INPUT_COVARIANCE, make_input_message, oracle_output, output_values
 
 STAMP_NS = 1_700_000_000_123_456_789   # a realistic wall-clock stamp (float seconds lose ~0.2 us)
 FRAME_ID = 'imu_link'
@@ -267,6 +268,146 @@ def test_quaternion_rate_has_the_sign_of_the_published_quaternion():
     np.testing.assert_allclose(output_values(results['quaternion_rate']),
                                -oracle_output('quaternion_rate', rotation, OMEGA_BODY),
                                atol=1e-8)
+
+
+# Orientation uncertainty ----------------------------------------------------------
+
+UNCERTAINTY = ['euler', 'euler_stddev', 'euler_covariance']
+COVARIANCE_INPUTS = ['imu', 'odometry', 'pose_with_covariance']
+
+
+@pytest.mark.parametrize('input_type', COVARIANCE_INPUTS)
+@pytest.mark.parametrize('covariance_frame', ['fixed', 'body'])
+@pytest.mark.parametrize('sequence, degrees', [('xyz', False), ('ZYX', True), ('zxz', True)])
+def test_euler_uncertainty_matches_scipy_finite_differences(input_type, covariance_frame,
+                                                            sequence, degrees, rotation):
+    p = pipeline(input_type=input_type, outputs=UNCERTAINTY, euler_sequence=sequence,
+                 euler_degrees=degrees, covariance_frame=covariance_frame)
+    msg = make_input_message(input_type, rotation, stamp_ns=STAMP_NS, frame_id=FRAME_ID)
+    out = outputs_of(p, msg)
+    for name in ('euler_stddev', 'euler_covariance'):
+        expected = oracle_output(name, rotation, sequence=sequence, degrees=degrees,
+                                 covariance_frame=covariance_frame)
+        np.testing.assert_allclose(output_values(out[name]), expected, rtol=1e-7, atol=1e-12,
+                                   err_msg=name)
+        assert out[name].header == msg.header
+    assert np.array_equal(output_values(out['euler_covariance'])[:3],
+                          output_values(out['euler']))
+
+
+@pytest.mark.parametrize('input_type', COVARIANCE_INPUTS)
+def test_unknown_covariance_gives_no_uncertainty_and_is_counted(input_type, rotation):
+    p = pipeline(input_type=input_type, outputs=UNCERTAINTY)
+    msg = make_input_message(input_type, rotation, covariance=[0.0] * 9)
+    assert list(outputs_of(p, msg)) == ['euler']
+    assert p.stats.skipped == {COVARIANCE_UNKNOWN: 1}
+    msg = make_input_message(input_type, rotation, covariance=[0.0] * 8 + [math.nan])
+    assert list(outputs_of(p, msg)) == ['euler']
+    assert p.stats.skipped[NON_FINITE_COVARIANCE] == 1
+
+
+def test_imu_orientation_unknown_gives_no_uncertainty(rotation):
+    p = pipeline(input_type='imu', outputs=UNCERTAINTY)
+    msg = make_input_message('imu', rotation)
+    msg.orientation_covariance[0] = -1.0
+    assert outputs_of(p, msg) == {}
+    assert p.stats.skipped == {ORIENTATION_UNKNOWN: 1}
+
+
+def test_an_input_without_covariance_counts_it_unknown(rotation):
+    p = pipeline(input_type='quaternion', outputs=UNCERTAINTY)
+    assert list(outputs_of(p, make_input_message('quaternion', rotation))) == ['euler']
+    assert p.stats.skipped == {COVARIANCE_UNKNOWN: 1}
+
+
+def test_gimbal_lock_and_non_linear_covariance_are_skipped_and_counted():
+    p = pipeline(input_type='imu', outputs=UNCERTAINTY, euler_singularity_threshold=0.01)
+    sigma = 1e-3   # isotropic: sigma / margin is the linearisation ratio
+    covariance = np.diag([sigma ** 2] * 3).ravel()
+    for margin, reason in [(0.005, EULER_COVARIANCE_NEAR_SINGULAR),
+                           (0.002, EULER_COVARIANCE_NEAR_SINGULAR),
+                           (0.0031, EULER_COVARIANCE_NEAR_SINGULAR),
+                           (0.02, None), (1.0, None)]:
+        rotation = Rotation.from_euler('xyz', [0.3, np.pi / 2 - margin, -1.0])
+        out = outputs_of(p, make_input_message('imu', rotation, covariance=covariance))
+        assert ('euler_stddev' in out) == (reason is None), margin
+    assert p.stats.skipped == {EULER_COVARIANCE_NEAR_SINGULAR: 3}
+    p = pipeline(input_type='imu', outputs=UNCERTAINTY, euler_singularity_threshold=0.001,
+                 covariance_max_linearisation_ratio=0.3)
+    for margin, published in [(0.0031, False), (0.0034, True), (0.5, True)]:
+        rotation = Rotation.from_euler('xyz', [0.3, np.pi / 2 - margin, -1.0])
+        out = outputs_of(p, make_input_message('imu', rotation, covariance=covariance))
+        assert ('euler_covariance' in out) == published, margin
+    assert p.stats.skipped == {EULER_COVARIANCE_NOT_LINEAR: 1}
+    assert any('covariance.max_linearisation_ratio' in detail for _, detail in p.issues)
+
+
+# Frame conventions -----------------------------------------------------------------
+
+# Hand transcriptions: NED from ENU swaps x and y and negates z; FRD from FLU negates y, z.
+NED_FROM_ENU = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+FRD_FROM_FLU = np.diag([1.0, -1.0, -1.0])
+PX4_FRAMES = {'frames_input_world': 'ned', 'frames_input_body': 'frd'}
+
+
+def px4_imu(rotation, omega_body, covariance, covariance_frame='fixed'):
+    """Return the Imu message of the same motion and uncertainty written in NED/FRD."""
+    r = NED_FROM_ENU @ rotation.as_matrix() @ FRD_FROM_FLU
+    block = FRD_FROM_FLU if covariance_frame == 'body' else NED_FROM_ENU
+    cov = block @ np.reshape(covariance, (3, 3)) @ block.T
+    return make_input_message('imu', Rotation.from_matrix(r), omega=FRD_FROM_FLU @ omega_body,
+                              stamp_ns=STAMP_NS, covariance=cov.ravel())
+
+
+@pytest.mark.parametrize('covariance_frame', ['fixed', 'body'])
+@pytest.mark.parametrize('output_frame', ['body', 'world'])
+def test_px4_ned_frd_stream_becomes_rep_103(covariance_frame, output_frame, rotation, rng):
+    omega = rng.normal(size=3)
+    outputs = ['quaternion', 'angular_velocity', *UNCERTAINTY]
+    p = pipeline(input_type='imu', outputs=outputs, covariance_frame=covariance_frame,
+                 angular_velocity_output_frame=output_frame, **PX4_FRAMES)
+    out = outputs_of(p, px4_imu(rotation, omega, INPUT_COVARIANCE, covariance_frame))
+    for name in outputs:
+        expected = oracle_output(name, rotation, omega, frame=output_frame,
+                                 covariance_frame=covariance_frame)
+        if name == 'quaternion':
+            assert same_rotation(output_values(out[name]), expected)
+        else:
+            np.testing.assert_allclose(output_values(out[name]), expected, rtol=1e-7,
+                                       atol=1e-12, err_msg=name)
+
+
+def test_rep_103_stream_becomes_px4_and_back(rotation, rng):
+    omega = rng.normal(size=3)
+    to_px4 = pipeline(input_type='imu', outputs=['quaternion', 'angular_velocity', 'matrix'],
+                      frames_output_world='ned', frames_output_body='frd')
+    msg = make_input_message('imu', rotation, omega=omega, stamp_ns=STAMP_NS)
+    out = outputs_of(to_px4, msg)
+    expected = Rotation.from_matrix(NED_FROM_ENU @ rotation.as_matrix() @ FRD_FROM_FLU)
+    assert same_rotation(output_values(out['quaternion']), expected.as_quat())
+    np.testing.assert_allclose(output_values(out['matrix']).reshape(3, 3), expected.as_matrix(),
+                               atol=1e-15)
+    assert np.array_equal(output_values(out['angular_velocity']), FRD_FROM_FLU @ omega)
+    # yaw is measured from north clockwise in NED: pi/2 minus the ENU yaw
+    roll, pitch, yaw = rotation.as_euler('xyz')
+    euler = pipeline(input_type='imu', outputs=['euler'], frames_output_world='ned',
+                     frames_output_body='frd')
+    got = output_values(outputs_of(euler, msg)['euler'])
+    assert np.allclose(np.remainder(got - [roll, -pitch, np.pi / 2 - yaw] + np.pi, 2 * np.pi)
+                       - np.pi, 0.0, atol=1e-9)
+    back = pipeline(input_type='quaternion', outputs=['quaternion'], **PX4_FRAMES)
+    q_px4 = make_input_message('quaternion', Rotation.from_quat(output_values(out['quaternion'])))
+    q_back = output_values(outputs_of(back, q_px4)['quaternion'])
+    assert same_rotation(q_back, rotation.as_quat())
+
+
+def test_frames_apply_to_euler_and_rotation_vector_inputs(rotation):
+    expected = NED_FROM_ENU @ rotation.as_matrix() @ FRD_FROM_FLU
+    for input_type in ('euler', 'rotation_vector'):
+        p = pipeline(input_type=input_type, outputs=['matrix'], frames_output_world='ned',
+                     frames_output_body='frd')
+        got = output_values(outputs_of(p, make_input_message(input_type, rotation))['matrix'])
+        np.testing.assert_allclose(got.reshape(3, 3), expected, atol=1e-14)
 
 
 # State over time ------------------------------------------------------------------

@@ -46,7 +46,7 @@ BAD_SCENES = {
                        'effects.gyro_drift: unknown effect'),
     'missing_field': ('duration: 1.0\nrate: 5\nmotion: {type: coning, half_angle: 0.1}\n',
                       'motion.frequency: missing'),
-    'not_yaml': ('duration: [1.0\n', 'not valid YAML'),
+    'not_yaml': ('duration: [1.0\n', 'invalid YAML'),
 }
 
 
@@ -65,7 +65,7 @@ def test_bad_scene_one_line_error_and_no_output(tmp_path, capsys, name):
 
 def test_missing_scene_file(tmp_path, capsys):
     assert main([str(tmp_path / 'absent.yaml'), str(tmp_path / 'out.mcap')]) == 1
-    assert 'cannot read scene file' in capsys.readouterr().err
+    assert 'cannot read it' in capsys.readouterr().err
     assert os.listdir(tmp_path) == []
 
 

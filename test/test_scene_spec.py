@@ -185,6 +185,21 @@ def test_unknown_key_is_reported_before_missing_field():
         spec.scene_from_dict(data)
 
 
+@pytest.mark.parametrize('changes, message', [
+    ({'motion.half_angle': DELETE, 'motion.half_angel': 0.2},
+     "motion.half_angel: unknown key (did you mean 'half_angle'?); expected type, half_angle"),
+    ({'durration': 1.0}, "durration: unknown key (did you mean 'duration'?)"),
+    ({'effects': {'gyro_noize': {'std': 0.1}}},
+     "effects.gyro_noize: unknown effect (did you mean 'gyro_noise'?)"),
+    ({'motion.type': 'conning'}, "motion.type: unknown motion 'conning' (did you mean 'coning'?)"),
+    ({'effects': {'zzz': {}}}, 'effects.zzz: unknown effect; expected one of'),
+])
+def test_an_unknown_name_names_the_nearest_valid_one(changes, message):
+    with pytest.raises(SceneError) as info:
+        spec.scene_from_dict(scene_dict(changes=changes))
+    assert str(info.value).startswith(message)
+
+
 @pytest.mark.parametrize('data', [None, [], 'duration: 1'])
 def test_scene_must_be_a_mapping(data):
     with pytest.raises(SceneError, match='^scene: expected a mapping'):
@@ -192,7 +207,7 @@ def test_scene_must_be_a_mapping(data):
 
 
 @pytest.mark.parametrize('text, message', [
-    ('duration: 1.0\nrate: [10\n', 'not valid YAML'),
+    ('duration: 1.0\nrate: [10\n', 'invalid YAML'),
     ('duration: 1.0\nrate: 10\nrate: 20\n', "duplicate key 'rate'"),
     ('duration: 1.0\nrate: 10\n', 'motion: missing'),
 ])
@@ -216,5 +231,5 @@ def test_exponent_without_a_dot_is_a_number(tmp_path):
 
 
 def test_load_scene_missing_file(tmp_path):
-    with pytest.raises(SceneError, match='cannot read scene file'):
+    with pytest.raises(SceneError, match='cannot read it'):
         spec.load_scene(tmp_path / 'absent.yaml')

@@ -1,19 +1,25 @@
 """
-Command line ``rotation_bag``: record, play, convert and plot MCAP bags.
+Command line ``rotation_bag``: record, play, convert and plot bags.
 
 Usage::
 
     rotation_bag record OUT.mcap --topics /imu [/odom ...] [--duration S] [--force]
-    rotation_bag play IN.mcap [--rate R] [--topics T ...] [--loop] [--delay S]
-                      [--wait-for-subscribers]
-    rotation_bag convert IN.mcap OUT.mcap --params config/params.yaml [--topic T ...] [--force]
-    rotation_bag plot IN.mcap --topic /imu/euler [-o plot.png] [--params FILE] [--force]
+    rotation_bag play IN [--rate R] [--topics T ...] [--loop] [--delay S]
+                      [--wait-for-subscribers] [--strict]
+    rotation_bag convert IN OUT --params config/params.yaml [--topic T ...] [--force]
+                         [--strict]
+    rotation_bag convert IN1 IN2 ... OUTDIR --params FILE [--jobs N] [...]
+    rotation_bag plot IN --topic /imu/euler [-o plot.png] [--params FILE] [--force] [--strict]
 
-``record`` and ``play`` accept ``--ros-args ...`` (remapping, namespace, ...).
-Bad input (a missing, truncated or corrupt bag, an unknown message type, a
-topic not in the bag, an invalid parameters file, an existing output) ends
-with one line on stderr naming the problem and exit status 1; no output file
-is left behind and the input is never modified.
+``IN`` is any bag :func:`rotation_node.bag.reader.open_bag` reads (a rosbag2
+directory, MCAP, sqlite3, split, compressed, ROS 1, an unfinished recording;
+see docs/bags.md). ``record`` and ``play`` accept ``--ros-args ...``
+(remapping, namespace, ...). Bad input (a missing, unsupported, truncated or
+corrupt bag, an unknown message type, a topic not in the bag, an invalid
+parameters file, an existing output) ends with one line on stderr naming the
+problem and exit status 1; no output file is left behind and the input is
+never modified. With several inputs, each bag gets one line and the exit
+status is 1 if any failed.
 """
 import argparse
 import os
@@ -21,7 +27,7 @@ import sys
 
 from rclpy.utilities import remove_ros_args
 
-from rotation_node.errors import RotationNodeError
+from rotation_node.errors import BagError, RotationNodeError
 
 PROG = 'rotation_bag'
 EXIT_ERROR = 1
@@ -39,14 +45,25 @@ def _record(args, ros_args):
 def _play(args, ros_args):
     from rotation_node.bag.play import play
     play(args.input, rate=args.rate, topics=args.topics, loop=args.loop, delay=args.delay,
-         wait_for_subscribers=args.wait_for_subscribers, ros_args=ros_args)
+         wait_for_subscribers=args.wait_for_subscribers, ros_args=ros_args, strict=args.strict,
+         report=_say)
 
 
 def _convert(args, ros_args):
-    from rotation_node.bag.convert import convert, output_topic
     from rotation_node.parameters import parameters_from_yaml
+    *inputs, output = args.paths
+    if not inputs:
+        raise BagError('convert needs an input bag and an output (IN OUT, or IN1 IN2 ... OUTDIR)')
     params = parameters_from_yaml(args.params)
-    stats = convert(args.input, args.output, params, topics=args.topic, overwrite=args.force)
+    if len(inputs) > 1 or _is_output_directory(output):
+        _convert_many(args, inputs, output, params)
+        return
+    from rotation_node.bag.convert import convert, output_topic
+    notes = []   # printed once the bag is written: a failure stays one line
+    stats = convert(inputs[0], output, params, topics=args.topic, overwrite=args.force,
+                    strict=args.strict, report=notes.append)
+    for note in notes:
+        _say(note)
     for topic, topic_stats in stats.items():
         outputs = ', '.join(output_topic(topic, name) for name in params.outputs)
         notes = [f'{reason} {count}' for reason, count in
@@ -55,16 +72,37 @@ def _convert(args, ros_args):
             notes.append(f'near gimbal lock {topic_stats.near_singular}')
         _say(f'{topic}: {topic_stats.received} messages -> {outputs}: '
              f'{topic_stats.published} messages' + ''.join(f'; {note}' for note in notes))
-    _say(f'wrote {args.output}')
+    _say(f'wrote {output}')
+
+
+def _is_output_directory(path):
+    """An existing directory that is not a rosbag2 bag: the OUTDIR of ``convert IN OUTDIR``."""
+    from rotation_node.bag.reader import METADATA_FILE
+    return os.path.isdir(path) and not os.path.exists(os.path.join(path, METADATA_FILE))
+
+
+def _convert_many(args, inputs, output_directory, params):
+    from rotation_node.bag.batch import convert_bags
+    results = convert_bags(inputs, output_directory, params, jobs=args.jobs, topics=args.topic,
+                           overwrite=args.force, strict=args.strict,
+                           on_result=lambda result: _say(result.line))
+    failed = sum(not result.ok for result in results)
+    if failed:
+        raise BagError(f'{failed} of {len(results)} bags failed')
+    _say(f'converted {len(results)} bags into {output_directory}')
 
 
 def _plot(args, ros_args):
     from rotation_node.bag.plot import plot_topic
     from rotation_node.parameters import parameters_from_yaml
-    output = args.output or (
-        os.path.splitext(os.path.basename(args.input))[0] + args.topic.replace('/', '_') + '.png')
+    bag_name = os.path.splitext(os.path.basename(os.path.normpath(args.input)))[0]
+    output = args.output or bag_name + args.topic.replace('/', '_') + '.png'
     params = None if args.params is None else parameters_from_yaml(args.params)
-    count = plot_topic(args.input, args.topic, output, params=params, overwrite=args.force)
+    notes = []
+    count = plot_topic(args.input, args.topic, output, params=params, overwrite=args.force,
+                       strict=args.strict, report=notes.append)
+    for note in notes:
+        _say(note)
     _say(f'plotted {count} messages of {args.topic} to {output}')
 
 
@@ -72,10 +110,20 @@ def _say(text):
     print(text, file=sys.stderr)
 
 
+def _positive_int(text):
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f'expected a positive integer, got {text!r}')
+    return value
+
+
 def build_parser():
     """The argument parser of ``rotation_bag``."""
     parser = argparse.ArgumentParser(
-        prog=PROG, description='Record, play, convert and plot ROS 2 MCAP bags.')
+        prog=PROG, description='Record, play, convert and plot ROS 2 bags.')
     commands = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
 
     record = commands.add_parser('record', help='record live topics to an MCAP bag')
@@ -87,7 +135,8 @@ def build_parser():
     record.set_defaults(run=_record)
 
     play = commands.add_parser('play', help='publish the messages of a bag')
-    play.add_argument('input', metavar='IN.mcap')
+    play.add_argument('input', metavar='IN', help='any bag (rosbag2 directory, .mcap, .db3, '
+                                                  'ROS 1 .bag...)')
     play.add_argument('--rate', type=float, default=1.0, metavar='R',
                       help='speed factor on the recorded timing; 0: as fast as the '
                            'subscribers acknowledge, lossless on reliable QoS (default 1)')
@@ -98,22 +147,39 @@ def build_parser():
                            'match the new publishers (default 0)')
     play.add_argument('--wait-for-subscribers', action='store_true',
                       help='start once every played topic has a subscriber (implied by --rate 0)')
+    play.add_argument('--strict', action='store_true',
+                      help='refuse unfinished recordings instead of playing what a scan '
+                           'recovers')
     play.set_defaults(run=_play)
 
     convert = commands.add_parser(
-        'convert', help="add the node's outputs for the input topics to a copy of a bag")
-    convert.add_argument('input', metavar='IN.mcap')
-    convert.add_argument('output', metavar='OUT.mcap')
+        'convert', help="add the node's outputs for the input topics to a copy of a bag",
+        usage=f'{PROG} convert IN [IN ...] OUT --params FILE [--topic T] [--force] [--strict] '
+              '[--jobs N]',
+        description="Write a copy of each input bag with the node's outputs for its input "
+                    'topics. IN OUT converts one bag; IN1 IN2 ... OUTDIR (or IN OUTDIR, an '
+                    'existing directory that is not a bag) converts each input into '
+                    'OUTDIR/<input name>, one line per bag.')
+    convert.add_argument('paths', nargs='+', metavar='PATH',
+                         help='input bags (rosbag2 directory, .mcap, .db3, ROS 1 .bag, '
+                              'compressed or split), then the output bag or directory')
     convert.add_argument('--params', required=True, metavar='FILE',
                          help="the node's parameters file (rotation_node: ros__parameters: ...)")
     convert.add_argument('--topic', action='append', metavar='T',
                          help='input topic to convert (repeatable; default: every topic of '
                               'the input_type)')
-    convert.add_argument('--force', action='store_true', help='overwrite OUT.mcap')
+    convert.add_argument('--force', action='store_true', help='overwrite existing outputs')
+    convert.add_argument('--strict', action='store_true',
+                         help='refuse unfinished recordings instead of converting what a scan '
+                              'recovers')
+    convert.add_argument('--jobs', type=_positive_int, default=1, metavar='N',
+                         help='with several inputs, convert N bags at a time in parallel '
+                              'processes (default 1)')
     convert.set_defaults(run=_convert)
 
-    plot = commands.add_parser('plot', help='plot a (converted) topic over time as a PNG')
-    plot.add_argument('input', metavar='IN.mcap')
+    plot = commands.add_parser('plot', help='plot a topic (input or converted) over time as a PNG')
+    plot.add_argument('input', metavar='IN', help='any bag (rosbag2 directory, .mcap, .db3, '
+                                                  'ROS 1 .bag...)')
     plot.add_argument('--topic', required=True, metavar='T')
     plot.add_argument('-o', '--output', metavar='PNG',
                       help='default: <bag name><topic with / as _>.png')
@@ -121,6 +187,9 @@ def build_parser():
                       help='parameters the bag was converted with (Euler sequence and units '
                            'for the labels; default: the node defaults)')
     plot.add_argument('--force', action='store_true', help='overwrite the PNG')
+    plot.add_argument('--strict', action='store_true',
+                      help='refuse unfinished recordings instead of plotting what a scan '
+                           'recovers')
     plot.set_defaults(run=_plot)
     return parser
 

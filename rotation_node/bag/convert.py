@@ -8,6 +8,11 @@ same parameters, one pipeline per input topic, fed in log-time order (the
 order of reception). Converted messages get the log and publish times of the
 input message they come from.
 The bag is streamed, never loaded: memory does not grow with its length.
+The input is any bag :func:`rotation_node.bag.reader.open_bag` reads (a
+rosbag2 directory, MCAP, sqlite3, split, compressed, ROS 1, an unfinished
+recording); topics that are not converted are copied unchanged, with their
+schema and metadata as stored, under their ROS 2 names
+(:mod:`rotation_node.bag.topic_names`).
 
 The input messages are decoded by :mod:`rotation_node.bag.cdr` into
 read-only views where their type has a fixed layout, which
@@ -20,9 +25,10 @@ import os
 
 from rotation_node import messages
 from rotation_node.bag.cdr import fixed_layout_codec
-from rotation_node.bag.mcap_io import BagReader, BagWriter, TopicMetadata
+from rotation_node.bag.mcap_io import BagWriter, TopicMetadata
 from rotation_node.bag.progress import ProgressBar
 from rotation_node.bag.qos import qos_profile, qos_profiles_yaml
+from rotation_node.bag.reader import open_bag
 from rotation_node.errors import BagError
 from rotation_node.pipeline import ConversionPipeline
 
@@ -41,7 +47,7 @@ def _input_topics(reader, input_type_name, topics):
             raise BagError(f'{reader.path} has no {input_type_name} topic to convert '
                            f'(its topics: {reader.topics})')
         return topics
-    reader.messages(topics)   # raises if a topic is not in the bag
+    topics = [reader.topic_name(topic) for topic in topics]   # raises if not in the bag
     for topic in topics:
         if reader.topics[topic] != input_type_name:
             raise BagError(f'topic {topic} in {reader.path} is {reader.topics[topic]}, '
@@ -49,25 +55,44 @@ def _input_topics(reader, input_type_name, topics):
     return list(dict.fromkeys(topics))
 
 
+def _same_path(input_path, output_path):
+    """Whether the output would be the input (or a storage file of an input directory)."""
+    if not os.path.exists(output_path):
+        return False
+    if os.path.samefile(input_path, output_path):
+        return True
+    return (os.path.isdir(input_path)
+            and os.path.samefile(input_path, os.path.dirname(os.path.abspath(output_path))))
+
+
 def convert(input_path, output_path, params, *, topics=None, overwrite=False,
-            progress_stream=None):
+            progress_stream=None, strict=False, report=None):
     """
     Write ``output_path``: the input bag plus the node's outputs for its input topics.
 
     Parameters
     ----------
-    input_path, output_path : str or os.PathLike
-        MCAP bags; the output is written to a temporary file and renamed, so a
-        failure never leaves a partial file, and the input is only read.
+    input_path : str or os.PathLike
+        Any bag :func:`rotation_node.bag.reader.open_bag` reads; only read.
+    output_path : str or os.PathLike
+        The output bag; written to a temporary file and renamed, so a failure
+        never leaves a partial file.
     params : rotation_node.parameters.NodeParameters
         As loaded from the node's parameters file.
     topics : list of str, optional
-        Topics to convert; by default every topic of the type ``params.input_type``
-        names.
+        Topics to convert (their names in the bag or their ROS 2 names); by
+        default every topic of the type ``params.input_type`` names.
     overwrite : bool, optional
         Replace an existing output file.
     progress_stream : file, optional
         Where to draw the progress bar (only if it is a terminal); stderr by default.
+    strict : bool, optional
+        Refuse an unfinished recording instead of converting what it holds.
+    report : callable, optional
+        ``report(line)`` receives what the input is (``<path>: rosbag2
+        directory (mcap, 3 files), 5000 messages``) and its notes (an
+        unfinished recording, a renamed topic) once it is opened, before
+        anything is written.
 
     Returns
     -------
@@ -82,9 +107,14 @@ def convert(input_path, output_path, params, *, topics=None, overwrite=False,
         exists (without ``overwrite``) or is the input.
 
     """
-    with BagReader(input_path) as reader:
-        if os.path.exists(output_path) and os.path.samefile(input_path, output_path):
+    with open_bag(input_path, strict=strict) as reader:
+        if _same_path(input_path, output_path):
             raise BagError(f'output {output_path} is the input bag')
+        if report is not None:
+            report(f'{reader.path}: {reader.description}, '
+                   f'{sum(reader.message_counts.values())} messages')
+            for note in reader.notes:
+                report(note)
         input_type_name = messages.INPUTS[params.input_type].type_name
         pipelines = {topic: ConversionPipeline(params)
                      for topic in _input_topics(reader, input_type_name, topics)}

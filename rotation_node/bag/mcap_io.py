@@ -31,13 +31,17 @@ import yaml
 import zstandard
 from mcap.exceptions import McapError
 from mcap.reader import SeekingReader
+from mcap.records import Channel, Chunk, Message, Schema
+from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
+from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.serialization import deserialize_message, serialize_message
 
 from rotation_node.bag.atomic_file import AtomicFile
+from rotation_node.bag.compression import ZSTD_MAGIC, decompressed_message
 from rotation_node.bag.cdr import message_encoder
 from rotation_node.bag.message_types import (
-    message_class, message_definition, split_type_name, type_hash, type_name_of)
+    message_class, message_definition, type_hash, type_name_of)
 from rotation_node.errors import BagError
 
 PROFILE = 'ros2'
@@ -48,12 +52,28 @@ ROSBAG2_METADATA_VERSION = 9
 LIBRARY = f'rotation_node bag; mcap-python/{mcap.__version__}'
 
 _MAX_TIMESTAMP = 2**64 - 1
-# What parsing a damaged file can raise from inside the mcap library, besides
-# its own McapError: short reads, bad lengths, undecodable strings, missing ids,
-# failed decompression (zstandard's ZstdError, lz4's RuntimeError; both are
-# dependencies of mcap).
-_CORRUPT_DATA_ERRORS = (McapError, struct.error, EOFError, ValueError, KeyError,
-                        IndexError, MemoryError, RuntimeError, zstandard.ZstdError)
+#: What rclpy's deserialize_message raises for data that is not a valid message.
+_RMWError = rclpy_implementation.RMWError
+# What the mcap library raises for a damaged file: its own McapError (bad
+# magic, short reads, missing ids...), CRCValidationError, struct.error for
+# short fixed-size fields, UnicodeDecodeError for strings, and failed chunk
+# decompression (zstandard's ZstdError; lz4's RuntimeError, recognised by its
+# message in _is_format_error so that no other RuntimeError is taken for one).
+_FORMAT_ERRORS = (McapError, CRCValidationError, struct.error, UnicodeDecodeError,
+                  zstandard.ZstdError, RuntimeError)
+_LZ4_ERROR_PREFIX = 'LZ4F_'
+
+
+def _is_format_error(error):
+    """Whether an exception from the mcap library means damaged data (not a bug)."""
+    return not isinstance(error, RuntimeError) or (
+        type(error) is RuntimeError and str(error).startswith(_LZ4_ERROR_PREFIX))
+
+
+def _described(error):
+    """``'Type: message'`` of an exception (some mcap errors have an empty repr)."""
+    text = str(error)
+    return f'{type(error).__name__}: {text}' if text else type(error).__name__
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,6 +95,9 @@ class TopicMetadata:
         ``'ros2msg'`` or ``'ros2idl'``.
     type_hash : str or None
         REP-2011 hash; None means the installed type's hash.
+    serialization_format : str
+        How the messages are serialized: ``'cdr'`` for ROS 2 (other values
+        only in bags of other recorders, whose topics are copied as they are).
 
     """
 
@@ -84,6 +107,7 @@ class TopicMetadata:
     definition: Optional[str] = None
     definition_encoding: str = 'ros2msg'
     type_hash: Optional[str] = None
+    serialization_format: str = MESSAGE_ENCODING
 
 
 class BagMessage:
@@ -140,7 +164,7 @@ class BagMessage:
                                        message_type=message_class(self.type_name))
         try:
             return decode(self.data)
-        except Exception as error:  # rclpy raises bare RuntimeError/TypeError on bad CDR
+        except (_RMWError, BagError) as error:   # rclpy's error for bad CDR; cdr's own
             raise BagError(
                 f'message on {self.topic} at {self.log_time_ns} ns is not a valid '
                 f'{self.type_name}: {error}') from None
@@ -229,12 +253,15 @@ class BagWriter:
         ------
         BagError
             If the topic is already registered or the type name is invalid or
-            (with ``definition=None``) not installed.
+            (with ``definition=None``) not installed. A topic with its own
+            ``definition`` is registered with its type name as given, for
+            copying topics of any bag unchanged.
 
         """
         if metadata.name in self._channels:
             raise BagError(f'topic {metadata.name} is already registered in {self.path}')
-        split_type_name(metadata.type_name)
+        # A topic copied with its own schema keeps its type name as stored
+        # (even a short or unknown one); others need an installed 'pkg/msg/Type'.
         definition = (message_definition(metadata.type_name) if metadata.definition is None
                       else metadata.definition)
         schema_key = (metadata.type_name, metadata.definition_encoding, definition)
@@ -245,7 +272,8 @@ class BagWriter:
                 data=definition.encode())
             self._schema_ids[schema_key] = schema_id
         channel_id = self._writer.register_channel(
-            topic=metadata.name, message_encoding=MESSAGE_ENCODING, schema_id=schema_id,
+            topic=metadata.name, message_encoding=metadata.serialization_format,
+            schema_id=schema_id,
             metadata={
                 'offered_qos_profiles': metadata.offered_qos_profiles,
                 'topic_type_hash': (type_hash(metadata.type_name) if metadata.type_hash is None
@@ -352,7 +380,7 @@ class BagWriter:
                 'topic_metadata': {
                     'name': topic.name,
                     'type': topic.type_name,
-                    'serialization_format': MESSAGE_ENCODING,
+                    'serialization_format': topic.serialization_format,
                     'offered_qos_profiles': yaml.safe_load(topic.offered_qos_profiles) or [],
                     'type_description_hash': (type_hash(topic.type_name)
                                               if topic.type_hash is None else topic.type_hash),
@@ -400,64 +428,178 @@ class BagWriter:
             self.abort()
 
 
+def checked_topics(topics, available, path):
+    """
+    Return ``topics`` as a list, each checked to be one of ``available`` (the topics of a bag).
+
+    Raises
+    ------
+    BagError
+        Naming the missing topics, the bag ``path`` and the topics it has.
+
+    """
+    topics = list(topics)
+    missing = [topic for topic in topics if topic not in available]
+    if missing:
+        raise BagError(f'topic {", ".join(missing)} not in {path} '
+                       f'(it has {", ".join(sorted(available)) or "no topics"})')
+    return topics
+
+
+class _Scan:
+    """
+    A linear scan of an MCAP file, record by record, as its writer wrote them.
+
+    Iterating yields the Schema, Channel and Message records in file order,
+    chunks opened (each chunk checked against its CRC first, so that a damaged
+    chunk yields nothing). The scan stops at the footer or at the first record
+    that cannot be read, which ``error`` then holds: a file cut short by a
+    crash ends in a partial record.
+    """
+
+    def __init__(self, stream):
+        self._stream = stream
+        self.error = None
+        self.compressions = set()
+
+    def __iter__(self):
+        self._stream.seek(0)
+        try:
+            for record in StreamReader(self._stream, emit_chunks=True).records:
+                if isinstance(record, Chunk):
+                    self.compressions.add(record.compression)
+                    yield from breakup_chunk(record, validate_crc=True)
+                elif isinstance(record, (Schema, Channel, Message)):
+                    yield record
+        except _FORMAT_ERRORS as error:
+            if not _is_format_error(error):
+                raise
+            self.error = error
+
+
+def _compression_name(compressions):
+    """The chunk compression of a file: ``'zstd'``, ``'lz4'`` or ``'none'``."""
+    return next((name for name in ('zstd', 'lz4') if name in compressions), 'none')
+
+
 class BagReader:
     """
-    Read a ROS 2 MCAP bag.
+    Read one ROS 2 MCAP file (``rotation_node.bag.reader`` reads every other bag).
 
-    The file is checked when opened: it must be a complete MCAP file (header,
-    summary, footer) whose channels all carry CDR messages with ``ros2msg`` or
-    ``ros2idl`` schemas. Messages are read lazily, one chunk at a time.
+    A complete file is read through its summary (index), chunk by chunk in
+    log-time order. A file without a summary is read by a linear scan, in the
+    order it was written; so is an unfinished recording (no summary and no
+    footer, as a writer killed mid-recording leaves it), up to its last
+    complete chunk (unless ``strict``). Channels of any schema and encoding are
+    listed (bags of other recorders, schemas rosbag2 could not find); only
+    decoding a message needs a ROS 2 type.
 
     Parameters
     ----------
     path : str or os.PathLike
+    strict : bool, optional
+        Refuse an unfinished recording instead of reading what it holds.
 
     Attributes
     ----------
     path : str
     topics : dict
-        ``{topic: 'pkg/msg/Type'}``.
+        ``{topic: type name as stored}``, normally ``'pkg/msg/Type'``.
     topic_metadata : dict
         ``{topic: TopicMetadata}`` as stored (schema text, QoS YAML, hash).
     message_counts : dict
         ``{topic: number of messages}``.
+    compression : str
+        The chunk compression: ``'zstd'``, ``'lz4'`` or ``'none'``.
+    recovered : int or None
+        For an unfinished recording, the number of messages recovered; None
+        for a complete file.
 
     Raises
     ------
     BagError
-        If the file does not exist, is not MCAP, is truncated or corrupt, or
-        holds a channel that is not a ROS 2 CDR channel.
+        If the file does not exist, is empty, is not MCAP, is corrupt, or is
+        an unfinished recording and ``strict`` is set.
 
     """
 
-    def __init__(self, path):
+    def __init__(self, path, *, strict=False):
         self.path = os.fspath(path)
+        self.recovered = None
+        self.compression = 'none'
         try:
             self._stream = open(self.path, 'rb')
         except OSError as error:
             raise BagError(f'cannot open bag {self.path}: {error.strerror}') from None
         try:
-            self._read_summary()
+            if os.fstat(self._stream.fileno()).st_size == 0:
+                raise BagError(f'{self.path}: empty file (0 bytes), not an MCAP bag')
+            self._open(strict)
         except BaseException:
             self._stream.close()
             raise
 
-    def _read_summary(self):
+    def _open(self, strict):
+        summary, unfinished = None, None
         try:
             self._reader = SeekingReader(self._stream, validate_crcs=True)
+        except _FORMAT_ERRORS as error:
+            if not _is_format_error(error):
+                raise
+            raise BagError(
+                f'{self.path} is not a valid MCAP file: {_described(error)}') from None
+        try:
             summary = self._reader.get_summary()
-        except _CORRUPT_DATA_ERRORS as error:
-            raise BagError(f'{self.path} is not a valid MCAP file (truncated or corrupt?): '
-                           f'{error}') from None
-        if summary is None:
-            raise BagError(f'{self.path} has no MCAP summary section (index); '
-                           'it was not closed by its writer')
+        except _FORMAT_ERRORS as error:
+            if not _is_format_error(error):
+                raise
+            unfinished = error
+        if summary is not None and summary.chunk_indexes:
+            self._scan_count = None
+            self._read_summary(summary)
+        else:
+            self._read_scan(unfinished, strict)
+
+    def _read_summary(self, summary):
+        self.compression = _compression_name({c.compression for c in summary.chunk_indexes})
+        counts = summary.statistics.channel_message_counts if summary.statistics else {}
+        self._set_topics(summary.channels.values(), summary.schemas, counts)
+
+    def _read_scan(self, unfinished, strict):
+        """Index a file without summary by reading it once; decide how much to recover."""
+        scan = _Scan(self._stream)
+        schemas, channels, counts = {}, {}, {}
+        total, previous, self._scan_ordered = 0, -1, True
+        for record in scan:
+            if isinstance(record, Schema):
+                schemas[record.id] = record
+            elif isinstance(record, Channel):
+                channels[record.id] = record
+            elif record.channel_id not in channels:
+                scan.error = McapError(f'message on unknown channel {record.channel_id}')
+                break
+            else:
+                counts[record.channel_id] = counts.get(record.channel_id, 0) + 1
+                total += 1
+                self._scan_ordered = self._scan_ordered and record.log_time >= previous
+                previous = record.log_time
+        if unfinished is None and scan.error is not None:
+            raise BagError(f'{self.path} is corrupt: {_described(scan.error)}')
+        if unfinished is not None:
+            if strict:
+                raise BagError(f'{self.path}: unfinished recording (no MCAP summary or '
+                               f'footer), {total} messages recoverable; refused (--strict)')
+            self.recovered = total
+        self._scan_count = total
+        self.compression = _compression_name(scan.compressions)
+        self._set_topics(channels.values(), schemas, counts)
+
+    def _set_topics(self, channels, schemas, counts):
         self.topic_metadata = {}
         self.message_counts = {}
         self._type_names = {}
-        counts = summary.statistics.channel_message_counts if summary.statistics else {}
-        for channel in summary.channels.values():
-            metadata = self._topic_metadata(channel, summary.schemas.get(channel.schema_id))
+        for channel in channels:
+            metadata = self._topic_metadata(channel, schemas.get(channel.schema_id))
             known = self.topic_metadata.setdefault(channel.topic, metadata)
             if known.type_name != metadata.type_name:
                 raise BagError(f'topic {channel.topic} in {self.path} has two types: '
@@ -468,27 +610,27 @@ class BagReader:
         self.topics = {topic: m.type_name for topic, m in self.topic_metadata.items()}
 
     def _topic_metadata(self, channel, schema):
-        if channel.message_encoding != MESSAGE_ENCODING:
-            raise BagError(f'topic {channel.topic} in {self.path} has message encoding '
-                           f'{channel.message_encoding!r}, expected {MESSAGE_ENCODING!r}')
-        if schema is None or schema.encoding not in SCHEMA_ENCODINGS:
-            found = 'no schema' if schema is None else f'schema encoding {schema.encoding!r}'
-            raise BagError(f'topic {channel.topic} in {self.path} has {found}, '
-                           f'expected one of {SCHEMA_ENCODINGS}')
+        """The metadata of a channel as stored, whatever its schema (copied unchanged)."""
         try:
-            split_type_name(schema.name)
-            definition = schema.data.decode()
-        except (BagError, UnicodeDecodeError) as error:
-            raise BagError(f'topic {channel.topic} in {self.path}: {error}') from None
+            definition = '' if schema is None else schema.data.decode()
+        except UnicodeDecodeError as error:
+            raise BagError(f'topic {channel.topic} in {self.path}: schema text is not '
+                           f'UTF-8: {error}') from None
         return TopicMetadata(
-            name=channel.topic, type_name=schema.name,
+            name=channel.topic, type_name='' if schema is None else schema.name,
             offered_qos_profiles=channel.metadata.get('offered_qos_profiles', '[]'),
-            definition=definition, definition_encoding=schema.encoding,
-            type_hash=channel.metadata.get('topic_type_hash', ''))
+            definition=definition, definition_encoding='' if schema is None else schema.encoding,
+            type_hash=channel.metadata.get('topic_type_hash', ''),
+            serialization_format=channel.message_encoding)
 
     def messages(self, topics=None):
         """
         Iterate over the messages in log-time order (ties in file order).
+
+        A file without summary is read in the order it was written, which
+        is log-time order for a recorder; if it is not, its messages are
+        sorted in memory first. Messages compressed by rosbag2
+        (``--compression-mode message``) are decompressed.
 
         Parameters
         ----------
@@ -507,24 +649,50 @@ class BagReader:
 
         """
         if topics is not None:
-            topics = list(topics)
-            missing = [topic for topic in topics if topic not in self.topics]
-            if missing:
-                raise BagError(f'topic {", ".join(missing)} not in {self.path} '
-                               f'(it has {", ".join(sorted(self.topics)) or "no topics"})')
-        return self._messages(topics)
+            topics = checked_topics(topics, self.topics, self.path)
+        if self._scan_count is None:
+            return self._indexed_messages(topics)
+        records = self._scanned_messages(topics)
+        return records if self._scan_ordered else iter(
+            sorted(records, key=operator.attrgetter('log_time_ns')))
 
-    def _messages(self, topics):
+    def _message(self, channel, message):
+        data = message.data
+        if data[:4] == ZSTD_MAGIC and channel.message_encoding == MESSAGE_ENCODING:
+            data = decompressed_message(data)
+        return BagMessage(channel.topic, self._type_names[channel.id], data,
+                          message.log_time, message.publish_time)
+
+    def _indexed_messages(self, topics):
         # Log-time order streams chunk by chunk. (mcap 1.6's file order,
         # log_time_order=False, queues every chunk's messages before yielding
         # the first: it loads the whole bag.)
-        type_names = self._type_names
         try:
             for _, channel, message in self._reader.iter_messages(topics=topics):
-                yield BagMessage(channel.topic, type_names[channel.id], message.data,
-                                 message.log_time, message.publish_time)
-        except _CORRUPT_DATA_ERRORS as error:
-            raise BagError(f'{self.path} is corrupt: {error!r}') from None
+                yield self._message(channel, message)
+        except _FORMAT_ERRORS as error:
+            if not _is_format_error(error):
+                raise
+            raise BagError(f'{self.path} is corrupt: {_described(error)}') from None
+
+    def _scanned_messages(self, topics):
+        """The messages the opening scan counted, no more (the file may still grow)."""
+        wanted = None if topics is None else set(topics)
+        channels, remaining = {}, self._scan_count
+        for record in _Scan(self._stream):
+            if remaining == 0:
+                return
+            if isinstance(record, Channel):
+                channels[record.id] = record
+            elif isinstance(record, Message):
+                remaining -= 1
+                channel = channels[record.channel_id]
+                if wanted is None or channel.topic in wanted:
+                    try:
+                        yield self._message(channel, record)
+                    except zstandard.ZstdError as error:
+                        raise BagError(
+                            f'{self.path} is corrupt: {_described(error)}') from None
 
     def close(self):
         """Close the file."""

@@ -1,5 +1,10 @@
 """
-Publish the messages of an MCAP bag on their topics (``rotation_bag play``).
+Publish the messages of a bag on their topics (``rotation_bag play``).
+
+Any bag :func:`rotation_node.bag.reader.open_bag` reads; topics whose names
+are not valid in ROS 2 are published under their mapped names
+(:mod:`rotation_node.bag.topic_names`), and topics whose type is not
+installed (or not CDR) are left out, with a note, unless asked for by name.
 
 Messages go out as stored (CDR bytes, never deserialised) in log-time order,
 spaced as they were recorded divided by the rate. Rate 0 publishes as fast as
@@ -23,9 +28,10 @@ from rclpy.duration import Duration
 from rclpy.qos import ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
-from rotation_node.bag.mcap_io import BagReader
+from rotation_node.bag.mcap_io import MESSAGE_ENCODING
 from rotation_node.bag.message_types import message_class
 from rotation_node.bag.qos import DEEP_QUEUE_DEPTH, playback_qos, qos_profiles_from_yaml
+from rotation_node.bag.reader import open_bag
 from rotation_node.bag.stop_signal import StopSignal
 from rotation_node.errors import BagError
 
@@ -36,9 +42,47 @@ _POLL_S = 0.05
 DISCOVERY_SETTLE_S = 0.5
 
 
+def _playable_topics(reader, topics, report):
+    """
+    The topics to play: the given ones (all checked), or every topic that can be published.
+
+    A topic of a type that is not installed, or not CDR, cannot be published:
+    asked for by name it is an error, else it is left out with a note.
+    """
+    if topics is not None:
+        topics = list(dict.fromkeys(reader.topic_name(topic) for topic in topics))
+        for topic in topics:
+            _message_class(reader, topic)
+        return topics
+    playable, left_out = [], []
+    for topic in reader.topics:
+        try:
+            _message_class(reader, topic)
+        except BagError:
+            left_out.append(topic)
+        else:
+            playable.append(topic)
+    if not playable:
+        raise BagError(f'{reader.path} has no topic that can be played (not installed or not '
+                       f'CDR: {", ".join(left_out) or "no topics"})')
+    if left_out and report is not None:
+        report(f'{reader.path}: not playing {", ".join(left_out)} (message type not installed '
+               'or not CDR)')
+    return playable
+
+
+def _message_class(reader, topic):
+    metadata = reader.topic_metadata[topic]
+    if metadata.serialization_format != MESSAGE_ENCODING:
+        raise BagError(f'topic {topic} in {reader.path} is serialized as '
+                       f'{metadata.serialization_format!r}, not {MESSAGE_ENCODING!r}: '
+                       'cannot publish it')
+    return message_class(metadata.type_name)
+
+
 def _publishers(node, reader, topics, lossless):
     """One publisher per topic with the QoS recorded in the bag; message classes checked first."""
-    classes = {topic: message_class(reader.topics[topic]) for topic in topics}
+    classes = {topic: _message_class(reader, topic) for topic in topics}
     return {topic: node.create_publisher(
         classes[topic], topic,
         playback_qos(qos_profiles_from_yaml(reader.topic_metadata[topic].offered_qos_profiles,
@@ -83,19 +127,20 @@ def _play_once(reader, topics, publishers, rate, stop):
 
 
 def play(path, *, rate=1.0, topics=None, loop=False, delay=0.0, wait_for_subscribers=False,
-         ros_args=None):
+         ros_args=None, strict=False, report=None):
     """
     Publish the messages of a bag until it ends (or forever with ``loop``) or Ctrl-C.
 
     Parameters
     ----------
     path : str or os.PathLike
-        The MCAP bag.
+        The bag: anything :func:`rotation_node.bag.reader.open_bag` reads.
     rate : float, optional
         Speed factor on the recorded timing; 0 publishes as fast as the
         subscribers acknowledge, after waiting for a subscriber on every topic.
     topics : list of str, optional
-        Only these topics; all by default.
+        Only these topics (names in the bag or their ROS 2 names); by
+        default every topic whose type is installed.
     loop : bool, optional
         Start again at the end.
     delay : float, optional
@@ -105,6 +150,11 @@ def play(path, *, rate=1.0, topics=None, loop=False, delay=0.0, wait_for_subscri
         Start only once every played topic has a subscriber (always at rate 0).
     ros_args : list of str, optional
         Command line passed to ``rclpy.init`` (``--ros-args ...``).
+    strict : bool, optional
+        Refuse an unfinished recording instead of playing what it holds.
+    report : callable, optional
+        ``report(line)`` receives the input's notes (an unfinished recording,
+        a renamed topic, topics left out) before anything is published.
 
     Returns
     -------
@@ -122,9 +172,10 @@ def play(path, *, rate=1.0, topics=None, loop=False, delay=0.0, wait_for_subscri
         raise BagError(f'rate must be >= 0, got {rate}')
     if not delay >= 0:
         raise BagError(f'delay must be >= 0, got {delay}')
-    with BagReader(path) as reader:
-        topics = list(reader.topics) if topics is None else list(topics)
-        reader.messages(topics)   # checks the topics before anything is published
+    with open_bag(path, strict=strict) as reader:
+        for note in reader.notes if report is not None else ():
+            report(note)
+        topics = _playable_topics(reader, topics, report)
         rclpy.init(args=ros_args, signal_handler_options=SignalHandlerOptions.NO)
         try:
             node = rclpy.create_node(NODE_NAME)

@@ -5,21 +5,26 @@ Meant for converted topics: a topic that ``rotation_bag convert`` wrote for
 the output ``NAME`` of an input topic ``T`` (``T/NAME``, ``T`` in the bag,
 the type the output's) is drawn as that output of
 :data:`rotation_node.messages.OUTPUTS` declares (Euler angles in the units and
-sequence of the parameters the bag was converted with). A topic of an input
-type (``sensor_msgs/msg/Imu``...) is drawn as its orientation and angular
-velocity; a type several input types share (Vector3Stamped) is read as
+sequence of the parameters the bag was converted with). A topic of any input
+type (Imu, Odometry, the Pose and Transform types, QuaternionStamped...) is
+drawn as its orientation, as Euler angles of the parameters' sequence, and its
+angular velocity where it has one; where the orientation is unknown (an Imu's
+``orientation_covariance[0] == -1``) or invalid (NaN, a zero quaternion) the
+plot has a gap. A type several input types share (Vector3Stamped) is read as
 ``input_type`` of the parameters. The time axis is the header stamp where the
 message has one, else the log time, in seconds since the first message.
 """
+import math
+
 import numpy as np
 # A bare Figure renders PNG with the Agg backend and never touches pyplot's
 # global state or a display.
 from matplotlib.figure import Figure
 
-from rotation_node import messages
+from rotation_node import conversions, messages
 from rotation_node.bag.atomic_file import AtomicFile
 from rotation_node.bag.convert import output_topic
-from rotation_node.bag.mcap_io import BagReader
+from rotation_node.bag.reader import open_bag
 from rotation_node.errors import BagError
 from rotation_node.parameters import NodeParameters
 from rotation_node.stamps import header_stamp_ns
@@ -43,6 +48,56 @@ def _input_type(type_name, params):
     return (preferred or candidates or [None])[0]
 
 
+def _input_orientation(entry, params):
+    """
+    ``euler(orientation) -> 3 angles`` of an input type's orientation form, NaN if unusable.
+
+    The Euler angles of the parameters' sequence and unit, computed by the
+    library's conversions as the node computes its ``euler`` output; NaN
+    where the orientation is unknown (None), not finite, or a zero quaternion.
+    """
+    sequence, degrees = params.euler_sequence, params.euler_degrees
+    unknown = (math.nan,) * 3
+    if entry.orientation_form == messages.EULER:
+        def quaternion(angles):
+            return conversions.quaternion_from_euler(angles, sequence, degrees=degrees)
+    elif entry.orientation_form == messages.ROTATION_VECTOR:
+        quaternion = conversions.quaternion_from_rotation_vector
+    else:
+        def quaternion(q):
+            return q if any(q) else None
+
+    def euler(orientation):
+        if orientation is None or not all(map(math.isfinite, orientation)):
+            return unknown
+        q = quaternion(orientation)
+        if q is None:
+            return unknown
+        return tuple(conversions.euler_from_quaternion(q, sequence, degrees=degrees))
+    return euler
+
+
+def _input_panels(entry, params):
+    """
+    ``(panels, numbers)`` of a topic of a plain input type.
+
+    Its orientation as Euler angles (the ``euler`` output's panel), then its
+    angular velocity where the type has one (NaN where unknown).
+    """
+    euler, read = _input_orientation(entry, params), entry.sample_reader()
+    panels = [panel._replace(title=f'Orientation as {panel.title}')
+              for panel in messages.OUTPUTS['euler'].panels(params)]
+    if entry.angular_velocity_field is None:
+        return panels, lambda msg: euler(read(msg).orientation)
+    panels.append(messages.Panel('Angular velocity', 'rad/s', ('x', 'y', 'z'), 3))
+    unknown = (math.nan,) * 3
+
+    def numbers(msg):
+        sample = read(msg)
+        return (*euler(sample.orientation), *(sample.angular_velocity or unknown))
+    return panels, numbers
+
+
 def _panels(topics, topic, params):
     """
     What to draw for a topic: ``(panels, numbers)``.
@@ -55,9 +110,7 @@ def _panels(topics, topic, params):
         return output.panels(params), output.message.numbers
     entry = _input_type(topics[topic], params)
     if entry is not None:
-        read = entry.sample_reader()
-        return (messages.input_panels(entry, params),
-                lambda msg: messages.sample_numbers(entry, read(msg)))
+        return _input_panels(entry, params)
     plottable = sorted({e.type_name for e in messages.INPUTS.values()})
     raise BagError(f'cannot plot {topics[topic]}: plottable are the outputs rotation_bag '
                    f'convert writes and topics of {", ".join(plottable)}')
@@ -70,7 +123,8 @@ def _time_ns(record, msg):
     return header_stamp_ns(header)
 
 
-def plot_topic(bag_path, topic, output_path, *, params=None, overwrite=False):
+def plot_topic(bag_path, topic, output_path, *, params=None, overwrite=False, strict=False,
+               report=None):
     """
     Draw ``topic`` of ``bag_path`` over time into the PNG ``output_path``.
 
@@ -85,6 +139,11 @@ def plot_topic(bag_path, topic, output_path, *, params=None, overwrite=False):
         frame for the labels. The node's defaults if omitted.
     overwrite : bool, optional
         Replace an existing ``output_path``.
+    strict : bool, optional
+        Refuse an unfinished recording instead of plotting what it holds.
+    report : callable, optional
+        ``report(line)`` receives the input's notes (an unfinished recording,
+        a renamed topic).
 
     Returns
     -------
@@ -99,21 +158,57 @@ def plot_topic(bag_path, topic, output_path, *, params=None, overwrite=False):
 
     """
     params = NodeParameters() if params is None else params
-    with AtomicFile(output_path, overwrite=overwrite) as output, BagReader(bag_path) as reader:
-        records = reader.messages([topic])
-        panels, numbers = _panels(reader.topics, topic, params)
-        times, values = [], [[] for _ in panels]
-        for record in records:
-            msg = record.message()
-            times.append(_time_ns(record, msg))
-            msg_numbers = numbers(msg)
-            for series, panel in zip(values, panels):
-                series.append(tuple(msg_numbers[panel.start:panel.start + len(panel.labels)]))
-        if not times:
-            raise BagError(f'topic {topic} in {bag_path} has no messages to plot')
-        _draw(topic, np.asarray(times, dtype=np.int64), values, panels).savefig(
+    with open_bag(bag_path, strict=strict) as reader, \
+            AtomicFile(output_path, overwrite=overwrite) as output:
+        for note in reader.notes if report is not None else ():
+            report(note)
+        times_ns, panels, values = plot_series(reader, topic, params)
+        _draw(reader.topic_name(topic), times_ns, values, panels).savefig(
             output.stream, format='png', dpi=110)
-    return len(times)
+    return len(times_ns)
+
+
+def plot_series(reader, topic, params):
+    """
+    Return what ``plot`` draws for a topic: ``(times_ns, panels, values)``.
+
+    Parameters
+    ----------
+    reader : rotation_node.bag.reader.InputBag
+    topic : str
+        Its name in the bag or its ROS 2 name.
+    params : rotation_node.parameters.NodeParameters
+        Euler sequence and units (of the plotted Euler angles, and for reading
+        Euler-angle inputs).
+
+    Returns
+    -------
+    times_ns : numpy.ndarray of int64
+        Header stamp (log time for messages without header) of each message.
+    panels : list of rotation_node.messages.Panel
+    values : list of numpy.ndarray
+        Per panel, shape ``(messages, len(panel.labels))``; NaN where a value
+        is unknown or invalid (left as a gap in the plot).
+
+    Raises
+    ------
+    BagError
+        If the topic is not in the bag, has no messages or cannot be plotted.
+
+    """
+    topic = reader.topic_name(topic)
+    records = reader.messages([topic])
+    panels, numbers = _panels(reader.topics, topic, params)
+    times, rows = [], []
+    for record in records:
+        msg = record.message()
+        times.append(_time_ns(record, msg))
+        rows.append(numbers(msg))
+    if not times:
+        raise BagError(f'topic {topic} in {reader.path} has no messages to plot')
+    table = np.asarray(rows, dtype=float)
+    return (np.asarray(times, dtype=np.int64), panels,
+            [table[:, panel.start:panel.start + len(panel.labels)] for panel in panels])
 
 
 def _draw(topic, times_ns, values, panels):
@@ -122,7 +217,7 @@ def _draw(topic, times_ns, values, panels):
     figure = Figure(figsize=(10, 3.2 * len(panels) + 0.6), layout='constrained')
     axes = figure.subplots(len(panels), 1, sharex=True, squeeze=False)
     for ax, series, panel in zip(axes[:, 0], values, panels):
-        for column, label in zip(np.asarray(series, dtype=float).T, panel.labels):
+        for column, label in zip(series.T, panel.labels):
             ax.plot(seconds, column, label=label, linewidth=1.0)
         ax.set_title(panel.title)
         ax.set_ylabel(panel.unit or 'value')

@@ -127,6 +127,26 @@ def qos_profiles_yaml(profiles):
     return yaml.safe_dump(entries, sort_keys=False, default_flow_style=False).rstrip('\n')
 
 
+def rosbags_qos_yaml(profiles):
+    """
+    Serialise QoS profiles as the ``rosbags`` package parses them to rosbag2's YAML.
+
+    Parameters
+    ----------
+    profiles : list of rosbags.interfaces.Qos
+        E.g. the ``offered_qos_profiles`` of a rosbags connection.
+
+    Returns
+    -------
+    str
+        A YAML list in the format of ``qos_profiles_yaml``, ``'[]'`` for none.
+
+    """
+    from rosbags.rosbag2.metadata import dump_qos_v9
+    return yaml.safe_dump(dump_qos_v9(list(profiles)), sort_keys=False,
+                          default_flow_style=False).rstrip('\n')
+
+
 def _policy(entry, key, policy_type):
     value = entry[key]
     if isinstance(value, int):

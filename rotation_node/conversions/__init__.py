@@ -35,7 +35,8 @@ from ._euler import (euler_from_matrix, euler_from_quaternion, euler_singularity
                      matrix_from_euler, quaternion_from_euler)
 from ._matrix import matrix_from_quaternion, quaternion_from_matrix
 from ._quaternion import (canonical_quaternion, quaternion_conjugate, quaternion_distance,
-                          quaternion_product, rotate_vector, set_threads)
+                          quaternion_product, rotate_vector)
+from ._runtime import set_threads
 from ._validation import EulerSequence, parse_sequence
 
 _LOWER = ('xyz', 'xzy', 'yxz', 'yzx', 'zxy', 'zyx', 'xyx', 'xzx', 'yxy', 'yzy', 'zxz', 'zyz')

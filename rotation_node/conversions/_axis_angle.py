@@ -17,9 +17,10 @@ import numpy as np
 
 from ._matrix import (DEFAULT_ORTHONORMAL_TOLERANCE, EIGENVECTOR_PENDING, convert_matrices,
                       quaternion_of_matrix, store_rotation)
-from ._quaternion import (STAGE_CHUNK, call_binary, call_unary, half_angle_atan2, jit,
-                          needs_sign_flip, quaternion_status, samples, scaled_quaternion, status,
+from ._quaternion import (half_angle_atan2, needs_sign_flip, quaternion_status, scaled_quaternion,
                           vector_defect, vector_norm, vector_status)
+from ._runtime import (FLAT_IN, FLAT_OUT, FLOAT, ROWS_IN, ROWS_OUT, STAGE_CHUNK, call_binary,
+                       call_unary, jit, kernel, matrix_samples, samples, status)
 from ._trigonometry import sin_cos, sin_cos_in_place_kernel
 from ._validation import NON_FINITE, OK, ZERO_NORM
 
@@ -104,23 +105,22 @@ def _axis_angle_status(ax, ay, az, angle, s):
 
 
 @jit
-def _from_axis_angle_kernel(axis, angle, out):
-    fa, ft = samples(axis, 1), samples(np.asarray(angle), 0)   # angle may be a float
-    fo = out.reshape(fa.shape[0], -1)
+def _rotations_from_axis_angle(fa, ft, angle, fo):
+    """Rotations about axes ``fa`` (n, 3) by ``ft`` (n,), or by ``angle`` if ``ft`` is empty."""
     for s in range(fa.shape[0]):
-        bad = _axis_angle_status(fa[s, 0], fa[s, 1], fa[s, 2], ft[s], s)
+        t = ft[s] if ft.shape[0] else angle
+        bad = _axis_angle_status(fa[s, 0], fa[s, 1], fa[s, 2], t, s)
         if bad >= 0:
             return bad
-        x, y, z, w = quaternion_from_axis_angle_scalar(fa[s, 0], fa[s, 1], fa[s, 2], ft[s])
+        x, y, z, w = quaternion_from_axis_angle_scalar(fa[s, 0], fa[s, 1], fa[s, 2], t)
         store_rotation(fo, s, x, y, z, w)
     return -1
 
 
 @jit
-def _from_axis_angle_batch_kernel(axis, angle, out):
-    fa, ft = samples(axis, 1), samples(np.asarray(angle), 0)   # angle may be a float
+def _rotations_from_axis_angle_staged(fa, ft, fo):
+    """The batch schedule of :func:`_rotations_from_axis_angle` (``ft`` one angle per axis)."""
     n = fa.shape[0]
-    fo = out.reshape(n, -1)
     half_sin, half_cos = np.empty(min(n, STAGE_CHUNK)), np.empty(min(n, STAGE_CHUNK))
     for start in range(0, n, STAGE_CHUNK):
         stop = min(n, start + STAGE_CHUNK)
@@ -137,10 +137,33 @@ def _from_axis_angle_batch_kernel(axis, angle, out):
     return -1
 
 
+# Each public function has its own kernels (one signature each): the
+# quaternion and the matrix forms differ in the layout of their output. The
+# scalar ``angle`` is a single sample's angle (``angles`` then empty).
+
+@kernel(FLAT_IN, FLAT_IN, FLAT_OUT, FLOAT)
+def _quaternion_from_axis_angle_kernel(axis, angles, out, angle):
+    return _rotations_from_axis_angle(samples(axis, 3), samples(angles, 0), angle, samples(out, 4))
+
+
+@kernel(FLAT_IN, FLAT_IN, ROWS_OUT, FLOAT)
+def _matrix_from_axis_angle_kernel(axis, angles, out, angle):
+    return _rotations_from_axis_angle(samples(axis, 3), samples(angles, 0), angle, samples(out, 9))
+
+
+@kernel(FLAT_IN, FLAT_IN, FLAT_OUT, FLOAT)
+def _quaternion_from_axis_angle_batch_kernel(axis, angles, out, angle):
+    return _rotations_from_axis_angle_staged(samples(axis, 3), samples(angles, 0), samples(out, 4))
+
+
+@kernel(FLAT_IN, FLAT_IN, ROWS_OUT, FLOAT)
+def _matrix_from_axis_angle_batch_kernel(axis, angles, out, angle):
+    return _rotations_from_axis_angle_staged(samples(axis, 3), samples(angles, 0), samples(out, 9))
+
+
 @jit
-def _from_rotation_vector_kernel(v, out):
-    fv = samples(v, 1)
-    fo = out.reshape(fv.shape[0], -1)
+def _rotations_from_rotation_vectors(fv, fo):
+    """Rotations (quaternions or matrices, as ``fo`` is (n, 4) or (n, 9)) of rotation vectors."""
     for s in range(fv.shape[0]):
         bad = vector_status(fv, s, 0)
         if bad >= 0:
@@ -151,10 +174,9 @@ def _from_rotation_vector_kernel(v, out):
 
 
 @jit
-def _from_rotation_vector_batch_kernel(v, out):
-    fv = samples(v, 1)
+def _rotations_from_rotation_vectors_staged(fv, fo):
+    """The batch schedule of :func:`_rotations_from_rotation_vectors`."""
     n = fv.shape[0]
-    fo = out.reshape(n, -1)
     half_sin, half_cos = np.empty(min(n, STAGE_CHUNK)), np.empty(min(n, STAGE_CHUNK))
     for start in range(0, n, STAGE_CHUNK):
         stop = min(n, start + STAGE_CHUNK)
@@ -172,6 +194,26 @@ def _from_rotation_vector_batch_kernel(v, out):
     return -1
 
 
+@kernel(FLAT_IN, FLAT_OUT)
+def _quaternion_from_rotation_vector_kernel(v, out):
+    return _rotations_from_rotation_vectors(samples(v, 3), samples(out, 4))
+
+
+@kernel(FLAT_IN, ROWS_OUT)
+def _matrix_from_rotation_vector_kernel(v, out):
+    return _rotations_from_rotation_vectors(samples(v, 3), samples(out, 9))
+
+
+@kernel(FLAT_IN, FLAT_OUT)
+def _quaternion_from_rotation_vector_batch_kernel(v, out):
+    return _rotations_from_rotation_vectors_staged(samples(v, 3), samples(out, 4))
+
+
+@kernel(FLAT_IN, ROWS_OUT)
+def _matrix_from_rotation_vector_batch_kernel(v, out):
+    return _rotations_from_rotation_vectors_staged(samples(v, 3), samples(out, 9))
+
+
 @jit
 def _store_axis_angle(fo, s, x, y, z, w):
     """``(axis, angle)`` of ``q`` into row ``s`` of ``fo`` (n, 4)."""
@@ -184,10 +226,10 @@ def _store_rotation_vector(fo, s, x, y, z, w):
     fo[s, 0], fo[s, 1], fo[s, 2] = rotation_vector_from_quaternion_scalar(x, y, z, w)
 
 
-@jit
+@kernel(FLAT_IN, FLAT_OUT)
 def axis_angle_kernel(q, out):
-    """``(x, y, z, angle)`` of quaternions into ``out`` (..., 4); returns the status."""
-    fq, fo = samples(q, 1), samples(out, 1)
+    """``(x, y, z, angle)`` of quaternions into ``out`` (4 n); returns the status."""
+    fq, fo = samples(q, 4), samples(out, 4)
     for s in range(fq.shape[0]):
         bad = quaternion_status(fq, s, 0)
         if bad >= 0:
@@ -196,10 +238,10 @@ def axis_angle_kernel(q, out):
     return -1
 
 
-@jit
+@kernel(FLAT_IN, FLAT_OUT)
 def rotation_vector_kernel(q, out):
-    """Rotation vectors of quaternions into ``out`` (..., 3); returns the status."""
-    fq, fo = samples(q, 1), samples(out, 1)
+    """Rotation vectors of quaternions into ``out`` (3 n); returns the status."""
+    fq, fo = samples(q, 4), samples(out, 3)
     for s in range(fq.shape[0]):
         bad = quaternion_status(fq, s, 0)
         if bad >= 0:
@@ -208,10 +250,10 @@ def rotation_vector_kernel(q, out):
     return -1
 
 
-@jit
+@kernel(ROWS_IN, FLAT_OUT, FLOAT)
 def _axis_angle_from_matrix_kernel(m, out, tolerance):
     """Axis-angle of matrices, one loop (the fused kernel of ``convert_matrices``)."""
-    fm, fo = samples(m, 2), samples(out, 1)
+    fm, fo = matrix_samples(m), samples(out, 4)
     pending = 0
     for s in range(fm.shape[0]):
         bad, x, y, z, w = quaternion_of_matrix(fm, s, tolerance)
@@ -222,10 +264,10 @@ def _axis_angle_from_matrix_kernel(m, out, tolerance):
     return -1 - pending
 
 
-@jit
+@kernel(ROWS_IN, FLAT_OUT, FLOAT)
 def _rotation_vector_from_matrix_kernel(m, out, tolerance):
     """Rotation vectors of matrices, one loop (the fused kernel of ``convert_matrices``)."""
-    fm, fo = samples(m, 2), samples(out, 1)
+    fm, fo = matrix_samples(m), samples(out, 3)
     pending = 0
     for s in range(fm.shape[0]):
         bad, x, y, z, w = quaternion_of_matrix(fm, s, tolerance)
@@ -266,8 +308,8 @@ def quaternion_from_axis_angle(axis, angle):
     ValueError
         Wrong shape, NaN/Inf, or a zero axis.
     """
-    return call_binary(_from_axis_angle_kernel, axis, angle, ('axis', 'angle'), ((3,), ()),
-                       (4,), batch_kernel=_from_axis_angle_batch_kernel)
+    return call_binary(_quaternion_from_axis_angle_kernel, axis, angle, ('axis', 'angle'),
+                       ((3,), ()), (4,), batch_kernel=_quaternion_from_axis_angle_batch_kernel)
 
 
 def matrix_from_axis_angle(axis, angle):
@@ -286,8 +328,8 @@ def matrix_from_axis_angle(axis, angle):
     ndarray, shape (..., 3, 3)
         Body-to-world rotation matrices.
     """
-    return call_binary(_from_axis_angle_kernel, axis, angle, ('axis', 'angle'), ((3,), ()),
-                       (3, 3), batch_kernel=_from_axis_angle_batch_kernel)
+    return call_binary(_matrix_from_axis_angle_kernel, axis, angle, ('axis', 'angle'),
+                       ((3,), ()), (3, 3), batch_kernel=_matrix_from_axis_angle_batch_kernel)
 
 
 def axis_angle_from_quaternion(q):
@@ -350,8 +392,8 @@ def quaternion_from_rotation_vector(v):
         Unit quaternions (x, y, z, w), canonical; exact to ~1 ulp from
         ``|v| = 0`` (identity) up.
     """
-    return call_unary(_from_rotation_vector_kernel, v, 'v', (3,), (4,),
-                      batch_kernel=_from_rotation_vector_batch_kernel)
+    return call_unary(_quaternion_from_rotation_vector_kernel, v, 'v', (3,), (4,),
+                      batch_kernel=_quaternion_from_rotation_vector_batch_kernel)
 
 
 def matrix_from_rotation_vector(v):
@@ -369,8 +411,8 @@ def matrix_from_rotation_vector(v):
         Body-to-world rotation matrices. Computed through the quaternion, so
         no ``(1 - cos t) / t^2`` cancellation.
     """
-    return call_unary(_from_rotation_vector_kernel, v, 'v', (3,), (3, 3),
-                      batch_kernel=_from_rotation_vector_batch_kernel)
+    return call_unary(_matrix_from_rotation_vector_kernel, v, 'v', (3,), (3, 3),
+                      batch_kernel=_matrix_from_rotation_vector_batch_kernel)
 
 
 def rotation_vector_from_quaternion(q):

@@ -27,8 +27,10 @@ import numpy as np
 
 from ._matrix import (DEFAULT_ORTHONORMAL_TOLERANCE, EIGENVECTOR_PENDING, convert_matrices,
                       quaternion_of_matrix, store_rotation)
-from ._quaternion import (STAGE_CHUNK, call_unary, jit, product, quaternion_status, samples,
-                          scaled_quaternion, vector_status)
+from ._quaternion import (needs_sign_flip, product, quaternion_status, scaled_quaternion,
+                          vector_status)
+from ._runtime import (FLAT_IN, FLAT_OUT, FLOAT, INT, ROWS_IN, ROWS_OUT, STAGE_CHUNK,
+                       call_unary, jit, kernel, matrix_samples, samples)
 from ._trigonometry import atan2_in_place_kernel, sin_cos
 from ._validation import SEQUENCE_TABLE, parse_sequence
 
@@ -60,7 +62,7 @@ def quaternion_from_euler_scalar(a1, a2, a3, i, j, k, intrinsic):
     else:  # R3 R2 R1
         x, y, z, w = product(e3x, e3y, e3z, e3w, e2x, e2y, e2z, e2w)
         x, y, z, w = product(x, y, z, w, e1x, e1y, e1z, e1w)
-    if w < 0.0:
+    if needs_sign_flip(x, y, z, w):
         return -x, -y, -z, -w
     return x, y, z, w + 0.0
 
@@ -142,9 +144,9 @@ def euler_from_half_angles(half_middle, half_sum, half_diff, h_ab, i, j, k, intr
     elif h_ab == 0.0:
         half_sum = half_diff if intrinsic else -half_diff
     first = _wrap(half_sum - half_diff)
-    third = _wrap(half_sum + half_diff)
+    # The sign before the wrap: wrapping first would turn +pi into -pi.
+    third = _wrap(half_sum + half_diff if proper else sign * (half_sum + half_diff))
     if not proper:
-        third = third * sign
         middle -= 0.5 * math.pi
     if intrinsic:
         return third, middle, first
@@ -182,12 +184,10 @@ def unpack_convention(convention):
 
 
 @jit
-def _from_euler_kernel(angles, out, convention):
-    """Quaternions or matrices (as ``out`` is (..., 4) or (..., 3, 3)) of Euler angles."""
+def _rotations_from_euler(fa, fo, convention):
+    """Quaternions or matrices (``fo`` (n, 4) or (n, 9)) of the Euler angles ``fa`` (n, 3)."""
     i, j, k, intrinsic, degrees = unpack_convention(convention)
     scale = _RADIANS_PER_DEGREE if degrees else 1.0
-    fa = samples(angles, 1)
-    fo = out.reshape(fa.shape[0], -1)
     for s in range(fa.shape[0]):
         bad = vector_status(fa, s, 0)
         if bad >= 0:
@@ -196,6 +196,16 @@ def _from_euler_kernel(angles, out, convention):
             fa[s, 0] * scale, fa[s, 1] * scale, fa[s, 2] * scale, i, j, k, intrinsic)
         store_rotation(fo, s, x, y, z, w)
     return -1
+
+
+@kernel(FLAT_IN, FLAT_OUT, INT)
+def _quaternion_from_euler_kernel(angles, out, convention):
+    return _rotations_from_euler(samples(angles, 3), samples(out, 4), convention)
+
+
+@kernel(FLAT_IN, ROWS_OUT, INT)
+def _matrix_from_euler_kernel(angles, out, convention):
+    return _rotations_from_euler(samples(angles, 3), samples(out, 9), convention)
 
 
 @jit
@@ -207,9 +217,9 @@ def _store_euler(fo, s, x, y, z, w, convention):
     fo[s, 0], fo[s, 1], fo[s, 2] = a1 * scale, a2 * scale, a3 * scale
 
 
-@jit
+@kernel(FLAT_IN, FLAT_OUT, INT)
 def _euler_from_quaternion_kernel(q, out, convention):
-    fq, fo = samples(q, 1), samples(out, 1)
+    fq, fo = samples(q, 4), samples(out, 3)
     for s in range(fq.shape[0]):
         bad = quaternion_status(fq, s, 0)
         if bad >= 0:
@@ -218,7 +228,7 @@ def _euler_from_quaternion_kernel(q, out, convention):
     return -1
 
 
-@jit
+@kernel(FLAT_IN, FLAT_OUT, INT)
 def _euler_from_quaternion_batch_kernel(q, out, convention):
     """
     Batch schedule of ``_euler_from_quaternion_kernel``: the ``atan2`` in one SIMD loop.
@@ -233,7 +243,7 @@ def _euler_from_quaternion_batch_kernel(q, out, convention):
     """
     i, j, k, intrinsic, degrees = unpack_convention(convention)
     scale = _DEGREES_PER_RADIAN if degrees else 1.0
-    fq, fo = samples(q, 1), samples(out, 1)
+    fq, fo = samples(q, 4), samples(out, 3)
     n = fq.shape[0]
     y, x = np.empty(3 * min(n, STAGE_CHUNK)), np.empty(3 * min(n, STAGE_CHUNK))
     for start in range(0, n, STAGE_CHUNK):
@@ -255,10 +265,10 @@ def _euler_from_quaternion_batch_kernel(q, out, convention):
     return -1
 
 
-@jit
+@kernel(ROWS_IN, FLAT_OUT, FLOAT, INT)
 def _euler_from_matrix_kernel(m, out, tolerance, convention):
     """Euler angles of matrices, one loop (the fused kernel of ``convert_matrices``)."""
-    fm, fo = samples(m, 2), samples(out, 1)
+    fm, fo = matrix_samples(m), samples(out, 3)
     pending = 0
     for s in range(fm.shape[0]):
         bad, x, y, z, w = quaternion_of_matrix(fm, s, tolerance)
@@ -269,10 +279,10 @@ def _euler_from_matrix_kernel(m, out, tolerance, convention):
     return -1 - pending
 
 
-@jit
+@kernel(FLAT_IN, FLAT_OUT, INT)
 def _singularity_margin_kernel(q, out, convention):
     i, j, k, intrinsic, _ = unpack_convention(convention)
-    fq, fo = samples(q, 1), samples(out, 0)
+    fq, fo = samples(q, 4), samples(out, 0)
     for s in range(fq.shape[0]):
         bad = quaternion_status(fq, s, 0)
         if bad >= 0:
@@ -305,8 +315,9 @@ def _convention(seq, degrees=False):
 
 
 def _from_angles(angles, seq, degrees, out_trailing):
-    return call_unary(_from_euler_kernel, angles, 'angles', (3,), out_trailing,
-                      _convention(seq, degrees))
+    matrices = out_trailing == (3, 3)
+    kernel_ = _matrix_from_euler_kernel if matrices else _quaternion_from_euler_kernel
+    return call_unary(kernel_, angles, 'angles', (3,), out_trailing, _convention(seq, degrees))
 
 
 def quaternion_from_euler(angles, seq, *, degrees=False):

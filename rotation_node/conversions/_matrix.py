@@ -26,9 +26,11 @@ import math
 
 import numpy as np
 
-from ._quaternion import (call_unary, canonical_kernel, canonical_unit_quaternion, is_batch,
-                          is_single_sample, jit, new_array, quaternion_status, samples,
-                          scaled_quaternion, status)
+from ._quaternion import (canonical_kernel, canonical_unit_quaternion, quaternion_status,
+                          scaled_quaternion)
+from ._runtime import (FLAT_IN, FLAT_OUT, FLOAT, ROWS_IN, ROWS_OUT, call_unary, is_batch,
+                       is_single_sample, jit, kernel, kernel_layout, matrix_samples, new_array,
+                       samples, status)
 from ._validation import (NON_FINITE, NOT_ORTHONORMAL, NOT_ROTATION, OK, float_array,
                           raise_sample_error)
 
@@ -211,9 +213,9 @@ def quaternion_of_matrix(fm, s, tolerance):
     return -1, x, y, z, w
 
 
-@jit
+@kernel(FLAT_IN, ROWS_OUT)
 def _matrix_from_quaternion_kernel(q, out):
-    fq, fo = samples(q, 1), out.reshape(-1, 9)
+    fq, fo = samples(q, 4), samples(out, 9)
     for s in range(fq.shape[0]):
         bad = quaternion_status(fq, s, 0)
         if bad >= 0:
@@ -222,17 +224,17 @@ def _matrix_from_quaternion_kernel(q, out):
     return -1
 
 
-@jit
+@kernel(ROWS_IN, FLAT_OUT, FLOAT)
 def quaternion_from_matrix_kernel(m, out, tolerance):
     """
-    Quaternions of matrices (any leading shape) into ``out`` (same leading shape, 4).
+    Quaternions of the matrices ``m`` (3 n, 3) into ``out`` (4 n).
 
     Returns the status of the first bad sample, or ``-1 - pending`` where
     ``pending`` rows of ``out`` are NaN: matrices left for the eigenvector
     method (see :func:`quaternion_of_matrix`; ``tolerance`` ``inf`` accepts
     every deviation).
     """
-    fm, fo = samples(m, 2), samples(out, 1)
+    fm, fo = matrix_samples(m), samples(out, 4)
     pending = 0
     for s in range(fm.shape[0]):
         bad, x, y, z, w = quaternion_of_matrix(fm, s, tolerance)
@@ -277,7 +279,7 @@ def nearest_rotation_quaternions(m):
     k[:, 2, 3] = k[:, 3, 2] = m10 - m01
     _, vectors = np.linalg.eigh(k)
     q = np.empty((m.shape[0], 4))
-    canonical_kernel(np.ascontiguousarray(vectors[:, :, 3]), q)
+    canonical_kernel(np.ascontiguousarray(vectors[:, :, 3]).reshape(-1), q.reshape(-1))
     return q
 
 
@@ -360,39 +362,46 @@ def convert_matrices(R, orthonormal_tolerance, non_orthonormal, out_trailing,
         ``R``'s leading shape followed by ``out_trailing``.
     """
     tolerance = _kernel_tolerance(orthonormal_tolerance, non_orthonormal)
-    if is_single_sample(R, (3, 3)):
-        m, shape, batch = R, out_trailing, False
+    if is_single_sample(R, (3, 3)):   # already in the canonical layout, as is its result
+        a = m = R
+        shape, batch, out = out_trailing, False, new_array(out_trailing)
+        flat_out = out
     else:
-        m = float_array(R, 'R', (3, 3))
-        shape, batch = m.shape[:-2] + out_trailing, is_batch(m, (3, 3))
+        a = float_array(R, 'R', (3, 3))
+        m = kernel_layout(a, (3, 3))
+        shape, batch = a.shape[:-2] + out_trailing, is_batch(a, (3, 3))
+        out = np.empty(shape)
+        flat_out = kernel_layout(out, out_trailing)
     if not batch:
-        out = new_array(shape)
         if convention is None:
-            bad = fused_kernel(m, out, tolerance)
+            bad = fused_kernel(m, flat_out, tolerance)
         else:
-            bad = fused_kernel(m, out, tolerance, convention)
+            bad = fused_kernel(m, flat_out, tolerance, convention)
         if bad == -1:
             return out
         if bad >= 0:
-            raise_sample_error(bad, ('R',), (m,), ((3, 3),))
-    q = _flat_quaternions(m, tolerance)
+            raise_sample_error(bad, ('R',), (a,), ((3, 3),))
+    q = _flat_quaternions(a, m, tolerance)
     if quaternion_kernel is None:   # the quaternions are the result
         return q.reshape(shape)
-    out = np.empty(shape)
-    kernel = batch_kernel if batch_kernel is not None and batch else quaternion_kernel
+    kernel_ = batch_kernel if batch_kernel is not None and batch else quaternion_kernel
     if convention is None:
-        kernel(q, out)
+        kernel_(q.reshape(-1), flat_out)
     else:
-        kernel(q, out, convention)
+        kernel_(q.reshape(-1), flat_out, convention)
     return out
 
 
-def _flat_quaternions(m, tolerance):
-    """Quaternions (n, 4) of the validated matrices ``m``, eigenvector method included."""
-    q = np.empty((m.size // 9, 4))
-    bad = quaternion_from_matrix_kernel(m, q, tolerance)
+def _flat_quaternions(a, m, tolerance):
+    """
+    Quaternions (n, 4) of the validated matrices ``a``, eigenvector method included.
+
+    ``m`` is ``a`` in the canonical layout (3 n, 3).
+    """
+    q = np.empty((m.shape[0] // 3, 4))
+    bad = quaternion_from_matrix_kernel(m, q.reshape(-1), tolerance)
     if bad >= 0:
-        raise_sample_error(bad, ('R',), (m,), ((3, 3),))
+        raise_sample_error(bad, ('R',), (a,), ((3, 3),))
     if bad < -1:
         rows = np.isnan(q[:, 3])
         q[rows] = nearest_rotation_quaternions(m.reshape(-1, 3, 3)[rows])
@@ -443,5 +452,3 @@ def quaternion_from_matrix(R, *, orthonormal_tolerance=DEFAULT_ORTHONORMAL_TOLER
     """
     return convert_matrices(R, orthonormal_tolerance, non_orthonormal, (4,),
                             quaternion_from_matrix_kernel, None)
-
-

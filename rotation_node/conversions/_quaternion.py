@@ -9,57 +9,14 @@ ratios or rescales by a power of two first (exact), so quaternions scaled by
 
 The scalar functions (tuples in, tuples out) are compiled with numba and
 called from the loop kernels of every module; they assume finite, non-zero
-input (the kernels check with :func:`quaternion_defect` first). The helpers
-at the end (``call_unary``, ``call_binary``, ``run_staged``) are the one
-Python-side path from public arguments to kernels: validation, output
-allocation, batch schedules, threads and error reporting.
+input (the kernels check with :func:`quaternion_defect` first). How kernels
+are declared, compiled and called is :mod:`._runtime`'s business.
 """
 import math
-import os
-from concurrent.futures import ThreadPoolExecutor
 
-import numpy as np
-from numba import njit, types
-from numba.core.errors import TypingError
-from numba.extending import overload
-
-from ._validation import NON_FINITE, OK, ZERO_NORM, broadcast_pair, float_array, raise_sample_error
-
-# Every compiled function is inlined into its callers (numba IR inlining, not
-# left to LLVM). A helper that is called rather than inlined costs a call per
-# sample and, when an array is live across it (the kernels' inputs and
-# outputs always are), an atomic reference-count increment and decrement per
-# call: 2-4x the whole per-sample cost of most kernels, measured.
-# (Inlined callees cannot be called with ``*args``.)
-jit = njit(cache=True, nogil=True, error_model='numpy', inline='always')
-
-
-def samples(a, sample_ndim):
-    """
-    The C-contiguous ``a`` as a stack of samples: shape ``(n,) + a.shape[-sample_ndim:]``.
-
-    How kernels see their arguments, whatever the leading shape. In compiled
-    code (the overload below) one sample and a one-dimensional stack are
-    viewed for free; only more leading dimensions take a ``reshape``, which
-    calls a C helper in numba (~30 ns, as much as a whole sample's
-    conversion). ``sample_ndim`` must be a constant.
-    """
-    return a.reshape((-1,) + a.shape[a.ndim - sample_ndim:])
-
-
-@overload(samples, inline='always', prefer_literal=True)
-def _samples_overload(a, sample_ndim):
-    if not isinstance(sample_ndim, types.IntegerLiteral):
-        raise TypingError('samples(): `sample_ndim` must be a constant.')
-    k = sample_ndim.literal_value
-    if not (isinstance(a, types.Array) and a.layout == 'C' and a.ndim >= k):
-        raise TypingError(f'samples(): expected a C-contiguous array of >= {k} dimensions, got {a}.')
-    if a.ndim == k:   # one sample
-        return lambda a, sample_ndim: a[None, ...]
-    if a.ndim == k + 1:   # already a stack
-        return lambda a, sample_ndim: a
-    start = a.ndim - k
-    return lambda a, sample_ndim: a.reshape((-1,) + a.shape[start:])
+from ._runtime import (FLAT_IN, FLAT_OUT, call_binary, call_unary, first_status, jit, kernel,
+                       samples, status)
+from ._validation import NON_FINITE, OK, ZERO_NORM
 
 
 @jit
@@ -157,6 +114,21 @@ def product(px, py, pz, pw, qx, qy, qz, qw):
 
 
 @jit
+def conjugate_product(px, py, pz, pw, qx, qy, qz, qw):
+    """
+    ``p* (x) q``, the rotation from ``p`` to ``q``, with each cancelling pair grouped.
+
+    The vector part is ``(p_s q_v - q_s p_v) - p_v x q_v``: each bracket is a
+    difference of the same two products when ``q = +-p``, so the vector part of
+    a rotation relative to itself is exactly zero.
+    """
+    return ((pw * qx - px * qw) - (py * qz - pz * qy),
+            (pw * qy - py * qw) - (pz * qx - px * qz),
+            (pw * qz - pz * qw) - (px * qy - py * qx),
+            pw * qw + px * qx + py * qy + pz * qz)
+
+
+@jit
 def rotated_vector(x, y, z, w, vx, vy, vz):
     """
     ``R(q) v`` for a unit quaternion: ``v + w t + u x t`` with ``t = 2 u x v``.
@@ -182,18 +154,6 @@ def half_angle_atan2(vector_norm_value, scalar):
 
 
 @jit
-def status(sample, argument, code):
-    """Kernel status for a bad sample: ``(sample << 4) | (argument << 3) | code``."""
-    return (sample << 4) | (argument << 3) | code
-
-
-@jit
-def first_status(a, b):
-    """The first of two statuses that reports a bad sample (-1 if neither does)."""
-    return a if a >= 0 else b
-
-
-@jit
 def quaternion_status(fq, s, argument):
     """Status of sample ``s`` of the flat quaternions ``fq`` (-1 when fine)."""
     code = quaternion_defect(fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3])
@@ -208,14 +168,14 @@ def vector_status(fv, s, argument):
 
 
 # ----------------------------------------------------------------- kernels
-# Kernels take validated C-contiguous arrays of any (common) leading shape and
-# a preallocated output, flatten them (free views), fill the output and return
-# the status of the first bad sample, or -1. Allocating in Python and returning
-# an int keeps a single-sample call near numba's dispatch floor.
+# Kernels take validated inputs and a preallocated output in the canonical
+# layout (see ``_runtime``), fill the output and return the status of the
+# first bad sample, or -1. Allocating in Python and returning an int keeps a
+# single-sample call near numba's dispatch floor.
 
-@jit
+@kernel(FLAT_IN, FLAT_IN, FLAT_OUT)
 def _product_kernel(p, q, out):
-    fp, fq, fo = samples(p, 1), samples(q, 1), samples(out, 1)
+    fp, fq, fo = samples(p, 4), samples(q, 4), samples(out, 4)
     for s in range(fp.shape[0]):
         bad = first_status(quaternion_status(fp, s, 0), quaternion_status(fq, s, 1))
         if bad >= 0:
@@ -225,9 +185,9 @@ def _product_kernel(p, q, out):
     return -1
 
 
-@jit
+@kernel(FLAT_IN, FLAT_OUT)
 def _conjugate_kernel(q, out):
-    fq, fo = samples(q, 1), samples(out, 1)
+    fq, fo = samples(q, 4), samples(out, 4)
     for s in range(fq.shape[0]):
         bad = quaternion_status(fq, s, 0)
         if bad >= 0:
@@ -236,10 +196,10 @@ def _conjugate_kernel(q, out):
     return -1
 
 
-@jit
+@kernel(FLAT_IN, FLAT_OUT)
 def canonical_kernel(q, out):
     """Canonical unit quaternions of ``q`` into ``out``; returns the status."""
-    fq, fo = samples(q, 1), samples(out, 1)
+    fq, fo = samples(q, 4), samples(out, 4)
     for s in range(fq.shape[0]):
         bad = quaternion_status(fq, s, 0)
         if bad >= 0:
@@ -249,23 +209,23 @@ def canonical_kernel(q, out):
     return -1
 
 
-@jit
+@kernel(FLAT_IN, FLAT_IN, FLAT_OUT)
 def _distance_kernel(p, q, out):
-    fp, fq, fo = samples(p, 1), samples(q, 1), samples(out, 0)
+    fp, fq, fo = samples(p, 4), samples(q, 4), samples(out, 0)
     for s in range(fp.shape[0]):
         bad = first_status(quaternion_status(fp, s, 0), quaternion_status(fq, s, 1))
         if bad >= 0:
             return bad
         px, py, pz, pw = scaled_quaternion(fp[s, 0], fp[s, 1], fp[s, 2], fp[s, 3])
         qx, qy, qz, qw = scaled_quaternion(fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3])
-        ex, ey, ez, ew = product(-px, -py, -pz, pw, qx, qy, qz, qw)
+        ex, ey, ez, ew = conjugate_product(px, py, pz, pw, qx, qy, qz, qw)
         fo[s] = half_angle_atan2(vector_norm(ex, ey, ez), ew)
     return -1
 
 
-@jit
+@kernel(FLAT_IN, FLAT_IN, FLAT_OUT)
 def _rotate_kernel(q, v, out):
-    fq, fv, fo = samples(q, 1), samples(v, 1), samples(out, 1)
+    fq, fv, fo = samples(q, 4), samples(v, 3), samples(out, 3)
     for s in range(fq.shape[0]):
         bad = first_status(quaternion_status(fq, s, 0), vector_status(fv, s, 1))
         if bad >= 0:
@@ -276,199 +236,6 @@ def _rotate_kernel(q, v, out):
 
 
 # ------------------------------------------------------------ public API
-
-# Inputs of at least this many samples use a kernel's batch schedule, where
-# it has one (the same count for every input type, so that a conversion and
-# its route through quaternions agree bit for bit).
-BATCH_SAMPLES = 1024
-
-
-def is_batch(a, trailing):
-    """Whether ``a`` (samples of shape ``trailing``) is large enough for a batch schedule."""
-    return a.size >= BATCH_SAMPLES * math.prod(trailing)
-
-# Samples per chunk of a staged batch: the intermediates stay in cache.
-STAGE_CHUNK = 4096
-
-
-def run_staged(n, width, first, transcendental, second):
-    """
-    Run a kernel split around vectorised transcendental functions, chunk by chunk.
-
-    The batch schedule of a kernel whose scalar formula calls libm (``atan2``,
-    ``sin``, ``cos``): a compiled loop computes the arguments, numpy's SIMD
-    ufuncs (< 1 ulp, several times faster than scalar libm calls) evaluate
-    them, and a second compiled loop finishes the formula. The formulas are
-    the fused kernel's own scalar functions; only the schedule differs.
-
-    Parameters
-    ----------
-    n : int
-        Number of samples.
-    width : int
-        Arguments per sample.
-    first : callable
-        ``first(start, stop, y, x) -> status`` validates samples
-        ``start:stop`` and fills the arguments ``y`` and ``x`` (``(m, width)``).
-    transcendental : callable
-        ``transcendental(y, x)`` evaluates in place, e.g. :func:`atan2_in_place`.
-    second : callable
-        ``second(start, stop, y, x)`` turns the results into output.
-
-    Returns
-    -------
-    int
-        The status of the first bad sample (with its index among the ``n``), or -1.
-    """
-    y = np.empty((min(n, STAGE_CHUNK), width))
-    x = np.empty_like(y)
-    for start in range(0, n, STAGE_CHUNK):
-        stop = min(n, start + STAGE_CHUNK)
-        yc, xc = y[:stop - start], x[:stop - start]
-        bad = first(start, stop, yc, xc)
-        if bad >= 0:
-            return bad + (start << 4)
-        transcendental(yc, xc)
-        second(start, stop, yc, xc)
-    return -1
-
-
-def atan2_in_place(y, x):
-    """``y <- atan2(y, x)``."""
-    np.arctan2(y, x, out=y)
-
-
-# Batches of at least this many samples are split across threads (the kernels
-# release the GIL); ROTATION_NODE_THREADS overrides the number of threads.
-THREADED_SAMPLES = 1 << 16
-_threads = int(os.environ.get('ROTATION_NODE_THREADS', 0)) or len(os.sched_getaffinity(0))
-_pool = None
-
-
-def set_threads(n):
-    """
-    Set how many threads large batches (>= 65536 samples) are split across.
-
-    Parameters
-    ----------
-    n : int
-        1 runs everything in the calling thread. The default is the number of
-        CPUs this process may use, or the environment variable
-        ``ROTATION_NODE_THREADS``.
-    """
-    global _threads, _pool
-    if int(n) < 1:
-        raise ValueError(f'Expected `n` >= 1 threads, got {n!r}.')
-    _threads = int(n)
-    if _pool is not None:
-        _pool.shutdown()
-        _pool = None
-
-
-def _run(kernel, inputs, trailings, out, out_trailing, args):
-    """Run ``kernel(*inputs, out, *args)``, split across threads for large batches."""
-    n = out.size // math.prod(out_trailing)
-    if _threads == 1 or n < THREADED_SAMPLES:
-        return kernel(*inputs, out, *args)
-    global _pool
-    if _pool is None:
-        _pool = ThreadPoolExecutor(_threads, thread_name_prefix='rotation_node')
-    flat_inputs = [a.reshape((n,) + t) for a, t in zip(inputs, trailings)]
-    flat_out = out.reshape((n,) + out_trailing)
-    bounds = np.linspace(0, n, _threads + 1).astype(int)
-    jobs = [_pool.submit(kernel, *[a[lo:hi] for a in flat_inputs], flat_out[lo:hi], *args)
-            for lo, hi in zip(bounds[:-1], bounds[1:])]
-    for lo, job in zip(bounds[:-1], jobs):
-        bad = job.result()
-        if bad >= 0:
-            return bad + (int(lo) << 4)
-    return -1
-
-
-# A single-sample call costs ~1 us in all, and numba's dispatch is a third of
-# it, so the single-sample path passes numba what it types fastest: a scalar
-# result is computed into shape (1,), a scalar argument passed as a float (a
-# 0-d array costs ~170 ns more, a numpy scalar ~60 ns), and the names it uses
-# are module globals (``np.empty`` looked up through the module costs ~30 ns).
-_FLOAT64 = np.dtype(np.float64)
-_NDARRAY = np.ndarray
-_ONE = (1,)
-new_array = np.empty
-
-
-def is_single_sample(x, trailing):
-    """Whether ``x`` is one sample that needs no conversion: the fast path of a call."""
-    # ``is``: every native float64 array shares numpy's one float64 dtype; an
-    # equal but distinct dtype object just takes the general path.
-    return (type(x) is _NDARRAY and x.shape == trailing and x.dtype is _FLOAT64
-            and x.flags.c_contiguous)
-
-
-def call_unary(kernel, x, name, trailing, out_trailing, convention=None, batch_kernel=None):
-    """
-    Validate ``x``, run ``kernel(x, out[, convention])``, raise for a bad sample.
-
-    ``out`` gets ``x``'s leading shape followed by ``out_trailing``; a 0-d
-    result is returned as a scalar. ``convention`` is the Euler kernels'
-    convention code (a named argument: unpacking ``*args`` costs ~50 ns of a
-    ~1 us single-sample call). Large inputs go to ``batch_kernel`` (same
-    signature) where one is given, and large batches are split across
-    threads. A single float64 sample skips straight to the kernel, which
-    checks its values.
-    """
-    if is_single_sample(x, trailing):
-        out = new_array(out_trailing or _ONE)
-        if convention is None:
-            bad = kernel(x, out)
-        else:
-            bad = kernel(x, out, convention)
-        if bad < 0:
-            return out if out_trailing else out[0]
-        a = x
-    else:
-        a = float_array(x, name, trailing)
-        out = np.empty(a.shape[:a.ndim - len(trailing)] + out_trailing)
-        args = () if convention is None else (convention,)
-        if not is_batch(a, trailing):
-            bad = kernel(a, out, *args)
-        else:
-            bad = _run(batch_kernel or kernel, (a,), (trailing,), out, out_trailing, args)
-    if bad >= 0:
-        raise_sample_error(bad, (name,), (a,), (trailing,))
-    return out[()] if out.ndim == 0 else out
-
-
-def call_binary(kernel, x, y, names, trailings, out_trailing, *args, batch_kernel=None):
-    """
-    Validate and broadcast ``x`` and ``y``, run ``kernel(x, y, out, *args)``, raise if bad.
-
-    ``out`` gets the common leading shape followed by ``out_trailing``; large
-    inputs go to ``batch_kernel`` where one is given, and large batches are
-    split across threads; single float64 samples skip the checks that the
-    kernel makes anyway.
-    """
-    scalar_y = trailings[1] == ()
-    if scalar_y and (isinstance(y, float) or is_single_sample(y, ())):
-        y = float(y)   # one scalar argument (an angle): kernels take ``np.asarray`` of it
-    if is_single_sample(x, trailings[0]) and (
-            type(y) is float if scalar_y else is_single_sample(y, trailings[1])):
-        a, b = x, y
-        out = new_array(out_trailing or _ONE)
-        bad = kernel(*((a, b, out) + args))   # one tuple: cheaper than f(a, b, out, *args)
-        if bad < 0:
-            return out if out_trailing else out[0]
-    else:
-        a, b = broadcast_pair(float_array(x, names[0], trailings[0]),
-                              float_array(y, names[1], trailings[1]), *trailings)
-        out = np.empty(a.shape[:a.ndim - len(trailings[0])] + out_trailing)
-        if not is_batch(a, trailings[0]):
-            bad = kernel(a, b, out, *args)
-        else:
-            bad = _run(batch_kernel or kernel, (a, b), trailings, out, out_trailing, args)
-    if bad >= 0:
-        raise_sample_error(bad, names, (a, np.asarray(b)), trailings)
-    return out[()] if out.ndim == 0 else out
-
 
 def quaternion_product(p, q):
     """

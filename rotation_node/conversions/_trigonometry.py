@@ -53,7 +53,7 @@ import math
 from numba import types
 from numba.extending import intrinsic
 
-from ._quaternion import jit
+from ._runtime import jit
 
 # fdlibm k_sin.c and k_cos.c.
 _S1 = -1.66666666666666324348e-01

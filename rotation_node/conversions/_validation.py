@@ -2,11 +2,11 @@
 Argument checks at the public boundary of :mod:`rotation_node.conversions`.
 
 Public functions validate once, here: they turn array_like arguments into
-C-contiguous float64 arrays with the right trailing shape; the compiled kernels
-flatten them to ``(n, *trailing)`` and give the output the input's leading
-shape, so a single sample costs little more than one kernel call. Per-sample checks (finiteness, zero norm, determinant) run
-inside the compiled kernels, which report the first bad sample as
-a status ``(flat_index << 4) | (argument << 3) | defect`` (negative when every
+C-contiguous, aligned float64 arrays with the right trailing shape, which the
+kernels take in their canonical layout (see ``_runtime``). Per-sample checks
+(finiteness, zero norm, determinant) run inside the compiled kernels, which
+report the first bad sample as a status
+``(flat_index << 4) | (argument << 3) | defect`` (negative when every
 sample is fine); :func:`raise_sample_error` turns it into a ``ValueError``
 that names the argument, the sample and what was wrong.
 """
@@ -28,7 +28,8 @@ _DEFECT_TEXT = {
     NOT_ORTHONORMAL: 'is not orthonormal within `orthonormal_tolerance`',
 }
 
-_SHAPE_TEXT = {(): '(...)', (3,): '(..., 3)', (4,): '(..., 4)', (3, 3): '(..., 3, 3)'}
+_SHAPE_TEXT = {(): '(...)', (3,): '(..., 3)', (4,): '(..., 4)', (3, 3): '(..., 3, 3)',
+               (4, 4): '(..., 4, 4)'}
 
 
 def float_array(x, name, trailing):
@@ -47,8 +48,9 @@ def float_array(x, name, trailing):
     Returns
     -------
     ndarray
-        The values; a copy only where a conversion or reordering was needed.
-        Kernels flatten it to ``(n, *trailing)`` themselves (a free view).
+        The values, C-contiguous and aligned; a copy only where a conversion,
+        reordering or realignment was needed. Read-only arrays are used as
+        they are.
 
     Raises
     ------
@@ -65,7 +67,13 @@ def float_array(x, name, trailing):
     if a.shape[a.ndim - k:] != trailing or a.ndim < k:
         raise ValueError(
             f'Expected `{name}` to have shape {_SHAPE_TEXT[trailing]}, got {a.shape}.')
-    return a if a.flags.c_contiguous else np.ascontiguousarray(a)
+    return kernel_ready(a)
+
+
+def kernel_ready(a):
+    """``a`` itself if C-contiguous and aligned (as compiled kernels take it), else such a copy."""
+    flags = a.flags
+    return a if flags.c_contiguous and flags.aligned else np.array(a, order='C')
 
 
 def broadcast_pair(a, b, trailing_a, trailing_b):

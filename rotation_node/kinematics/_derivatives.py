@@ -20,10 +20,10 @@ they are the least-squares angular velocity for a noisy derivative.
 """
 import math
 
-from ..conversions._matrix import matrix_at, matrix_defect
-from ..conversions._quaternion import (call_binary, first_status, jit, product, quaternion_status,
-                                       samples, status, unit_quaternion, vector_status)
-from ..conversions._validation import NON_FINITE, OK
+from ..conversions.kernels import (BOOL, FLAT_IN, FLAT_OUT, NON_FINITE, OK, ROWS_IN, ROWS_OUT,
+                                   call_binary, first_status, jit, kernel, matrix_at,
+                                   matrix_defect, matrix_samples, product, quaternion_status,
+                                   samples, status, unit_quaternion, vector_status)
 from ._validation import is_world_frame
 
 
@@ -48,9 +48,9 @@ def _finite_status(fa, s, argument):
     return -1
 
 
-@jit
+@kernel(FLAT_IN, FLAT_IN, FLAT_OUT, BOOL)
 def _quaternion_derivative_kernel(q, omega, out, world):
-    fq, fw, fo = samples(q, 1), samples(omega, 1), samples(out, 1)
+    fq, fw, fo = samples(q, 4), samples(omega, 3), samples(out, 4)
     for s in range(fq.shape[0]):
         bad = first_status(quaternion_status(fq, s, 0), vector_status(fw, s, 1))
         if bad >= 0:
@@ -64,9 +64,9 @@ def _quaternion_derivative_kernel(q, omega, out, world):
     return -1
 
 
-@jit
+@kernel(FLAT_IN, FLAT_IN, FLAT_OUT, BOOL)
 def _angular_velocity_from_quaternion_derivative_kernel(q, q_dot, out, world):
-    fq, fd, fo = samples(q, 1), samples(q_dot, 1), samples(out, 1)
+    fq, fd, fo = samples(q, 4), samples(q_dot, 4), samples(out, 3)
     for s in range(fq.shape[0]):
         bad = first_status(quaternion_status(fq, s, 0), _finite_status(fd, s, 1))
         if bad >= 0:
@@ -80,9 +80,9 @@ def _angular_velocity_from_quaternion_derivative_kernel(q, q_dot, out, world):
     return -1
 
 
-@jit
+@kernel(ROWS_IN, FLAT_IN, ROWS_OUT, BOOL)
 def _matrix_derivative_kernel(R, omega, out, world):
-    fm, fw, fo = samples(R, 2), samples(omega, 1), samples(out, 2)
+    fm, fw, fo = matrix_samples(R), samples(omega, 3), matrix_samples(out)
     for s in range(fm.shape[0]):
         bad = first_status(_matrix_status(fm, s, 0), vector_status(fw, s, 1))
         if bad >= 0:
@@ -102,9 +102,9 @@ def _matrix_derivative_kernel(R, omega, out, world):
     return -1
 
 
-@jit
+@kernel(ROWS_IN, ROWS_IN, FLAT_OUT, BOOL)
 def _angular_velocity_from_matrix_derivative_kernel(R, R_dot, out, world):
-    fm, fd, fo = samples(R, 2), samples(R_dot, 2), samples(out, 1)
+    fm, fd, fo = matrix_samples(R), matrix_samples(R_dot), samples(out, 3)
     for s in range(fm.shape[0]):
         bad = first_status(_matrix_status(fm, s, 0), _finite_status(fd, s, 1))
         if bad >= 0:

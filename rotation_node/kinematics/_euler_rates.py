@@ -46,7 +46,8 @@ import warnings
 import numpy as np
 
 from ..conversions import parse_sequence
-from ..conversions._quaternion import call_binary, first_status, jit, samples, vector_status
+from ..conversions.kernels import (BOOL, FLAT_IN, FLAT_OUT, FLOAT, INT, array_type, call_binary,
+                                   first_status, jit, kernel, samples, vector_status)
 from ._validation import is_world_frame
 
 #: Default ``singularity_threshold`` (rad), ~sqrt(eps): closer to gimbal lock
@@ -90,9 +91,13 @@ def _jacobian_angles(angles, scale, reverse, world):
     return math.cos(middle), math.sin(middle), math.cos(last), math.sin(last)
 
 
-@jit
+# The arguments after ``out``: the axes and flags of :func:`_jacobian_axes`, then the angle unit.
+_JACOBIAN = (INT, INT, INT, FLOAT, BOOL, BOOL, BOOL, FLOAT)
+
+
+@kernel(FLAT_IN, FLAT_IN, FLAT_OUT, *_JACOBIAN)
 def _angular_velocity_kernel(angles, rates, out, i, j, n, parity, proper, reverse, world, scale):
-    fa, fr, fo = samples(angles, 1), samples(rates, 1), samples(out, 1)
+    fa, fr, fo = samples(angles, 3), samples(rates, 3), samples(out, 3)
     for s in range(fa.shape[0]):
         bad = first_status(vector_status(fa, s, 0), vector_status(fr, s, 1))
         if bad >= 0:
@@ -112,11 +117,11 @@ def _angular_velocity_kernel(angles, rates, out, i, j, n, parity, proper, revers
     return -1
 
 
-@jit
+@kernel(FLAT_IN, FLAT_IN, FLAT_OUT, *_JACOBIAN, FLOAT, array_type(1, True, INT))
 def _euler_rates_kernel(angles, omega, out, i, j, n, parity, proper, reverse, world, scale,
                         sin_threshold, singular):
     """Fill ``out``, count the near-singular samples into ``singular[0]``; return the status."""
-    fa, fw, fo = samples(angles, 1), samples(omega, 1), samples(out, 1)
+    fa, fw, fo = samples(angles, 3), samples(omega, 3), samples(out, 3)
     for s in range(fa.shape[0]):
         bad = first_status(vector_status(fa, s, 0), vector_status(fw, s, 1))
         if bad >= 0:

@@ -11,17 +11,17 @@ It aliases when the true rotation per step reaches pi (``|w| h >= pi``).
 """
 import numpy as np
 
-from ..conversions._axis_angle import rotation_vector_from_quaternion_scalar
-from ..conversions._quaternion import (jit, product, quaternion_status, samples,
-                                       scaled_quaternion)
-from ..conversions._validation import float_array, raise_sample_error
+from ..conversions.kernels import (BOOL, FLAT_IN, FLAT_OUT, float_array, kernel, product,
+                                   quaternion_status, raise_sample_error,
+                                   rotation_vector_from_quaternion_scalar, samples,
+                                   scaled_quaternion)
 from ._validation import is_world_frame, sample_times
 
 
-@jit
+@kernel(FLAT_IN, FLAT_IN, FLAT_OUT, BOOL)
 def _finite_difference_kernel(q, h, out, world):
     n = h.shape[0] + 1
-    fq, fo = samples(q, 1), samples(out, 1)
+    fq, fo = samples(q, 4), samples(out, 3)
     for series in range(fq.shape[0] // n):
         first = series * n
         bad = quaternion_status(fq, first, 0)
@@ -85,7 +85,7 @@ def angular_velocity_from_quaternions(q, t, frame='body'):
         raise ValueError(f'Expected `q` to have shape (..., N, 4) (a time series), got {a.shape}.')
     _, h = sample_times(t, a.shape[-2], 'q')
     out = np.empty(a.shape[:-2] + (a.shape[-2] - 1, 3))
-    bad = _finite_difference_kernel(a, h, out, world)
+    bad = _finite_difference_kernel(a.reshape(-1), h, out.reshape(-1), world)
     if bad >= 0:
         raise_sample_error(bad, ('q',), (a,), ((4,),))
     return out

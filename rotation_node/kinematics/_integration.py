@@ -44,9 +44,9 @@ import math
 
 import numpy as np
 
-from ..conversions._axis_angle import quaternion_from_rotation_vector_scalar
-from ..conversions._quaternion import canonical_kernel, canonical_unit_quaternion, jit, product
-from ..conversions._validation import float_array, raise_sample_error
+from ..conversions.kernels import (FLAT_IN, INT, ROWS_IN, array_type, canonical_kernel,
+                                   canonical_unit_quaternion, float_array, jit, kernel, product,
+                                   quaternion_from_rotation_vector_scalar, raise_sample_error)
 from ._stage_rates import stage_rates
 from ._validation import is_world_frame, sample_times
 
@@ -112,7 +112,7 @@ def _increment(method, h, r):
                                                   d1z + d2z + 2.0 / 3.0 * cz)
 
 
-@jit
+@kernel(ROWS_IN, array_type(4), FLAT_IN, array_type(3, True), INT, returns=None)
 def _integrate_kernel(q0, rates, h, out, method):
     """Chain the steps from unit ``q0`` (B, 4): ``rates`` (B, K, S, 3) -> ``out`` (B, K + 1, 4)."""
     for b in range(q0.shape[0]):
@@ -175,7 +175,7 @@ def integrate_angular_velocity(q0, omega, t, *, method='magnus4', frame='body'):
     world = is_world_frame(frame)
     q0 = float_array(q0, 'q0', (4,))
     q = np.empty(q0.shape)
-    bad = canonical_kernel(q0, q)
+    bad = canonical_kernel(q0.reshape(-1), q.reshape(-1))
     if bad >= 0:
         raise_sample_error(bad, ('q0',), (q0,), ((4,),))
     t, h = sample_times(t)

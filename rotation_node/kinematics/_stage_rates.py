@@ -11,7 +11,7 @@ of them is used.
 """
 import numpy as np
 
-from ..conversions._validation import float_array
+from ..conversions.kernels import float_array
 
 
 def _lagrange_stencils(t, h, nodes):

@@ -1,17 +1,17 @@
 """
 Argument checks shared by the kinematics functions.
 
-Arrays are validated with the helpers of :mod:`rotation_node.conversions`
-(``float_array``, ``call_unary``, ``call_binary``, ``raise_sample_error``: one
-contract for shapes, broadcasting, kernel status codes and error messages
-across the package). This module adds what only kinematics needs: the reference frame of
+Arrays are validated with the helpers of :mod:`rotation_node.conversions.kernels`
+(``float_array``, ``call_binary``, ``raise_sample_error``: one contract for
+shapes, broadcasting, kernel status codes and error messages across the
+package). This module adds what only kinematics needs: the reference frame of
 an angular velocity and a strictly increasing vector of sample times.
 """
 import math
 
 import numpy as np
 
-from ..conversions._quaternion import jit
+from ..conversions.kernels import FLAT_IN, FLAT_OUT, kernel, kernel_ready
 
 def is_world_frame(frame):
     """
@@ -83,6 +83,7 @@ def sample_times(t, n_samples=None, series_name='t'):
         raise ValueError(f'Expected `t` to have shape ({n_samples},) to match `{series_name}`, '
                          f'got {t.shape}.')
     h = np.empty(n_samples - 1)
+    t = kernel_ready(t)
     bad = _steps_kernel(t, h)
     if bad >= 0 and not math.isfinite(t[bad]):
         raise ValueError(f'`t` at index {bad} is {float(t[bad])!r}: times must be finite.')
@@ -92,7 +93,7 @@ def sample_times(t, n_samples=None, series_name='t'):
     return t, h
 
 
-@jit
+@kernel(FLAT_IN, FLAT_OUT)
 def _steps_kernel(t, h):
     """
     Fill ``h`` with ``t[1:] - t[:-1]`` and return the index of the first bad time, or -1.

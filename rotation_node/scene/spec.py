@@ -20,10 +20,10 @@ import math
 import re
 from typing import ClassVar, Mapping, Tuple
 
-import yaml
-
 from rotation_node.conversions import parse_sequence
 from rotation_node.errors import SceneError
+from rotation_node.ros_yaml import load_ros_yaml
+from rotation_node.validation import describe_value, did_you_mean
 
 #: Default ``start_time``: 2025-01-01T00:00:00Z, in seconds since the Unix epoch.
 DEFAULT_START_TIME = 1735689600.0
@@ -46,14 +46,10 @@ TRUTH_ANGULAR_VELOCITY_TOPIC = '/truth/angular_velocity'
 
 # --- value checks: (value, path) -> stored value, SceneError otherwise -----------
 
-def _describe(value):
-    return f'{type(value).__name__} {value!r}'
-
-
 def _number(value, path):
     # bool is an int subclass: `rate: true` must not mean 1 Hz.
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SceneError(f'{path}: expected a number, got {_describe(value)}')
+        raise SceneError(f'{path}: expected a number, got {describe_value(value)}')
     try:
         x = float(value)
     except OverflowError:   # an integer beyond the float range
@@ -85,7 +81,7 @@ def _integer(minimum):
     """Check: an integer >= minimum (``3.0`` and ``true`` are not integers)."""
     def check(value, path):
         if isinstance(value, bool) or not isinstance(value, int):
-            raise SceneError(f'{path}: expected an integer, got {_describe(value)}')
+            raise SceneError(f'{path}: expected an integer, got {describe_value(value)}')
         if value < minimum:
             raise SceneError(f'{path}: must be >= {minimum}, got {value}')
         return value
@@ -97,7 +93,7 @@ def _vector(size):
     def check(value, path):
         if not isinstance(value, (list, tuple)) or len(value) != size:
             raise SceneError(
-                f'{path}: expected a list of {size} numbers, got {_describe(value)}')
+                f'{path}: expected a list of {size} numbers, got {describe_value(value)}')
         return tuple(_number(x, f'{path}[{i}]') for i, x in enumerate(value))
     return check
 
@@ -136,7 +132,8 @@ def _scale_range(value, path):
 def _euler_sequence(value, path):
     """Check: an Euler sequence accepted by :func:`rotation_node.conversions.parse_sequence`."""
     if not isinstance(value, str):
-        raise SceneError(f'{path}: expected an Euler sequence such as ZYX, got {_describe(value)}')
+        raise SceneError(
+            f'{path}: expected an Euler sequence such as ZYX, got {describe_value(value)}')
     try:
         return parse_sequence(value).name
     except ValueError as exc:
@@ -148,11 +145,11 @@ def _subset(choices):
     def check(value, path):
         if not isinstance(value, (list, tuple)) or not value:
             raise SceneError(f'{path}: expected a non-empty list from {list(choices)}, '
-                             f'got {_describe(value)}')
+                             f'got {describe_value(value)}')
         for name in value:
             if name not in choices:
-                raise SceneError(
-                    f'{path}: unknown entry {name!r}; expected one of {list(choices)}')
+                raise SceneError(f'{path}: unknown entry {name!r}{did_you_mean(name, choices)}; '
+                                 f'expected one of {list(choices)}')
         if len(set(value)) != len(value):
             raise SceneError(f'{path}: entries must be distinct, got {list(value)}')
         return tuple(value)
@@ -162,7 +159,7 @@ def _subset(choices):
 def _topic(value, path):
     if not isinstance(value, str) or not _TOPIC_PATTERN.fullmatch(value):
         raise SceneError(f'{path}: expected an absolute ROS topic name such as /imu, '
-                         f'got {_describe(value)}')
+                         f'got {describe_value(value)}')
     if value in (TRUTH_ORIENTATION_TOPIC, TRUTH_ANGULAR_VELOCITY_TOPIC):
         raise SceneError(f'{path}: {value} is reserved for the truth')
     return value
@@ -172,7 +169,7 @@ def _frame_id(value, path):
     if not isinstance(value, str) or not value or value.startswith('/') \
             or any(c.isspace() for c in value):
         raise SceneError(f'{path}: expected a tf2 frame id such as imu_link (non-empty, '
-                         f'no leading /, no spaces), got {_describe(value)}')
+                         f'no leading /, no spaces), got {describe_value(value)}')
     return value
 
 
@@ -194,12 +191,13 @@ def _checked_values(cls, data, path, *, skip=()):
     if data is None:
         data = {}
     if not isinstance(data, dict):
-        raise SceneError(f'{path}: expected a mapping, got {_describe(data)}')
+        raise SceneError(f'{path}: expected a mapping, got {describe_value(data)}')
     fields = {f.name: f for f in dataclasses.fields(cls) if 'check' in f.metadata}
     for key in data:
         if key not in fields and key not in skip:
-            expected = ', '.join([*skip, *fields]) or 'no keys'
-            raise SceneError(f'{_join(path, key)}: unknown key; expected {expected}')
+            expected = [*skip, *fields]
+            raise SceneError(f'{_join(path, key)}: unknown key{did_you_mean(key, expected)}; '
+                             f'expected {", ".join(expected) or "no keys"}')
     for name, f in fields.items():
         if name not in data and f.default is dataclasses.MISSING:
             raise SceneError(f'{_join(path, name)}: missing')
@@ -480,7 +478,7 @@ def scene_from_dict(data):
         Naming the key path of the first unknown key, missing field or bad value.
     """
     if not isinstance(data, dict):
-        raise SceneError(f'scene: expected a mapping of keys, got {_describe(data)}')
+        raise SceneError(f'scene: expected a mapping of keys, got {describe_value(data)}')
     values = _checked_values(Scene, data, '', skip=('motion', 'effects'))
     if 'motion' not in data:
         raise SceneError('motion: missing')
@@ -496,13 +494,14 @@ def scene_from_dict(data):
 
 def _motion(data):
     if not isinstance(data, dict):
-        raise SceneError(f'motion: expected a mapping with a type, got {_describe(data)}')
+        raise SceneError(f'motion: expected a mapping with a type, got {describe_value(data)}')
     if 'type' not in data:
         raise SceneError(f'motion.type: missing; expected one of {", ".join(MOTIONS)}')
     kind = data['type']
     if not isinstance(kind, str) or kind not in MOTIONS:
         raise SceneError(
-            f'motion.type: unknown motion {kind!r}; expected one of {", ".join(MOTIONS)}')
+            f'motion.type: unknown motion {kind!r}{did_you_mean(kind, MOTIONS)}; '
+            f'expected one of {", ".join(MOTIONS)}')
     return _build(MOTIONS[kind], data, 'motion', skip=('type',))
 
 
@@ -510,39 +509,15 @@ def _effects(data):
     if data is None:
         return {}
     if not isinstance(data, dict):
-        raise SceneError(f'effects: expected a mapping of effect names, got {_describe(data)}')
+        raise SceneError(
+            f'effects: expected a mapping of effect names, got {describe_value(data)}')
     for name in data:
         if name not in EFFECT_PARAMETERS:
-            raise SceneError(f'effects.{name}: unknown effect; '
+            raise SceneError(f'effects.{name}: unknown effect'
+                             f'{did_you_mean(name, EFFECT_PARAMETERS)}; '
                              f'expected one of {", ".join(EFFECT_PARAMETERS)}')
     return {name: _build(EFFECT_PARAMETERS[name], params, f'effects.{name}')
             for name, params in data.items()}
-
-
-class _SceneLoader(yaml.SafeLoader):
-    """
-    SafeLoader for scene files, with two fixes to PyYAML's YAML 1.1 habits.
-
-    A key given twice in one mapping is an error (PyYAML keeps the last), and
-    ``1e-3`` is a number, as in YAML 1.2 (PyYAML wants ``1.0e-3``).
-    """
-
-    def construct_mapping(self, node, deep=False):
-        seen = set()
-        for key_node, _ in node.value:
-            key = self.construct_object(key_node, deep=deep)
-            if key in seen:
-                raise yaml.constructor.ConstructorError(
-                    None, None, f'duplicate key {key!r}', key_node.start_mark)
-            seen.add(key)
-        return super().construct_mapping(node, deep=deep)
-
-
-# Resolvers are tried in order: integers still resolve as int first.
-_SceneLoader.add_implicit_resolver(
-    'tag:yaml.org,2002:float',
-    re.compile(r'^[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)[eE][-+]?[0-9]+$'),
-    list('-+0123456789.'))
 
 
 def load_scene(path):
@@ -564,16 +539,7 @@ def load_scene(path):
         If the file cannot be read, is not YAML, or is not a valid scene; the
         message starts with the file name and names the key that is wrong.
     """
-    try:
-        with open(path, encoding='utf-8') as f:
-            data = yaml.load(f, Loader=_SceneLoader)
-    except OSError as exc:
-        raise SceneError(f'{path}: cannot read scene file: {exc.strerror}') from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, 'problem_mark', None)
-        where = f' (line {mark.line + 1}, column {mark.column + 1})' if mark else ''
-        problem = getattr(exc, 'problem', None) or str(exc)
-        raise SceneError(f'{path}: not valid YAML{where}: {problem}') from None
+    data = load_ros_yaml(path, str(path), SceneError)
     try:
         return scene_from_dict(data)
     except SceneError as exc:

@@ -1,0 +1,28 @@
+"""Argument checks shared by :mod:`rotation_node.covariance` and :mod:`rotation_node.frames`."""
+import numpy as np
+
+from .conversions._validation import float_array
+
+
+def finite_array(x, name: str, trailing: tuple) -> np.ndarray:
+    """
+    Return ``x`` as a float64 array whose shape ends in ``trailing``, every element finite.
+
+    The shape check and its message are those of the conversions; this adds
+    the finiteness check that the conversions make inside their kernels.
+
+    Raises
+    ------
+    ValueError
+        If ``x`` is not numeric, its shape does not end in ``trailing`` or an
+        element is NaN or infinite; the message names the argument.
+
+    """
+    a = float_array(x, name, trailing)
+    finite = np.isfinite(a)
+    if not finite.all():
+        k = len(trailing)
+        bad = np.argwhere(~finite)[0][:a.ndim - k]
+        where = f' at index {tuple(int(i) for i in bad)}' if a.ndim > k else ''
+        raise ValueError(f'`{name}`{where} has a NaN or Inf component.')
+    return a

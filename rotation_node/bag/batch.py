@@ -1,0 +1,260 @@
+"""
+Convert many bags: in parallel processes on this machine, or as tasks on Dask.
+
+One bag is one task (:func:`convert_bag`): it opens its input, converts it
+into its own output and returns a :class:`BagResult`, a failure included, so
+that a bad bag never stops the others. :func:`convert_bags` runs the tasks in
+``jobs`` worker processes (``rotation_bag convert IN1 IN2 ... OUTDIR --jobs
+N``); :func:`convert_bags_on_dask` submits the same tasks to a Dask
+distributed cluster, for fleets that outgrow one machine. The outputs are
+named after the inputs (:func:`batch_output_path`).
+"""
+import concurrent.futures
+import dataclasses
+import multiprocessing
+import os
+from typing import Callable, List, Optional, Sequence
+
+from rotation_node.errors import BagError, RotationNodeError
+
+_STORAGE_SUFFIXES = ('.zstd', '.mcap', '.db3', '.bag')
+
+
+@dataclasses.dataclass(frozen=True)
+class BagResult:
+    """
+    What converting one bag gave.
+
+    Attributes
+    ----------
+    input_path, output_path : str
+    ok : bool
+        Whether the output was written.
+    line : str
+        One line for the user: what was converted, or why it failed.
+
+    """
+
+    input_path: str
+    output_path: str
+    ok: bool
+    line: str
+
+
+def batch_output_path(input_path: str, output_directory: str) -> str:
+    """
+    Return the output of ``input_path`` in ``output_directory``: its name without storage suffixes.
+
+    ``runs/day1`` (a rosbag2 directory) -> ``OUT/day1``, ``a/imu.mcap`` ->
+    ``OUT/imu``, ``old.bag`` -> ``OUT/old``, ``x_0.mcap.zstd`` -> ``OUT/x_0``.
+    """
+    name = os.path.basename(os.path.normpath(os.fspath(input_path)))
+    stripped = True
+    while stripped:
+        stripped = False
+        for suffix in _STORAGE_SUFFIXES:
+            if name.endswith(suffix) and len(name) > len(suffix):
+                name, stripped = name[:-len(suffix)], True
+    return os.path.join(os.fspath(output_directory), name)
+
+
+def batch_output_paths(input_paths: Sequence[str], output_directory: str) -> List[str]:
+    """
+    Return :func:`batch_output_path` of every input, checked to be distinct.
+
+    Raises
+    ------
+    BagError
+        If two inputs would be written to the same output, or an input is
+        given twice.
+
+    """
+    outputs = {}
+    for input_path in input_paths:
+        output = batch_output_path(input_path, output_directory)
+        if output in outputs:
+            raise BagError(f'inputs {outputs[output]} and {input_path} would both be written '
+                           f'to {output}; convert them into different output directories')
+        outputs[output] = input_path
+    return list(outputs)
+
+
+def _summary(stats, params) -> str:
+    """``/imu 500 -> 1000 messages (/imu/euler, /imu/quaternion)``, per converted topic."""
+    from rotation_node.bag.convert import output_topic
+    return '; '.join(
+        f'{topic} {topic_stats.received} -> {topic_stats.published} messages '
+        f'({", ".join(output_topic(topic, name) for name in params.outputs)})'
+        for topic, topic_stats in stats.items())
+
+
+def convert_bag(input_path: str, output_path: str, params, *, topics=None,
+                overwrite: bool = False, strict: bool = False) -> BagResult:
+    """
+    Convert one bag as ``rotation_bag convert`` does; report a failure instead of raising it.
+
+    The unit of work of :func:`convert_bags` and :func:`convert_bags_on_dask`;
+    importable and picklable, so any task runner can call it.
+
+    Parameters
+    ----------
+    input_path : str
+        Any bag :func:`rotation_node.bag.reader.open_bag` reads.
+    output_path : str
+        The output bag (must not exist unless ``overwrite``).
+    params : rotation_node.parameters.NodeParameters
+        The node's parameters, as for :func:`rotation_node.bag.convert.convert`.
+    topics : list of str, optional
+        As for :func:`rotation_node.bag.convert.convert`.
+    overwrite, strict : bool, optional
+        As for :func:`rotation_node.bag.convert.convert`.
+
+    Returns
+    -------
+    BagResult
+        ``ok`` False, with the error line, if the bag could not be converted
+        (bad or unsupported input, existing output...); nothing is written then.
+
+    """
+    from rotation_node.bag.convert import convert
+    notes = []
+    try:
+        with open(os.devnull, 'w') as no_progress_bar:
+            stats = convert(input_path, output_path, params, topics=topics, overwrite=overwrite,
+                            strict=strict, report=notes.append, progress_stream=no_progress_bar)
+    except RotationNodeError as error:
+        return BagResult(os.fspath(input_path), os.fspath(output_path), False,
+                         f'{input_path}: error: {_without_path(str(error), input_path)}')
+    description, *notes = (_without_path(note, input_path) for note in notes)
+    return BagResult(os.fspath(input_path), os.fspath(output_path), True,
+                     f'{input_path} -> {output_path}: ' + '; '.join(
+                         [description, _summary(stats, params), *notes]))
+
+
+def _without_path(line, path):
+    """``line`` on one line, without a leading ``<path>: `` (the bag's line names it)."""
+    line = ' '.join(line.split())
+    prefix = f'{os.fspath(path)}: '
+    return line[len(prefix):] if line.startswith(prefix) else line
+
+
+def convert_bags(input_paths: Sequence[str], output_directory: str, params, *, jobs: int = 1,
+                 topics=None, overwrite: bool = False, strict: bool = False,
+                 on_result: Optional[Callable[[BagResult], None]] = None) -> List[BagResult]:
+    """
+    Convert every input into ``output_directory``, ``jobs`` bags at a time.
+
+    Parameters
+    ----------
+    input_paths : sequence of str
+        The bags, any :func:`rotation_node.bag.reader.open_bag` reads.
+    output_directory : str
+        Created if missing; outputs are named by :func:`batch_output_path`.
+    params : rotation_node.parameters.NodeParameters
+        The node's parameters, for every bag.
+    jobs : int, optional
+        Worker processes (``1``: one after the other in this process).
+    topics, overwrite, strict
+        As for :func:`convert_bag`.
+    on_result : callable, optional
+        Called with each :class:`BagResult` as soon as its bag is done.
+
+    Returns
+    -------
+    list of BagResult
+        In the order the bags finished.
+
+    Raises
+    ------
+    BagError
+        If ``jobs`` is not a positive integer, two inputs would share an
+        output, or the output directory cannot be created (before any bag is
+        converted).
+
+    """
+    if not (isinstance(jobs, int) and jobs >= 1):
+        raise BagError(f'jobs must be a positive integer, got {jobs!r}')
+    outputs = batch_output_paths(input_paths, output_directory)
+    _make_directory(output_directory)
+    on_result = on_result or (lambda result: None)
+    results = []
+    if jobs == 1 or len(input_paths) == 1:
+        for input_path, output_path in zip(input_paths, outputs):
+            results.append(convert_bag(input_path, output_path, params, topics=topics,
+                                       overwrite=overwrite, strict=strict))
+            on_result(results[-1])
+        return results
+    # Fresh interpreters ("spawn"): forking a process that runs threads (numba's,
+    # the conversion thread pool) can deadlock the child.
+    context = multiprocessing.get_context('spawn')
+    with concurrent.futures.ProcessPoolExecutor(max_workers=min(jobs, len(input_paths)),
+                                                mp_context=context) as pool:
+        futures = [pool.submit(convert_bag, input_path, output_path, params, topics=topics,
+                               overwrite=overwrite, strict=strict)
+                   for input_path, output_path in zip(input_paths, outputs)]
+        try:
+            for future in concurrent.futures.as_completed(futures):
+                results.append(future.result())
+                on_result(results[-1])
+        except BaseException:
+            pool.shutdown(wait=True, cancel_futures=True)
+            raise
+    return results
+
+
+def convert_bags_on_dask(client, input_paths: Sequence[str], output_directory: str, params, *,
+                         topics=None, overwrite: bool = False, strict: bool = False,
+                         on_result: Optional[Callable[[BagResult], None]] = None,
+                         timeout: Optional[float] = None) -> List[BagResult]:
+    """
+    Convert every input into ``output_directory`` as tasks on a Dask cluster.
+
+    Each bag is one task running :func:`convert_bag` on a worker; the paths
+    must name the same files on every worker (a shared file system).
+
+    Parameters
+    ----------
+    client : distributed.Client
+        Connected to the cluster (``Client('tcp://scheduler:8786')``, or a
+        ``LocalCluster``).
+    input_paths, output_directory, params, topics, overwrite, strict, on_result
+        As for :func:`convert_bags`.
+    timeout : float, optional
+        Seconds to wait for all tasks; ``None`` waits until they finish.
+
+    Returns
+    -------
+    list of BagResult
+        As :func:`convert_bags` returns them.
+
+    Raises
+    ------
+    BagError
+        As :func:`convert_bags` raises it.
+    TimeoutError
+        If ``timeout`` passes first (the remaining tasks are cancelled).
+
+    """
+    from distributed import as_completed
+    outputs = batch_output_paths(input_paths, output_directory)
+    _make_directory(output_directory)
+    on_result = on_result or (lambda result: None)
+    # pure=False: a task is a side effect (a file written), never to be deduplicated.
+    futures = client.map(convert_bag, list(input_paths), outputs, params=params, topics=topics,
+                         overwrite=overwrite, strict=strict, pure=False)
+    results = []
+    try:
+        for future in as_completed(futures, timeout=timeout):
+            results.append(future.result())
+            on_result(results[-1])
+    except BaseException:
+        client.cancel(futures)
+        raise
+    return results
+
+
+def _make_directory(path):
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError as error:
+        raise BagError(f'cannot create output directory {path}: {error.strerror}') from None

@@ -1,0 +1,95 @@
+"""
+Bags read with a reader of the ``rosbags`` package, behind the interface of ``BagReader``.
+
+rosbag2 sqlite3 storage files (:mod:`rotation_node.bag.reader`) and ROS 1 bags
+(:mod:`rotation_node.bag.ros1`) are read this way: the rosbags reader yields
+``(connection, time, data)`` in time order; each topic's connections get their
+:class:`~rotation_node.bag.mcap_io.TopicMetadata` and a function that turns
+the stored data into the ROS 2 CDR bytes passed on. Both formats store one
+time per message, the time the recorder received it: it is the log time and
+the publish time.
+"""
+from typing import Callable, Iterable, Iterator, Optional, Tuple
+
+from rotation_node.bag.mcap_io import BagMessage, checked_topics, TopicMetadata
+from rotation_node.errors import BagError
+
+
+class RosbagsInput:
+    """
+    A bag opened with a rosbags reader; a context manager.
+
+    The interface of :class:`rotation_node.bag.mcap_io.BagReader`:
+    ``topics``, ``topic_metadata``, ``message_counts``, ``compression``,
+    ``recovered`` (always None) and ``messages``.
+
+    Parameters
+    ----------
+    path : str
+        Named in errors.
+    reader : rosbags reader
+        Open; ``messages(connections)`` yields ``(connection, time_ns, data)``.
+    errors : tuple of exception types
+        What the reader (and ``to_cdr``) raise for damaged data.
+    topics : iterable of (connection, TopicMetadata, to_cdr)
+        Every connection of the bag with the metadata of its topic and the
+        function that turns its stored data into CDR bytes.
+    compression : str, optional
+        The bag's chunk compression as MCAP names it.
+
+    Raises
+    ------
+    BagError
+        If a topic has connections of two types.
+
+    """
+
+    def __init__(self, path: str, reader, errors: tuple,
+                 topics: Iterable[Tuple[object, TopicMetadata, Callable[[bytes], bytes]]],
+                 compression: str = 'none'):
+        self.path = path
+        self.recovered: Optional[int] = None
+        self.compression = compression
+        self._reader, self._errors = reader, errors
+        self.topic_metadata, self.message_counts = {}, {}
+        self._connections, self._to_cdr = {}, {}
+        for connection, metadata, to_cdr in topics:
+            known = self.topic_metadata.setdefault(connection.topic, metadata)
+            if known.type_name != metadata.type_name:
+                raise BagError(f'topic {connection.topic} in {path} has two types: '
+                               f'{known.type_name} and {metadata.type_name}')
+            self.message_counts[connection.topic] = (
+                self.message_counts.get(connection.topic, 0) + connection.msgcount)
+            self._connections.setdefault(connection.topic, []).append(connection)
+            self._to_cdr[connection.id] = to_cdr
+        self.topics = {topic: m.type_name for topic, m in self.topic_metadata.items()}
+
+    def messages(self, topics=None) -> Iterator[BagMessage]:
+        """
+        Iterate over the messages of the given topics (default all) in time order, as CDR.
+
+        As :meth:`rotation_node.bag.mcap_io.BagReader.messages`; a message
+        that cannot be read or converted raises BagError when it is reached.
+        """
+        topics = checked_topics(self.topics if topics is None else topics, self.topics, self.path)
+        connections = [c for topic in topics for c in self._connections[topic]]
+        return self._messages(connections) if connections else iter(())
+
+    def _messages(self, connections):
+        type_names, to_cdr = self.topics, self._to_cdr
+        try:
+            for connection, time_ns, data in self._reader.messages(connections):
+                yield BagMessage(connection.topic, type_names[connection.topic],
+                                 to_cdr[connection.id](data), time_ns, time_ns)
+        except self._errors as error:
+            raise BagError(f'{self.path} is corrupt: {type(error).__name__}: {error}') from None
+
+    def close(self) -> None:
+        """Close the reader."""
+        self._reader.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()

@@ -1,0 +1,394 @@
+"""
+The compiled-call machinery of the library: from public arguments to compiled kernels.
+
+A *kernel* is a compiled loop over samples. It takes its array arguments in
+one canonical layout, fills a preallocated output and returns the status of
+the first bad sample (see :func:`status`), or -1. This module holds what every
+kernel shares:
+
+- the JIT policy (:data:`jit`) and the kernel declaration (:func:`kernel`):
+  each kernel is compiled for exactly one signature, on its first call or by
+  :func:`compile_kernels`, and cached on disk, so no later call compiles,
+  whatever the caller's leading shape, dtype, memory layout or writability;
+- the canonical layout (:func:`kernel_layout`) and the compiled views of it
+  (:func:`samples`, :func:`matrix_samples`);
+- status packing (:func:`status`, :func:`first_status`);
+- batch schedules: the chunk size and the thread pool (:func:`set_threads`);
+- the one Python-side path from public arguments to kernels
+  (:func:`call_unary`, :func:`call_binary`).
+
+The canonical layout: every array argument is a C-contiguous float64 array
+holding its samples one after the other along the first axis. Samples of
+shape ``()`` or ``(k,)`` are a 1-D array of ``n`` or ``n k`` values; 3 x 3
+matrices a 2-D array of shape ``(3 n, 3)``. A single sample in its natural
+shape, ``(4,)`` or ``(3, 3)``, is already in that layout, so a single-sample
+call passes the caller's array as it is. Inputs are typed read-only (a
+writable array converts for free), outputs writable.
+
+Compiled kernels are cached next to the package; where that directory is not
+writable (a system-wide ROS install), numba caches them in the user's cache
+directory instead (``$XDG_CACHE_HOME/numba``, by default ``~/.cache/numba``),
+or wherever ``NUMBA_CACHE_DIR`` says.
+"""
+import math
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+from numba import njit, types
+from numba.core.errors import RequireLiteralValue, TypingError
+from numba.extending import intrinsic, overload
+
+from ._validation import broadcast_pair, float_array, raise_sample_error
+
+# Every compiled function is inlined into its callers (numba IR inlining, not
+# left to LLVM). A helper that is called rather than inlined costs a call per
+# sample and, when an array is live across it (the kernels' inputs and
+# outputs always are), an atomic reference-count increment and decrement per
+# call: 2-4x the whole per-sample cost of most kernels, measured.
+# (Inlined callees cannot be called with ``*args``.) Only kernels are cached
+# on disk (:func:`kernel`): an inlined helper is compiled into its callers,
+# and a cache would cost each helper a directory probe at import.
+jit = njit(nogil=True, error_model='numpy', inline='always')
+_cached_jit = njit(cache=True, nogil=True, error_model='numpy', inline='always')
+
+
+# ------------------------------------------------------------ kernel types
+
+def array_type(ndim, writable=False, dtype=types.float64):
+    """The numba type of a C-contiguous kernel argument (read-only unless ``writable``)."""
+    return types.Array(dtype, ndim, 'C', readonly=not writable)
+
+
+#: Inputs in the canonical layout: samples of shape () or (k,), and matrices (3 n, 3).
+FLAT_IN, ROWS_IN = array_type(1), array_type(2)
+#: Outputs in the canonical layout.
+FLAT_OUT, ROWS_OUT = array_type(1, True), array_type(2, True)
+#: Scalar arguments and the status that kernels return.
+INT, FLOAT, BOOL = types.int64, types.float64, types.boolean
+STATUS = types.int64
+
+#: Every kernel declared with :func:`kernel`, in declaration order.
+KERNELS = []
+
+
+_compiling = threading.Lock()
+
+
+def _compile(dispatcher):
+    """Compile ``dispatcher`` for its one signature (or load it from the disk cache), once."""
+    with _compiling:   # threads of one large batch may all make the first call
+        if not dispatcher.kernel_compiled:
+            dispatcher.compile(dispatcher.kernel_signature)
+            dispatcher.disable_compile()
+            dispatcher.kernel_compiled = True
+
+
+def kernel(*argument_types, returns=STATUS):
+    """
+    Declare a kernel: compiled for exactly one signature, on first use.
+
+    Parameters
+    ----------
+    *argument_types : numba types
+        The kernel's arguments, e.g. ``FLAT_IN, FLAT_OUT, INT``. Arrays are
+        C-contiguous float64 in the canonical layout; a writable array is
+        accepted where a read-only one is declared.
+    returns : numba type or None, optional
+        The result: the status by default; None for a kernel without one.
+
+    Returns
+    -------
+    callable
+        A decorator returning the numba dispatcher. Its first call compiles
+        the declared signature (or loads it from the disk cache) and then
+        disables compilation, so a call with other types raises ``TypeError``
+        instead of compiling again.
+    """
+    signature = (types.none if returns is None else returns)(*argument_types)
+
+    def decorate(py_func):
+        dispatcher = _cached_jit(py_func)
+        dispatcher.kernel_signature = signature
+        dispatcher.kernel_compiled = False
+
+        def compile_on_first_call(*args, **kwargs):
+            # numba calls this when no compiled signature matches the arguments,
+            # and then calls what it returns with them: now the dispatcher
+            # itself, which accepts them or raises TypeError.
+            _compile(dispatcher)
+            return dispatcher
+
+        dispatcher._compile_for_args = compile_on_first_call
+        KERNELS.append(dispatcher)
+        return dispatcher
+
+    return decorate
+
+
+def compile_kernels(kernels=None):
+    """
+    Compile every kernel (or those given) for its one signature, from the disk cache where cached.
+
+    Returns
+    -------
+    int
+        How many kernels were compiled or loaded.
+    """
+    kernels = KERNELS if kernels is None else kernels
+    for dispatcher in kernels:
+        _compile(dispatcher)
+    return len(kernels)
+
+
+# ------------------------------------------------------------ sample views
+
+def kernel_layout(a, trailing):
+    """The canonical layout (a view) of the C-contiguous ``a`` of samples of shape ``trailing``."""
+    if len(trailing) <= 1:
+        return a.reshape(-1)
+    return a.reshape((-1,) + trailing[1:])
+
+
+def _rows_per_sample(trailing):
+    return trailing[0] if trailing else 1
+
+
+@intrinsic
+def _stack_view(typingctx, a, rows, columns):
+    """C-contiguous ``a`` viewed as ``(n,)``, ``(n, rows)`` or ``(n, rows, columns)``: no copy."""
+    if not (isinstance(a, types.Array) and a.layout == 'C'):
+        raise TypingError(f'samples(): expected a C-contiguous array, got {a}.')
+    if not (isinstance(rows, types.IntegerLiteral) and isinstance(columns, types.IntegerLiteral)):
+        raise RequireLiteralValue('samples(): the sample shape must be constant.')
+    trailing = [d for d in (rows.literal_value, columns.literal_value) if d > 0]
+    result = a.copy(ndim=1 + len(trailing), layout='C')
+
+    def codegen(context, builder, signature, args):
+        # Imported here, when a kernel is compiled: not needed to load one from the cache.
+        from numba.core.imputils import impl_ret_borrowed
+        from numba.np.arrayobj import make_array, populate_array
+        source = make_array(signature.args[0])(context, builder, args[0])
+        view = make_array(signature.return_type)(context, builder)
+        intp = context.get_value_type(types.intp)
+        sizes = [math.prod(trailing[i:]) for i in range(len(trailing) + 1)]
+        shape = [builder.sdiv(source.nitems, intp(sizes[0]))] + [intp(d) for d in trailing]
+        strides = [builder.mul(source.itemsize, intp(size)) for size in sizes]
+        populate_array(view, data=source.data, shape=shape, strides=strides,
+                       itemsize=source.itemsize, meminfo=source.meminfo, parent=source.parent)
+        return impl_ret_borrowed(context, builder, signature.return_type, view._getvalue())
+
+    return result(a, rows, columns), codegen
+
+
+def samples(a, width):
+    """
+    The canonical ``a`` as a stack of samples: shape ``(n, width)``, or ``(n,)`` for width 0.
+
+    How kernels see their flat arguments. In compiled code (the overload
+    below) the view costs nothing: no copy and no call. ``width`` must be a
+    constant there; any C-contiguous array of ``n width`` values is viewed.
+    """
+    return a.reshape(-1, width) if width else a.reshape(-1)
+
+
+@overload(samples, inline='always', prefer_literal=True)
+def _samples_overload(a, width):
+    if not isinstance(width, types.IntegerLiteral):
+        raise RequireLiteralValue('samples(): `width` must be a constant.')
+    k = width.literal_value
+    return lambda a, width: _stack_view(a, k, 0)
+
+
+def matrix_samples(a):
+    """The canonical matrices ``a`` (3 n, 3), or any C-contiguous 9 n values, as (n, 3, 3)."""
+    return a.reshape(-1, 3, 3)
+
+
+@overload(matrix_samples, inline='always')
+def _matrix_samples_overload(a):
+    return lambda a: _stack_view(a, 3, 3)
+
+
+# ------------------------------------------------------------ status packing
+
+@jit
+def status(sample, argument, code):
+    """Kernel status for a bad sample: ``(sample << 4) | (argument << 3) | code``."""
+    return (sample << 4) | (argument << 3) | code
+
+
+@jit
+def first_status(a, b):
+    """The first of two statuses that reports a bad sample (-1 if neither does)."""
+    return a if a >= 0 else b
+
+
+# ------------------------------------------------------------ batch schedules
+
+# Inputs of at least this many samples use a kernel's batch schedule, where
+# it has one (the same count for every input type, so that a conversion and
+# its route through quaternions agree bit for bit).
+BATCH_SAMPLES = 1024
+
+
+def is_batch(a, trailing):
+    """Whether ``a`` (samples of shape ``trailing``) is large enough for a batch schedule."""
+    return a.size >= BATCH_SAMPLES * math.prod(trailing)
+
+
+# Samples per chunk of a batch schedule: the intermediates stay in cache.
+STAGE_CHUNK = 4096
+
+
+# Batches of at least this many samples are split across threads (the kernels
+# release the GIL); ROTATION_NODE_THREADS overrides the number of threads.
+THREADED_SAMPLES = 1 << 16
+_threads = int(os.environ.get('ROTATION_NODE_THREADS', 0)) or len(os.sched_getaffinity(0))
+_pool = None
+
+
+def set_threads(n):
+    """
+    Set how many threads large batches (>= 65536 samples) are split across.
+
+    Parameters
+    ----------
+    n : int
+        1 runs everything in the calling thread. The default is the number of
+        CPUs this process may use, or the environment variable
+        ``ROTATION_NODE_THREADS``.
+    """
+    global _threads, _pool
+    if int(n) < 1:
+        raise ValueError(f'Expected `n` >= 1 threads, got {n!r}.')
+    _threads = int(n)
+    if _pool is not None:
+        _pool.shutdown()
+        _pool = None
+
+
+def _run(kernel_, inputs, trailings, out, out_trailing, args):
+    """
+    Run ``kernel_(*inputs, out, *args)`` on canonical arrays, in threads for large batches.
+
+    The parts are whole samples: rows ``lo r:hi r`` of an argument with ``r``
+    rows per sample.
+    """
+    n = out.shape[0] // _rows_per_sample(out_trailing)
+    if _threads == 1 or n < THREADED_SAMPLES:
+        return kernel_(*inputs, out, *args)
+    global _pool
+    if _pool is None:
+        _pool = ThreadPoolExecutor(_threads, thread_name_prefix='rotation_node')
+    arrays = tuple(inputs) + (out,)
+    rows = [_rows_per_sample(t) for t in tuple(trailings) + (out_trailing,)]
+    bounds = np.linspace(0, n, _threads + 1).astype(int)
+    jobs = [_pool.submit(kernel_, *[a[lo * r:hi * r] for a, r in zip(arrays, rows)], *args)
+            for lo, hi in zip(bounds[:-1], bounds[1:])]
+    for lo, job in zip(bounds[:-1], jobs):
+        bad = job.result()
+        if bad >= 0:
+            return bad + (int(lo) << 4)
+    return -1
+
+
+# ------------------------------------------------------------ calls
+
+# A single-sample call costs ~1 us in all, and numba's dispatch is a third of
+# it, so the single-sample path passes numba what it types fastest: the
+# caller's array as it is (its natural shape is the canonical layout), a
+# scalar result computed into shape (1,), a scalar argument passed as a float
+# (a 0-d array costs ~170 ns more, a numpy scalar ~60 ns), and the names it
+# uses are module globals (``np.empty`` looked up through the module costs ~30 ns).
+_FLOAT64 = np.dtype(np.float64)
+_NDARRAY = np.ndarray
+_ONE = (1,)
+_NO_SAMPLES = np.empty(0)
+new_array = np.empty
+
+
+def is_single_sample(x, trailing):
+    """Whether ``x`` is one sample that needs no conversion: the fast path of a call."""
+    # ``is``: every native float64 array shares numpy's one float64 dtype; an
+    # equal but distinct dtype object just takes the general path. ``carray``:
+    # C-contiguous, aligned and writable (a read-only sample takes the general
+    # path, which accepts it as it is).
+    return (type(x) is _NDARRAY and x.shape == trailing and x.dtype is _FLOAT64
+            and x.flags.carray)
+
+
+def call_unary(kernel_, x, name, trailing, out_trailing, convention=None, batch_kernel=None):
+    """
+    Validate ``x``, run ``kernel_(x, out[, convention])``, raise for a bad sample.
+
+    ``out`` gets ``x``'s leading shape followed by ``out_trailing``; a 0-d
+    result is returned as a scalar. Both reach the kernel in the canonical
+    layout. ``convention`` is the Euler kernels' convention code (a named
+    argument: unpacking ``*args`` costs ~50 ns of a ~1 us single-sample call).
+    Large inputs go to ``batch_kernel`` (same signature) where one is given,
+    and large batches are split across threads. A single float64 sample skips
+    straight to the kernel, which checks its values.
+    """
+    if is_single_sample(x, trailing):
+        out = new_array(out_trailing or _ONE)
+        if convention is None:
+            bad = kernel_(x, out)
+        else:
+            bad = kernel_(x, out, convention)
+        if bad < 0:
+            return out if out_trailing else out[0]
+        a = x
+    else:
+        a = float_array(x, name, trailing)
+        out = np.empty(a.shape[:a.ndim - len(trailing)] + out_trailing)
+        args = () if convention is None else (convention,)
+        chosen = batch_kernel if batch_kernel is not None and is_batch(a, trailing) else kernel_
+        bad = _run(chosen, (kernel_layout(a, trailing),), (trailing,),
+                   kernel_layout(out, out_trailing), out_trailing, args)
+    if bad >= 0:
+        raise_sample_error(bad, (name,), (a,), (trailing,))
+    return out[()] if out.ndim == 0 else out
+
+
+def call_binary(kernel_, x, y, names, trailings, out_trailing, *args, batch_kernel=None):
+    """
+    Validate and broadcast ``x`` and ``y``, run ``kernel_(x, y, out, *args)``, raise if bad.
+
+    ``out`` gets the common leading shape followed by ``out_trailing``; all
+    three reach the kernel in the canonical layout. Large inputs go to
+    ``batch_kernel`` where one is given, and large batches are split across
+    threads; single float64 samples skip the checks that the kernel makes
+    anyway.
+
+    A scalar second argument (``trailings[1] == ()``, an angle) reaches the
+    kernel twice, as ``kernel_(x, ys, out, y, *args)``: a single sample as the
+    float ``y`` with ``ys`` empty, several as the array ``ys`` (``y`` unused),
+    so that the kernel has one signature and one sample costs no array.
+    """
+    scalar_y = trailings[1] == ()
+    if scalar_y and (isinstance(y, float) or is_single_sample(y, ())):
+        y = float(y)
+    if is_single_sample(x, trailings[0]) and (
+            type(y) is float if scalar_y else is_single_sample(y, trailings[1])):
+        a, b = x, y
+        out = new_array(out_trailing or _ONE)
+        if scalar_y:
+            bad = kernel_(*((a, _NO_SAMPLES, out, b) + args))
+        else:
+            bad = kernel_(*((a, b, out) + args))   # one tuple: cheaper than f(a, b, out, *args)
+        if bad < 0:
+            return out if out_trailing else out[0]
+    else:
+        a, b = broadcast_pair(float_array(x, names[0], trailings[0]),
+                              float_array(y, names[1], trailings[1]), *trailings)
+        out = np.empty(a.shape[:a.ndim - len(trailings[0])] + out_trailing)
+        chosen = (batch_kernel if batch_kernel is not None and is_batch(a, trailings[0])
+                  else kernel_)
+        bad = _run(chosen, (kernel_layout(a, trailings[0]), kernel_layout(b, trailings[1])),
+                   trailings, kernel_layout(out, out_trailing), out_trailing,
+                   (0.0,) + args if scalar_y else args)
+    if bad >= 0:
+        raise_sample_error(bad, names, (a, np.asarray(b)), trailings)
+    return out[()] if out.ndim == 0 else out

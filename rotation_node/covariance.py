@@ -1,0 +1,414 @@
+"""
+Orientation covariance between representations, to first order (``J Sigma J^T``).
+
+Pure numpy on top of :mod:`rotation_node.conversions` and
+:mod:`rotation_node.kinematics`; no rclpy import. Every function takes
+array_like input with any leading dimensions (broadcast between arguments),
+never modifies it, and raises ``ValueError`` naming the argument on bad input.
+
+The reference representation is the rotation vector ``d`` of a small
+perturbation of the estimate ``R_hat`` (quaternion ``q_hat``), in one of two
+frames:
+
+- ``'world'`` (REP 145's "rotation about fixed axes"): ``R = exp([d]x) R_hat``,
+  ``q = (d/2, 1) (x) q_hat``;
+- ``'body'``: ``R = R_hat exp([d]x)``, ``q = q_hat (x) (d/2, 1)``.
+
+They are related by ``d_world = R_hat d_body``, so
+``Sigma_world = R_hat Sigma_body R_hat^T``.
+
+Euler angles. A change ``da`` of the Euler angles ``a`` moves the orientation
+by ``d = J(a) da``, where ``J`` is exactly the matrix that maps Euler rates to
+angular velocity (``Rdot R^T = [w_world]x``, ``R^T Rdot = [w_body]x``); its
+closed form and analytic inverse are those of
+:func:`rotation_node.kinematics.angular_velocity_from_euler_rates`. Hence
+
+    Sigma_d = J Sigma_a J^T,        Sigma_a = J^-1 Sigma_d J^-T.
+
+``J^-1`` divides by the cosine (Tait-Bryan) or sine (proper Euler) of the
+middle angle: at gimbal lock the Euler covariance is unbounded, and so are
+the errors of its first-order estimate as soon as the orientation's
+uncertainty reaches the distance to the singularity. Samples whose middle angle is
+within ``singularity_threshold`` of its singular value get an all-NaN
+covariance and an :class:`~rotation_node.kinematics.EulerSingularityWarning`,
+as the Euler rates do.
+
+Quaternions. The 4x4 covariance of the components ``(x, y, z, w)`` (the order
+of the quaternion, PX4's estimators use ``(w, x, y, z)``) is
+``Sigma_q = G Sigma_d G^T`` with ``G = dq/dd = M / 2``, where the three
+columns of ``M`` are orthonormal and orthogonal to ``q_hat``:
+
+    world:  M = [[w I - [v]x], [-v^T]],     body:  M = [[w I + [v]x], [-v^T]]
+
+for ``q_hat = (v, w)`` normalised. Back, ``Sigma_d = 4 M^T Sigma_q M``: the
+component of ``Sigma_q`` along ``q_hat`` (a change of norm, not of
+orientation) is projected out. Both maps are invariant under ``q -> -q``.
+
+Round trips ``d -> a -> d`` and ``d -> q -> d`` are exact to rounding
+(``J J^-1 = I``, ``M^T M = I``); ``a -> d -> a`` too, away from gimbal lock.
+"""
+import warnings
+
+import numpy as np
+
+from ._arrays import finite_array
+from .conversions import matrix_from_quaternion, parse_sequence
+from .kinematics import (
+    angular_velocity_from_euler_rates, DEFAULT_SINGULARITY_THRESHOLD,
+    euler_rates_from_angular_velocity, EulerSingularityWarning)
+
+__all__ = [
+    'body_rotation_vector_covariance', 'euler_covariance_from_rotation_vector_covariance',
+    'euler_linearisation_ratio',
+    'quaternion_covariance_from_rotation_vector_covariance', 'rotation_vector_covariance_jacobian',
+    'rotation_vector_covariance_from_euler_covariance',
+    'rotation_vector_covariance_from_quaternion_covariance', 'world_rotation_vector_covariance',
+]
+
+_IDENTITY = np.eye(3)
+
+
+def _congruence(a: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """Return ``a sigma a^T`` over leading dimensions, made exactly symmetric."""
+    out = a @ sigma @ np.swapaxes(a, -1, -2)
+    return 0.5 * (out + np.swapaxes(out, -1, -2))
+
+
+def _unit_quaternion(quaternion) -> np.ndarray:
+    q = finite_array(quaternion, 'quaternion', (4,))
+    norm = np.linalg.norm(q, axis=-1, keepdims=True)
+    if not (norm > 0.0).all():
+        raise ValueError('`quaternion` has zero norm (a zero quaternion is not a rotation).')
+    return q / norm
+
+
+def _frame_is_world(frame: str) -> bool:
+    if frame == 'world':
+        return True
+    if frame == 'body':
+        return False
+    raise ValueError(f"Expected `frame` to be 'world' or 'body', got {frame!r}.")
+
+
+def rotation_vector_covariance_jacobian(angles, seq: str, frame: str = 'world',
+                                        degrees: bool = False) -> np.ndarray:
+    """
+    Jacobian ``J = dd/da`` of the rotation-vector perturbation w.r.t. the Euler angles.
+
+    Parameters
+    ----------
+    angles : array_like, shape (..., 3)
+        Euler angles (first, second, third of ``seq``), radians unless ``degrees``.
+    seq : str
+        One of the 24 conventions of :func:`rotation_node.conversions.euler_from_quaternion`.
+    frame : {'world', 'body'}, optional
+        Frame of the perturbation ``d`` (see the module docstring).
+    degrees : bool, optional
+        Angles in degrees: ``J`` is then in rad per degree.
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 3)
+        ``J``, with ``d = J da``; defined everywhere (singular at gimbal lock).
+
+    Raises
+    ------
+    ValueError
+        Bad ``seq`` or ``frame``; wrong shape or NaN/Inf ``angles``.
+
+    """
+    world = _frame_is_world(frame)
+    a = finite_array(angles, 'angles', (3,))
+    columns = angular_velocity_from_euler_rates(a[..., None, :], _IDENTITY, seq,
+                                                'world' if world else 'body', degrees)
+    return np.swapaxes(columns, -1, -2)
+
+
+def rotation_vector_covariance_from_euler_covariance(angles, covariance, seq: str,
+                                                     frame: str = 'world',
+                                                     degrees: bool = False) -> np.ndarray:
+    """
+    Rotation-vector covariance of an orientation whose Euler angles have ``covariance``.
+
+    Parameters
+    ----------
+    angles : array_like, shape (..., 3)
+        Euler angles of the estimate, radians unless ``degrees``.
+    covariance : array_like, shape (..., 3, 3)
+        Covariance of the three angles (rad^2, or deg^2 if ``degrees``);
+        leading dimensions broadcast with ``angles``'.
+    seq : str
+        One of the 24 conventions.
+    frame : {'world', 'body'}, optional
+        Frame of the returned rotation-vector covariance: ``'world'`` (REP
+        145's rotation about fixed axes, ``R = exp([d]x) R_hat``) or ``'body'``
+        (``R = R_hat exp([d]x)``).
+    degrees : bool, optional
+        Angles in degrees and ``covariance`` in deg^2.
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 3)
+        ``J Sigma_a J^T`` in rad^2, exactly symmetric. Defined everywhere.
+
+    Raises
+    ------
+    ValueError
+        Bad ``seq`` or ``frame``; wrong shape or NaN/Inf, naming the argument.
+
+    """
+    sigma = finite_array(covariance, 'covariance', (3, 3))
+    return _congruence(rotation_vector_covariance_jacobian(angles, seq, frame, degrees), sigma)
+
+
+def euler_covariance_from_rotation_vector_covariance(
+        angles, covariance, seq: str, frame: str = 'world', degrees: bool = False, *,
+        singularity_threshold: float = DEFAULT_SINGULARITY_THRESHOLD) -> np.ndarray:
+    """
+    First-order covariance of the Euler angles of an uncertain orientation.
+
+    Parameters
+    ----------
+    angles : array_like, shape (..., 3)
+        Euler angles of the estimate in ``seq``, radians unless ``degrees``.
+    covariance : array_like, shape (..., 3, 3)
+        Rotation-vector covariance (rad^2) in ``frame``; leading dimensions
+        broadcast with ``angles``'.
+    seq : str
+        One of the 24 conventions.
+    frame : {'world', 'body'}, optional
+        Frame of ``covariance``: ``'world'`` (REP 145's rotation about fixed
+        axes, ``R = exp([d]x) R_hat``, the default) or ``'body'``
+        (``R = R_hat exp([d]x)``).
+    degrees : bool, optional
+        Angles in degrees; the result is then in deg^2.
+    singularity_threshold : float, optional
+        Radians, whatever ``degrees``; in [0, pi/2]. Samples whose middle angle
+        is within this distance of gimbal lock get an all-NaN covariance.
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 3)
+        ``J^-1 Sigma_d J^-T`` (rad^2, or deg^2), exactly symmetric. It grows as
+        ``1 / margin^2`` towards gimbal lock; it describes the angles' spread
+        only while the orientation's standard deviation is small compared
+        with that margin: check :func:`euler_linearisation_ratio`.
+
+    Warns
+    -----
+    EulerSingularityWarning
+        Once per call if any sample was within ``singularity_threshold`` of
+        gimbal lock, with their count; the mask is ``np.isnan(result[..., 0, 0])``.
+
+    Raises
+    ------
+    ValueError
+        Bad ``seq``, ``frame`` or ``singularity_threshold``; wrong shape or
+        NaN/Inf, naming the argument.
+
+    """
+    world = _frame_is_world(frame)
+    a = finite_array(angles, 'angles', (3,))
+    sigma = finite_array(covariance, 'covariance', (3, 3))
+    # One row of angles per column of J^-1: equal leading shapes need no broadcast copy.
+    rows = np.repeat(a[..., None, :], 3, axis=-2)
+    frame_name = 'world' if world else 'body'
+    try:
+        near = (_middle_margin(a, parse_sequence(seq), degrees)
+                <= float(singularity_threshold) * (1.0 + 1e-9))
+    except (TypeError, ValueError):
+        near = True   # the call below names what was wrong
+    if np.any(near):   # the warning below replaces the Euler rates' one
+        with warnings.catch_warnings():
+            warnings.simplefilter('ignore', EulerSingularityWarning)
+            columns = euler_rates_from_angular_velocity(
+                rows, _IDENTITY, seq, frame_name, degrees,
+                singularity_threshold=singularity_threshold)
+    else:
+        columns = euler_rates_from_angular_velocity(
+            rows, _IDENTITY, seq, frame_name, degrees,
+            singularity_threshold=singularity_threshold)
+    out = _congruence(np.swapaxes(columns, -1, -2), sigma)
+    singular = np.isnan(columns[..., 0, 0])
+    if singular.any():
+        out[np.broadcast_to(singular, out.shape[:-2])] = np.nan
+        count = int(np.count_nonzero(singular))
+        warnings.warn(
+            f'{count} of {singular.size} orientations are within {singularity_threshold:g} rad '
+            f'of gimbal lock in {seq!r}: their Euler covariance is unbounded and returned as '
+            'NaN.', EulerSingularityWarning, stacklevel=2)
+    return out
+
+
+def _middle_margin(angles: np.ndarray, spec, degrees: bool) -> np.ndarray:
+    """Return the distance (rad) of the middle angle from its singular values, in [0, pi/2]."""
+    middle = np.radians(angles[..., 1]) if degrees else angles[..., 1]
+    c, s = np.abs(np.cos(middle)), np.abs(np.sin(middle))
+    return np.arctan2(s, c) if spec.proper else np.arctan2(c, s)
+
+
+def euler_linearisation_ratio(angles, covariance, seq: str, degrees: bool = False) -> np.ndarray:
+    """
+    How far the first-order Euler covariance can be trusted: ``sigma_max / margin``.
+
+    ``sigma_max`` is the largest standard deviation of the rotation vector
+    (the square root of the largest eigenvalue of its covariance, the same in
+    the world and the body frame) and ``margin`` the distance of the middle
+    angle from its singular value (+-pi/2 Tait-Bryan, 0 or pi proper Euler).
+    Measured against Monte Carlo (``docs/covariance.md``), the first-order
+    standard deviations of the angles are within 1 % of the true ones while
+    this ratio is below about 0.1 and within 10 % below about 0.3.
+
+    Parameters
+    ----------
+    angles : array_like, shape (..., 3)
+        Euler angles of the estimate in ``seq``, radians unless ``degrees``.
+    covariance : array_like, shape (..., 3, 3)
+        Rotation-vector covariance (rad^2), world or body frame.
+    seq : str
+        One of the 24 conventions.
+    degrees : bool, optional
+        Angles in degrees.
+
+    Returns
+    -------
+    ndarray, shape (...)
+        The ratio; ``inf`` at gimbal lock (unless the covariance is zero).
+
+    Raises
+    ------
+    ValueError
+        Bad ``seq``; wrong shape or NaN/Inf, naming the argument.
+
+    """
+    a = finite_array(angles, 'angles', (3,))
+    sigma = finite_array(covariance, 'covariance', (3, 3))
+    margin = _middle_margin(a, parse_sequence(seq), degrees)
+    largest = np.linalg.eigvalsh(0.5 * (sigma + np.swapaxes(sigma, -1, -2)))[..., -1]
+    std = np.sqrt(np.maximum(largest, 0.0))
+    # std / margin, with 0 / 0 = 0 (no uncertainty) and std / 0 = inf (gimbal lock)
+    std, margin = np.broadcast_arrays(std, margin)
+    out = np.where(std > 0.0, np.inf, 0.0)
+    np.divide(std, margin, out=out, where=margin > 0.0)
+    return out
+
+
+def _tangent_basis(q: np.ndarray, world: bool) -> np.ndarray:
+    """Return ``M`` (..., 4, 3): orthonormal columns, ``dq = M d / 2``, for unit ``q``."""
+    x, y, z, w = np.moveaxis(q, -1, 0)
+    s = 1.0 if world else -1.0  # w I - s [v]x
+    m = np.empty(q.shape[:-1] + (4, 3))
+    m[..., 0, 0], m[..., 0, 1], m[..., 0, 2] = w, s * z, -s * y
+    m[..., 1, 0], m[..., 1, 1], m[..., 1, 2] = -s * z, w, s * x
+    m[..., 2, 0], m[..., 2, 1], m[..., 2, 2] = s * y, -s * x, w
+    m[..., 3, 0], m[..., 3, 1], m[..., 3, 2] = -x, -y, -z
+    return m
+
+
+def quaternion_covariance_from_rotation_vector_covariance(quaternion, covariance,
+                                                          frame: str = 'world') -> np.ndarray:
+    """
+    4x4 covariance of the quaternion components of an uncertain orientation.
+
+    Parameters
+    ----------
+    quaternion : array_like, shape (..., 4)
+        The estimate ``(x, y, z, w)``, any non-zero norm (it is normalised).
+    covariance : array_like, shape (..., 3, 3)
+        Rotation-vector covariance (rad^2) in ``frame``.
+    frame : {'world', 'body'}, optional
+        Frame of ``covariance`` (see the module docstring).
+
+    Returns
+    -------
+    ndarray, shape (..., 4, 4)
+        ``G Sigma_d G^T`` with ``G = dq/dd`` at the normalised quaternion,
+        rows and columns ordered ``(x, y, z, w)``; rank 3, ``q_hat`` in its
+        null space. The same for ``q`` and ``-q``.
+
+    Raises
+    ------
+    ValueError
+        Bad ``frame``; wrong shape, NaN/Inf or zero quaternion, naming the argument.
+
+    """
+    m = _tangent_basis(_unit_quaternion(quaternion), _frame_is_world(frame))
+    return 0.25 * _congruence(m, finite_array(covariance, 'covariance', (3, 3)))
+
+
+def rotation_vector_covariance_from_quaternion_covariance(quaternion, covariance,
+                                                          frame: str = 'world') -> np.ndarray:
+    """
+    Rotation-vector covariance of an orientation given its 4x4 quaternion covariance.
+
+    Parameters
+    ----------
+    quaternion : array_like, shape (..., 4)
+        The estimate ``(x, y, z, w)``, any non-zero norm (it is normalised).
+    covariance : array_like, shape (..., 4, 4)
+        Covariance of the components in the order ``(x, y, z, w)``. For a
+        ``(w, x, y, z)`` covariance ``C`` (PX4) pass ``C[..., p, :][..., :, p]``
+        with ``p = [1, 2, 3, 0]``.
+    frame : {'world', 'body'}, optional
+        Frame of the returned covariance (see the module docstring).
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 3)
+        ``4 M^T Sigma_q M`` (rad^2): the tangent-space part of ``Sigma_q``;
+        what lies along ``q_hat`` (uncertainty of the norm) is dropped.
+
+    Raises
+    ------
+    ValueError
+        Bad ``frame``; wrong shape, NaN/Inf or zero quaternion, naming the argument.
+
+    """
+    m = _tangent_basis(_unit_quaternion(quaternion), _frame_is_world(frame))
+    sigma = finite_array(covariance, 'covariance', (4, 4))
+    return 4.0 * _congruence(np.swapaxes(m, -1, -2), sigma)
+
+
+def world_rotation_vector_covariance(quaternion, body_covariance) -> np.ndarray:
+    """
+    World-frame (fixed axes) rotation-vector covariance from the body-frame one.
+
+    Parameters
+    ----------
+    quaternion : array_like, shape (..., 4)
+        The estimate ``(x, y, z, w)``, body to world, any non-zero norm.
+    body_covariance : array_like, shape (..., 3, 3)
+        Covariance of ``d`` in ``R = R_hat exp([d]x)``, rad^2.
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 3)
+        ``R_hat Sigma_body R_hat^T``: the covariance of ``d`` in
+        ``R = exp([d]x) R_hat``.
+
+    """
+    r = matrix_from_quaternion(_unit_quaternion(quaternion))
+    return _congruence(r, finite_array(body_covariance, 'body_covariance', (3, 3)))
+
+
+def body_rotation_vector_covariance(quaternion, world_covariance) -> np.ndarray:
+    """
+    Body-frame rotation-vector covariance from the world-frame (fixed axes) one.
+
+    Parameters
+    ----------
+    quaternion : array_like, shape (..., 4)
+        The estimate ``(x, y, z, w)``, body to world, any non-zero norm.
+    world_covariance : array_like, shape (..., 3, 3)
+        Covariance of ``d`` in ``R = exp([d]x) R_hat``, rad^2.
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 3)
+        ``R_hat^T Sigma_world R_hat``: the covariance of ``d`` in
+        ``R = R_hat exp([d]x)``.
+
+    """
+    r = matrix_from_quaternion(_unit_quaternion(quaternion))
+    return _congruence(np.swapaxes(r, -1, -2),
+                       finite_array(world_covariance, 'world_covariance', (3, 3)))

@@ -1,0 +1,130 @@
+"""
+Tests of rotation_node.bag.batch: many bags in parallel processes and on Dask.
+
+Each output must be the bag that converting its input alone gives (the same
+messages and metadata); a bad bag fails on its own line without stopping the others, and the
+exit status says whether any failed.
+"""
+import os
+
+from bag_helpers import imu_messages, serialized_rows, write_rosbag2
+import pytest
+from rotation_node.bag.batch import (
+    batch_output_path, batch_output_paths, convert_bags, convert_bags_on_dask)
+from rotation_node.bag.cli import main
+from rotation_node.bag.convert import convert
+from rotation_node.bag.reader import open_bag
+from rotation_node.errors import BagError
+from rotation_node.parameters import NodeParameters
+
+PARAMS = NodeParameters(input_type='imu', outputs=('euler', 'quaternion'))
+PARAMS_YAML = """rotation_node:
+  ros__parameters:
+    input_type: imu
+    outputs: [euler, quaternion]
+"""
+
+
+@pytest.fixture
+def inputs(tmp_path, rng):
+    """Three good bags of different formats and one bad one: [(path, good)]."""
+    directory = tmp_path / 'in'
+    directory.mkdir()
+    bags = [
+        (write_rosbag2(directory / 'day1', serialized_rows('/imu', imu_messages(rng, 50))), True),
+        (write_rosbag2(directory / 'day2', serialized_rows('/imu', imu_messages(rng, 60)),
+                       storage='sqlite3', compression='message'), True),
+        (directory / 'broken.mcap', False),
+        (write_rosbag2(directory / 'day3', serialized_rows('/imu', imu_messages(rng, 70)),
+                       compression='file'), True),
+    ]
+    (directory / 'broken.mcap').write_text('not a bag\n')
+    return [(str(path), good) for path, good in bags]
+
+
+def _expected_outputs(tmp_path, inputs):
+    """Each good input converted alone: {output name: messages}."""
+    expected = {}
+    for path, good in inputs:
+        if good:
+            output = tmp_path / 'alone' / (os.path.basename(path) + '.mcap')
+            output.parent.mkdir(exist_ok=True)
+            convert(path, output, PARAMS)
+            expected[os.path.basename(path)] = _messages(output)
+    return expected
+
+
+def _messages(path):
+    with open_bag(path) as bag:
+        return bag.topic_metadata, [(m.topic, m.data, m.log_time_ns, m.publish_time_ns)
+                                    for m in bag.messages()]
+
+
+def _outputs(directory):
+    """{name: messages} of the outputs in ``directory``."""
+    return {name: _messages(directory / name) for name in sorted(os.listdir(directory))}
+
+
+def test_output_names():
+    assert batch_output_path('runs/day1/', 'out') == os.path.join('out', 'day1')
+    assert batch_output_path('a/imu.mcap', 'out') == os.path.join('out', 'imu')
+    assert batch_output_path('x_0.mcap.zstd', 'out') == os.path.join('out', 'x_0')
+    assert batch_output_path('old.bag', 'out') == os.path.join('out', 'old')
+    with pytest.raises(BagError, match='a/x.mcap and b/x.bag would both be written to'):
+        batch_output_paths(['a/x.mcap', 'b/x.bag'], 'out')
+
+
+def test_parallel_processes_one_line_per_bag_and_a_bad_bag_fails_alone(
+        tmp_path, inputs, capsys):
+    expected = _expected_outputs(tmp_path, inputs)
+    (tmp_path / 'params.yaml').write_text(PARAMS_YAML)
+    out = tmp_path / 'out'
+    status = main(['convert', *[path for path, _ in inputs], str(out),
+                   '--params', str(tmp_path / 'params.yaml'), '--jobs', '2'])
+    lines = capsys.readouterr().err.splitlines()
+    assert status == 1
+    assert lines[-1] == 'rotation_bag convert: error: 1 of 4 bags failed'
+    per_bag = sorted(lines[:-1])
+    assert len(per_bag) == 4
+    for path, good in inputs:
+        line, = [line for line in per_bag if line.startswith(path)]
+        if good:
+            assert line.startswith(f'{path} -> {out / os.path.basename(path)}: rosbag2 '
+                                   'directory (')
+            assert '; /imu ' in line and ' messages (/imu/euler, /imu/quaternion)' in line
+        else:
+            assert line == f'{path}: error: text file, not a bag (readable: rosbag2 ' \
+                           'directories, MCAP, sqlite3 and ROS 1 bags)'
+    assert _outputs(out) == expected
+
+
+def test_good_bags_exit_zero(tmp_path, inputs, capsys):
+    (tmp_path / 'params.yaml').write_text(PARAMS_YAML)
+    good = [path for path, ok in inputs if ok]
+    out = tmp_path / 'out'
+    out.mkdir()   # IN OUTDIR: an existing directory that is not a bag
+    status = main(['convert', good[0], str(out), '--params', str(tmp_path / 'params.yaml')])
+    assert status == 0
+    assert capsys.readouterr().err.splitlines()[-1] == f'converted 1 bags into {out}'
+    assert os.listdir(out) == ['day1']
+
+
+def test_same_tasks_on_a_dask_local_cluster(tmp_path, inputs):
+    """The documented Dask route: every bag a task on worker processes, bounded waits."""
+    from distributed import Client, LocalCluster
+    expected = _expected_outputs(tmp_path, inputs)
+    out = tmp_path / 'dask'
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                      dashboard_address=None, silence_logs=40) as cluster, \
+            Client(cluster, timeout=60) as client:
+        results = convert_bags_on_dask(client, [path for path, _ in inputs], str(out), PARAMS,
+                                       timeout=240)
+    assert sorted((r.input_path, r.ok) for r in results) == sorted(inputs)
+    assert _outputs(out) == expected
+
+
+def test_local_processes_and_dask_give_the_same_results(tmp_path, inputs):
+    local = convert_bags([path for path, _ in inputs], str(tmp_path / 'a'), PARAMS, jobs=1)
+    assert [(r.input_path, r.ok) for r in local] == inputs
+    with pytest.raises(BagError, match='jobs must be a positive integer'):
+        convert_bags([inputs[0][0]], str(tmp_path / 'b'), PARAMS, jobs=0)
