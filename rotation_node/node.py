@@ -550,7 +550,11 @@ def main(args: Optional[Sequence[str]] = None) -> int:
     except ParameterError as exc:
         print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
         return 1
-    rclpy.init(args=args)
+    try:
+        rclpy.init(args=args)
+    except _rclpy.RCLError as exc:   # e.g. a malformed --ros-args remapping
+        print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
+        return 1
     node = None
     try:
         node = RotationNode(parameters_files=files)
