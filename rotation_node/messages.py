@@ -149,8 +149,10 @@ class InputType:
         Dotted path of the covariance array holding the orientation covariance.
     covariance_indices : tuple of int
         Indices in that array of the 3 x 3 orientation block, row-major.
-    orientation_unknown, angular_velocity_unknown : callable, optional
-        ``message -> bool``: the message says the field holds no data.
+    orientation_unknown_field, angular_velocity_unknown_field : str, optional
+        Dotted path of an array whose first element is -1 when the message holds
+        no orientation (angular velocity), as sensor_msgs/Imu marks it in its
+        covariances (REP 145).
     notes : str
         What else a user needs to know, for the documentation tables.
     topics : tuple of InputTopic
@@ -171,8 +173,8 @@ class InputType:
     angular_velocity_field: Optional[str] = None
     covariance_field: Optional[str] = None
     covariance_indices: Tuple[int, ...] = tuple(range(9))
-    orientation_unknown: Optional[Callable[[Any], bool]] = None
-    angular_velocity_unknown: Optional[Callable[[Any], bool]] = None
+    orientation_unknown_field: Optional[str] = None
+    angular_velocity_unknown_field: Optional[str] = None
     notes: str = ''
     topics: Tuple[InputTopic, ...] = (INPUT_TOPIC,)
     stream: Optional[Callable[[Any], SampleStream]] = None
@@ -208,15 +210,11 @@ class InputType:
         components = _XYZW if self.orientation_form == QUATERNION else _XYZ
         orientation = operator.attrgetter(   # one C call returns the tuple
             *(f'{self.orientation_field}.{c}' for c in components))
-        unknown = self.orientation_unknown
-        rate = None
+        unknown = _optional_getter(self.orientation_unknown_field)
+        rate = rate_unknown = None
         if angular_velocity and self.angular_velocity_field is not None:
             rate = operator.attrgetter(*(f'{self.angular_velocity_field}.{c}' for c in _XYZ))
-            if self.angular_velocity_unknown is not None:
-                rate_unknown, read_rate = self.angular_velocity_unknown, rate
-
-                def rate(msg):
-                    return None if rate_unknown(msg) else read_rate(msg)
+            rate_unknown = _optional_getter(self.angular_velocity_unknown_field)
         block = None
         if covariance and self.covariance_field is not None:
             block = _covariance_block(self.covariance_field, self.covariance_indices)
@@ -224,10 +222,12 @@ class InputType:
             return lambda msg: new(Sample, (msg.header, orientation(msg), None, None))
 
         def read(msg):
-            return new(Sample, (msg.header, None if unknown is not None and unknown(msg)
-                                else orientation(msg),
-                                None if rate is None else rate(msg),
-                                None if block is None else block(msg)))
+            return new(Sample, (
+                msg.header,
+                None if unknown is not None and unknown(msg)[0] == -1.0 else orientation(msg),
+                None if rate is None or (rate_unknown is not None and rate_unknown(msg)[0] == -1.0)
+                else rate(msg),
+                None if block is None else block(msg)))
         return read
 
     def sample_stream(self, params: Any, *, angular_velocity: bool = True,
@@ -250,18 +250,14 @@ class InputType:
         return lambda topic, msg: (read(msg),)
 
 
+def _optional_getter(path):
+    return None if path is None else operator.attrgetter(path)
+
+
 def _covariance_block(path, indices):
     get = operator.attrgetter(path)
     pick = operator.itemgetter(*indices)
     return lambda msg: tuple(float(v) for v in pick(get(msg)))
-
-
-def _imu_orientation_unknown(msg):
-    return msg.orientation_covariance[0] == -1.0
-
-
-def _imu_angular_velocity_unknown(msg):
-    return msg.angular_velocity_covariance[0] == -1.0
 
 
 _POSE_ROTATION_BLOCK = (21, 22, 23, 27, 28, 29, 33, 34, 35)   # rows/columns 3-5 of 6 x 6
@@ -275,8 +271,8 @@ _INPUT_LIST = (
     InputType('imu', 'sensor_msgs/msg/Imu', QUATERNION, 'orientation',
               angular_velocity_field='angular_velocity',
               covariance_field='orientation_covariance',
-              orientation_unknown=_imu_orientation_unknown,
-              angular_velocity_unknown=_imu_angular_velocity_unknown,
+              orientation_unknown_field='orientation_covariance',
+              angular_velocity_unknown_field='angular_velocity_covariance',
               notes='orientation unknown when `orientation_covariance[0] == -1`; angular '
                     'velocity by finite difference when `angular_velocity_covariance[0] == -1`'),
     InputType('odometry', 'nav_msgs/msg/Odometry', QUATERNION, 'pose.pose.orientation',

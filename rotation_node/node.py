@@ -113,12 +113,14 @@ def _parameters_files(args):
     return [value for flag, value in ros_arguments(args) if flag == '--params-file']
 
 
-def _check_parameter_names(args):
-    """Raise ParameterError for a ``-p NAME:=VALUE`` naming no parameter of the node."""
+def check_parameter_names(args: Sequence[str]) -> None:
+    """Raise ParameterError for a ``-p [NODE:]NAME:=VALUE`` naming no parameter of the node."""
     known = {*PARAMETERS_BY_NAME, *ROS_BUILTIN_PARAMETERS}
     for flag, value in ros_arguments(args):
         if flag in ('-p', '--param') and value is not None:
-            name = value.split(':=', 1)[0]
+            node, _, name = value.split(':=', 1)[0].rpartition(':')   # [node:]name:=value
+            if node not in ('', NODE_NAME):
+                continue   # a parameter of another node of the process
             if name not in known:
                 raise unknown_parameter_error(name, f' in {flag} {value}')
 
@@ -546,7 +548,7 @@ def main(args: Optional[Sequence[str]] = None) -> int:
     try:   # before rclpy reads the files, whose own errors are many lines long
         for path in files:
             parameters_file_sections(path)
-        _check_parameter_names(argv)
+        check_parameter_names(argv)
     except ParameterError as exc:
         print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
         return 1

@@ -392,7 +392,7 @@ def parameters_file_sections(path) -> list:
         names, or a node key holds no ``ros__parameters`` mapping.
 
     """
-    document = load_ros_yaml(path, f'parameters file {path}', ParameterError)
+    document = load_ros_yaml(path, f'parameters file {path}', ParameterError, aliases=False)
     if not isinstance(document, dict):
         raise ParameterError(f'parameters file {path}: expected a mapping of node names')
     sections = []
@@ -401,6 +401,11 @@ def parameters_file_sections(path) -> list:
         for key, value in mapping.items():
             name = f'{prefix}/{str(key).strip("/")}' if prefix else str(key)
             if isinstance(value, dict) and isinstance(value.get('ros__parameters'), dict):
+                problem = _node_key_problem(name) or next(filter(None, (
+                    _value_problem(parameter, v)
+                    for parameter, v in _flattened(value['ros__parameters']).items())), '')
+                if problem:
+                    raise ParameterError(f"parameters file {path}: section '{name}': {problem}")
                 sections.append((name, _flattened(value['ros__parameters'])))
             elif (isinstance(value, dict) and value and 'ros__parameters' not in value
                     and all(isinstance(child, dict) for child in value.values())):
@@ -411,6 +416,38 @@ def parameters_file_sections(path) -> list:
                     'mapping')
     read('', document)
     return sections
+
+
+_NODE_NAME = re.compile(r'[A-Za-z_][A-Za-z0-9_]*')
+_NAMESPACE = re.compile(r'(?:/[A-Za-z_][A-Za-z0-9_]*)+')
+
+
+def _node_key_problem(key):
+    """What rcl finds wrong with a node key of a parameters file ('' if nothing)."""
+    if key == '/**':
+        return ''
+    namespace, _, node = key.rpartition('/')
+    if node != '*' and not _NODE_NAME.fullmatch(node):
+        return (f'{node!r} is not a node name (letters, digits and _, not starting with a '
+                'digit), nor * or **')
+    namespace = namespace if namespace.startswith('/') or not namespace else '/' + namespace
+    if namespace not in ('', '/', '/**') and not _NAMESPACE.fullmatch(namespace):
+        return f'{namespace!r} is not a namespace'
+    return ''
+
+
+def _value_problem(name, value):
+    """What rcl refuses in a parameter value of a file ('' if nothing)."""
+    if value is None:
+        return f"parameter '{name}' has no value"
+    if isinstance(value, list):
+        kinds = {type(item) for item in value}
+        if not kinds <= {bool, int, float, str}:
+            return f"parameter '{name}': a list may hold only booleans, numbers or strings"
+        if len(kinds) > 1:
+            return (f"parameter '{name}': a list must hold values of one type, got "
+                    f"{', '.join(sorted(kind.__name__ for kind in kinds))}")
+    return ''
 
 
 def _flattened(mapping, prefix=''):

@@ -302,26 +302,14 @@ class ConversionPipeline:
 
         """
         self.stats.received += 1
-        if self._read is not None:
-            samples = (self._read(msg),)
-        else:
-            samples = self._samples(topic, msg)
-            for transform in self._transforms:
-                samples = [transform(sample) for sample in samples]
+        if self._read is not None:   # a plain input without transforms: one sample
+            return self._outputs_of(self._read(msg))
+        samples = self._samples(topic, msg)
+        for transform in self._transforms:
+            samples = [transform(sample) for sample in samples]
         results = []
         for sample in samples:
-            try:
-                outputs = self._converted(sample)
-            except _Dropped as drop:
-                self.stats.dropped[drop.reason] += 1
-                self._report(drop.reason, str(drop))
-                continue
-            except ValueError as exc:   # a conversion rejected a value the checks let through
-                self.stats.dropped[CONVERSION_ERROR] += 1
-                self._report(CONVERSION_ERROR, f'message dropped: {exc}')
-                continue
-            self.stats.published += len(outputs)
-            results += outputs
+            results += self._outputs_of(sample)
         return results
 
     def _report(self, reason, detail):
@@ -332,35 +320,49 @@ class ConversionPipeline:
         self.stats.skipped[reason] += 1
         self._report(reason, detail)
 
-    def _converted(self, sample):
-        """The outputs of one sample: every needed value once, then each output from them."""
-        values = {}
-        for name, requires, compute in self._plan:
-            for required in requires:
-                if values[required] is None:
-                    values[name] = None
-                    break
-            else:
-                values[name] = compute(sample, values)
-        params, header, outputs = self.params, sample.header, []
-        for name, needs, compute in self._output_plan:
-            if compute is None:   # the one value needed, as it is
-                value = values[needs[0]]
-                if value is not None:
-                    outputs.append((name, header, value))
-                continue
-            needed = []
-            for need in needs:
-                value = values[need]
-                if value is None:
-                    break
-                needed.append(value)
-            else:
-                outputs.append((name, header, compute(params, *needed)))
+    def _outputs_of(self, sample):
+        """
+        The outputs of one sample: every needed value once, then each output from them.
+
+        Counts the sample's outputs, or the sample as dropped (then returns none).
+        """
+        try:
+            values = {}
+            for name, requires, compute in self._plan:
+                for required in requires:
+                    if values[required] is None:
+                        values[name] = None
+                        break
+                else:
+                    values[name] = compute(sample, values)
+            params, header, outputs = self.params, sample.header, []
+            for name, needs, compute in self._output_plan:
+                if compute is None:   # the one value needed, as it is
+                    value = values[needs[0]]
+                    if value is not None:
+                        outputs.append((name, header, value))
+                    continue
+                needed = []
+                for need in needs:
+                    value = values[need]
+                    if value is None:
+                        break
+                    needed.append(value)
+                else:
+                    outputs.append((name, header, compute(params, *needed)))
+        except _Dropped as drop:
+            self.stats.dropped[drop.reason] += 1
+            self._report(drop.reason, str(drop))
+            return []
+        except ValueError as exc:   # a conversion rejected a value the checks let through
+            self.stats.dropped[CONVERSION_ERROR] += 1
+            self._report(CONVERSION_ERROR, f'message dropped: {exc}')
+            return []
         if values[ORIENTATION] is None and len(outputs) < len(self._outputs):
             self._skip(ORIENTATION_UNKNOWN,
                        'orientation unknown (Imu orientation_covariance[0] == -1): '
                        'outputs that need it skipped')
+        self.stats.published += len(outputs)
         return outputs
 
     # The per-message values, in the order of VALUES -----------------------------------

@@ -17,7 +17,8 @@ Plain (unquoted) scalars are typed as ROS 2 types them in parameters files
   quoted scalars are always strings. An empty scalar, ``~`` and ``null`` are
   None.
 
-A key given twice in one mapping is an error. Input is bounded: a file larger
+A key given twice in one mapping is an error; parameters files may hold no
+alias (rcl refuses them). Input is bounded: a file larger
 than :data:`MAX_FILE_BYTES`, a document whose aliases expand it beyond
 :data:`MAX_NODES` nodes (a "billion laughs" alias bomb), or one nested deeper
 than :data:`MAX_DEPTH` is refused before it is built.
@@ -171,6 +172,17 @@ _RosLoader.add_constructor(
     _ROS_SCALAR_TAG, lambda loader, node: ros_scalar(loader.construct_scalar(node)))
 
 
+class _RosLoaderWithoutAliases(_RosLoader):
+    """The loader of parameters files: rcl refuses aliases there, so does this one."""
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            raise yaml.composer.ComposerError(
+                None, None, 'aliases (*name) are not allowed in a parameters file (ROS refuses '
+                'them)', self.peek_event().start_mark)
+        return super().compose_node(parent, index)
+
+
 def _check_size(node, label, error):
     """Refuse a document that, with its aliases expanded, is too large or too deep."""
     sizes = {}   # id(node) -> expanded node count, for nodes already counted
@@ -198,7 +210,8 @@ def _check_size(node, label, error):
                      if id(child) not in sizes)
 
 
-def load_ros_yaml(path: Any, label: str, error: Type[Exception]) -> Any:
+def load_ros_yaml(path: Any, label: str, error: Type[Exception], *,
+                  aliases: bool = True) -> Any:
     """
     Read one YAML document from a file with the rules of this module.
 
@@ -210,6 +223,9 @@ def load_ros_yaml(path: Any, label: str, error: Type[Exception]) -> Any:
         How error messages name the file, e.g. ``'parameters file config/params.yaml'``.
     error : type
         The exception class raised (e.g. ParameterError, SceneError).
+    aliases : bool, optional
+        Allow YAML aliases (``*name``), within the bounds; a ROS parameters file
+        may not have any.
 
     Returns
     -------
@@ -235,7 +251,7 @@ def load_ros_yaml(path: Any, label: str, error: Type[Exception]) -> Any:
         text = data.decode('utf-8')
     except UnicodeDecodeError as exc:
         raise error(f'{label}: not UTF-8 text (byte {exc.start})') from None
-    loader = _RosLoader(text)
+    loader = (_RosLoader if aliases else _RosLoaderWithoutAliases)(text)
     try:
         node = loader.get_single_node()
         if node is None:

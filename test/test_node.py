@@ -20,7 +20,7 @@ from scipy.spatial.transform import Rotation
 
 from rotation_node.errors import ParameterError
 from rotation_node.messages import OUTPUTS as OUTPUT_TYPES
-from rotation_node.node import ros_arguments
+from rotation_node.node import check_parameter_names, ros_arguments
 from rotation_node.parameters import (
     INPUT_TYPES, OUTPUTS, PARAMETERS, NodeParameters, parameters_from_yaml)
 from rotation_node.pipeline import input_message_type
@@ -407,6 +407,15 @@ BAD_PARAMETERS_FILES = {
         '/**/rotation_node:\n  ros__parameters: {}\nother_node:\n  rate: 5\n', [],
         "section 'other_node' needs a 'ros__parameters:' mapping"),
     'missing': (None, [], 'cannot read it (No such file or directory)'),
+    # What rcl itself refuses, in a traceback, unless the node refuses it first:
+    'invalid node name': ('rotation-node:\n  ros__parameters:\n    qos.depth: 5\n', [],
+                          "section 'rotation-node': 'rotation-node' is not a node name"),
+    'mixed list': ('/**:\n  ros__parameters:\n    outputs: [euler, 1]\n', [],
+                   "'outputs': a list must hold values of one type, got int, str"),
+    'no value': ('/**:\n  ros__parameters:\n    qos.depth:\n', [],
+                 "parameter 'qos.depth' has no value"),
+    'alias': ('/**:\n  ros__parameters:\n    a: &x 1\n    b: *x\n', [],
+              'aliases (*name) are not allowed in a parameters file'),
 }
 
 
@@ -430,12 +439,20 @@ def test_node_and_convert_reject_the_same_parameters_files(tmp_path, name):
 
 def test_an_unknown_parameter_on_the_command_line_names_the_nearest():
     result = subprocess.run(
-        [script('rotation_node'), '--ros-args', '-p', 'qos.dept:=5'],
+        [script('rotation_node'), '--ros-args', '-p', 'other_node:rate:=5', '-p', 'qos.dept:=5'],
         capture_output=True, text=True, timeout=START_TIMEOUT_S)
     assert result.returncode == 1
     assert result.stderr == (
         "rotation_node: error: unknown parameter 'qos.dept' in -p qos.dept:=5 (did you mean "
         f"'qos.depth'?); the node's parameters are {', '.join(p.name for p in PARAMETERS)}\n")
+
+
+def test_node_prefixed_parameters_are_checked_for_this_node_only():
+    check_parameter_names(['x', '--ros-args', '-p', 'other:zzz:=1', '-p',
+                           'rotation_node:qos.depth:=5', '-p', 'use_sim_time:=true'])
+    with pytest.raises(ParameterError, match="unknown parameter 'qos.dept' in --param "
+                                             "rotation_node:qos.dept:=5 \\(did you mean"):
+        check_parameter_names(['x', '--ros-args', '--param', 'rotation_node:qos.dept:=5'])
 
 
 def test_ros_arguments_are_read_as_rcl_reads_them():

@@ -24,7 +24,7 @@ import functools
 import operator
 import os
 import struct
-from typing import Optional
+from typing import Collection, Iterable, List, Optional
 
 import mcap
 import yaml
@@ -428,7 +428,7 @@ class BagWriter:
             self.abort()
 
 
-def checked_topics(topics, available, path):
+def checked_topics(topics: Iterable[str], available: Collection[str], path: str) -> List[str]:
     """
     Return ``topics`` as a list, each checked to be one of ``available`` (the topics of a bag).
 

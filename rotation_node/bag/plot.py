@@ -15,6 +15,7 @@ plot has a gap. A type several input types share (Vector3Stamped) is read as
 message has one, else the log time, in seconds since the first message.
 """
 import math
+from typing import Any, Tuple
 
 import numpy as np
 # A bare Figure renders PNG with the Agg backend and never touches pyplot's
@@ -168,7 +169,8 @@ def plot_topic(bag_path, topic, output_path, *, params=None, overwrite=False, st
     return len(times_ns)
 
 
-def plot_series(reader, topic, params):
+def plot_series(reader: Any, topic: str,
+                params: NodeParameters) -> Tuple[np.ndarray, list, list]:
     """
     Return what ``plot`` draws for a topic: ``(times_ns, panels, values)``.
 

@@ -9,6 +9,8 @@ avoid_ros_namespace_conventions, policies by name (``keep_last``) and durations
 as ``{sec, nsec}``. Bags written before version 9 hold the policies as
 integers; both are read.
 """
+from typing import Any, Iterable
+
 import yaml
 from rclpy.duration import Duration
 from rclpy.qos import (
@@ -127,7 +129,7 @@ def qos_profiles_yaml(profiles):
     return yaml.safe_dump(entries, sort_keys=False, default_flow_style=False).rstrip('\n')
 
 
-def rosbags_qos_yaml(profiles):
+def rosbags_qos_yaml(profiles: Iterable[Any]) -> str:
     """
     Serialise QoS profiles as the ``rosbags`` package parses them to rosbag2's YAML.
 

@@ -38,7 +38,7 @@ from pathlib import Path
 import re
 import sqlite3
 import tempfile
-from typing import Iterator, List, Optional
+from typing import Iterator, List, Optional, Union
 import urllib.parse
 
 from rotation_node.bag.compression import (
@@ -317,7 +317,7 @@ class InputBag:
             record.topic = renames.get(record.topic, record.topic)
             yield record
 
-    def close(self):
+    def close(self) -> None:
         """Close every storage file and remove decompressed temporary copies."""
         for source in self._sources:
             source.close()
@@ -412,7 +412,7 @@ class _Opener:
             self.tmpdir.cleanup()
 
 
-def open_bag(path, *, strict: bool = False) -> InputBag:
+def open_bag(path: Union[str, os.PathLike], *, strict: bool = False) -> InputBag:
     """
     Open any bag for reading: a rosbag2 directory, a storage file, a ROS 1 bag.
 

@@ -15,8 +15,10 @@ message, also used as the publish time.
 """
 import contextlib
 import io
+import os
 from pathlib import Path
 import struct
+from typing import Union
 
 from rosbags.convert.converter import generate_message_converter, LATCH, STATIC_MSGTYPE_RENAMES
 from rosbags.highlevel import AnyReader, AnyReaderError
@@ -46,7 +48,7 @@ def _installed(type_name):
     return True
 
 
-def open_ros1_bag(path) -> RosbagsInput:
+def open_ros1_bag(path: Union[str, os.PathLike]) -> RosbagsInput:
     """
     Open a ROS 1 bag to read it as ROS 2 CDR messages.
 

@@ -22,6 +22,7 @@ earlier mapped one, in sorted order of the original names),
 ``_2``, ``_3``... is appended (:func:`topic_renames`).
 """
 import re
+from typing import Dict, Iterable
 
 _INVALID_CHARACTER = re.compile(r'[^A-Za-z0-9_/]')
 _VALID_NAME = re.compile(r'(/[A-Za-z_][A-Za-z0-9_]*)+')
@@ -56,7 +57,7 @@ def ros2_topic_name(name: str) -> str:
     return '/' + '/'.join(tokens) if tokens else '/_'
 
 
-def topic_renames(names) -> dict:
+def topic_renames(names: Iterable[str]) -> Dict[str, str]:
     """
     Return the new name of every invalid name among ``names``, distinct from all the others.
 

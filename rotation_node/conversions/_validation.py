@@ -2,7 +2,7 @@
 Argument checks at the public boundary of :mod:`rotation_node.conversions`.
 
 Public functions validate once, here: they turn array_like arguments into
-C-contiguous, aligned float64 arrays with the right trailing shape, which the
+C-contiguous, aligned, writable float64 arrays with the right trailing shape, which the
 kernels take in their canonical layout (see ``_runtime``). Per-sample checks
 (finiteness, zero norm, determinant) run inside the compiled kernels, which
 report the first bad sample as a status
@@ -48,9 +48,8 @@ def float_array(x, name, trailing):
     Returns
     -------
     ndarray
-        The values, C-contiguous and aligned; a copy only where a conversion,
-        reordering or realignment was needed. Read-only arrays are used as
-        they are.
+        The values, C-contiguous, aligned and writable; a copy only where a
+        conversion, reordering, realignment or a read-only input needed one.
 
     Raises
     ------
@@ -71,9 +70,8 @@ def float_array(x, name, trailing):
 
 
 def kernel_ready(a):
-    """``a`` itself if C-contiguous and aligned (as compiled kernels take it), else such a copy."""
-    flags = a.flags
-    return a if flags.c_contiguous and flags.aligned else np.array(a, order='C')
+    """``a`` itself if C-contiguous, aligned and writable (as kernels take it), else such a copy."""
+    return a if a.flags.carray else np.array(a, order='C')
 
 
 def broadcast_pair(a, b, trailing_a, trailing_b):
@@ -94,8 +92,8 @@ def broadcast_pair(a, b, trailing_a, trailing_b):
     except ValueError:
         raise ValueError(
             f'Leading shapes of the arguments do not broadcast: {lead_a} and {lead_b}.') from None
-    return (np.ascontiguousarray(np.broadcast_to(a, lead + trailing_a)),
-            np.ascontiguousarray(np.broadcast_to(b, lead + trailing_b)))
+    return (kernel_ready(np.broadcast_to(a, lead + trailing_a)),
+            kernel_ready(np.broadcast_to(b, lead + trailing_b)))
 
 
 def raise_sample_error(status, names, arrays, trailings):

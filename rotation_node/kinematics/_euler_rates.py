@@ -117,7 +117,7 @@ def _angular_velocity_kernel(angles, rates, out, i, j, n, parity, proper, revers
     return -1
 
 
-@kernel(FLAT_IN, FLAT_IN, FLAT_OUT, *_JACOBIAN, FLOAT, array_type(1, True, INT))
+@kernel(FLAT_IN, FLAT_IN, FLAT_OUT, *_JACOBIAN, FLOAT, array_type(1, INT))
 def _euler_rates_kernel(angles, omega, out, i, j, n, parity, proper, reverse, world, scale,
                         sin_threshold, singular):
     """Fill ``out``, count the near-singular samples into ``singular[0]``; return the status."""

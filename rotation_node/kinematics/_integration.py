@@ -45,8 +45,9 @@ import math
 import numpy as np
 
 from ..conversions.kernels import (FLAT_IN, INT, ROWS_IN, array_type, canonical_kernel,
-                                   canonical_unit_quaternion, float_array, jit, kernel, product,
-                                   quaternion_from_rotation_vector_scalar, raise_sample_error)
+                                   canonical_unit_quaternion, float_array, jit, kernel,
+                                   kernel_ready, product, quaternion_from_rotation_vector_scalar,
+                                   raise_sample_error)
 from ._stage_rates import stage_rates
 from ._validation import is_world_frame, sample_times
 
@@ -112,7 +113,7 @@ def _increment(method, h, r):
                                                   d1z + d2z + 2.0 / 3.0 * cz)
 
 
-@kernel(ROWS_IN, array_type(4), FLAT_IN, array_type(3, True), INT, returns=None)
+@kernel(ROWS_IN, array_type(4), FLAT_IN, array_type(3), INT, returns=None)
 def _integrate_kernel(q0, rates, h, out, method):
     """Chain the steps from unit ``q0`` (B, 4): ``rates`` (B, K, S, 3) -> ``out`` (B, K + 1, 4)."""
     for b in range(q0.shape[0]):
@@ -123,6 +124,11 @@ def _integrate_kernel(q0, rates, h, out, method):
             x, y, z, w = product(x, y, z, w, dx, dy, dz, dw)
             x, y, z, w = canonical_unit_quaternion(x, y, z, w)
             out[b, k + 1, 0], out[b, k + 1, 1], out[b, k + 1, 2], out[b, k + 1, 3] = x, y, z, w
+
+
+def _broadcast(a, shape):
+    """``a`` broadcast to ``shape``, C-contiguous and writable: a copy only where needed."""
+    return kernel_ready(a if a.shape == shape else np.broadcast_to(a, shape))
 
 
 def integrate_angular_velocity(q0, omega, t, *, method='magnus4', frame='body'):
@@ -187,8 +193,7 @@ def integrate_angular_velocity(q0, omega, t, *, method='magnus4', frame='body'):
     except ValueError:
         raise ValueError(f'Leading shapes of `q0` {q.shape[:-1]} and `omega` {rates.shape[:-3]} '
                          'do not broadcast.') from None
-    q = np.ascontiguousarray(np.broadcast_to(q, lead + (4,)))
-    rates = np.ascontiguousarray(np.broadcast_to(rates, lead + rates.shape[-3:]))
+    q, rates = _broadcast(q, lead + (4,)), _broadcast(rates, lead + rates.shape[-3:])
     out = np.empty(lead + (t.shape[0], 4))
     # One compiled specialisation: the kernel sees (B, ...) views of the broadcast arrays.
     _integrate_kernel(q.reshape(-1, 4), rates.reshape((-1,) + rates.shape[-3:]), h,
