@@ -40,7 +40,8 @@ from rcl_interfaces.msg import (
 from rclpy.exceptions import (
     InvalidParameterTypeException, InvalidParameterValueException)
 from rclpy.event_handler import (
-    PublisherEventCallbacks, QoSSubscriptionEventType, SubscriptionEventCallbacks)
+    PublisherEventCallbacks, QoSSubscriptionEventType, SubscriptionEventCallbacks,
+    UnsupportedEventTypeError)
 from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
@@ -65,6 +66,9 @@ ISSUE_LOG_PERIOD_S = 5.0
 HANDOFF_CHECK_S = 0.05
 HANDOFF_QUIET_S = 0.25
 HANDOFF_MAX_S = 2.0
+# Replacing an output publisher: how long the new one must have matched the old one's
+# subscribers (on its side) before it takes over, so that their readers match it too.
+PUBLISHER_SETTLE_S = 0.5
 # Messages taken in one callback at most, beyond the one the executor took.
 DRAIN_MAX = 100
 
@@ -182,6 +186,9 @@ class RotationNode(Node):
     """
 
     def __init__(self, parameters_files: Sequence[str] = (), **kwargs):
+        # Before the node exists: its parameter services answer as soon as they appear,
+        # not after the conversions have been compiled or loaded (seconds on a first run).
+        warm_up_conversions()
         super().__init__(NODE_NAME, **kwargs)
         try:
             for path in parameters_files:   # as rotation_bag convert reads them
@@ -196,6 +203,7 @@ class RotationNode(Node):
         self._output_publishers = {}
         self._publish = {}              # output name -> publish(bytes)
         self._encoders = {}             # output name -> encode(header, numbers) -> bytes
+        self._replacing = {}    # output name -> [new publisher, matched since, created at]
         self._handoff_timer = None
         self._message_lost = {}         # input subscription -> its message-lost event handle
         self._next_issue_log = {}   # reason -> monotonic time of its next allowed warning
@@ -211,7 +219,6 @@ class RotationNode(Node):
         except (InvalidParameterValueException, InvalidParameterTypeException) as exc:
             self.destroy_node()
             raise ParameterError(str(exc)) from None
-        warm_up_conversions()
         self._configure(None, self.params)
         # No QoS event handlers on the diagnostics publisher: each handler is one more
         # entity that rclpy's executor re-examines at every wake-up, i.e. every message.
@@ -255,25 +262,48 @@ class RotationNode(Node):
                 self._subscribe(state, qos)
         output_qos = qos_profile(params)
         for name in list(self._output_publishers):
-            publisher = self._output_publishers[name]
-            if name not in params.outputs or publisher.qos_profile != output_qos:
+            replacement = self._replacing.pop(name, None)
+            if replacement is not None:   # superseded before it took over
+                self.destroy_publisher(replacement[0])
+            if name not in params.outputs:
                 self.destroy_publisher(self._output_publishers.pop(name))
                 del self._publish[name]
+            elif self._output_publishers[name].qos_profile != output_qos:
+                # The old publisher publishes until the new one has matched its subscribers.
+                self._replacing[name] = [
+                    self._create_output_publisher(name, output_qos), None, time.monotonic()]
+                self._start_handoff_timer()
         for name in params.outputs:
             if name not in self._output_publishers:
-                output = messages.OUTPUTS[name]
-                # Without QoS event handlers (as the diagnostics publisher): a
-                # subscriber that cannot match reports it itself.
-                publisher = self.create_publisher(
-                    output.message_class, name, output_qos,
-                    event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
+                publisher = self._create_output_publisher(name, output_qos)
                 self._output_publishers[name] = publisher
                 self._publish[name] = publisher.publish
-                self._encoders[name] = output.message.encoder()
+                self._encoders[name] = messages.OUTPUTS[name].message.encoder()
         self.get_logger().info(
             f'converting {params.input_type} messages on {self._input_topic_names()} '
             f'to {", ".join(params.outputs)} (euler.sequence {params.euler_sequence}, '
             f'{"degrees" if params.euler_degrees else "radians"})')
+
+    def _create_output_publisher(self, name, qos):
+        # Without QoS event handlers (as the diagnostics publisher): a subscriber
+        # that cannot match reports it itself.
+        return self.create_publisher(
+            messages.OUTPUTS[name].message_class, name, qos,
+            event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
+
+    def _check_publisher_handoffs(self, now):
+        """Let each new output publisher take over once it matched the old one's subscribers."""
+        for name, replacement in list(self._replacing.items()):
+            new, old = replacement[0], self._output_publishers[name]
+            if new.get_subscription_count() < old.get_subscription_count():
+                replacement[1] = None   # (a subscriber the new QoS cannot match: HANDOFF_MAX_S)
+            elif replacement[1] is None:
+                replacement[1] = now   # matched on the publisher's side; let readers match too
+            settled = replacement[1] is not None and now - replacement[1] >= PUBLISHER_SETTLE_S
+            if settled or now - replacement[2] > HANDOFF_MAX_S:
+                del self._replacing[name]
+                self._output_publishers[name], self._publish[name] = new, new.publish
+                self.destroy_publisher(old)
 
     # Input subscriptions and QoS ------------------------------------------------------
 
@@ -334,14 +364,16 @@ class RotationNode(Node):
             event_callbacks=callbacks, raw=self._decode is not None)
         # The message-lost status is read once a second, not waited on: an event handler
         # is one more entity the executor examines at every wake-up.
-        with subscription.handle:
-            self._message_lost[subscription] = _rclpy.EventHandle(
-                subscription.handle, QoSSubscriptionEventType.RCL_SUBSCRIPTION_MESSAGE_LOST)
+        try:
+            with subscription.handle:
+                self._message_lost[subscription] = _rclpy.EventHandle(
+                    subscription.handle, QoSSubscriptionEventType.RCL_SUBSCRIPTION_MESSAGE_LOST)
+        except UnsupportedEventTypeError:   # a middleware without it: sequence gaps only
+            self._message_lost[subscription] = None
         if state.subscription is not None:
             state.retiring = state.subscription
             state.handoff_started = state.retiring_heard = time.monotonic()
-            if self._handoff_timer is None:
-                self._handoff_timer = self.create_timer(HANDOFF_CHECK_S, self._check_handoffs)
+            self._start_handoff_timer()
         state.subscription, state.qos = subscription, qos
         state.reception.resize(_memory(self.params))
 
@@ -355,17 +387,23 @@ class RotationNode(Node):
         state.pending_identities.clear()
         for data, info in pending:
             self._accept(state, data, info)
-        if self._handoff_timer is not None and all(s.retiring is None for s in self._inputs):
-            self.destroy_timer(self._handoff_timer)
-            self._handoff_timer = None
+
+    def _start_handoff_timer(self):
+        if self._handoff_timer is None:
+            self._handoff_timer = self.create_timer(HANDOFF_CHECK_S, self._check_handoffs)
 
     def _check_handoffs(self):
+        """Finish the subscription and publisher replacements that are due; then the timer."""
         now = time.monotonic()
         for state in self._inputs:
             if state.retiring is not None and (
                     (state.pending and now - state.retiring_heard > HANDOFF_QUIET_S)
                     or now - state.handoff_started > HANDOFF_MAX_S):
                 self._finish_handoff(state)
+        self._check_publisher_handoffs(now)
+        if not self._replacing and all(state.retiring is None for state in self._inputs):
+            self.destroy_timer(self._handoff_timer)
+            self._handoff_timer = None
 
     def _on_incompatible_qos(self, state, event):
         if self.params.qos_reliability == AUTO:
@@ -386,7 +424,9 @@ class RotationNode(Node):
 
     def _destroy_input_subscription(self, state, subscription):
         self._count_message_lost(state, subscription)
-        self._message_lost.pop(subscription).destroy_when_not_in_use()
+        event = self._message_lost.pop(subscription)
+        if event is not None:
+            event.destroy_when_not_in_use()
         self.destroy_subscription(subscription)
 
     def _input_topic_names(self):
