@@ -256,9 +256,17 @@ class RotationNode(Node):
             codec = fixed_layout_codec(input_type.type_name)
             self._decode = None if codec is None else codec.decode
             self._inputs = [_TopicInput(topic, _memory(params)) for topic in input_type.topics]
+        # A stateful input stream (input_type.stream) starts empty with the new pipeline:
+        # its latched topics are subscribed again, so that their publishers deliver what
+        # they keep once more, and accepted again.
+        replay = previous is not None and input_type.stream is not None
         for state in self._inputs:
             qos = self._input_qos(state, self._offered(state))
-            if qos != state.qos:
+            if replay and state.topic.transient_local:
+                self._finish_handoff(state)
+                state.reception.forget()
+                self._subscribe(state, qos)
+            elif qos != state.qos:
                 self._subscribe(state, qos)
         output_qos = qos_profile(params)
         for name in list(self._output_publishers):

@@ -78,7 +78,8 @@ def input_qos(params, offered, *, transient_local: bool = False) -> QoSProfile:
     as ``ros2 bag record`` adapts to what is offered); otherwise, or while
     there is no publisher, those of :func:`qos_profile` (reliable when auto):
     a reliable publisher then matches at once, and a best-effort one is
-    reported by an incompatible-QoS event. Keep last ``qos.depth`` either way.
+    reported by an incompatible-QoS event. The history is that of
+    :func:`qos_profile` either way.
 
     Parameters
     ----------
@@ -93,11 +94,10 @@ def input_qos(params, offered, *, transient_local: bool = False) -> QoSProfile:
     rclpy.qos.QoSProfile
 
     """
-    if params.qos_reliability != AUTO or not offered:
-        return qos_profile(params, transient_local=transient_local)
-    reliability, durability = matching_policies(offered)
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=params.qos_depth,
-                      reliability=reliability, durability=durability)
+    profile = qos_profile(params, transient_local=transient_local)
+    if params.qos_reliability == AUTO and offered:
+        profile.reliability, profile.durability = matching_policies(offered)
+    return profile
 
 
 def qos_profiles_yaml(profiles):
