@@ -23,6 +23,15 @@ checked against the table before it is accepted; an accepted change takes
 effect on the next message. Counters and the current conventions are
 published on ``/diagnostics`` once a second.
 
+With ``qos.reliability: auto`` each input subscription adapts to the QoS its
+publishers offer, a subscription is replaced (new QoS) without losing or
+repeating a message, and messages the publishers sent but the node never got
+are counted from their publication sequence numbers (:mod:`rotation_node.reception`)
+and reported as ``lost``. Input types with a fixed CDR layout are taken as
+serialized messages and decoded by :mod:`rotation_node.bag.cdr`; outputs are
+published as the bytes their encoders give, as ``rotation_bag convert`` writes
+them. See docs/node.md.
+
 Run it with, for example::
 
     rotation_node --ros-args -r input:=/imu/data -p outputs:='[euler, angular_velocity]'
