@@ -609,13 +609,13 @@ def main(args: Optional[Sequence[str]] = None) -> int:
     except ParameterError as exc:
         print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
         return 1
-    try:
-        rclpy.init(args=args)
-    except _rclpy.RCLError as exc:   # e.g. a malformed --ros-args remapping
-        print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
-        return 1
     node = None
     try:
+        try:
+            rclpy.init(args=args)
+        except _rclpy.RCLError as exc:   # e.g. a malformed --ros-args remapping
+            print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
+            return 1
         node = RotationNode(parameters_files=files)
         # The ~1e5 objects of rclpy, numpy and numba live as long as the process: keep
         # them out of the cyclic collector, whose full passes over them stall a
