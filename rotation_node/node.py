@@ -43,31 +43,29 @@ import sys
 import time
 from typing import List, Optional, Sequence
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (
     FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult)
-from rclpy.exceptions import (
-    InvalidParameterTypeException, InvalidParameterValueException)
+import rclpy
 from rclpy.event_handler import (
     PublisherEventCallbacks, QoSSubscriptionEventType, SubscriptionEventCallbacks,
     UnsupportedEventTypeError)
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.qos import (
-    DurabilityPolicy, QoSPolicyKind, ReliabilityPolicy, qos_policy_name_from_kind)
-
+    DurabilityPolicy, qos_policy_name_from_kind, QoSPolicyKind, ReliabilityPolicy)
 from rotation_node import messages
 from rotation_node.bag.cdr import fixed_layout_codec
 from rotation_node.bag.qos import AUTO, input_qos, qos_profile
 from rotation_node.errors import BagError, ParameterError
 from rotation_node.parameters import (
-    NODE_NAME, PARAMETERS, PARAMETERS_BY_NAME, ROS_BUILTIN_PARAMETERS, NodeParameters,
-    parameters_file_sections, parameters_from_yaml, unknown_parameter_error)
+    NODE_NAME, NodeParameters, PARAMETERS, PARAMETERS_BY_NAME, parameters_file_sections,
+    parameters_from_yaml, ROS_BUILTIN_PARAMETERS, unknown_parameter_error)
 from rotation_node.pipeline import (
-    CONVERSION_ERROR, SKIP_REASONS, ConversionPipeline, warm_up_conversions)
-from rotation_node.reception import Reception, message_identity
+    CONVERSION_ERROR, ConversionPipeline, SKIP_REASONS, warm_up_conversions)
+from rotation_node.reception import message_identity, Reception
 
 DIAGNOSTICS_PERIOD_S = 1.0
 ISSUE_LOG_PERIOD_S = 5.0
@@ -594,9 +592,31 @@ def _text(value):
     return str(value)
 
 
+def _non_ros_arguments(arguments: Sequence[str]) -> List[str]:
+    """Return the arguments outside ``--ros-args ... [--]`` (without parsing the ROS ones)."""
+    outside, in_ros_args = [], False
+    for argument in arguments:
+        if argument == '--ros-args':
+            in_ros_args = True
+        elif argument == '--' and in_ros_args:
+            in_ros_args = False
+        elif not in_ros_args:
+            outside.append(argument)
+    return outside
+
+
+def usage() -> str:
+    """Return the text ``rotation_node --help`` prints: how to run it, its parameters."""
+    return ('usage: rotation_node [--ros-args [-r input:=TOPIC] [-p NAME:=VALUE]... '
+            '[--params-file FILE]]\n\n'
+            'Convert the orientations on the topic "input" and publish the outputs listed in '
+            'the parameter "outputs".\nParameters: '
+            + ', '.join(spec.name for spec in PARAMETERS) + '.\n')
+
+
 def main(args: Optional[Sequence[str]] = None) -> int:
     """
-    Run the node until Ctrl-C.
+    Run the node until Ctrl-C (``--help``: print its usage).
 
     Returns
     -------
@@ -606,6 +626,9 @@ def main(args: Optional[Sequence[str]] = None) -> int:
 
     """
     argv = sys.argv if args is None else list(args)
+    if {'-h', '--help'} & set(_non_ros_arguments(argv[1:])):
+        print(usage(), end='')
+        return 0
     files = _parameters_files(argv)
     try:   # before rclpy reads the files, whose own errors are many lines long
         for path in files:
