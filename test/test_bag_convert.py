@@ -52,7 +52,7 @@ def _outputs(path, topic):
 
 
 def _output_bytes(path, topic):
-    """The serialised messages of one topic of a bag, in order."""
+    """Return the serialised messages of one topic of a bag, in order."""
     with BagReader(path) as reader:
         return [bytes(record.data) for record in reader.messages([topic])]
 

@@ -11,17 +11,16 @@ import itertools
 import re
 import time
 
-import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+import pytest
 from rcl_interfaces.msg import Log
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
-from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from rclpy.qos import qos_profile_sensor_data, QoSProfile
+from ros_harness import RosProcess, script, TestNode
+from rotation_node.messages import OUTPUTS
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Header
-
-from rotation_node.messages import OUTPUTS
-from ros_harness import RosProcess, TestNode, script
 
 START_TIMEOUT_S = 60.0
 STAMP_NS = 1_700_000_000_000_000_000
@@ -89,7 +88,7 @@ class Node:
         return [log.msg for log in self.ros.log
                 if log.name.startswith(self.namespace + '.') and text in log.msg]
 
-    def set(self, name, value):
+    def set_parameter(self, name, value):
         future = self.parameters.set_parameters([Parameter(name, value=value)])
         assert self.ros.spin_until(future.done, 10.0), 'parameter service timed out'
         assert future.result().results[0].successful
@@ -184,7 +183,7 @@ def test_publishers_of_either_kind_in_turn(ros, node):
 
 
 def test_an_explicit_reliability_is_kept(ros, node):
-    node.set('qos.reliability', 'reliable')
+    node.set_parameter('qos.reliability', 'reliable')
     publisher = node.publisher(qos_profile_sensor_data)
     ros.spin_for(2.5)
     assert node.diagnostics()['input_qos'] == f'{node.input_topic}: reliable, volatile'

@@ -11,9 +11,9 @@ converted once each.
 import dataclasses
 import time
 
+from geometry_msgs.msg import QuaternionStamped
 import pytest
 import rclpy
-from geometry_msgs.msg import QuaternionStamped
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter

@@ -3,7 +3,7 @@ import random
 
 import pytest
 
-from rotation_node.reception import MAX_PUBLISHERS, Reception, message_identity
+from rotation_node.reception import MAX_PUBLISHERS, message_identity, Reception
 
 
 def info(number, stamp=None):

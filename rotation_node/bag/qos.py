@@ -88,6 +88,7 @@ def input_qos(params, offered, *, transient_local: bool = False) -> QoSProfile:
     Parameters
     ----------
     params : rotation_node.parameters.NodeParameters
+        The node's parameters (``qos.reliability``, ``qos.depth``).
     offered : list of rclpy.qos.QoSProfile
         The profiles the topic's publishers offer (may be empty).
     transient_local : bool, optional
