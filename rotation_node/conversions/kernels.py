@@ -12,7 +12,9 @@ Declaring and calling kernels (see :mod:`._runtime` for the canonical layout)
     (``FLAT_IN``, ``ROWS_IN``, ``FLAT_OUT``, ``ROWS_OUT``, ``INT``, ``FLOAT``,
     ``BOOL``, :func:`array_type`); :func:`samples` and :func:`matrix_samples`
     (compiled views of the canonical layout), :func:`kernel_layout`;
-    :func:`call_binary` (validation, broadcasting, output, threads, errors).
+    :func:`call_binary` (validation, broadcasting, output, threads, errors);
+    :data:`BATCH_SAMPLES`, the size from which conversions with a batch schedule
+    use it (its results may differ from the single-sample path in the last bit).
 
 Validation and error reporting
     :func:`float_array`, :func:`kernel_ready`, :func:`raise_sample_error`, the statuses
@@ -34,13 +36,15 @@ from ._axis_angle import (quaternion_from_rotation_vector_scalar,
 from ._matrix import matrix_at, matrix_defect
 from ._quaternion import (canonical_kernel, canonical_unit_quaternion, product, quaternion_status,
                           scaled_quaternion, unit_quaternion, vector_status)
-from ._runtime import (BOOL, FLAT_IN, FLAT_OUT, FLOAT, INT, ROWS_IN, ROWS_OUT, array_type,
+from ._runtime import (BATCH_SAMPLES, BOOL, FLAT_IN, FLAT_OUT, FLOAT, INT, ROWS_IN, ROWS_OUT,
+                       array_type,
                        call_binary, first_status, jit, kernel, kernel_layout, matrix_samples,
                        samples, status)
 from ._validation import NON_FINITE, OK, float_array, kernel_ready, raise_sample_error
 
 __all__ = [
-    'BOOL', 'FLAT_IN', 'FLAT_OUT', 'FLOAT', 'INT', 'NON_FINITE', 'OK', 'ROWS_IN', 'ROWS_OUT',
+    'BATCH_SAMPLES', 'BOOL', 'FLAT_IN', 'FLAT_OUT', 'FLOAT', 'INT', 'NON_FINITE', 'OK',
+    'ROWS_IN', 'ROWS_OUT',
     'array_type', 'call_binary', 'canonical_kernel', 'canonical_unit_quaternion',
     'first_status', 'float_array', 'jit', 'kernel', 'kernel_layout', 'kernel_ready', 'matrix_at',
     'matrix_defect', 'matrix_samples', 'product', 'quaternion_from_rotation_vector_scalar',
