@@ -24,13 +24,12 @@ node's conversions, without building rclpy messages where the types allow it.
 import os
 
 from rotation_node import messages
-from rotation_node.bag.cdr import fixed_layout_codec
+from rotation_node.bag.block_convert import converted_blocks, TopicConverter
 from rotation_node.bag.mcap_io import BagWriter, TopicMetadata
 from rotation_node.bag.progress import ProgressBar
 from rotation_node.bag.qos import qos_profile, qos_profiles_yaml
 from rotation_node.bag.reader import open_bag
 from rotation_node.errors import BagError
-from rotation_node.pipeline import ConversionPipeline
 
 
 def output_topic(input_topic, output_name):
@@ -66,7 +65,7 @@ def _same_path(input_path, output_path):
 
 
 def convert(input_path, output_path, params, *, topics=None, overwrite=False,
-            progress_stream=None, strict=False, report=None):
+            progress_stream=None, strict=False, report=None, blocks=True):
     """
     Write ``output_path``: the input bag plus the node's outputs for its input topics.
 
@@ -93,6 +92,10 @@ def convert(input_path, output_path, params, *, topics=None, overwrite=False,
         directory (mcap, 3 files), 5000 messages``) and its notes (an
         unfinished recording, a renamed topic) once it is opened, before
         anything is written.
+    blocks : bool, optional
+        Convert in blocks where the parameters allow it (the default; see
+        :mod:`rotation_node.bag.block_convert`); False converts message by
+        message. The output is the same byte for byte.
 
     Returns
     -------
@@ -116,17 +119,16 @@ def convert(input_path, output_path, params, *, topics=None, overwrite=False,
             for note in reader.notes:
                 report(note)
         input_type_name = messages.INPUTS[params.input_type].type_name
-        pipelines = {topic: ConversionPipeline(params)
-                     for topic in _input_topics(reader, input_type_name, topics)}
-        input_codec = fixed_layout_codec(input_type_name)
-        decode = None if input_codec is None else input_codec.decode
+        input_topics = _input_topics(reader, input_type_name, topics)
         encoders = {name: (messages.OUTPUTS[name].type_name,
                            messages.OUTPUTS[name].message.encoder())
                     for name in params.outputs}
         # {input topic: {output name: (output topic, type name, encode)}}
         outputs = {topic: {name: (output_topic(topic, name), *encoder)
                            for name, encoder in encoders.items()}
-                   for topic in pipelines}
+                   for topic in input_topics}
+        converters = {topic: TopicConverter(params, outputs[topic], blocks=blocks)
+                      for topic in input_topics}
         offered_qos = qos_profiles_yaml([qos_profile(params)])
         new_topics = [TopicMetadata(output_topic_name, type_name, offered_qos)
                       for topic_outputs in outputs.values()
@@ -140,16 +142,14 @@ def convert(input_path, output_path, params, *, topics=None, overwrite=False,
                             label='converting ') as progress:
             for metadata in [*reader.topic_metadata.values(), *new_topics]:
                 writer.add_topic(metadata)
-            for record in reader.messages():
-                log_time_ns, publish_time_ns = record.log_time_ns, record.publish_time_ns
-                writer.write_serialized(record.topic, record.type_name, record.data,
-                                        log_time_ns, publish_time_ns)
-                pipeline = pipelines.get(record.topic)
-                if pipeline is not None:
-                    topic_outputs = outputs[record.topic]
-                    for name, header, values in pipeline.process_values(record.message(decode)):
-                        topic, type_name, encode = topic_outputs[name]
-                        writer.write_serialized(topic, type_name, encode(header, values),
-                                                log_time_ns, publish_time_ns)
-                progress.update()
-    return {topic: pipeline.stats for topic, pipeline in pipelines.items()}
+            write = writer.write_serialized
+            for block in converted_blocks(reader.messages(), converters):
+                for record, converted in block:
+                    log_time_ns, publish_time_ns = record.log_time_ns, record.publish_time_ns
+                    write(record.topic, record.type_name, record.data, log_time_ns,
+                          publish_time_ns)
+                    if converted:
+                        for topic, type_name, data in converted:
+                            write(topic, type_name, data, log_time_ns, publish_time_ns)
+                progress.update(len(block))
+    return {topic: converter.pipeline.stats for topic, converter in converters.items()}
