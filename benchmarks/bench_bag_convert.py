@@ -70,11 +70,12 @@ def write_imu_bag(path, count, seed=0):
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import Imu
 
-    from rotation_node.bag.mcap_io import BagWriter
+    from rotation_node.bag.writer import BagWriter
     rng = np.random.default_rng(seed)
     msg = Imu()
     msg.header.frame_id = 'imu_link'
-    with BagWriter(path, overwrite=True) as writer:
+    # Uncompressed, as every bag was before chunk compression existed: the ratio stays comparable.
+    with BagWriter(path, overwrite=True, compression='none') as writer:
         for start in range(0, count, 10_000):
             n = min(10_000, count - start)
             quaternions = rng.normal(size=(n, 4))
@@ -372,7 +373,8 @@ def breakdown(directory, count=20_000):
     from rotation_node import messages
     from rotation_node.bag.block_convert import BLOCK_MESSAGES
     from rotation_node.bag.cdr_block import InputBlockDecoder, OutputBlockEncoder
-    from rotation_node.bag.mcap_io import BagReader, BagWriter
+    from rotation_node.bag.mcap_io import BagReader
+    from rotation_node.bag.writer import BagWriter
     from rotation_node.block_pipeline import BlockPipeline
     from rotation_node.parameters import parameters_from_yaml
     from rotation_node.pipeline import ConversionPipeline
@@ -383,7 +385,8 @@ def breakdown(directory, count=20_000):
     encoder = OutputBlockEncoder(messages.OUTPUTS['euler'].message)
 
     def write(records, encoded):
-        with BagWriter(os.path.join(directory, 'sample_out.mcap'), overwrite=True) as writer:
+        with BagWriter(os.path.join(directory, 'sample_out.mcap'), overwrite=True,
+                       compression='none') as writer:
             outputs = (data for block in encoded for data in block)
             for record in records:
                 writer.write_serialized(TOPIC, record.type_name, record.data, record.log_time_ns)

@@ -83,7 +83,7 @@ def _axis_flow(q, momentum, inverse_inertia, axis, duration):
 
 
 @numba.njit(cache=True)
-def integrate(q0, momentum0, inverse_inertia, t, substeps, axes, fractions):
+def integrate(q0, momentum0, momentum_norm, inverse_inertia, t, substeps, axes, fractions):
     """
     Integrate a free rigid body from ``t[0]`` and return its state at every ``t``.
 
@@ -93,6 +93,10 @@ def integrate(q0, momentum0, inverse_inertia, t, substeps, axes, fractions):
         Unit quaternion (x, y, z, w) at ``t[0]``, body-to-world.
     momentum0 : ndarray, shape (3,)
         Body angular momentum ``I w`` at ``t[0]``.
+    momentum_norm : float
+        ``|L|``, held exactly along the motion: ``|momentum0|`` at the start
+        of the motion (passed on, so that integrating in pieces, each from
+        the last state of the one before, gives the same result as at once).
     inverse_inertia : ndarray, shape (3,)
         ``1 / I_i``, principal axes along the body x, y, z axes.
     t : ndarray, shape (n,)
@@ -107,10 +111,9 @@ def integrate(q0, momentum0, inverse_inertia, t, substeps, axes, fractions):
     q : ndarray, shape (n, 4)
         Unit quaternions, continuous in sign.
     momentum : ndarray, shape (n, 3)
-        Body angular momentum, ``|L|`` equal to ``|momentum0|``.
+        Body angular momentum, ``|L|`` equal to ``momentum_norm``.
     """
     n = t.shape[0]
-    momentum_norm = math.sqrt(momentum0[0] ** 2 + momentum0[1] ** 2 + momentum0[2] ** 2)
     q_out = np.empty((n, 4))
     momentum_out = np.empty((n, 3))
     q = q0.copy()

@@ -2,9 +2,13 @@
 Sensor effects: what a simulated IMU gets wrong, one small function per effect.
 
 The simulated sensor starts as the truth (:meth:`SensorStream.from_truth`).
-Each effect listed in the scene is then a function ``(stream, params, rng) ->
-(stream, changed)`` that returns a new stream in which only the fields that
-effect owns differ, and the ``(n,)`` mask of the samples it changed:
+Each effect listed in the scene is then a function ``(stream, params, rng,
+state) -> (stream, changed)`` that returns a new stream in which only the
+fields that effect owns differ, and the ``(n,)`` mask of the samples it
+changed. ``state`` is a dict the effect keeps between calls on consecutive
+blocks of one stream (a random walk's position, a burst running into the next
+block): :class:`EffectsStream` applies the effects block by block with the
+same result, bit for bit, as :func:`apply_effects` on the whole stream.
 
 =========================  =============================================================
 effect                     fields it changes
@@ -95,22 +99,29 @@ def _isotropic_covariance(n, std):
     return np.tile((std * std * np.eye(3)).ravel(), (n, 1))
 
 
-def add_gyro_bias(stream, params, rng):
+def add_gyro_bias(stream, params, rng, state):
     """
     Return the stream with ``b_k = constant + random walk`` added to the angular velocity.
 
     The walk starts at 0 on the first sample and steps by
     ``N(0, random_walk^2 dt)`` per axis over each nominal interval ``dt``.
     """
-    steps = rng.standard_normal((len(stream) - 1, 3))
-    steps *= params.random_walk * np.sqrt(np.diff(stream.time))[:, np.newaxis]
-    bias = np.asarray(params.constant) + np.concatenate(
-        (np.zeros((1, 3)), np.cumsum(steps, axis=0)))
+    if 'time' in state:   # a later block: the walk goes on from the last sample
+        time = np.concatenate(([state['time']], stream.time))
+    else:
+        time = stream.time
+    steps = rng.standard_normal((len(time) - 1, 3))
+    steps *= params.random_walk * np.sqrt(np.diff(time))[:, np.newaxis]
+    walk = np.cumsum(np.concatenate((state.get('walk', np.zeros((1, 3))), steps)), axis=0)
+    if 'time' in state:
+        walk = walk[1:]
+    state['time'], state['walk'] = stream.time[-1], walk[-1:].copy()
+    bias = np.asarray(params.constant) + walk
     changed = np.any(bias != 0, axis=1)
     return dataclasses.replace(stream, angular_velocity=stream.angular_velocity + bias), changed
 
 
-def add_gyro_noise(stream, params, rng):
+def add_gyro_noise(stream, params, rng, state):
     """Return the stream with N(0, std^2) white noise on each gyro axis, and its covariance."""
     noise = params.std * rng.standard_normal((len(stream), 3))
     return dataclasses.replace(
@@ -119,7 +130,7 @@ def add_gyro_noise(stream, params, rng):
     ), np.full(len(stream), params.std > 0)
 
 
-def add_orientation_noise(stream, params, rng):
+def add_orientation_noise(stream, params, rng, state):
     """
     Return the stream with orientation ``q (x) exp(v)``, and its covariance ``std^2 I``.
 
@@ -135,14 +146,14 @@ def add_orientation_noise(stream, params, rng):
     ), np.full(len(stream), params.std > 0)
 
 
-def flip_quaternion_signs(stream, params, rng):
+def flip_quaternion_signs(stream, params, rng, state):
     """Return the stream with each orientation replaced by ``-q`` with ``probability``."""
     flipped = rng.random(len(stream)) < params.probability
     sign = np.where(flipped, -1.0, 1.0)[:, np.newaxis]
     return dataclasses.replace(stream, orientation=stream.orientation * sign), flipped
 
 
-def scale_quaternions(stream, params, rng):
+def scale_quaternions(stream, params, rng, state):
     """Return the stream with each orientation multiplied by a factor uniform in ``scale``."""
     low, high = params.scale
     factor = rng.uniform(low, high, len(stream))
@@ -150,7 +161,7 @@ def scale_quaternions(stream, params, rng):
             factor != 1.0)
 
 
-def insert_nan_bursts(stream, params, rng):
+def insert_nan_bursts(stream, params, rng, state):
     """
     Return the stream with NaN in every component of ``fields`` during bursts.
 
@@ -158,8 +169,12 @@ def insert_nan_bursts(stream, params, rng):
     overlapping bursts merge.
     """
     starts = rng.random(len(stream)) < params.probability
-    in_burst = np.convolve(starts.astype(np.int64), np.ones(params.length, dtype=np.int64))
-    in_burst = in_burst[:len(stream)] > 0
+    # Starts of the previous block whose bursts reach into this one.
+    earlier = state.get('starts', np.zeros(0, dtype=np.int64))
+    linked = np.concatenate((earlier, starts.astype(np.int64)))
+    in_burst = np.convolve(linked, np.ones(params.length, dtype=np.int64))
+    in_burst = in_burst[len(earlier):len(earlier) + len(stream)] > 0
+    state['starts'] = linked[max(len(linked) - (params.length - 1), 0):]
     changes = {}
     for field in params.fields:
         values = getattr(stream, field).copy()
@@ -168,7 +183,7 @@ def insert_nan_bursts(stream, params, rng):
     return dataclasses.replace(stream, **changes), in_burst
 
 
-def hide_orientation(stream, params, rng):
+def hide_orientation(stream, params, rng, state):
     """
     Return the stream with the orientation hidden, each sample with ``probability``.
 
@@ -189,7 +204,7 @@ def hide_orientation(stream, params, rng):
                                orientation_covariance=covariance), unknown
 
 
-def jitter_timestamps(stream, params, rng):
+def jitter_timestamps(stream, params, rng, state):
     """
     Return the stream with each ``header.stamp`` offset by N(0, std^2) s, rounded to ns.
 
@@ -201,7 +216,7 @@ def jitter_timestamps(stream, params, rng):
     return dataclasses.replace(stream, stamp_ns=stream.stamp_ns + offset_ns), offset_ns != 0
 
 
-def drop_messages(stream, params, rng):
+def drop_messages(stream, params, rng, state):
     """Return the stream with each sample unpublished with ``probability``."""
     dropped = rng.random(len(stream)) < params.probability
     return dataclasses.replace(stream, published=stream.published & ~dropped), dropped
@@ -231,6 +246,34 @@ def effect_rng(seed, name):
     return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=tuple(name.encode())))
 
 
+class EffectsStream:
+    """
+    The scene's effects, applied to consecutive blocks of one sensor stream.
+
+    ``apply(block)`` on consecutive pieces of a stream returns, piece by
+    piece, exactly what :func:`apply_effects` returns for the whole stream:
+    each effect keeps its generator and its state across blocks.
+
+    Parameters
+    ----------
+    effects : Mapping[str, object]
+        Effect parameters by name (``Scene.effects``).
+    seed : int
+        Scene seed, >= 0.
+    """
+
+    def __init__(self, effects, seed):
+        self._effects = [(name, effect, effects[name], effect_rng(seed, name), {})
+                         for name, effect in EFFECTS.items() if name in effects]
+
+    def apply(self, stream):
+        """Return the next block with the effects applied, and what each changed in it."""
+        changed = {}
+        for name, effect, params, rng, state in self._effects:
+            stream, changed[name] = effect(stream, params, rng, state)
+        return stream, changed
+
+
 def apply_effects(stream, effects, seed):
     """
     Return the stream with the scene's effects applied, and what each changed.
@@ -250,8 +293,4 @@ def apply_effects(stream, effects, seed):
     changed : dict of str to ndarray of bool, shape (n,)
         For each applied effect, the samples it changed.
     """
-    changed = {}
-    for name, effect in EFFECTS.items():
-        if name in effects:
-            stream, changed[name] = effect(stream, effects[name], effect_rng(seed, name))
-    return stream, changed
+    return EffectsStream(effects, seed).apply(stream)
