@@ -463,4 +463,7 @@ def test_reading_gives_the_mcap_library_log_time_order(tmp_path, layout):
                     for _, channel, message in make_reader(stream).iter_messages()]
     with BagReader(path) as reader:
         got = [(record.topic, record.data, record.log_time_ns) for record in reader.messages()]
+        some = [(record.topic, record.data, record.log_time_ns)
+                for record in reader.messages(['/t0', '/t2'])]
     assert got == expected
+    assert some == [message for message in expected if message[0] != '/t1']

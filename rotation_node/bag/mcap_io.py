@@ -421,17 +421,19 @@ class BagReader:
         # log_time_order=False, queues every chunk's messages before yielding
         # the first: it loads the whole bag.)
         try:
-            chunks = None if topics is not None else _chunks_in_order(self._summary)
+            chunks = _chunks_in_order(self._summary)
             if chunks is None:
                 for _, channel, message in self._reader.iter_messages(topics=topics):
                     yield self._message(channel, message)
                 return
             channels, log_time = self._summary.channels, operator.attrgetter('log_time')
+            wanted = {channel_id for channel_id, channel in channels.items()
+                      if topics is None or channel.topic in topics}
             for chunk_index in chunks:
                 self._stream.seek(chunk_index.chunk_start_offset + 1 + 8)
                 records = [record for record in breakup_chunk(
                     Chunk.read(ReadDataStream(self._stream)), validate_crc=True)
-                    if isinstance(record, Message)]
+                    if isinstance(record, Message) and record.channel_id in wanted]
                 records.sort(key=log_time)   # stable: ties in file order
                 for message in records:
                     yield self._message(channels[message.channel_id], message)
