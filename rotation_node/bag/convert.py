@@ -24,7 +24,8 @@ node's conversions, without building rclpy messages where the types allow it.
 import os
 
 from rotation_node import messages
-from rotation_node.bag.block_convert import converted_blocks, TopicConverter
+from rotation_node.bag.block_convert import (
+    collections_deferred, converted_blocks, TopicConverter)
 from rotation_node.bag.mcap_io import TopicMetadata
 from rotation_node.bag.progress import ProgressBar
 from rotation_node.bag.qos import qos_profile, qos_profiles_yaml
@@ -145,7 +146,8 @@ def convert(input_path, output_path, params, *, topics=None, overwrite=False,
             raise BagError(f'output topic {", ".join(clashes)} is already in {reader.path}')
 
         compression = reader.compression if compression is None else compression
-        with BagWriter(output_path, overwrite=overwrite, compression=compression) as writer, \
+        with collections_deferred(), \
+                BagWriter(output_path, overwrite=overwrite, compression=compression) as writer, \
                 ProgressBar(sum(reader.message_counts.values()), stream=progress_stream,
                             label='converting ') as progress:
             for metadata in [*reader.topic_metadata.values(), *new_topics]:
