@@ -197,7 +197,8 @@ def formats(directory, count, repeat, sizes):
               f'{naive / count * 1e6:7.1f} {least:7.2f} {least / count * 1e6:7.1f} '
               f'{naive / ours:9.2f}x {ours / least:9.2f}x')
         _remove(source)
-    print('floor: mcap (MCAP file) or rosbags (the others) reading, mcap writing, no work')
+    print('floor: mcap (MCAP file) or rosbags (the others) reading, mcap writing, no work '
+          '(ROS 1: converted to CDR by rosbags)')
     print('\n## Input formats: peak memory growth of ours (fresh process each; MiB)')
     print(f'{"format":20s} ' + ' '.join(f'{f"{n} msgs":>16s}' for n in sizes))
     for fmt in FORMATS:
@@ -295,17 +296,25 @@ def floor_mcap(source, output, euler_datas):
 
 
 def floor_rosbags(source, output, euler_datas):
-    """Read the raw messages with rosbags (any format) and write the output's with ``mcap``."""
+    """
+    Read the raw messages with rosbags (any format) and write the output's with ``mcap``.
+
+    A ROS 1 bag's messages are converted to CDR (``ros1_to_cdr``, as the naive
+    pipeline does): the output holds ROS 2 messages.
+    """
     from pathlib import Path
 
     from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
 
     from rotation_node.bag.block_convert import collections_deferred
+    ros2 = get_typestore(Stores.ROS2_JAZZY)
     with collections_deferred(), AnyReader([Path(source)]) as reader, open(output, 'wb') as out:
         writer, (imu, euler) = _floor_writer(out)
         add, datas = writer.add_message, iter(euler_datas)
         for _, log_time, raw in reader.messages():
-            add(imu, log_time, bytes(raw), log_time)
+            data = raw if reader.is2 else ros2.ros1_to_cdr(raw, 'sensor_msgs/msg/Imu')
+            add(imu, log_time, bytes(data), log_time)
             add(euler, log_time, next(datas), log_time)
         writer.finish()
 
