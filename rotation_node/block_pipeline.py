@@ -276,7 +276,7 @@ class BlockPipeline:
     # ------------------------------------------------------------------ the values
 
     def _converted(self, block):
-        params, pipeline = self.params, self.pipeline
+        params = self.params
         n = len(block.stamp_ns)
         events: List[Tuple[int, int, str, str, str]] = []   # (sample, rank, reason, kind, detail)
         state = {}
@@ -326,7 +326,6 @@ class BlockPipeline:
                            'orientation unknown (Imu orientation_covariance[0] == -1): '
                            'outputs that need it skipped'))
         events.sort(key=lambda event: event[:2])
-        del pipeline   # (state and counters are committed by process_block)
         return state, stats, [event[2:] for event in events], outputs
 
     def _orientation(self, block, events, stats):
@@ -374,7 +373,7 @@ class BlockPipeline:
 
     def _angular_velocity(self, block, kept, known, q, events, state):
         """The angular velocity in the output frame: measured, or by finite difference."""
-        params, pipeline = self.params, self.pipeline
+        params = self.params
         n = len(kept)
         omega = np.zeros((n, 3))
         available = np.zeros(n, dtype=bool)

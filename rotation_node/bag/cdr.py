@@ -201,7 +201,7 @@ class FixedLayoutCodec:
 
     @property
     def leaves(self):
-        """The primitive fields in CDR order: ``path``, struct ``code`` (``'s'`` a string), ``count``."""
+        """The primitive fields in CDR order: ``path``, struct ``code`` (``s``: string), count."""
         return tuple(self._leaves)
 
     @property
