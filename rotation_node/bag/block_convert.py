@@ -120,9 +120,13 @@ class TopicConverter:
             self._encoders = [block_encoder(messages.OUTPUTS[name].message)
                               for name in params.outputs]
 
-    def convert(self, records: List) -> List[List[Output]]:
+    def convert(self, records: List, input_topics: Optional[List[str]] = None
+                ) -> List[List[Output]]:
         """
         Return the outputs of each record (a :class:`~rotation_node.bag.mcap_io.BagMessage`).
+
+        ``input_topics`` names, for each record, the input type's topic it came
+        on (for input types with several topics); ``input`` by default.
 
         Raises
         ------
@@ -131,15 +135,19 @@ class TopicConverter:
             where the per-message conversion raises it).
 
         """
-        if self._blocks is not None and len(records) > 1:
+        if self._blocks is not None and len(records) > 1:   # a plain type: one topic
             converted = self._converted_block(records)
             if converted is not None:
                 return converted
-        return [self._converted_message(record) for record in records]
+        if input_topics is None:
+            input_topics = [messages.INPUT_TOPIC.name] * len(records)
+        return [self._converted_message(record, topic)
+                for record, topic in zip(records, input_topics)]
 
-    def _converted_message(self, record) -> List[Output]:
+    def _converted_message(self, record, input_topic) -> List[Output]:
         outputs, result = self._by_name, []
-        for name, header, values in self.pipeline.process_values(record.message(self._decode)):
+        for name, header, values in self.pipeline.process_values(
+                record.message(self._decode), input_topic):
             topic, type_name, encode = outputs[name]
             result.append((topic, type_name, encode(header, values)))
         return result
@@ -161,17 +169,22 @@ class TopicConverter:
         return result
 
 
-def converted_blocks(records: Iterable, converters: Dict[str, TopicConverter]
+def converted_blocks(records: Iterable, converters: Dict[str, TopicConverter],
+                     routes: Optional[Dict[str, Tuple[str, str]]] = None
                      ) -> Iterator[List[Tuple[object, List[Output]]]]:
     """
-    Give the records in blocks, each record with the outputs of its topic's converter.
+    Give the records in blocks, each record with the outputs of its stream's converter.
 
     Parameters
     ----------
     records : iterable of BagMessage
         The input, in the order it is to be written.
     converters : dict
-        ``{input topic: TopicConverter}``; records of other topics get no outputs.
+        ``{stream: TopicConverter}``; records of other topics get no outputs.
+    routes : dict, optional
+        ``{bag topic: (stream, the input type's topic name)}``; by default
+        each converter's stream is one bag topic of that name (a plain input
+        type's ``input``).
 
     Yields
     ------
@@ -179,18 +192,23 @@ def converted_blocks(records: Iterable, converters: Dict[str, TopicConverter]
         One block of at most :data:`BLOCK_MESSAGES` records, in input order.
 
     """
+    if routes is None:
+        routes = {topic: (topic, messages.INPUT_TOPIC.name) for topic in converters}
     records = iter(records)
     while True:
         block = list(itertools.islice(records, BLOCK_MESSAGES))
         if not block:
             return
         outputs = [None] * len(block)
-        by_topic: Dict[str, List[int]] = {}
+        by_stream: Dict[str, Tuple[List[int], List[str]]] = {}
         for index, record in enumerate(block):
-            if record.topic in converters:
-                by_topic.setdefault(record.topic, []).append(index)
-        for topic, indices in by_topic.items():
-            converted = converters[topic].convert([block[i] for i in indices])
+            route = routes.get(record.topic)
+            if route is not None:
+                indices, names = by_stream.setdefault(route[0], ([], []))
+                indices.append(index)
+                names.append(route[1])
+        for stream, (indices, names) in by_stream.items():
+            converted = converters[stream].convert([block[i] for i in indices], names)
             for index, result in zip(indices, converted):
                 outputs[index] = result
         yield list(zip(block, outputs))

@@ -6,7 +6,9 @@ converted input topic ``T`` the outputs the live node would publish, on
 ``T/<output name>`` (``/imu/euler``): the same ``ConversionPipeline`` with the
 same parameters, one pipeline per input topic, fed in log-time order (the
 order of reception). Converted messages get the log and publish times of the
-input message they come from.
+input message they come from. An input type with several topics is one stream
+per first topic: ``input_type: tf`` converts ``/tf`` together with
+``/tf_static`` (``T`` with ``T_static``), and writes ``/tf/euler``...
 The bag is streamed, never loaded: memory does not grow with its length.
 The input is any bag :func:`rotation_node.bag.reader.open_bag` reads (a
 rosbag2 directory, MCAP, sqlite3, split, compressed, ROS 1, an unfinished
@@ -39,21 +41,42 @@ def output_topic(input_topic, output_name):
     return f'{input_topic.rstrip("/")}/{output_name}'
 
 
-def _input_topics(reader, input_type_name, topics):
-    """The topics to convert: the given ones, checked, or every topic of the input type."""
+def _input_streams(reader, input_type, topics):
+    """
+    Return the streams to convert: ``{topic: {bag topic: the input type's topic name}}``.
+
+    A stream is named by its first topic: the given ones, checked, or by default
+    every topic of the input type that is not another one's companion. An input
+    type with several topics (``/tf`` and ``/tf_static``) finds the others in
+    the bag by their suffix to the first one's name: ``T`` and ``T_static``.
+    """
+    first, *others = input_type.topics
+    type_name = input_type.type_name
+
+    def companions(topic):
+        return {topic + other.name[len(first.name):]: other.name for other in others
+                if other.name.startswith(first.name)}
+
     if topics is None:
-        topics = [topic for topic, type_name in reader.topics.items()
-                  if type_name == input_type_name]
+        candidates = [topic for topic, name in reader.topics.items() if name == type_name]
+        companion_topics = {c for topic in candidates for c in companions(topic)}
+        topics = [topic for topic in candidates if topic not in companion_topics]
         if not topics:
-            raise BagError(f'{reader.path} has no {input_type_name} topic to convert '
+            raise BagError(f'{reader.path} has no {type_name} topic to convert '
                            f'(its topics: {reader.topics})')
-        return topics
-    topics = [reader.topic_name(topic) for topic in topics]   # raises if not in the bag
-    for topic in topics:
-        if reader.topics[topic] != input_type_name:
-            raise BagError(f'topic {topic} in {reader.path} is {reader.topics[topic]}, '
-                           f'but input_type expects {input_type_name}')
-    return list(dict.fromkeys(topics))
+    else:
+        topics = [reader.topic_name(topic) for topic in topics]   # raises if not in the bag
+        for topic in topics:
+            if reader.topics[topic] != type_name:
+                raise BagError(f'topic {topic} in {reader.path} is {reader.topics[topic]}, '
+                               f'but input_type expects {type_name}')
+    streams = {}
+    for topic in dict.fromkeys(topics):
+        streams[topic] = {topic: first.name}
+        for companion, name in companions(topic).items():
+            if reader.topics.get(companion) == type_name:
+                streams[topic][companion] = name
+    return streams
 
 
 def _check_output(input_path, output_path):
@@ -84,7 +107,8 @@ def convert(input_path, output_path, params, *, topics=None, overwrite=False,
         As loaded from the node's parameters file.
     topics : list of str, optional
         Topics to convert (their names in the bag or their ROS 2 names); by
-        default every topic of the type ``params.input_type`` names.
+        default every topic of the type ``params.input_type`` names (for a type
+        with several topics, the first of each group: ``/tf``, not ``/tf_static``).
     overwrite : bool, optional
         Replace an existing output (atomically, once the new one is complete).
     compression : str, optional
@@ -126,17 +150,20 @@ def convert(input_path, output_path, params, *, topics=None, overwrite=False,
                    f'{sum(reader.message_counts.values())} messages')
             for note in reader.notes:
                 report(note)
-        input_type_name = messages.INPUTS[params.input_type].type_name
-        input_topics = _input_topics(reader, input_type_name, topics)
+        input_type = messages.INPUTS[params.input_type]
+        streams = _input_streams(reader, input_type, topics)
+        # {bag topic: (its stream's first topic, the input type's name for it)}
+        routes = {bag_topic: (topic, name) for topic, stream in streams.items()
+                  for bag_topic, name in stream.items()}
         encoders = {name: (messages.OUTPUTS[name].type_name,
                            messages.OUTPUTS[name].message.encoder())
                     for name in params.outputs}
         # {input topic: {output name: (output topic, type name, encode)}}
         outputs = {topic: {name: (output_topic(topic, name), *encoder)
                            for name, encoder in encoders.items()}
-                   for topic in input_topics}
+                   for topic in streams}
         converters = {topic: TopicConverter(params, outputs[topic], blocks=blocks)
-                      for topic in input_topics}
+                      for topic in streams}
         offered_qos = qos_profiles_yaml([qos_profile(params)])
         new_topics = [TopicMetadata(output_topic_name, type_name, offered_qos)
                       for topic_outputs in outputs.values()
@@ -153,7 +180,7 @@ def convert(input_path, output_path, params, *, topics=None, overwrite=False,
             for metadata in [*reader.topic_metadata.values(), *new_topics]:
                 writer.add_topic(metadata)
             write = writer.write_serialized
-            for block in converted_blocks(reader.messages(), converters):
+            for block in converted_blocks(reader.messages(), converters, routes):
                 for record, converted in block:
                     log_time_ns, publish_time_ns = record.log_time_ns, record.publish_time_ns
                     write(record.topic, record.type_name, record.data, log_time_ns,
