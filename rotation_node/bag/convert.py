@@ -16,12 +16,18 @@ recording); topics that are not converted are copied unchanged, with their
 schema and metadata as stored, under their ROS 2 names
 (:mod:`rotation_node.bag.topic_names`).
 
-The input messages are decoded by :mod:`rotation_node.bag.cdr` into
-read-only views where their type has a fixed layout, which
+The conversion runs in blocks (:mod:`rotation_node.bag.block_convert`): a
+block of messages of a topic is decoded into arrays, converted with one
+library call per conversion and encoded for the whole block, with the live
+node's results bit for bit (the per-message ``ConversionPipeline``'s state,
+counters and output bytes). What has no block form (some outputs, frame
+conversions, input types with several topics, a block the fast decoder
+cannot read exactly) goes message by message: input messages decoded by
+:mod:`rotation_node.bag.cdr` into read-only views where their type has a
+fixed layout, which
 :meth:`~rotation_node.pipeline.ConversionPipeline.process_values` reads as it
-reads rclpy messages, and the numbers it returns are encoded by each output's
-encoder (:meth:`rotation_node.messages.OutputMessage.encoder`): the live
-node's conversions, without building rclpy messages where the types allow it.
+reads rclpy messages, and the numbers it returns encoded by each output's
+encoder (:meth:`rotation_node.messages.OutputMessage.encoder`).
 """
 import os
 
