@@ -165,10 +165,6 @@ class BlockOutputs:
     numbers: Dict[str, np.ndarray]
 
 
-class _Fallback(Exception):
-    """Internal: this block must go message by message."""
-
-
 @numba.njit(cache=True, nogil=True)
 def _unwrap_chain(first, third, previous_first, previous_third, period):   # pragma: no cover
     """
@@ -251,7 +247,7 @@ class BlockPipeline:
         try:
             with np.errstate(all='ignore'):
                 result = self._converted(block)
-        except (ValueError, _Fallback):
+        except ValueError:   # a conversion rejected a value: the pipeline says which
             return None
         state, stats, events, outputs = result
         self._commit(state, stats, events)
