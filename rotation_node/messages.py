@@ -21,14 +21,13 @@ factory instead, which returns a function ``(topic, message) -> samples``.
 This module does not import rclpy: message classes and the CDR encoders are
 looked up when first used.
 """
+from dataclasses import dataclass
 import functools
 import math
 import operator
-from dataclasses import dataclass
 from typing import Any, Callable, Iterable, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
-
 from rotation_node import conversions, kinematics, tf_input
 
 # Forms of an input orientation.
@@ -197,7 +196,7 @@ class InputType:
 
     @property
     def message_class(self) -> type:
-        """The rclpy message class of :attr:`type_name`."""
+        """Return the rclpy message class of :attr:`type_name`."""
         return _message_class(self.type_name)
 
     @property
@@ -256,6 +255,7 @@ class InputType:
         Parameters
         ----------
         params : rotation_node.parameters.NodeParameters
+            The parameters the stream is converted with.
         angular_velocity, covariance : bool, optional
             As for :meth:`sample_reader`; a stateful type may always read them.
         report : callable, optional
@@ -375,7 +375,7 @@ class OutputMessage:
 
     @property
     def message_class(self) -> type:
-        """The rclpy message class of :attr:`type_name`."""
+        """Return the rclpy message class of :attr:`type_name`."""
         return _message_class(self.type_name)
 
     def encoder(self) -> Callable[[Any, Sequence[float]], bytes]:
@@ -521,7 +521,7 @@ class OutputType:
 
     @property
     def message_class(self) -> type:
-        """The rclpy message class of the output."""
+        """Return the rclpy message class of the output."""
         return self.message.message_class
 
 

@@ -99,7 +99,8 @@ def plain(value):
 
 def imu_messages(rng, count, *, period_ns=10_000_000, start_ns=1_700_000_000_000_000_000,
                  frame_id='imu_link', orientation_variance=(1e-6, 2e-6, 4e-6)):
-    """Imu messages at a fixed rate: random unit orientations, angular velocities.
+    """
+    Return Imu messages at a fixed rate: random unit orientations, angular velocities.
 
     The orientation covariance is ``diag(orientation_variance)`` (rad^2).
     """
@@ -167,7 +168,7 @@ def write_rosbag2(path, rows, *, storage='mcap', compression=None, qos=None):
 
 def write_split_rosbag2(path, rows, parts, **options):
     """
-    A rosbag2 directory of ``parts`` storage files (as ``ros2 bag record --max-bag-size``).
+    Return a rosbag2 directory of ``parts`` storage files (as ``ros2 bag record --max-bag-size``).
 
     Each part is written by :func:`write_rosbag2`; ``metadata.yaml`` lists them
     in order, with the per-file and per-topic counts rosbag2 writes.

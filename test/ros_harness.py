@@ -159,7 +159,7 @@ def oracle_output(name, rotation, omega_body=(0.0, 0.0, 0.0), *, sequence='xyz',
                   degrees=False, frame='body', covariance=INPUT_COVARIANCE,
                   covariance_frame='fixed'):
     """
-    Expected values of the node output ``name``, computed independently with scipy.
+    Return the expected values of the node output ``name``, computed independently with scipy.
 
     ``rotation`` (scipy ``Rotation``) turns at the constant body rate
     ``omega_body``; rates are central differences of scipy's conversions. The

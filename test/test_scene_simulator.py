@@ -26,7 +26,7 @@ def read_topic(path, topic):
 
 @pytest.fixture(scope='module')
 def every_effect(tmp_path_factory):
-    """The shipped every-effect scene, simulated and written once."""
+    """Return the shipped every-effect scene, simulated and written once."""
     simulation = simulate(spec.load_scene(os.path.join(SCENES_DIR, 'every_effect.yaml')), 4)
     path = tmp_path_factory.mktemp('bags') / 'every_effect.mcap'
     write_bag(simulation, path)

@@ -97,7 +97,7 @@ _STRING_LENGTH = _Leaf('<string length>', 'I', 0)
 
 @functools.lru_cache(maxsize=None)
 def _view_class(msg_class):
-    """The named tuple class that views messages of ``msg_class``."""
+    """Return the named tuple class that views messages of ``msg_class``."""
     view = collections.namedtuple(msg_class.__name__, msg_class.get_fields_and_field_types())
     view.__doc__ = (f'Read-only view of a decoded {msg_class.__module__.split(".")[0]}/msg/'
                     f'{msg_class.__name__} (rotation_node.bag.cdr).')
@@ -240,7 +240,7 @@ class FixedLayoutCodec:
         return self._struct(tuple(string_lengths)).size
 
     def _struct(self, string_lengths):
-        """The struct of the payload when the strings have these lengths (NUL included)."""
+        """Return the struct of the payload when the strings have these lengths (NUL included)."""
         compiled = self._structs.get(string_lengths)
         if compiled is None:
             if len(self._structs) >= _MAX_CACHED_STRUCTS:
@@ -403,7 +403,7 @@ def _fixed_format(leaves, offset):
 
 
 def _runs_before_strings(leaves):
-    """The leaves between strings: the runs before each string, then the one after the last."""
+    """Return the leaves between strings: the runs before each string, then after the last."""
     runs = [[]]
     for leaf in leaves:
         if leaf.code == _STRING:

@@ -20,18 +20,17 @@ import os
 import struct
 from typing import Collection, Iterable, List, Optional
 
-import zstandard
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.reader import SeekingReader
 from mcap.records import Channel, Chunk, Message, Schema
-from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
+from mcap.stream_reader import breakup_chunk, CRCValidationError, StreamReader
 from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.serialization import deserialize_message
-
-from rotation_node.bag.compression import ZSTD_MAGIC, decompressed_message
+from rotation_node.bag.compression import decompressed_message, ZSTD_MAGIC
 from rotation_node.bag.message_types import message_class
 from rotation_node.errors import BagError
+import zstandard
 
 MESSAGE_ENCODING = 'cdr'
 SCHEMA_ENCODINGS = ('ros2msg', 'ros2idl')
@@ -230,7 +229,7 @@ class _Scan:
 
 
 def _compression_name(compressions):
-    """The chunk compression of a file: ``'zstd'``, ``'lz4'`` or ``'none'``."""
+    """Return the chunk compression of a file: ``'zstd'``, ``'lz4'`` or ``'none'``."""
     return next((name for name in ('zstd', 'lz4') if name in compressions), 'none')
 
 
@@ -363,7 +362,7 @@ class BagReader:
         self.topics = {topic: m.type_name for topic, m in self.topic_metadata.items()}
 
     def _topic_metadata(self, channel, schema):
-        """The metadata of a channel as stored, whatever its schema (copied unchanged)."""
+        """Return the metadata of a channel as stored, whatever its schema (copied unchanged)."""
         try:
             definition = '' if schema is None else schema.data.decode()
         except UnicodeDecodeError as error:
@@ -443,7 +442,7 @@ class BagReader:
             raise BagError(f'{self.path} is corrupt: {_described(error)}') from None
 
     def _scanned_messages(self, topics):
-        """The messages the opening scan counted, no more (the file may still grow)."""
+        """Return the messages the opening scan counted, no more (the file may still grow)."""
         wanted = None if topics is None else set(topics)
         channels, remaining = {}, self._scan_count
         for record in _Scan(self._stream):

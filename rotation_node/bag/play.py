@@ -60,7 +60,7 @@ def _wait(stop, seconds):
 
 def _playable_topics(reader, topics, report):
     """
-    The topics to play: the given ones (all checked), or every topic that can be published.
+    Return the topics to play: the given ones (all checked), or every topic that can be published.
 
     A topic of a type that is not installed, or not CDR, cannot be published:
     asked for by name it is an error, else it is left out with a note.

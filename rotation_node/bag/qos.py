@@ -11,13 +11,12 @@ integers; both are read.
 """
 from typing import Any, Iterable
 
-import yaml
 from rclpy.duration import Duration
 from rclpy.qos import (
     DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy)
-
 from rotation_node.errors import BagError
 from rotation_node.stamps import split_ns
+import yaml
 
 _POLICIES = (
     ('history', HistoryPolicy),
@@ -215,6 +214,7 @@ def playback_qos(offered, *, lossless=False):
     offered : list of rclpy.qos.QoSProfile
         The profiles recorded in the bag for the topic (may be empty).
     lossless : bool, optional
+        Reliable with a deep queue, whatever was recorded (``--rate 0``).
 
     Returns
     -------

@@ -21,13 +21,12 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
-
 from rotation_node.bag.mcap_io import TopicMetadata
 from rotation_node.bag.message_types import message_class
 from rotation_node.bag.qos import qos_profiles_yaml, recording_qos
 from rotation_node.bag.stop_signal import StopSignal
 from rotation_node.bag.topic_arguments import checked_topic_names
-from rotation_node.bag.writer import CHUNK_PERIOD_S, DEFAULT_COMPRESSION, BagWriter
+from rotation_node.bag.writer import BagWriter, CHUNK_PERIOD_S, DEFAULT_COMPRESSION
 from rotation_node.errors import BagError, DiskFullError
 
 NODE_NAME = 'rotation_bag_record'
@@ -68,7 +67,7 @@ class BagRecorder(Node):
 
     @property
     def pending_topics(self):
-        """Requested topics that have no publisher yet."""
+        """Return the requested topics that have no publisher yet."""
         return list(self._pending)
 
     def _discover(self):
@@ -130,6 +129,7 @@ def record(output, topics, *, duration=None, overwrite=False, compression=DEFAUL
     output : str or os.PathLike
         The bag: a rosbag2 directory, or a single MCAP file if it ends in ``.mcap``.
     topics : list of str
+        The topics to record.
     duration : float, optional
         Seconds to record; until stopped by a signal by default.
     overwrite : bool, optional

@@ -30,15 +30,15 @@ writable (a system-wide ROS install), numba caches them in the user's cache
 directory instead (``$XDG_CACHE_HOME/numba``, by default ``~/.cache/numba``),
 or wherever ``NUMBA_CACHE_DIR`` says.
 """
+from concurrent.futures import ThreadPoolExecutor
 import math
 import os
 import threading
-from concurrent.futures import ThreadPoolExecutor
 
-import numpy as np
 from numba import njit, types
 from numba.core.errors import RequireLiteralValue, TypingError
 from numba.extending import intrinsic, overload
+import numpy as np
 
 from ._validation import broadcast_pair, float_array, raise_sample_error
 
@@ -57,7 +57,7 @@ _cached_jit = njit(cache=True, nogil=True, error_model='numpy', inline='always')
 # ------------------------------------------------------------ kernel types
 
 def array_type(ndim, dtype=types.float64):
-    """The numba type of a C-contiguous, aligned, writable kernel argument."""
+    """Return the numba type of a C-contiguous, aligned, writable kernel argument."""
     return types.Array(dtype, ndim, 'C')
 
 
@@ -107,6 +107,7 @@ def kernel(*argument_types, returns=STATUS):
         the declared signature (or loads it from the disk cache) and then
         disables compilation, so a call with other types raises ``TypeError``
         instead of compiling again.
+
     """
     signature = (types.none if returns is None else returns)(*argument_types)
 
@@ -137,6 +138,7 @@ def compile_kernels(kernels=None):
     -------
     int
         How many kernels were compiled or loaded.
+
     """
     kernels = KERNELS if kernels is None else kernels
     for dispatcher in kernels:
@@ -147,7 +149,7 @@ def compile_kernels(kernels=None):
 # ------------------------------------------------------------ sample views
 
 def kernel_layout(a, trailing):
-    """The canonical layout (a view) of the C-contiguous ``a`` of samples of shape ``trailing``."""
+    """Return the canonical layout (a view) of C-contiguous samples ``a`` of shape ``trailing``."""
     if len(trailing) <= 1:
         return a.reshape(-1)
     return a.reshape((-1,) + trailing[1:])
@@ -186,7 +188,7 @@ def _stack_view(typingctx, a, rows, columns):
 
 def samples(a, width):
     """
-    The canonical ``a`` as a stack of samples: shape ``(n, width)``, or ``(n,)`` for width 0.
+    Return the canonical ``a`` as a stack of samples, shape ``(n, width)`` (``(n,)``: width 0).
 
     How kernels see their flat arguments. In compiled code (the overload
     below) the view costs nothing: no copy and no call. ``width`` must be a
@@ -204,7 +206,7 @@ def _samples_overload(a, width):
 
 
 def matrix_samples(a):
-    """The canonical matrices ``a`` (3 n, 3), or any C-contiguous 9 n values, as (n, 3, 3)."""
+    """Return the matrices ``a`` (3 n, 3), or any C-contiguous 9 n values, as (n, 3, 3)."""
     return a.reshape(-1, 3, 3)
 
 
@@ -223,7 +225,7 @@ def status(sample, argument, code):
 
 @jit
 def first_status(a, b):
-    """The first of two statuses that reports a bad sample (-1 if neither does)."""
+    """Return the first of two statuses that reports a bad sample (-1 if neither does)."""
     return a if a >= 0 else b
 
 
@@ -261,6 +263,7 @@ def set_threads(n):
         1 runs everything in the calling thread. The default is the number of
         CPUs this process may use, or the environment variable
         ``ROTATION_NODE_THREADS``.
+
     """
     global _threads, _pool
     if int(n) < 1:

@@ -118,7 +118,7 @@ def sin_cos(a):
 @jit
 def sin_cos_in_place_kernel(a, cos_out):
     """
-    ``a <- sin(a)``, ``cos_out <- cos(a)`` for 1-d float64 arrays of finite angles.
+    Compute ``a <- sin(a)``, ``cos_out <- cos(a)`` for 1-d float64 arrays of finite angles.
 
     The batch form of :func:`sin_cos`, same results: one vectorised loop
     (no calls, no branches) unless some ``|a| > REDUCTION_LIMIT``.
@@ -136,7 +136,7 @@ def sin_cos_in_place_kernel(a, cos_out):
 
 @intrinsic
 def fused_multiply_add(typingctx, a, b, c):
-    """``a * b + c`` rounded once (LLVM's ``fma``; a C library call on CPUs without FMA)."""
+    """Return ``a * b + c`` rounded once (LLVM's ``fma``; a C library call without FMA)."""
     signature = types.float64(types.float64, types.float64, types.float64)
 
     def codegen(context, builder, signature, args):
@@ -214,7 +214,9 @@ def _reduced_atan_argument(ax, ay):
 @jit
 def atan2(y, x):
     """
-    ``atan2(y, x)`` of finite ``y`` and ``x`` to 0.8 ulp, without calls or branches.
+    Return the arc tangent of ``y / x`` in the quadrant of ``(x, y)``, to 0.8 ulp, branch-free.
+
+    ``y`` and ``x`` finite.
 
     See the module for the method. Values and signed zeros as C's ``atan2``.
     """

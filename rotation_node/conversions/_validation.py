@@ -55,6 +55,7 @@ def float_array(x, name, trailing):
     ------
     ValueError
         If ``x`` is not numeric or its shape does not end in ``trailing``.
+
     """
     try:
         a = np.asarray(x, dtype=np.float64)
@@ -70,7 +71,7 @@ def float_array(x, name, trailing):
 
 
 def kernel_ready(a):
-    """``a`` itself if C-contiguous, aligned and writable (as kernels take it), else such a copy."""
+    """Return ``a`` if C-contiguous, aligned and writable (as kernels take it), else a copy."""
     return a if a.flags.carray else np.array(a, order='C')
 
 
@@ -82,6 +83,7 @@ def broadcast_pair(a, b, trailing_a, trailing_b):
     -------
     a, b : ndarray
         C-contiguous, with a common leading shape (unchanged when it already was).
+
     """
     lead_a = a.shape[:a.ndim - len(trailing_a)]
     lead_b = b.shape[:b.ndim - len(trailing_b)]
@@ -101,7 +103,8 @@ def raise_sample_error(status, names, arrays, trailings):
     flat_index, argument, code = status >> 4, (status >> 3) & 1, status & 7
     array, trailing = arrays[argument], trailings[argument]
     lead = array.shape[:array.ndim - len(trailing)]
-    where = '' if lead == () else f' at index {tuple(int(i) for i in np.unravel_index(flat_index, lead))}'
+    index = tuple(int(i) for i in np.unravel_index(flat_index, lead)) if lead else ()
+    where = f' at index {index}' if lead else ''
     raise ValueError(f'`{names[argument]}`{where} {_DEFECT_TEXT[code]}.')
 
 
@@ -160,6 +163,7 @@ def parse_sequence(seq):
     ------
     ValueError
         If ``seq`` is not one of the 24 conventions; the message says why.
+
     """
     parsed = SEQUENCE_TABLE.get(seq) if isinstance(seq, str) else None
     if parsed is not None:

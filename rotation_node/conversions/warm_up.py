@@ -20,6 +20,7 @@ def warm_up() -> int:
     -------
     int
         The number of kernels.
+
     """
     from .. import kinematics  # noqa: F401  (declares its kernels)
     from ._runtime import compile_kernels

@@ -20,17 +20,17 @@ they are the least-squares angular velocity for a noisy derivative.
 """
 import math
 
-from ..conversions.kernels import (BOOL, FLAT_IN, FLAT_OUT, NON_FINITE, OK, ROWS_IN, ROWS_OUT,
-                                   call_binary, first_status, jit, kernel, matrix_at,
-                                   matrix_defect, matrix_samples, product, quaternion_status,
-                                   samples, status, unit_quaternion, vector_status)
 from ._validation import is_world_frame
-
+from ..conversions.kernels import (
+    BOOL, call_binary, first_status, FLAT_IN, FLAT_OUT, jit, kernel, matrix_at, matrix_defect,
+    matrix_samples, NON_FINITE, OK, product, quaternion_status, ROWS_IN, ROWS_OUT, samples, status,
+    unit_quaternion, vector_status)
 
 # ----------------------------------------------------------------- kernels
 # As in conversions: validated C-contiguous inputs with a common leading shape,
 # a preallocated output; the return value is the status of the first bad
 # sample, or -1.
+
 
 @jit
 def _matrix_status(fm, s, argument):
@@ -159,9 +159,10 @@ def quaternion_derivative(q, omega, frame='body'):
     ValueError
         Bad ``frame``; wrong shape, NaN/Inf or zero quaternion, naming the
         argument and the sample.
+
     """
     return call_binary(_quaternion_derivative_kernel, q, omega, ('q', 'omega'), ((4,), (3,)), (4,),
-                     is_world_frame(frame))
+                       is_world_frame(frame))
 
 
 def angular_velocity_from_quaternion_derivative(q, q_dot, frame='body'):
@@ -192,9 +193,10 @@ def angular_velocity_from_quaternion_derivative(q, q_dot, frame='body'):
     ------
     ValueError
         Bad ``frame``; wrong shape, NaN/Inf, zero ``q``.
+
     """
     return call_binary(_angular_velocity_from_quaternion_derivative_kernel, q, q_dot,
-                     ('q', 'q_dot'), ((4,), (4,)), (3,), is_world_frame(frame))
+                       ('q', 'q_dot'), ((4,), (4,)), (3,), is_world_frame(frame))
 
 
 def matrix_derivative(R, omega, frame='body'):
@@ -221,9 +223,10 @@ def matrix_derivative(R, omega, frame='body'):
     ------
     ValueError
         Bad ``frame``; wrong shape, NaN/Inf, ``det(R) <= 0``.
+
     """
     return call_binary(_matrix_derivative_kernel, R, omega, ('R', 'omega'), ((3, 3), (3,)), (3, 3),
-                     is_world_frame(frame))
+                       is_world_frame(frame))
 
 
 def angular_velocity_from_matrix_derivative(R, R_dot, frame='body'):
@@ -253,6 +256,7 @@ def angular_velocity_from_matrix_derivative(R, R_dot, frame='body'):
     ------
     ValueError
         Bad ``frame``; wrong shape, NaN/Inf, ``det(R) <= 0``.
+
     """
     return call_binary(_angular_velocity_from_matrix_derivative_kernel, R, R_dot,
-                     ('R', 'R_dot'), ((3, 3), (3, 3)), (3,), is_world_frame(frame))
+                       ('R', 'R_dot'), ((3, 3), (3, 3)), (3,), is_world_frame(frame))

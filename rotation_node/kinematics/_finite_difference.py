@@ -11,11 +11,10 @@ It aliases when the true rotation per step reaches pi (``|w| h >= pi``).
 """
 import numpy as np
 
-from ..conversions.kernels import (BOOL, FLAT_IN, FLAT_OUT, float_array, kernel, product,
-                                   quaternion_status, raise_sample_error,
-                                   rotation_vector_from_quaternion_scalar, samples,
-                                   scaled_quaternion)
 from ._validation import is_world_frame, sample_times
+from ..conversions.kernels import (
+    BOOL, FLAT_IN, FLAT_OUT, float_array, kernel, product, quaternion_status, raise_sample_error,
+    rotation_vector_from_quaternion_scalar, samples, scaled_quaternion)
 
 
 @kernel(FLAT_IN, FLAT_IN, FLAT_OUT, BOOL)
@@ -78,6 +77,7 @@ def angular_velocity_from_quaternions(q, t, frame='body'):
     ValueError
         Bad ``frame``; ``q`` not (..., N, 4) or with a NaN/Inf or zero
         sample; ``t`` of the wrong shape, non-finite or not strictly increasing.
+
     """
     world = is_world_frame(frame)
     a = float_array(q, 'q', (4,))

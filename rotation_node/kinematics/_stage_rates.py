@@ -24,6 +24,7 @@ def _lagrange_stencils(t, h, nodes):
         Sample indices used for step ``k`` (``P = min(N, 4)``).
     weights : ndarray, shape (K, S, P)
         The rate at ``t_k + nodes[s] h_k`` is ``sum_p weights[k, s, p] omega[stencil[k, p]]``.
+
     """
     n = t.shape[0]
     points = min(n, 4)
@@ -75,6 +76,7 @@ def stage_rates(omega, t, h, nodes):
     ValueError
         Samples of the wrong shape or with a NaN/Inf; a function whose result
         has the wrong shape or a NaN/Inf (naming the time).
+
     """
     steps, stages = h.shape[0], nodes.shape[0]
     if callable(omega):

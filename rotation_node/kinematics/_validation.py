@@ -13,6 +13,7 @@ import numpy as np
 
 from ..conversions.kernels import FLAT_IN, FLAT_OUT, kernel, kernel_ready
 
+
 def is_world_frame(frame):
     """
     Validate ``frame`` and say whether it is the world frame.
@@ -32,6 +33,7 @@ def is_world_frame(frame):
     ------
     ValueError
         If ``frame`` is anything else.
+
     """
     if frame == 'body':
         return False
@@ -66,6 +68,7 @@ def sample_times(t, n_samples=None, series_name='t'):
     ValueError
         Fewer than two samples; ``t`` not numeric, not of shape (N,), with a
         NaN/Inf, or not strictly increasing (naming the first offending pair).
+
     """
     try:
         t = np.asarray(t, dtype=np.float64)

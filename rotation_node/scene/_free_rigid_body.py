@@ -20,6 +20,7 @@ H. Yoshida, "Construction of higher order symplectic integrators",
 Phys. Lett. A 150, 262 (1990).
 F. Fasso, "Comparison of splitting algorithms for the rigid body",
 J. Comput. Phys. 189, 527 (2003).
+
 """
 import math
 
@@ -112,6 +113,7 @@ def integrate(q0, momentum0, momentum_norm, inverse_inertia, t, substeps, axes, 
         Unit quaternions, continuous in sign.
     momentum : ndarray, shape (n, 3)
         Body angular momentum, ``|L|`` equal to ``momentum_norm``.
+
     """
     n = t.shape[0]
     q_out = np.empty((n, 4))

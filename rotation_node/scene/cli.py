@@ -35,7 +35,7 @@ def build_parser():
     parser.add_argument('output', help='bag to write: a rosbag2 directory, or a single MCAP '
                                        'file if it ends in .mcap, e.g. coning.mcap')
     parser.add_argument('--seed', type=_seed, default=0,
-                        help='seed of the effects\' random draws (default 0); the same scene '
+                        help="seed of the effects' random draws (default 0); the same scene "
                              'and seed give a byte-identical bag')
     parser.add_argument('--force', action='store_true', help='replace the output if it exists')
     return parser

@@ -64,6 +64,7 @@ class SensorStream:
         "no estimate".
     published : ndarray of bool, shape (n,)
         Whether the sample's sensor message is written.
+
     """
 
     time: np.ndarray
@@ -260,6 +261,7 @@ class EffectsStream:
         Effect parameters by name (``Scene.effects``).
     seed : int
         Scene seed, >= 0.
+
     """
 
     def __init__(self, effects, seed):
@@ -292,5 +294,6 @@ def apply_effects(stream, effects, seed):
     stream : SensorStream
     changed : dict of str to ndarray of bool, shape (n,)
         For each applied effect, the samples it changed.
+
     """
     return EffectsStream(effects, seed).apply(stream)

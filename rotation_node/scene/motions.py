@@ -44,6 +44,7 @@ def sign_continuous(q):
     -------
     ndarray, shape (n, 4)
         ``+-q[k]``, the same rotations.
+
     """
     return _continue_signs(q, None, 1.0)[0]
 
@@ -84,6 +85,7 @@ def constant_rate_truth(orientation, angular_velocity, t):
     -------
     q : ndarray, shape (n, 4)
     w : ndarray, shape (n, 3)
+
     """
     q, w = _constant_rate_unsigned(orientation, angular_velocity, t)
     # exp(w t) comes back canonical (scalar >= 0); undo the jump at |w| t = pi.
@@ -118,6 +120,7 @@ def coning_truth(half_angle, frequency, t):
     -------
     q : ndarray, shape (n, 4)
     w : ndarray, shape (n, 3)
+
     """
     phase = frequency * np.asarray(t, dtype=np.float64)
     cos_phase, sin_phase = np.cos(phase), np.sin(phase)
@@ -161,6 +164,7 @@ def torque_free_truth(inertia, orientation, angular_velocity, t):
     -------
     q : ndarray, shape (n, 4)
     w : ndarray, shape (n, 3)
+
     """
     t = np.ascontiguousarray(t, dtype=np.float64)
     return _TorqueFree(inertia, orientation, angular_velocity, longest_interval(t)).truth(t)
@@ -224,6 +228,7 @@ def euler_sweep_truth(sequence, start, end, duration, t):
     -------
     q : ndarray, shape (n, 4)
     w : ndarray, shape (n, 3)
+
     """
     q, w = _euler_sweep_unsigned(sequence, start, end, duration, t)
     return sign_continuous(q), w
@@ -257,6 +262,7 @@ def motion_truth(motion, t, duration):
     -------
     q : ndarray, shape (n, 4)
     w : ndarray, shape (n, 3)
+
     """
     t = np.asarray(t, dtype=np.float64)
     return MotionStream(motion, duration, longest_interval(t)).truth(t)
@@ -285,6 +291,7 @@ class MotionStream:
     ------
     TypeError
         If ``motion`` is not a scene motion.
+
     """
 
     def __init__(self, motion, duration, longest):

@@ -25,17 +25,16 @@ zero padding, see :mod:`rotation_node.bag.cdr`).
 import dataclasses
 from typing import Mapping
 
-import numpy as np
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
-from sensor_msgs.msg import Imu
-
+import numpy as np
 from rotation_node.bag.writer import BagWriter
 from rotation_node.stamps import NS_PER_S as _NS_PER_S
 from rotation_node.stamps import time_message as _time_message
+from sensor_msgs.msg import Imu
 
-from .effects import UNKNOWN_COVARIANCE, EffectsStream, SensorStream
+from .effects import EffectsStream, SensorStream, UNKNOWN_COVARIANCE
 from .motions import MotionStream
-from .spec import TRUTH_ANGULAR_VELOCITY_TOPIC, TRUTH_ORIENTATION_TOPIC, Scene
+from .spec import Scene, TRUTH_ANGULAR_VELOCITY_TOPIC, TRUTH_ORIENTATION_TOPIC
 
 
 @dataclasses.dataclass(frozen=True)
@@ -61,6 +60,7 @@ class Simulation:
         ``published`` mask; equal to the truth when the scene has no effects.
     effect_masks : Mapping[str, ndarray of bool, shape (n,)]
         For each effect of the scene, the samples it changed.
+
     """
 
     scene: Scene
@@ -86,12 +86,13 @@ def sample_stamps_ns(scene):
     Returns
     -------
     ndarray of int64, shape (n,)
+
     """
     return _stamps_ns(scene, 0, scene.sample_count)
 
 
 def _stamps_ns(scene, start, stop):
-    """The nominal stamps of samples ``start .. stop-1`` (elementwise as for all samples)."""
+    """Return the nominal stamps of samples ``start .. stop-1`` (as computed for all samples)."""
     whole_seconds = int(scene.start_time // 1)
     start_ns = whole_seconds * _NS_PER_S + round((scene.start_time - whole_seconds) * _NS_PER_S)
     offsets = np.round(np.arange(start, stop) * (_NS_PER_S / scene.rate))
@@ -104,7 +105,7 @@ def _block_bounds(scene, block_samples):
 
 
 def _longest_interval(scene, bounds):
-    """The longest interval between consecutive sample times, s, computed block by block."""
+    """Return the longest interval between consecutive sample times, s, computed block by block."""
     first_ns = _stamps_ns(scene, 0, 1)[0]
     longest, previous = 0.0, None
     for start, stop in bounds:
@@ -133,6 +134,7 @@ def simulate_blocks(scene, seed=0, block_samples=BLOCK_SAMPLES):
     Parameters
     ----------
     scene : Scene
+        A validated scene.
     seed : int, optional
         Seed of the effects' random draws, >= 0. Default 0.
     block_samples : int, optional
@@ -146,6 +148,7 @@ def simulate_blocks(scene, seed=0, block_samples=BLOCK_SAMPLES):
     ------
     ValueError
         If ``seed`` is not a non-negative integer.
+
     """
     seed = _check_seed(seed)
     bounds = _block_bounds(scene, max(int(block_samples), 1))
@@ -186,6 +189,7 @@ def simulate(scene, seed=0):
     ------
     ValueError
         If ``seed`` is not a non-negative integer.
+
     """
     simulation, = simulate_blocks(scene, seed, block_samples=scene.sample_count)
     return simulation
@@ -219,6 +223,7 @@ def write_bag(simulation, path, *, overwrite=False):
     Parameters
     ----------
     simulation : Simulation
+        What :func:`simulate` returned.
     path : str or os.PathLike
         A rosbag2 directory, or a single MCAP file if it ends in ``.mcap``;
         it appears only once completely written.
@@ -229,6 +234,7 @@ def write_bag(simulation, path, *, overwrite=False):
     ------
     BagError
         If ``path`` exists (and not ``overwrite``) or cannot be written.
+
     """
     with BagWriter(path, overwrite=overwrite) as writer:
         _write_samples(writer, simulation)
@@ -243,6 +249,7 @@ def write_scene_bag(scene, path, *, seed=0, overwrite=False, block_samples=BLOCK
     Parameters
     ----------
     scene : Scene
+        A validated scene.
     path : str or os.PathLike
         A rosbag2 directory, or a single MCAP file if it ends in ``.mcap``;
         it appears only once completely written.
@@ -267,6 +274,7 @@ def write_scene_bag(scene, path, *, seed=0, overwrite=False, block_samples=BLOCK
         (``DiskFullError`` when the disk fills); nothing is left behind.
     ValueError
         If ``seed`` is not a non-negative integer.
+
     """
     blocks = simulate_blocks(scene, _check_seed(seed), block_samples)
     samples = published = 0
