@@ -254,14 +254,14 @@ def convert_naive(source, output):
 
 
 def output_datas(path):
-    """The CDR data of the ``/imu/euler`` messages of a converted bag (for the floors)."""
+    """Return the CDR data of the ``/imu/euler`` messages of a converted bag (for the floors)."""
     from rotation_node.bag.mcap_io import BagReader
     with BagReader(path) as reader:
         return [record.data for record in reader.messages([TOPIC + '/euler'])]
 
 
 def _floor_writer(stream):
-    """An ``mcap`` writer of the output's two channels, as the converters write them."""
+    """Return an ``mcap`` writer of the output's two channels, as the converters write them."""
     from mcap.writer import CompressionType, Writer
 
     from rotation_node.bag.message_types import message_definition

@@ -29,23 +29,21 @@ the per-message call makes. Decisions that a last-bit difference could flip
 per-message pipeline's own expression wherever the block's estimate is not
 clearly on one side.
 """
-import math
-import warnings
 from dataclasses import dataclass
+import math
 from typing import Callable, Dict, List, NamedTuple, Optional, Tuple
+import warnings
 
 import numba
 import numpy as np
-
 from rotation_node import conversions, kinematics, messages
 from rotation_node.conversions.kernels import BATCH_SAMPLES
 from rotation_node.messages import (
-    ANGULAR_VELOCITY, EULER_ANGLES, EULER_RATES, ORIENTATION, OUTPUT_QUATERNION,
-    PUBLISHED_EULER)
+    ANGULAR_VELOCITY, EULER_ANGLES, EULER_RATES, ORIENTATION, OUTPUT_QUATERNION, PUBLISHED_EULER)
 from rotation_node.pipeline import (
-    EULER_RATES_NEAR_SINGULAR, NON_FINITE_ANGULAR_VELOCITY, NON_FINITE_ORIENTATION,
-    NON_UNIT_QUATERNION, ORIENTATION_UNKNOWN, SAMPLE_TRANSFORMS, TIMESTAMP_NOT_INCREASING,
-    ZERO_QUATERNION, ConversionPipeline, _needed_values)
+    _needed_values, ConversionPipeline, EULER_RATES_NEAR_SINGULAR, NON_FINITE_ANGULAR_VELOCITY,
+    NON_FINITE_ORIENTATION, NON_UNIT_QUATERNION, ORIENTATION_UNKNOWN, SAMPLE_TRANSFORMS,
+    TIMESTAMP_NOT_INCREASING, ZERO_QUATERNION)
 from rotation_node.stamps import seconds_text
 
 #: Most samples in one block: below the conversions' batch schedules (see the module notes).
@@ -94,6 +92,7 @@ def block_support(params) -> Optional[str]:
     Parameters
     ----------
     params : rotation_node.parameters.NodeParameters
+        The node's parameters (input type, outputs, frames).
 
     Returns
     -------
@@ -325,7 +324,7 @@ class BlockPipeline:
         return state, stats, [event[2:] for event in events], outputs
 
     def _orientation(self, block, events, stats):
-        """Drops and normalisation of the orientations; the input quaternions (any norm)."""
+        """Return which samples are kept and their input quaternions (any norm); count drops."""
         params, form = self.params, self.input_type.orientation_form
         orientation = block.orientation
         n = len(orientation)
@@ -368,7 +367,7 @@ class BlockPipeline:
         return kept, q
 
     def _angular_velocity(self, block, kept, known, q, events, state):
-        """The angular velocity in the output frame: measured, or by finite difference."""
+        """Return the angular velocity in the output frame: measured, or by finite difference."""
         params = self.params
         n = len(kept)
         omega = np.zeros((n, 3))
@@ -403,7 +402,7 @@ class BlockPipeline:
         return available, omega
 
     def _finite_differences(self, block, indices, q, omega, available, events, state):
-        """The finite-difference rates of the samples ``indices``, in order, from the state."""
+        """Compute the finite-difference rates of the samples ``indices``, from the state."""
         pipeline = self.pipeline
         stamps = block.stamp_ns[indices]
         previous_q = np.empty((len(indices), 4))
@@ -439,7 +438,7 @@ class BlockPipeline:
         available[target] = True
 
     def _output_quaternion(self, q, known, state):
-        """Canonical unit quaternions, sign-continuous with ``quaternion.continuity``."""
+        """Return canonical unit quaternions, sign-continuous with ``quaternion.continuity``."""
         out = np.zeros_like(q)
         indices = np.flatnonzero(known)
         if not indices.size:
@@ -460,7 +459,7 @@ class BlockPipeline:
         return out
 
     def _published_euler(self, angles, known, state):
-        """The Euler angles, first and third unwrapped against the previous published ones."""
+        """Return the Euler angles, first and third unwrapped against the previous published."""
         published = angles.copy()
         indices = np.flatnonzero(known)
         if not indices.size:
@@ -481,7 +480,7 @@ class BlockPipeline:
         return published
 
     def _euler_rates(self, values, events):
-        """Euler-angle rates; skipped within the singularity threshold."""
+        """Return the Euler-angle rates; skipped within the singularity threshold."""
         params = self.params
         angles_ok, angles = values[EULER_ANGLES]
         omega_ok, omega = values[ANGULAR_VELOCITY]

@@ -11,13 +11,13 @@ import math
 import operator
 import os
 
-from hypothesis import given, HealthCheck, settings, strategies as st
+from hypothesis import given, HealthCheck, settings
+from hypothesis import strategies as st
 import numpy as np
 import pytest
-
 from rotation_node import messages
 from rotation_node.bag.block_convert import (
-    BLOCK_MESSAGES, block_form_missing, converted_blocks, TopicConverter)
+    block_form_missing, BLOCK_MESSAGES, converted_blocks, TopicConverter)
 from rotation_node.bag.cdr import fixed_layout_codec
 from rotation_node.bag.convert import convert, output_topic
 from rotation_node.bag.mcap_io import BagMessage, BagReader
@@ -67,7 +67,7 @@ def _same_state(a, b):
 
 
 def assert_block_form_exact(params, records, splits=()):
-    """The block form gives the per-message pipeline's bytes, counters, reports and state."""
+    """Assert the block form gives the per-message pipeline's bytes, counters, reports, state."""
     expected = _run(params, records, splits, blocks=False)
     got = _run(params, records, splits, blocks=True)
     assert got[4] is None, got[4]   # really converted in blocks
@@ -241,7 +241,7 @@ def _imu_record(stamp_ns, data=None):
 
 
 def _outcome(params, records, blocks):
-    """What converting gives: the outputs, counters and reports, or the error line."""
+    """Return what converting gives: the outputs, counters and reports, or the error line."""
     try:
         return _run(params, records, (), blocks=blocks)[:3]
     except BagError as error:

@@ -1,18 +1,20 @@
 """
-BlockPipeline (rotation_node.block_pipeline): its own contract; exactness against the
-per-message pipeline is checked end to end in test_bag_block_convert.py.
+BlockPipeline (rotation_node.block_pipeline): its own contract.
+
+Exactness against the per-message pipeline is checked end to end in
+test_bag_block_convert.py.
 """
 import dataclasses
 import math
 import types
 
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 import numpy as np
 import pytest
-
 from rotation_node import block_pipeline, conversions, messages
 from rotation_node.block_pipeline import (
-    BLOCK_OUTPUTS, BLOCK_SAMPLES, BlockPipeline, block_support, SampleBlock)
+    BLOCK_OUTPUTS, BLOCK_SAMPLES, block_support, BlockPipeline, SampleBlock)
 from rotation_node.conversions.kernels import BATCH_SAMPLES
 from rotation_node.parameters import NodeParameters
 from rotation_node.pipeline import _unwrapped, ConversionPipeline

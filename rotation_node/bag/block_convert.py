@@ -24,8 +24,8 @@ from typing import Dict, Iterable, Iterator, List, Optional, Tuple
 
 from rotation_node import messages
 from rotation_node.bag.cdr import fixed_layout_codec
-from rotation_node.bag.cdr_block import InputBlockDecoder, block_encoder
-from rotation_node.block_pipeline import BLOCK_SAMPLES, BlockPipeline, block_support
+from rotation_node.bag.cdr_block import block_encoder, InputBlockDecoder
+from rotation_node.block_pipeline import BLOCK_SAMPLES, block_support, BlockPipeline
 from rotation_node.pipeline import ConversionPipeline
 
 #: Messages read per block (of all topics together).

@@ -201,7 +201,7 @@ class FixedLayoutCodec:
 
     @property
     def leaves(self):
-        """The primitive fields in CDR order: ``path``, struct ``code`` (``s``: string), count."""
+        """Return the primitive fields in CDR order: ``path``, struct ``code``, ``count``."""
         return tuple(self._leaves)
 
     @property

@@ -19,7 +19,6 @@ None and the caller converts that block message by message.
 from typing import List, NamedTuple, Optional, Sequence
 
 import numpy as np
-
 from rotation_node import messages
 from rotation_node.bag.cdr import CDR_LE, fixed_layout_codec
 from rotation_node.block_pipeline import SampleBlock
@@ -30,12 +29,12 @@ _NS_PER_S = 1_000_000_000
 
 
 def _gathered(buffer, positions, width):
-    """The ``width`` bytes at each of ``positions`` in ``buffer``, as an (n, width) uint8 array."""
+    """Return the ``width`` bytes at each of ``positions`` in ``buffer``: (n, width) uint8."""
     return buffer[positions[:, None] + np.arange(width)]
 
 
 def _float64s(buffer, positions, count):
-    """``count`` little-endian float64 at each position: an (n, count) array."""
+    """Return the ``count`` little-endian float64 at each position: an (n, count) array."""
     return _gathered(buffer, positions, 8 * count).view('<f8')
 
 

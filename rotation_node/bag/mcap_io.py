@@ -176,7 +176,7 @@ def checked_topics(topics: Iterable[str], available: Collection[str], path: str)
 
 def _chunks_in_order(summary):
     """
-    The chunk indexes in log-time order, if their messages can be read chunk after chunk.
+    Return the chunk indexes in log-time order, if their messages can be read chunk by chunk.
 
     ``SeekingReader.iter_messages`` orders messages by (log time, chunk offset,
     place in the chunk) through a heap, a Python comparison per step. When no
