@@ -10,7 +10,8 @@ range of steps, and the repository's benchmarks are run for their ratios.
 
 Modules: :mod:`.reference` (exact truth), :mod:`.methods` (the competing
 methods), :mod:`.measure` (timing and errors per conversion family),
-:mod:`.integration` (integrators), :mod:`.report` (``accuracy.md``,
+:mod:`.integration` (integrators), :mod:`.covariance` (first-order Euler
+covariance against Monte Carlo), :mod:`.report` (``accuracy.md``,
 ``accuracy.png``), :mod:`.performance` (``performance.md``), :mod:`.cli`.
 
 scipy, transforms3d and mpmath are study-time peers and references, imported
