@@ -14,6 +14,9 @@ useless near pi).
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike
+
+from ..array_types import FloatArray, FloatArrayOrScalar, Quaternion4, Vector3
 
 from ._matrix import (DEFAULT_ORTHONORMAL_TOLERANCE, EIGENVECTOR_PENDING, convert_matrices,
                       quaternion_of_matrix, store_rotation)
@@ -26,7 +29,8 @@ from ._validation import NON_FINITE, OK, ZERO_NORM
 
 
 @jit
-def rotation_quaternion(ux, uy, uz, k, half_angle_cos):
+def rotation_quaternion(ux: float, uy: float, uz: float, k: float,
+                        half_angle_cos: float) -> Quaternion4:
     """``(k u, cos(a/2))`` with the canonical sign."""
     x, y, z, w = k * ux, k * uy, k * uz, half_angle_cos
     if needs_sign_flip(x, y, z, w):
@@ -35,7 +39,8 @@ def rotation_quaternion(ux, uy, uz, k, half_angle_cos):
 
 
 @jit
-def rotation_vector_quaternion(vx, vy, vz, theta, half_angle_sin, half_angle_cos):
+def rotation_vector_quaternion(vx: float, vy: float, vz: float, theta: float,
+                               half_angle_sin: float, half_angle_cos: float) -> Quaternion4:
     """
     Exponential map from ``sin`` and ``cos`` of half the norm ``theta = |v|``.
 
@@ -47,14 +52,15 @@ def rotation_vector_quaternion(vx, vy, vz, theta, half_angle_sin, half_angle_cos
 
 
 @jit
-def axis_angle_quaternion(ax, ay, az, half_angle_sin, half_angle_cos):
+def axis_angle_quaternion(ax: float, ay: float, az: float, half_angle_sin: float,
+                          half_angle_cos: float) -> Quaternion4:
     """Quaternion of a rotation about the non-zero axis ``a``, from sin/cos of half the angle."""
     n = vector_norm(ax, ay, az)
     return rotation_quaternion(ax / n, ay / n, az / n, half_angle_sin, half_angle_cos)
 
 
 @jit
-def quaternion_from_rotation_vector_scalar(vx, vy, vz):
+def quaternion_from_rotation_vector_scalar(vx: float, vy: float, vz: float) -> Quaternion4:
     """Exponential map: unit canonical quaternion of the rotation vector ``v``."""
     theta = vector_norm(vx, vy, vz)
     half_sin, half_cos = sin_cos(0.5 * theta)
@@ -62,14 +68,16 @@ def quaternion_from_rotation_vector_scalar(vx, vy, vz):
 
 
 @jit
-def quaternion_from_axis_angle_scalar(ax, ay, az, angle):
+def quaternion_from_axis_angle_scalar(ax: float, ay: float, az: float,
+                                      angle: float) -> Quaternion4:
     """Unit canonical quaternion of a rotation by ``angle`` about a non-zero axis."""
     half_sin, half_cos = sin_cos(0.5 * angle)
     return axis_angle_quaternion(ax, ay, az, half_sin, half_cos)
 
 
 @jit
-def axis_angle_from_quaternion_scalar(x, y, z, w):
+def axis_angle_from_quaternion_scalar(x: float, y: float, z: float,
+                                      w: float) -> Quaternion4:
     """Unit axis and angle in [0, pi]; the identity gives axis (1, 0, 0), angle 0."""
     x, y, z, w = scaled_quaternion(x, y, z, w)
     if w < 0.0:
@@ -81,7 +89,7 @@ def axis_angle_from_quaternion_scalar(x, y, z, w):
 
 
 @jit
-def rotation_vector_from_quaternion_scalar(x, y, z, w):
+def rotation_vector_from_quaternion_scalar(x: float, y: float, z: float, w: float) -> Vector3:
     """Logarithm map: rotation vector with norm in [0, pi]."""
     ax, ay, az, angle = axis_angle_from_quaternion_scalar(x, y, z, w)
     return ax * angle, ay * angle, az * angle
@@ -227,7 +235,7 @@ def _store_rotation_vector(fo, s, x, y, z, w):
 
 
 @kernel(FLAT_IN, FLAT_OUT)
-def axis_angle_kernel(q, out):
+def axis_angle_kernel(q: FloatArray, out: FloatArray) -> int:
     """``(x, y, z, angle)`` of quaternions into ``out`` (4 n); returns the status."""
     fq, fo = samples(q, 4), samples(out, 4)
     for s in range(fq.shape[0]):
@@ -239,7 +247,7 @@ def axis_angle_kernel(q, out):
 
 
 @kernel(FLAT_IN, FLAT_OUT)
-def rotation_vector_kernel(q, out):
+def rotation_vector_kernel(q: FloatArray, out: FloatArray) -> int:
     """Rotation vectors of quaternions into ``out`` (3 n); returns the status."""
     fq, fo = samples(q, 4), samples(out, 3)
     for s in range(fq.shape[0]):
@@ -280,14 +288,14 @@ def _rotation_vector_from_matrix_kernel(m, out, tolerance):
 
 # ------------------------------------------------------------ public API
 
-def _split_axis_angle(packed):
+def _split_axis_angle(packed: FloatArray) -> tuple[FloatArray, FloatArrayOrScalar]:
     """``(axis, angle)`` from ``(..., 4)`` rows ``(x, y, z, angle)``; one sample gives a scalar angle."""
     if packed.ndim == 1:
         return packed[:3], packed[3]
     return packed[..., :3], packed[..., 3]
 
 
-def quaternion_from_axis_angle(axis, angle):
+def quaternion_from_axis_angle(axis: ArrayLike, angle: ArrayLike) -> FloatArray:
     """
     Quaternions of rotations by ``angle`` about ``axis``.
 
@@ -312,7 +320,7 @@ def quaternion_from_axis_angle(axis, angle):
                        ((3,), ()), (4,), batch_kernel=_quaternion_from_axis_angle_batch_kernel)
 
 
-def matrix_from_axis_angle(axis, angle):
+def matrix_from_axis_angle(axis: ArrayLike, angle: ArrayLike) -> FloatArray:
     """
     Rotation matrices of rotations by ``angle`` about ``axis``.
 
@@ -332,7 +340,7 @@ def matrix_from_axis_angle(axis, angle):
                        ((3,), ()), (3, 3), batch_kernel=_matrix_from_axis_angle_batch_kernel)
 
 
-def axis_angle_from_quaternion(q):
+def axis_angle_from_quaternion(q: ArrayLike) -> tuple[FloatArray, FloatArrayOrScalar]:
     """
     Axis and angle of quaternions.
 
@@ -352,8 +360,10 @@ def axis_angle_from_quaternion(q):
     return _split_axis_angle(packed)
 
 
-def axis_angle_from_matrix(R, *, orthonormal_tolerance=DEFAULT_ORTHONORMAL_TOLERANCE,
-                           non_orthonormal='project'):
+def axis_angle_from_matrix(R: ArrayLike, *,
+                           orthonormal_tolerance: float = DEFAULT_ORTHONORMAL_TOLERANCE,
+                           non_orthonormal: str = 'project',
+                           ) -> tuple[FloatArray, FloatArrayOrScalar]:
     """
     Axis and angle of rotation matrices (through the quaternion, exact near pi).
 
@@ -377,7 +387,7 @@ def axis_angle_from_matrix(R, *, orthonormal_tolerance=DEFAULT_ORTHONORMAL_TOLER
     return _split_axis_angle(packed)
 
 
-def quaternion_from_rotation_vector(v):
+def quaternion_from_rotation_vector(v: ArrayLike) -> FloatArray:
     """
     Exponential map: quaternions of rotation vectors.
 
@@ -396,7 +406,7 @@ def quaternion_from_rotation_vector(v):
                       batch_kernel=_quaternion_from_rotation_vector_batch_kernel)
 
 
-def matrix_from_rotation_vector(v):
+def matrix_from_rotation_vector(v: ArrayLike) -> FloatArray:
     """
     Exponential map: rotation matrices of rotation vectors (Rodrigues).
 
@@ -415,7 +425,7 @@ def matrix_from_rotation_vector(v):
                       batch_kernel=_matrix_from_rotation_vector_batch_kernel)
 
 
-def rotation_vector_from_quaternion(q):
+def rotation_vector_from_quaternion(q: ArrayLike) -> FloatArray:
     """
     Logarithm map: rotation vectors of quaternions.
 
@@ -432,8 +442,9 @@ def rotation_vector_from_quaternion(q):
     return call_unary(rotation_vector_kernel, q, 'q', (4,), (3,))
 
 
-def rotation_vector_from_matrix(R, *, orthonormal_tolerance=DEFAULT_ORTHONORMAL_TOLERANCE,
-                                non_orthonormal='project'):
+def rotation_vector_from_matrix(R: ArrayLike, *,
+                                orthonormal_tolerance: float = DEFAULT_ORTHONORMAL_TOLERANCE,
+                                non_orthonormal: str = 'project') -> FloatArray:
     """
     Logarithm map: rotation vectors of rotation matrices.
 

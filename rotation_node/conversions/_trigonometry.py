@@ -49,10 +49,12 @@ Signed zeros are handled as C's ``atan2`` does (``atan2(+-0, -0) = +-pi``);
 arguments must be finite.
 """
 import math
+from typing import Any, Callable
 
 from numba import types
 from numba.extending import intrinsic
 
+from ..array_types import FloatArray
 from ._runtime import jit
 
 # fdlibm k_sin.c and k_cos.c.
@@ -80,7 +82,7 @@ REDUCTION_LIMIT = 2.0 ** 19
 
 
 @jit
-def reduced_sin_cos(a):
+def reduced_sin_cos(a: float) -> tuple[float, float]:
     """
     ``(sin a, cos a)`` for ``|a| <= REDUCTION_LIMIT``, without calls or branches.
 
@@ -108,7 +110,7 @@ def reduced_sin_cos(a):
 
 
 @jit
-def sin_cos(a):
+def sin_cos(a: float) -> tuple[float, float]:
     """``(sin a, cos a)`` of any finite ``a`` (accuracy: see the module)."""
     if abs(a) <= REDUCTION_LIMIT:
         return reduced_sin_cos(a)
@@ -116,7 +118,7 @@ def sin_cos(a):
 
 
 @jit
-def sin_cos_in_place_kernel(a, cos_out):
+def sin_cos_in_place_kernel(a: FloatArray, cos_out: FloatArray) -> None:
     """
     ``a <- sin(a)``, ``cos_out <- cos(a)`` for 1-d float64 arrays of finite angles.
 
@@ -135,7 +137,8 @@ def sin_cos_in_place_kernel(a, cos_out):
 
 
 @intrinsic
-def fused_multiply_add(typingctx, a, b, c):
+def fused_multiply_add(typingctx: Any, a: Any, b: Any,
+                      c: Any) -> tuple[Any, Callable[..., Any]]:
     """``a * b + c`` rounded once (LLVM's ``fma``; a C library call on CPUs without FMA)."""
     signature = types.float64(types.float64, types.float64, types.float64)
 
@@ -212,7 +215,7 @@ def _reduced_atan_argument(ax, ay):
 
 
 @jit
-def atan2(y, x):
+def atan2(y: float, x: float) -> float:
     """
     ``atan2(y, x)`` of finite ``y`` and ``x`` to 0.8 ulp, without calls or branches.
 
@@ -250,7 +253,7 @@ def atan2(y, x):
 
 
 @jit
-def atan2_in_place_kernel(y, x):
+def atan2_in_place_kernel(y: FloatArray, x: FloatArray) -> None:
     """``y <- atan2(y, x)`` for 1-d float64 arrays of finite values: one vectorised loop."""
     for i in range(y.shape[0]):
         y[i] = atan2(y[i], x[i])
