@@ -1,10 +1,13 @@
 """Argument checks shared by :mod:`rotation_node.covariance` and :mod:`rotation_node.frames`."""
 import numpy as np
+from numpy.typing import ArrayLike
+
+from .type_aliases import FloatArray
 
 from .conversions._validation import float_array
 
 
-def finite_array(x, name: str, trailing: tuple) -> np.ndarray:
+def finite_array(x: ArrayLike, name: str, trailing: tuple[int, ...]) -> FloatArray:
     """
     Return ``x`` as a float64 array whose shape ends in ``trailing``, every element finite.
 

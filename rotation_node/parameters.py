@@ -22,6 +22,7 @@ from rotation_node.conversions import parse_sequence
 from rotation_node.errors import ParameterError
 from rotation_node.frames import BODY_FRAMES, WORLD_FRAMES
 from rotation_node.ros_yaml import load_ros_yaml
+from rotation_node.type_aliases import StrPath
 from rotation_node.validation import describe_value, did_you_mean
 
 NODE_NAME = 'rotation_node'
@@ -91,7 +92,7 @@ class ParameterSpec:
             return f'from {self.bounds[0]:g} to {self.bounds[1]:g}'
         return self.rule
 
-    def checked(self, value):
+    def checked(self, value: Any) -> Any:
         """
         Return ``value`` in canonical form (string arrays as tuples) if it is valid.
 
@@ -261,7 +262,7 @@ class NodeParameters:
         'History depth (keep last) of the input subscription and of the output publishers',
         bounds=(1, 10000))
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         """Check every value; store string arrays as tuples."""
         for spec in PARAMETERS:
             object.__setattr__(self, spec.attribute, spec.checked(getattr(self, spec.attribute)))
@@ -312,7 +313,7 @@ def unknown_parameter_error(name: str, where: str = '') -> ParameterError:
         f"the node's parameters are {', '.join(PARAMETERS_BY_NAME)}")
 
 
-def parameters_from_yaml(path, node_name: str = NODE_NAME) -> NodeParameters:
+def parameters_from_yaml(path: StrPath, node_name: str = NODE_NAME) -> NodeParameters:
     """
     Read the node's parameters from a ROS 2 parameters file.
 
@@ -367,7 +368,7 @@ def parameters_from_yaml(path, node_name: str = NODE_NAME) -> NodeParameters:
         raise ParameterError(f'parameters file {path}: {exc}') from None
 
 
-def parameters_file_sections(path) -> list:
+def parameters_file_sections(path: StrPath) -> list[tuple[str, dict[str, Any]]]:
     """
     Read the sections of a ROS 2 parameters file, for any node.
 

@@ -26,7 +26,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..array_types import FloatArray, FloatArrayOrScalar, Quaternion4, Vector3
+from ..type_aliases import FloatArray, FloatArrayOrScalar, Quaternion4, Vector3
 
 from ._matrix import (DEFAULT_ORTHONORMAL_TOLERANCE, EIGENVECTOR_PENDING, convert_matrices,
                       quaternion_of_matrix, store_rotation)

@@ -28,7 +28,7 @@ from typing import Any, Optional
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..array_types import FloatArray, Matrix9, Quaternion4
+from ..type_aliases import FloatArray, Matrix9, Quaternion4
 
 from ._quaternion import (canonical_kernel, canonical_unit_quaternion, quaternion_status,
                           scaled_quaternion)

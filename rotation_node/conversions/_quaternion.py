@@ -16,7 +16,7 @@ import math
 
 from numpy.typing import ArrayLike
 
-from ..array_types import FloatArray, FloatArrayOrScalar, Quaternion4, Vector3
+from ..type_aliases import FloatArray, FloatArrayOrScalar, Quaternion4, Vector3
 from ._runtime import (FLAT_IN, FLAT_OUT, call_binary, call_unary, first_status, jit, kernel,
                        samples, status)
 from ._validation import NON_FINITE, OK, ZERO_NORM

@@ -42,7 +42,7 @@ from numba import njit, types
 from numba.core.errors import RequireLiteralValue, TypingError
 from numba.extending import intrinsic, overload
 
-from ..array_types import FloatArray
+from ..type_aliases import FloatArray
 from ._validation import broadcast_pair, float_array, raise_sample_error
 
 # Every compiled function is inlined into its callers (numba IR inlining, not

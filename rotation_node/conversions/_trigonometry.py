@@ -54,7 +54,7 @@ from typing import Any, Callable
 from numba import types
 from numba.extending import intrinsic
 
-from ..array_types import FloatArray
+from ..type_aliases import FloatArray
 from ._runtime import jit
 
 # fdlibm k_sin.c and k_cos.c.

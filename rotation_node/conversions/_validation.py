@@ -15,7 +15,7 @@ from typing import Any, NamedTuple, NoReturn, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..array_types import FloatArray
+from ..type_aliases import FloatArray
 
 # Defect codes returned by the kernels (0 = sample is fine).
 OK = 0

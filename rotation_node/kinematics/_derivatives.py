@@ -20,6 +20,9 @@ they are the least-squares angular velocity for a noisy derivative.
 """
 import math
 
+from numpy.typing import ArrayLike
+
+from ..type_aliases import FloatArray
 from ..conversions.kernels import (BOOL, FLAT_IN, FLAT_OUT, NON_FINITE, OK, ROWS_IN, ROWS_OUT,
                                    call_binary, first_status, jit, kernel, matrix_at,
                                    matrix_defect, matrix_samples, product, quaternion_status,
@@ -129,7 +132,7 @@ def _angular_velocity_from_matrix_derivative_kernel(R, R_dot, out, world):
 
 # ------------------------------------------------------------ public API
 
-def quaternion_derivative(q, omega, frame='body'):
+def quaternion_derivative(q: ArrayLike, omega: ArrayLike, frame: str = 'body') -> FloatArray:
     """
     Time derivative of a unit quaternion rotating with angular velocity ``omega``.
 
@@ -164,7 +167,8 @@ def quaternion_derivative(q, omega, frame='body'):
                      is_world_frame(frame))
 
 
-def angular_velocity_from_quaternion_derivative(q, q_dot, frame='body'):
+def angular_velocity_from_quaternion_derivative(q: ArrayLike, q_dot: ArrayLike,
+                                                frame: str = 'body') -> FloatArray:
     """
     Angular velocity of a quaternion and its time derivative.
 
@@ -197,7 +201,7 @@ def angular_velocity_from_quaternion_derivative(q, q_dot, frame='body'):
                      ('q', 'q_dot'), ((4,), (4,)), (3,), is_world_frame(frame))
 
 
-def matrix_derivative(R, omega, frame='body'):
+def matrix_derivative(R: ArrayLike, omega: ArrayLike, frame: str = 'body') -> FloatArray:
     """
     Time derivative of a rotation matrix rotating with angular velocity ``omega``.
 
@@ -226,7 +230,8 @@ def matrix_derivative(R, omega, frame='body'):
                      is_world_frame(frame))
 
 
-def angular_velocity_from_matrix_derivative(R, R_dot, frame='body'):
+def angular_velocity_from_matrix_derivative(R: ArrayLike, R_dot: ArrayLike,
+                                            frame: str = 'body') -> FloatArray:
     """
     Angular velocity of a rotation matrix and its time derivative.
 

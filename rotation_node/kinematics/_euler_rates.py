@@ -44,6 +44,9 @@ import math
 import warnings
 
 import numpy as np
+from numpy.typing import ArrayLike
+
+from ..type_aliases import FloatArray
 
 from ..conversions import parse_sequence
 from ..conversions.kernels import (BOOL, FLAT_IN, FLAT_OUT, FLOAT, INT, array_type, call_binary,
@@ -146,7 +149,8 @@ def _euler_rates_kernel(angles, omega, out, i, j, n, parity, proper, reverse, wo
     return -1
 
 
-def angular_velocity_from_euler_rates(angles, rates, seq, frame='body', degrees=False):
+def angular_velocity_from_euler_rates(angles: ArrayLike, rates: ArrayLike, seq: str,
+                                      frame: str = 'body', degrees: bool = False) -> FloatArray:
     """
     Angular velocity of Euler angles changing at the given rates.
 
@@ -182,8 +186,10 @@ def angular_velocity_from_euler_rates(angles, rates, seq, frame='body', degrees=
                      (3,), *_jacobian_axes(seq, frame), _RADIANS_PER_DEGREE if degrees else 1.0)
 
 
-def euler_rates_from_angular_velocity(angles, omega, seq, frame='body', degrees=False, *,
-                                      singularity_threshold=DEFAULT_SINGULARITY_THRESHOLD):
+def euler_rates_from_angular_velocity(
+        angles: ArrayLike, omega: ArrayLike, seq: str, frame: str = 'body',
+        degrees: bool = False, *,
+        singularity_threshold: float = DEFAULT_SINGULARITY_THRESHOLD) -> FloatArray:
     """
     Euler-angle rates of an orientation turning with angular velocity ``omega``.
 

@@ -10,6 +10,9 @@ estimate at the midpoint time, and exact for a constant angular velocity.
 It aliases when the true rotation per step reaches pi (``|w| h >= pi``).
 """
 import numpy as np
+from numpy.typing import ArrayLike
+
+from ..type_aliases import FloatArray
 
 from ..conversions.kernels import (BOOL, FLAT_IN, FLAT_OUT, float_array, kernel, product,
                                    quaternion_status, raise_sample_error,
@@ -45,7 +48,8 @@ def _finite_difference_kernel(q, h, out, world):
     return -1
 
 
-def angular_velocity_from_quaternions(q, t, frame='body'):
+def angular_velocity_from_quaternions(q: ArrayLike, t: ArrayLike,
+                                      frame: str = 'body') -> FloatArray:
     """
     Angular velocity between consecutive orientations of a time series.
 

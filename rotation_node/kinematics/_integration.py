@@ -43,6 +43,11 @@ References
 import math
 
 import numpy as np
+from typing import Callable
+
+from numpy.typing import ArrayLike
+
+from ..type_aliases import FloatArray
 
 from ..conversions.kernels import (FLAT_IN, INT, ROWS_IN, array_type, canonical_kernel,
                                    canonical_unit_quaternion, float_array, jit, kernel,
@@ -131,7 +136,10 @@ def _broadcast(a, shape):
     return kernel_ready(a if a.shape == shape else np.broadcast_to(a, shape))
 
 
-def integrate_angular_velocity(q0, omega, t, *, method='magnus4', frame='body'):
+def integrate_angular_velocity(q0: ArrayLike,
+                               omega: ArrayLike | Callable[[FloatArray], ArrayLike],
+                               t: ArrayLike, *, method: str = 'magnus4',
+                               frame: str = 'body') -> FloatArray:
     """
     Integrate angular velocity into orientations.
 

@@ -10,6 +10,11 @@ on smooth sampled data. With fewer than four samples the polynomial through all
 of them is used.
 """
 import numpy as np
+from typing import Callable
+
+from numpy.typing import ArrayLike
+
+from ..type_aliases import FloatArray
 
 from ..conversions.kernels import float_array
 
@@ -49,7 +54,8 @@ def _first_non_finite(values, trailing_ndim):
     return tuple(int(i) for i in np.unravel_index(np.flatnonzero(bad)[0], bad.shape))
 
 
-def stage_rates(omega, t, h, nodes):
+def stage_rates(omega: ArrayLike | Callable[[FloatArray], ArrayLike], t: FloatArray,
+                h: FloatArray, nodes: FloatArray) -> FloatArray:
     """
     Angular velocity at ``t_k + nodes[s] h_k`` for every step ``k``.
 

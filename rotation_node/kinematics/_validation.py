@@ -10,10 +10,15 @@ an angular velocity and a strictly increasing vector of sample times.
 import math
 
 import numpy as np
+from typing import Optional
+
+from numpy.typing import ArrayLike
+
+from ..type_aliases import FloatArray
 
 from ..conversions.kernels import FLAT_IN, FLAT_OUT, kernel, kernel_ready
 
-def is_world_frame(frame):
+def is_world_frame(frame: object) -> bool:
     """
     Validate ``frame`` and say whether it is the world frame.
 
@@ -40,7 +45,8 @@ def is_world_frame(frame):
     raise ValueError(f"Expected `frame` to be 'body' or 'world', got {frame!r}.")
 
 
-def sample_times(t, n_samples=None, series_name='t'):
+def sample_times(t: ArrayLike, n_samples: Optional[int] = None,
+                 series_name: str = 't') -> tuple[FloatArray, FloatArray]:
     """
     Validate sample times and return them with the steps between them.
 

@@ -7,6 +7,7 @@ On bad input (scene file, seed, existing output) it prints one line,
 import argparse
 import os
 import sys
+from typing import Optional, Sequence
 
 from rotation_node.errors import BagError, SceneError
 
@@ -24,7 +25,7 @@ def _seed(text):
     return seed
 
 
-def build_parser():
+def build_parser() -> argparse.ArgumentParser:
     """Return the command-line parser of ``rotation_scene``."""
     parser = argparse.ArgumentParser(
         prog='rotation_scene',
@@ -40,7 +41,7 @@ def build_parser():
     return parser
 
 
-def main(argv=None):
+def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run ``rotation_scene``; return the exit status."""
     args = build_parser().parse_args(argv)
     try:

@@ -29,11 +29,17 @@ Conventions: quaternions (x, y, z, w), body-to-world; angular velocity in the
 body frame, rad/s; covariances row-major 3x3 as in ``sensor_msgs/Imu``.
 """
 import dataclasses
+from typing import Callable, Mapping
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from rotation_node.conversions import quaternion_from_rotation_vector, quaternion_product
 from rotation_node.stamps import NS_PER_S as _NS_PER_S
+from rotation_node.type_aliases import BoolArray
+
+from .spec import (DroppedMessages, GyroBias, GyroNoise, NanBursts, NonUnitQuaternions,
+                   OrientationNoise, OrientationUnknown, QuaternionSignFlips, TimestampJitter)
 
 #: ``sensor_msgs/Imu``: covariance element 0 set to -1 means "no estimate".
 UNKNOWN_COVARIANCE = -1.0
@@ -71,7 +77,8 @@ class SensorStream:
     published: np.ndarray
 
     @classmethod
-    def from_truth(cls, time, stamp_ns, orientation, angular_velocity):
+    def from_truth(cls, time: ArrayLike, stamp_ns: ArrayLike, orientation: ArrayLike,
+                   angular_velocity: ArrayLike) -> 'SensorStream':
         """
         Return a perfect sensor: the truth, zero covariances, every sample published.
 
@@ -86,7 +93,7 @@ class SensorStream:
                    angular_velocity_covariance=np.zeros((n, 9)),
                    published=np.ones(n, dtype=bool))
 
-    def __len__(self):
+    def __len__(self) -> int:
         return len(self.time)
 
 
@@ -95,7 +102,8 @@ def _isotropic_covariance(n, std):
     return np.tile((std * std * np.eye(3)).ravel(), (n, 1))
 
 
-def add_gyro_bias(stream, params, rng):
+def add_gyro_bias(stream: SensorStream, params: GyroBias,
+                  rng: np.random.Generator) -> tuple[SensorStream, BoolArray]:
     """
     Return the stream with ``b_k = constant + random walk`` added to the angular velocity.
 
@@ -110,7 +118,8 @@ def add_gyro_bias(stream, params, rng):
     return dataclasses.replace(stream, angular_velocity=stream.angular_velocity + bias), changed
 
 
-def add_gyro_noise(stream, params, rng):
+def add_gyro_noise(stream: SensorStream, params: GyroNoise,
+                   rng: np.random.Generator) -> tuple[SensorStream, BoolArray]:
     """Return the stream with N(0, std^2) white noise on each gyro axis, and its covariance."""
     noise = params.std * rng.standard_normal((len(stream), 3))
     return dataclasses.replace(
@@ -119,7 +128,8 @@ def add_gyro_noise(stream, params, rng):
     ), np.full(len(stream), params.std > 0)
 
 
-def add_orientation_noise(stream, params, rng):
+def add_orientation_noise(stream: SensorStream, params: OrientationNoise,
+                          rng: np.random.Generator) -> tuple[SensorStream, BoolArray]:
     """
     Return the stream with orientation ``q (x) exp(v)``, and its covariance ``std^2 I``.
 
@@ -135,14 +145,16 @@ def add_orientation_noise(stream, params, rng):
     ), np.full(len(stream), params.std > 0)
 
 
-def flip_quaternion_signs(stream, params, rng):
+def flip_quaternion_signs(stream: SensorStream, params: QuaternionSignFlips,
+                          rng: np.random.Generator) -> tuple[SensorStream, BoolArray]:
     """Return the stream with each orientation replaced by ``-q`` with ``probability``."""
     flipped = rng.random(len(stream)) < params.probability
     sign = np.where(flipped, -1.0, 1.0)[:, np.newaxis]
     return dataclasses.replace(stream, orientation=stream.orientation * sign), flipped
 
 
-def scale_quaternions(stream, params, rng):
+def scale_quaternions(stream: SensorStream, params: NonUnitQuaternions,
+                      rng: np.random.Generator) -> tuple[SensorStream, BoolArray]:
     """Return the stream with each orientation multiplied by a factor uniform in ``scale``."""
     low, high = params.scale
     factor = rng.uniform(low, high, len(stream))
@@ -150,7 +162,8 @@ def scale_quaternions(stream, params, rng):
             factor != 1.0)
 
 
-def insert_nan_bursts(stream, params, rng):
+def insert_nan_bursts(stream: SensorStream, params: NanBursts,
+                      rng: np.random.Generator) -> tuple[SensorStream, BoolArray]:
     """
     Return the stream with NaN in every component of ``fields`` during bursts.
 
@@ -168,7 +181,8 @@ def insert_nan_bursts(stream, params, rng):
     return dataclasses.replace(stream, **changes), in_burst
 
 
-def hide_orientation(stream, params, rng):
+def hide_orientation(stream: SensorStream, params: OrientationUnknown,
+                     rng: np.random.Generator) -> tuple[SensorStream, BoolArray]:
     """
     Return the stream with the orientation hidden, each sample with ``probability``.
 
@@ -189,7 +203,8 @@ def hide_orientation(stream, params, rng):
                                orientation_covariance=covariance), unknown
 
 
-def jitter_timestamps(stream, params, rng):
+def jitter_timestamps(stream: SensorStream, params: TimestampJitter,
+                      rng: np.random.Generator) -> tuple[SensorStream, BoolArray]:
     """
     Return the stream with each ``header.stamp`` offset by N(0, std^2) s, rounded to ns.
 
@@ -201,14 +216,15 @@ def jitter_timestamps(stream, params, rng):
     return dataclasses.replace(stream, stamp_ns=stream.stamp_ns + offset_ns), offset_ns != 0
 
 
-def drop_messages(stream, params, rng):
+def drop_messages(stream: SensorStream, params: DroppedMessages,
+                  rng: np.random.Generator) -> tuple[SensorStream, BoolArray]:
     """Return the stream with each sample unpublished with ``probability``."""
     dropped = rng.random(len(stream)) < params.probability
     return dataclasses.replace(stream, published=stream.published & ~dropped), dropped
 
 
 #: Effect functions by scene name, in the order they apply.
-EFFECTS = {
+EFFECTS: dict[str, Callable[..., tuple[SensorStream, BoolArray]]] = {
     'gyro_bias': add_gyro_bias,
     'gyro_noise': add_gyro_noise,
     'orientation_noise': add_orientation_noise,
@@ -221,7 +237,7 @@ EFFECTS = {
 }
 
 
-def effect_rng(seed, name):
+def effect_rng(seed: int, name: str) -> np.random.Generator:
     """
     Return the generator of effect ``name`` for scene seed ``seed``.
 
@@ -231,7 +247,8 @@ def effect_rng(seed, name):
     return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=tuple(name.encode())))
 
 
-def apply_effects(stream, effects, seed):
+def apply_effects(stream: SensorStream, effects: Mapping[str, object],
+                  seed: int) -> tuple[SensorStream, dict[str, BoolArray]]:
     """
     Return the stream with the scene's effects applied, and what each changed.
 

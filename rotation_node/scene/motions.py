@@ -17,16 +17,18 @@ splitting (:mod:`rotation_node.scene._free_rigid_body`).
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from rotation_node.conversions import (quaternion_from_euler, quaternion_from_rotation_vector,
                                        quaternion_product)
 from rotation_node.kinematics import angular_velocity_from_euler_rates
+from rotation_node.type_aliases import FloatArray
 
 from . import _free_rigid_body
 from .spec import Coning, ConstantRate, EulerSweep, TorqueFree
 
 
-def sign_continuous(q):
+def sign_continuous(q: FloatArray) -> FloatArray:
     """
     Return the quaternion series with signs chosen so that consecutive ones have ``dot >= 0``.
 
@@ -46,7 +48,8 @@ def sign_continuous(q):
     return q * signs[:, np.newaxis]
 
 
-def constant_rate_truth(orientation, angular_velocity, t):
+def constant_rate_truth(orientation: ArrayLike, angular_velocity: ArrayLike,
+                        t: FloatArray) -> tuple[FloatArray, FloatArray]:
     """
     Return the exact rotation at constant body rate: ``q(t) = q0 (x) exp(w t)``.
 
@@ -71,7 +74,8 @@ def constant_rate_truth(orientation, angular_velocity, t):
     return sign_continuous(q), w.copy()
 
 
-def coning_truth(half_angle, frequency, t):
+def coning_truth(half_angle: float, frequency: float,
+                 t: FloatArray) -> tuple[FloatArray, FloatArray]:
     """
     Return classical coning motion, phase 0 at ``t = 0`` (NUMERICS.md).
 
@@ -105,7 +109,8 @@ def coning_truth(half_angle, frequency, t):
     return q, w
 
 
-def torque_free_truth(inertia, orientation, angular_velocity, t):
+def torque_free_truth(inertia: ArrayLike, orientation: ArrayLike, angular_velocity: ArrayLike,
+                      t: FloatArray) -> tuple[FloatArray, FloatArray]:
     """
     Return a free rigid body's motion: ``I w' = (I w) x w`` with attitude.
 
@@ -151,7 +156,8 @@ def torque_free_truth(inertia, orientation, angular_velocity, t):
     return q, momentum * inverse_inertia
 
 
-def euler_sweep_truth(sequence, start, end, duration, t):
+def euler_sweep_truth(sequence: str, start: ArrayLike, end: ArrayLike, duration: float,
+                      t: FloatArray) -> tuple[FloatArray, FloatArray]:
     """
     Return the rotation whose Euler angles move linearly from ``start`` to ``end``.
 
@@ -186,7 +192,8 @@ def euler_sweep_truth(sequence, start, end, duration, t):
     return q, w
 
 
-def motion_truth(motion, t, duration):
+def motion_truth(motion: object, t: FloatArray,
+                 duration: float) -> tuple[FloatArray, FloatArray]:
     """
     Return the truth ``(q, w)`` of a scene's motion at times ``t``.
 

@@ -28,6 +28,7 @@ from sensor_msgs.msg import Imu
 from rotation_node.bag.mcap_io import BagWriter
 from rotation_node.stamps import NS_PER_S as _NS_PER_S
 from rotation_node.stamps import time_message as _time_message
+from rotation_node.type_aliases import IntArray, StrPath
 
 from .effects import UNKNOWN_COVARIANCE, SensorStream, apply_effects
 from .motions import motion_truth
@@ -69,7 +70,7 @@ class Simulation:
     effect_masks: Mapping[str, np.ndarray]
 
 
-def sample_stamps_ns(scene):
+def sample_stamps_ns(scene: Scene) -> IntArray:
     """
     Return the nominal stamps ``start_time + k / rate``, k = 0 .. n-1, in ns since the epoch.
 
@@ -85,7 +86,7 @@ def sample_stamps_ns(scene):
     return start_ns + offsets.astype(np.int64)
 
 
-def simulate(scene, seed=0):
+def simulate(scene: Scene, seed: int = 0) -> Simulation:
     """
     Return the truth and the sensor stream of a scene, as arrays.
 
@@ -138,7 +139,7 @@ def _imu_message(sensor, k, frame_id):
     return msg
 
 
-def write_bag(simulation, path, *, overwrite=False):
+def write_bag(simulation: Simulation, path: StrPath, *, overwrite: bool = False) -> None:
     """
     Write a simulation as a ROS 2 MCAP bag (the layout in this module's docstring).
 

@@ -23,6 +23,7 @@ from typing import ClassVar, Mapping, Tuple
 from rotation_node.conversions import parse_sequence
 from rotation_node.errors import SceneError
 from rotation_node.ros_yaml import load_ros_yaml
+from rotation_node.type_aliases import StrPath
 from rotation_node.validation import describe_value, did_you_mean
 
 #: Default ``start_time``: 2025-01-01T00:00:00Z, in seconds since the Unix epoch.
@@ -443,12 +444,12 @@ class Scene:
     start_time: float = _param(_real(0.0), DEFAULT_START_TIME)
 
     @property
-    def sample_count(self):
+    def sample_count(self) -> int:
         """Number of samples: at ``k / rate`` for every k with ``k / rate <= duration``."""
         return sample_count(self.duration, self.rate)
 
 
-def sample_count(duration, rate):
+def sample_count(duration: float, rate: float) -> int:
     """
     Return the number of samples ``t_k = k / rate`` with ``t_k <= duration``.
 
@@ -459,7 +460,7 @@ def sample_count(duration, rate):
     return math.floor(n + 1e-9 * max(1.0, n)) + 1
 
 
-def scene_from_dict(data):
+def scene_from_dict(data: object) -> Scene:
     """
     Validate a scene given as parsed YAML.
 
@@ -520,7 +521,7 @@ def _effects(data):
             for name, params in data.items()}
 
 
-def load_scene(path):
+def load_scene(path: StrPath) -> Scene:
     """
     Load and validate a YAML scene file.
 

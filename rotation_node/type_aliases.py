@@ -1,18 +1,19 @@
 """
-Type aliases for the arrays the public functions take and return.
+Type aliases of the public API: arrays, scalar tuples and file paths.
 
 Inputs are anything numpy turns into an array (``ArrayLike``): lists,
 tuples, scalars, arrays of any dtype and layout. Results are float64 arrays;
 a function whose result for one sample has shape ``()`` returns a numpy
 float64 scalar for a single sample and an array for several.
 """
+import os
 from typing import Union
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = ['ArrayLike', 'FloatArray', 'FloatArrayOrScalar', 'IntArray', 'BoolArray',
-           'Quaternion4', 'Vector3', 'Matrix9']
+           'Quaternion4', 'Vector3', 'Matrix9', 'StrPath']
 
 #: A float64 array: the result of every conversion.
 FloatArray = NDArray[np.float64]
@@ -28,3 +29,5 @@ Quaternion4 = tuple[float, float, float, float]
 Vector3 = tuple[float, float, float]
 #: One 3 x 3 matrix as nine floats, row-major.
 Matrix9 = tuple[float, float, float, float, float, float, float, float, float]
+#: A file path as the caller gives it: text or a path object.
+StrPath = Union[str, os.PathLike[str]]
