@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from typing import Any, Callable, Iterable, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from rotation_node import conversions, kinematics
 
@@ -479,7 +480,7 @@ class OutputType:
     name: str
     message: OutputMessage
     needs: Tuple[str, ...]
-    compute: Optional[Callable[..., Sequence[float]]]
+    compute: Optional[Callable[..., ArrayLike]]
     description: str
     panels: Callable[[Any], list]
 

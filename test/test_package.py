@@ -46,6 +46,7 @@ def test_colcon_build_installs_what_ros2_run_needs(colcon_install):
     assert (share / 'rotation_node' / 'config' / 'params.yaml').is_file()
     assert list((share / 'rotation_node' / 'config' / 'scenes').glob('*.yaml'))
     assert (colcon_install / SITE / 'rotation_node' / 'conversions' / '__init__.py').is_file()
+    assert (colcon_install / SITE / 'rotation_node' / 'py.typed').is_file()   # PEP 561
 
 
 def test_package_xml_is_format_3_ament_python():

@@ -34,7 +34,7 @@ import math
 import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any, Callable, Optional, Sequence
+from typing import Any, Callable, Optional, Sequence, TypeGuard
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -76,7 +76,7 @@ INT, FLOAT, BOOL = types.int64, types.float64, types.boolean
 STATUS = types.int64
 
 #: Every kernel declared with :func:`kernel`, in declaration order.
-KERNELS = []
+KERNELS: list[Any] = []
 
 
 _compiling = threading.Lock()
@@ -316,7 +316,7 @@ _NO_SAMPLES = np.empty(0)
 new_array = np.empty
 
 
-def is_single_sample(x: object, trailing: tuple[int, ...]) -> bool:
+def is_single_sample(x: object, trailing: tuple[int, ...]) -> TypeGuard[FloatArray]:
     """Whether ``x`` is one sample that needs no conversion: the fast path of a call."""
     # ``is``: every native float64 array shares numpy's one float64 dtype; an
     # equal but distinct dtype object just takes the general path. ``carray``:

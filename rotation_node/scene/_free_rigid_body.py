@@ -43,7 +43,7 @@ def _yoshida_axis_flows():
     """
     c1 = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
     c0 = 1.0 - 2.0 * c1
-    flows = []
+    flows: list[tuple[int, float]] = []
     for c in (c1, c0, c1):
         for axis, fraction in ((0, c / 2), (1, c / 2), (2, c), (1, c / 2), (0, c / 2)):
             if flows and flows[-1][0] == axis:

@@ -32,11 +32,10 @@ import dataclasses
 from typing import Callable, Mapping
 
 import numpy as np
-from numpy.typing import ArrayLike
 
 from rotation_node.conversions import quaternion_from_rotation_vector, quaternion_product
 from rotation_node.stamps import NS_PER_S as _NS_PER_S
-from rotation_node.type_aliases import BoolArray
+from rotation_node.type_aliases import BoolArray, FloatArray, IntArray
 
 from .spec import (DroppedMessages, GyroBias, GyroNoise, NanBursts, NonUnitQuaternions,
                    OrientationNoise, OrientationUnknown, QuaternionSignFlips, TimestampJitter)
@@ -77,8 +76,8 @@ class SensorStream:
     published: np.ndarray
 
     @classmethod
-    def from_truth(cls, time: ArrayLike, stamp_ns: ArrayLike, orientation: ArrayLike,
-                   angular_velocity: ArrayLike) -> 'SensorStream':
+    def from_truth(cls, time: FloatArray, stamp_ns: IntArray, orientation: FloatArray,
+                   angular_velocity: FloatArray) -> 'SensorStream':
         """
         Return a perfect sensor: the truth, zero covariances, every sample published.
 
@@ -171,8 +170,8 @@ def insert_nan_bursts(stream: SensorStream, params: NanBursts,
     overlapping bursts merge.
     """
     starts = rng.random(len(stream)) < params.probability
-    in_burst = np.convolve(starts.astype(np.int64), np.ones(params.length, dtype=np.int64))
-    in_burst = in_burst[:len(stream)] > 0
+    covered = np.convolve(starts.astype(np.int64), np.ones(params.length, dtype=np.int64))
+    in_burst = covered[:len(stream)] > 0
     changes = {}
     for field in params.fields:
         values = getattr(stream, field).copy()

@@ -25,7 +25,7 @@ from rotation_node.kinematics import angular_velocity_from_euler_rates
 from rotation_node.type_aliases import FloatArray
 
 from . import _free_rigid_body
-from .spec import Coning, ConstantRate, EulerSweep, TorqueFree
+from .spec import Coning, ConstantRate, EulerSweep, Motion, TorqueFree
 
 
 def sign_continuous(q: FloatArray) -> FloatArray:
@@ -192,7 +192,7 @@ def euler_sweep_truth(sequence: str, start: ArrayLike, end: ArrayLike, duration:
     return q, w
 
 
-def motion_truth(motion: object, t: FloatArray,
+def motion_truth(motion: Motion, t: FloatArray,
                  duration: float) -> tuple[FloatArray, FloatArray]:
     """
     Return the truth ``(q, w)`` of a scene's motion at times ``t``.

@@ -18,7 +18,7 @@ angular velocities in the body frame, rad/s; angles in radians.
 import dataclasses
 import math
 import re
-from typing import ClassVar, Mapping, Tuple
+from typing import ClassVar, Mapping, Tuple, Union
 
 from rotation_node.conversions import parse_sequence
 from rotation_node.errors import SceneError
@@ -300,6 +300,9 @@ class EulerSweep:
 
 
 #: Motion classes by their scene ``type``.
+#: What a scene's ``motion`` is.
+Motion = Union[ConstantRate, Coning, TorqueFree, EulerSweep]
+
 MOTIONS = {cls.type: cls for cls in (ConstantRate, Coning, TorqueFree, EulerSweep)}
 
 
@@ -437,7 +440,8 @@ class Scene:
 
     duration: float = _param(_real(positive=True))
     rate: float = _param(_real(positive=True))
-    motion: object
+    # Required, as are duration and rate: mypy takes any `_param(...)` for a default.
+    motion: Motion  # type: ignore[misc]
     effects: Mapping[str, object] = dataclasses.field(default_factory=dict)
     topic: str = _param(_topic, '/imu')
     frame_id: str = _param(_frame_id, 'imu_link')
