@@ -13,9 +13,12 @@ import concurrent.futures
 import dataclasses
 import multiprocessing
 import os
-from typing import Callable, List, Optional, Sequence
+from typing import Any, Callable, Dict, List, Optional, Sequence, TYPE_CHECKING
 
 from rotation_node.errors import BagError, RotationNodeError
+
+if TYPE_CHECKING:
+    from rotation_node.parameters import NodeParameters
 
 _STORAGE_SUFFIXES = ('.zstd', '.mcap', '.db3', '.bag')
 
@@ -69,7 +72,7 @@ def batch_output_paths(input_paths: Sequence[str], output_directory: str) -> Lis
         given twice.
 
     """
-    outputs = {}
+    outputs: Dict[str, str] = {}
     for input_path in input_paths:
         output = batch_output_path(input_path, output_directory)
         if output in outputs:
@@ -88,8 +91,9 @@ def _summary(stats, params) -> str:
         for topic, topic_stats in stats.items())
 
 
-def convert_bag(input_path: str, output_path: str, params, *, topics=None,
-                overwrite: bool = False, strict: bool = False) -> BagResult:
+def convert_bag(input_path: str, output_path: str, params: 'NodeParameters', *,
+                topics: Optional[Sequence[str]] = None, overwrite: bool = False,
+                strict: bool = False) -> BagResult:
     """
     Convert one bag as ``rotation_bag convert`` does; report a failure instead of raising it.
 
@@ -117,7 +121,7 @@ def convert_bag(input_path: str, output_path: str, params, *, topics=None,
 
     """
     from rotation_node.bag.convert import convert
-    notes = []
+    notes: List[str] = []
     try:
         with open(os.devnull, 'w') as no_progress_bar:
             stats = convert(input_path, output_path, params, topics=topics, overwrite=overwrite,
@@ -138,8 +142,9 @@ def _without_path(line, path):
     return line[len(prefix):] if line.startswith(prefix) else line
 
 
-def convert_bags(input_paths: Sequence[str], output_directory: str, params, *, jobs: int = 1,
-                 topics=None, overwrite: bool = False, strict: bool = False,
+def convert_bags(input_paths: Sequence[str], output_directory: str, params: 'NodeParameters',
+                 *, jobs: int = 1, topics: Optional[Sequence[str]] = None,
+                 overwrite: bool = False, strict: bool = False,
                  on_result: Optional[Callable[[BagResult], None]] = None) -> List[BagResult]:
     """
     Convert every input into ``output_directory``, ``jobs`` bags at a time.
@@ -202,8 +207,9 @@ def convert_bags(input_paths: Sequence[str], output_directory: str, params, *, j
     return results
 
 
-def convert_bags_on_dask(client, input_paths: Sequence[str], output_directory: str, params, *,
-                         topics=None, overwrite: bool = False, strict: bool = False,
+def convert_bags_on_dask(client: Any, input_paths: Sequence[str], output_directory: str,
+                         params: 'NodeParameters', *, topics: Optional[Sequence[str]] = None,
+                         overwrite: bool = False, strict: bool = False,
                          on_result: Optional[Callable[[BagResult], None]] = None,
                          timeout: Optional[float] = None) -> List[BagResult]:
     """
