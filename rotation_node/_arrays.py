@@ -1,10 +1,15 @@
 """Argument checks shared by :mod:`rotation_node.covariance` and :mod:`rotation_node.frames`."""
-import numpy as np
-from numpy.typing import ArrayLike
+from __future__ import annotations
 
-from .type_aliases import FloatArray
+from typing import TYPE_CHECKING
+
+import numpy as np
 
 from .conversions._validation import float_array
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from .type_aliases import FloatArray
 
 
 def finite_array(x: ArrayLike, name: str, trailing: tuple[int, ...]) -> FloatArray:

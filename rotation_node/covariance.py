@@ -47,16 +47,21 @@ orientation) is projected out. Both maps are invariant under ``q -> -q``.
 Round trips ``d -> a -> d`` and ``d -> q -> d`` are exact to rounding
 (``J J^-1 = I``, ``M^T M = I``); ``a -> d -> a`` too, away from gimbal lock.
 """
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
 import warnings
 
 import numpy as np
-from numpy.typing import ArrayLike
 
 from ._arrays import finite_array
 from .conversions import matrix_from_quaternion, parse_sequence
 from .kinematics import (
     angular_velocity_from_euler_rates, DEFAULT_SINGULARITY_THRESHOLD,
     euler_rates_from_angular_velocity, EulerSingularityWarning)
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 __all__ = [
     'body_rotation_vector_covariance', 'euler_covariance_from_rotation_vector_covariance',

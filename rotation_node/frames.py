@@ -30,12 +30,17 @@ with ``w >= 0``.
 :class:`FrameConversion` says which way a conversion goes; the two common ones
 are :data:`NED_FRD_FROM_ENU_FLU` and :data:`ENU_FLU_FROM_NED_FRD`.
 """
+from __future__ import annotations
+
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-from numpy.typing import ArrayLike
 
 from ._arrays import finite_array
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 __all__ = ['BODY_FRAMES', 'ENU_FLU_FROM_NED_FRD', 'FrameConversion', 'NED_FRD_FROM_ENU_FLU',
            'WORLD_FRAMES']

@@ -21,16 +21,20 @@ factory instead, which returns a function ``(topic, message) -> samples``.
 This module does not import rclpy: message classes and the CDR encoders are
 looked up when first used.
 """
+from __future__ import annotations
+
+from dataclasses import dataclass
 import functools
 import math
 import operator
-from dataclasses import dataclass
-from typing import Any, Callable, Iterable, NamedTuple, Optional, Sequence, Tuple
+from typing import Any, Callable, Iterable, NamedTuple, Optional, Sequence, Tuple, TYPE_CHECKING
 
 import numpy as np
-from numpy.typing import ArrayLike
 
 from rotation_node import conversions, kinematics
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 # Forms of an input orientation.
 QUATERNION = 'quaternion'

@@ -11,19 +11,23 @@ node and the offline conversion accept exactly the same values.
 Values are typed as ROS types them: a double parameter needs a float (``0.0``,
 not ``0``), a string array a list of strings. This module does not import rclpy.
 """
-import math
-import re
+from __future__ import annotations
+
 from dataclasses import dataclass, field, fields, replace
+import math
 from pathlib import Path
-from typing import Any, Callable, Mapping, Optional
+import re
+from typing import Any, Callable, Mapping, Optional, TYPE_CHECKING
 
 from rotation_node import messages
 from rotation_node.conversions import parse_sequence
 from rotation_node.errors import ParameterError
 from rotation_node.frames import BODY_FRAMES, WORLD_FRAMES
 from rotation_node.ros_yaml import load_ros_yaml
-from rotation_node.type_aliases import StrPath
 from rotation_node.validation import describe_value, did_you_mean
+
+if TYPE_CHECKING:
+    from rotation_node.type_aliases import StrPath
 
 NODE_NAME = 'rotation_node'
 

@@ -11,12 +11,12 @@ axis ``q_v / |q_v|``, exact to ~1 ulp for every angle and every norm. Matrix
 forms go through the quaternion (never ``acos`` of the trace, which is
 useless near pi).
 """
+from __future__ import annotations
+
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
-from numpy.typing import ArrayLike
-
-from ..type_aliases import FloatArray, FloatArrayOrScalar, Quaternion4, Vector3
 
 from ._matrix import (DEFAULT_ORTHONORMAL_TOLERANCE, EIGENVECTOR_PENDING, convert_matrices,
                       quaternion_of_matrix, store_rotation)
@@ -26,6 +26,10 @@ from ._runtime import (FLAT_IN, FLAT_OUT, FLOAT, ROWS_IN, ROWS_OUT, STAGE_CHUNK,
                        call_unary, jit, kernel, matrix_samples, samples, status)
 from ._trigonometry import sin_cos, sin_cos_in_place_kernel
 from ._validation import NON_FINITE, OK, ZERO_NORM
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from ..type_aliases import FloatArray, FloatArrayOrScalar, Quaternion4, Vector3
 
 
 @jit

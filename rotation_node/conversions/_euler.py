@@ -21,12 +21,12 @@ References
    direct, general and computationally efficient method", PLOS ONE 17(11),
    e0276302, 2022.
 """
+from __future__ import annotations
+
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
-from numpy.typing import ArrayLike
-
-from ..type_aliases import FloatArray, FloatArrayOrScalar, Quaternion4, Vector3
 
 from ._matrix import (DEFAULT_ORTHONORMAL_TOLERANCE, EIGENVECTOR_PENDING, convert_matrices,
                       quaternion_of_matrix, store_rotation)
@@ -36,6 +36,10 @@ from ._runtime import (FLAT_IN, FLAT_OUT, FLOAT, INT, ROWS_IN, ROWS_OUT, STAGE_C
                        call_unary, jit, kernel, matrix_samples, samples)
 from ._trigonometry import atan2_in_place_kernel, sin_cos
 from ._validation import SEQUENCE_TABLE, EulerSequence, parse_sequence
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from ..type_aliases import FloatArray, FloatArrayOrScalar, Quaternion4, Vector3
 
 _TWO_PI = 2.0 * math.pi
 _DEGREES_PER_RADIAN = 180.0 / math.pi

@@ -22,13 +22,12 @@ References
 .. [4] A. Bjorck and C. Bowie, "An Iterative Algorithm for Computing the Best
    Estimate of an Orthogonal Matrix", SIAM J. Numer. Anal. 8(2), 1971.
 """
+from __future__ import annotations
+
 import math
-from typing import Any, Optional
+from typing import Any, Optional, TYPE_CHECKING
 
 import numpy as np
-from numpy.typing import ArrayLike
-
-from ..type_aliases import FloatArray, Matrix9, Quaternion4
 
 from ._quaternion import (canonical_kernel, canonical_unit_quaternion, quaternion_status,
                           scaled_quaternion)
@@ -37,6 +36,10 @@ from ._runtime import (FLAT_IN, FLAT_OUT, FLOAT, ROWS_IN, ROWS_OUT, call_unary, 
                        samples, status)
 from ._validation import (NON_FINITE, NOT_ORTHONORMAL, NOT_ROTATION, OK, float_array,
                           raise_sample_error)
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from ..type_aliases import FloatArray, Matrix9, Quaternion4
 
 DEFAULT_ORTHONORMAL_TOLERANCE = 1e-6
 

@@ -12,14 +12,18 @@ called from the loop kernels of every module; they assume finite, non-zero
 input (the kernels check with :func:`quaternion_defect` first). How kernels
 are declared, compiled and called is :mod:`._runtime`'s business.
 """
+from __future__ import annotations
+
 import math
+from typing import TYPE_CHECKING
 
-from numpy.typing import ArrayLike
-
-from ..type_aliases import FloatArray, FloatArrayOrScalar, Quaternion4, Vector3
 from ._runtime import (FLAT_IN, FLAT_OUT, call_binary, call_unary, first_status, jit, kernel,
                        samples, status)
 from ._validation import NON_FINITE, OK, ZERO_NORM
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from ..type_aliases import FloatArray, FloatArrayOrScalar, Quaternion4, Vector3
 
 
 @jit

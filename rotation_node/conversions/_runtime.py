@@ -30,20 +30,24 @@ writable (a system-wide ROS install), numba caches them in the user's cache
 directory instead (``$XDG_CACHE_HOME/numba``, by default ``~/.cache/numba``),
 or wherever ``NUMBA_CACHE_DIR`` says.
 """
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
 import math
 import os
 import threading
-from concurrent.futures import ThreadPoolExecutor
-from typing import Any, Callable, Optional, Sequence, TypeGuard
+from typing import Any, Callable, Optional, Sequence, TYPE_CHECKING, TypeGuard
 
 import numpy as np
-from numpy.typing import ArrayLike
 from numba import njit, types
 from numba.core.errors import RequireLiteralValue, TypingError
 from numba.extending import intrinsic, overload
 
-from ..type_aliases import FloatArray
 from ._validation import broadcast_pair, float_array, raise_sample_error
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from ..type_aliases import FloatArray
 
 # Every compiled function is inlined into its callers (numba IR inlining, not
 # left to LLVM). A helper that is called rather than inlined costs a call per

@@ -48,14 +48,18 @@ mpmath, 0.76 the worst found, next to ``t = 7/16``; fdlibm's own reduction
 Signed zeros are handled as C's ``atan2`` does (``atan2(+-0, -0) = +-pi``);
 arguments must be finite.
 """
+from __future__ import annotations
+
 import math
-from typing import Any, Callable
+from typing import Any, Callable, TYPE_CHECKING
 
 from numba import types
 from numba.extending import intrinsic
 
-from ..type_aliases import FloatArray
 from ._runtime import jit
+
+if TYPE_CHECKING:
+    from ..type_aliases import FloatArray
 
 # fdlibm k_sin.c and k_cos.c.
 _S1 = -1.66666666666666324348e-01

@@ -10,12 +10,16 @@ report the first bad sample as a status
 sample is fine); :func:`raise_sample_error` turns it into a ``ValueError``
 that names the argument, the sample and what was wrong.
 """
-from typing import Any, NamedTuple, NoReturn, Sequence
+from __future__ import annotations
+
+from typing import Any, NamedTuple, NoReturn, Sequence, TYPE_CHECKING
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
 
-from ..type_aliases import FloatArray
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike, NDArray
+    from ..type_aliases import FloatArray
+
 
 # Defect codes returned by the kernels (0 = sample is fine).
 OK = 0

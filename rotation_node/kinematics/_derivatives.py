@@ -18,16 +18,20 @@ The inverses project onto the tangent space: ``w_b = 2 vec(q* (x) qdot)`` and
 rotation cannot have (``q . qdot`` and the symmetric part of ``R^T Rdot``), so
 they are the least-squares angular velocity for a noisy derivative.
 """
+from __future__ import annotations
+
 import math
+from typing import TYPE_CHECKING
 
-from numpy.typing import ArrayLike
-
-from ..type_aliases import FloatArray
 from ..conversions.kernels import (BOOL, FLAT_IN, FLAT_OUT, NON_FINITE, OK, ROWS_IN, ROWS_OUT,
                                    call_binary, first_status, jit, kernel, matrix_at,
                                    matrix_defect, matrix_samples, product, quaternion_status,
                                    samples, status, unit_quaternion, vector_status)
 from ._validation import is_world_frame
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from ..type_aliases import FloatArray
 
 
 # ----------------------------------------------------------------- kernels

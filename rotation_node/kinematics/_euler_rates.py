@@ -40,18 +40,22 @@ References
 .. [1] J. Diebel, "Representing Attitude: Euler Angles, Unit Quaternions, and
    Rotation Vectors", Stanford University, 2006.
 """
+from __future__ import annotations
+
 import math
+from typing import TYPE_CHECKING
 import warnings
 
 import numpy as np
-from numpy.typing import ArrayLike
-
-from ..type_aliases import FloatArray
 
 from ..conversions import parse_sequence
 from ..conversions.kernels import (BOOL, FLAT_IN, FLAT_OUT, FLOAT, INT, array_type, call_binary,
                                    first_status, jit, kernel, samples, vector_status)
 from ._validation import is_world_frame
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from ..type_aliases import FloatArray
 
 #: Default ``singularity_threshold`` (rad), ~sqrt(eps): closer to gimbal lock
 #: the rates exceed 6.7e7 |omega| and a one-ulp change of the middle angle

@@ -9,16 +9,21 @@ angular velocity over the step. By the Magnus expansion
 estimate at the midpoint time, and exact for a constant angular velocity.
 It aliases when the true rotation per step reaches pi (``|w| h >= pi``).
 """
-import numpy as np
-from numpy.typing import ArrayLike
+from __future__ import annotations
 
-from ..type_aliases import FloatArray
+from typing import TYPE_CHECKING
+
+import numpy as np
 
 from ..conversions.kernels import (BOOL, FLAT_IN, FLAT_OUT, float_array, kernel, product,
                                    quaternion_status, raise_sample_error,
                                    rotation_vector_from_quaternion_scalar, samples,
                                    scaled_quaternion)
 from ._validation import is_world_frame, sample_times
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from ..type_aliases import FloatArray
 
 
 @kernel(FLAT_IN, FLAT_IN, FLAT_OUT, BOOL)

@@ -40,14 +40,12 @@ References
 .. [2] R. B. Miller, "A new strapdown attitude algorithm", J. Guidance,
    Control, and Dynamics 6(4), 1983.
 """
+from __future__ import annotations
+
 import math
+from typing import Callable, TYPE_CHECKING
 
 import numpy as np
-from typing import Callable
-
-from numpy.typing import ArrayLike
-
-from ..type_aliases import FloatArray
 
 from ..conversions.kernels import (FLAT_IN, INT, ROWS_IN, array_type, canonical_kernel,
                                    canonical_unit_quaternion, float_array, jit, kernel,
@@ -55,6 +53,10 @@ from ..conversions.kernels import (FLAT_IN, INT, ROWS_IN, array_type, canonical_
                                    raise_sample_error)
 from ._stage_rates import stage_rates
 from ._validation import is_world_frame, sample_times
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from ..type_aliases import FloatArray
 
 _GAUSS = math.sqrt(3.0) / 6.0  # Gauss-Legendre nodes on [0, 1]: 1/2 -+ sqrt(3)/6
 

@@ -9,14 +9,17 @@ at the ends): its error is ``O(h^4)``, so no method of order <= 4 loses its orde
 on smooth sampled data. With fewer than four samples the polynomial through all
 of them is used.
 """
+from __future__ import annotations
+
+from typing import Callable, TYPE_CHECKING
+
 import numpy as np
-from typing import Callable
-
-from numpy.typing import ArrayLike
-
-from ..type_aliases import FloatArray
 
 from ..conversions.kernels import float_array
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from ..type_aliases import FloatArray
 
 
 def _lagrange_stencils(t, h, nodes):

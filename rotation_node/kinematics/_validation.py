@@ -7,16 +7,18 @@ shapes, broadcasting, kernel status codes and error messages across the
 package). This module adds what only kinematics needs: the reference frame of
 an angular velocity and a strictly increasing vector of sample times.
 """
+from __future__ import annotations
+
 import math
+from typing import Optional, TYPE_CHECKING
 
 import numpy as np
-from typing import Optional
-
-from numpy.typing import ArrayLike
-
-from ..type_aliases import FloatArray
 
 from ..conversions.kernels import FLAT_IN, FLAT_OUT, kernel, kernel_ready
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from ..type_aliases import FloatArray
 
 def is_world_frame(frame: object) -> bool:
     """

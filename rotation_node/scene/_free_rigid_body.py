@@ -21,12 +21,17 @@ Phys. Lett. A 150, 262 (1990).
 F. Fasso, "Comparison of splitting algorithms for the rigid body",
 J. Comput. Phys. 189, 527 (2003).
 """
+from __future__ import annotations
+
 import math
+from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
 
-from rotation_node.type_aliases import FloatArray, IntArray
+if TYPE_CHECKING:
+    from rotation_node.type_aliases import FloatArray, IntArray
+
 
 #: Largest rotation (rad) the fastest axis flow makes in one internal step;
 #: 1e-3 keeps the relative energy error near 1e-14 and the trajectory within

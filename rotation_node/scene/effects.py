@@ -28,17 +28,21 @@ same number of values, so enabling one effect never changes another's draws.
 Conventions: quaternions (x, y, z, w), body-to-world; angular velocity in the
 body frame, rad/s; covariances row-major 3x3 as in ``sensor_msgs/Imu``.
 """
+from __future__ import annotations
+
 import dataclasses
-from typing import Callable, Mapping
+from typing import Callable, Mapping, TYPE_CHECKING
 
 import numpy as np
 
 from rotation_node.conversions import quaternion_from_rotation_vector, quaternion_product
 from rotation_node.stamps import NS_PER_S as _NS_PER_S
-from rotation_node.type_aliases import BoolArray, FloatArray, IntArray
 
 from .spec import (DroppedMessages, GyroBias, GyroNoise, NanBursts, NonUnitQuaternions,
                    OrientationNoise, OrientationUnknown, QuaternionSignFlips, TimestampJitter)
+
+if TYPE_CHECKING:
+    from rotation_node.type_aliases import BoolArray, FloatArray, IntArray
 
 #: ``sensor_msgs/Imu``: covariance element 0 set to -1 means "no estimate".
 UNKNOWN_COVARIANCE = -1.0

@@ -14,18 +14,23 @@ sample, shape ``(n,)``):
 ``torque_free`` integrates Euler's equations with a structure-preserving
 splitting (:mod:`rotation_node.scene._free_rigid_body`).
 """
+from __future__ import annotations
+
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
-from numpy.typing import ArrayLike
 
 from rotation_node.conversions import (quaternion_from_euler, quaternion_from_rotation_vector,
                                        quaternion_product)
 from rotation_node.kinematics import angular_velocity_from_euler_rates
-from rotation_node.type_aliases import FloatArray
 
 from . import _free_rigid_body
 from .spec import Coning, ConstantRate, EulerSweep, Motion, TorqueFree
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from rotation_node.type_aliases import FloatArray
 
 
 def sign_continuous(q: FloatArray) -> FloatArray:

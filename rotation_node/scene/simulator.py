@@ -18,8 +18,10 @@ Every message has ``header.frame_id`` = the scene's ``frame_id`` and log time
 seed give a byte-identical bag (``BagWriter.write`` encodes these types with
 zero padding, see :mod:`rotation_node.bag.cdr`).
 """
+from __future__ import annotations
+
 import dataclasses
-from typing import Mapping
+from typing import Mapping, TYPE_CHECKING
 
 import numpy as np
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
@@ -28,11 +30,13 @@ from sensor_msgs.msg import Imu
 from rotation_node.bag.mcap_io import BagWriter
 from rotation_node.stamps import NS_PER_S as _NS_PER_S
 from rotation_node.stamps import time_message as _time_message
-from rotation_node.type_aliases import IntArray, StrPath
 
 from .effects import UNKNOWN_COVARIANCE, SensorStream, apply_effects
 from .motions import motion_truth
 from .spec import TRUTH_ANGULAR_VELOCITY_TOPIC, TRUTH_ORIENTATION_TOPIC, Scene
+
+if TYPE_CHECKING:
+    from rotation_node.type_aliases import IntArray, StrPath
 
 
 @dataclasses.dataclass(frozen=True)

@@ -15,16 +15,20 @@ first, then missing fields, then invalid values.
 Conventions: quaternions (x, y, z, w), scalar last, active, body-to-world;
 angular velocities in the body frame, rad/s; angles in radians.
 """
+from __future__ import annotations
+
 import dataclasses
 import math
 import re
-from typing import ClassVar, Mapping, Tuple, Union
+from typing import ClassVar, Mapping, Tuple, TYPE_CHECKING, Union
 
 from rotation_node.conversions import parse_sequence
 from rotation_node.errors import SceneError
 from rotation_node.ros_yaml import load_ros_yaml
-from rotation_node.type_aliases import StrPath
 from rotation_node.validation import describe_value, did_you_mean
+
+if TYPE_CHECKING:
+    from rotation_node.type_aliases import StrPath
 
 #: Default ``start_time``: 2025-01-01T00:00:00Z, in seconds since the Unix epoch.
 DEFAULT_START_TIME = 1735689600.0
