@@ -24,10 +24,10 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'rotation_node = rotation_node.node:main',
-            'rotation_bag = rotation_node.bag.cli:main',
-            'rotation_scene = rotation_node.scene.cli:main',
-            'rotation_bench = rotation_node.study.cli:main',
+            'rotation_node = rotation_node.console:rotation_node',
+            'rotation_bag = rotation_node.console:rotation_bag',
+            'rotation_scene = rotation_node.console:rotation_scene',
+            'rotation_bench = rotation_node.console:rotation_bench',
         ],
     },
 )

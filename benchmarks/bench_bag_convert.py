@@ -67,7 +67,8 @@ def write_imu_bag(path, count, seed=0):
     rng = np.random.default_rng(seed)
     msg = Imu()
     msg.header.frame_id = 'imu_link'
-    with BagWriter(path, overwrite=True) as writer:
+    # Uncompressed, as every bag was before chunk compression existed: the ratio stays comparable.
+    with BagWriter(path, overwrite=True, compression='none') as writer:
         for start in range(0, count, 10_000):
             n = min(10_000, count - start)
             quaternions = rng.normal(size=(n, 4))
@@ -289,7 +290,8 @@ def breakdown(directory, count=20_000):
     encode = fixed_layout_codec('geometry_msgs/msg/Vector3Stamped').stamped_encoder()
 
     def write(records, encoded):
-        with BagWriter(os.path.join(directory, 'sample_out.mcap'), overwrite=True) as writer:
+        with BagWriter(os.path.join(directory, 'sample_out.mcap'), overwrite=True,
+                       compression='none') as writer:
             for record, outputs in zip(records, encoded):
                 writer.write_serialized(TOPIC, record.type_name, record.data, record.log_time_ns)
                 for data in outputs:

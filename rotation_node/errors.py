@@ -14,6 +14,25 @@ class BagError(RotationNodeError, ValueError):
     """An MCAP bag could not be read or written (corrupt, truncated, unknown type...)."""
 
 
+class DiskFullError(BagError):
+    """
+    The disk filled while a bag was written.
+
+    Attributes
+    ----------
+    kept : int
+        Messages written to the bag before (a closed bag holds them).
+    dropped : int
+        Messages that were not written.
+
+    """
+
+    def __init__(self, message: str, *, kept: int, dropped: int) -> None:
+        super().__init__(message)
+        self.kept = kept
+        self.dropped = dropped
+
+
 class SceneError(RotationNodeError, ValueError):
     """A scene file is invalid: an unknown key, a missing field or a bad value."""
 

@@ -316,9 +316,9 @@ def main(args: Optional[Sequence[str]] = None) -> int:
     except ParameterError as exc:
         print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
         return 1
-    rclpy.init(args=args)
     node = None
     try:
+        rclpy.init(args=args)
         node = RotationNode(parameters_files=files)
         # The ~1e5 objects of rclpy, numpy and numba live as long as the process: keep
         # them out of the cyclic collector, whose full passes over them stall a

@@ -9,6 +9,7 @@ import os
 
 from bag_helpers import imu_messages, serialized_rows, write_rosbag2
 import pytest
+from mcap.reader import make_reader
 from rotation_node.bag.batch import (
     batch_output_path, batch_output_paths, convert_bags, convert_bags_on_dask)
 from rotation_node.bag.cli import main
@@ -103,10 +104,16 @@ def test_good_bags_exit_zero(tmp_path, inputs, capsys):
     good = [path for path, ok in inputs if ok]
     out = tmp_path / 'out'
     out.mkdir()   # IN OUTDIR: an existing directory that is not a bag
-    status = main(['convert', good[0], str(out), '--params', str(tmp_path / 'params.yaml')])
+    status = main(['convert', good[0], str(out), '--params', str(tmp_path / 'params.yaml'),
+                   '--compression', 'lz4'])
     assert status == 0
     assert capsys.readouterr().err.splitlines()[-1] == f'converted 1 bags into {out}'
     assert os.listdir(out) == ['day1']
+    # Each output is a rosbag2 directory, its chunks compressed as asked.
+    assert sorted(os.listdir(out / 'day1')) == ['day1_0.mcap', 'metadata.yaml']
+    with open(out / 'day1' / 'day1_0.mcap', 'rb') as stream:
+        summary = make_reader(stream).get_summary()
+    assert {index.compression for index in summary.chunk_indexes} == {'lz4'}
 
 
 def test_same_tasks_on_a_dask_local_cluster(tmp_path, inputs):

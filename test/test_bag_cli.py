@@ -136,8 +136,15 @@ def test_plot_default_name_and_bad_topic(workspace, capsys, monkeypatch):
     (['missing.mcap'], 'cannot open bag missing.mcap'),
     (['imu.mcap', '--topics', '/nope'], 'topic /nope not in imu.mcap'),
     (['imu.mcap', '--topics', '/foreign'], "unknown message type 'foreign_msgs/msg/Thing'"),
-    (['imu.mcap', '--rate', '-1'], 'rate must be >= 0, got -1.0'),
-], ids=['missing', 'topic_not_in_bag', 'unknown_type', 'negative_rate'])
+    (['imu.mcap', '--rate', '-1'], 'rate must be 0 or a finite number >= 1e-09, got -1.0'),
+    (['imu.mcap', '--rate', '1e-300'], 'rate must be 0 or a finite number >= 1e-09, got 1e-300'),
+    (['imu.mcap', '--rate', 'inf'], 'rate must be 0 or a finite number >= 1e-09, got inf'),
+    (['imu.mcap', '--delay', '1e300'], 'delay must be a number of seconds in [0, '),
+    (['imu.mcap', '--delay', 'nan'], 'delay must be a number of seconds in [0, '),
+    (['imu.mcap', '--topics', '/imu-raw'],
+     "'/imu-raw' is not a valid ROS 2 topic name: topic name must not contain characters"),
+], ids=['missing', 'topic_not_in_bag', 'unknown_type', 'negative_rate', 'tiny_rate',
+        'infinite_rate', 'huge_delay', 'nan_delay', 'invalid_topic_name'])
 def test_play_bad_input(workspace, args, match):
     before = _snapshot(workspace)
     result = subprocess.run([script('rotation_bag'), 'play', *args], cwd=workspace,

@@ -133,4 +133,4 @@ def test_negative_delay_is_rejected_before_anything_is_published(tmp_path, rng):
     with _play(path, '--delay', '-1') as player:
         player.proc.wait(timeout=60)   # exits by itself
         assert player.stop() == 1
-    assert 'delay must be >= 0, got -1.0' in player.output
+    assert 'delay must be a number of seconds in [0, 9.223e+09], got -1.0' in player.output

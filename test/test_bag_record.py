@@ -1,11 +1,15 @@
 """Tests of rotation_bag record (rotation_node.bag.record) against live publishers."""
+import os
 import pathlib
 import signal
+import subprocess
 
 import pytest
 from bag_helpers import imu_messages, plain
+from fault_helpers import can_mount, linear_scan, small_filesystem, wait_for
 from rclpy.duration import Duration
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 from ros_harness import RosProcess, TestNode, script
 from rosbags.highlevel import AnyReader
 from sensor_msgs.msg import Imu
@@ -88,3 +92,68 @@ def test_refuses_to_overwrite(tmp_path):
         assert recorder.stop() == 1
     assert 'rotation_bag record: error: output' in recorder.output
     assert path.read_bytes() == b'keep'
+
+
+def test_sigkill_keeps_every_message_written_a_second_before(tmp_path, rng):
+    """After SIGKILL the .part holds what was received more than about a second before."""
+    path = tmp_path / 'live'
+    storage = tmp_path / 'live.part' / 'live_0.mcap'
+    first, second = imu_messages(rng, 150), imu_messages(rng, 150)
+    reliable = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+    with TestNode('publisher') as client, _record(path, '--topics', '/imu') as recorder:
+        imu = client.node.create_publisher(Imu, '/imu', reliable)
+        _wait_until_recorded(client, '/imu')
+        for msg in first:
+            imu.publish(msg)
+        # Written within about a second of reception (a bounded wait, not a speed test).
+        assert wait_for(lambda: len(linear_scan(storage)) >= len(first), timeout=20)
+        for msg in second:
+            imu.publish(msg)
+        recorder.proc.send_signal(signal.SIGKILL)
+        assert recorder.stop() == -signal.SIGKILL
+    assert not path.exists()
+    recovered = linear_scan(storage)
+    published = first + second
+    assert len(first) <= len(recovered) <= len(published)
+    assert [plain(deserialize_message(data, Imu)) for _, _, _, data in recovered] == [
+        plain(m) for m in published[:len(recovered)]]
+
+
+@pytest.mark.skipif(not can_mount(), reason='needs a tmpfs mount (root); the writer tests '
+                                            'cover the full disk without one')
+def test_full_disk_stops_and_keeps_a_valid_bag(tmp_path, rng):
+    messages = imu_messages(rng, 3000)
+    reliable = QoSProfile(depth=len(messages), reliability=ReliabilityPolicy.RELIABLE)
+    with small_filesystem(tmp_path / 'small', 512 * 1024) as small:
+        path = small / 'live'
+        with TestNode('publisher') as client, \
+                _record(path, '--topics', '/imu', '--compression', 'none') as recorder:
+            imu = client.node.create_publisher(Imu, '/imu', reliable)
+            _wait_until_recorded(client, '/imu')
+            for msg in messages:
+                imu.publish(msg)
+            assert wait_for(lambda: not recorder.alive(), timeout=30)
+            assert recorder.stop() == 1
+        line, = [line for line in recorder.output.splitlines() if 'error' in line]
+        kept = int(line.split('kept ')[1].split()[0])
+        assert line.startswith('rotation_bag record: error: disk full: recording stopped, '
+                               f'kept {kept} messages in {path}')
+        assert sorted(os.listdir(small)) == ['live']
+        with AnyReader([pathlib.Path(path)]) as reader:
+            assert reader.message_count == kept > 500
+            recorded = [plain(deserialize_message(bytes(data), Imu))
+                        for _, _, data in reader.messages()]
+    assert recorded == [plain(m) for m in messages[:kept]]
+
+
+@pytest.mark.parametrize('args, match', [
+    (['--topics', '/imu-raw'], "'/imu-raw' is not a valid ROS 2 topic name"),
+    (['--topics', '/imu', '--duration', 'inf'], 'duration must be a finite number of seconds'),
+], ids=['invalid_topic_name', 'infinite_duration'])
+def test_bad_arguments_are_one_line_and_create_nothing(tmp_path, args, match):
+    result = subprocess.run([script('rotation_bag'), 'record', tmp_path / 'out', *args],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 1
+    line, = result.stderr.splitlines()
+    assert line.startswith('rotation_bag record: error: ') and match in line
+    assert os.listdir(tmp_path) == []

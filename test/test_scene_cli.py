@@ -1,8 +1,11 @@
 """Tests of rotation_node.scene.cli: the rotation_scene command."""
 import os
+import signal
 import subprocess
 
+import numpy as np
 import pytest
+from fault_helpers import FULL_DISKS, linear_scan, small_disk, wait_for
 
 from ros_harness import script
 from rotation_node.bag.mcap_io import BagReader
@@ -96,3 +99,80 @@ def test_console_script_reports_errors_with_status_1(tmp_path):
                             capture_output=True, text=True, timeout=120)
     assert failed.returncode == 1
     assert failed.stderr.startswith('rotation_scene: error: ') and failed.stderr.count('\n') == 1
+
+
+LONG_SCENE = """duration: 10.0
+rate: 1000.0
+topic: /imu
+motion: {type: coning, half_angle: 0.2, frequency: 3.0}
+effects: {gyro_noise: {std: 0.01}, dropped_messages: {probability: 0.1}}
+"""
+
+
+@pytest.fixture(scope='module')
+def long_scene(tmp_path_factory):
+    """A 10 001-sample scene and its complete bag, written once in-process."""
+    directory = tmp_path_factory.mktemp('long_scene')
+    (directory / 'scene.yaml').write_text(LONG_SCENE)
+    (directory / 'reference').mkdir()
+    assert main([str(directory / 'scene.yaml'),
+                 str(directory / 'reference' / 'out.mcap')]) == 0
+    return directory
+
+
+def _scene_process(long_scene, output):
+    return subprocess.Popen([script('rotation_scene'), str(long_scene / 'scene.yaml'),
+                             str(output)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+
+
+def _size(path):
+    try:
+        return os.path.getsize(path)
+    except OSError:
+        return 0
+
+
+def test_sigkill_leaves_a_part_holding_a_prefix_of_the_bag(long_scene, tmp_path):
+    reference = (long_scene / 'reference' / 'out.mcap').read_bytes()
+    threshold = int(np.random.default_rng(11).uniform(0.1, 0.6) * len(reference))
+    output = tmp_path / 'out.mcap'
+    process = _scene_process(long_scene, output)
+    try:
+        assert wait_for(lambda: _size(f'{output}.part') >= threshold
+                        or process.poll() is not None, timeout=90)
+        process.send_signal(signal.SIGKILL)
+    finally:
+        process.communicate(timeout=30)
+    assert process.returncode == -signal.SIGKILL and not output.exists()
+    written = (tmp_path / 'out.mcap.part').read_bytes()
+    assert len(written) >= threshold and written == reference[:len(written)]
+    recovered = linear_scan(tmp_path / 'out.mcap.part')
+    assert recovered and recovered == linear_scan(
+        long_scene / 'reference' / 'out.mcap')[:len(recovered)]
+
+
+@pytest.mark.parametrize('stop', [signal.SIGTERM, signal.SIGINT], ids=lambda s: s.name)
+def test_signal_removes_the_part_and_says_so_on_one_line(long_scene, tmp_path, stop):
+    output = tmp_path / 'out'
+    process = _scene_process(long_scene, output)
+    try:
+        assert wait_for(lambda: _size(tmp_path / 'out.part' / 'out_0.mcap') > 0
+                        or process.poll() is not None, timeout=90)
+        process.send_signal(stop)
+    finally:
+        _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 128 + stop, stderr
+    assert stderr.splitlines() == [f'rotation_scene: interrupted ({stop.name})']
+    assert os.listdir(tmp_path) == []
+
+
+@pytest.mark.parametrize('disk', FULL_DISKS)
+def test_full_disk_is_one_line_and_leaves_nothing(long_scene, tmp_path, monkeypatch, capsys,
+                                                  disk):
+    with small_disk(disk, tmp_path / 'small', 256 * 1024, monkeypatch) as small:
+        status = main([str(long_scene / 'scene.yaml'), str(small / 'out')])
+        assert os.listdir(small) == []
+    assert status == 1
+    line, = capsys.readouterr().err.splitlines()
+    assert line.startswith('rotation_scene: error: disk full writing ')

@@ -2,14 +2,20 @@
 Output files that appear complete or not at all.
 
 The data goes to a hidden temporary file in the destination's directory, which
-is renamed over the destination (``os.replace``, atomic on POSIX) only when
-writing finished cleanly; on failure it is removed. A reader of the
+is renamed to the destination only when writing finished cleanly; on failure
+(or Ctrl-C, SIGTERM) it is removed. The rename is atomic: without
+``overwrite`` it fails if the destination appeared meanwhile
+(``RENAME_NOREPLACE``), with it the destination is replaced. A reader of the
 destination therefore never sees a half-written file, and an existing file is
 replaced only when asked to.
+
+(Bags are written differently, by :mod:`rotation_node.bag.output`: under a
+visible ``.part`` name that a crash leaves for recovery.)
 """
 import os
 import secrets
 
+from rotation_node.bag.output import rename_exclusive
 from rotation_node.errors import BagError
 
 
@@ -38,6 +44,7 @@ class AtomicFile:
 
     def __init__(self, path, *, overwrite=False):
         self.path = os.fspath(path)
+        self.overwrite = overwrite
         if os.path.isdir(self.path):
             raise BagError(f'output {self.path} is a directory')
         if not overwrite and os.path.lexists(self.path):
@@ -66,7 +73,14 @@ class AtomicFile:
             self.stream.flush()
             os.fsync(self.stream.fileno())
             self.stream.close()
-            os.replace(self.temporary_path, self.path)
+            if self.overwrite:
+                os.replace(self.temporary_path, self.path)
+            else:
+                rename_exclusive(self.temporary_path, self.path)
+        except FileExistsError:
+            self.discard()
+            raise BagError(f'output {self.path} was created by another process while this one '
+                           'wrote it') from None
         except OSError as error:
             self.discard()
             raise BagError(f'cannot write output {self.path}: {error.strerror}') from None

@@ -9,18 +9,24 @@ N``); :func:`convert_bags_on_dask` submits the same tasks to a Dask
 distributed cluster, for fleets that outgrow one machine. The outputs are
 named after the inputs (:func:`batch_output_path`).
 """
+from __future__ import annotations
+
 import concurrent.futures
 import dataclasses
 import multiprocessing
 import os
+import signal
 from typing import Any, Callable, Dict, List, Optional, Sequence, TYPE_CHECKING
 
+from rotation_node.bag.stop_signal import Terminated
 from rotation_node.errors import BagError, RotationNodeError
 
 if TYPE_CHECKING:
     from rotation_node.parameters import NodeParameters
 
 _STORAGE_SUFFIXES = ('.zstd', '.mcap', '.db3', '.bag')
+_converting = False   # in a worker process: whether it is converting a bag now
+_stopped = False      # in a worker process: whether SIGTERM came (no further bag is started)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -91,9 +97,9 @@ def _summary(stats, params) -> str:
         for topic, topic_stats in stats.items())
 
 
-def convert_bag(input_path: str, output_path: str, params: 'NodeParameters', *,
+def convert_bag(input_path: str, output_path: str, params: NodeParameters, *,
                 topics: Optional[Sequence[str]] = None, overwrite: bool = False,
-                strict: bool = False) -> BagResult:
+                strict: bool = False, compression: Optional[str] = None) -> BagResult:
     """
     Convert one bag as ``rotation_bag convert`` does; report a failure instead of raising it.
 
@@ -105,13 +111,16 @@ def convert_bag(input_path: str, output_path: str, params: 'NodeParameters', *,
     input_path : str
         Any bag :func:`rotation_node.bag.reader.open_bag` reads.
     output_path : str
-        The output bag (must not exist unless ``overwrite``).
+        The output bag (must not exist unless ``overwrite``): a rosbag2
+        directory, or a single MCAP file if it ends in ``.mcap``.
     params : rotation_node.parameters.NodeParameters
         The node's parameters, as for :func:`rotation_node.bag.convert.convert`.
     topics : list of str, optional
         As for :func:`rotation_node.bag.convert.convert`.
     overwrite, strict : bool, optional
         As for :func:`rotation_node.bag.convert.convert`.
+    compression : str, optional
+        As for :func:`rotation_node.bag.convert.convert` (default: the input's).
 
     Returns
     -------
@@ -125,7 +134,8 @@ def convert_bag(input_path: str, output_path: str, params: 'NodeParameters', *,
     try:
         with open(os.devnull, 'w') as no_progress_bar:
             stats = convert(input_path, output_path, params, topics=topics, overwrite=overwrite,
-                            strict=strict, report=notes.append, progress_stream=no_progress_bar)
+                            compression=compression, strict=strict, report=notes.append,
+                            progress_stream=no_progress_bar)
     except RotationNodeError as error:
         return BagResult(os.fspath(input_path), os.fspath(output_path), False,
                          f'{input_path}: error: {_without_path(str(error), input_path)}')
@@ -142,9 +152,10 @@ def _without_path(line, path):
     return line[len(prefix):] if line.startswith(prefix) else line
 
 
-def convert_bags(input_paths: Sequence[str], output_directory: str, params: 'NodeParameters',
+def convert_bags(input_paths: Sequence[str], output_directory: str, params: NodeParameters,
                  *, jobs: int = 1, topics: Optional[Sequence[str]] = None,
                  overwrite: bool = False, strict: bool = False,
+                 compression: Optional[str] = None,
                  on_result: Optional[Callable[[BagResult], None]] = None) -> List[BagResult]:
     """
     Convert every input into ``output_directory``, ``jobs`` bags at a time.
@@ -159,7 +170,7 @@ def convert_bags(input_paths: Sequence[str], output_directory: str, params: 'Nod
         The node's parameters, for every bag.
     jobs : int, optional
         Worker processes (``1``: one after the other in this process).
-    topics, overwrite, strict
+    topics, overwrite, strict, compression
         As for :func:`convert_bag`.
     on_result : callable, optional
         Called with each :class:`BagResult` as soon as its bag is done.
@@ -186,30 +197,69 @@ def convert_bags(input_paths: Sequence[str], output_directory: str, params: 'Nod
     if jobs == 1 or len(input_paths) == 1:
         for input_path, output_path in zip(input_paths, outputs):
             results.append(convert_bag(input_path, output_path, params, topics=topics,
-                                       overwrite=overwrite, strict=strict))
+                                       overwrite=overwrite, strict=strict,
+                                       compression=compression))
             on_result(results[-1])
         return results
     # Fresh interpreters ("spawn"): forking a process that runs threads (numba's,
     # the conversion thread pool) can deadlock the child.
     context = multiprocessing.get_context('spawn')
     with concurrent.futures.ProcessPoolExecutor(max_workers=min(jobs, len(input_paths)),
-                                                mp_context=context) as pool:
-        futures = [pool.submit(convert_bag, input_path, output_path, params, topics=topics,
-                               overwrite=overwrite, strict=strict)
+                                                mp_context=context,
+                                                initializer=_init_worker) as pool:
+        futures = [pool.submit(_convert_bag_in_worker, input_path, output_path, params,
+                               topics=topics, overwrite=overwrite, strict=strict,
+                               compression=compression)
                    for input_path, output_path in zip(input_paths, outputs)]
         try:
             for future in concurrent.futures.as_completed(futures):
                 results.append(future.result())
                 on_result(results[-1])
-        except BaseException:
+        except BaseException:   # Ctrl-C, SIGTERM: stop the workers too
+            for process in list((getattr(pool, '_processes', None) or {}).values()):
+                process.terminate()
             pool.shutdown(wait=True, cancel_futures=True)
             raise
     return results
 
 
+def _init_worker():
+    """
+    Set a worker process's signals: Ctrl-C is the parent's, SIGTERM stops the worker.
+
+    The parent, interrupted, sends SIGTERM to its workers: a conversion then
+    stops as ``rotation_bag convert`` does on SIGTERM (its unfinished output
+    removed), and no queued bag is started; an idle worker exits at once.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _stop_worker)
+
+
+def _stop_worker(signal_number, frame):
+    global _stopped
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)   # the clean-up is not interrupted
+    _stopped = True
+    if _converting:
+        raise Terminated()
+    os._exit(128 + signal_number)
+
+
+def _convert_bag_in_worker(*args, **kwargs):
+    """:func:`convert_bag` in a worker process, stoppable by SIGTERM (see ``_init_worker``)."""
+    global _converting
+    if _stopped:   # a bag queued before the parent was interrupted
+        raise Terminated()
+    _converting = True
+    try:
+        return convert_bag(*args, **kwargs)
+    finally:
+        _converting = False
+
+
 def convert_bags_on_dask(client: Any, input_paths: Sequence[str], output_directory: str,
-                         params: 'NodeParameters', *, topics: Optional[Sequence[str]] = None,
+                         params: NodeParameters, *, topics: Optional[Sequence[str]] = None,
                          overwrite: bool = False, strict: bool = False,
+                         compression: Optional[str] = None,
                          on_result: Optional[Callable[[BagResult], None]] = None,
                          timeout: Optional[float] = None) -> List[BagResult]:
     """
@@ -223,7 +273,7 @@ def convert_bags_on_dask(client: Any, input_paths: Sequence[str], output_directo
     client : distributed.Client
         Connected to the cluster (``Client('tcp://scheduler:8786')``, or a
         ``LocalCluster``).
-    input_paths, output_directory, params, topics, overwrite, strict, on_result
+    input_paths, output_directory, params, topics, overwrite, strict, compression, on_result
         As for :func:`convert_bags`.
     timeout : float, optional
         Seconds to wait for all tasks; ``None`` waits until they finish.
@@ -247,7 +297,8 @@ def convert_bags_on_dask(client: Any, input_paths: Sequence[str], output_directo
     on_result = on_result or (lambda result: None)
     # pure=False: a task is a side effect (a file written), never to be deduplicated.
     futures = client.map(convert_bag, list(input_paths), outputs, params=params, topics=topics,
-                         overwrite=overwrite, strict=strict, pure=False)
+                         overwrite=overwrite, strict=strict, compression=compression,
+                         pure=False)
     results = []
     try:
         for future in as_completed(futures, timeout=timeout):

@@ -3,23 +3,27 @@ Command line ``rotation_bag``: record, play, convert and plot bags.
 
 Usage::
 
-    rotation_bag record OUT.mcap --topics /imu [/odom ...] [--duration S] [--force]
+    rotation_bag record OUT --topics /imu [/odom ...] [--duration S] [--compression C] [--force]
     rotation_bag play IN [--rate R] [--topics T ...] [--loop] [--delay S]
                       [--wait-for-subscribers] [--strict]
-    rotation_bag convert IN OUT --params config/params.yaml [--topic T ...] [--force]
-                         [--strict]
+    rotation_bag convert IN OUT --params config/params.yaml [--topic T ...]
+                         [--compression C] [--force] [--strict]
     rotation_bag convert IN1 IN2 ... OUTDIR --params FILE [--jobs N] [...]
     rotation_bag plot IN --topic /imu/euler [-o plot.png] [--params FILE] [--force] [--strict]
 
 ``IN`` is any bag :func:`rotation_node.bag.reader.open_bag` reads (a rosbag2
 directory, MCAP, sqlite3, split, compressed, ROS 1, an unfinished recording;
-see docs/bags.md). ``record`` and ``play`` accept ``--ros-args ...``
-(remapping, namespace, ...). Bad input (a missing, unsupported, truncated or
-corrupt bag, an unknown message type, a topic not in the bag, an invalid
-parameters file, an existing output) ends with one line on stderr naming the
-problem and exit status 1; no output file is left behind and the input is
-never modified. With several inputs, each bag gets one line and the exit
-status is 1 if any failed.
+see docs/bags.md). An output ``OUT`` is a rosbag2 directory, or a single MCAP
+file if it ends in ``.mcap``; it is written as ``OUT.part`` and renamed when
+complete (docs/recording.md). ``record`` and ``play`` accept ``--ros-args
+...`` (remapping, namespace, ...). Every failure (a missing, unsupported,
+truncated or corrupt bag, an unknown message type, a topic not in the bag or
+not a valid name, an invalid parameters file, an existing output, a full
+disk) ends with one line on stderr naming the problem and exit status 1;
+Ctrl-C and SIGTERM with one line and 130 or 143. No output file is left
+behind (``record`` keeps what it recorded: on a full disk as a closed bag)
+and the input is never modified. With several inputs, each bag gets one line
+and the exit status is 1 if any failed.
 """
 import argparse
 import os
@@ -27,17 +31,18 @@ import sys
 
 from rclpy.utilities import remove_ros_args
 
+from rotation_node.bag.stop_signal import exit_status, interrupt_on_stop_signals, signal_name
 from rotation_node.errors import BagError, RotationNodeError
 
 PROG = 'rotation_bag'
 EXIT_ERROR = 1
-EXIT_INTERRUPTED = 130
+COMPRESSION_CHOICES = ('zstd', 'lz4', 'none')
 
 
 def _record(args, ros_args):
     from rotation_node.bag.record import record
     counts = record(args.output, args.topics, duration=args.duration, overwrite=args.force,
-                    ros_args=ros_args)
+                    compression=args.compression, ros_args=ros_args)
     _say(f'wrote {sum(counts.values())} messages to {args.output}: ' +
          (', '.join(f'{topic} {count}' for topic, count in counts.items()) or 'no topics'))
 
@@ -61,7 +66,7 @@ def _convert(args, ros_args):
     from rotation_node.bag.convert import convert, output_topic
     notes = []   # printed once the bag is written: a failure stays one line
     stats = convert(inputs[0], output, params, topics=args.topic, overwrite=args.force,
-                    strict=args.strict, report=notes.append)
+                    compression=args.compression, strict=args.strict, report=notes.append)
     for note in notes:
         _say(note)
     for topic, topic_stats in stats.items():
@@ -84,7 +89,8 @@ def _is_output_directory(path):
 def _convert_many(args, inputs, output_directory, params):
     from rotation_node.bag.batch import convert_bags
     results = convert_bags(inputs, output_directory, params, jobs=args.jobs, topics=args.topic,
-                           overwrite=args.force, strict=args.strict,
+                           overwrite=args.force, compression=args.compression,
+                           strict=args.strict,
                            on_result=lambda result: _say(result.line))
     failed = sum(not result.ok for result in results)
     if failed:
@@ -127,11 +133,14 @@ def build_parser():
     commands = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
 
     record = commands.add_parser('record', help='record live topics to an MCAP bag')
-    record.add_argument('output', metavar='OUT.mcap')
+    record.add_argument('output', metavar='OUT',
+                        help='rosbag2 directory to create, or a single MCAP file *.mcap')
     record.add_argument('--topics', nargs='+', required=True, metavar='TOPIC')
     record.add_argument('--duration', type=float, metavar='S',
                         help='stop after S seconds (default: at Ctrl-C or SIGTERM)')
-    record.add_argument('--force', action='store_true', help='overwrite OUT.mcap')
+    record.add_argument('--compression', choices=COMPRESSION_CHOICES, default='zstd',
+                        help='MCAP chunk compression (default zstd, as ros2 bag record)')
+    record.add_argument('--force', action='store_true', help='replace OUT')
     record.set_defaults(run=_record)
 
     play = commands.add_parser('play', help='publish the messages of a bag')
@@ -154,12 +163,13 @@ def build_parser():
 
     convert = commands.add_parser(
         'convert', help="add the node's outputs for the input topics to a copy of a bag",
-        usage=f'{PROG} convert IN [IN ...] OUT --params FILE [--topic T] [--force] [--strict] '
-              '[--jobs N]',
+        usage=f'{PROG} convert IN [IN ...] OUT --params FILE [--topic T] [--compression C] '
+              '[--force] [--strict] [--jobs N]',
         description="Write a copy of each input bag with the node's outputs for its input "
                     'topics. IN OUT converts one bag; IN1 IN2 ... OUTDIR (or IN OUTDIR, an '
                     'existing directory that is not a bag) converts each input into '
-                    'OUTDIR/<input name>, one line per bag.')
+                    'OUTDIR/<input name>, one line per bag. An output is a rosbag2 '
+                    'directory, or a single MCAP file if its name ends in .mcap.')
     convert.add_argument('paths', nargs='+', metavar='PATH',
                          help='input bags (rosbag2 directory, .mcap, .db3, ROS 1 .bag, '
                               'compressed or split), then the output bag or directory')
@@ -168,7 +178,9 @@ def build_parser():
     convert.add_argument('--topic', action='append', metavar='T',
                          help='input topic to convert (repeatable; default: every topic of '
                               'the input_type)')
-    convert.add_argument('--force', action='store_true', help='overwrite existing outputs')
+    convert.add_argument('--compression', choices=COMPRESSION_CHOICES,
+                         help="MCAP chunk compression (default: the input's)")
+    convert.add_argument('--force', action='store_true', help='replace existing outputs')
     convert.add_argument('--strict', action='store_true',
                          help='refuse unfinished recordings instead of converting what a scan '
                               'recovers')
@@ -199,12 +211,20 @@ def main(argv=None):
     argv = sys.argv if argv is None else [PROG, *argv]
     args = build_parser().parse_args(remove_ros_args(argv)[1:])
     try:
+        interrupt_on_stop_signals()
         args.run(args, argv)
-    except RotationNodeError as error:
-        # One line, whatever the message holds (YAML errors span several).
-        print(f'{PROG} {args.command}: error: {" ".join(str(error).split())}', file=sys.stderr)
+    except (RotationNodeError, OSError) as error:
+        _error(args, error)
         return EXIT_ERROR
-    except KeyboardInterrupt:
-        print(f'{PROG} {args.command}: interrupted', file=sys.stderr)
-        return EXIT_INTERRUPTED
+    except KeyboardInterrupt as interrupt:
+        print(f'{PROG} {args.command}: interrupted ({signal_name(interrupt)})', file=sys.stderr)
+        return exit_status(interrupt)
     return 0
+
+
+def _error(args, error):
+    """Print ``error`` on one line, whatever it holds (YAML errors span several)."""
+    if isinstance(error, OSError) and not isinstance(error, RotationNodeError):
+        where = f'{error.filename}: ' if error.filename else ''
+        error = f'{where}{error.strerror or error}'
+    print(f'{PROG} {args.command}: error: {" ".join(str(error).split())}', file=sys.stderr)

@@ -25,10 +25,11 @@ import os
 
 from rotation_node import messages
 from rotation_node.bag.cdr import fixed_layout_codec
-from rotation_node.bag.mcap_io import BagWriter, TopicMetadata
+from rotation_node.bag.mcap_io import TopicMetadata
 from rotation_node.bag.progress import ProgressBar
 from rotation_node.bag.qos import qos_profile, qos_profiles_yaml
 from rotation_node.bag.reader import open_bag
+from rotation_node.bag.writer import BagWriter
 from rotation_node.errors import BagError
 from rotation_node.pipeline import ConversionPipeline
 
@@ -55,18 +56,19 @@ def _input_topics(reader, input_type_name, topics):
     return list(dict.fromkeys(topics))
 
 
-def _same_path(input_path, output_path):
-    """Whether the output would be the input (or a storage file of an input directory)."""
-    if not os.path.exists(output_path):
-        return False
-    if os.path.samefile(input_path, output_path):
-        return True
-    return (os.path.isdir(input_path)
-            and os.path.samefile(input_path, os.path.dirname(os.path.abspath(output_path))))
+def _check_output(input_path, output_path):
+    """Refuse an output that is the input bag, inside it, or replaces the directory holding it."""
+    if os.path.exists(output_path) and os.path.samefile(input_path, output_path):
+        raise BagError(f'output {output_path} is the input bag')
+    real_input, real_output = os.path.realpath(input_path), os.path.realpath(output_path)
+    if real_input.startswith(real_output + os.sep):
+        raise BagError(f'output {output_path} holds the input bag {input_path}')
+    if os.path.isdir(input_path) and real_output.startswith(real_input + os.sep):
+        raise BagError(f'output {output_path} is inside the input bag {input_path}')
 
 
 def convert(input_path, output_path, params, *, topics=None, overwrite=False,
-            progress_stream=None, strict=False, report=None):
+            compression=None, progress_stream=None, strict=False, report=None):
     """
     Write ``output_path``: the input bag plus the node's outputs for its input topics.
 
@@ -75,15 +77,19 @@ def convert(input_path, output_path, params, *, topics=None, overwrite=False,
     input_path : str or os.PathLike
         Any bag :func:`rotation_node.bag.reader.open_bag` reads; only read.
     output_path : str or os.PathLike
-        The output bag; written to a temporary file and renamed, so a failure
-        never leaves a partial file.
+        The output bag, a rosbag2 directory or a single MCAP file if it ends
+        in ``.mcap``. It is written as ``<output>.part`` and renamed when
+        complete; a failure or a signal removes it.
     params : rotation_node.parameters.NodeParameters
         As loaded from the node's parameters file.
     topics : list of str, optional
         Topics to convert (their names in the bag or their ROS 2 names); by
         default every topic of the type ``params.input_type`` names.
     overwrite : bool, optional
-        Replace an existing output file.
+        Replace an existing output (atomically, once the new one is complete).
+    compression : str, optional
+        Chunk compression of the output, ``'zstd'``, ``'lz4'`` or ``'none'``;
+        the input's by default.
     progress_stream : file, optional
         Where to draw the progress bar (only if it is a terminal); stderr by default.
     strict : bool, optional
@@ -104,12 +110,13 @@ def convert(input_path, output_path, params, *, topics=None, overwrite=False,
     BagError
         If the input is unreadable or corrupt, a topic is missing or of the
         wrong type, an output topic already exists in the input, or the output
-        exists (without ``overwrite``) or is the input.
+        exists (without ``overwrite``), is being written by another process
+        (``<output>.part`` exists) or is the input; a ``DiskFullError`` if the
+        disk fills (no output is left then).
 
     """
     with open_bag(input_path, strict=strict) as reader:
-        if _same_path(input_path, output_path):
-            raise BagError(f'output {output_path} is the input bag')
+        _check_output(input_path, output_path)
         if report is not None:
             report(f'{reader.path}: {reader.description}, '
                    f'{sum(reader.message_counts.values())} messages')
@@ -135,7 +142,8 @@ def convert(input_path, output_path, params, *, topics=None, overwrite=False,
         if clashes:
             raise BagError(f'output topic {", ".join(clashes)} is already in {reader.path}')
 
-        with BagWriter(output_path, overwrite=overwrite) as writer, \
+        compression = reader.compression if compression is None else compression
+        with BagWriter(output_path, overwrite=overwrite, compression=compression) as writer, \
                 ProgressBar(sum(reader.message_counts.values()), stream=progress_stream,
                             label='converting ') as progress:
             for metadata in [*reader.topic_metadata.values(), *new_topics]:

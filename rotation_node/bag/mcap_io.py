@@ -1,23 +1,17 @@
 """
-Read and write ROS 2 bags as single MCAP files, the way rosbag2 writes them.
+Read ROS 2 bags stored as single MCAP files, the way rosbag2 writes them.
 
-A bag written here is what ``ros2 bag record -s mcap`` would write for the same
-messages: profile ``ros2``; one schema per message type, named
-``pkg/msg/Type`` with encoding ``ros2msg`` and the complete concatenated
-definition (see ``message_types.message_definition``); one channel per topic
-with message encoding ``cdr`` and the metadata ``offered_qos_profiles`` (QoS
-YAML, see ``qos``) and ``topic_type_hash``; uncompressed chunks with message
-indexes and a summary; and a ``rosbag2`` metadata record holding the
-version 9 bag metadata, without which rosbag2 would read the QoS YAML with the
-pre-Jazzy (integer) schema.
+A bag is what ``ros2 bag record -s mcap`` writes: profile ``ros2``; one schema
+per message type, named ``pkg/msg/Type`` with encoding ``ros2msg`` and the
+complete concatenated definition (see ``message_types.message_definition``);
+one channel per topic with message encoding ``cdr`` and the metadata
+``offered_qos_profiles`` (QoS YAML, see ``qos``) and ``topic_type_hash``.
+:mod:`rotation_node.bag.writer` writes such bags (``BagWriter``, importable
+from here too); :mod:`rotation_node.bag.reader` reads every other kind of bag.
 
 Messages are stored as CDR bytes, which reading returns unchanged, so a bag
-round trip is byte-exact. ``BagWriter.write`` encodes messages with
-:mod:`rotation_node.bag.cdr` where it can (fixed-layout types such as
-sensor_msgs/Imu, and std_msgs/Float64MultiArray): rclpy's bytes, with the
-alignment padding zeroed instead of uninitialised, so that the same messages
-give the same bag; other types with ``rclpy.serialization``. Reading streams
-chunk by chunk: memory does not grow with the length of the bag.
+round trip is byte-exact. Reading streams chunk by chunk: memory does not grow
+with the length of the bag.
 """
 import dataclasses
 import functools
@@ -26,32 +20,20 @@ import os
 import struct
 from typing import Collection, Iterable, List, Optional
 
-import mcap
-import yaml
 import zstandard
 from mcap.exceptions import McapError
 from mcap.reader import SeekingReader
 from mcap.records import Channel, Chunk, Message, Schema
 from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
-from mcap.writer import CompressionType, Writer
 from rclpy.impl.implementation_singleton import rclpy_implementation
-from rclpy.serialization import deserialize_message, serialize_message
+from rclpy.serialization import deserialize_message
 
-from rotation_node.bag.atomic_file import AtomicFile
 from rotation_node.bag.compression import ZSTD_MAGIC, decompressed_message
-from rotation_node.bag.cdr import message_encoder
-from rotation_node.bag.message_types import (
-    message_class, message_definition, type_hash, type_name_of)
+from rotation_node.bag.message_types import message_class
 from rotation_node.errors import BagError
 
-PROFILE = 'ros2'
 MESSAGE_ENCODING = 'cdr'
 SCHEMA_ENCODINGS = ('ros2msg', 'ros2idl')
-#: Version of the rosbag2 metadata written (Jazzy's).
-ROSBAG2_METADATA_VERSION = 9
-LIBRARY = f'rotation_node bag; mcap-python/{mcap.__version__}'
-
-_MAX_TIMESTAMP = 2**64 - 1
 #: What rclpy's deserialize_message raises for data that is not a valid message.
 _RMWError = rclpy_implementation.RMWError
 # What the mcap library raises for a damaged file: its own McapError (bad
@@ -172,260 +154,6 @@ class BagMessage:
     def __repr__(self):
         return (f'BagMessage({self.topic!r}, {self.type_name!r}, <{len(self.data)} bytes>, '
                 f'log_time_ns={self.log_time_ns}, publish_time_ns={self.publish_time_ns})')
-
-
-def _timestamp(value, name):
-    """Validate a timestamp argument: an integer in [0, 2**64)."""
-    try:
-        value = operator.index(value)
-    except TypeError:
-        raise BagError(
-            f'{name} must be an integer number of nanoseconds, got {value!r}') from None
-    if not 0 <= value <= _MAX_TIMESTAMP:
-        raise BagError(f'{name} must be in [0, 2**64) ns, got {value}')
-    return value
-
-
-class _Channel:
-    __slots__ = ('id', 'type_name', 'msg_class', 'encode')
-
-    def __init__(self, channel_id, type_name):
-        self.id = channel_id
-        self.type_name = type_name
-        self.msg_class = None   # of the messages given to write(), with their encode(msg)
-        self.encode = None
-
-
-class BagWriter:
-    """
-    Write a ROS 2 MCAP bag; a context manager.
-
-    The file appears at ``path`` only when the writer is closed cleanly (end
-    of the ``with`` block or ``close()``): until then the data goes to a
-    temporary file in the same directory, which an exception (or ``abort()``)
-    removes.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        The ``.mcap`` file to write.
-    overwrite : bool, optional
-        Replace an existing file. Default False: an existing file is an error.
-
-    Raises
-    ------
-    BagError
-        If ``path`` exists and ``overwrite`` is false, or cannot be created.
-
-    Examples
-    --------
-    >>> with BagWriter('out.mcap') as writer:                  # doctest: +SKIP
-    ...     writer.write('/imu', Imu(), log_time_ns=1_700_000_000_000_000_000)
-
-    """
-
-    def __init__(self, path, *, overwrite=False):
-        self.path = os.fspath(path)
-        self._file = AtomicFile(self.path, overwrite=overwrite)
-        self._writer = Writer(self._file.stream, compression=CompressionType.NONE)
-        self._writer.start(profile=PROFILE, library=LIBRARY)
-        self._schema_ids = {}
-        self._channels = {}
-        self._topics = []
-        self._counts = {}
-        self._start_ns = _MAX_TIMESTAMP
-        self._end_ns = 0
-
-    def add_topic(self, metadata):
-        """
-        Register a topic with explicit metadata (QoS, definition).
-
-        ``write`` and ``write_serialized`` register unknown topics by
-        themselves, with the installed definition and no QoS profiles; call
-        this first to record the publishers' QoS, or to copy a topic from
-        another bag with its own schema.
-
-        Parameters
-        ----------
-        metadata : TopicMetadata
-
-        Raises
-        ------
-        BagError
-            If the topic is already registered or the type name is invalid or
-            (with ``definition=None``) not installed. A topic with its own
-            ``definition`` is registered with its type name as given, for
-            copying topics of any bag unchanged.
-
-        """
-        if metadata.name in self._channels:
-            raise BagError(f'topic {metadata.name} is already registered in {self.path}')
-        # A topic copied with its own schema keeps its type name as stored
-        # (even a short or unknown one); others need an installed 'pkg/msg/Type'.
-        definition = (message_definition(metadata.type_name) if metadata.definition is None
-                      else metadata.definition)
-        schema_key = (metadata.type_name, metadata.definition_encoding, definition)
-        schema_id = self._schema_ids.get(schema_key)
-        if schema_id is None:
-            schema_id = self._writer.register_schema(
-                name=metadata.type_name, encoding=metadata.definition_encoding,
-                data=definition.encode())
-            self._schema_ids[schema_key] = schema_id
-        channel_id = self._writer.register_channel(
-            topic=metadata.name, message_encoding=metadata.serialization_format,
-            schema_id=schema_id,
-            metadata={
-                'offered_qos_profiles': metadata.offered_qos_profiles,
-                'topic_type_hash': (type_hash(metadata.type_name) if metadata.type_hash is None
-                                    else metadata.type_hash),
-            })
-        self._channels[metadata.name] = _Channel(channel_id, metadata.type_name)
-        self._topics.append(metadata)
-        self._counts[channel_id] = 0
-
-    def _channel(self, topic, type_name):
-        channel = self._channels.get(topic)
-        if channel is None:
-            self.add_topic(TopicMetadata(topic, type_name))
-            channel = self._channels[topic]
-        elif channel.type_name != type_name:
-            raise BagError(
-                f'topic {topic} holds {channel.type_name} in {self.path}, '
-                f'cannot write {type_name}')
-        return channel
-
-    def write(self, topic, msg, log_time_ns, publish_time_ns=None):
-        """
-        Serialise and write one message.
-
-        Types that :func:`rotation_node.bag.cdr.message_encoder` covers are
-        encoded by it (zero padding: the same message gives the same bytes),
-        others by ``rclpy.serialization``.
-
-        Parameters
-        ----------
-        topic : str
-        msg : rclpy message
-            Its class decides the topic's type on first use.
-        log_time_ns : int
-            Receive time, nanoseconds (e.g. since the Unix epoch).
-        publish_time_ns : int, optional
-            Publish time; defaults to ``log_time_ns``.
-
-        Raises
-        ------
-        BagError
-            If the topic already holds another type or a time is not a
-            non-negative integer.
-
-        """
-        channel = self._channels.get(topic)
-        if channel is None or channel.msg_class is not type(msg):
-            channel = self._channel(topic, type_name_of(type(msg)))
-            channel.msg_class = type(msg)
-            channel.encode = message_encoder(channel.type_name) or serialize_message
-        self._add(channel.id, channel.encode(msg), log_time_ns, publish_time_ns)
-
-    def write_serialized(self, topic, type_name, data, log_time_ns, publish_time_ns=None):
-        """
-        Write one message that is already CDR-serialised.
-
-        Parameters
-        ----------
-        topic : str
-        type_name : str
-            ``'pkg/msg/Type'``; decides the topic's type on first use.
-        data : bytes
-        log_time_ns : int
-        publish_time_ns : int, optional
-            Defaults to ``log_time_ns``.
-
-        Raises
-        ------
-        BagError
-            As ``write``; also if the type is not installed on first use of a
-            topic not registered with ``add_topic``.
-
-        """
-        channel = self._channels.get(topic)
-        if channel is None or channel.type_name != type_name:
-            channel = self._channel(topic, type_name)
-        self._add(channel.id, data, log_time_ns, publish_time_ns)
-
-    def _add(self, channel_id, data, log_time_ns, publish_time_ns):
-        log_time_ns = _timestamp(log_time_ns, 'log_time_ns')
-        publish_time_ns = (log_time_ns if publish_time_ns is None
-                           else _timestamp(publish_time_ns, 'publish_time_ns'))
-        self._writer.add_message(channel_id=channel_id, log_time=log_time_ns, data=data,
-                                 publish_time=publish_time_ns)
-        self._counts[channel_id] += 1
-        if log_time_ns < self._start_ns:
-            self._start_ns = log_time_ns
-        if log_time_ns > self._end_ns:
-            self._end_ns = log_time_ns
-
-    def _rosbag2_metadata(self):
-        """The bag metadata rosbag2 stores in the MCAP metadata record ``rosbag2``."""
-        count = sum(self._counts.values())
-        start = self._start_ns if count else 0
-        duration = {'nanoseconds': self._end_ns - start if count else 0}
-        name = os.path.basename(self.path)
-        return {
-            'version': ROSBAG2_METADATA_VERSION,
-            'storage_identifier': 'mcap',
-            'duration': duration,
-            'starting_time': {'nanoseconds_since_epoch': start},
-            'message_count': count,
-            'topics_with_message_count': [{
-                'topic_metadata': {
-                    'name': topic.name,
-                    'type': topic.type_name,
-                    'serialization_format': topic.serialization_format,
-                    'offered_qos_profiles': yaml.safe_load(topic.offered_qos_profiles) or [],
-                    'type_description_hash': (type_hash(topic.type_name)
-                                              if topic.type_hash is None else topic.type_hash),
-                },
-                'message_count': self._counts[self._channels[topic.name].id],
-            } for topic in self._topics],
-            'compression_format': '',
-            'compression_mode': '',
-            'relative_file_paths': [name],
-            'files': [{
-                'path': name,
-                'starting_time': {'nanoseconds_since_epoch': start},
-                'duration': duration,
-                'message_count': count,
-            }],
-            'custom_data': {},
-            'ros_distro': os.environ.get('ROS_DISTRO', 'jazzy'),
-        }
-
-    def close(self):
-        """Finish the file and move it to ``path``; idempotent."""
-        if self._file.closed:
-            return
-        try:
-            serialized = yaml.safe_dump(self._rosbag2_metadata(), sort_keys=False)
-            self._writer.add_metadata('rosbag2', {'serialized_metadata': serialized})
-            self._writer.finish()
-        except BaseException:
-            self._file.discard()
-            raise
-        self._file.commit()
-
-    def abort(self):
-        """Discard everything written; ``path`` is left as it was."""
-        if not self._file.closed:
-            self._file.discard()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, exc_type, exc, traceback):
-        if exc_type is None:
-            self.close()
-        else:
-            self.abort()
 
 
 def checked_topics(topics: Iterable[str], available: Collection[str], path: str) -> List[str]:
@@ -703,3 +431,11 @@ class BagReader:
 
     def __exit__(self, *exc):
         self.close()
+
+
+def __getattr__(name):
+    # BagWriter lives in rotation_node.bag.writer (which imports this module).
+    if name == 'BagWriter':
+        from rotation_node.bag.writer import BagWriter
+        return BagWriter
+    raise AttributeError(f'module {__name__!r} has no attribute {name!r}')

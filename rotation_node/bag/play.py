@@ -21,6 +21,8 @@ subscriber misses what was published before: with ``wait_for_subscribers``
 topic has a subscriber, and ``delay`` (``--delay``, as in ``ros2 bag play``)
 holds back the first message further.
 """
+import math
+import threading
 import time
 
 import rclpy
@@ -33,6 +35,7 @@ from rotation_node.bag.message_types import message_class
 from rotation_node.bag.qos import DEEP_QUEUE_DEPTH, playback_qos, qos_profiles_from_yaml
 from rotation_node.bag.reader import open_bag
 from rotation_node.bag.stop_signal import StopSignal
+from rotation_node.bag.topic_arguments import checked_topic_names
 from rotation_node.errors import BagError
 
 NODE_NAME = 'rotation_bag_play'
@@ -40,6 +43,19 @@ ACK_BATCH = DEEP_QUEUE_DEPTH // 4
 ACK_TIMEOUT = Duration(seconds=30)
 _POLL_S = 0.05
 DISCOVERY_SETTLE_S = 0.5
+#: Slowest playback rate: a second of the bag then takes about 32 years.
+MIN_RATE = 1e-9
+#: Longest delay before the first message (what ``threading`` can wait for).
+MAX_DELAY_S = threading.TIMEOUT_MAX
+
+
+def _wait(stop, seconds):
+    """Sleep ``seconds`` (any length) or until a stop signal; return whether stopped."""
+    deadline = time.monotonic() + seconds
+    while (remaining := deadline - time.monotonic()) > 0:
+        if stop.event.wait(min(remaining, 3600.0)):
+            return True
+    return stop.is_set()
 
 
 def _playable_topics(reader, topics, report):
@@ -50,6 +66,11 @@ def _playable_topics(reader, topics, report):
     asked for by name it is an error, else it is left out with a note.
     """
     if topics is not None:
+        topics = list(topics)
+        # A name the bag does not have (under either name) is checked as a
+        # ROS 2 name first, so that the error says what is wrong with it.
+        checked_topic_names(topic for topic in topics
+                            if topic not in reader.topics and topic not in reader.renames)
         topics = list(dict.fromkeys(reader.topic_name(topic) for topic in topics))
         for topic in topics:
             _message_class(reader, topic)
@@ -116,7 +137,7 @@ def _play_once(reader, topics, publishers, rate, stop):
                 start_bag = record.log_time_ns
             delay = start_wall + (record.log_time_ns - start_bag) * 1e-9 / rate - time.monotonic()
             if delay > 0:
-                stop.event.wait(delay)
+                _wait(stop, delay)
         if stop.is_set():
             break
         publishers[record.topic].publish(record.data)
@@ -164,14 +185,16 @@ def play(path, *, rate=1.0, topics=None, loop=False, delay=0.0, wait_for_subscri
     Raises
     ------
     BagError
-        If the bag is unreadable, a topic is not in it, a type is not installed
-        or the rate is negative; nothing is published then.
+        If the bag is unreadable, a topic is not in it or not a valid name, a
+        type is not installed, the rate is neither 0 nor in ``[MIN_RATE, inf)``
+        or the delay not in ``[0, MAX_DELAY_S]``; nothing is published then.
 
     """
-    if not rate >= 0:
-        raise BagError(f'rate must be >= 0, got {rate}')
-    if not delay >= 0:
-        raise BagError(f'delay must be >= 0, got {delay}')
+    if not (rate == 0 or MIN_RATE <= rate < math.inf):
+        raise BagError(f'rate must be 0 or a finite number >= {MIN_RATE:g}, got {rate}')
+    if not 0 <= delay <= MAX_DELAY_S:
+        raise BagError(f'delay must be a number of seconds in [0, {MAX_DELAY_S:.4g}], '
+                       f'got {delay}')
     with open_bag(path, strict=strict) as reader:
         for note in reader.notes if report is not None else ():
             report(note)
@@ -183,7 +206,7 @@ def play(path, *, rate=1.0, topics=None, loop=False, delay=0.0, wait_for_subscri
                 publishers = _publishers(node, reader, topics, lossless=rate == 0)
                 if rate == 0 or wait_for_subscribers:
                     _wait_for_subscribers(node, publishers, stop)
-                stop.event.wait(delay)
+                _wait(stop, delay)
                 count = 0
                 while True:
                     published = _play_once(reader, topics, publishers, rate, stop)

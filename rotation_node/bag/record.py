@@ -6,6 +6,12 @@ has a publisher, with a QoS every publisher is compatible with, and its
 messages are stored as received (``raw=True``: CDR bytes, never deserialised).
 Log time is the node clock at reception, publish time the DDS source
 timestamp, as rosbag2 records them.
+
+The bag is crash-safe (see :mod:`rotation_node.bag.writer`): it is written to
+``<output>.part``, flushed to disk at least once a second, and renamed to the
+output when recording stops; after a SIGKILL or a power loss the ``.part``
+holds everything up to the last flush. When the disk fills, recording stops
+and the bag is closed with what fitted.
 """
 import functools
 import math
@@ -16,15 +22,19 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-from rotation_node.bag.mcap_io import BagWriter, TopicMetadata
+from rotation_node.bag.mcap_io import TopicMetadata
 from rotation_node.bag.message_types import message_class
 from rotation_node.bag.qos import qos_profiles_yaml, recording_qos
 from rotation_node.bag.stop_signal import StopSignal
-from rotation_node.errors import BagError
+from rotation_node.bag.topic_arguments import checked_topic_names
+from rotation_node.bag.writer import CHUNK_PERIOD_S, DEFAULT_COMPRESSION, BagWriter
+from rotation_node.errors import BagError, DiskFullError
 
 NODE_NAME = 'rotation_bag_record'
 DISCOVERY_PERIOD_S = 0.1
-DRAIN_LIMIT_S = 5.0
+#: Longest time spent writing what was already received, once stopped.
+DRAIN_LIMIT_S = 0.5
+_SPIN_PERIOD_S = 0.05
 
 
 class BagRecorder(Node):
@@ -95,26 +105,37 @@ def _drain(executor, recorder):
     idle = 0
     while idle < 2 and time.monotonic() < deadline:
         before = sum(recorder.counts.values())
-        executor.spin_once(timeout_sec=0.01)
+        executor.spin_once(timeout_sec=0.005)
         idle = idle + 1 if sum(recorder.counts.values()) == before else 0
 
 
-def record(output, topics, *, duration=None, overwrite=False, ros_args=None):
+def _spin(executor, writer, stop, deadline):
+    """Record until ``stop`` or ``deadline``; write a chunk at least every ``CHUNK_PERIOD_S``."""
+    while not stop.is_set() and (remaining := deadline - time.monotonic()) > 0:
+        executor.spin_once(timeout_sec=min(_SPIN_PERIOD_S, remaining))
+        writer.flush_if_due()
+
+
+def record(output, topics, *, duration=None, overwrite=False, compression=DEFAULT_COMPRESSION,
+           ros_args=None):
     """
-    Record ``topics`` into ``output`` until Ctrl-C, SIGTERM or ``duration``.
+    Record ``topics`` into ``output`` until Ctrl-C, SIGTERM, ``duration`` or a full disk.
 
     The bag is closed cleanly on every one of these, so it is always valid;
-    messages already received by then are written first.
+    messages already received by then are written first (for at most
+    ``DRAIN_LIMIT_S``).
 
     Parameters
     ----------
     output : str or os.PathLike
-        The MCAP file to write.
+        The bag: a rosbag2 directory, or a single MCAP file if it ends in ``.mcap``.
     topics : list of str
     duration : float, optional
         Seconds to record; until stopped by a signal by default.
     overwrite : bool, optional
         Replace an existing ``output``.
+    compression : str, optional
+        Chunk compression, ``'zstd'`` (default, as rosbag2), ``'lz4'`` or ``'none'``.
     ros_args : list of str, optional
         Command line passed to ``rclpy.init`` (``--ros-args ...``).
 
@@ -125,29 +146,44 @@ def record(output, topics, *, duration=None, overwrite=False, ros_args=None):
 
     Raises
     ------
+    DiskFullError
+        If the disk filled: the bag was closed with the messages that fitted
+        (``kept``); recording stopped.
     BagError
         If ``output`` exists (without ``overwrite``), ``duration`` is not
-        positive or a topic's type is not installed; no file is left behind.
+        positive or a topic name is invalid, before anything is written.
+        Should writing fail otherwise, what was flushed stays in ``<output>.part``.
 
     """
-    if duration is not None and not duration > 0:
-        raise BagError(f'duration must be > 0 s, got {duration}')
+    if duration is not None and not (0 < duration < math.inf):
+        raise BagError(f'duration must be a finite number of seconds > 0, got {duration}')
+    topics = checked_topic_names(topics)
     rclpy.init(args=ros_args, signal_handler_options=SignalHandlerOptions.NO)
     try:
-        with StopSignal() as stop, BagWriter(output, overwrite=overwrite) as writer:
+        with StopSignal() as stop, BagWriter(output, overwrite=overwrite, compression=compression,
+                                             keep_unfinished=True,
+                                             chunk_period_s=CHUNK_PERIOD_S) as writer:
             recorder = BagRecorder(writer, topics)
             executor = SingleThreadedExecutor()
             executor.add_node(recorder)
             deadline = math.inf if duration is None else time.monotonic() + duration
+            disk_full = None
             try:
-                while not stop.is_set() and (remaining := deadline - time.monotonic()) > 0:
-                    executor.spin_once(timeout_sec=min(0.05, remaining))
-                _drain(executor, recorder)
+                try:
+                    _spin(executor, writer, stop, deadline)
+                    _drain(executor, recorder)
+                except DiskFullError as error:
+                    disk_full = error
                 for topic in recorder.pending_topics:
                     recorder.get_logger().warning(f'{topic} never had a publisher; not recorded')
             finally:
                 executor.shutdown()
                 recorder.destroy_node()
-        return recorder.counts
+        if disk_full is not None:
+            raise DiskFullError(
+                f'disk full: recording stopped, kept {writer.message_count} messages in '
+                f'{output} ({disk_full.dropped} received messages not written)',
+                kept=writer.message_count, dropped=disk_full.dropped)
+        return writer.message_counts
     finally:
         rclpy.try_shutdown()

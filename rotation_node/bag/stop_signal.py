@@ -1,14 +1,49 @@
 """
-Stop on Ctrl-C (SIGINT) or SIGTERM by setting a flag, never by raising.
+What Ctrl-C (SIGINT) and SIGTERM do in the command-line tools.
 
-``record`` and ``play`` poll the flag between messages. An exception raised
-from a signal handler could interrupt a write halfway through a record; a flag
-lets the current message finish and the bag be closed cleanly.
+``record`` and ``play`` stop by a flag (:class:`StopSignal`), polled between
+messages: an exception raised from a signal handler could interrupt a write
+halfway through a record; a flag lets the current message finish and the bag
+be closed cleanly.
+
+``convert``, ``plot`` and ``rotation_scene`` stop by an exception
+(:func:`interrupt_on_stop_signals`): ``KeyboardInterrupt`` for SIGINT,
+:class:`Terminated` (a ``KeyboardInterrupt``) for SIGTERM, raised once; the
+second signal is ignored, so that removing the unfinished output cannot be
+interrupted. The tools exit with ``128 + signal number`` (130, 143).
 """
 import signal
 import threading
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM arrived; raised as Ctrl-C's ``KeyboardInterrupt`` is, so the same clean-up runs."""
+
+
+def _raise_once(signal_number, frame):
+    for number in STOP_SIGNALS:
+        signal.signal(number, signal.SIG_IGN)
+    if signal_number == signal.SIGTERM:
+        raise Terminated()
+    raise KeyboardInterrupt()
+
+
+def interrupt_on_stop_signals() -> None:
+    """Make the first SIGINT or SIGTERM raise ``KeyboardInterrupt`` or ``Terminated``."""
+    for number in STOP_SIGNALS:
+        signal.signal(number, _raise_once)
+
+
+def exit_status(interrupt: KeyboardInterrupt) -> int:
+    """The exit status after ``interrupt``: 143 for SIGTERM, 130 for Ctrl-C."""
+    return 128 + (signal.SIGTERM if isinstance(interrupt, Terminated) else signal.SIGINT)
+
+
+def signal_name(interrupt: KeyboardInterrupt) -> str:
+    """``'SIGTERM'`` or ``'SIGINT'``."""
+    return 'SIGTERM' if isinstance(interrupt, Terminated) else 'SIGINT'
 
 
 class StopSignal:

@@ -1,18 +1,18 @@
 """
 ``rotation_scene SCENE.yaml OUT.mcap [--seed N] [--force]``: simulate a scene file into a bag.
 
-On bad input (scene file, seed, existing output) it prints one line,
-``rotation_scene: error: ...``, exits with status 1 and leaves no output file.
+The output is a rosbag2 directory, or a single MCAP file if it ends in
+``.mcap``, written as ``OUT.part`` and renamed when complete. On any failure
+(scene file, seed, existing output, full disk) it prints one line,
+``rotation_scene: error: ...``, exits with status 1 and leaves no output file;
+on Ctrl-C or SIGTERM one line, status 130 or 143, no output file.
 """
 import argparse
-import os
 import sys
 from typing import Optional, Sequence
 
-from rotation_node.errors import BagError, SceneError
-
-from .simulator import simulate, write_bag
-from .spec import load_scene
+from rotation_node.bag.stop_signal import exit_status, interrupt_on_stop_signals, signal_name
+from rotation_node.errors import RotationNodeError
 
 
 def _seed(text):
@@ -33,11 +33,12 @@ def build_parser() -> argparse.ArgumentParser:
                     'holding the sensor_msgs/Imu stream and the truth on /truth/orientation '
                     'and /truth/angular_velocity.')
     parser.add_argument('scene', help='scene file (YAML), e.g. config/scenes/coning.yaml')
-    parser.add_argument('output', help='bag to write, e.g. coning.mcap')
+    parser.add_argument('output', help='bag to write: a rosbag2 directory, or a single MCAP '
+                                       'file if it ends in .mcap, e.g. coning.mcap')
     parser.add_argument('--seed', type=_seed, default=0,
                         help='seed of the effects\' random draws (default 0); the same scene '
                              'and seed give a byte-identical bag')
-    parser.add_argument('--force', action='store_true', help='overwrite OUT.mcap if it exists')
+    parser.add_argument('--force', action='store_true', help='replace the output if it exists')
     return parser
 
 
@@ -45,18 +46,24 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run ``rotation_scene``; return the exit status."""
     args = build_parser().parse_args(argv)
     try:
-        # Checked again when the bag is opened; here it saves simulating for nothing.
-        if os.path.lexists(args.output) and not args.force:
-            raise BagError(f'output {args.output} already exists (use --force to overwrite it)')
+        interrupt_on_stop_signals()
+        # Imported here: a Ctrl-C while numpy and rclpy load is then one line too.
+        from rotation_node.bag.output import BagOutput
+        from .simulator import write_scene_bag
+        from .spec import load_scene
+        # Checked again when the bag is opened; here it saves loading the scene for nothing.
+        BagOutput.check_absent(args.output, overwrite=args.force)
         scene = load_scene(args.scene)
-        simulation = simulate(scene, args.seed)
-        write_bag(simulation, args.output, overwrite=args.force)
-    except (SceneError, BagError) as exc:
+        # Streamed: memory does not grow with the scene's length.
+        n, published = write_scene_bag(scene, args.output, seed=args.seed,
+                                       overwrite=args.force)
+    except (RotationNodeError, OSError) as exc:
         one_line = ' '.join(str(exc).split())
         print(f'rotation_scene: error: {one_line}', file=sys.stderr)
         return 1
-    n = len(simulation.time)
-    published = int(simulation.sensor.published.sum())
+    except KeyboardInterrupt as interrupt:
+        print(f'rotation_scene: interrupted ({signal_name(interrupt)})', file=sys.stderr)
+        return exit_status(interrupt)
     effects = ', '.join(scene.effects) or 'none'
     print(f'{args.output}: {n} samples over {scene.duration:g} s at {scene.rate:g} Hz, '
           f'motion {scene.motion.type}, effects {effects}; '

@@ -2,9 +2,13 @@
 Sensor effects: what a simulated IMU gets wrong, one small function per effect.
 
 The simulated sensor starts as the truth (:meth:`SensorStream.from_truth`).
-Each effect listed in the scene is then a function ``(stream, params, rng) ->
-(stream, changed)`` that returns a new stream in which only the fields that
-effect owns differ, and the ``(n,)`` mask of the samples it changed:
+Each effect listed in the scene is then a function ``(stream, params, rng,
+state) -> (stream, changed)`` that returns a new stream in which only the
+fields that effect owns differ, and the ``(n,)`` mask of the samples it
+changed. ``state`` is a dict the effect keeps between calls on consecutive
+blocks of one stream (a random walk's position, a burst running into the next
+block): :class:`EffectsStream` applies the effects block by block with the
+same result, bit for bit, as :func:`apply_effects` on the whole stream.
 
 =========================  =============================================================
 effect                     fields it changes
@@ -31,7 +35,7 @@ body frame, rad/s; covariances row-major 3x3 as in ``sensor_msgs/Imu``.
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable, Mapping, TYPE_CHECKING
+from typing import Any, Callable, Mapping, TYPE_CHECKING
 
 import numpy as np
 
@@ -81,7 +85,7 @@ class SensorStream:
 
     @classmethod
     def from_truth(cls, time: FloatArray, stamp_ns: IntArray, orientation: FloatArray,
-                   angular_velocity: FloatArray) -> 'SensorStream':
+                   angular_velocity: FloatArray) -> SensorStream:
         """
         Return a perfect sensor: the truth, zero covariances, every sample published.
 
@@ -106,23 +110,32 @@ def _isotropic_covariance(n, std):
 
 
 def add_gyro_bias(stream: SensorStream, params: GyroBias,
-                  rng: np.random.Generator) -> tuple[SensorStream, BoolArray]:
+                  rng: np.random.Generator,
+                  state: dict[str, Any]) -> tuple[SensorStream, BoolArray]:
     """
     Return the stream with ``b_k = constant + random walk`` added to the angular velocity.
 
     The walk starts at 0 on the first sample and steps by
     ``N(0, random_walk^2 dt)`` per axis over each nominal interval ``dt``.
     """
-    steps = rng.standard_normal((len(stream) - 1, 3))
-    steps *= params.random_walk * np.sqrt(np.diff(stream.time))[:, np.newaxis]
-    bias = np.asarray(params.constant) + np.concatenate(
-        (np.zeros((1, 3)), np.cumsum(steps, axis=0)))
+    if 'time' in state:   # a later block: the walk goes on from the last sample
+        time = np.concatenate(([state['time']], stream.time))
+    else:
+        time = stream.time
+    steps = rng.standard_normal((len(time) - 1, 3))
+    steps *= params.random_walk * np.sqrt(np.diff(time))[:, np.newaxis]
+    walk = np.cumsum(np.concatenate((state.get('walk', np.zeros((1, 3))), steps)), axis=0)
+    if 'time' in state:
+        walk = walk[1:]
+    state['time'], state['walk'] = stream.time[-1], walk[-1:].copy()
+    bias = np.asarray(params.constant) + walk
     changed = np.any(bias != 0, axis=1)
     return dataclasses.replace(stream, angular_velocity=stream.angular_velocity + bias), changed
 
 
 def add_gyro_noise(stream: SensorStream, params: GyroNoise,
-                   rng: np.random.Generator) -> tuple[SensorStream, BoolArray]:
+                   rng: np.random.Generator,
+                   state: dict[str, Any]) -> tuple[SensorStream, BoolArray]:
     """Return the stream with N(0, std^2) white noise on each gyro axis, and its covariance."""
     noise = params.std * rng.standard_normal((len(stream), 3))
     return dataclasses.replace(
@@ -132,7 +145,8 @@ def add_gyro_noise(stream: SensorStream, params: GyroNoise,
 
 
 def add_orientation_noise(stream: SensorStream, params: OrientationNoise,
-                          rng: np.random.Generator) -> tuple[SensorStream, BoolArray]:
+                          rng: np.random.Generator,
+                          state: dict[str, Any]) -> tuple[SensorStream, BoolArray]:
     """
     Return the stream with orientation ``q (x) exp(v)``, and its covariance ``std^2 I``.
 
@@ -149,7 +163,8 @@ def add_orientation_noise(stream: SensorStream, params: OrientationNoise,
 
 
 def flip_quaternion_signs(stream: SensorStream, params: QuaternionSignFlips,
-                          rng: np.random.Generator) -> tuple[SensorStream, BoolArray]:
+                          rng: np.random.Generator,
+                          state: dict[str, Any]) -> tuple[SensorStream, BoolArray]:
     """Return the stream with each orientation replaced by ``-q`` with ``probability``."""
     flipped = rng.random(len(stream)) < params.probability
     sign = np.where(flipped, -1.0, 1.0)[:, np.newaxis]
@@ -157,7 +172,8 @@ def flip_quaternion_signs(stream: SensorStream, params: QuaternionSignFlips,
 
 
 def scale_quaternions(stream: SensorStream, params: NonUnitQuaternions,
-                      rng: np.random.Generator) -> tuple[SensorStream, BoolArray]:
+                      rng: np.random.Generator,
+                      state: dict[str, Any]) -> tuple[SensorStream, BoolArray]:
     """Return the stream with each orientation multiplied by a factor uniform in ``scale``."""
     low, high = params.scale
     factor = rng.uniform(low, high, len(stream))
@@ -166,7 +182,8 @@ def scale_quaternions(stream: SensorStream, params: NonUnitQuaternions,
 
 
 def insert_nan_bursts(stream: SensorStream, params: NanBursts,
-                      rng: np.random.Generator) -> tuple[SensorStream, BoolArray]:
+                      rng: np.random.Generator,
+                      state: dict[str, Any]) -> tuple[SensorStream, BoolArray]:
     """
     Return the stream with NaN in every component of ``fields`` during bursts.
 
@@ -174,8 +191,12 @@ def insert_nan_bursts(stream: SensorStream, params: NanBursts,
     overlapping bursts merge.
     """
     starts = rng.random(len(stream)) < params.probability
-    covered = np.convolve(starts.astype(np.int64), np.ones(params.length, dtype=np.int64))
-    in_burst = covered[:len(stream)] > 0
+    # Starts of the previous block whose bursts reach into this one.
+    earlier = state.get('starts', np.zeros(0, dtype=np.int64))
+    linked = np.concatenate((earlier, starts.astype(np.int64)))
+    in_burst = np.convolve(linked, np.ones(params.length, dtype=np.int64))
+    in_burst = in_burst[len(earlier):len(earlier) + len(stream)] > 0
+    state['starts'] = linked[max(len(linked) - (params.length - 1), 0):]
     changes = {}
     for field in params.fields:
         values = getattr(stream, field).copy()
@@ -185,7 +206,8 @@ def insert_nan_bursts(stream: SensorStream, params: NanBursts,
 
 
 def hide_orientation(stream: SensorStream, params: OrientationUnknown,
-                     rng: np.random.Generator) -> tuple[SensorStream, BoolArray]:
+                     rng: np.random.Generator,
+                     state: dict[str, Any]) -> tuple[SensorStream, BoolArray]:
     """
     Return the stream with the orientation hidden, each sample with ``probability``.
 
@@ -207,7 +229,8 @@ def hide_orientation(stream: SensorStream, params: OrientationUnknown,
 
 
 def jitter_timestamps(stream: SensorStream, params: TimestampJitter,
-                      rng: np.random.Generator) -> tuple[SensorStream, BoolArray]:
+                      rng: np.random.Generator,
+                      state: dict[str, Any]) -> tuple[SensorStream, BoolArray]:
     """
     Return the stream with each ``header.stamp`` offset by N(0, std^2) s, rounded to ns.
 
@@ -220,7 +243,8 @@ def jitter_timestamps(stream: SensorStream, params: TimestampJitter,
 
 
 def drop_messages(stream: SensorStream, params: DroppedMessages,
-                  rng: np.random.Generator) -> tuple[SensorStream, BoolArray]:
+                  rng: np.random.Generator,
+                  state: dict[str, Any]) -> tuple[SensorStream, BoolArray]:
     """Return the stream with each sample unpublished with ``probability``."""
     dropped = rng.random(len(stream)) < params.probability
     return dataclasses.replace(stream, published=stream.published & ~dropped), dropped
@@ -250,6 +274,36 @@ def effect_rng(seed: int, name: str) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=tuple(name.encode())))
 
 
+class EffectsStream:
+    """
+    The scene's effects, applied to consecutive blocks of one sensor stream.
+
+    ``apply(block)`` on consecutive pieces of a stream returns, piece by
+    piece, exactly what :func:`apply_effects` returns for the whole stream:
+    each effect keeps its generator and its state across blocks.
+
+    Parameters
+    ----------
+    effects : Mapping[str, object]
+        Effect parameters by name (``Scene.effects``).
+    seed : int
+        Scene seed, >= 0.
+    """
+
+    def __init__(self, effects: Mapping[str, object], seed: int) -> None:
+        self._effects: list[tuple[str, Callable[..., tuple[SensorStream, BoolArray]], object,
+                                  np.random.Generator, dict[str, Any]]] = [
+            (name, effect, effects[name], effect_rng(seed, name), {})
+            for name, effect in EFFECTS.items() if name in effects]
+
+    def apply(self, stream: SensorStream) -> tuple[SensorStream, dict[str, BoolArray]]:
+        """Return the next block with the effects applied, and what each changed in it."""
+        changed = {}
+        for name, effect, params, rng, state in self._effects:
+            stream, changed[name] = effect(stream, params, rng, state)
+        return stream, changed
+
+
 def apply_effects(stream: SensorStream, effects: Mapping[str, object],
                   seed: int) -> tuple[SensorStream, dict[str, BoolArray]]:
     """
@@ -270,8 +324,4 @@ def apply_effects(stream: SensorStream, effects: Mapping[str, object],
     changed : dict of str to ndarray of bool, shape (n,)
         For each applied effect, the samples it changed.
     """
-    changed = {}
-    for name, effect in EFFECTS.items():
-        if name in effects:
-            stream, changed[name] = effect(stream, effects[name], effect_rng(seed, name))
-    return stream, changed
+    return EffectsStream(effects, seed).apply(stream)

@@ -13,11 +13,16 @@ sample, shape ``(n,)``):
 ``constant_rate``, ``coning`` and ``euler_sweep`` are exact (closed form);
 ``torque_free`` integrates Euler's equations with a structure-preserving
 splitting (:mod:`rotation_node.scene._free_rigid_body`).
+
+:class:`MotionStream` computes the same truth block by block of consecutive
+samples, carrying the sign continuity and the integrator's state across
+blocks, with results bit-identical to :func:`motion_truth` over all samples at
+once: the simulator streams scenes of any length in bounded memory.
 """
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import Optional, TYPE_CHECKING
 
 import numpy as np
 
@@ -47,10 +52,26 @@ def sign_continuous(q: FloatArray) -> FloatArray:
     ndarray, shape (n, 4)
         ``+-q[k]``, the same rotations.
     """
-    steps = np.sign(np.einsum('ij,ij->i', q[1:], q[:-1]))
+    return _continue_signs(q, None, 1.0)[0]
+
+
+def _continue_signs(q, previous, previous_sign):
+    """
+    Return ``q`` with continuous signs after ``previous`` (the unsigned sample before, or None).
+
+    Also returns the last unsigned quaternion and its sign, to continue with.
+    """
+    if previous is None:
+        linked, first = q, 1.0
+    else:
+        linked, first = np.concatenate((previous[np.newaxis], q)), previous_sign
+    steps = np.sign(np.einsum('ij,ij->i', linked[1:], linked[:-1]))
     steps[steps == 0] = 1.0
-    signs = np.concatenate(([1.0], np.cumprod(steps)))
-    return q * signs[:, np.newaxis]
+    if previous is None:
+        signs = np.concatenate(([1.0], np.cumprod(steps)))
+    else:
+        signs = first * np.cumprod(steps)
+    return q * signs[:, np.newaxis], q[-1].copy(), float(signs[-1])
 
 
 def constant_rate_truth(orientation: ArrayLike, angular_velocity: ArrayLike,
@@ -72,11 +93,16 @@ def constant_rate_truth(orientation: ArrayLike, angular_velocity: ArrayLike,
     q : ndarray, shape (n, 4)
     w : ndarray, shape (n, 3)
     """
+    q, w = _constant_rate_unsigned(orientation, angular_velocity, t)
+    # exp(w t) comes back canonical (scalar >= 0); undo the jump at |w| t = pi.
+    return sign_continuous(q), w
+
+
+def _constant_rate_unsigned(orientation, angular_velocity, t):
     t = np.asarray(t, dtype=np.float64)
     w = np.broadcast_to(np.asarray(angular_velocity, dtype=np.float64), (t.size, 3))
     q = quaternion_product(orientation, quaternion_from_rotation_vector(w * t[:, np.newaxis]))
-    # exp(w t) comes back canonical (scalar >= 0); undo the jump at |w| t = pi.
-    return sign_continuous(q), w.copy()
+    return q, w.copy()
 
 
 def coning_truth(half_angle: float, frequency: float,
@@ -146,19 +172,42 @@ def torque_free_truth(inertia: ArrayLike, orientation: ArrayLike, angular_veloci
     q : ndarray, shape (n, 4)
     w : ndarray, shape (n, 3)
     """
-    inverse_inertia = 1.0 / np.asarray(inertia, dtype=np.float64)
-    w0 = np.asarray(angular_velocity, dtype=np.float64)
-    momentum = w0 / inverse_inertia
     t = np.ascontiguousarray(t, dtype=np.float64)
-    # |w|^2 <= w.I w / I_min = 2T / I_min along the whole motion: T is conserved.
-    fastest = np.sqrt(w0 @ momentum * inverse_inertia.max())
-    longest_interval = np.max(np.diff(t), initial=0.0)
-    substeps = max(1, math.ceil(fastest * longest_interval / _free_rigid_body.MAX_STEP_ANGLE))
-    q0 = np.array(orientation, dtype=np.float64)
-    q, momentum = _free_rigid_body.integrate(
-        q0 / np.linalg.norm(q0), momentum, inverse_inertia, t, substeps,
-        _free_rigid_body.AXES, _free_rigid_body.FRACTIONS)
-    return q, momentum * inverse_inertia
+    return _TorqueFree(inertia, orientation, angular_velocity, longest_interval(t)).truth(t)
+
+
+def longest_interval(t: FloatArray) -> float:
+    """Return the longest interval between consecutive times ``t`` (0 for fewer than two)."""
+    return float(np.max(np.diff(t), initial=0.0))
+
+
+class _TorqueFree:
+    """The torque-free integration, resumable: each ``truth(t)`` continues the previous one."""
+
+    def __init__(self, inertia, orientation, angular_velocity, longest):
+        self.inverse_inertia = 1.0 / np.asarray(inertia, dtype=np.float64)
+        w0 = np.asarray(angular_velocity, dtype=np.float64)
+        self.momentum = w0 / self.inverse_inertia
+        self.momentum_norm = math.sqrt(
+            self.momentum[0] ** 2 + self.momentum[1] ** 2 + self.momentum[2] ** 2)
+        # |w|^2 <= w.I w / I_min = 2T / I_min along the whole motion: T is conserved.
+        fastest = np.sqrt(w0 @ self.momentum * self.inverse_inertia.max())
+        self.substeps = max(1, math.ceil(fastest * longest / _free_rigid_body.MAX_STEP_ANGLE))
+        q0 = np.array(orientation, dtype=np.float64)
+        self.q = q0 / np.linalg.norm(q0)
+        self.time: Optional[float] = None
+
+    def truth(self, t):
+        t = np.ascontiguousarray(t, dtype=np.float64)
+        first = self.time is None
+        times = t if self.time is None else np.concatenate(([self.time], t))
+        q, momentum = _free_rigid_body.integrate(
+            self.q, self.momentum, self.momentum_norm, self.inverse_inertia, times,
+            self.substeps, _free_rigid_body.AXES, _free_rigid_body.FRACTIONS)
+        if not first:
+            q, momentum = q[1:], momentum[1:]
+        self.q, self.momentum, self.time = q[-1].copy(), momentum[-1].copy(), float(t[-1])
+        return q, momentum * self.inverse_inertia
 
 
 def euler_sweep_truth(sequence: str, start: ArrayLike, end: ArrayLike, duration: float,
@@ -187,11 +236,16 @@ def euler_sweep_truth(sequence: str, start: ArrayLike, end: ArrayLike, duration:
     q : ndarray, shape (n, 4)
     w : ndarray, shape (n, 3)
     """
+    q, w = _euler_sweep_unsigned(sequence, start, end, duration, t)
+    return sign_continuous(q), w
+
+
+def _euler_sweep_unsigned(sequence, start, end, duration, t):
     t = np.asarray(t, dtype=np.float64)
     start = np.asarray(start, dtype=np.float64)
     rates = (np.asarray(end, dtype=np.float64) - start) / duration
     angles = start + rates * t[:, np.newaxis]
-    q = sign_continuous(quaternion_from_euler(angles, sequence))
+    q = quaternion_from_euler(angles, sequence)
     w = angular_velocity_from_euler_rates(angles, np.broadcast_to(rates, angles.shape),
                                           sequence, frame='body')
     return q, w
@@ -216,12 +270,59 @@ def motion_truth(motion: Motion, t: FloatArray,
     q : ndarray, shape (n, 4)
     w : ndarray, shape (n, 3)
     """
-    if isinstance(motion, ConstantRate):
-        return constant_rate_truth(motion.orientation, motion.angular_velocity, t)
-    if isinstance(motion, Coning):
-        return coning_truth(motion.half_angle, motion.frequency, t)
-    if isinstance(motion, TorqueFree):
-        return torque_free_truth(motion.inertia, motion.orientation, motion.angular_velocity, t)
-    if isinstance(motion, EulerSweep):
-        return euler_sweep_truth(motion.sequence, motion.start, motion.end, duration, t)
-    raise TypeError(f'motion_truth: not a scene motion: {motion!r}')
+    t = np.asarray(t, dtype=np.float64)
+    return MotionStream(motion, duration, longest_interval(t)).truth(t)
+
+
+class MotionStream:
+    """
+    The truth of a motion over consecutive blocks of samples.
+
+    ``truth(t)`` called on consecutive pieces of a time series returns, piece
+    by piece, exactly (bit for bit) what :func:`motion_truth` returns for the
+    whole series: sign continuity and the torque-free integrator's state carry
+    over from one block to the next.
+
+    Parameters
+    ----------
+    motion : ConstantRate or Coning or TorqueFree or EulerSweep
+        The scene's validated ``motion``.
+    duration : float
+        The scene's duration, s (the end of an Euler sweep).
+    longest : float
+        The longest interval between consecutive times of the whole series,
+        s (:func:`longest_interval`); sets the torque-free integrator's step.
+
+    Raises
+    ------
+    TypeError
+        If ``motion`` is not a scene motion.
+    """
+
+    def __init__(self, motion: Motion, duration: float, longest: float) -> None:
+        if not isinstance(motion, (ConstantRate, Coning, TorqueFree, EulerSweep)):
+            raise TypeError(f'motion_truth: not a scene motion: {motion!r}')
+        self._motion = motion
+        self._duration = duration
+        self._torque_free = (
+            _TorqueFree(motion.inertia, motion.orientation, motion.angular_velocity, longest)
+            if isinstance(motion, TorqueFree) else None)
+        self._previous = None       # last unsigned quaternion, and its sign
+        self._previous_sign = 1.0
+
+    def truth(self, t: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Return ``(q, w)`` at the times ``t`` that follow the previous call's."""
+        motion = self._motion
+        if isinstance(motion, Coning):
+            return coning_truth(motion.half_angle, motion.frequency, t)
+        if self._torque_free is not None:
+            return self._torque_free.truth(t)
+        if isinstance(motion, ConstantRate):
+            q, w = _constant_rate_unsigned(motion.orientation, motion.angular_velocity, t)
+        else:
+            assert isinstance(motion, EulerSweep)
+            q, w = _euler_sweep_unsigned(motion.sequence, motion.start, motion.end,
+                                         self._duration, t)
+        q, self._previous, self._previous_sign = _continue_signs(
+            q, self._previous, self._previous_sign)
+        return q, w

@@ -1,6 +1,10 @@
 """
 Simulate a scene: truth and sensor arrays (:func:`simulate`), then an MCAP bag (:func:`write_bag`).
 
+:func:`write_scene_bag` does both in blocks of samples (:func:`simulate_blocks`),
+so that a scene of any length is written in bounded memory, byte for byte as
+the two steps would write it.
+
 The bag holds, for every sample ``k`` at the nominal stamp
 ``start_time + k / rate`` (rounded to ns):
 
@@ -21,18 +25,18 @@ zero padding, see :mod:`rotation_node.bag.cdr`).
 from __future__ import annotations
 
 import dataclasses
-from typing import Mapping, TYPE_CHECKING
+from typing import Iterator, Mapping, Optional, TYPE_CHECKING
 
 import numpy as np
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
 from sensor_msgs.msg import Imu
 
-from rotation_node.bag.mcap_io import BagWriter
+from rotation_node.bag.writer import BagWriter
 from rotation_node.stamps import NS_PER_S as _NS_PER_S
 from rotation_node.stamps import time_message as _time_message
 
-from .effects import UNKNOWN_COVARIANCE, SensorStream, apply_effects
-from .motions import motion_truth
+from .effects import UNKNOWN_COVARIANCE, EffectsStream, SensorStream
+from .motions import MotionStream
 from .spec import TRUTH_ANGULAR_VELOCITY_TOPIC, TRUTH_ORIENTATION_TOPIC, Scene
 
 if TYPE_CHECKING:
@@ -74,6 +78,10 @@ class Simulation:
     effect_masks: Mapping[str, np.ndarray]
 
 
+#: Samples simulated and written at a time by :func:`write_scene_bag` (memory is bounded by it).
+BLOCK_SAMPLES = 20_000
+
+
 def sample_stamps_ns(scene: Scene) -> IntArray:
     """
     Return the nominal stamps ``start_time + k / rate``, k = 0 .. n-1, in ns since the epoch.
@@ -84,10 +92,86 @@ def sample_stamps_ns(scene: Scene) -> IntArray:
     -------
     ndarray of int64, shape (n,)
     """
+    return _stamps_ns(scene, 0, scene.sample_count)
+
+
+def _stamps_ns(scene, start, stop):
+    """The nominal stamps of samples ``start .. stop-1`` (elementwise as for all samples)."""
     whole_seconds = int(scene.start_time // 1)
     start_ns = whole_seconds * _NS_PER_S + round((scene.start_time - whole_seconds) * _NS_PER_S)
-    offsets = np.round(np.arange(scene.sample_count) * (_NS_PER_S / scene.rate))
+    offsets = np.round(np.arange(start, stop) * (_NS_PER_S / scene.rate))
     return start_ns + offsets.astype(np.int64)
+
+
+def _block_bounds(scene, block_samples):
+    n = scene.sample_count
+    return [(start, min(start + block_samples, n)) for start in range(0, n, block_samples)]
+
+
+def _longest_interval(scene, bounds):
+    """The longest interval between consecutive sample times, s, computed block by block."""
+    first_ns = _stamps_ns(scene, 0, 1)[0]
+    longest, previous = 0.0, None
+    for start, stop in bounds:
+        time = (_stamps_ns(scene, start, stop) - first_ns) / _NS_PER_S
+        linked = time if previous is None else np.concatenate(([previous], time))
+        longest = max(longest, float(np.max(np.diff(linked), initial=0.0)))
+        previous = time[-1]
+    return longest
+
+
+def _check_seed(seed):
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f'seed must be a non-negative integer, got {seed!r}')
+    return int(seed)
+
+
+def simulate_blocks(scene: Scene, seed: int = 0,
+                    block_samples: int = BLOCK_SAMPLES) -> Iterator[Simulation]:
+    """
+    Yield the simulation of a scene in consecutive blocks of samples.
+
+    Each block is a :class:`Simulation` of up to ``block_samples`` consecutive
+    samples; taken together they are bit for bit what :func:`simulate`
+    returns (the motion's and the effects' state carries over from block to
+    block), so memory does not depend on the scene's length.
+
+    Parameters
+    ----------
+    scene : Scene
+    seed : int, optional
+        Seed of the effects' random draws, >= 0. Default 0.
+    block_samples : int, optional
+        Samples per block (the last block may be shorter).
+
+    Yields
+    ------
+    Simulation
+
+    Raises
+    ------
+    ValueError
+        If ``seed`` is not a non-negative integer.
+    """
+    seed = _check_seed(seed)
+    bounds = _block_bounds(scene, max(int(block_samples), 1))
+    longest = _longest_interval(scene, bounds) if len(bounds) > 1 else None
+    first_ns = _stamps_ns(scene, 0, 1)[0]
+    motion: Optional[MotionStream] = None
+    effects: Optional[EffectsStream] = None
+    for start, stop in bounds:
+        stamp_ns = _stamps_ns(scene, start, stop)
+        time = (stamp_ns - first_ns) / _NS_PER_S
+        if motion is None or effects is None:
+            motion = MotionStream(scene.motion, scene.duration,
+                                  float(np.max(np.diff(time), initial=0.0))
+                                  if longest is None else longest)
+            effects = EffectsStream(scene.effects, seed)
+        q, w = motion.truth(time)
+        sensor, masks = effects.apply(SensorStream.from_truth(time, stamp_ns, q, w))
+        yield Simulation(scene=scene, seed=seed, stamp_ns=stamp_ns, time=time,
+                         truth_orientation=q, truth_angular_velocity=w,
+                         sensor=sensor, effect_masks=masks)
 
 
 def simulate(scene: Scene, seed: int = 0) -> Simulation:
@@ -110,16 +194,8 @@ def simulate(scene: Scene, seed: int = 0) -> Simulation:
     ValueError
         If ``seed`` is not a non-negative integer.
     """
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f'seed must be a non-negative integer, got {seed!r}')
-    stamp_ns = sample_stamps_ns(scene)
-    time = (stamp_ns - stamp_ns[0]) / _NS_PER_S
-    q, w = motion_truth(scene.motion, time, scene.duration)
-    sensor, masks = apply_effects(SensorStream.from_truth(time, stamp_ns, q, w),
-                                  scene.effects, int(seed))
-    return Simulation(scene=scene, seed=int(seed), stamp_ns=stamp_ns, time=time,
-                      truth_orientation=q, truth_angular_velocity=w,
-                      sensor=sensor, effect_masks=masks)
+    simulation, = simulate_blocks(scene, seed, block_samples=scene.sample_count)
+    return simulation
 
 
 def _set_quaternion(message, q):
@@ -151,7 +227,8 @@ def write_bag(simulation: Simulation, path: StrPath, *, overwrite: bool = False)
     ----------
     simulation : Simulation
     path : str or os.PathLike
-        The ``.mcap`` file; it appears only once completely written.
+        A rosbag2 directory, or a single MCAP file if it ends in ``.mcap``;
+        it appears only once completely written.
     overwrite : bool, optional
         Replace an existing file. Default False.
 
@@ -160,19 +237,69 @@ def write_bag(simulation: Simulation, path: StrPath, *, overwrite: bool = False)
     BagError
         If ``path`` exists (and not ``overwrite``) or cannot be written.
     """
+    with BagWriter(path, overwrite=overwrite) as writer:
+        _write_samples(writer, simulation)
+
+
+def write_scene_bag(scene: Scene, path: StrPath, *, seed: int = 0, overwrite: bool = False,
+                    block_samples: int = BLOCK_SAMPLES) -> tuple[int, int]:
+    """
+    Simulate a scene and write it as a bag, streaming: memory does not grow with its length.
+
+    The bag is byte for byte what ``write_bag(simulate(scene, seed), path)`` writes.
+
+    Parameters
+    ----------
+    scene : Scene
+    path : str or os.PathLike
+        A rosbag2 directory, or a single MCAP file if it ends in ``.mcap``;
+        it appears only once completely written.
+    seed : int, optional
+        Seed of the effects' random draws, >= 0. Default 0.
+    overwrite : bool, optional
+        Replace an existing bag. Default False.
+    block_samples : int, optional
+        Samples simulated at a time.
+
+    Returns
+    -------
+    samples : int
+        Samples simulated (messages on each truth topic).
+    published : int
+        Sensor messages written.
+
+    Raises
+    ------
+    BagError
+        If ``path`` exists (and not ``overwrite``) or cannot be written
+        (``DiskFullError`` when the disk fills); nothing is left behind.
+    ValueError
+        If ``seed`` is not a non-negative integer.
+    """
+    blocks = simulate_blocks(scene, _check_seed(seed), block_samples)
+    samples = published = 0
+    with BagWriter(path, overwrite=overwrite) as writer:
+        for simulation in blocks:
+            _write_samples(writer, simulation)
+            samples += len(simulation.time)
+            published += int(simulation.sensor.published.sum())
+    return samples, published
+
+
+def _write_samples(writer, simulation):
+    """Write every sample of ``simulation`` (one block or all) in sample order."""
     sensor = simulation.sensor
     frame_id = simulation.scene.frame_id
     topic = simulation.scene.topic
-    with BagWriter(path, overwrite=overwrite) as writer:
-        for k, stamp_ns in enumerate(simulation.stamp_ns.tolist()):
-            if sensor.published[k]:
-                writer.write(topic, _imu_message(sensor, k, frame_id), stamp_ns)
-            orientation = QuaternionStamped()
-            orientation.header.stamp = _time_message(stamp_ns)
-            orientation.header.frame_id = frame_id
-            _set_quaternion(orientation.quaternion, simulation.truth_orientation[k])
-            writer.write(TRUTH_ORIENTATION_TOPIC, orientation, stamp_ns)
-            angular_velocity = Vector3Stamped()
-            angular_velocity.header = orientation.header
-            _set_vector(angular_velocity.vector, simulation.truth_angular_velocity[k])
-            writer.write(TRUTH_ANGULAR_VELOCITY_TOPIC, angular_velocity, stamp_ns)
+    for k, stamp_ns in enumerate(simulation.stamp_ns.tolist()):
+        if sensor.published[k]:
+            writer.write(topic, _imu_message(sensor, k, frame_id), stamp_ns)
+        orientation = QuaternionStamped()
+        orientation.header.stamp = _time_message(stamp_ns)
+        orientation.header.frame_id = frame_id
+        _set_quaternion(orientation.quaternion, simulation.truth_orientation[k])
+        writer.write(TRUTH_ORIENTATION_TOPIC, orientation, stamp_ns)
+        angular_velocity = Vector3Stamped()
+        angular_velocity.header = orientation.header
+        _set_vector(angular_velocity.vector, simulation.truth_angular_velocity[k])
+        writer.write(TRUTH_ANGULAR_VELOCITY_TOPIC, angular_velocity, stamp_ns)

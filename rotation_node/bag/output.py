@@ -1,0 +1,351 @@
+"""
+Bag outputs that are created exclusively, survive crashes and appear whole.
+
+A bag is written under an obviously named ``<output>.part`` beside the
+requested output, created with ``O_EXCL`` (a file) or ``mkdir`` (a rosbag2
+directory), so two writers of the same output never share it: the second one
+fails at once. The storage file is flushed to disk (``fdatasync``) in small
+chunks, so after a crash (SIGKILL, power loss) the ``.part`` holds everything
+up to the last flush and can be read as an unfinished recording. When the bag
+is complete it is renamed to the output: with ``renameat2(RENAME_NOREPLACE)``
+when the output must not exist (atomic: of two writers one fails), with
+``rename`` or ``renameat2(RENAME_EXCHANGE)`` when it may be replaced (atomic:
+a reader sees the old bag or the new one, never a mix).
+
+Disk space for closing the bag (the MCAP summary and ``metadata.yaml``) is
+reserved beyond the end of the storage file (``fallocate`` with
+``FALLOC_FL_KEEP_SIZE``) before each chunk is written: when the disk fills,
+the reservation fails before any write does, and the bag can still be closed
+as a valid bag holding every chunk written so far.
+"""
+import ctypes
+import ctypes.util
+import errno
+import os
+import shutil
+
+from rotation_node.errors import BagError
+
+PART_SUFFIX = '.part'
+STORAGE_SUFFIX = '.mcap'
+METADATA_FILE = 'metadata.yaml'
+
+_AT_FDCWD = -100
+_RENAME_NOREPLACE = 1
+_RENAME_EXCHANGE = 2
+_FALLOC_FL_KEEP_SIZE = 1
+_UNSUPPORTED = (errno.EOPNOTSUPP, errno.ENOSYS, errno.EINVAL)
+
+
+def _load_libc():
+    try:
+        return ctypes.CDLL(ctypes.util.find_library('c') or None, use_errno=True)
+    except OSError:
+        return None
+
+
+_LIBC = _load_libc()
+
+
+def _libc_function(name, *argtypes):
+    function = getattr(_LIBC, name, None)
+    if function is not None:
+        function.argtypes = argtypes
+        function.restype = ctypes.c_int
+    return function
+
+
+_renameat2 = _libc_function('renameat2', ctypes.c_int, ctypes.c_char_p, ctypes.c_int,
+                            ctypes.c_char_p, ctypes.c_uint)
+_fallocate = _libc_function('fallocate', ctypes.c_int, ctypes.c_int, ctypes.c_int64,
+                            ctypes.c_int64)
+
+
+def _rename2(source, destination, flags):
+    """``renameat2``; raises OSError, with ENOSYS when the C library lacks it."""
+    if _renameat2 is None:
+        raise OSError(errno.ENOSYS, os.strerror(errno.ENOSYS))
+    if _renameat2(_AT_FDCWD, os.fsencode(source), _AT_FDCWD, os.fsencode(destination),
+                  flags) != 0:
+        code = ctypes.get_errno()
+        raise OSError(code, os.strerror(code), destination)
+
+
+def rename_exclusive(source: str, destination: str) -> None:
+    """
+    Rename ``source`` to ``destination`` only if ``destination`` does not exist, atomically.
+
+    Raises
+    ------
+    FileExistsError
+        If ``destination`` exists (a file, directory or dangling symlink).
+    OSError
+        Any other failure of the rename.
+
+    """
+    try:
+        _rename2(source, destination, _RENAME_NOREPLACE)
+        return
+    except OSError as error:
+        if error.errno not in _UNSUPPORTED:
+            raise
+    if os.path.isdir(source):
+        # No RENAME_NOREPLACE (an old kernel or a file system without it): a
+        # directory cannot be hard-linked, so this check and rename can race.
+        if os.path.lexists(destination):
+            raise FileExistsError(errno.EEXIST, os.strerror(errno.EEXIST), destination)
+        os.rename(source, destination)
+        return
+    os.link(source, destination)   # fails with EEXIST atomically
+    os.unlink(source)
+
+
+def rename_replacing(source: str, destination: str) -> None:
+    """
+    Rename ``source`` to ``destination``, atomically replacing whatever is there.
+
+    A file replaces a file with ``rename``; otherwise (a directory on either
+    side) the two are exchanged with ``RENAME_EXCHANGE`` and the old one,
+    now at ``source``, is removed.
+    """
+    try:
+        rename_exclusive(source, destination)
+        return
+    except FileExistsError:
+        pass
+    if not os.path.isdir(source) and not os.path.isdir(destination):
+        os.replace(source, destination)
+        return
+    try:
+        _rename2(source, destination, _RENAME_EXCHANGE)
+    except OSError as error:
+        if error.errno not in _UNSUPPORTED:
+            raise
+        _remove(destination)
+        os.rename(source, destination)
+        return
+    _remove(source)
+
+
+def _remove(path):
+    if os.path.isdir(path) and not os.path.islink(path):
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        try:
+            os.unlink(path)
+        except FileNotFoundError:
+            pass
+
+
+def allocate(descriptor: int, offset: int, length: int) -> bool:
+    """
+    Allocate disk space for ``[offset, offset + length)`` of a file without changing its size.
+
+    Returns
+    -------
+    bool
+        False if the file system cannot do it (no ``fallocate`` support): no
+        space is reserved then.
+
+    Raises
+    ------
+    OSError
+        ``ENOSPC`` when the space is not available.
+
+    """
+    if _fallocate is None:
+        return False
+    if _fallocate(descriptor, _FALLOC_FL_KEEP_SIZE, offset, length) == 0:
+        return True
+    code = ctypes.get_errno()
+    if code in _UNSUPPORTED:
+        return False
+    raise OSError(code, os.strerror(code))
+
+
+def _sync_directory(path):
+    try:
+        descriptor = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
+    except OSError:
+        return
+    try:
+        os.fsync(descriptor)
+    except OSError:
+        pass
+    finally:
+        os.close(descriptor)
+
+
+def _part_exists_message(path):
+    return (f'{path}{PART_SUFFIX} exists: another process is writing {path}, or an earlier '
+            'one was killed and left its unfinished bag there (read it, or move it away)')
+
+
+def is_single_file(path: str) -> bool:
+    """Whether ``path`` names a single MCAP file (``*.mcap``) rather than a rosbag2 directory."""
+    return os.fspath(path).endswith(STORAGE_SUFFIX)
+
+
+class BagOutput:
+    """
+    The files of one bag being written: ``<path>.part``, renamed to ``path`` on ``finish()``.
+
+    ``path`` ending in ``.mcap`` is a single MCAP file; any other path is a
+    rosbag2 directory holding ``<name>_0.mcap`` and ``metadata.yaml``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The output the user asked for.
+    overwrite : bool, optional
+        Replace an existing output on ``finish()``. Without it an existing
+        output is an error, here and again (atomically) on ``finish()``.
+
+    Attributes
+    ----------
+    path : str
+    part_path : str
+        Where the bag is while it is written.
+    storage_name : str
+        The MCAP file's name inside the bag (``relative_file_paths``).
+    stream : file
+        The open MCAP storage file (binary, buffered).
+
+    Raises
+    ------
+    BagError
+        If the output exists (without ``overwrite``), or ``<path>.part``
+        exists (another writer, or a crashed one whose recording is there),
+        or the directory cannot be written.
+
+    """
+
+    def __init__(self, path, *, overwrite=False):
+        self.path = os.fspath(path).rstrip(os.sep) or os.fspath(path)
+        self.overwrite = overwrite
+        self.single_file = is_single_file(self.path)
+        self.part_path = self.path + PART_SUFFIX
+        self.check_absent(self.path, overwrite=overwrite)
+        name = os.path.basename(self.path)
+        self.storage_name = name if self.single_file else f'{name}_0{STORAGE_SUFFIX}'
+        try:
+            if self.single_file:
+                self.storage_path = self.part_path
+            else:
+                os.mkdir(self.part_path)
+                self.storage_path = os.path.join(self.part_path, self.storage_name)
+            # O_EXCL: never follow or reuse someone else's file; mode 0o666 so
+            # that the umask applies, as for any other newly created file.
+            descriptor = os.open(self.storage_path,
+                                 os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+        except FileExistsError:
+            raise BagError(_part_exists_message(self.path)) from None
+        except OSError as error:
+            if not self.single_file and os.path.isdir(self.part_path):
+                _remove(self.part_path)
+            raise BagError(f'cannot create output {self.path}: {error.strerror}') from None
+        except BaseException:   # Ctrl-C, SIGTERM between creating the directory and the file
+            if not self.single_file:
+                _remove(self.part_path)
+            raise
+        self.stream = os.fdopen(descriptor, 'wb')
+        self._can_reserve = True
+        self.closed = False
+
+    @staticmethod
+    def check_absent(path, *, overwrite=False) -> None:
+        """
+        Raise ``BagError`` if ``path`` exists (without ``overwrite``) or is being written.
+
+        A check before a long computation; the creation itself is exclusive
+        whatever happens between the two.
+        """
+        path = os.fspath(path)
+        if not overwrite and os.path.lexists(path):
+            raise BagError(f'output {path} already exists (--force, overwrite=True, replaces it)')
+        if os.path.lexists(path + PART_SUFFIX):
+            raise BagError(_part_exists_message(path))
+
+    def reserve(self, length: int) -> None:
+        """
+        Make sure ``length`` bytes beyond what is written are allocated on disk.
+
+        Raises
+        ------
+        OSError
+            ``ENOSPC`` if they are not available. File systems without
+            ``fallocate`` reserve nothing (and raise nothing).
+
+        """
+        if self._can_reserve:
+            self._can_reserve = allocate(self.stream.fileno(), self.stream.tell(), length)
+
+    def sync(self) -> None:
+        """Write what is buffered and flush it to disk (``fdatasync``)."""
+        self.stream.flush()
+        os.fdatasync(self.stream.fileno())
+
+    def _close_storage(self):
+        self.stream.flush()
+        # Frees the reservation beyond the end of the file.
+        os.ftruncate(self.stream.fileno(), self.stream.tell())
+        os.fsync(self.stream.fileno())
+        self.stream.close()
+
+    def finish(self, metadata_yaml: str = None) -> None:
+        """
+        Close the storage file, write ``metadata.yaml`` (directories) and rename to ``path``.
+
+        Raises
+        ------
+        BagError
+            If the output appeared meanwhile (without ``overwrite``), or
+            writing failed; the ``.part`` is left for ``keep()`` or ``discard()``.
+
+        """
+        if self.closed:
+            return
+        try:
+            self._close_storage()
+            if not self.single_file:
+                if metadata_yaml is not None:
+                    with open(os.path.join(self.part_path, METADATA_FILE), 'x') as stream:
+                        stream.write(metadata_yaml)
+                        stream.flush()
+                        os.fsync(stream.fileno())
+                _sync_directory(self.part_path)
+            if self.overwrite:
+                rename_replacing(self.part_path, self.path)
+            else:
+                rename_exclusive(self.part_path, self.path)
+        except FileExistsError:
+            raise BagError(f'output {self.path} was created by another process while this '
+                           'one wrote it') from None
+        except OSError as error:
+            raise BagError(f'cannot write output {self.path}: {error.strerror}') from None
+        self.closed = True
+        _sync_directory(os.path.dirname(os.path.abspath(self.path)))
+
+    def keep(self) -> None:
+        """Close and leave the unfinished bag in ``part_path`` (after a failure)."""
+        self.closed = True
+        if self.stream.closed:
+            return
+        try:
+            self.stream.flush()
+        except OSError:
+            pass
+        try:
+            self.stream.close()
+        except OSError:
+            pass
+
+    def discard(self) -> None:
+        """Close and remove ``part_path``; the output is left as it was."""
+        if not self.stream.closed:
+            try:
+                self.stream.close()
+            except OSError:
+                pass
+        self.closed = True
+        _remove(self.part_path)

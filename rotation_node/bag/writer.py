@@ -1,0 +1,550 @@
+"""
+Write ROS 2 bags as ``ros2 bag record`` does: crash-safe, exclusive, closed even on a full disk.
+
+The output is a rosbag2 directory (``metadata.yaml`` and one MCAP storage file
+``<name>_0.mcap``), or a single MCAP file when its path ends in ``.mcap``. The
+MCAP file is what ``ros2 bag record -s mcap`` writes: profile ``ros2``; one
+schema per message type, named ``pkg/msg/Type`` with encoding ``ros2msg`` and
+the complete concatenated definition; one channel per topic with message
+encoding ``cdr`` and the metadata ``offered_qos_profiles`` and
+``topic_type_hash``; chunks compressed with zstd (rosbag2's default), lz4 or
+not at all, with message indexes and a summary; and a ``rosbag2`` metadata
+record holding the version 9 bag metadata, also written to ``metadata.yaml``.
+
+Crash safety (see :mod:`rotation_node.bag.output`): the bag is written to
+``<output>.part`` and renamed to the output when closed. Messages are collected
+into a chunk that is written when it reaches ``CHUNK_SIZE`` bytes (or, for a
+live recording, ``chunk_period_s`` after the last one); what is written is
+flushed to disk (``fdatasync``) at least every ``SYNC_PERIOD_S``. So a SIGKILL
+or a power loss loses at most about the last second: the ``.part`` is an
+unfinished MCAP file whose complete chunks a linear scan reads back. Chunks cut
+by size only make the bag depend on the messages alone: the same messages give
+the same bytes. Before each chunk is written, the space to close the bag
+(summary and metadata) is reserved beyond it; when that fails the disk is
+full, ``DiskFullError`` says so, the chunk is dropped, and ``close()`` still
+writes a valid bag of everything written before.
+
+``BagWriter.write`` encodes messages with :mod:`rotation_node.bag.cdr` where it
+can (fixed-layout types such as sensor_msgs/Imu, and
+std_msgs/Float64MultiArray): rclpy's bytes, with the alignment padding zeroed
+instead of uninitialised, so that the same messages give the same bag; other
+types with ``rclpy.serialization``.
+"""
+import errno
+import math
+import operator
+import os
+import time
+
+import mcap
+import yaml
+from mcap.writer import CompressionType, Writer
+from rclpy.serialization import serialize_message
+
+from rotation_node.bag.cdr import message_encoder
+from rotation_node.bag.mcap_io import TopicMetadata
+from rotation_node.bag.message_types import message_definition, type_hash, type_name_of
+from rotation_node.bag.output import BagOutput
+from rotation_node.errors import BagError, DiskFullError
+
+PROFILE = 'ros2'
+#: Version of the rosbag2 metadata written (Jazzy's).
+ROSBAG2_METADATA_VERSION = 9
+LIBRARY = f'rotation_node bag; mcap-python/{mcap.__version__}'
+#: Chunk compressions, by their ``--compression`` name.
+COMPRESSIONS = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
+                'none': CompressionType.NONE}
+#: rosbag2's default for ``ros2 bag record`` with MCAP storage.
+DEFAULT_COMPRESSION = 'zstd'
+#: Uncompressed bytes of messages after which a chunk is written (rosbag2's MCAP default).
+CHUNK_SIZE = 768 * 1024
+#: Longest time written data waits before it is flushed to disk (fdatasync).
+SYNC_PERIOD_S = 1.0
+#: Longest time a live recording's message waits in memory before its chunk is written.
+CHUNK_PERIOD_S = 1.0
+
+_MAX_TIMESTAMP = 2**64 - 1
+_CHECK_CLOCK_EVERY = 64              # messages between clock reads (a power of two)
+_MESSAGE_OVERHEAD = 31 + 16          # message record header + message index entry
+_CHUNK_OVERHEAD = 4096               # chunk record, compression frame, page rounding
+_SUMMARY_PER_CHUNK = 64              # chunk index record, besides its per-channel entries
+_SUMMARY_PER_CHANNEL_IN_CHUNK = 10
+_SUMMARY_FIXED = 64 * 1024           # statistics, offsets, footer, metadata.yaml's block
+
+
+def _timestamp(value, name):
+    """Validate a timestamp argument: an integer in [0, 2**64)."""
+    try:
+        value = operator.index(value)
+    except TypeError:
+        raise BagError(
+            f'{name} must be an integer number of nanoseconds, got {value!r}') from None
+    if not 0 <= value <= _MAX_TIMESTAMP:
+        raise BagError(f'{name} must be in [0, 2**64) ns, got {value}')
+    return value
+
+
+def compression_type(name: str) -> CompressionType:
+    """Return the MCAP chunk compression called ``name`` (``'zstd'``, ``'lz4'``, ``'none'``)."""
+    try:
+        return COMPRESSIONS[name]
+    except (KeyError, TypeError):
+        raise BagError(f'compression must be one of {", ".join(COMPRESSIONS)}, '
+                       f'got {name!r}') from None
+
+
+class _Channel:
+    __slots__ = ('id', 'type_name', 'msg_class', 'encode')
+
+    def __init__(self, channel_id, type_name):
+        self.id = channel_id
+        self.type_name = type_name
+        self.msg_class = None   # of the messages given to write(), with their encode(msg)
+        self.encode = None
+
+
+class BagWriter:
+    """
+    Write a ROS 2 bag; a context manager.
+
+    The bag is written to ``<path>.part`` and renamed to ``path`` when the
+    writer is closed cleanly (end of the ``with`` block or ``close()``). An
+    exception in the ``with`` block (or ``abort()``) removes the ``.part``, or
+    with ``keep_unfinished`` leaves it as an unfinished bag that a linear scan
+    reads. A process killed while writing leaves the ``.part`` holding every
+    message up to the last chunk written.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The bag: a rosbag2 directory, or a single MCAP file if it ends in ``.mcap``.
+    overwrite : bool, optional
+        Replace an existing bag (atomically, when closed). Default False: an
+        existing bag is an error.
+    compression : str, optional
+        Chunk compression: ``'zstd'`` (default, as rosbag2), ``'lz4'`` or ``'none'``.
+    keep_unfinished : bool, optional
+        On failure, keep the ``.part`` instead of removing it (for recordings,
+        which cannot be repeated).
+    chunk_period_s : float, optional
+        Also write a chunk when the last one is this old (checked every 64
+        messages and by ``flush_if_due()``): for live recordings. Default:
+        chunks by size only, so the bag depends on the messages alone.
+
+    Attributes
+    ----------
+    path : str
+    part_path : str
+        Where the bag is until it is closed.
+    message_count : int
+        Messages written to the file so far (not those still collected in
+        memory, nor those dropped on a full disk).
+
+    Raises
+    ------
+    BagError
+        If ``path`` exists and ``overwrite`` is false, ``<path>.part`` exists
+        (another writer, or a crashed one), or it cannot be created.
+
+    Examples
+    --------
+    >>> with BagWriter('out.mcap') as writer:                  # doctest: +SKIP
+    ...     writer.write('/imu', Imu(), log_time_ns=1_700_000_000_000_000_000)
+
+    """
+
+    def __init__(self, path, *, overwrite=False, compression=DEFAULT_COMPRESSION,
+                 keep_unfinished=False, chunk_period_s=None):
+        self.path = os.fspath(path)
+        self.compression = compression
+        chunk_compression = compression_type(compression)
+        self.keep_unfinished = keep_unfinished
+        self._output = BagOutput(self.path, overwrite=overwrite)
+        self.part_path = self._output.part_path
+        # Chunks are cut here (flush()), never by the library: its chunk size is unreachable.
+        self._writer = Writer(self._output.stream, compression=chunk_compression,
+                              chunk_size=2**62)
+        self._schema_ids = {}
+        self._channels = {}
+        self._topics = []
+        self._counts = {}
+        self._start_ns = _MAX_TIMESTAMP
+        self._end_ns = 0
+        self._pending = []
+        self._pending_bytes = 0
+        self._registered_bytes = 0      # schemas and channels since the last chunk
+        self._summary_bytes = 0         # schemas and channels repeated in the summary
+        self._chunk_count = 0
+        self._chunk_period_s = chunk_period_s
+        self._flush_due = (math.inf if chunk_period_s is None
+                           else time.monotonic() + chunk_period_s)
+        self._sync_due = time.monotonic() + SYNC_PERIOD_S
+        self._failed = False
+        try:
+            self._writer.start(profile=PROFILE, library=LIBRARY)
+            self._output.sync()
+        except OSError as error:
+            self._output.discard()
+            raise BagError(f'cannot write output {self.path}: {error.strerror}') from None
+        except BaseException:   # Ctrl-C, SIGTERM: no writer to abort yet
+            self._output.discard()
+            raise
+
+    @property
+    def message_count(self):
+        """Messages flushed to disk so far."""
+        return sum(self._counts.values())
+
+    @property
+    def message_counts(self):
+        """``{topic: messages flushed to disk so far}`` for every registered topic."""
+        return {topic: self._counts[channel.id] for topic, channel in self._channels.items()}
+
+    def add_topic(self, metadata):
+        """
+        Register a topic with explicit metadata (QoS, definition).
+
+        ``write`` and ``write_serialized`` register unknown topics by
+        themselves, with the installed definition and no QoS profiles; call
+        this first to record the publishers' QoS, or to copy a topic from
+        another bag with its own schema.
+
+        Parameters
+        ----------
+        metadata : TopicMetadata
+
+        Raises
+        ------
+        BagError
+            If the topic is already registered or the type name is invalid or
+            (with ``definition=None``) not installed. A topic with its own
+            ``definition`` is registered with its type name as given, for
+            copying topics of any bag unchanged.
+
+        """
+        if metadata.name in self._channels:
+            raise BagError(f'topic {metadata.name} is already registered in {self.path}')
+        # A topic copied with its own schema keeps its type name as stored
+        # (even a short or unknown one); others need an installed 'pkg/msg/Type'.
+        definition = (message_definition(metadata.type_name) if metadata.definition is None
+                      else metadata.definition)
+        schema_key = (metadata.type_name, metadata.definition_encoding, definition)
+        schema_id = self._schema_ids.get(schema_key)
+        if schema_id is None:
+            data = definition.encode()
+            schema_id = self._writer.register_schema(
+                name=metadata.type_name, encoding=metadata.definition_encoding, data=data)
+            self._schema_ids[schema_key] = schema_id
+            self._add_registered(len(data) + len(metadata.type_name) + 64)
+        topic_hash = (type_hash(metadata.type_name) if metadata.type_hash is None
+                      else metadata.type_hash)
+        channel_id = self._writer.register_channel(
+            topic=metadata.name, message_encoding=metadata.serialization_format,
+            schema_id=schema_id,
+            metadata={
+                'offered_qos_profiles': metadata.offered_qos_profiles,
+                'topic_type_hash': topic_hash,
+            })
+        self._add_registered(len(metadata.name) + len(metadata.offered_qos_profiles)
+                             + len(topic_hash) + 128)
+        self._channels[metadata.name] = _Channel(channel_id, metadata.type_name)
+        self._topics.append(metadata)
+        self._counts[channel_id] = 0
+
+    def _add_registered(self, size):
+        self._registered_bytes += size
+        self._summary_bytes += size
+
+    def _channel(self, topic, type_name):
+        channel = self._channels.get(topic)
+        if channel is None:
+            self.add_topic(TopicMetadata(topic, type_name))
+            channel = self._channels[topic]
+        elif channel.type_name != type_name:
+            raise BagError(
+                f'topic {topic} holds {channel.type_name} in {self.path}, '
+                f'cannot write {type_name}')
+        return channel
+
+    def write(self, topic, msg, log_time_ns, publish_time_ns=None):
+        """
+        Serialise and write one message.
+
+        Types that :func:`rotation_node.bag.cdr.message_encoder` covers are
+        encoded by it (zero padding: the same message gives the same bytes),
+        others by ``rclpy.serialization``.
+
+        Parameters
+        ----------
+        topic : str
+        msg : rclpy message
+            Its class decides the topic's type on first use.
+        log_time_ns : int
+            Receive time, nanoseconds (e.g. since the Unix epoch).
+        publish_time_ns : int, optional
+            Publish time; defaults to ``log_time_ns``.
+
+        Raises
+        ------
+        BagError
+            If the topic already holds another type or a time is not a
+            non-negative integer.
+        DiskFullError
+            If the disk filled: the chunk in progress was dropped, ``close()``
+            keeps everything written before.
+
+        """
+        channel = self._channels.get(topic)
+        if channel is None or channel.msg_class is not type(msg):
+            channel = self._channel(topic, type_name_of(type(msg)))
+            channel.msg_class = type(msg)
+            channel.encode = message_encoder(channel.type_name) or serialize_message
+        self._add(channel.id, channel.encode(msg), log_time_ns, publish_time_ns)
+
+    def write_serialized(self, topic, type_name, data, log_time_ns, publish_time_ns=None):
+        """
+        Write one message that is already CDR-serialised.
+
+        Parameters
+        ----------
+        topic : str
+        type_name : str
+            ``'pkg/msg/Type'``; decides the topic's type on first use.
+        data : bytes
+        log_time_ns : int
+        publish_time_ns : int, optional
+            Defaults to ``log_time_ns``.
+
+        Raises
+        ------
+        BagError
+            As ``write``; also if the type is not installed on first use of a
+            topic not registered with ``add_topic``.
+        DiskFullError
+            As ``write``.
+
+        """
+        channel = self._channels.get(topic)
+        if channel is None or channel.type_name != type_name:
+            channel = self._channel(topic, type_name)
+        self._add(channel.id, data, log_time_ns, publish_time_ns)
+
+    def _add(self, channel_id, data, log_time_ns, publish_time_ns):
+        log_time_ns = _timestamp(log_time_ns, 'log_time_ns')
+        publish_time_ns = (log_time_ns if publish_time_ns is None
+                           else _timestamp(publish_time_ns, 'publish_time_ns'))
+        if self._failed:
+            raise BagError(f'cannot write to {self.path} after a failed write')
+        pending = self._pending
+        pending.append((channel_id, log_time_ns, data, publish_time_ns))
+        self._pending_bytes += len(data)
+        if self._pending_bytes >= CHUNK_SIZE or (
+                not len(pending) % _CHECK_CLOCK_EVERY and time.monotonic() >= self._flush_due):
+            self.flush()
+
+    def flush_if_due(self):
+        """Write a chunk, or sync to disk, if one is due (call it when idle)."""
+        now = time.monotonic()
+        if self._pending and now >= self._flush_due:
+            self.flush()
+        elif now >= self._sync_due:
+            self._sync(now)
+
+    def _sync(self, now):
+        self._sync_due = now + SYNC_PERIOD_S
+        try:
+            self._output.sync()
+        except OSError as error:
+            self._fail(error)
+
+    def _summary_reserve(self):
+        """Bytes that closing the bag may still need: summary, metadata record, metadata.yaml."""
+        channels = len(self._channels)
+        chunk_indexes = (self._chunk_count + 1) * (
+            _SUMMARY_PER_CHUNK + _SUMMARY_PER_CHANNEL_IN_CHUNK * channels)
+        # The rosbag2 metadata is written twice (metadata record, metadata.yaml).
+        metadata = 2 * (2048 + 1024 * channels)
+        return 2 * self._summary_bytes + chunk_indexes + metadata + _SUMMARY_FIXED
+
+    def flush(self):
+        """
+        Write the messages collected so far as one chunk (to disk, if a sync is due).
+
+        Raises
+        ------
+        DiskFullError
+            If the chunk and the space needed to close the bag do not fit on
+            the disk: as many of its first messages as fit are written, the
+            others dropped.
+        BagError
+            If writing failed otherwise (the bag cannot be closed then).
+
+        """
+        pending = self._pending
+        now = time.monotonic()
+        if self._chunk_period_s is not None:
+            self._flush_due = now + self._chunk_period_s
+        if not pending:
+            return
+        fitting = self._reserve_chunk(pending)
+        dropped = len(pending) - fitting
+        if dropped:
+            pending = pending[:fitting]
+        add_message = self._writer.add_message
+        counts = self._counts
+        try:
+            for channel_id, log_time_ns, data, publish_time_ns in pending:
+                add_message(channel_id=channel_id, log_time=log_time_ns, data=data,
+                            publish_time=publish_time_ns)
+            self._writer.flush()
+        except OSError as error:
+            self._fail(error)
+        if now >= self._sync_due:
+            self._sync(now)
+        for channel_id, log_time_ns, _, _ in pending:
+            counts[channel_id] += 1
+            if log_time_ns < self._start_ns:
+                self._start_ns = log_time_ns
+            if log_time_ns > self._end_ns:
+                self._end_ns = log_time_ns
+        if pending:
+            self._chunk_count += 1
+            self._registered_bytes = 0
+        self._drop_pending()
+        if dropped:
+            raise DiskFullError(
+                f'disk full writing {self.path}: kept {self.message_count} messages, '
+                f'{dropped} not written', kept=self.message_count, dropped=dropped)
+
+    def _reserve_chunk(self, pending):
+        """
+        Reserve the space for a chunk of ``pending`` and for closing the bag.
+
+        Returns
+        -------
+        int
+            How many of the first messages of ``pending`` fit: all of them, or
+            on a full disk the most of the halves tried (0 if none).
+
+        """
+        count = len(pending)
+        data_bytes = self._pending_bytes
+        while count:
+            chunk_size = (data_bytes + _MESSAGE_OVERHEAD * count + self._registered_bytes
+                          + _CHUNK_OVERHEAD)
+            try:
+                self._output.reserve(chunk_size + self._summary_reserve())
+                return count
+            except OSError as error:
+                if error.errno != errno.ENOSPC:
+                    self._fail(error)
+            count //= 2
+            data_bytes = sum(len(message[2]) for message in pending[:count])
+        return 0
+
+    def _drop_pending(self):
+        self._pending = []
+        self._pending_bytes = 0
+
+    def _fail(self, error):
+        self._failed = True
+        kept = (f'; what was written is in {self.part_path}' if self.keep_unfinished else '')
+        raise BagError(f'cannot write output {self.path}: {error.strerror}{kept}') from None
+
+    def rosbag2_metadata(self):
+        """
+        Return the rosbag2 bag metadata (version 9) of what is written so far.
+
+        Returns
+        -------
+        dict
+            The contents of ``metadata.yaml``'s ``rosbag2_bagfile_information``.
+
+        """
+        count = self.message_count
+        start = self._start_ns if count else 0
+        duration = {'nanoseconds': self._end_ns - start if count else 0}
+        storage_name = self._output.storage_name
+        return {
+            'version': ROSBAG2_METADATA_VERSION,
+            'storage_identifier': 'mcap',
+            'duration': duration,
+            'starting_time': {'nanoseconds_since_epoch': start},
+            'message_count': count,
+            'topics_with_message_count': [{
+                'topic_metadata': {
+                    'name': topic.name,
+                    'type': topic.type_name,
+                    'serialization_format': topic.serialization_format,
+                    'offered_qos_profiles': yaml.safe_load(topic.offered_qos_profiles) or [],
+                    'type_description_hash': (type_hash(topic.type_name)
+                                              if topic.type_hash is None else topic.type_hash),
+                },
+                'message_count': self._counts[self._channels[topic.name].id],
+            } for topic in self._topics],
+            # rosbag2's own (file or message) compression: none; MCAP compresses chunks.
+            'compression_format': '',
+            'compression_mode': '',
+            'relative_file_paths': [storage_name],
+            'files': [{
+                'path': storage_name,
+                'starting_time': {'nanoseconds_since_epoch': start},
+                'duration': dict(duration),   # a copy: no YAML alias
+                'message_count': count,
+            }],
+            'custom_data': {},
+            'ros_distro': os.environ.get('ROS_DISTRO', 'jazzy'),
+        }
+
+    def close(self):
+        """
+        Write what is collected, finish the bag and rename it to ``path``; idempotent.
+
+        After a ``DiskFullError`` this still closes the bag, with the messages
+        written before it.
+
+        Raises
+        ------
+        BagError
+            If the bag cannot be finished; the ``.part`` is removed, or kept
+            with ``keep_unfinished``.
+
+        """
+        if self._output.closed:
+            return
+        try:
+            try:
+                self.flush()
+            except DiskFullError:
+                if not self.keep_unfinished:
+                    raise
+            metadata = self.rosbag2_metadata()
+            try:
+                serialized = yaml.safe_dump(metadata, sort_keys=False)
+                self._writer.add_metadata('rosbag2', {'serialized_metadata': serialized})
+                self._writer.finish()
+            except OSError as error:
+                self._fail(error)
+            self._output.finish(yaml.safe_dump({'rosbag2_bagfile_information': metadata},
+                                               sort_keys=False))
+        except BaseException:
+            self.abort()
+            raise
+
+    def abort(self):
+        """Stop writing: remove the ``.part`` (or keep it, with ``keep_unfinished``)."""
+        if self._output.closed:
+            return
+        if self.keep_unfinished:
+            self._output.keep()
+        else:
+            self._output.discard()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, traceback):
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()

@@ -1,0 +1,257 @@
+"""
+Tests of rotation_node.bag.writer: rosbag2 layout, compression, crash safety, full disks.
+
+Bags are read back with independent readers: ``rosbags`` (rosbag2 directories
+and MCAP files) and the ``mcap`` library's linear stream reader (unfinished
+files).
+"""
+import os
+import pathlib
+
+import pytest
+import yaml
+from fault_helpers import FULL_DISKS, can_mount, linear_scan, small_disk, small_filesystem
+from mcap.reader import make_reader
+from rosbags.highlevel import AnyReader
+from std_msgs.msg import String
+
+from rotation_node.bag import output as output_module
+from rotation_node.bag import writer as writer_module
+from rotation_node.bag.mcap_io import BagReader
+from rotation_node.bag.writer import BagWriter
+from rotation_node.errors import BagError, DiskFullError
+
+T0 = 1_700_000_000_000_000_000
+
+
+def _strings(rng, count, size=200):
+    """``count`` (topic, String, log time) with random payloads of about ``size`` bytes."""
+    letters = 'abcdefghijklmnopqrstuvwxyz0123456789'
+    return [('/text' if k % 3 else '/other',
+             String(data=''.join(rng.choice(list(letters), size))), T0 + 1000 * k)
+            for k in range(count)]
+
+
+def _write(path, messages, **kwargs):
+    with BagWriter(path, **kwargs) as writer:
+        for topic, msg, stamp in messages:
+            writer.write(topic, msg, stamp)
+
+
+def _rosbags_messages(path):
+    with AnyReader([pathlib.Path(path)]) as reader:
+        return [(connection.topic, timestamp, bytes(data))
+                for connection, timestamp, data in reader.messages()]
+
+
+def _chunk_compressions(path):
+    with open(path, 'rb') as stream:
+        summary = make_reader(stream).get_summary()
+        return {index.compression for index in summary.chunk_indexes}
+
+
+@pytest.mark.parametrize('compression, stored', [('zstd', 'zstd'), ('lz4', 'lz4'),
+                                                 ('none', '')])
+def test_directory_bag_as_ros2_bag_record_writes_it(tmp_path, rng, compression, stored):
+    path = tmp_path / 'run1'
+    messages = _strings(rng, 300)
+    _write(path, messages, compression=compression)
+    assert sorted(os.listdir(path)) == ['metadata.yaml', 'run1_0.mcap']
+    assert not os.path.exists(f'{path}.part')
+    info = yaml.safe_load((path / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    assert (info['version'], info['storage_identifier']) == (9, 'mcap')
+    assert info['relative_file_paths'] == ['run1_0.mcap']
+    assert info['files'][0]['path'] == 'run1_0.mcap'
+    assert info['message_count'] == info['files'][0]['message_count'] == 300
+    assert info['duration']['nanoseconds'] == messages[-1][2] - messages[0][2]
+    assert {t['topic_metadata']['name']: t['message_count']
+            for t in info['topics_with_message_count']} == {'/text': 200, '/other': 100}
+    assert _chunk_compressions(path / 'run1_0.mcap') == {stored}
+    # rosbags reads the directory through metadata.yaml: every message, byte for byte.
+    from_rosbags = _rosbags_messages(path)
+    assert [(t, s) for t, s, _ in from_rosbags] == [(t, s) for t, _, s in messages]
+    with BagReader(path / 'run1_0.mcap') as reader:
+        ours = [(r.topic, r.log_time_ns, r.data) for r in reader.messages()]
+    assert ours == from_rosbags
+    assert [(t, s, d) for t, s, _, d in linear_scan(path / 'run1_0.mcap')] == from_rosbags
+
+
+def test_path_ending_in_mcap_is_a_single_file(tmp_path, rng):
+    path = tmp_path / 'one.mcap'
+    _write(path, _strings(rng, 10))
+    assert os.listdir(tmp_path) == ['one.mcap']
+    assert len(_rosbags_messages(path)) == 10
+
+
+def test_unknown_compression_is_refused(tmp_path):
+    with pytest.raises(BagError, match="compression must be one of zstd, lz4, none, got 'gz'"):
+        BagWriter(tmp_path / 'x.mcap', compression='gz')
+    assert os.listdir(tmp_path) == []
+
+
+def test_same_messages_give_the_same_bytes_over_many_chunks(tmp_path, rng, monkeypatch):
+    monkeypatch.setattr(writer_module, 'CHUNK_SIZE', 8192)
+    messages = _strings(rng, 400)
+    for name in ('a', 'b'):
+        os.mkdir(tmp_path / name)
+        _write(tmp_path / name / 'same.mcap', messages)
+    with open(tmp_path / 'a' / 'same.mcap', 'rb') as stream:
+        assert len(make_reader(stream).get_summary().chunk_indexes) >= 8
+    assert ((tmp_path / 'a' / 'same.mcap').read_bytes()
+            == (tmp_path / 'b' / 'same.mcap').read_bytes())
+
+
+def test_bag_is_written_as_part_and_every_chunk_is_readable_before_close(tmp_path, rng,
+                                                                         monkeypatch):
+    monkeypatch.setattr(writer_module, 'CHUNK_SIZE', 4096)
+    path = tmp_path / 'live.mcap'
+    messages = _strings(rng, 200)
+    writer = BagWriter(path)
+    for topic, msg, stamp in messages[:150]:
+        writer.write(topic, msg, stamp)
+    assert not path.exists()
+    recovered = linear_scan(f'{path}.part')
+    # Everything up to the last full chunk, in order, byte-identical.
+    assert len(recovered) == writer.message_count > 100
+    assert [(t, s) for t, s, _, _ in recovered] == [(t, s) for t, _, s in
+                                                    messages[:len(recovered)]]
+    for topic, msg, stamp in messages[150:]:
+        writer.write(topic, msg, stamp)
+    writer.close()
+    assert os.listdir(tmp_path) == ['live.mcap']
+    assert len(_rosbags_messages(path)) == 200
+
+
+def test_live_recording_writes_a_chunk_once_a_period(tmp_path, monkeypatch):
+    clock = [100.0]
+    monkeypatch.setattr(writer_module.time, 'monotonic', lambda: clock[0])
+    writer = BagWriter(tmp_path / 'slow.mcap', chunk_period_s=1.0)
+    writer.write('/text', String(data='first'), T0)
+    writer.flush_if_due()
+    assert writer.message_count == 0
+    clock[0] += 1.0
+    writer.flush_if_due()
+    assert writer.message_count == 1
+    assert [m[:2] for m in linear_scan(writer.part_path)] == [('/text', T0)]
+    writer.abort()
+    assert os.listdir(tmp_path) == []
+
+
+def test_failure_removes_the_part_unless_keep_unfinished(tmp_path, rng):
+    messages = _strings(rng, 50)
+    with pytest.raises(RuntimeError):
+        with BagWriter(tmp_path / 'gone') as writer:
+            for topic, msg, stamp in messages:
+                writer.write(topic, msg, stamp)
+            raise RuntimeError('stop')
+    assert os.listdir(tmp_path) == []
+    with pytest.raises(RuntimeError):
+        with BagWriter(tmp_path / 'kept.mcap', keep_unfinished=True) as writer:
+            for topic, msg, stamp in messages:
+                writer.write(topic, msg, stamp)
+            writer.flush()
+            raise RuntimeError('stop')
+    assert os.listdir(tmp_path) == ['kept.mcap.part']
+    assert len(linear_scan(tmp_path / 'kept.mcap.part')) == 50
+
+
+@pytest.mark.parametrize('disk', FULL_DISKS)
+def test_full_disk_keeps_a_valid_bag_of_what_was_written(tmp_path, rng, monkeypatch, disk):
+    limit = 256 * 1024
+    monkeypatch.setattr(writer_module, 'CHUNK_SIZE', 16 * 1024)
+    messages = _strings(rng, 4000)
+    with small_disk(disk, tmp_path / 'small', limit, monkeypatch) as directory:
+        path = directory / 'full'
+        writer = BagWriter(path, compression='none', keep_unfinished=True)
+        with pytest.raises(DiskFullError) as caught:
+            for topic, msg, stamp in messages:
+                writer.write(topic, msg, stamp)
+        kept = caught.value.kept
+        assert kept == writer.message_count and 0 < kept < len(messages)
+        assert f'kept {kept} messages' in str(caught.value)
+        writer.close()
+        assert sorted(os.listdir(path)) == ['full_0.mcap', 'metadata.yaml']
+        recovered = _rosbags_messages(path)
+        assert len(recovered) == kept
+        assert [(t, s) for t, s, _ in recovered] == [(t, s) for t, _, s in messages[:kept]]
+        assert os.path.getsize(path / 'full_0.mcap') <= limit
+
+
+def test_output_and_part_are_exclusive(tmp_path):
+    path = tmp_path / 'out.mcap'
+    first = BagWriter(path)
+    with pytest.raises(BagError, match=r'out.mcap.part exists: another process is writing'):
+        BagWriter(path)
+    with pytest.raises(BagError, match=r'out.mcap.part exists'):
+        BagWriter(path, overwrite=True)
+    # Another writer finished the same output meanwhile: closing must not replace it.
+    path.write_bytes(b'theirs')
+    with pytest.raises(BagError, match='was created by another process while this one wrote'):
+        first.close()
+    assert path.read_bytes() == b'theirs'
+    assert os.listdir(tmp_path) == ['out.mcap']
+
+
+@pytest.mark.parametrize('name', ['bag', 'bag.mcap'])
+def test_overwrite_replaces_a_file_or_directory_atomically(tmp_path, rng, name):
+    path = tmp_path / name
+    _write(path, _strings(rng, 5))
+    messages = _strings(rng, 7)
+    with pytest.raises(BagError, match='already exists'):
+        BagWriter(path)
+    _write(path, messages, overwrite=True)
+    assert len(_rosbags_messages(path)) == 7
+    assert os.listdir(tmp_path) == [name]
+
+
+def test_metadata_yaml_qos_profiles_are_read_by_rosbags(tmp_path):
+    from rclpy.duration import Duration
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from rosbags.interfaces import QosDurability, QosReliability
+
+    from rotation_node.bag.mcap_io import TopicMetadata
+    from rotation_node.bag.qos import qos_profiles_yaml
+
+    offered = QoSProfile(depth=7, reliability=ReliabilityPolicy.BEST_EFFORT,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                         deadline=Duration(seconds=2, nanoseconds=5))
+    path = tmp_path / 'qos'
+    with BagWriter(path) as writer:
+        writer.add_topic(TopicMetadata('/text', 'std_msgs/msg/String',
+                                       qos_profiles_yaml([offered])))
+        writer.write('/text', String(data='x'), T0)
+    info = yaml.safe_load((path / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    stored, = info['topics_with_message_count'][0]['topic_metadata']['offered_qos_profiles']
+    assert (stored['reliability'], stored['durability'], stored['deadline']) == (
+        'best_effort', 'transient_local', {'sec': 2, 'nsec': 5})
+    with AnyReader([pathlib.Path(path)]) as reader:
+        qos, = reader.connections[0].ext.offered_qos_profiles
+    assert (qos.reliability, qos.durability, qos.depth) == (
+        QosReliability.BEST_EFFORT, QosDurability.TRANSIENT_LOCAL, 7)
+    assert (qos.deadline.sec, qos.deadline.nsec) == (2, 5)
+
+
+@pytest.mark.skipif(not can_mount(), reason='needs a tmpfs mount (root)')
+@pytest.mark.parametrize('keep_unfinished', [True, False])
+def test_full_disk_without_reservation_is_a_write_error(tmp_path, rng, monkeypatch,
+                                                        keep_unfinished):
+    """On a file system without fallocate a full disk shows as a failed write."""
+    monkeypatch.setattr(output_module, 'allocate', lambda descriptor, offset, length: False)
+    monkeypatch.setattr(writer_module, 'CHUNK_SIZE', 16 * 1024)
+    messages = _strings(rng, 4000)
+    with small_filesystem(tmp_path / 'small', 256 * 1024) as small:
+        writer = BagWriter(small / 'full', compression='none', keep_unfinished=keep_unfinished)
+        with pytest.raises(BagError, match='cannot write output .*full: No space left on '
+                                           'device') as caught:
+            with writer:
+                for topic, msg, stamp in messages:
+                    writer.write(topic, msg, stamp)
+        if keep_unfinished:
+            assert 'what was written is in' in str(caught.value)
+            assert os.listdir(small) == ['full.part']
+            recovered = linear_scan(small / 'full.part' / 'full_0.mcap')
+            assert 0 < len(recovered) < len(messages)
+            assert [(t, s) for t, s, _, _ in recovered] == [
+                (t, s) for t, _, s in messages[:len(recovered)]]
+        else:
+            assert os.listdir(small) == []
