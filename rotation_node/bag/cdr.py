@@ -36,11 +36,13 @@ not little-endian CDR is left to rclpy. Encoding gives rclpy's bytes, except
 that the padding is zero where rclpy leaves it uninitialised, so that equal
 messages give equal bytes and bags are reproducible.
 """
+from __future__ import annotations
+
 import collections
 import functools
 import operator
 import struct
-from typing import NamedTuple
+from typing import Any, Callable, NamedTuple, Optional, Sequence
 
 import numpy as np
 from rclpy.serialization import deserialize_message
@@ -178,7 +180,7 @@ class FixedLayoutCodec:
 
     """
 
-    def __init__(self, type_name):
+    def __init__(self, type_name: str) -> None:
         self.type_name = type_name
         self.message_class = message_class(type_name)
         self._leaves = []
@@ -209,7 +211,7 @@ class FixedLayoutCodec:
                 _payload_format(self._leaves, string_lengths))
         return compiled
 
-    def decode(self, data):
+    def decode(self, data: bytes) -> Any:
         """
         Decode one message.
 
@@ -257,7 +259,7 @@ class FixedLayoutCodec:
         return BagError(f'{self.type_name}: CDR data of {len(data)} bytes is truncated '
                         f'(needs at least {_ENCAPSULATION_SIZE + payload_size})')
 
-    def encode(self, msg):
+    def encode(self, msg: Any) -> bytes:
         """
         Encode one message.
 
@@ -307,7 +309,7 @@ class FixedLayoutCodec:
                 return f'{leaf.path} = {value!r}: {error}'
         return 'the values do not match the fields'
 
-    def stamped_encoder(self):
+    def stamped_encoder(self) -> Callable[[Any, Sequence[float]], bytes]:
         """
         Return an encoder from a header and numbers, without a message object.
 
@@ -386,7 +388,7 @@ def _payload_format(leaves, string_lengths):
 
 
 @functools.lru_cache(maxsize=None)
-def fixed_layout_codec(type_name):
+def fixed_layout_codec(type_name: str) -> Optional[FixedLayoutCodec]:
     """
     Return the codec of a message type, or None if its layout is not fixed.
 
@@ -412,7 +414,7 @@ def fixed_layout_codec(type_name):
         return None
 
 
-def float64_multi_array_encoder(layout):
+def float64_multi_array_encoder(layout: Any) -> Callable[[Sequence[float]], bytes]:
     """
     Return an encoder of std_msgs/Float64MultiArray messages with a given layout.
 
@@ -444,7 +446,7 @@ def float64_multi_array_encoder(layout):
 
 
 @functools.lru_cache(maxsize=None)
-def message_encoder(type_name):
+def message_encoder(type_name: str) -> Optional[Callable[[Any], bytes]]:
     """
     Return ``encode(msg) -> bytes`` for a type this module encodes, or None.
 

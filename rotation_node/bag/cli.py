@@ -25,9 +25,12 @@ behind (``record`` keeps what it recorded: on a full disk as a closed bag)
 and the input is never modified. With several inputs, each bag gets one line
 and the exit status is 1 if any failed.
 """
+from __future__ import annotations
+
 import argparse
 import os
 import sys
+from typing import Optional, Sequence
 
 from rclpy.utilities import remove_ros_args
 
@@ -126,7 +129,7 @@ def _positive_int(text):
     return value
 
 
-def build_parser():
+def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``rotation_bag``."""
     parser = argparse.ArgumentParser(
         prog=PROG, description='Record, play, convert and plot ROS 2 bags.')
@@ -206,7 +209,7 @@ def build_parser():
     return parser
 
 
-def main(argv=None):
+def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run ``rotation_bag``; return the exit status."""
     argv = sys.argv if argv is None else [PROG, *argv]
     args = build_parser().parse_args(remove_ros_args(argv)[1:])

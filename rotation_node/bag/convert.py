@@ -21,7 +21,10 @@ reads rclpy messages, and the numbers it returns are encoded by each output's
 encoder (:meth:`rotation_node.messages.OutputMessage.encoder`): the live
 node's conversions, without building rclpy messages where the types allow it.
 """
+from __future__ import annotations
+
 import os
+from typing import Callable, Dict, Optional, Sequence, TextIO, TYPE_CHECKING
 
 from rotation_node import messages
 from rotation_node.bag.cdr import fixed_layout_codec
@@ -33,8 +36,13 @@ from rotation_node.bag.writer import BagWriter
 from rotation_node.errors import BagError
 from rotation_node.pipeline import ConversionPipeline
 
+if TYPE_CHECKING:
+    from rotation_node.parameters import NodeParameters
+    from rotation_node.pipeline import PipelineStats
+    from rotation_node.type_aliases import StrPath
 
-def output_topic(input_topic, output_name):
+
+def output_topic(input_topic: str, output_name: str) -> str:
     """Topic of the output ``output_name`` of ``input_topic``: ``/imu`` -> ``/imu/euler``."""
     return f'{input_topic.rstrip("/")}/{output_name}'
 
@@ -67,8 +75,11 @@ def _check_output(input_path, output_path):
         raise BagError(f'output {output_path} is inside the input bag {input_path}')
 
 
-def convert(input_path, output_path, params, *, topics=None, overwrite=False,
-            compression=None, progress_stream=None, strict=False, report=None):
+def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *,
+            topics: Optional[Sequence[str]] = None, overwrite: bool = False,
+            compression: Optional[str] = None, progress_stream: Optional[TextIO] = None,
+            strict: bool = False,
+            report: Optional[Callable[[str], None]] = None) -> Dict[str, PipelineStats]:
     """
     Write ``output_path``: the input bag plus the node's outputs for its input topics.
 

@@ -13,12 +13,14 @@ Messages are stored as CDR bytes, which reading returns unchanged, so a bag
 round trip is byte-exact. Reading streams chunk by chunk: memory does not grow
 with the length of the bag.
 """
+from __future__ import annotations
+
 import dataclasses
 import functools
 import operator
 import os
 import struct
-from typing import Collection, Iterable, List, Optional
+from typing import Any, Callable, Collection, Iterable, Iterator, List, Optional, TYPE_CHECKING
 
 import zstandard
 from mcap.exceptions import McapError
@@ -31,6 +33,9 @@ from rclpy.serialization import deserialize_message
 from rotation_node.bag.compression import ZSTD_MAGIC, decompressed_message
 from rotation_node.bag.message_types import message_class
 from rotation_node.errors import BagError
+
+if TYPE_CHECKING:
+    from rotation_node.type_aliases import StrPath
 
 MESSAGE_ENCODING = 'cdr'
 SCHEMA_ENCODINGS = ('ros2msg', 'ros2idl')
@@ -112,14 +117,15 @@ class BagMessage:
 
     __slots__ = ('topic', 'type_name', 'data', 'log_time_ns', 'publish_time_ns')
 
-    def __init__(self, topic, type_name, data, log_time_ns, publish_time_ns):
+    def __init__(self, topic: str, type_name: str, data: bytes, log_time_ns: int,
+                 publish_time_ns: int) -> None:
         self.topic = topic
         self.type_name = type_name
         self.data = data
         self.log_time_ns = log_time_ns
         self.publish_time_ns = publish_time_ns
 
-    def message(self, decode=None):
+    def message(self, decode: Optional[Callable[[bytes], Any]] = None) -> Any:
         """
         Deserialise the message.
 
@@ -151,7 +157,7 @@ class BagMessage:
                 f'message on {self.topic} at {self.log_time_ns} ns is not a valid '
                 f'{self.type_name}: {error}') from None
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return (f'BagMessage({self.topic!r}, {self.type_name!r}, <{len(self.data)} bytes>, '
                 f'log_time_ns={self.log_time_ns}, publish_time_ns={self.publish_time_ns})')
 
@@ -251,7 +257,7 @@ class BagReader:
 
     """
 
-    def __init__(self, path, *, strict=False):
+    def __init__(self, path: StrPath, *, strict: bool = False) -> None:
         self.path = os.fspath(path)
         self.recovered = None
         self.compression = 'none'
@@ -351,7 +357,7 @@ class BagReader:
             type_hash=channel.metadata.get('topic_type_hash', ''),
             serialization_format=channel.message_encoding)
 
-    def messages(self, topics=None):
+    def messages(self, topics: Optional[Iterable[str]] = None) -> Iterator[BagMessage]:
         """
         Iterate over the messages in log-time order (ties in file order).
 
@@ -422,18 +428,18 @@ class BagReader:
                         raise BagError(
                             f'{self.path} is corrupt: {_described(error)}') from None
 
-    def close(self):
+    def close(self) -> None:
         """Close the file."""
         self._stream.close()
 
-    def __enter__(self):
+    def __enter__(self) -> BagReader:
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
 
-def __getattr__(name):
+def __getattr__(name: str) -> Any:
     # BagWriter lives in rotation_node.bag.writer (which imports this module).
     if name == 'BagWriter':
         from rotation_node.bag.writer import BagWriter

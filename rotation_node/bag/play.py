@@ -21,9 +21,12 @@ subscriber misses what was published before: with ``wait_for_subscribers``
 topic has a subscriber, and ``delay`` (``--delay``, as in ``ros2 bag play``)
 holds back the first message further.
 """
+from __future__ import annotations
+
 import math
 import threading
 import time
+from typing import Callable, Optional, Sequence, TYPE_CHECKING
 
 import rclpy
 from rclpy.duration import Duration
@@ -37,6 +40,9 @@ from rotation_node.bag.reader import open_bag
 from rotation_node.bag.stop_signal import StopSignal
 from rotation_node.bag.topic_arguments import checked_topic_names
 from rotation_node.errors import BagError
+
+if TYPE_CHECKING:
+    from rotation_node.type_aliases import StrPath
 
 NODE_NAME = 'rotation_bag_play'
 ACK_BATCH = DEEP_QUEUE_DEPTH // 4
@@ -147,8 +153,10 @@ def _play_once(reader, topics, publishers, rate, stop):
     return count
 
 
-def play(path, *, rate=1.0, topics=None, loop=False, delay=0.0, wait_for_subscribers=False,
-         ros_args=None, strict=False, report=None):
+def play(path: StrPath, *, rate: float = 1.0, topics: Optional[Sequence[str]] = None,
+         loop: bool = False, delay: float = 0.0, wait_for_subscribers: bool = False,
+         ros_args: Optional[Sequence[str]] = None, strict: bool = False,
+         report: Optional[Callable[[str], None]] = None) -> int:
     """
     Publish the messages of a bag until it ends (or forever with ``loop``) or Ctrl-C.
 

@@ -14,8 +14,10 @@ plot has a gap. A type several input types share (Vector3Stamped) is read as
 ``input_type`` of the parameters. The time axis is the header stamp where the
 message has one, else the log time, in seconds since the first message.
 """
+from __future__ import annotations
+
 import math
-from typing import Any, Tuple
+from typing import Any, Callable, Optional, Tuple, TYPE_CHECKING
 
 import numpy as np
 # A bare Figure renders PNG with the Agg backend and never touches pyplot's
@@ -29,6 +31,9 @@ from rotation_node.bag.reader import open_bag
 from rotation_node.errors import BagError
 from rotation_node.parameters import NodeParameters
 from rotation_node.stamps import header_stamp_ns
+
+if TYPE_CHECKING:
+    from rotation_node.type_aliases import StrPath
 
 
 def _converted_output(topics, topic):
@@ -124,8 +129,9 @@ def _time_ns(record, msg):
     return header_stamp_ns(header)
 
 
-def plot_topic(bag_path, topic, output_path, *, params=None, overwrite=False, strict=False,
-               report=None):
+def plot_topic(bag_path: StrPath, topic: str, output_path: StrPath, *,
+               params: Optional[NodeParameters] = None, overwrite: bool = False,
+               strict: bool = False, report: Optional[Callable[[str], None]] = None) -> int:
     """
     Draw ``topic`` of ``bag_path`` over time into the PNG ``output_path``.
 

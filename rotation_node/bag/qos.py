@@ -9,7 +9,9 @@ avoid_ros_namespace_conventions, policies by name (``keep_last``) and durations
 as ``{sec, nsec}``. Bags written before version 9 hold the policies as
 integers; both are read.
 """
-from typing import Any, Iterable
+from __future__ import annotations
+
+from typing import Any, Iterable, List, Sequence, TYPE_CHECKING
 
 import yaml
 from rclpy.duration import Duration
@@ -18,6 +20,9 @@ from rclpy.qos import (
 
 from rotation_node.errors import BagError
 from rotation_node.stamps import split_ns
+
+if TYPE_CHECKING:
+    from rotation_node.parameters import NodeParameters
 
 _POLICIES = (
     ('history', HistoryPolicy),
@@ -41,7 +46,7 @@ def _duration_yaml(duration):
     return {'sec': seconds, 'nsec': nanoseconds}
 
 
-def qos_profile(params, *, transient_local: bool = False) -> QoSProfile:
+def qos_profile(params: NodeParameters, *, transient_local: bool = False) -> QoSProfile:
     """
     Return the QoS of the node's input subscriptions and output publishers.
 
@@ -66,7 +71,7 @@ def qos_profile(params, *, transient_local: bool = False) -> QoSProfile:
                     else DurabilityPolicy.VOLATILE))
 
 
-def qos_profiles_yaml(profiles):
+def qos_profiles_yaml(profiles: Iterable[QoSProfile]) -> str:
     """
     Serialise QoS profiles to rosbag2's ``offered_qos_profiles`` YAML.
 
@@ -122,7 +127,7 @@ def _policy(entry, key, policy_type):
     return policy_type[str(value).upper()]
 
 
-def qos_profiles_from_yaml(text, *, topic=''):
+def qos_profiles_from_yaml(text: str, *, topic: str = '') -> List[QoSProfile]:
     """
     Parse rosbag2's ``offered_qos_profiles`` YAML into QoS profiles.
 
@@ -163,7 +168,7 @@ def qos_profiles_from_yaml(text, *, topic=''):
     return profiles
 
 
-def recording_qos(offered):
+def recording_qos(offered: Sequence[QoSProfile]) -> QoSProfile:
     """
     Return the subscription QoS that receives every publisher's messages.
 
@@ -196,7 +201,7 @@ def recording_qos(offered):
                     else DurabilityPolicy.VOLATILE))
 
 
-def playback_qos(offered, *, lossless=False):
+def playback_qos(offered: Sequence[QoSProfile], *, lossless: bool = False) -> QoSProfile:
     """
     Return the publisher QoS that replays a topic as it was recorded.
 

@@ -125,7 +125,8 @@ def _sqlite3_file(path):
                 offered_qos_profiles=rosbags_qos_yaml(
                     connection.ext.offered_qos_profiles),  # type: ignore[union-attr]
                 type_hash=connection.digest,
-                serialization_format=connection.ext.serialization_format,  # type: ignore[union-attr]
+                serialization_format=(
+                    connection.ext.serialization_format),  # type: ignore[union-attr]
                 **_definition(connection.msgtype, connection.msgdef)), decompressed_message)
             for connection in reader.connections])
     except BaseException:

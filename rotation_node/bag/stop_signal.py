@@ -12,6 +12,8 @@ be closed cleanly.
 second signal is ignored, so that removing the unfinished output cannot be
 interrupted. The tools exit with ``128 + signal number`` (130, 143).
 """
+from __future__ import annotations
+
 import signal
 import threading
 
@@ -64,7 +66,7 @@ class StopSignal:
 
     """
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.event = threading.Event()
         self.signal_number = None
         self._previous = {}
@@ -73,15 +75,15 @@ class StopSignal:
         self.signal_number = signal_number
         self.event.set()
 
-    def is_set(self):
+    def is_set(self) -> bool:
         """Whether a stop signal arrived."""
         return self.event.is_set()
 
-    def __enter__(self):
+    def __enter__(self) -> StopSignal:
         for number in STOP_SIGNALS:
             self._previous[number] = signal.signal(number, self._handle)
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> None:
         for number, handler in self._previous.items():
             signal.signal(number, handler)

@@ -35,7 +35,7 @@ from ._quaternion import (needs_sign_flip, product, quaternion_status, scaled_qu
 from ._runtime import (FLAT_IN, FLAT_OUT, FLOAT, INT, ROWS_IN, ROWS_OUT, STAGE_CHUNK,
                        call_unary, jit, kernel, matrix_samples, samples)
 from ._trigonometry import atan2_in_place_kernel, sin_cos
-from ._validation import SEQUENCE_TABLE, EulerSequence, parse_sequence
+from ._validation import EulerSequence, parse_sequence, SEQUENCE_TABLE
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike

@@ -141,8 +141,7 @@ def sin_cos_in_place_kernel(a: FloatArray, cos_out: FloatArray) -> None:
 
 
 @intrinsic
-def fused_multiply_add(typingctx: Any, a: Any, b: Any,
-                      c: Any) -> tuple[Any, Callable[..., Any]]:
+def fused_multiply_add(typingctx: Any, a: Any, b: Any, c: Any) -> tuple[Any, Callable[..., Any]]:
     """``a * b + c`` rounded once (LLVM's ``fma``; a C library call on CPUs without FMA)."""
     signature = types.float64(types.float64, types.float64, types.float64)
 
