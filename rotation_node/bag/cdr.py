@@ -42,7 +42,7 @@ import collections
 import functools
 import operator
 import struct
-from typing import Any, Callable, NamedTuple, Optional, Sequence
+from typing import Any, Callable, Dict, List, NamedTuple, Optional, Sequence
 
 import numpy as np
 from rclpy.serialization import deserialize_message
@@ -91,7 +91,7 @@ class _Leaf(NamedTuple):
 
     path: str     # 'header.stamp.sec'
     code: str     # struct code; _STRING for a string
-    count: int    # elements of a fixed array; 0 for a single value or a string
+    count: int  # type: ignore[assignment]  # elements of a fixed array; 0: a value or string
 
 
 _STRING_LENGTH = _Leaf('<string length>', 'I', 0)
@@ -100,7 +100,8 @@ _STRING_LENGTH = _Leaf('<string length>', 'I', 0)
 @functools.lru_cache(maxsize=None)
 def _view_class(msg_class):
     """The named tuple class that views messages of ``msg_class``."""
-    view = collections.namedtuple(msg_class.__name__, msg_class.get_fields_and_field_types())
+    view = collections.namedtuple(  # type: ignore[misc]
+        msg_class.__name__, msg_class.get_fields_and_field_types())
     view.__doc__ = (f'Read-only view of a decoded {msg_class.__module__.split(".")[0]}/msg/'
                     f'{msg_class.__name__} (rotation_node.bag.cdr).')
     return view
@@ -183,7 +184,7 @@ class FixedLayoutCodec:
     def __init__(self, type_name: str) -> None:
         self.type_name = type_name
         self.message_class = message_class(type_name)
-        self._leaves = []
+        self._leaves: List[_Leaf] = []
         try:
             self._build, _ = _compile(self.message_class, '', self._leaves, 0)
         except _NotFixedLayout as error:
@@ -195,7 +196,7 @@ class FixedLayoutCodec:
         self._to_string_lengths = [
             tuple(_fixed_format([*run, _STRING_LENGTH], start)[1] - start for start in range(8))
             for run in _runs_before_strings(self._leaves)[0]]
-        self._structs = {}
+        self._structs: Dict[Any, Any] = {}
         # rmw_fastrtps pads types without strings ("plain" types) to 4 bytes;
         # readers do not need it, the decoder does not expect it.
         self._end_padding = (bytes(_padding(self._struct(()).size, 4))
@@ -281,7 +282,8 @@ class FixedLayoutCodec:
             an array of the wrong length...).
 
         """
-        values, lengths = [], []
+        values: List[Any] = []
+        lengths: List[int] = []
         for leaf, get in zip(self._leaves, self._getters):
             value = get(msg)
             if leaf.code == _STRING:
@@ -366,7 +368,7 @@ def _fixed_format(leaves, offset):
 
 def _runs_before_strings(leaves):
     """The leaves between strings: the runs before each string, then the one after the last."""
-    runs = [[]]
+    runs: List[List[_Leaf]] = [[]]
     for leaf in leaves:
         if leaf.code == _STRING:
             runs.append([])

@@ -30,7 +30,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from typing import Optional, Sequence
+from typing import List, Optional, Sequence
 
 from rclpy.utilities import remove_ros_args
 
@@ -67,7 +67,7 @@ def _convert(args, ros_args):
         _convert_many(args, inputs, output, params)
         return
     from rotation_node.bag.convert import convert, output_topic
-    notes = []   # printed once the bag is written: a failure stays one line
+    notes: List[str] = []   # printed once the bag is written: a failure stays one line
     stats = convert(inputs[0], output, params, topics=args.topic, overwrite=args.force,
                     compression=args.compression, strict=args.strict, report=notes.append)
     for note in notes:
@@ -107,7 +107,7 @@ def _plot(args, ros_args):
     bag_name = os.path.splitext(os.path.basename(os.path.normpath(args.input)))[0]
     output = args.output or bag_name + args.topic.replace('/', '_') + '.png'
     params = None if args.params is None else parameters_from_yaml(args.params)
-    notes = []
+    notes: List[str] = []
     count = plot_topic(args.input, args.topic, output, params=params, overwrite=args.force,
                        strict=args.strict, report=notes.append)
     for note in notes:

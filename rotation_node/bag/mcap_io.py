@@ -20,7 +20,8 @@ import functools
 import operator
 import os
 import struct
-from typing import Any, Callable, Collection, Iterable, Iterator, List, Optional, TYPE_CHECKING
+from typing import (Any, Callable, Collection, Dict, Iterable, Iterator, List, Optional,
+                    TYPE_CHECKING)
 
 import zstandard
 from mcap.exceptions import McapError
@@ -259,7 +260,7 @@ class BagReader:
 
     def __init__(self, path: StrPath, *, strict: bool = False) -> None:
         self.path = os.fspath(path)
-        self.recovered = None
+        self.recovered: Optional[int] = None
         self.compression = 'none'
         try:
             self._stream = open(self.path, 'rb')
@@ -289,7 +290,7 @@ class BagReader:
                 raise
             unfinished = error
         if summary is not None and summary.chunk_indexes:
-            self._scan_count = None
+            self._scan_count: Optional[int] = None
             self._read_summary(summary)
         else:
             self._read_scan(unfinished, strict)
@@ -302,7 +303,9 @@ class BagReader:
     def _read_scan(self, unfinished, strict):
         """Index a file without summary by reading it once; decide how much to recover."""
         scan = _Scan(self._stream)
-        schemas, channels, counts = {}, {}, {}
+        schemas: Dict[int, Any] = {}
+        channels: Dict[int, Any] = {}
+        counts: Dict[int, int] = {}
         total, previous, self._scan_ordered = 0, -1, True
         for record in scan:
             if isinstance(record, Schema):
@@ -329,9 +332,9 @@ class BagReader:
         self._set_topics(channels.values(), schemas, counts)
 
     def _set_topics(self, channels, schemas, counts):
-        self.topic_metadata = {}
-        self.message_counts = {}
-        self._type_names = {}
+        self.topic_metadata: Dict[str, TopicMetadata] = {}
+        self.message_counts: Dict[str, int] = {}
+        self._type_names: Dict[int, str] = {}
         for channel in channels:
             metadata = self._topic_metadata(channel, schemas.get(channel.schema_id))
             known = self.topic_metadata.setdefault(channel.topic, metadata)
@@ -412,7 +415,9 @@ class BagReader:
     def _scanned_messages(self, topics):
         """The messages the opening scan counted, no more (the file may still grow)."""
         wanted = None if topics is None else set(topics)
-        channels, remaining = {}, self._scan_count
+        channels: Dict[int, Any] = {}
+        remaining = self._scan_count
+        assert remaining is not None   # set by the opening scan
         for record in _Scan(self._stream):
             if remaining == 0:
                 return

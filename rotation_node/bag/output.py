@@ -25,7 +25,7 @@ import ctypes.util
 import errno
 import os
 import shutil
-from typing import TYPE_CHECKING
+from typing import Optional, TYPE_CHECKING
 
 from rotation_node.errors import BagError
 
@@ -298,7 +298,7 @@ class BagOutput:
         os.fsync(self.stream.fileno())
         self.stream.close()
 
-    def finish(self, metadata_yaml: str = None) -> None:
+    def finish(self, metadata_yaml: Optional[str] = None) -> None:
         """
         Close the storage file, write ``metadata.yaml`` (directories) and rename to ``path``.
 

@@ -26,7 +26,7 @@ from __future__ import annotations
 import math
 import threading
 import time
-from typing import Callable, Optional, Sequence, TYPE_CHECKING
+from typing import Callable, List, Optional, Sequence, TYPE_CHECKING
 
 import rclpy
 from rclpy.duration import Duration
@@ -155,7 +155,7 @@ def _play_once(reader, topics, publishers, rate, stop):
 
 def play(path: StrPath, *, rate: float = 1.0, topics: Optional[Sequence[str]] = None,
          loop: bool = False, delay: float = 0.0, wait_for_subscribers: bool = False,
-         ros_args: Optional[Sequence[str]] = None, strict: bool = False,
+         ros_args: Optional[List[str]] = None, strict: bool = False,
          report: Optional[Callable[[str], None]] = None) -> int:
     """
     Publish the messages of a bag until it ends (or forever with ``loop``) or Ctrl-C.
@@ -204,8 +204,9 @@ def play(path: StrPath, *, rate: float = 1.0, topics: Optional[Sequence[str]] = 
         raise BagError(f'delay must be a number of seconds in [0, {MAX_DELAY_S:.4g}], '
                        f'got {delay}')
     with open_bag(path, strict=strict) as reader:
-        for note in reader.notes if report is not None else ():
-            report(note)
+        if report is not None:
+            for note in reader.notes:
+                report(note)
         topics = _playable_topics(reader, topics, report)
         rclpy.init(args=ros_args, signal_handler_options=SignalHandlerOptions.NO)
         try:

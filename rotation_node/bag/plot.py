@@ -51,7 +51,7 @@ def _input_type(type_name, params):
     candidates = [entry for entry in messages.INPUTS.values()
                   if entry.type_name == type_name and entry.stream is None]
     preferred = [entry for entry in candidates if entry.name == params.input_type]
-    return (preferred or candidates or [None])[0]
+    return next(iter(preferred or candidates), None)
 
 
 def _input_orientation(entry, params):
@@ -167,8 +167,9 @@ def plot_topic(bag_path: StrPath, topic: str, output_path: StrPath, *,
     params = NodeParameters() if params is None else params
     with open_bag(bag_path, strict=strict) as reader, \
             AtomicFile(output_path, overwrite=overwrite) as output:
-        for note in reader.notes if report is not None else ():
-            report(note)
+        if report is not None:
+            for note in reader.notes:
+                report(note)
         times_ns, panels, values = plot_series(reader, topic, params)
         _draw(reader.topic_name(topic), times_ns, values, panels).savefig(
             output.stream, format='png', dpi=110)

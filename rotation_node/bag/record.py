@@ -69,7 +69,7 @@ class BagRecorder(Node):
         super().__init__(node_name, **kwargs)
         self._writer = writer
         self._pending = [self.resolve_topic_name(topic) for topic in topics]
-        self.counts = {}
+        self.counts: Dict[str, int] = {}
         self._discovery = self.create_timer(DISCOVERY_PERIOD_S, self._discover)
         self._discover()
 
@@ -125,7 +125,7 @@ def _spin(executor, writer, stop, deadline):
 
 def record(output: StrPath, topics: Sequence[str], *, duration: Optional[float] = None,
            overwrite: bool = False, compression: str = DEFAULT_COMPRESSION,
-           ros_args: Optional[Sequence[str]] = None) -> Dict[str, int]:
+           ros_args: Optional[List[str]] = None) -> Dict[str, int]:
     """
     Record ``topics`` into ``output`` until Ctrl-C, SIGTERM, ``duration`` or a full disk.
 

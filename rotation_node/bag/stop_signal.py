@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import signal
 import threading
+from typing import Any, Dict, Optional
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
@@ -68,8 +69,8 @@ class StopSignal:
 
     def __init__(self) -> None:
         self.event = threading.Event()
-        self.signal_number = None
-        self._previous = {}
+        self.signal_number: Optional[int] = None
+        self._previous: Dict[int, Any] = {}
 
     def _handle(self, signal_number, frame):
         self.signal_number = signal_number

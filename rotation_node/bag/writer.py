@@ -37,7 +37,7 @@ import math
 import operator
 import os
 import time
-from typing import Any, Dict, Optional, TYPE_CHECKING
+from typing import Any, Dict, List, Optional, Tuple, TYPE_CHECKING
 
 import mcap
 import yaml
@@ -172,13 +172,13 @@ class BagWriter:
         # Chunks are cut here (flush()), never by the library: its chunk size is unreachable.
         self._writer = Writer(self._output.stream, compression=chunk_compression,
                               chunk_size=2**62)
-        self._schema_ids = {}
-        self._channels = {}
-        self._topics = []
-        self._counts = {}
+        self._schema_ids: Dict[Tuple[str, str, str], int] = {}
+        self._channels: Dict[str, Any] = {}
+        self._topics: List[TopicMetadata] = []
+        self._counts: Dict[int, int] = {}
         self._start_ns = _MAX_TIMESTAMP
         self._end_ns = 0
-        self._pending = []
+        self._pending: List[Any] = []
         self._pending_bytes = 0
         self._registered_bytes = 0      # schemas and channels since the last chunk
         self._summary_bytes = 0         # schemas and channels repeated in the summary
