@@ -362,7 +362,8 @@ class OutputMessage:
         """
         from rotation_node.bag import cdr
         if self.stamped_numbers:
-            return cdr.fixed_layout_codec(self.type_name).stamped_encoder()  # type: ignore[union-attr]
+            codec = cdr.fixed_layout_codec(self.type_name)   # stamped numbers: a fixed layout
+            return codec.stamped_encoder()  # type: ignore[union-attr]
         if self.layout is not None:
             encode_data = cdr.float64_multi_array_encoder(self.layout)
             return lambda header, numbers: encode_data(numbers)
