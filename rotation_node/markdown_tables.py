@@ -25,6 +25,8 @@ def _yaml_value(value):
         return 'true' if value else 'false'
     if isinstance(value, tuple):
         return '[' + ', '.join(value) + ']'
+    if value == '':
+        return "''"
     return f'{value:g}' if isinstance(value, float) else str(value)
 
 

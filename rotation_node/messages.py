@@ -31,7 +31,7 @@ from typing import Any, Callable, Iterable, NamedTuple, Optional, Sequence, Tupl
 
 import numpy as np
 
-from rotation_node import conversions, kinematics
+from rotation_node import conversions, kinematics, tf_input
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
@@ -94,7 +94,10 @@ class Sample(NamedTuple):
 
 
 SampleStream = Callable[[str, Any], Iterable[Sample]]
-"""``(relative topic name, message) -> samples`` of one input stream."""
+"""``(topic name, message) -> samples`` of one input stream (the :class:`InputTopic` name)."""
+
+Report = Callable[[str, str], None]
+"""``report(reason, detail)``: a stream's message gave no sample, and why (counted as dropped)."""
 
 
 class InputTopic(NamedTuple):
@@ -104,10 +107,12 @@ class InputTopic(NamedTuple):
     Attributes
     ----------
     name : str
-        Relative topic name (``'input'``), remappable with ``-r``.
+        Topic name, relative (``'input'``) or absolute (``'/tf'``), remappable
+        with ``-r``.
     transient_local : bool
-        Subscribe with transient-local durability (latched data such as
-        ``/tf_static``); volatile otherwise.
+        Latched data such as ``/tf_static``: subscribe reliable, keep all, with
+        transient-local durability, so that what publishers sent before the
+        subscription arrives too; volatile with the ``qos`` parameters otherwise.
 
     """
 
@@ -116,6 +121,8 @@ class InputTopic(NamedTuple):
 
 
 INPUT_TOPIC = InputTopic('input')
+TF_TOPIC = InputTopic('/tf')
+TF_STATIC_TOPIC = InputTopic('/tf_static', transient_local=True)
 
 
 _XYZ = ('x', 'y', 'z')
@@ -163,11 +170,17 @@ class InputType:
     topics : tuple of InputTopic
         Topics subscribed; one topic ``input`` for a plain type.
     stream : callable, optional
-        ``stream(params) -> SampleStream`` for a type whose samples need per-stream
-        state (several topics, a buffer): called once per input stream. None for a
-        plain type, which reads one sample per message from the fields above.
+        ``stream(params, report) -> SampleStream`` for a type whose samples need
+        per-stream state (several topics, a buffer): called once per input
+        stream; ``report`` is a :data:`Report`. None for a plain type, which
+        reads one sample per message from the fields above.
     parameters : tuple of str
         ROS names of the parameters used only by this input type.
+    check_parameters : callable, optional
+        ``check(params)``: raises ParameterError when this type's parameters are
+        missing or inconsistent (called on every parameter change with this type).
+    drop_reasons : tuple of str
+        Reasons its stream reports, counted with the pipeline's dropped messages.
 
     """
 
@@ -182,8 +195,10 @@ class InputType:
     angular_velocity_unknown_field: Optional[str] = None
     notes: str = ''
     topics: Tuple[InputTopic, ...] = (INPUT_TOPIC,)
-    stream: Optional[Callable[[Any], SampleStream]] = None
+    stream: Optional[Callable[[Any, Report], SampleStream]] = None
     parameters: Tuple[str, ...] = ()
+    check_parameters: Optional[Callable[[Any], None]] = None
+    drop_reasons: Tuple[str, ...] = ()
 
     @property
     def message_class(self) -> type:
@@ -236,7 +251,8 @@ class InputType:
         return read
 
     def sample_stream(self, params: Any, *, angular_velocity: bool = True,
-                      covariance: bool = False) -> SampleStream:
+                      covariance: bool = False,
+                      report: Optional[Report] = None) -> SampleStream:
         """
         Return the function that turns messages of one input stream into samples.
 
@@ -247,12 +263,19 @@ class InputType:
         params : rotation_node.parameters.NodeParameters
         angular_velocity, covariance : bool, optional
             As for :meth:`sample_reader`; a stateful type may always read them.
+        report : callable, optional
+            ``report(reason, detail)`` for each message or part of one that a
+            stateful type could not use (one of :attr:`drop_reasons`).
 
         """
         if self.stream is not None:
-            return self.stream(params)
+            return self.stream(params, report or _report_nothing)
         read = self.sample_reader(angular_velocity=angular_velocity, covariance=covariance)
         return lambda topic, msg: (read(msg),)
+
+
+def _report_nothing(reason, detail):
+    """Discard a stream's report."""
 
 
 def _optional_getter(path):
@@ -290,6 +313,14 @@ _INPUT_LIST = (
                     '(degrees with `euler.degrees`)'),
     InputType('rotation_vector', 'geometry_msgs/msg/Vector3Stamped', ROTATION_VECTOR, 'vector',
               notes='axis times angle (rad)'),
+    InputType('tf', 'tf2_msgs/msg/TFMessage', QUATERNION, 'transforms',
+              notes='subscribes `/tf` and `/tf_static`; the orientation of `tf.child_frame` in '
+                    '`tf.parent_frame` composed along the TF tree, as tf2 '
+                    '`lookupTransform(parent, child, Time(0))` gives it, stamped with that '
+                    'time ([docs/tf.md](docs/tf.md))',
+              topics=(TF_TOPIC, TF_STATIC_TOPIC), stream=tf_input.TfSampleStream,
+              parameters=('tf.parent_frame', 'tf.child_frame'),
+              check_parameters=tf_input.check_parameters, drop_reasons=tf_input.DROP_REASONS),
 )
 
 INPUTS = {entry.name: entry for entry in _INPUT_LIST}

@@ -2,8 +2,9 @@
 The orientation-conversion node (console script ``rotation_node``).
 
 Subscribes the relative topic ``input`` (type chosen by the ``input_type``
-parameter) and publishes each output listed in ``outputs`` on the relative
-topic of the same name; the conversion itself is
+parameter; ``input_type: tf`` subscribes ``/tf`` and ``/tf_static`` instead)
+and publishes each output listed in ``outputs`` on the relative topic of the
+same name; the conversion itself is
 :class:`rotation_node.pipeline.ConversionPipeline`, the same code that
 ``rotation_bag convert`` runs on bags. The subscribed topics and the message
 types come from :mod:`rotation_node.messages`.
@@ -49,7 +50,7 @@ from rotation_node.parameters import (
     NODE_NAME, PARAMETERS, PARAMETERS_BY_NAME, ROS_BUILTIN_PARAMETERS, NodeParameters,
     parameters_file_sections, parameters_from_yaml, unknown_parameter_error)
 from rotation_node.pipeline import (
-    DROP_REASONS, SKIP_REASONS, ConversionPipeline, warm_up_conversions)
+    SKIP_REASONS, ConversionPipeline, warm_up_conversions)
 
 DIAGNOSTICS_PERIOD_S = 1.0
 ISSUE_LOG_PERIOD_S = 5.0
@@ -161,10 +162,13 @@ class RotationNode(Node):
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         defaults = self.params.to_ros()
+        # rclpy checks each declared parameter on its own, in this order: input_type comes
+        # last, so that the parameters of its input type (tf.*) are set when it is checked.
+        in_order = sorted(PARAMETERS, key=lambda spec: spec.name == 'input_type')
         try:
             self.declare_parameters('', [
                 (spec.name, defaults[spec.name], parameter_descriptor(spec))
-                for spec in PARAMETERS])
+                for spec in in_order])
         except (InvalidParameterValueException, InvalidParameterTypeException) as exc:
             self.destroy_node()
             raise ParameterError(str(exc)) from None
@@ -200,7 +204,10 @@ class RotationNode(Node):
         qos_changed = previous is None or qos != qos_profile(previous)
         stats = None if self._pipeline is None else self._pipeline.stats
         self._pipeline = ConversionPipeline(params, on_issue=self._log_issue, stats=stats)
-        if qos_changed or params.input_type != previous.input_type:
+        # The new pipeline's input stream starts empty; a stateful one (tf) subscribes
+        # again, so that its latched topics (/tf_static) are delivered to it again.
+        stateful = messages.INPUTS[params.input_type].stream is not None
+        if qos_changed or stateful or params.input_type != previous.input_type:
             for subscription in self._subscriptions:
                 self.destroy_subscription(subscription)
             self._subscriptions = [
@@ -267,7 +274,8 @@ class RotationNode(Node):
             'received': stats.received,
             'published': stats.published,
             'dropped': totals[0],
-            **{f'dropped.{reason}': stats.dropped[reason] for reason in DROP_REASONS},
+            **{f'dropped.{reason}': stats.dropped[reason]
+               for reason in self._pipeline.drop_reasons},
             'skipped': totals[1],
             **{f'skipped.{reason}': stats.skipped[reason] for reason in SKIP_REASONS},
             'normalised': stats.normalised,

@@ -165,6 +165,14 @@ def _check_outputs(value):
         raise ParameterError(f"parameter 'outputs': {', '.join(repeated)} listed twice")
 
 
+def _check_frame_name(name):
+    def check(value):
+        if value.startswith('/'):
+            raise ParameterError(f"parameter '{name}': {value!r} starts with '/'; TF frame "
+                                 f'names do not (write {value.lstrip("/")!r})')
+    return check
+
+
 def _parameter(name, default, description, **constraints):
     return field(default=default, metadata={'spec': ParameterSpec(
         name, default, description, **constraints)})
@@ -265,11 +273,27 @@ class NodeParameters:
         'qos.depth', 10,
         'History depth (keep last) of the input subscription and of the output publishers',
         bounds=(1, 10000))
+    tf_parent_frame: str = _parameter(
+        'tf.parent_frame', '',
+        'input_type tf: the frame the orientation is expressed in (tf2 target frame, '
+        'e.g. map)',
+        check=_check_frame_name('tf.parent_frame'),
+        rule='a TF frame name without a leading /; required with input_type tf')
+    tf_child_frame: str = _parameter(
+        'tf.child_frame', '',
+        'input_type tf: the frame whose orientation is published (tf2 source frame, '
+        'e.g. base_link)',
+        check=_check_frame_name('tf.child_frame'),
+        rule='a TF frame name without a leading /, not tf.parent_frame; required with '
+             'input_type tf')
 
     def __post_init__(self) -> None:
-        """Check every value; store string arrays as tuples."""
+        """Check every value, then the input type's own parameters; string arrays as tuples."""
         for spec in PARAMETERS:
             object.__setattr__(self, spec.attribute, spec.checked(getattr(self, spec.attribute)))
+        check = messages.INPUTS[self.input_type].check_parameters
+        if check is not None:
+            check(self)
 
     @classmethod
     def from_ros(cls, values: Mapping[str, Any]) -> 'NodeParameters':

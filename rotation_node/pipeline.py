@@ -219,7 +219,8 @@ class ConversionPipeline:
         reads = {field for value in plan for field in value.reads}
         sample_fields = {'angular_velocity': 'angular_velocity' in reads,
                          'covariance': 'covariance' in reads}
-        self._samples = self._input.sample_stream(params, **sample_fields)
+        self._samples = self._input.sample_stream(params, **sample_fields,
+                                                  report=self._stream_dropped)
         self._transforms = [transform for transform in
                             (factory(params) for factory in SAMPLE_TRANSFORMS)
                             if transform is not None]
@@ -244,6 +245,11 @@ class ConversionPipeline:
     def input_type(self) -> type:
         """Message class of the input."""
         return self._input.message_class
+
+    @property
+    def drop_reasons(self) -> Tuple[str, ...]:
+        """Reasons counted in ``stats.dropped``: :data:`DROP_REASONS` and the input type's."""
+        return DROP_REASONS + self._input.drop_reasons
 
     @property
     def output_types(self) -> Dict[str, type]:
@@ -311,6 +317,11 @@ class ConversionPipeline:
         for sample in samples:
             results += self._outputs_of(sample)
         return results
+
+    def _stream_dropped(self, reason, detail):
+        """Count what the input type's stream could not use (its own reasons)."""
+        self.stats.dropped[reason] += 1
+        self._report(reason, detail)
 
     def _report(self, reason, detail):
         if self._on_issue is not None:

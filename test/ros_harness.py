@@ -12,7 +12,12 @@ import subprocess
 import sys
 import time
 
+from rotation_node import messages
+
 BIN = os.path.dirname(sys.executable)
+
+PLAIN_INPUT_TYPES = tuple(name for name, entry in messages.INPUTS.items() if entry.stream is None)
+"""Input types read one sample from each message on ``input`` (:func:`make_input_message`)."""
 
 
 def script(name):

@@ -12,7 +12,7 @@ import subprocess
 import pytest
 import yaml
 from bag_helpers import imu_messages, plain, stamp_ns
-from ros_harness import RosProcess, TestNode, make_input_message, script
+from ros_harness import PLAIN_INPUT_TYPES, RosProcess, TestNode, make_input_message, script
 from rclpy.duration import Duration
 from rclpy.qos import QoSProfile
 from scipy.spatial.transform import Rotation
@@ -26,7 +26,7 @@ from rotation_node.bag.qos import qos_profiles_from_yaml
 from rotation_node.bag.qos import qos_profile
 from rotation_node.errors import BagError
 from rotation_node.messages import INPUTS, OUTPUTS as OUTPUT_TYPES
-from rotation_node.parameters import INPUT_TYPES, NodeParameters, parameters_from_yaml
+from rotation_node.parameters import NodeParameters, parameters_from_yaml
 from rotation_node.pipeline import ConversionPipeline
 
 OUTPUTS = ('euler', 'quaternion', 'angular_velocity')
@@ -86,7 +86,7 @@ def test_convert_adds_pipeline_outputs_and_copies_everything(tmp_path, rng):
         assert offered == qos_profile(PARAMS)
 
 
-@pytest.mark.parametrize('input_type', INPUT_TYPES)
+@pytest.mark.parametrize('input_type', PLAIN_INPUT_TYPES)
 def test_every_input_type_and_output_is_the_pipelines_byte_for_byte(tmp_path, rng, input_type):
     """convert reads cdr views and encodes values: the same bytes as process()'s messages."""
     params = NodeParameters(input_type=input_type, outputs=ALL_OUTPUTS, euler_unwrap=True,

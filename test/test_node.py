@@ -22,11 +22,12 @@ from rotation_node.errors import ParameterError
 from rotation_node.messages import OUTPUTS as OUTPUT_TYPES
 from rotation_node.node import check_parameter_names, ros_arguments
 from rotation_node.parameters import (
-    INPUT_TYPES, OUTPUTS, PARAMETERS, NodeParameters, parameters_from_yaml)
+    OUTPUTS, PARAMETERS, NodeParameters, parameters_from_yaml)
 from rotation_node.pipeline import input_message_type
 
 from ros_harness import (
-    RosProcess, TestNode, make_input_message, oracle_output, output_values, script)
+    PLAIN_INPUT_TYPES, RosProcess, TestNode, make_input_message, oracle_output, output_values,
+    script)
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'params.yaml'
 STAMP_NS = 1_700_000_000_000_000_000
@@ -179,7 +180,7 @@ def assert_output(out, name, rotation, omega=OMEGA_BODY, **convention):
 
 # Inputs, outputs, headers ----------------------------------------------------------
 
-@pytest.mark.parametrize('input_type', INPUT_TYPES)
+@pytest.mark.parametrize('input_type', PLAIN_INPUT_TYPES)
 def test_each_input_type(node, input_type, rotation):
     node.configure({'input_type': input_type, 'outputs': ['quaternion', 'euler']})
     msg = make_input_message(input_type, rotation, stamp_ns=STAMP_NS + 123, frame_id='base')

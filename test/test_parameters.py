@@ -28,14 +28,14 @@ def test_every_field_has_one_row_with_a_description():
     assert all(len(spec.description) > 20 for spec in PARAMETERS)
 
 
-def test_the_issue_names_every_parameter():
+def test_the_issues_name_every_parameter():
     assert set(PARAMETERS_BY_NAME) == {
         'input_type', 'outputs', 'euler.sequence', 'euler.degrees', 'euler.unwrap',
         'euler.singularity_threshold', 'quaternion.continuity', 'quaternion.norm_tolerance',
         'angular_velocity.input_frame', 'angular_velocity.output_frame',
         'covariance.frame', 'covariance.max_linearisation_ratio', 'frames.input_world',
         'frames.input_body', 'frames.output_world', 'frames.output_body',
-        'qos.reliability', 'qos.depth'}
+        'qos.reliability', 'qos.depth', 'tf.parent_frame', 'tf.child_frame'}
 
 
 def test_defaults_follow_ros_conventions():
@@ -136,6 +136,28 @@ def test_every_euler_convention_is_accepted(sequence):
 def test_invalid_values_are_rejected_naming_the_parameter(name, value, message):
     with pytest.raises(ParameterError, match=re.escape(message)):
         NodeParameters.from_ros({name: value})
+
+
+@pytest.mark.parametrize('values, message', [
+    ({'input_type': 'tf'}, "'tf.parent_frame': required with input_type tf"),
+    ({'input_type': 'tf', 'tf.parent_frame': 'map'}, "'tf.child_frame': required"),
+    ({'input_type': 'tf', 'tf.parent_frame': 'map', 'tf.child_frame': 'map'},
+     "'tf.parent_frame' and 'tf.child_frame' are both 'map'"),
+    ({'tf.child_frame': '/base_link'}, "'tf.child_frame': '/base_link' starts with '/'"),
+    ({'tf.parent_frame': 1}, "'tf.parent_frame': expected a string"),
+])
+def test_tf_frames_are_required_and_different_with_input_type_tf(values, message):
+    with pytest.raises(ParameterError, match=re.escape(message)):
+        NodeParameters.from_ros(values)
+
+
+def test_tf_frames_are_optional_for_other_input_types():
+    params = NodeParameters.from_ros({'input_type': 'tf', 'tf.parent_frame': 'map',
+                                      'tf.child_frame': 'base_link'})
+    assert (params.tf_parent_frame, params.tf_child_frame) == ('map', 'base_link')
+    assert NodeParameters(input_type='imu', tf_parent_frame='map').tf_child_frame == ''
+    with pytest.raises(ParameterError, match="'tf.child_frame': required"):
+        params.replaced({'tf.child_frame': ''})
 
 
 def test_parameter_error_is_a_value_error():

@@ -6,7 +6,9 @@ converted input topic ``T`` the outputs the live node would publish, on
 ``T/<output name>`` (``/imu/euler``): the same ``ConversionPipeline`` with the
 same parameters, one pipeline per input topic, fed in log-time order (the
 order of reception). Converted messages get the log and publish times of the
-input message they come from.
+input message they come from. An input type with several topics is one stream
+per first topic: ``input_type: tf`` converts ``/tf`` together with
+``/tf_static`` (``T`` with ``T_static``), and writes ``/tf/euler``...
 The bag is streamed, never loaded: memory does not grow with its length.
 The input is any bag :func:`rotation_node.bag.reader.open_bag` reads (a
 rosbag2 directory, MCAP, sqlite3, split, compressed, ROS 1, an unfinished
@@ -47,21 +49,42 @@ def output_topic(input_topic: str, output_name: str) -> str:
     return f'{input_topic.rstrip("/")}/{output_name}'
 
 
-def _input_topics(reader, input_type_name, topics):
-    """The topics to convert: the given ones, checked, or every topic of the input type."""
+def _input_streams(reader, input_type, topics):
+    """
+    Return the streams to convert: ``{topic: {bag topic: the input type's topic name}}``.
+
+    A stream is named by its first topic: the given ones, checked, or by default
+    every topic of the input type that is not another one's companion. An input
+    type with several topics (``/tf`` and ``/tf_static``) finds the others in
+    the bag by their suffix to the first one's name: ``T`` and ``T_static``.
+    """
+    first, *others = input_type.topics
+    type_name = input_type.type_name
+
+    def companions(topic):
+        return {topic + other.name[len(first.name):]: other.name for other in others
+                if other.name.startswith(first.name)}
+
     if topics is None:
-        topics = [topic for topic, type_name in reader.topics.items()
-                  if type_name == input_type_name]
+        candidates = [topic for topic, name in reader.topics.items() if name == type_name]
+        companion_topics = {c for topic in candidates for c in companions(topic)}
+        topics = [topic for topic in candidates if topic not in companion_topics]
         if not topics:
-            raise BagError(f'{reader.path} has no {input_type_name} topic to convert '
+            raise BagError(f'{reader.path} has no {type_name} topic to convert '
                            f'(its topics: {reader.topics})')
-        return topics
-    topics = [reader.topic_name(topic) for topic in topics]   # raises if not in the bag
-    for topic in topics:
-        if reader.topics[topic] != input_type_name:
-            raise BagError(f'topic {topic} in {reader.path} is {reader.topics[topic]}, '
-                           f'but input_type expects {input_type_name}')
-    return list(dict.fromkeys(topics))
+    else:
+        topics = [reader.topic_name(topic) for topic in topics]   # raises if not in the bag
+        for topic in topics:
+            if reader.topics[topic] != type_name:
+                raise BagError(f'topic {topic} in {reader.path} is {reader.topics[topic]}, '
+                               f'but input_type expects {type_name}')
+    streams = {}
+    for topic in dict.fromkeys(topics):
+        streams[topic] = {topic: first.name}
+        for companion, name in companions(topic).items():
+            if reader.topics.get(companion) == type_name:
+                streams[topic][companion] = name
+    return streams
 
 
 def _check_output(input_path, output_path):
@@ -95,7 +118,8 @@ def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *
         As loaded from the node's parameters file.
     topics : list of str, optional
         Topics to convert (their names in the bag or their ROS 2 names); by
-        default every topic of the type ``params.input_type`` names.
+        default every topic of the type ``params.input_type`` names (for a type
+        with several topics, the first of each group: ``/tf``, not ``/tf_static``).
     overwrite : bool, optional
         Replace an existing output (atomically, once the new one is complete).
     compression : str, optional
@@ -133,10 +157,13 @@ def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *
                    f'{sum(reader.message_counts.values())} messages')
             for note in reader.notes:
                 report(note)
-        input_type_name = messages.INPUTS[params.input_type].type_name
-        pipelines = {topic: ConversionPipeline(params)
-                     for topic in _input_topics(reader, input_type_name, topics)}
-        input_codec = fixed_layout_codec(input_type_name)
+        input_type = messages.INPUTS[params.input_type]
+        streams = _input_streams(reader, input_type, topics)
+        pipelines = {topic: ConversionPipeline(params) for topic in streams}
+        # {bag topic: (its stream's first topic, the input type's name for it)}
+        routes = {bag_topic: (topic, name) for topic, stream in streams.items()
+                  for bag_topic, name in stream.items()}
+        input_codec = fixed_layout_codec(input_type.type_name)
         decode = None if input_codec is None else input_codec.decode
         encoders = {name: (messages.OUTPUTS[name].type_name,
                            messages.OUTPUTS[name].message.encoder())
@@ -163,10 +190,12 @@ def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *
                 log_time_ns, publish_time_ns = record.log_time_ns, record.publish_time_ns
                 writer.write_serialized(record.topic, record.type_name, record.data,
                                         log_time_ns, publish_time_ns)
-                pipeline = pipelines.get(record.topic)
-                if pipeline is not None:
-                    topic_outputs = outputs[record.topic]
-                    for name, header, values in pipeline.process_values(record.message(decode)):
+                route = routes.get(record.topic)
+                if route is not None:
+                    stream, input_topic = route
+                    topic_outputs = outputs[stream]
+                    for name, header, values in pipelines[stream].process_values(
+                            record.message(decode), input_topic):
                         topic, type_name, encode = topic_outputs[name]
                         writer.write_serialized(topic, type_name, encode(header, values),
                                                 log_time_ns, publish_time_ns)

@@ -117,9 +117,13 @@ def _panels(topics, topic, params):
     entry = _input_type(topics[topic], params)
     if entry is not None:
         return _input_panels(entry, params)
-    plottable = sorted({e.type_name for e in messages.INPUTS.values()})
-    raise BagError(f'cannot plot {topics[topic]}: plottable are the outputs rotation_bag '
-                   f'convert writes and topics of {", ".join(plottable)}')
+    plottable = sorted({e.type_name for e in messages.INPUTS.values() if e.stream is None})
+    streams = [e.name for e in messages.INPUTS.values()
+               if e.type_name == topics[topic] and e.stream is not None]
+    hint = (f' (convert it with input_type {streams[0]} first, then plot an output)'
+            if streams else '')
+    raise BagError(f'cannot plot {topics[topic]}{hint}: plottable are the outputs '
+                   f'rotation_bag convert writes and topics of {", ".join(plottable)}')
 
 
 def _time_ns(record, msg):

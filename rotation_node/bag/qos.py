@@ -57,18 +57,23 @@ def qos_profile(params: NodeParameters, *, transient_local: bool = False) -> QoS
     params : rotation_node.parameters.NodeParameters
         ``qos.reliability`` and ``qos.depth`` (keep last).
     transient_local : bool, optional
-        Transient-local durability (an input topic of latched data); volatile otherwise.
+        An input topic of latched data (``/tf_static``): reliable, keep all and
+        transient local, whatever the parameters, so that every message its
+        publishers keep for late subscribers arrives (only a reliable reader
+        gets them); volatile with the parameters' reliability and depth otherwise.
 
     Returns
     -------
     rclpy.qos.QoSProfile
 
     """
+    if transient_local:
+        return QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
     return QoSProfile(
         history=HistoryPolicy.KEEP_LAST, depth=params.qos_depth,
         reliability=_RELIABILITY[params.qos_reliability],
-        durability=(DurabilityPolicy.TRANSIENT_LOCAL if transient_local
-                    else DurabilityPolicy.VOLATILE))
+        durability=DurabilityPolicy.VOLATILE)
 
 
 def qos_profiles_yaml(profiles: Iterable[QoSProfile]) -> str:
