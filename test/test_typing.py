@@ -30,7 +30,8 @@ def unannotated_functions(source, module=''):
     Public: a module-level function or a method of a public class (at any
     nesting of public classes) whose name has no leading underscore, or a
     dunder method. Every parameter but ``self``/``cls`` needs an annotation,
-    and the return type too.
+    and the return type too, except for an ``__init__`` with annotated parameters (as
+    mypy checks it).
     """
     missing = []
 
@@ -46,8 +47,9 @@ def unannotated_functions(source, module=''):
                     params = params[1:]
                 params += [p for p in (args.vararg, args.kwarg) if p is not None]
                 bare = [p.arg for p in params if p.annotation is None]
-                if bare or node.returns is None:
-                    what = ', '.join(bare + ([] if node.returns else ['return']))
+                returns = node.returns is not None or (node.name == '__init__' and params)
+                if bare or not returns:
+                    what = ', '.join(bare + ([] if returns else ['return']))
                     missing.append(f'{module}:{node.lineno} {prefix}{node.name} ({what})')
 
     visit(ast.parse(source).body, '', False)
@@ -77,7 +79,7 @@ def test_the_annotation_check_finds_what_is_missing():
         def bare_parameter(a, b: int) -> int: ...
         def _private(a): ...
         class Public:
-            def __init__(self, a: int) -> None: ...
+            def __init__(self, a: int): ...
             def method(self, a) -> int: ...
             @staticmethod
             def static(a) -> int: ...
@@ -86,13 +88,15 @@ def test_the_annotation_check_finds_what_is_missing():
             def __len__(self): ...
             class Inner:
                 def method(self, *args) -> None: ...
+            class Bare:
+                def __init__(self): ...
         class _Private:
             def method(self, a): ...
     ''')
     assert unannotated_functions(source, 'm') == [
         'm:3 no_return (return)', 'm:4 bare_parameter (a)', 'm:8 Public.method (a)',
         'm:10 Public.static (a)', 'm:13 Public.__len__ (return)',
-        'm:15 Public.Inner.method (args)']
+        'm:15 Public.Inner.method (args)', 'm:17 Public.Bare.__init__ (return)']
 
 
 def test_py_typed_marks_the_package_as_typed():
