@@ -57,7 +57,7 @@ def unannotated_functions(source, module=''):
 
 
 def package_modules():
-    """Every Python file of the runtime package, relative to the repository."""
+    """Yield every Python file of the runtime package, relative to the repository."""
     for directory, _, files in os.walk(PACKAGE):
         for name in sorted(files):
             if name.endswith('.py'):
