@@ -31,7 +31,7 @@ Run it with, for example::
 import gc
 import sys
 import time
-from typing import List, Optional, Sequence
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -48,7 +48,7 @@ from rotation_node.bag.qos import qos_profile
 from rotation_node.errors import ParameterError
 from rotation_node.parameters import (
     NODE_NAME, PARAMETERS, PARAMETERS_BY_NAME, ROS_BUILTIN_PARAMETERS, NodeParameters,
-    parameters_file_sections, parameters_from_yaml, unknown_parameter_error)
+    ParameterSpec, parameters_file_sections, parameters_from_yaml, unknown_parameter_error)
 from rotation_node.pipeline import (
     SKIP_REASONS, ConversionPipeline, warm_up_conversions)
 
@@ -62,7 +62,7 @@ _ROS_FLAGS_WITH_VALUE = frozenset((
     '--log-file-name', '--log-config-file'))
 
 
-def ros_arguments(args: Sequence[str]) -> List[tuple]:
+def ros_arguments(args: Sequence[str]) -> List[Tuple[str, Optional[str]]]:
     """
     Return the ``(flag, value)`` pairs of the ROS arguments in a command line.
 
@@ -79,7 +79,8 @@ def ros_arguments(args: Sequence[str]) -> List[tuple]:
         without a value (``--disable-stdout-logs``) with None.
 
     """
-    pairs, in_ros_args, index = [], False, 0
+    pairs: List[Tuple[str, Optional[str]]] = []
+    in_ros_args, index = False, 0
     while index < len(args):
         token = args[index]
         if token == '--ros-args':
@@ -112,7 +113,7 @@ def check_parameter_names(args: Sequence[str]) -> None:
                 raise unknown_parameter_error(name, f' in {flag} {value}')
 
 
-def parameter_descriptor(spec) -> ParameterDescriptor:
+def parameter_descriptor(spec: ParameterSpec) -> ParameterDescriptor:
     """Return the ROS descriptor of one row of the parameter table."""
     descriptor = ParameterDescriptor(
         name=spec.name, description=spec.description,
@@ -144,7 +145,7 @@ class RotationNode(Node):
 
     """
 
-    def __init__(self, parameters_files: Sequence[str] = (), **kwargs):
+    def __init__(self, parameters_files: Sequence[str] = (), **kwargs: Any):
         super().__init__(NODE_NAME, **kwargs)
         try:
             for path in parameters_files:   # as rotation_bag convert reads them
@@ -155,8 +156,8 @@ class RotationNode(Node):
         self.params = NodeParameters()
         self._pipeline = None
         self._subscriptions = []
-        self._output_publishers = {}
-        self._next_issue_log = {}   # reason -> monotonic time of its next allowed warning
+        self._output_publishers: Dict[str, Any] = {}
+        self._next_issue_log: Dict[str, float] = {}   # reason -> time of its next warning
         self._reported = (0, 0)   # dropped and skipped totals at the last diagnostics
         # Registered before declaring, so the initial values pass the same checks.
         self.add_on_set_parameters_callback(self._check_parameters)
@@ -304,7 +305,7 @@ def _text(value):
     return str(value)
 
 
-def main(args: Optional[Sequence[str]] = None) -> int:
+def main(args: Optional[List[str]] = None) -> int:
     """
     Run the node until Ctrl-C.
 
