@@ -92,7 +92,7 @@ def test_the_annotation_check_finds_what_is_missing():
                 def __init__(self): ...
         class _Private:
             def method(self, a): ...
-    ''')
+    """)
     assert unannotated_functions(source, 'm') == [
         'm:3 no_return (return)', 'm:4 bare_parameter (a)', 'm:8 Public.method (a)',
         'm:10 Public.static (a)', 'm:13 Public.__len__ (return)',
