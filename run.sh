@@ -2,14 +2,17 @@
 # The two commands of the README:
 #   ./run.sh main [ARGS...]   create .venv if missing, run the built-in demo job
 #   ./run.sh test [ARGS...]   create .venv if missing, run the whole test suite
-# Everything is installed from PyPI into .venv (override with ROTATION_NODE_VENV).
+# Everything is installed from PyPI into .venv (override with ROTATION_NODE_VENV);
+# tf2_msgs, which is not on PyPI, is built into it by tools/build_tf2_msgs.sh.
 set -euo pipefail
 cd "$(dirname "$0")"
 venv="${ROTATION_NODE_VENV:-$PWD/.venv}"
 
 ensure_env() {
   local want have
-  want=$(cat requirements.txt setup.py setup.cfg | sha256sum | cut -d' ' -f1)
+  want=$(cat requirements.txt setup.py setup.cfg tools/build_tf2_msgs.sh \
+    tools/tf2_msgs/requirements.txt tools/tf2_msgs/CMakeLists.txt tools/tf2_msgs/package.xml \
+    tools/tf2_msgs/msg/*.msg | sha256sum | cut -d' ' -f1)
   have=$(cat "$venv/.installed" 2>/dev/null || true)
   if [ -x "$venv/bin/python" ] && [ "$want" = "$have" ]; then
     return
@@ -19,6 +22,7 @@ ensure_env() {
   "$venv/bin/python" -m pip install --quiet --upgrade pip
   "$venv/bin/python" -m pip install --quiet -r requirements.txt
   "$venv/bin/python" -m pip install --quiet --no-deps -e .
+  tools/build_tf2_msgs.sh "$venv"
   "$venv/bin/python" -m rotation_node.conversions.warm_up   # compile and cache every kernel once
   echo "$want" > "$venv/.installed"
 }
@@ -28,7 +32,7 @@ shift || true
 case "$cmd" in
   main)
     ensure_env
-    exec "$venv/bin/python" -m rotation_node.demo "$@"
+    exec "$venv/bin/python" -m rotation_dev.demo "$@"
     ;;
   test)
     ensure_env

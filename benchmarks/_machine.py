@@ -14,7 +14,7 @@ import numpy as np
 
 
 def cpu_model():
-    """The CPU's model name (``/proc/cpuinfo``, else what ``platform`` knows)."""
+    """Return the CPU's model name (``/proc/cpuinfo``, else what ``platform`` knows)."""
     try:
         with open('/proc/cpuinfo') as cpuinfo:
             for line in cpuinfo:
@@ -27,7 +27,7 @@ def cpu_model():
 
 def numpy_simd_levels():
     """
-    numpy's SIMD extensions ``(baseline, found, not_found)``, as ``numpy.show_runtime`` has them.
+    Return numpy's SIMD extensions ``(baseline, found, not_found)`` (``numpy.show_runtime``'s).
 
     ``baseline`` is what numpy was compiled for; ``found`` the dispatch targets
     this CPU supports (their kernels are the ones that run), ``not_found``
@@ -45,7 +45,7 @@ def numpy_simd_levels():
 
 
 def llvm_target_cpu():
-    """The CPU numba compiles the kernels for (``NUMBA_CPU_NAME``, else the host's)."""
+    """Return the CPU numba compiles the kernels for (``NUMBA_CPU_NAME``, else the host's)."""
     import numba
     from llvmlite import binding
     return numba.config.CPU_NAME or binding.get_host_cpu_name()
@@ -72,7 +72,7 @@ def print_machine():
 
 def copy_floor(inputs, out_shape):
     """
-    A call that moves the bytes a batch conversion must: reads ``inputs``, writes a new output.
+    Return a call that moves the bytes a batch conversion must: read inputs, write an output.
 
     It allocates an output of ``out_shape`` (as a conversion does), copies
     the inputs' values into it as flat float64 and, where the inputs are

@@ -47,9 +47,8 @@ import tempfile
 import threading
 import time
 
-import numpy as np
-
 from _machine import print_machine
+import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 PARAMS_FILE = os.path.join(HERE, os.pardir, 'config', 'params.yaml')
@@ -59,11 +58,10 @@ T0_NS = 1_700_000_000_000_000_000
 
 
 def write_imu_bag(path, count, seed=0):
-    """An Imu bag: random orientations and angular velocities at 100 Hz."""
+    """Return an Imu bag: random orientations and angular velocities at 100 Hz."""
     from rclpy.serialization import serialize_message
-    from sensor_msgs.msg import Imu
-
     from rotation_node.bag.mcap_io import BagWriter
+    from sensor_msgs.msg import Imu
     rng = np.random.default_rng(seed)
     msg = Imu()
     msg.header.frame_id = 'imu_link'
@@ -88,14 +86,13 @@ FORMATS = ('mcap file', 'rosbag2 mcap zstd', 'rosbag2 sqlite3', 'ROS 1 bag')
 
 
 def write_format_bag(directory, fmt, count, seed=0):
-    """The Imu bag of ``write_imu_bag`` in format ``fmt`` (written by rosbags); its path."""
+    """Return the Imu bag of ``write_imu_bag`` in format ``fmt`` (written by rosbags); its path."""
     from pathlib import Path
 
     from rosbags.rosbag1 import Writer as Ros1Writer
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
-    from rosbags.typesys import Stores, get_typestore
-
+    from rosbags.typesys import get_typestore, Stores
     from rotation_node.bag.mcap_io import BagReader
     name = fmt.replace(' ', '_')
     mcap_path = os.path.join(directory, f'{name}.mcap')
@@ -127,15 +124,14 @@ def write_format_bag(directory, fmt, count, seed=0):
 
 
 def convert_naive_rosbags(source, output):
-    """The same output with rosbags (read, deserialise, serialise) and scipy, per message."""
+    """Return the same output with rosbags (read, deserialise, serialise) and scipy per message."""
     from pathlib import Path
 
     from mcap.writer import Writer
     from rosbags.highlevel import AnyReader
-    from rosbags.typesys import Stores, get_typestore
-    from scipy.spatial.transform import Rotation
-
+    from rosbags.typesys import get_typestore, Stores
     from rotation_node.bag.message_types import message_definition
+    from scipy.spatial.transform import Rotation
     ros2 = get_typestore(Stores.ROS2_JAZZY)
     Vector3Stamped = ros2.types['geometry_msgs/msg/Vector3Stamped']
     Vector3 = ros2.types['geometry_msgs/msg/Vector3']
@@ -209,12 +205,11 @@ def convert_ours(source, output):
 
 
 def convert_naive(source, output):
-    """The same output bag with mcap-ros2-support and scipy, message by message."""
+    """Return the same output bag with mcap-ros2-support and scipy, message by message."""
     from mcap_ros2.reader import read_ros2_messages
     from mcap_ros2.writer import Writer
-    from scipy.spatial.transform import Rotation
-
     from rotation_node.bag.message_types import message_definition
+    from scipy.spatial.transform import Rotation
     with open(output, 'wb') as stream:
         writer = Writer(stream)
         imu_schema = writer.register_msgdef(
@@ -277,7 +272,6 @@ def compare(directory, count, repeat):
 def breakdown(directory, count=20_000):
     """Microseconds per input message spent in each stage of ``convert``, and in rclpy's."""
     from rclpy.serialization import serialize_message
-
     from rotation_node.bag.cdr import fixed_layout_codec
     from rotation_node.bag.mcap_io import BagReader, BagWriter
     from rotation_node.parameters import parameters_from_yaml

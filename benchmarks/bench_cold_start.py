@@ -47,7 +47,7 @@ _SAMPLE = {'euler_from_quaternion': 'q', 'matrix_from_quaternion': 'q',
            'quaternion_from_matrix': 'm', 'quaternion_from_euler': 'a',
            'rotation_vector_from_quaternion': 'q'}
 
-_PROGRAM = '''
+_PROGRAM = """
 import time
 start = time.perf_counter()
 import numpy as np
@@ -63,7 +63,7 @@ for x in (one, np.broadcast_to(one, (5,) + one.shape).copy(),
     {call}
 end = time.perf_counter()
 print(imported - start, end - imported)
-'''
+"""
 
 
 def _run(kind, import_line, call):

@@ -33,11 +33,10 @@ import json
 import math
 import sys
 
-import numpy as np
-from scipy.spatial.transform import Rotation
-
 from _machine import best_seconds, copy_floor, print_machine
+import numpy as np
 from rotation_node import conversions as rc
+from scipy.spatial.transform import Rotation
 
 SEQ = 'xyz'
 
@@ -111,7 +110,7 @@ def _interleaved_best_times(functions, data, number, repeat):
 
 
 def _reference(data):
-    """The single-sample yardstick of issue 2: scipy's quaternion to Euler angles."""
+    """Return the single-sample yardstick of issue 2: scipy's quaternion to Euler angles."""
     return Rotation.from_quat(data['q']).as_euler(SEQ)
 
 
@@ -166,7 +165,8 @@ def main(argv=None):
             'single_reference_us': single_reference * 1e6,
             'single_ratio': single_ours / single_reference,
             'single_ratio_same_call': single_ours / single_scipy,
-            'batch_n': sizes[-1], 'batch_ns': batch_ours * 1e9, 'batch_scipy_ns': batch_scipy * 1e9,
+            'batch_n': sizes[-1], 'batch_ns': batch_ours * 1e9,
+            'batch_scipy_ns': batch_scipy * 1e9,
             'batch_speedup': batch_scipy / batch_ours, 'batch_target': target,
             'floor_ns': floor * 1e9, 'floor_ratio': batch_ours / floor,
             'growth_ns': {str(n): [o * 1e9, s * 1e9] for n, (o, s) in growth.items()},

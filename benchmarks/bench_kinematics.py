@@ -23,13 +23,12 @@ also loads the compiled kernels). Usage::
 """
 import argparse
 
-import numpy as np
-from scipy.integrate import solve_ivp
-from scipy.spatial.transform import Rotation
-
 from _machine import best_seconds, copy_floor, print_machine
+import numpy as np
 from rotation_node import conversions as rc
 from rotation_node import kinematics as rk
+from scipy.integrate import solve_ivp
+from scipy.spatial.transform import Rotation
 
 CONE_HALF_ANGLE, CONE_RATE, DURATION = 0.3, 2.0, 2.0
 EVALUATIONS = {'euler': 1, 'midpoint_exp': 1, 'rk4': 3, 'magnus4': 2, 'coning2': 4}

@@ -59,7 +59,7 @@ def relay_main(name, depth):
 
 
 def qos_profile(depth):
-    """The node's QoS for ``qos.depth: depth`` (reliable, keep last)."""
+    """Return the node's QoS for ``qos.depth: depth`` (reliable, keep last)."""
     from rotation_node.bag.qos import qos_profile as node_qos_profile
     from rotation_node.parameters import NodeParameters
     return node_qos_profile(NodeParameters(qos_depth=depth))

@@ -9,6 +9,7 @@ from .conversions._validation import float_array
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
+
     from .type_aliases import FloatArray
 
 

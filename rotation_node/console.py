@@ -15,7 +15,6 @@ _PROGRAMS = {
     'rotation_node': 'rotation_node.node',
     'rotation_bag': 'rotation_node.bag.cli',
     'rotation_scene': 'rotation_node.scene.cli',
-    'rotation_bench': 'rotation_node.study.cli',
 }
 
 
@@ -55,8 +54,3 @@ def rotation_bag() -> int:
 def rotation_scene() -> int:
     """Run ``rotation_scene`` (:func:`rotation_node.scene.cli.main`)."""
     return _run('rotation_scene')
-
-
-def rotation_bench() -> int:
-    """Run ``rotation_bench`` (:func:`rotation_node.study.cli.main`)."""
-    return _run('rotation_bench')

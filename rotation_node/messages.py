@@ -30,7 +30,6 @@ import operator
 from typing import Any, Callable, Iterable, NamedTuple, Optional, Sequence, Tuple, TYPE_CHECKING
 
 import numpy as np
-
 from rotation_node import conversions, kinematics, tf_input
 
 if TYPE_CHECKING:
@@ -202,7 +201,7 @@ class InputType:
 
     @property
     def message_class(self) -> type:
-        """The rclpy message class of :attr:`type_name`."""
+        """Return the rclpy message class of :attr:`type_name`."""
         return _message_class(self.type_name)
 
     @property
@@ -261,6 +260,7 @@ class InputType:
         Parameters
         ----------
         params : rotation_node.parameters.NodeParameters
+            The parameters the stream is converted with.
         angular_velocity, covariance : bool, optional
             As for :meth:`sample_reader`; a stateful type may always read them.
         report : callable, optional
@@ -380,7 +380,7 @@ class OutputMessage:
 
     @property
     def message_class(self) -> type:
-        """The rclpy message class of :attr:`type_name`."""
+        """Return the rclpy message class of :attr:`type_name`."""
         return _message_class(self.type_name)
 
     def encoder(self) -> Callable[[Any, Sequence[float]], bytes]:
@@ -527,7 +527,7 @@ class OutputType:
 
     @property
     def message_class(self) -> type:
-        """The rclpy message class of the output."""
+        """Return the rclpy message class of the output."""
         return self.message.message_class
 
 

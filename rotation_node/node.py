@@ -33,24 +33,21 @@ import sys
 import time
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (
     FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult)
-from rclpy.exceptions import (
-    InvalidParameterTypeException, InvalidParameterValueException)
+import rclpy
 from rclpy.event_handler import PublisherEventCallbacks
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-
 from rotation_node import messages
 from rotation_node.bag.qos import qos_profile
 from rotation_node.errors import ParameterError
 from rotation_node.parameters import (
-    NODE_NAME, PARAMETERS, PARAMETERS_BY_NAME, ROS_BUILTIN_PARAMETERS, NodeParameters,
-    ParameterSpec, parameters_file_sections, parameters_from_yaml, unknown_parameter_error)
-from rotation_node.pipeline import (
-    SKIP_REASONS, ConversionPipeline, warm_up_conversions)
+    NODE_NAME, NodeParameters, PARAMETERS, PARAMETERS_BY_NAME, parameters_file_sections,
+    parameters_from_yaml, ParameterSpec, ROS_BUILTIN_PARAMETERS, unknown_parameter_error)
+from rotation_node.pipeline import ConversionPipeline, SKIP_REASONS, warm_up_conversions
 
 DIAGNOSTICS_PERIOD_S = 1.0
 ISSUE_LOG_PERIOD_S = 5.0
@@ -305,9 +302,31 @@ def _text(value):
     return str(value)
 
 
+def _non_ros_arguments(arguments: Sequence[str]) -> List[str]:
+    """Return the arguments outside ``--ros-args ... [--]`` (without parsing the ROS ones)."""
+    outside, in_ros_args = [], False
+    for argument in arguments:
+        if argument == '--ros-args':
+            in_ros_args = True
+        elif argument == '--' and in_ros_args:
+            in_ros_args = False
+        elif not in_ros_args:
+            outside.append(argument)
+    return outside
+
+
+def usage() -> str:
+    """Return the text ``rotation_node --help`` prints: how to run it, its parameters."""
+    return ('usage: rotation_node [--ros-args [-r input:=TOPIC] [-p NAME:=VALUE]... '
+            '[--params-file FILE]]\n\n'
+            'Convert the orientations on the topic "input" and publish the outputs listed in '
+            'the parameter "outputs".\nParameters: '
+            + ', '.join(spec.name for spec in PARAMETERS) + '.\n')
+
+
 def main(args: Optional[List[str]] = None) -> int:
     """
-    Run the node until Ctrl-C.
+    Run the node until Ctrl-C (``--help``: print its usage).
 
     Returns
     -------
@@ -317,6 +336,9 @@ def main(args: Optional[List[str]] = None) -> int:
 
     """
     argv = sys.argv if args is None else list(args)
+    if {'-h', '--help'} & set(_non_ros_arguments(argv[1:])):
+        print(usage(), end='')
+        return 0
     files = _parameters_files(argv)
     try:   # before rclpy reads the files, whose own errors are many lines long
         for path in files:

@@ -82,13 +82,13 @@ class ParameterSpec:
     attribute: str = ''
 
     @property
-    def type(self) -> type:
+    def type(self) -> type:  # noqa: A003
         """Python type of the value: str, bool, int, float or tuple (string array)."""
         return type(self.default)
 
     @property
     def constraints(self) -> str:
-        """The allowed values in words ('' when the type is the only constraint)."""
+        """Return the allowed values in words ('' when the type is the only constraint)."""
         if self.choices is not None:
             prefix = 'each one of' if self.type is tuple else 'one of'
             return f'{prefix}: {", ".join(self.choices)}'
@@ -406,6 +406,7 @@ def parameters_file_sections(path: StrPath) -> list[tuple[str, dict[str, Any]]]:
     Parameters
     ----------
     path : str or os.PathLike
+        The parameters file.
 
     Returns
     -------
@@ -451,7 +452,7 @@ _NAMESPACE = re.compile(r'(?:/[A-Za-z_][A-Za-z0-9_]*)+')
 
 
 def _node_key_problem(key):
-    """What rcl finds wrong with a node key of a parameters file ('' if nothing)."""
+    """Return what rcl finds wrong with a node key of a parameters file ('' if nothing)."""
     if key == '/**':
         return ''
     namespace, _, node = key.rpartition('/')
@@ -465,7 +466,7 @@ def _node_key_problem(key):
 
 
 def _value_problem(name, value):
-    """What rcl refuses in a parameter value of a file ('' if nothing)."""
+    """Return what rcl refuses in a parameter value of a file ('' if nothing)."""
     if value is None:
         return f"parameter '{name}' has no value"
     if isinstance(value, list):

@@ -27,20 +27,19 @@ midpoint, so half a sample period older than the stamp it is published with.
 It needs increasing stamps: the first message, and a message whose stamp is
 not after the previous one, produce no finite-difference outputs.
 """
-import math
-import warnings
 from collections import Counter
 from dataclasses import dataclass, field
+import math
 from typing import Any, Callable, Dict, List, NamedTuple, Optional, Tuple
+import warnings
 
 import numpy as np
-
 from rotation_node import conversions, covariance, kinematics, messages
 from rotation_node.frames import FrameConversion
 from rotation_node.messages import (
     ANGULAR_VELOCITY, EULER_ANGLES, EULER_COVARIANCE, EULER_RATES, ORIENTATION,
     ORIENTATION_COVARIANCE, OUTPUT_QUATERNION, PUBLISHED_EULER, Sample)
-from rotation_node.parameters import INPUT_TYPES, OUTPUTS, NodeParameters
+from rotation_node.parameters import INPUT_TYPES, NodeParameters, OUTPUTS
 from rotation_node.stamps import header_stamp_ns, seconds_text
 
 # Reasons for dropping a whole message (counted in PipelineStats.dropped).
@@ -168,7 +167,7 @@ _VALUES_BY_NAME = {value.name: value for value in VALUES}
 
 
 def _needed_values(outputs):
-    """The values the outputs need, with everything they depend on, in :data:`VALUES` order."""
+    """Return the values the outputs need, with what they depend on, in :data:`VALUES` order."""
     needed = {ORIENTATION}   # always read: an invalid orientation drops the message
     pending = [need for name in outputs for need in messages.OUTPUTS[name].needs]
     while pending:
@@ -263,6 +262,7 @@ class ConversionPipeline:
         Parameters
         ----------
         msg : message of class :attr:`input_type`
+            The input message.
         topic : str, optional
             The input type's relative topic the message came on (input types
             with several topics tell them apart by it).
@@ -333,7 +333,7 @@ class ConversionPipeline:
 
     def _outputs_of(self, sample):
         """
-        The outputs of one sample: every needed value once, then each output from them.
+        Return the outputs of one sample: every needed value once, then each output from them.
 
         Counts the sample's outputs, or the sample as dropped (then returns none).
         """
@@ -379,7 +379,7 @@ class ConversionPipeline:
     # The per-message values, in the order of VALUES -----------------------------------
 
     def _orientation(self, sample, values):
-        """The input orientation as a quaternion array (any scale), or None if unknown."""
+        """Return the input orientation as a quaternion array (any scale), or None if unknown."""
         orientation = sample.orientation
         if orientation is None:
             return None
@@ -405,7 +405,7 @@ class ConversionPipeline:
 
     def _angular_velocity(self, sample, values):
         """
-        The angular velocity (rad/s) in the output frame, or None if unavailable.
+        Return the angular velocity (rad/s) in the output frame, or None if unavailable.
 
         From the sample where it carries one, otherwise by finite difference of
         this sample's and the previous sample's orientations.
@@ -435,7 +435,7 @@ class ConversionPipeline:
         return self._finite_difference(q, header_stamp_ns(sample.header))
 
     def _finite_difference(self, q, stamp_ns):
-        """The rate from the previous orientation to ``q``; this one becomes the previous."""
+        """Return the rate from the previous orientation to ``q``, which becomes the previous."""
         previous_q, previous_ns = self._previous_quaternion, self._previous_stamp_ns
         self._previous_quaternion, self._previous_stamp_ns = q, stamp_ns
         if previous_q is None:
@@ -451,7 +451,7 @@ class ConversionPipeline:
             np.stack((previous_q, q)), times, frame=self.params.angular_velocity_output_frame)[0]
 
     def _output_quaternion(self, sample, values):
-        """The unit output quaternion: w >= 0, or nearer the previous one with continuity."""
+        """Return the unit output quaternion: w >= 0, or with continuity nearer the previous."""
         q = conversions.canonical_quaternion(values[ORIENTATION])
         if not self.params.quaternion_continuity:
             return q
@@ -462,7 +462,7 @@ class ConversionPipeline:
         return q
 
     def _euler_angles(self, sample, values):
-        """The Euler angles of the orientation; counts a near-singular sample."""
+        """Return the Euler angles of the orientation; counts a near-singular sample."""
         params, q = self.params, values[ORIENTATION]
         angles = conversions.euler_from_quaternion(
             q, params.euler_sequence, degrees=params.euler_degrees)
@@ -471,7 +471,7 @@ class ConversionPipeline:
         return angles
 
     def _published_euler(self, sample, values):
-        """The Euler angles, first and third unwrapped against the previous published ones."""
+        """Return the Euler angles, first and third unwrapped against the previous published."""
         first, second, third = values[EULER_ANGLES].tolist()
         previous = self._previous_euler
         if self.params.euler_unwrap and previous is not None:
@@ -481,7 +481,7 @@ class ConversionPipeline:
         return self._previous_euler
 
     def _euler_rates(self, sample, values):
-        """The Euler-angle rates, or None within the singularity threshold."""
+        """Return the Euler-angle rates, or None within the singularity threshold."""
         params = self.params
         with warnings.catch_warnings():   # counted and reported below instead
             warnings.simplefilter('ignore', kinematics.EulerSingularityWarning)

@@ -23,11 +23,11 @@ than :data:`MAX_FILE_BYTES`, a document whose aliases expand it beyond
 :data:`MAX_NODES` nodes (a "billion laughs" alias bomb), or one nested deeper
 than :data:`MAX_DEPTH` is refused before it is built.
 """
+from decimal import Decimal
+from fractions import Fraction
 import math
 import re
 import sys
-from decimal import Decimal
-from fractions import Fraction
 from typing import Any, Type
 
 import yaml
@@ -98,7 +98,7 @@ def ros_scalar(text: str) -> Any:
 
 
 def _strtod(text):
-    """The double C ``strtod`` reads from all of ``text``, or ``text`` if it is not one."""
+    """Return the double C ``strtod`` reads from all of ``text``, or ``text`` if it is not one."""
     if _STRTOD_DECIMAL.fullmatch(text):
         value = float(text)
     elif _STRTOD_HEX.fullmatch(text):

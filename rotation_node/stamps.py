@@ -19,6 +19,7 @@ def stamp_ns(stamp: Any) -> int:
     Parameters
     ----------
     stamp : builtin_interfaces.msg.Time or any object with ``sec`` and ``nanosec``
+        The stamp.
 
     Returns
     -------
@@ -58,6 +59,7 @@ def seconds_text(nanoseconds: int) -> str:
     Parameters
     ----------
     nanoseconds : int
+        The time.
 
     Returns
     -------

@@ -15,9 +15,8 @@ import types
 
 import numpy as np
 from rosidl_parser.definition import (
-    AbstractGenericString, AbstractNestedType, AbstractSequence, Array, BasicType,
-    BoundedSequence, BoundedString, NamespacedType)
-
+    AbstractGenericString, AbstractNestedType, AbstractSequence, Array, BasicType, BoundedSequence,
+    BoundedString, NamespacedType)
 from rotation_node.bag.message_types import message_class
 
 _INTEGER_RANGES = {
@@ -99,7 +98,8 @@ def plain(value):
 
 def imu_messages(rng, count, *, period_ns=10_000_000, start_ns=1_700_000_000_000_000_000,
                  frame_id='imu_link', orientation_variance=(1e-6, 2e-6, 4e-6)):
-    """Imu messages at a fixed rate: random unit orientations, angular velocities.
+    """
+    Return Imu messages at a fixed rate: random unit orientations, angular velocities.
 
     The orientation covariance is ``diag(orientation_variance)`` (rad^2).
     """
@@ -129,7 +129,6 @@ def stamp_ns(msg):
 def serialized_rows(topic, messages, *, log_offset_ns=1_000_000):
     """``[(topic, type name, rclpy CDR bytes, log time)]``; log time = stamp + offset."""
     from rclpy.serialization import serialize_message
-
     from rotation_node.bag.message_types import type_name_of
     return [(topic, type_name_of(type(msg)), serialize_message(msg),
              stamp_ns(msg) + log_offset_ns) for msg in messages]
@@ -149,7 +148,7 @@ def write_rosbag2(path, rows, *, storage='mcap', compression=None, qos=None):
     """
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
-    from rosbags.typesys import Stores, get_typestore
+    from rosbags.typesys import get_typestore, Stores
     typestore = get_typestore(Stores.ROS2_JAZZY)
     writer = Writer(path, version=9, storage_plugin=StoragePlugin[storage.upper()])
     if compression:
@@ -167,7 +166,7 @@ def write_rosbag2(path, rows, *, storage='mcap', compression=None, qos=None):
 
 def write_split_rosbag2(path, rows, parts, **options):
     """
-    A rosbag2 directory of ``parts`` storage files (as ``ros2 bag record --max-bag-size``).
+    Return a rosbag2 directory of ``parts`` storage files (as ``ros2 bag record --max-bag-size``).
 
     Each part is written by :func:`write_rosbag2`; ``metadata.yaml`` lists them
     in order, with the per-file and per-topic counts rosbag2 writes.

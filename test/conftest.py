@@ -9,8 +9,8 @@ test starts so that subprocesses started by tests inherit them.
 import os
 import sys
 
-import pytest
 from hypothesis import settings
+import pytest
 
 # CI runs the same examples every time (a new random counterexample must not
 # turn an unrelated change red); locally every run explores new ones.
@@ -25,6 +25,8 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('RCUTILS_COLORIZED_OUTPUT', '0')
 
 sys.path.insert(0, os.path.dirname(__file__))
+# The development tools of the checkout (rotation_dev: hard cases, study, demo).
+sys.path.append(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 @pytest.fixture

@@ -16,10 +16,10 @@ import os
 import subprocess
 import time
 
-import pytest
 from mcap.exceptions import McapError
 from mcap.records import Channel, Message
 from mcap.stream_reader import StreamReader
+import pytest
 
 
 @functools.lru_cache(maxsize=1)

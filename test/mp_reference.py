@@ -2,16 +2,15 @@
 High-precision references (mpmath, 40 digits) for measuring errors in units of eps.
 
 Inputs are taken as exact binary values; the truth is computed with 40
-significant digits (``rotation_node.study.reference``, which the accuracy study
+significant digits (``rotation_dev.study.reference``, which the accuracy study
 uses too), so the errors measured are the package's own. Quaternions are
 (x, y, z, w).
 """
 import mpmath as mp
 import numpy as np
-
-from rotation_node.study.reference import (DIGITS, EPS, distance, exact, nearest_rotation_quaternion,
-                                           normalized, quaternion_from_euler,
-                                           quaternion_from_rotation_vector)
+from rotation_dev.study.reference import (
+    DIGITS, distance, EPS, exact, nearest_rotation_quaternion, normalized, quaternion_from_euler,
+    quaternion_from_rotation_vector)
 
 mp.mp.dps = DIGITS
 mpf_vector = exact

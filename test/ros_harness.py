@@ -132,6 +132,7 @@ def make_input_message(input_type, rotation, *, omega=(0.0, 0.0, 0.0), stamp_ns=
     in rotation_node.messages names.
     """
     import operator
+
     from rotation_node import messages
     from rotation_node.stamps import split_ns
     entry = messages.INPUTS[input_type]
@@ -159,7 +160,7 @@ def oracle_output(name, rotation, omega_body=(0.0, 0.0, 0.0), *, sequence='xyz',
                   degrees=False, frame='body', covariance=INPUT_COVARIANCE,
                   covariance_frame='fixed'):
     """
-    Expected values of the node output ``name``, computed independently with scipy.
+    Return the expected values of the node output ``name``, computed independently with scipy.
 
     ``rotation`` (scipy ``Rotation``) turns at the constant body rate
     ``omega_body``; rates are central differences of scipy's conversions. The

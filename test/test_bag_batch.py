@@ -8,8 +8,8 @@ exit status says whether any failed.
 import os
 
 from bag_helpers import imu_messages, serialized_rows, write_rosbag2
-import pytest
 from mcap.reader import make_reader
+import pytest
 from rotation_node.bag.batch import (
     batch_output_path, batch_output_paths, convert_bags, convert_bags_on_dask)
 from rotation_node.bag.cli import main

@@ -11,18 +11,17 @@ multi-byte UTF-8 one.
 import math
 import struct
 
+from bag_helpers import random_message
 import numpy as np
 import pytest
-from bag_helpers import random_message
 from rclpy.serialization import deserialize_message, serialize_message
-from rosbags.typesys import Stores, get_typestore
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
-
+from rosbags.typesys import get_typestore, Stores
 from rotation_node.bag.cdr import (
     CDR_LE, fixed_layout_codec, float64_multi_array_encoder, message_encoder)
 from rotation_node.bag.message_types import message_class
 from rotation_node.errors import BagError
 from rotation_node.messages import OUTPUTS
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
 
 PIPELINE_TYPES = [   # inputs, and the stamped outputs
     'sensor_msgs/msg/Imu',
@@ -88,7 +87,7 @@ def _same_number(a, b):
 
 
 def _flat(view):
-    """The values of a view, depth first."""
+    """Return the values of a view, depth first."""
     return [x for item in view for x in _flat(item)] if isinstance(view, tuple) else [view]
 
 

@@ -10,11 +10,10 @@ import os
 import shutil
 import subprocess
 
+from bag_helpers import imu_messages, stamp_ns
 import numpy as np
 import pytest
-from bag_helpers import imu_messages, stamp_ns
 from ros_harness import script
-
 from rotation_node.bag.cli import main
 from rotation_node.bag.mcap_io import BagReader, BagWriter, TopicMetadata
 
@@ -44,7 +43,7 @@ def template(tmp_path_factory):
 
 @pytest.fixture
 def workspace(template, tmp_path):
-    """A fresh copy of the template files in tmp_path."""
+    """Return a fresh copy of the template files in tmp_path."""
     for name in os.listdir(template):
         shutil.copy(template / name, tmp_path / name)
     return tmp_path

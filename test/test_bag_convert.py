@@ -9,25 +9,24 @@ into a running ``rotation_node``, records its outputs and checks that
 import os
 import subprocess
 
-import pytest
-import yaml
 from bag_helpers import imu_messages, plain, stamp_ns
-from ros_harness import PLAIN_INPUT_TYPES, RosProcess, TestNode, make_input_message, script
+import pytest
 from rclpy.duration import Duration
 from rclpy.qos import QoSProfile
-from scipy.spatial.transform import Rotation
-from sensor_msgs.msg import Imu
-
+from ros_harness import make_input_message, PLAIN_INPUT_TYPES, RosProcess, script, TestNode
 from rotation_node.bag.cdr import message_encoder
 from rotation_node.bag.convert import convert, output_topic
 from rotation_node.bag.mcap_io import BagReader, BagWriter
 from rotation_node.bag.message_types import type_name_of
-from rotation_node.bag.qos import qos_profiles_from_yaml
-from rotation_node.bag.qos import qos_profile
+from rotation_node.bag.qos import qos_profile, qos_profiles_from_yaml
 from rotation_node.errors import BagError
-from rotation_node.messages import INPUTS, OUTPUTS as OUTPUT_TYPES
+from rotation_node.messages import INPUTS
+from rotation_node.messages import OUTPUTS as OUTPUT_TYPES
 from rotation_node.parameters import NodeParameters, parameters_from_yaml
 from rotation_node.pipeline import ConversionPipeline
+from scipy.spatial.transform import Rotation
+from sensor_msgs.msg import Imu
+import yaml
 
 OUTPUTS = ('euler', 'quaternion', 'angular_velocity')
 PARAMS = NodeParameters(input_type='imu', outputs=OUTPUTS, euler_sequence='ZYX',
@@ -53,7 +52,7 @@ def _outputs(path, topic):
 
 
 def _expected(params, messages):
-    """What the pipeline gives, message by message: {output name: [plain message]}."""
+    """Return what the pipeline gives, message by message: {output name: [plain message]}."""
     pipeline = ConversionPipeline(params)
     expected = {name: [] for name in params.outputs}
     for msg in messages:
@@ -88,7 +87,7 @@ def test_convert_adds_pipeline_outputs_and_copies_everything(tmp_path, rng):
 
 @pytest.mark.parametrize('input_type', PLAIN_INPUT_TYPES)
 def test_every_input_type_and_output_is_the_pipelines_byte_for_byte(tmp_path, rng, input_type):
-    """convert reads cdr views and encodes values: the same bytes as process()'s messages."""
+    """``convert`` reads cdr views and encodes values: the same bytes as process()'s messages."""
     params = NodeParameters(input_type=input_type, outputs=ALL_OUTPUTS, euler_unwrap=True,
                             quaternion_continuity=True, angular_velocity_output_frame='world')
     stamps = [1_700_000_000_000_000_000 + 10_000_000 * i for i in range(30)]
@@ -190,7 +189,7 @@ def test_corrupt_chunk_leaves_no_output(tmp_path, rng):
 
 @pytest.mark.timeout(180)
 def test_live_node_round_trip_equals_convert(tmp_path, rng):
-    """record a publisher -> play into rotation_node -> record its outputs == convert."""
+    """``record`` a publisher -> play into rotation_node -> record its outputs == convert."""
     count = 200
     params_file = tmp_path / 'params.yaml'
     params_file.write_text(yaml.safe_dump({'/**/rotation_node': {'ros__parameters': {

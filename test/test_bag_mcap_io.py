@@ -9,21 +9,20 @@ reader and mcap-ros2-support's decoder.
 import os
 import pathlib
 
-import pytest
-import yaml
 from bag_helpers import plain, random_message
 from mcap.reader import make_reader
-from mcap.stream_reader import StreamReader
 from mcap.records import Channel, Footer, Header, Metadata, Schema, Statistics
+from mcap.stream_reader import StreamReader
 from mcap_ros2.decoder import DecoderFactory
+import pytest
 from rclpy.serialization import serialize_message
 from rosbags.highlevel import AnyReader
-
 from rotation_node.bag.cdr import fixed_layout_codec
 from rotation_node.bag.mcap_io import BagReader, BagWriter, TopicMetadata
 from rotation_node.bag.message_types import message_class, message_definition, type_hash
 from rotation_node.bag.qos import qos_profiles_from_yaml
 from rotation_node.errors import BagError
+import yaml
 
 TYPES = [
     'sensor_msgs/msg/Imu',
@@ -64,7 +63,7 @@ def _records(type_name, rng, count=5):
 
 @pytest.fixture
 def mixed_bag(tmp_path, rng):
-    """A bag with every type in TYPES, interleaved; returns (path, rows)."""
+    """Return a bag with every type in TYPES, interleaved; returns (path, rows)."""
     rows = [row for type_name in TYPES for row in _records(type_name, rng)]
     rows.sort(key=lambda row: row[2])
     path = tmp_path / 'mixed.mcap'

@@ -1,11 +1,10 @@
 """Tests of rotation_node.bag.message_types: classes, rosbag2 definitions, type hashes."""
 import pytest
-from rosbags.typesys import Stores, get_typestore
-from sensor_msgs.msg import Imu
-
+from rosbags.typesys import get_typestore, Stores
 from rotation_node.bag.message_types import (
     message_class, message_definition, split_type_name, type_hash, type_name_of)
 from rotation_node.errors import BagError
+from sensor_msgs.msg import Imu
 
 TYPES = ['sensor_msgs/msg/Imu', 'geometry_msgs/msg/Vector3Stamped',
          'geometry_msgs/msg/QuaternionStamped', 'geometry_msgs/msg/PoseWithCovarianceStamped',

@@ -13,19 +13,18 @@ import os
 import signal
 import subprocess
 
-import numpy as np
-import pytest
 from fault_helpers import FULL_DISKS, linear_scan, small_disk, wait_for
 from mcap.reader import make_reader
+import numpy as np
+import pytest
 from ros_harness import script
-from sensor_msgs.msg import Imu
-
 from rotation_node.bag.cdr import message_encoder
 from rotation_node.bag.cli import main
 from rotation_node.bag.convert import convert
 from rotation_node.bag.output import rename_exclusive, rename_replacing
 from rotation_node.bag.writer import BagWriter
 from rotation_node.parameters import parameters_from_yaml
+from sensor_msgs.msg import Imu
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -39,7 +38,7 @@ T0 = 1_700_000_000_000_000_000
 
 @pytest.fixture(scope='module')
 def workspace(tmp_path_factory):
-    """An Imu bag of 20000 messages (~7 MB), the parameters file, and its complete conversion."""
+    """Return an Imu bag of 20000 messages (~7 MB), the parameters file and its conversion."""
     directory = tmp_path_factory.mktemp('convert_faults')
     rng = np.random.default_rng(20261123)
     encode = message_encoder('sensor_msgs/msg/Imu')

@@ -1,16 +1,15 @@
 """Tests of rotation_bag play (rotation_node.bag.play) into live subscribers."""
 import time
 
+from bag_helpers import imu_messages, stamp_ns
 import numpy as np
 import pytest
-from bag_helpers import imu_messages, stamp_ns
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from ros_harness import RosProcess, TestNode, script
-from sensor_msgs.msg import Imu
-from std_msgs.msg import String
-
+from ros_harness import RosProcess, script, TestNode
 from rotation_node.bag.mcap_io import BagReader, BagWriter, TopicMetadata
 from rotation_node.bag.qos import qos_profiles_yaml
+from sensor_msgs.msg import Imu
+from std_msgs.msg import String
 
 pytestmark = pytest.mark.timeout(120)
 KEEP_ALL = QoSProfile(depth=1, history=HistoryPolicy.KEEP_ALL)

@@ -3,22 +3,20 @@ import math
 import operator
 import os
 
+from bag_helpers import imu_messages, stamp_ns
 import matplotlib.image
 import numpy as np
 import pytest
-from bag_helpers import imu_messages, stamp_ns
 from ros_harness import make_input_message
-from scipy.spatial.transform import Rotation
-from std_msgs.msg import String
-
 from rotation_node import messages
-
 from rotation_node.bag.convert import convert
 from rotation_node.bag.mcap_io import BagWriter
 from rotation_node.bag.plot import plot_series, plot_topic
 from rotation_node.bag.reader import open_bag
 from rotation_node.errors import BagError
-from rotation_node.parameters import OUTPUTS, NodeParameters
+from rotation_node.parameters import NodeParameters, OUTPUTS
+from scipy.spatial.transform import Rotation
+from std_msgs.msg import String
 
 T0 = 1_700_000_000_000_000_000
 PARAMS = NodeParameters(input_type='imu', outputs=OUTPUTS, euler_sequence='ZYX',
@@ -27,7 +25,7 @@ PARAMS = NodeParameters(input_type='imu', outputs=OUTPUTS, euler_sequence='ZYX',
 
 @pytest.fixture(scope='module')
 def converted(tmp_path_factory):
-    """A bag with /imu and every output of the node, converted from 200 messages."""
+    """Return a bag with /imu and every output of the node, converted from 200 messages."""
     directory = tmp_path_factory.mktemp('plot')
     source, output = directory / 'imu.mcap', directory / 'converted.mcap'
     with BagWriter(source) as writer:

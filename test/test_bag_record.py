@@ -4,19 +4,18 @@ import pathlib
 import signal
 import subprocess
 
-import pytest
 from bag_helpers import imu_messages, plain
 from fault_helpers import can_mount, linear_scan, small_filesystem, wait_for
+import pytest
 from rclpy.duration import Duration
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
-from ros_harness import RosProcess, TestNode, script
+from ros_harness import RosProcess, script, TestNode
 from rosbags.highlevel import AnyReader
-from sensor_msgs.msg import Imu
-from std_msgs.msg import String
-
 from rotation_node.bag.mcap_io import BagReader
 from rotation_node.bag.qos import qos_profiles_from_yaml
+from sensor_msgs.msg import Imu
+from std_msgs.msg import String
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -26,7 +25,7 @@ def _record(path, *args):
 
 
 def _wait_until_recorded(client, topic, timeout=30):
-    """The recorder subscribes once it discovered the publisher: wait for that."""
+    """Return the recorder subscribes once it discovered the publisher: wait for that."""
     assert client.spin_until(lambda: client.node.count_subscribers(topic) >= 1, timeout)
 
 

@@ -8,18 +8,17 @@ files).
 import os
 import pathlib
 
-import pytest
-import yaml
-from fault_helpers import FULL_DISKS, can_mount, linear_scan, small_disk, small_filesystem
+from fault_helpers import can_mount, FULL_DISKS, linear_scan, small_disk, small_filesystem
 from mcap.reader import make_reader
+import pytest
 from rosbags.highlevel import AnyReader
-from std_msgs.msg import String
-
 from rotation_node.bag import output as output_module
 from rotation_node.bag import writer as writer_module
 from rotation_node.bag.mcap_io import BagReader
 from rotation_node.bag.writer import BagWriter
 from rotation_node.errors import BagError, DiskFullError
+from std_msgs.msg import String
+import yaml
 
 T0 = 1_700_000_000_000_000_000
 
@@ -208,7 +207,6 @@ def test_metadata_yaml_qos_profiles_are_read_by_rosbags(tmp_path):
     from rclpy.duration import Duration
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from rosbags.interfaces import QosDurability, QosReliability
-
     from rotation_node.bag.mcap_io import TopicMetadata
     from rotation_node.bag.qos import qos_profiles_yaml
 

@@ -1,14 +1,13 @@
-"""Tests of rotation_node.conversions._axis_angle: axis-angle and rotation vectors (exp / log maps)."""
-import numpy as np
-import pytest
+"""Tests of rotation_node.conversions._axis_angle: axis-angle, rotation vectors (exp/log maps)."""
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
-from scipy.spatial.transform import Rotation
-
 import mp_reference as mpr
+import numpy as np
+import pytest
+from rotation_dev.hard_cases import hard_matrices, hard_quaternions, hard_rotation_vectors
 from rotation_node import conversions as rc
-from rotation_node.hard_cases import hard_matrices, hard_quaternions, hard_rotation_vectors
+from scipy.spatial.transform import Rotation
 
 BOUND = 8  # eps, geodesic error of one conversion (issue 2)
 ROUND_TRIP = 16
@@ -59,7 +58,8 @@ def test_quaternion_from_axis_angle_hard_cases(rng):
     axis = rng.normal(size=(200, 3)) * 10.0 ** rng.uniform(-100, 100, (200, 1))
     angle = np.concatenate([hard_rotation_vectors(rng, 100)[:, 0], rng.uniform(-10, 10, 100)])
     got = rc.quaternion_from_axis_angle(axis, angle)
-    assert _max_error(got, [mpr.quaternion_from_axis_angle(a, t) for a, t in zip(axis, angle)]) <= BOUND
+    expected = [mpr.quaternion_from_axis_angle(a, t) for a, t in zip(axis, angle)]
+    assert _max_error(got, expected) <= BOUND
 
 
 def test_axis_angle_broadcasts_scalar_angle():
@@ -70,7 +70,8 @@ def test_axis_angle_broadcasts_scalar_angle():
 
 def test_matrix_forms_match_scipy(rng):
     v = rng.normal(size=(50, 3))
-    assert np.allclose(rc.matrix_from_rotation_vector(v), Rotation.from_rotvec(v).as_matrix(), atol=1e-15)
+    assert np.allclose(rc.matrix_from_rotation_vector(v), Rotation.from_rotvec(v).as_matrix(),
+                       atol=1e-15)
     axis, angle = v, np.linalg.norm(v, axis=1)
     assert np.allclose(rc.matrix_from_axis_angle(axis, angle),
                        Rotation.from_rotvec(v).as_matrix(), atol=1e-15)
@@ -84,7 +85,8 @@ def test_matrix_forms_match_scipy(rng):
 def test_rotation_vector_from_matrix_near_pi(rng):
     m = hard_matrices(rng, 100)
     v = rc.rotation_vector_from_matrix(m)
-    errors = [mpr.error_in_eps(mpr.quaternion_from_rotation_vector(x), mpr.nearest_rotation_quaternion(r))
+    errors = [mpr.error_in_eps(mpr.quaternion_from_rotation_vector(x),
+                               mpr.nearest_rotation_quaternion(r))
               for x, r in zip(v, m)]
     assert max(errors) <= BOUND
 
@@ -111,7 +113,8 @@ def test_batch_schedule_equals_the_fused_kernel_bit_for_bit(rng):
     # and one chunk with an angle beyond the branch-free reduction's range.
     v = np.concatenate([hard_rotation_vectors(rng, 3000), rng.normal(size=(3000, 3)) * 1e6])
     axis, angle = rng.normal(size=(6000, 3)), np.concatenate([v[:3000, 0], [3e6], v[3001:, 1]])
-    for batch, single in ((rc.quaternion_from_rotation_vector(v), rc.quaternion_from_rotation_vector),
+    for batch, single in ((rc.quaternion_from_rotation_vector(v),
+                           rc.quaternion_from_rotation_vector),
                           (rc.matrix_from_rotation_vector(v), rc.matrix_from_rotation_vector)):
         assert np.array_equal(batch[::7], [single(x) for x in v[::7]])
     for function in (rc.quaternion_from_axis_angle, rc.matrix_from_axis_angle):

@@ -1,17 +1,16 @@
-"""Tests of rotation_node.conversions._euler: all 24 conventions, gimbal lock, singularity margin."""
-import numpy as np
-import pytest
-import transforms3d
+"""Tests of rotation_node.conversions._euler: 24 conventions, gimbal lock, singularity margin."""
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
-from scipy.spatial.transform import Rotation
-
 import mp_reference as mpr
+import numpy as np
+import pytest
+from rotation_dev.hard_cases import hard_quaternions, near_gimbal_lock_angles
 from rotation_node import conversions as rc
 from rotation_node.conversions._euler import euler_atan2_arguments, euler_from_half_angles
 from rotation_node.conversions._trigonometry import atan2
-from rotation_node.hard_cases import hard_quaternions, near_gimbal_lock_angles
+from scipy.spatial.transform import Rotation
+import transforms3d
 
 BOUND = 8
 ROUND_TRIP = 16
@@ -127,7 +126,7 @@ def test_round_trip_hard_quaternions(rng, seq):
 
 def _exactly_locked_quaternion(seq, first_angle):
     """
-    A quaternion whose middle angle is exactly singular for ``seq``.
+    Return a quaternion whose middle angle is exactly singular for ``seq``.
 
     ``e_first (x) J`` with ``J`` the rotation by pi/2 (Tait-Bryan) or pi (proper)
     about the middle axis, written with components 0 and 1 (any norm is a
@@ -140,7 +139,9 @@ def _exactly_locked_quaternion(seq, first_angle):
     lock[3] = 0.0 if spec.proper else 1.0
     first = np.zeros(4)
     first[i], first[3] = np.sin(first_angle / 2), np.cos(first_angle / 2)
-    return rc.quaternion_product(first, lock) if spec.intrinsic else rc.quaternion_product(lock, first)
+    if spec.intrinsic:
+        return rc.quaternion_product(first, lock)
+    return rc.quaternion_product(lock, first)
 
 
 @pytest.mark.parametrize('seq', SEQUENCES)
@@ -158,7 +159,8 @@ def test_exact_gimbal_lock_sets_third_angle_to_zero(seq, first_angle):
 
 @pytest.mark.parametrize('seq', ['xyz', 'ZYX', 'zxz', 'YXY'])
 def test_exact_gimbal_lock_from_a_matrix(seq):
-    # A matrix at exact lock: rotate 90 deg about the middle axis (Tait-Bryan) or identity-like (proper).
+    # A matrix at exact lock: rotate 90 deg about the middle axis (Tait-Bryan) or identity-like
+    # (proper).
     middle = 'xyz'.index(seq[1].lower())
     m = np.zeros((3, 3))
     m[middle, middle] = 1.0
@@ -276,7 +278,7 @@ GRID_ANGLES = np.stack(np.meshgrid(_STEPS, _STEPS, _STEPS, indexing='ij'), -1).r
 
 
 def _signed_unit_quaternions():
-    """The unit quaternions with components in {0, +-1/2, +-sqrt(1/2), +-1}: 48 rotations, +-q."""
+    """Return unit quaternions with components in {0, +-1/2, +-sqrt(1/2), +-1}: 48 rotations."""
     values = (0.0, 0.5, -0.5, np.sqrt(0.5), -np.sqrt(0.5), 1.0, -1.0)
     q = np.stack(np.meshgrid(values, values, values, values, indexing='ij'), -1).reshape(-1, 4)
     return q[np.abs(np.einsum('ij,ij->i', q, q) - 1.0) <= 1e-15]
@@ -297,7 +299,7 @@ def _assert_in_documented_ranges(angles, seq):
 
 
 def _assert_same_rotations(angles, seq, q):
-    """The angles are the rotations ``q`` (scipy as the independent oracle)."""
+    """Return the angles are the rotations ``q`` (scipy as the independent oracle)."""
     back = Rotation.from_euler(seq, np.asarray(angles).reshape(-1, 3)).as_quat()
     assert np.max(mpr.rotation_distance(back, np.asarray(q).reshape(-1, 4))) <= 1e-14
 

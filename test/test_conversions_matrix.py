@@ -1,12 +1,12 @@
 """Tests of rotation_node.conversions._matrix: quaternion <-> rotation matrix, nearest rotation."""
+import mp_reference as mpr
 import numpy as np
 import pytest
-import transforms3d
-from scipy.spatial.transform import Rotation
-
-import mp_reference as mpr
+from rotation_dev.hard_cases import (
+    diagonal_rotations, hard_matrices, hard_quaternions, noisy_matrices)
 from rotation_node import conversions as rc
-from rotation_node.hard_cases import diagonal_rotations, hard_matrices, hard_quaternions, noisy_matrices
+from scipy.spatial.transform import Rotation
+import transforms3d
 
 BOUND = 8
 ROUND_TRIP = 16
@@ -64,7 +64,8 @@ def test_nearest_rotation_agrees_with_svd(rng):
     d = np.sign(np.linalg.det(u @ vt))
     u[:, :, 2] *= d[:, None]
     nearest = u @ vt
-    assert np.allclose(rc.matrix_from_quaternion(rc.quaternion_from_matrix(noisy)), nearest, atol=1e-13)
+    assert np.allclose(rc.matrix_from_quaternion(rc.quaternion_from_matrix(noisy)), nearest,
+                       atol=1e-13)
 
 
 def test_scaled_rotation_projects_to_rotation(rng):
@@ -109,7 +110,8 @@ def test_every_from_matrix_conversion_is_the_quaternion_path(rng, count):
         q = rc.quaternion_from_matrix(m)
         assert np.array_equal(rc.euler_from_matrix(m, 'ZYX', degrees=True),
                               rc.euler_from_quaternion(q, 'ZYX', degrees=True))
-        assert np.array_equal(rc.rotation_vector_from_matrix(m), rc.rotation_vector_from_quaternion(q))
+        assert np.array_equal(rc.rotation_vector_from_matrix(m),
+                              rc.rotation_vector_from_quaternion(q))
         for got, expected in zip(rc.axis_angle_from_matrix(m), rc.axis_angle_from_quaternion(q)):
             assert np.array_equal(got, expected)
 
@@ -121,7 +123,8 @@ def test_from_matrix_conversions_name_the_bad_matrix():
                      lambda r: rc.euler_from_matrix(r, 'xyz')):
         with pytest.raises(ValueError, match=r'`R` at index \(2,\) has a NaN'):
             function(m)
-    with pytest.raises(ValueError, match="`non_orthonormal` to be 'project' or 'raise', got 'snap'"):
+    message = "`non_orthonormal` to be 'project' or 'raise', got 'snap'"
+    with pytest.raises(ValueError, match=message):
         rc.euler_from_matrix(np.eye(3), 'xyz', non_orthonormal='snap')
     for tolerance in (-1e-6, float('nan'), '1e-6', np.array([1e-6, 1e-3])):
         with pytest.raises(ValueError, match='`orthonormal_tolerance` to be a number >= 0'):

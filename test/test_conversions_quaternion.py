@@ -1,14 +1,13 @@
 """Tests of rotation_node.conversions._quaternion: product, conjugate, canonical, distance."""
-import numpy as np
-import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
-from scipy.spatial.transform import Rotation
-
 import mp_reference as mpr
+import numpy as np
+import pytest
+from rotation_dev.hard_cases import hard_quaternions
 from rotation_node import conversions as rc
-from rotation_node.hard_cases import hard_quaternions
+from scipy.spatial.transform import Rotation
 
 finite = st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False)
 nonzero_quaternions = arrays(np.float64, 4, elements=finite).filter(

@@ -6,12 +6,11 @@ import os
 import subprocess
 import sys
 
-import numpy as np
-import pytest
 from numba import njit
 from numba.core.errors import TypingError
 from numba.core.registry import CPUDispatcher
-
+import numpy as np
+import pytest
 from rotation_node import conversions as rc
 from rotation_node import kinematics as rk
 from rotation_node.conversions import _runtime
@@ -69,7 +68,7 @@ def test_canonical_layout_of_a_single_sample_is_its_natural_shape():
 # ------------------------------------------------------- one signature each
 
 def _variants(sample, lead_shapes=((), (1,), (5,), (5, 2), (2, 1, 3), (1100,))):
-    """The same samples in every form a caller may pass them."""
+    """Return the same samples in every form a caller may pass them."""
     sample = np.asarray(sample, dtype=np.float64)
     for lead in lead_shapes:
         a = np.ascontiguousarray(np.broadcast_to(sample, lead + sample.shape))

@@ -4,10 +4,9 @@ import math
 import mpmath
 import numpy as np
 import pytest
-
-from rotation_node.conversions._trigonometry import (REDUCTION_LIMIT, atan2, atan2_in_place_kernel,
-                                                     reduced_sin_cos, sin_cos,
-                                                     sin_cos_in_place_kernel)
+from rotation_node.conversions._trigonometry import (
+    atan2, atan2_in_place_kernel, reduced_sin_cos, REDUCTION_LIMIT, sin_cos,
+    sin_cos_in_place_kernel)
 
 mpmath.mp.prec = 300
 

@@ -1,7 +1,6 @@
-"""Tests of rotation_node.conversions._validation: bad input raises ValueError naming what was wrong."""
+"""Tests of rotation_node.conversions._validation: bad input raises ValueError naming the fault."""
 import numpy as np
 import pytest
-
 from rotation_node import conversions as rc
 
 Q = np.array([0.1, 0.2, 0.3, 0.9])
@@ -157,7 +156,8 @@ def test_single_samples_equal_their_batch_rows_in_every_form(rng):
     q = rng.normal(size=(6, 4))
     margins, distances = rc.euler_singularity_margin(q, 'ZXZ'), rc.quaternion_distance(q, q[::-1])
     for s in range(6):
-        margin, distance = rc.euler_singularity_margin(q[s], 'ZXZ'), rc.quaternion_distance(q[s], q[5 - s])
+        margin = rc.euler_singularity_margin(q[s], 'ZXZ')
+        distance = rc.quaternion_distance(q[s], q[5 - s])
         assert type(margin) is np.float64 and margin == margins[s]
         assert type(distance) is np.float64 and distance == distances[s]
     axis, angle = rng.normal(size=(6, 3)), rng.uniform(-4, 4, 6)

@@ -3,10 +3,12 @@ import re
 import subprocess
 import sys
 
+from rotation_dev.paths import REPOSITORY
+
 
 def test_main_job_replays_the_tumbling_box_through_the_node(tmp_path):
-    result = subprocess.run([sys.executable, '-m', 'rotation_node.demo', '--out', str(tmp_path)],
-                            capture_output=True, text=True, timeout=240)
+    result = subprocess.run([sys.executable, '-m', 'rotation_dev.demo', '--out', str(tmp_path)],
+                            cwd=REPOSITORY, capture_output=True, text=True, timeout=240)
     assert result.returncode == 0, result.stdout + result.stderr
     out = result.stdout
     assert re.search(r'Imu messages in the scene bag: 1001', out)

@@ -9,7 +9,6 @@ independent numpy Hamilton product, so the other tests can trust it.
 """
 import numpy as np
 import pytest
-
 from rotation_node import conversions as rc
 
 CONE_HALF_ANGLE, CONE_RATE = 0.3, 2.0
@@ -33,7 +32,7 @@ def coning_rate(t, frame='body'):
 
 
 def hamilton(p, q):
-    """Reference Hamilton product, scalar last, written out with numpy."""
+    """Return the reference Hamilton product, scalar last, written out with numpy."""
     pv, ps, qv, qs = p[..., :3], p[..., 3:], q[..., :3], q[..., 3:]
     return np.concatenate([ps * qv + qs * pv + np.cross(pv, qv),
                            ps * qs - np.sum(pv * qv, axis=-1, keepdims=True)], axis=-1)

@@ -1,10 +1,9 @@
 """Tests of rotation_node.kinematics._derivatives: quaternion and matrix derivatives."""
-import numpy as np
-import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
-
+import numpy as np
+import pytest
 from rotation_node import conversions as rc
 from rotation_node import kinematics as rk
 

@@ -1,11 +1,10 @@
 """Tests of rotation_node.kinematics._euler_rates: Euler rates <-> angular velocity."""
 import warnings
 
-import numpy as np
-import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
+import numpy as np
+import pytest
 from rotation_node import conversions as rc
 from rotation_node import kinematics as rk
 

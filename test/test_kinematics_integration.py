@@ -1,7 +1,6 @@
 """Tests of rotation_node.kinematics._integration: attitude integration."""
 import numpy as np
 import pytest
-
 from rotation_node import conversions as rc
 from rotation_node import kinematics as rk
 from test_kinematics_coning import coning_orientation, coning_rate
@@ -105,29 +104,31 @@ T3 = np.array([0.0, 0.1, 0.2])
 
 
 @pytest.mark.parametrize('kwargs, message', [
-    (dict(q0=[0, 0, 0, 1], omega=np.zeros((3, 3)), t=T3, method='rk45'), '`method` to be one of'),
-    (dict(q0=[0, 0, 0, 1], omega=np.zeros((3, 3)), t=T3, method=None), '`method`'),
-    (dict(q0=[0, 0, 0, 1], omega=np.zeros((3, 3)), t=T3, frame='Body'), '`frame`'),
-    (dict(q0=[0, 0, 0, 0], omega=np.zeros((3, 3)), t=T3), '`q0` has zero norm'),
-    (dict(q0=[0, 0, 1], omega=np.zeros((3, 3)), t=T3), r'`q0` to have shape \(\.\.\., 4\)'),
-    (dict(q0=[[0, 0, 0, 1], [np.nan, 0, 0, 1]], omega=np.zeros((3, 3)), t=T3),
+    ({'q0': [0, 0, 0, 1], 'omega': np.zeros((3, 3)), 't': T3, 'method': 'rk45'},
+     '`method` to be one of'),
+    ({'q0': [0, 0, 0, 1], 'omega': np.zeros((3, 3)), 't': T3, 'method': None}, '`method`'),
+    ({'q0': [0, 0, 0, 1], 'omega': np.zeros((3, 3)), 't': T3, 'frame': 'Body'}, '`frame`'),
+    ({'q0': [0, 0, 0, 0], 'omega': np.zeros((3, 3)), 't': T3}, '`q0` has zero norm'),
+    ({'q0': [0, 0, 1], 'omega': np.zeros((3, 3)), 't': T3}, r'`q0` to have shape \(\.\.\., 4\)'),
+    ({'q0': [[0, 0, 0, 1], [np.nan, 0, 0, 1]], 'omega': np.zeros((3, 3)), 't': T3},
      r'`q0` at index \(1,\) has a NaN'),
-    (dict(q0=[0, 0, 0, 1], omega=np.zeros((2, 3)), t=T3),
+    ({'q0': [0, 0, 0, 1], 'omega': np.zeros((2, 3)), 't': T3},
      r'`omega` samples of shape \(\.\.\., 3, 3\)'),
-    (dict(q0=[0, 0, 0, 1], omega=np.zeros((3, 2)), t=T3), r'`omega` to have shape \(\.\.\., 3\)'),
-    (dict(q0=[0, 0, 0, 1], omega=[[0, 0, 0], [0, np.inf, 0], [0, 0, 0]], t=T3),
+    ({'q0': [0, 0, 0, 1], 'omega': np.zeros((3, 2)), 't': T3},
+     r'`omega` to have shape \(\.\.\., 3\)'),
+    ({'q0': [0, 0, 0, 1], 'omega': [[0, 0, 0], [0, np.inf, 0], [0, 0, 0]], 't': T3},
      r'`omega` at index \(1,\) has a NaN or Inf'),
-    (dict(q0=[0, 0, 0, 1], omega=lambda times: np.zeros(3), t=T3),
+    ({'q0': [0, 0, 0, 1], 'omega': lambda times: np.zeros(3), 't': T3},
      r'`omega\(t\)` to return shape \(\.\.\., 4, 3\)'),
-    (dict(q0=[0, 0, 0, 1], method='euler', t=T3,
-          omega=lambda times: np.where(times[:, None] > 0.05, np.nan, np.zeros(3))),
+    ({'q0': [0, 0, 0, 1], 'method': 'euler', 't': T3,
+      'omega': lambda times: np.where(times[:, None] > 0.05, np.nan, np.zeros(3))},
      r'`omega\(t\)` returned a NaN or Inf at t = 0.1'),
-    (dict(q0=[0, 0, 0, 1], omega=np.zeros((3, 3)), t=[0.0, 0.2, 0.1]),
+    ({'q0': [0, 0, 0, 1], 'omega': np.zeros((3, 3)), 't': [0.0, 0.2, 0.1]},
      '`t` to be strictly increasing'),
-    (dict(q0=[0, 0, 0, 1], omega=np.zeros((3, 3)), t=[[0.0, 0.1, 0.2]]),
+    ({'q0': [0, 0, 0, 1], 'omega': np.zeros((3, 3)), 't': [[0.0, 0.1, 0.2]]},
      r'`t` to have shape \(N,\)'),
-    (dict(q0=[0, 0, 0, 1], omega=np.zeros((1, 3)), t=[0.0]), 'N >= 2 samples'),
-    (dict(q0=np.ones((2, 4)), omega=np.zeros((3, 3, 3)), t=T3), 'do not broadcast'),
+    ({'q0': [0, 0, 0, 1], 'omega': np.zeros((1, 3)), 't': [0.0]}, 'N >= 2 samples'),
+    ({'q0': np.ones((2, 4)), 'omega': np.zeros((3, 3, 3)), 't': T3}, 'do not broadcast'),
 ])
 def test_bad_input_raises_naming_the_argument(kwargs, message):
     with pytest.raises(ValueError, match=message):

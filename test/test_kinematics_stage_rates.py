@@ -1,7 +1,6 @@
 """Tests of rotation_node.kinematics._stage_rates: rates at the integrators' stage times."""
 import numpy as np
 import pytest
-
 from rotation_node.kinematics._integration import _METHODS
 from rotation_node.kinematics._stage_rates import stage_rates
 from rotation_node.kinematics._validation import sample_times
@@ -10,7 +9,7 @@ ALL_NODES = np.array(sorted({c for _, nodes in _METHODS.values() for c in nodes}
 
 
 def polynomial(degree, rng):
-    """A random vector polynomial of ``degree`` as a function of time, shape (..., 3)."""
+    """Return a random vector polynomial of ``degree`` as a function of time, shape (..., 3)."""
     coefficients = rng.normal(size=(degree + 1, 3))
     return lambda times: np.moveaxis(np.polynomial.polynomial.polyval(times, coefficients), 0, -1)
 

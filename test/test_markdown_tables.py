@@ -6,12 +6,11 @@ ones (regenerate them with ``python -m rotation_node.markdown_tables``), the
 shipped parameters file names every input type and output in its comments, and
 package.xml depends on the package of every message type the node uses.
 """
-import re
 from pathlib import Path
+import re
 from xml.etree import ElementTree
 
 import pytest
-
 from rotation_node import markdown_tables, messages
 from rotation_node.parameters import PARAMETERS
 
@@ -41,7 +40,7 @@ def test_tables_have_a_row_per_entry():
 
 
 def _comment_before(text, key):
-    """The comment lines just above ``key:`` in a YAML text."""
+    """Return the comment lines just above ``key:`` in a YAML text."""
     lines = text.splitlines()
     index = next(i for i, line in enumerate(lines) if line.strip().startswith(key + ':'))
     comment = []

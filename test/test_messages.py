@@ -11,21 +11,19 @@ points (a stateful input stream, an input-stage transform) to work as one entry.
 import dataclasses
 import operator
 
+from bag_helpers import random_message
 import numpy as np
 import pytest
-from bag_helpers import random_message
 from rclpy.serialization import deserialize_message, serialize_message
-from rosbags.typesys import Stores, get_typestore
-from scipy.spatial.transform import Rotation
-
+from ros_harness import oracle_output
+from rosbags.typesys import get_typestore, Stores
 from rotation_node import messages, parameters, pipeline
 from rotation_node.bag.cdr import fixed_layout_codec
 from rotation_node.bag.message_types import message_class
-from rotation_node.messages import INPUTS, OUTPUTS, OutputMessage, Sample
+from rotation_node.messages import INPUTS, OutputMessage, OUTPUTS, Sample
 from rotation_node.parameters import NodeParameters
 from rotation_node.stamps import split_ns
-
-from ros_harness import oracle_output
+from scipy.spatial.transform import Rotation
 
 # Written from the message definitions, not from the registry.
 EXPECTED_INPUT_FIELDS = {

@@ -6,28 +6,25 @@ parameter (defaults plus its own changes) through the node's parameter service,
 so tests do not depend on each other's settings. Values are compared with scipy
 (``ros_harness.oracle_output``); test_pipeline.py covers the conversions in depth.
 """
-import subprocess
 from pathlib import Path
+import subprocess
 
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 import numpy as np
 import pytest
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import Log
 from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from scipy.spatial.transform import Rotation
-
+from ros_harness import (
+    make_input_message, oracle_output, output_values, PLAIN_INPUT_TYPES, RosProcess, script,
+    TestNode)
 from rotation_node.errors import ParameterError
 from rotation_node.messages import OUTPUTS as OUTPUT_TYPES
 from rotation_node.node import check_parameter_names, ros_arguments
-from rotation_node.parameters import (
-    OUTPUTS, PARAMETERS, NodeParameters, parameters_from_yaml)
+from rotation_node.parameters import NodeParameters, OUTPUTS, PARAMETERS, parameters_from_yaml
 from rotation_node.pipeline import input_message_type
-
-from ros_harness import (
-    PLAIN_INPUT_TYPES, RosProcess, TestNode, make_input_message, oracle_output, output_values,
-    script)
+from scipy.spatial.transform import Rotation
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'params.yaml'
 STAMP_NS = 1_700_000_000_000_000_000
@@ -69,7 +66,7 @@ class NodeUnderTest:
         assert self.ros.spin_until(future.done, timeout=10.0), 'parameter service timed out'
         return future.result()
 
-    def set(self, values):
+    def set(self, values):  # noqa: A003
         """Set parameters one by one; return the SetParametersResult of each."""
         return self.call(self.parameters.set_parameters(
             [Parameter(name, value=value) for name, value in values.items()])).results
@@ -451,7 +448,7 @@ def test_node_prefixed_parameters_are_checked_for_this_node_only():
     check_parameter_names(['x', '--ros-args', '-p', 'other:zzz:=1', '-p',
                            'rotation_node:qos.depth:=5', '-p', 'use_sim_time:=true'])
     with pytest.raises(ParameterError, match="unknown parameter 'qos.dept' in --param "
-                                             "rotation_node:qos.dept:=5 \\(did you mean"):
+                                             r'rotation_node:qos.dept:=5 \(did you mean'):
         check_parameter_names(['x', '--ros-args', '--param', 'rotation_node:qos.dept:=5'])
 
 

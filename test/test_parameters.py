@@ -1,15 +1,14 @@
 """Tests of rotation_node.parameters: the parameter table, validation and YAML loading."""
 import math
-import re
 from pathlib import Path
+import re
 
 import pytest
-import yaml
-
 from rotation_node.conversions import SEQUENCES
 from rotation_node.errors import ParameterError
 from rotation_node.parameters import (
-    NODE_NAME, OUTPUTS, PARAMETERS, PARAMETERS_BY_NAME, NodeParameters, parameters_from_yaml)
+    NODE_NAME, NodeParameters, OUTPUTS, PARAMETERS, PARAMETERS_BY_NAME, parameters_from_yaml)
+import yaml
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'params.yaml'
 

@@ -6,24 +6,22 @@ the values are checked here against scipy, and test_node.py checks the wiring.
 """
 import math
 
-import numpy as np
-import pytest
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from scipy.spatial.transform import Rotation
-from std_msgs.msg import Float64MultiArray
-
-from rotation_node.conversions import SEQUENCES
-from rotation_node.parameters import OUTPUTS, NodeParameters
-from rotation_node.pipeline import (
-    COVARIANCE_UNKNOWN, EULER_COVARIANCE_NEAR_SINGULAR, EULER_COVARIANCE_NOT_LINEAR,
-    EULER_RATES_NEAR_SINGULAR, NON_FINITE_ANGULAR_VELOCITY, NON_FINITE_COVARIANCE,
-    NON_FINITE_ORIENTATION, NON_UNIT_QUATERNION, ORIENTATION_UNKNOWN, TIMESTAMP_NOT_INCREASING,
-    ZERO_QUATERNION, ConversionPipeline, input_message_type)
-
+import numpy as np
+import pytest
 from ros_harness import (
     INPUT_COVARIANCE, make_input_message, oracle_output, output_values, PLAIN_INPUT_TYPES)
+from rotation_node.conversions import SEQUENCES
+from rotation_node.parameters import NodeParameters, OUTPUTS
+from rotation_node.pipeline import (
+    ConversionPipeline, COVARIANCE_UNKNOWN, EULER_COVARIANCE_NEAR_SINGULAR,
+    EULER_COVARIANCE_NOT_LINEAR, EULER_RATES_NEAR_SINGULAR, input_message_type,
+    NON_FINITE_ANGULAR_VELOCITY, NON_FINITE_COVARIANCE, NON_FINITE_ORIENTATION,
+    NON_UNIT_QUATERNION, ORIENTATION_UNKNOWN, TIMESTAMP_NOT_INCREASING, ZERO_QUATERNION)
+from scipy.spatial.transform import Rotation
+from std_msgs.msg import Float64MultiArray
 
 STAMP_NS = 1_700_000_000_123_456_789   # a realistic wall-clock stamp (float seconds lose ~0.2 us)
 FRAME_ID = 'imu_link'

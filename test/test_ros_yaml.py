@@ -11,13 +11,12 @@ import ctypes.util
 import math
 import time
 
-import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
+import pytest
 from rotation_node.errors import ParameterError, SceneError
 from rotation_node.parameters import parameters_from_yaml
-from rotation_node.ros_yaml import MAX_DEPTH, MAX_FILE_BYTES, MAX_NODES, load_ros_yaml, ros_scalar
+from rotation_node.ros_yaml import load_ros_yaml, MAX_DEPTH, MAX_FILE_BYTES, MAX_NODES, ros_scalar
 from rotation_node.scene.spec import load_scene
 
 LIBC = ctypes.CDLL(ctypes.util.find_library('c'), use_errno=True)
@@ -37,7 +36,7 @@ NUMBER_TEXTS = [
 
 
 def c_library_value(text):
-    """What rcl_yaml_param_parser's get_value makes of a plain scalar (bool words aside)."""
+    """Return what rcl_yaml_param_parser's get_value makes of a plain scalar (bool words aside)."""
     raw = text.encode()
     end = ctypes.c_char_p()
     ctypes.set_errno(0)

@@ -3,10 +3,9 @@ import os
 import signal
 import subprocess
 
+from fault_helpers import FULL_DISKS, linear_scan, small_disk, wait_for
 import numpy as np
 import pytest
-from fault_helpers import FULL_DISKS, linear_scan, small_disk, wait_for
-
 from ros_harness import script
 from rotation_node.bag.mcap_io import BagReader
 from rotation_node.scene.cli import main
@@ -111,7 +110,7 @@ effects: {gyro_noise: {std: 0.01}, dropped_messages: {probability: 0.1}}
 
 @pytest.fixture(scope='module')
 def long_scene(tmp_path_factory):
-    """A 10 001-sample scene and its complete bag, written once in-process."""
+    """Return a 10 001-sample scene and its complete bag, written once in-process."""
     directory = tmp_path_factory.mktemp('long_scene')
     (directory / 'scene.yaml').write_text(LONG_SCENE)
     (directory / 'reference').mkdir()

@@ -3,12 +3,11 @@ import os
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
-from scipy.spatial.transform import Rotation
-
 from rotation_node import conversions as rc
 from rotation_node.scene import motions, spec
 from rotation_node.scene.simulator import simulate
+from scipy.integrate import solve_ivp
+from scipy.spatial.transform import Rotation
 
 SCENES_DIR = os.path.join(os.path.dirname(__file__), '..', 'config', 'scenes')
 
@@ -49,7 +48,7 @@ def world_momentum(inertia, q, w):
 
 @pytest.mark.parametrize('name', MOTIONS)
 def test_angular_velocity_is_the_derivative_of_the_orientation(name):
-    """w = 2 vec(q^-1 q'), q' by central differences: error ~h^2 |dddq| / 3 < 2e-7 here."""
+    """``w`` = 2 vec(q^-1 q'), q' by central differences: error ~h^2 |dddq| / 3 < 2e-7 here."""
     h = 1e-4
     t = np.arange(0.0, 1.0 + h / 2, h)
     q, w = sample(name, t)

@@ -4,12 +4,11 @@ import tracemalloc
 
 import numpy as np
 import pytest
-
 from rotation_node.bag.mcap_io import BagReader
 from rotation_node.errors import BagError
 from rotation_node.scene import spec
-from rotation_node.scene.simulator import (sample_stamps_ns, simulate, simulate_blocks,
-                                           write_bag, write_scene_bag)
+from rotation_node.scene.simulator import (
+    sample_stamps_ns, simulate, simulate_blocks, write_bag, write_scene_bag)
 
 SCENES_DIR = os.path.join(os.path.dirname(__file__), '..', 'config', 'scenes')
 TRUTH_TOPICS = ('/truth/orientation', '/truth/angular_velocity')
@@ -26,7 +25,7 @@ def read_topic(path, topic):
 
 @pytest.fixture(scope='module')
 def every_effect(tmp_path_factory):
-    """The shipped every-effect scene, simulated and written once."""
+    """Return the shipped every-effect scene, simulated and written once."""
     simulation = simulate(spec.load_scene(os.path.join(SCENES_DIR, 'every_effect.yaml')), 4)
     path = tmp_path_factory.mktemp('bags') / 'every_effect.mcap'
     write_bag(simulation, path)

@@ -5,7 +5,6 @@ import math
 import os
 
 import pytest
-
 from rotation_node.errors import SceneError
 from rotation_node.scene import effects, spec
 
@@ -26,7 +25,7 @@ DELETE = object()
 
 
 def scene_dict(kind='coning', changes=None):
-    """A valid scene as parsed YAML, with ``changes`` = {dotted key path: value or DELETE}."""
+    """Return a valid scene as parsed YAML with ``changes``: {dotted key path: value or DELETE}."""
     data = {'duration': 1.0, 'rate': 10.0, 'motion': copy.deepcopy(MOTIONS[kind]),
             'effects': {}}
     for dotted, value in (changes or {}).items():
@@ -159,10 +158,10 @@ BAD_SCENES = [
     ('coning', {'effects.nan_bursts': {'probability': 0.1, 'length': 2.5}},
      'effects.nan_bursts.length'),
     ('coning', {'effects.nan_bursts': {'probability': 0.1, 'length': 2,
-                                        'fields': ['linear_acceleration']}},
+                                       'fields': ['linear_acceleration']}},
      'effects.nan_bursts.fields'),
     ('coning', {'effects.nan_bursts': {'probability': 0.1, 'length': 2,
-                                        'fields': ['orientation', 'orientation']}},
+                                       'fields': ['orientation', 'orientation']}},
      'effects.nan_bursts.fields'),
     ('coning', {'effects.timestamp_jitter': {'std': -1e-3}}, 'effects.timestamp_jitter.std'),
     ('coning', {'effects.orientation_unknown': {'probability': 2}},

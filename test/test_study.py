@@ -1,5 +1,5 @@
 """
-Tests of rotation_node.study: ``rotation_bench --quick`` writes complete documents.
+Tests of rotation_dev.study: ``python -m rotation_dev.study --quick`` writes complete documents.
 
 The run's tables must hold a row for every family and method of the study with
 finite numbers; the stability claims themselves (errors within a few eps) are
@@ -13,22 +13,23 @@ import sys
 import time
 
 import pytest
-
+from rotation_dev.paths import REPOSITORY
+from rotation_dev.study import integration, measure, methods
 from rotation_node.kinematics import INTEGRATION_METHODS
-from rotation_node.study import integration, measure, methods
 
-ROTATION_BENCH = os.path.join(os.path.dirname(sys.executable), 'rotation_bench')
-QUICK_SECONDS = 60.0
+STUDY = (sys.executable, '-m', 'rotation_dev.study')
+#: Bound on one quick run (it takes about a minute on an idle machine).
+QUICK_TIMEOUT_S = 300.0
 PNG_SIGNATURE = b'\x89PNG\r\n\x1a\n'
 
 
 @pytest.fixture(scope='module')
 def quick_run(tmp_path_factory):
-    """One ``rotation_bench --quick`` run: (output directory, completed process, seconds)."""
+    """One quick run of the study: (output directory, completed process, seconds)."""
     out = tmp_path_factory.mktemp('docs')
     start = time.monotonic()
-    process = subprocess.run([ROTATION_BENCH, '--quick', '--out', str(out)],
-                             capture_output=True, text=True, timeout=4 * QUICK_SECONDS)
+    process = subprocess.run([*STUDY, '--quick', '--out', str(out)], cwd=REPOSITORY,
+                             capture_output=True, text=True, timeout=QUICK_TIMEOUT_S)
     return out, process, time.monotonic() - start
 
 
@@ -64,7 +65,7 @@ def _section(sections, prefix):
 
 
 def _number(cell):
-    """The first number of a cell (``'1.4e+16 (3 rad)'`` -> 1.4e16); NaN if there is none."""
+    """Return the first number of a cell (``'1.4e+16 (3 rad)'`` -> 1.4e16), or NaN."""
     match = re.search(r'[-+]?\d+(\.\d+)?(e[-+]?\d+)?', cell)
     return float(match.group(0)) if match else math.nan
 
@@ -74,10 +75,9 @@ def _assert_finite(row, columns, what):
         assert math.isfinite(_number(row[column])), f'{what}: column {column} is {row[column]!r}'
 
 
-def test_quick_run_succeeds_in_under_a_minute(quick_run):
-    out, process, seconds = quick_run
+def test_quick_run_succeeds_and_writes_the_three_documents(quick_run):
+    out, process, _ = quick_run
     assert process.returncode == 0, process.stderr
-    assert seconds < QUICK_SECONDS
     assert sorted(os.listdir(out)) == ['accuracy.md', 'accuracy.png', 'performance.md']
 
 
@@ -170,9 +170,9 @@ def test_performance_lists_the_node_and_bag_benchmarks_with_their_commands(quick
 ])
 def test_unusable_out_is_a_one_line_error(tmp_path, make_out):
     (tmp_path / 'a_file').write_text('not a directory')
-    process = subprocess.run([ROTATION_BENCH, '--quick', '--out', str(make_out(tmp_path))],
-                             capture_output=True, text=True, timeout=60)
+    process = subprocess.run([*STUDY, '--quick', '--out', str(make_out(tmp_path))],
+                             cwd=REPOSITORY, capture_output=True, text=True, timeout=60)
     assert process.returncode == 1
-    assert process.stderr.startswith('rotation_bench: error: ')
+    assert process.stderr.startswith('python -m rotation_dev.study: error: ')
     assert len(process.stderr.strip().splitlines()) == 1
     assert (tmp_path / 'a_file').read_text() == 'not a directory'

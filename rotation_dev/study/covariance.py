@@ -209,6 +209,8 @@ def covariance_markdown(rows: Sequence[CovarianceRow], heading: str = '##') -> s
         'uniform angle (104 deg). `euler_linearisation_ratio` computes the ratio for any '
         'covariance.',
         '',
+        '![first-order Euler covariance against Monte Carlo](covariance.png)',
+        '',
         f'Growing sigma, roll, pitch, yaw = {FAR_ORIENTATION} rad:',
         '',
         *_table(sigma_rows),

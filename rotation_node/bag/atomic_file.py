@@ -23,6 +23,7 @@ from rotation_node.errors import BagError
 
 if TYPE_CHECKING:
     from types import TracebackType
+
     from rotation_node.type_aliases import StrPath
 
 

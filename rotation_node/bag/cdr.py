@@ -47,7 +47,6 @@ from typing import Any, Callable, Dict, List, NamedTuple, Optional, Sequence
 import numpy as np
 from rclpy.serialization import deserialize_message
 from rosidl_parser.definition import Array, BasicType, NamespacedType, UnboundedString
-
 from rotation_node.bag.message_types import message_class
 from rotation_node.errors import BagError
 
@@ -99,7 +98,7 @@ _STRING_LENGTH = _Leaf('<string length>', 'I', 0)
 
 @functools.lru_cache(maxsize=None)
 def _view_class(msg_class):
-    """The named tuple class that views messages of ``msg_class``."""
+    """Return the named tuple class that views messages of ``msg_class``."""
     view = collections.namedtuple(  # type: ignore[misc]
         msg_class.__name__, msg_class.get_fields_and_field_types())
     view.__doc__ = (f'Read-only view of a decoded {msg_class.__module__.split(".")[0]}/msg/'
@@ -203,7 +202,7 @@ class FixedLayoutCodec:
                              if not self._to_string_lengths else b'')
 
     def _struct(self, string_lengths):
-        """The struct of the payload when the strings have these lengths (NUL included)."""
+        """Return the struct of the payload when the strings have these lengths (NUL included)."""
         compiled = self._structs.get(string_lengths)
         if compiled is None:
             if len(self._structs) >= _MAX_CACHED_STRUCTS:
@@ -367,7 +366,7 @@ def _fixed_format(leaves, offset):
 
 
 def _runs_before_strings(leaves):
-    """The leaves between strings: the runs before each string, then the one after the last."""
+    """Return the leaves between strings: the runs before each string, then after the last."""
     runs: List[List[_Leaf]] = [[]]
     for leaf in leaves:
         if leaf.code == _STRING:

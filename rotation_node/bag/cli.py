@@ -33,7 +33,6 @@ import sys
 from typing import List, Optional, Sequence
 
 from rclpy.utilities import remove_ros_args
-
 from rotation_node.bag.stop_signal import exit_status, interrupt_on_stop_signals, signal_name
 from rotation_node.errors import BagError, RotationNodeError
 
@@ -84,7 +83,7 @@ def _convert(args, ros_args):
 
 
 def _is_output_directory(path):
-    """An existing directory that is not a rosbag2 bag: the OUTDIR of ``convert IN OUTDIR``."""
+    """Return an existing directory that is not a rosbag2 bag (``convert IN... OUTDIR``)."""
     from rotation_node.bag.reader import METADATA_FILE
     return os.path.isdir(path) and not os.path.exists(os.path.join(path, METADATA_FILE))
 
@@ -130,7 +129,7 @@ def _positive_int(text):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``rotation_bag``."""
+    """Return the argument parser of ``rotation_bag``."""
     parser = argparse.ArgumentParser(
         prog=PROG, description='Record, play, convert and plot ROS 2 bags.')
     commands = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')

@@ -20,20 +20,19 @@ import functools
 import operator
 import os
 import struct
-from typing import (Any, Callable, Collection, Dict, Iterable, Iterator, List, Optional,
-                    TYPE_CHECKING)
+from typing import (
+    Any, Callable, Collection, Dict, Iterable, Iterator, List, Optional, TYPE_CHECKING)
 
-import zstandard
 from mcap.exceptions import McapError
 from mcap.reader import SeekingReader
 from mcap.records import Channel, Chunk, Message, Schema
-from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
+from mcap.stream_reader import breakup_chunk, CRCValidationError, StreamReader
 from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.serialization import deserialize_message
-
-from rotation_node.bag.compression import ZSTD_MAGIC, decompressed_message
+from rotation_node.bag.compression import decompressed_message, ZSTD_MAGIC
 from rotation_node.bag.message_types import message_class
 from rotation_node.errors import BagError
+import zstandard
 
 if TYPE_CHECKING:
     from rotation_node.type_aliases import StrPath
@@ -213,7 +212,7 @@ class _Scan:
 
 
 def _compression_name(compressions):
-    """The chunk compression of a file: ``'zstd'``, ``'lz4'`` or ``'none'``."""
+    """Return the chunk compression of a file: ``'zstd'``, ``'lz4'`` or ``'none'``."""
     return next((name for name in ('zstd', 'lz4') if name in compressions), 'none')
 
 
@@ -347,7 +346,7 @@ class BagReader:
         self.topics = {topic: m.type_name for topic, m in self.topic_metadata.items()}
 
     def _topic_metadata(self, channel, schema):
-        """The metadata of a channel as stored, whatever its schema (copied unchanged)."""
+        """Return the metadata of a channel as stored, whatever its schema (copied unchanged)."""
         try:
             definition = '' if schema is None else schema.data.decode()
         except UnicodeDecodeError as error:
@@ -413,7 +412,7 @@ class BagReader:
             raise BagError(f'{self.path} is corrupt: {_described(error)}') from None
 
     def _scanned_messages(self, topics):
-        """The messages the opening scan counted, no more (the file may still grow)."""
+        """Return the messages the opening scan counted, no more (the file may still grow)."""
         wanted = None if topics is None else set(topics)
         channels: Dict[int, Any] = {}
         remaining = self._scan_count

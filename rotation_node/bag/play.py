@@ -32,7 +32,6 @@ import rclpy
 from rclpy.duration import Duration
 from rclpy.qos import ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
-
 from rotation_node.bag.mcap_io import MESSAGE_ENCODING
 from rotation_node.bag.message_types import message_class
 from rotation_node.bag.qos import DEEP_QUEUE_DEPTH, playback_qos, qos_profiles_from_yaml
@@ -66,7 +65,7 @@ def _wait(stop, seconds):
 
 def _playable_topics(reader, topics, report):
     """
-    The topics to play: the given ones (all checked), or every topic that can be published.
+    Return the topics to play: the given ones (all checked), or every topic that can be published.
 
     A topic of a type that is not installed, or not CDR, cannot be published:
     asked for by name it is an error, else it is left out with a note.

@@ -19,11 +19,10 @@ from __future__ import annotations
 import math
 from typing import Any, Callable, Optional, Tuple, TYPE_CHECKING
 
-import numpy as np
 # A bare Figure renders PNG with the Agg backend and never touches pyplot's
 # global state or a display.
 from matplotlib.figure import Figure
-
+import numpy as np
 from rotation_node import conversions, messages
 from rotation_node.bag.atomic_file import AtomicFile
 from rotation_node.bag.convert import output_topic
@@ -37,7 +36,7 @@ if TYPE_CHECKING:
 
 
 def _converted_output(topics, topic):
-    """The output whose ``convert`` topic ``topic`` is (checked against the bag), or None."""
+    """Return the output whose ``convert`` topic ``topic`` is (checked in the bag), or None."""
     parent, _, name = topic.rpartition('/')
     output = messages.OUTPUTS.get(name)
     if (output is None or parent not in topics or topics[topic] != output.type_name
@@ -47,7 +46,7 @@ def _converted_output(topics, topic):
 
 
 def _input_type(type_name, params):
-    """The plain input type of a topic of ``type_name`` (``input_type`` if it is one)."""
+    """Return the plain input type of a topic of ``type_name`` (``input_type`` if it is one)."""
     candidates = [entry for entry in messages.INPUTS.values()
                   if entry.type_name == type_name and entry.stream is None]
     preferred = [entry for entry in candidates if entry.name == params.input_type]
@@ -106,7 +105,7 @@ def _input_panels(entry, params):
 
 def _panels(topics, topic, params):
     """
-    What to draw for a topic: ``(panels, numbers)``.
+    Return what to draw for a topic: ``(panels, numbers)``.
 
     ``panels`` are :class:`rotation_node.messages.Panel`; ``numbers(msg)`` gives the
     numbers of one message that they index.
@@ -142,7 +141,9 @@ def plot_topic(bag_path: StrPath, topic: str, output_path: StrPath, *,
     Parameters
     ----------
     bag_path : str or os.PathLike
+        The bag to read.
     topic : str
+        Its name in the bag or its ROS 2 name.
     output_path : str or os.PathLike
         Written to a temporary file and renamed, so never half-written.
     params : rotation_node.parameters.NodeParameters, optional
@@ -188,6 +189,7 @@ def plot_series(reader: Any, topic: str,
     Parameters
     ----------
     reader : rotation_node.bag.reader.InputBag
+        The open bag.
     topic : str
         Its name in the bag or its ROS 2 name.
     params : rotation_node.parameters.NodeParameters
@@ -225,7 +227,7 @@ def plot_series(reader: Any, topic: str,
 
 
 def _draw(topic, times_ns, values, panels):
-    """A figure with one panel per entry of ``panels``, time in seconds since the first."""
+    """Return a figure with one panel per entry of ``panels``, time in seconds since the first."""
     seconds = (times_ns - times_ns[0]) * 1e-9
     figure = Figure(figsize=(10, 3.2 * len(panels) + 0.6), layout='constrained')
     axes = figure.subplots(len(panels), 1, sharex=True, squeeze=False)

@@ -1,6 +1,4 @@
-"""
-A one-line progress bar on a terminal, nothing elsewhere.
-"""
+"""A one-line progress bar on a terminal, nothing elsewhere."""
 import sys
 import time
 from typing import Optional, TextIO

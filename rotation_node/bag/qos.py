@@ -13,13 +13,12 @@ from __future__ import annotations
 
 from typing import Any, Iterable, List, Sequence, TYPE_CHECKING
 
-import yaml
 from rclpy.duration import Duration
 from rclpy.qos import (
     DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy)
-
 from rotation_node.errors import BagError
 from rotation_node.stamps import split_ns
+import yaml
 
 if TYPE_CHECKING:
     from rotation_node.parameters import NodeParameters
@@ -220,6 +219,7 @@ def playback_qos(offered: Sequence[QoSProfile], *, lossless: bool = False) -> Qo
     offered : list of rclpy.qos.QoSProfile
         The profiles recorded in the bag for the topic (may be empty).
     lossless : bool, optional
+        Reliable with a deep queue, whatever was recorded (``--rate 0``).
 
     Returns
     -------

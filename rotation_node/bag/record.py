@@ -24,13 +24,12 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
-
 from rotation_node.bag.mcap_io import TopicMetadata
 from rotation_node.bag.message_types import message_class
 from rotation_node.bag.qos import qos_profiles_yaml, recording_qos
 from rotation_node.bag.stop_signal import StopSignal
 from rotation_node.bag.topic_arguments import checked_topic_names
-from rotation_node.bag.writer import CHUNK_PERIOD_S, DEFAULT_COMPRESSION, BagWriter
+from rotation_node.bag.writer import BagWriter, CHUNK_PERIOD_S, DEFAULT_COMPRESSION
 from rotation_node.errors import BagError, DiskFullError
 
 if TYPE_CHECKING:
@@ -75,7 +74,7 @@ class BagRecorder(Node):
 
     @property
     def pending_topics(self) -> List[str]:
-        """Requested topics that have no publisher yet."""
+        """Return the requested topics that have no publisher yet."""
         return list(self._pending)
 
     def _discover(self):
@@ -138,6 +137,7 @@ def record(output: StrPath, topics: Sequence[str], *, duration: Optional[float] 
     output : str or os.PathLike
         The bag: a rosbag2 directory, or a single MCAP file if it ends in ``.mcap``.
     topics : list of str
+        The topics to record.
     duration : float, optional
         Seconds to record; until stopped by a signal by default.
     overwrite : bool, optional

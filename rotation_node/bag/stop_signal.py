@@ -40,7 +40,7 @@ def interrupt_on_stop_signals() -> None:
 
 
 def exit_status(interrupt: KeyboardInterrupt) -> int:
-    """The exit status after ``interrupt``: 143 for SIGTERM, 130 for Ctrl-C."""
+    """Return the exit status after ``interrupt``: 143 for SIGTERM, 130 for Ctrl-C."""
     return 128 + (signal.SIGTERM if isinstance(interrupt, Terminated) else signal.SIGINT)
 
 

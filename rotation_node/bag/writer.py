@@ -40,18 +40,18 @@ import time
 from typing import Any, Dict, List, Optional, Tuple, TYPE_CHECKING
 
 import mcap
-import yaml
 from mcap.writer import CompressionType, Writer
 from rclpy.serialization import serialize_message
-
 from rotation_node.bag.cdr import message_encoder
 from rotation_node.bag.mcap_io import TopicMetadata
 from rotation_node.bag.message_types import message_definition, type_hash, type_name_of
 from rotation_node.bag.output import BagOutput
 from rotation_node.errors import BagError, DiskFullError
+import yaml
 
 if TYPE_CHECKING:
     from types import TracebackType
+
     from rotation_node.type_aliases import StrPath
 
 PROFILE = 'ros2'
@@ -220,6 +220,7 @@ class BagWriter:
         Parameters
         ----------
         metadata : TopicMetadata
+            The topic's name, type, QoS profiles and (optionally) definition.
 
         Raises
         ------
@@ -286,6 +287,7 @@ class BagWriter:
         Parameters
         ----------
         topic : str
+            The topic to write on.
         msg : rclpy message
             Its class decides the topic's type on first use.
         log_time_ns : int
@@ -318,10 +320,13 @@ class BagWriter:
         Parameters
         ----------
         topic : str
+            The topic to write on.
         type_name : str
             ``'pkg/msg/Type'``; decides the topic's type on first use.
         data : bytes
+            The serialized (CDR) message.
         log_time_ns : int
+            Receive time, nanoseconds.
         publish_time_ns : int, optional
             Defaults to ``log_time_ns``.
 

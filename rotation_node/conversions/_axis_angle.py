@@ -18,17 +18,21 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ._matrix import (DEFAULT_ORTHONORMAL_TOLERANCE, EIGENVECTOR_PENDING, convert_matrices,
-                      quaternion_of_matrix, store_rotation)
-from ._quaternion import (half_angle_atan2, needs_sign_flip, quaternion_status, scaled_quaternion,
-                          vector_defect, vector_norm, vector_status)
-from ._runtime import (FLAT_IN, FLAT_OUT, FLOAT, ROWS_IN, ROWS_OUT, STAGE_CHUNK, call_binary,
-                       call_unary, jit, kernel, matrix_samples, samples, status)
+from ._matrix import (
+    convert_matrices, DEFAULT_ORTHONORMAL_TOLERANCE, EIGENVECTOR_PENDING, quaternion_of_matrix,
+    store_rotation)
+from ._quaternion import (
+    half_angle_atan2, needs_sign_flip, quaternion_status, scaled_quaternion, vector_defect,
+    vector_norm, vector_status)
+from ._runtime import (
+    call_binary, call_unary, FLAT_IN, FLAT_OUT, FLOAT, jit, kernel, matrix_samples, ROWS_IN,
+    ROWS_OUT, samples, STAGE_CHUNK, status)
 from ._trigonometry import sin_cos, sin_cos_in_place_kernel
 from ._validation import NON_FINITE, OK, ZERO_NORM
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
+
     from ..type_aliases import FloatArray, FloatArrayOrScalar, Quaternion4, Vector3
 
 
@@ -74,7 +78,7 @@ def quaternion_from_rotation_vector_scalar(vx: float, vy: float, vz: float) -> Q
 @jit
 def quaternion_from_axis_angle_scalar(ax: float, ay: float, az: float,
                                       angle: float) -> Quaternion4:
-    """Unit canonical quaternion of a rotation by ``angle`` about a non-zero axis."""
+    """Return the unit canonical quaternion of a rotation by ``angle`` about a non-zero axis."""
     half_sin, half_cos = sin_cos(0.5 * angle)
     return axis_angle_quaternion(ax, ay, az, half_sin, half_cos)
 
@@ -82,7 +86,7 @@ def quaternion_from_axis_angle_scalar(ax: float, ay: float, az: float,
 @jit
 def axis_angle_from_quaternion_scalar(x: float, y: float, z: float,
                                       w: float) -> Quaternion4:
-    """Unit axis and angle in [0, pi]; the identity gives axis (1, 0, 0), angle 0."""
+    """Return the unit axis and angle in [0, pi]; the identity gives axis (1, 0, 0), angle 0."""
     x, y, z, w = scaled_quaternion(x, y, z, w)
     if w < 0.0:
         x, y, z, w = -x, -y, -z, -w
@@ -131,7 +135,7 @@ def _rotations_from_axis_angle(fa, ft, angle, fo):
 
 @jit
 def _rotations_from_axis_angle_staged(fa, ft, fo):
-    """The batch schedule of :func:`_rotations_from_axis_angle` (``ft`` one angle per axis)."""
+    """Return the batch schedule of :func:`_rotations_from_axis_angle` (``ft``: angle per axis)."""
     n = fa.shape[0]
     half_sin, half_cos = np.empty(min(n, STAGE_CHUNK)), np.empty(min(n, STAGE_CHUNK))
     for start in range(0, n, STAGE_CHUNK):
@@ -187,7 +191,7 @@ def _rotations_from_rotation_vectors(fv, fo):
 
 @jit
 def _rotations_from_rotation_vectors_staged(fv, fo):
-    """The batch schedule of :func:`_rotations_from_rotation_vectors`."""
+    """Return the batch schedule of :func:`_rotations_from_rotation_vectors`."""
     n = fv.shape[0]
     half_sin, half_cos = np.empty(min(n, STAGE_CHUNK)), np.empty(min(n, STAGE_CHUNK))
     for start in range(0, n, STAGE_CHUNK):
@@ -234,7 +238,7 @@ def _store_axis_angle(fo, s, x, y, z, w):
 
 @jit
 def _store_rotation_vector(fo, s, x, y, z, w):
-    """The rotation vector of ``q`` into row ``s`` of ``fo`` (n, 3)."""
+    """Return the rotation vector of ``q`` into row ``s`` of ``fo`` (n, 3)."""
     fo[s, 0], fo[s, 1], fo[s, 2] = rotation_vector_from_quaternion_scalar(x, y, z, w)
 
 
@@ -293,7 +297,7 @@ def _rotation_vector_from_matrix_kernel(m, out, tolerance):
 # ------------------------------------------------------------ public API
 
 def _split_axis_angle(packed: FloatArray) -> tuple[FloatArray, FloatArrayOrScalar]:
-    """``(axis, angle)`` from ``(..., 4)`` rows ``(x, y, z, angle)``; one sample gives a scalar angle."""
+    """Split ``(..., 4)`` rows ``(x, y, z, angle)`` into ``(axis, angle)`` (one sample: scalar)."""
     if packed.ndim == 1:
         return packed[:3], packed[3]
     return packed[..., :3], packed[..., 3]
@@ -319,6 +323,7 @@ def quaternion_from_axis_angle(axis: ArrayLike, angle: ArrayLike) -> FloatArray:
     ------
     ValueError
         Wrong shape, NaN/Inf, or a zero axis.
+
     """
     return call_binary(_quaternion_from_axis_angle_kernel, axis, angle, ('axis', 'angle'),
                        ((3,), ()), (4,), batch_kernel=_quaternion_from_axis_angle_batch_kernel)
@@ -339,6 +344,7 @@ def matrix_from_axis_angle(axis: ArrayLike, angle: ArrayLike) -> FloatArray:
     -------
     ndarray, shape (..., 3, 3)
         Body-to-world rotation matrices.
+
     """
     return call_binary(_matrix_from_axis_angle_kernel, axis, angle, ('axis', 'angle'),
                        ((3,), ()), (3, 3), batch_kernel=_matrix_from_axis_angle_batch_kernel)
@@ -359,6 +365,7 @@ def axis_angle_from_quaternion(q: ArrayLike) -> tuple[FloatArray, FloatArrayOrSc
         Unit rotation axes; ``(1, 0, 0)`` for the identity.
     angle : ndarray, shape (...)
         Angles in [0, pi], ``2 atan2(|q_v|, |q_s|)``: ~1 ulp for every angle.
+
     """
     packed = call_unary(axis_angle_kernel, q, 'q', (4,), (4,))
     return _split_axis_angle(packed)
@@ -385,6 +392,7 @@ def axis_angle_from_matrix(R: ArrayLike, *,
         Unit axes; ``(1, 0, 0)`` for the identity.
     angle : ndarray, shape (...)
         Angles in [0, pi].
+
     """
     packed = convert_matrices(R, orthonormal_tolerance, non_orthonormal, (4,),
                               _axis_angle_from_matrix_kernel, axis_angle_kernel)
@@ -405,6 +413,7 @@ def quaternion_from_rotation_vector(v: ArrayLike) -> FloatArray:
     ndarray, shape (..., 4)
         Unit quaternions (x, y, z, w), canonical; exact to ~1 ulp from
         ``|v| = 0`` (identity) up.
+
     """
     return call_unary(_quaternion_from_rotation_vector_kernel, v, 'v', (3,), (4,),
                       batch_kernel=_quaternion_from_rotation_vector_batch_kernel)
@@ -424,6 +433,7 @@ def matrix_from_rotation_vector(v: ArrayLike) -> FloatArray:
     ndarray, shape (..., 3, 3)
         Body-to-world rotation matrices. Computed through the quaternion, so
         no ``(1 - cos t) / t^2`` cancellation.
+
     """
     return call_unary(_matrix_from_rotation_vector_kernel, v, 'v', (3,), (3, 3),
                       batch_kernel=_matrix_from_rotation_vector_batch_kernel)
@@ -442,6 +452,7 @@ def rotation_vector_from_quaternion(q: ArrayLike) -> FloatArray:
     -------
     ndarray, shape (..., 3)
         Rotation vectors with norm in [0, pi] (the shorter way round).
+
     """
     return call_unary(rotation_vector_kernel, q, 'q', (4,), (3,))
 
@@ -465,6 +476,7 @@ def rotation_vector_from_matrix(R: ArrayLike, *,
     ndarray, shape (..., 3)
         Rotation vectors with norm in [0, pi]; exact near pi, where ``acos``
         of the trace loses everything.
+
     """
     return convert_matrices(R, orthonormal_tolerance, non_orthonormal, (3,),
                             _rotation_vector_from_matrix_kernel, rotation_vector_kernel)

@@ -20,6 +20,7 @@ References
 .. [1] E. Bernardes and S. Viollet, "Quaternion to Euler angles conversion: a
    direct, general and computationally efficient method", PLOS ONE 17(11),
    e0276302, 2022.
+
 """
 from __future__ import annotations
 
@@ -28,17 +29,20 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ._matrix import (DEFAULT_ORTHONORMAL_TOLERANCE, EIGENVECTOR_PENDING, convert_matrices,
-                      quaternion_of_matrix, store_rotation)
-from ._quaternion import (needs_sign_flip, product, quaternion_status, scaled_quaternion,
-                          vector_status)
-from ._runtime import (FLAT_IN, FLAT_OUT, FLOAT, INT, ROWS_IN, ROWS_OUT, STAGE_CHUNK,
-                       call_unary, jit, kernel, matrix_samples, samples)
+from ._matrix import (
+    convert_matrices, DEFAULT_ORTHONORMAL_TOLERANCE, EIGENVECTOR_PENDING, quaternion_of_matrix,
+    store_rotation)
+from ._quaternion import (
+    needs_sign_flip, product, quaternion_status, scaled_quaternion, vector_status)
+from ._runtime import (
+    call_unary, FLAT_IN, FLAT_OUT, FLOAT, INT, jit, kernel, matrix_samples, ROWS_IN, ROWS_OUT,
+    samples, STAGE_CHUNK)
 from ._trigonometry import atan2_in_place_kernel, sin_cos
 from ._validation import EulerSequence, parse_sequence, SEQUENCE_TABLE
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
+
     from ..type_aliases import FloatArray, FloatArrayOrScalar, Quaternion4, Vector3
 
 _TWO_PI = 2.0 * math.pi
@@ -60,7 +64,7 @@ def _elementary(axis, angle):
 @jit
 def quaternion_from_euler_scalar(a1: float, a2: float, a3: float, i: int, j: int, k: int,
                                  intrinsic: bool) -> Quaternion4:
-    """Unit canonical quaternion of Euler angles (radians) about axes i, j, k."""
+    """Return the unit canonical quaternion of Euler angles (radians) about axes i, j, k."""
     e1x, e1y, e1z, e1w = _elementary(i, a1)
     e2x, e2y, e2z, e2w = _elementary(j, a2)
     e3x, e3y, e3z, e3w = _elementary(k, a3)
@@ -104,7 +108,7 @@ def _working_axes(i, j, k, intrinsic):
 @jit
 def _bernardes_viollet_terms(x, y, z, w, i, j, k, intrinsic):
     """
-    The quantities (a, b, c, d) of [1]_ and ``h_ab = |(a, b)|``, ``h_cd = |(c, d)|``.
+    Return the quantities (a, b, c, d) of [1]_ and ``h_ab = |(a, b)|``, ``h_cd = |(c, d)|``.
 
     The quaternion is first rescaled exactly into the range where
     ``sqrt(a^2 + b^2)`` cannot overflow; where it underflows, ``a`` and ``b``
@@ -126,7 +130,7 @@ def _bernardes_viollet_terms(x, y, z, w, i, j, k, intrinsic):
 def euler_atan2_arguments(x: float, y: float, z: float, w: float, i: int, j: int, k: int,
                           intrinsic: bool) -> tuple[Vector3, Vector3]:
     """
-    The three ``atan2`` argument pairs of the conversion: ``(y1, y2, y3), (x1, x2, x3)``.
+    Return the three ``atan2`` argument pairs of the conversion: ``(y1, y2, y3), (x1, x2, x3)``.
 
     ``atan2(y1, x1)`` is half the middle angle (in [0, pi/2]), ``atan2(y2, x2)``
     and ``atan2(y3, x3)`` the half sum and half difference of the outer angles.
@@ -222,7 +226,7 @@ def _matrix_from_euler_kernel(angles, out, convention):
 
 @jit
 def _store_euler(fo, s, x, y, z, w, convention):
-    """Euler angles of ``q`` (radians or degrees, as ``convention`` says) into row ``s`` of ``fo``."""
+    """Write the Euler angles of ``q`` (unit as ``convention`` says) into row ``s`` of ``fo``."""
     i, j, k, intrinsic, degrees = unpack_convention(convention)
     scale = _DEGREES_PER_RADIAN if degrees else 1.0
     a1, a2, a3 = euler_from_quaternion_scalar(x, y, z, w, i, j, k, intrinsic)
@@ -307,7 +311,7 @@ def _singularity_margin_kernel(q, out, convention):
 # ------------------------------------------------------------ public API
 
 def convention_code(spec: EulerSequence) -> int:
-    """One integer for the kernels: ``i | j << 2 | k << 4 | intrinsic << 6`` (degrees: ``| 1 << 7``)."""
+    """Return the kernels' code: ``i | j << 2 | k << 4 | intrinsic << 6`` (degrees: ``| 128``)."""
     i, j, k = spec.axes
     return i | j << 2 | k << 4 | int(spec.intrinsic) << 6
 
@@ -317,7 +321,7 @@ _DEGREES_FLAG = 1 << 7   # angles in degrees rather than radians
 
 
 def _convention(seq: str, degrees: bool = False) -> int:
-    """The kernels' code of ``seq`` and the angle unit; ValueError if ``seq`` is not one of the 24."""
+    """Return the kernels' code of ``seq`` and the angle unit; ValueError for another ``seq``."""
     try:
         code = _CONVENTIONS[seq]
     except (KeyError, TypeError):
@@ -358,6 +362,7 @@ def quaternion_from_euler(angles: ArrayLike, seq: str, *, degrees: bool = False)
     ------
     ValueError
         Wrong shape, NaN/Inf, or an invalid ``seq``.
+
     """
     return _from_angles(angles, seq, degrees, (4,))
 
@@ -380,6 +385,7 @@ def matrix_from_euler(angles: ArrayLike, seq: str, *, degrees: bool = False) -> 
     -------
     ndarray, shape (..., 3, 3)
         Body-to-world rotation matrices.
+
     """
     return _from_angles(angles, seq, degrees, (3, 3))
 
@@ -414,6 +420,7 @@ def euler_from_quaternion(q: ArrayLike, seq: str, *, degrees: bool = False) -> F
     References
     ----------
     .. [1] E. Bernardes and S. Viollet, PLOS ONE 17(11), e0276302, 2022.
+
     """
     return call_unary(_euler_from_quaternion_kernel, q, 'q', (4,), (3,), _convention(seq, degrees),
                       batch_kernel=_euler_from_quaternion_batch_kernel)
@@ -442,6 +449,7 @@ def euler_from_matrix(R: ArrayLike, seq: str, *, degrees: bool = False,
     ndarray, shape (..., 3)
         Angles as in :func:`euler_from_quaternion` (computed through the
         quaternion: no ``asin`` of a matrix element).
+
     """
     return convert_matrices(R, orthonormal_tolerance, non_orthonormal, (3,),
                             _euler_from_matrix_kernel, _euler_from_quaternion_kernel,
@@ -466,5 +474,6 @@ def euler_singularity_margin(q: ArrayLike, seq: str) -> FloatArrayOrScalar:
         (+-pi/2 for Tait-Bryan, 0 or pi for proper Euler), in [0, pi/2];
         exact to an ulp even for tiny margins. Compare with a threshold to flag
         samples whose first and third angles are ill-conditioned.
+
     """
     return call_unary(_singularity_margin_kernel, q, 'q', (4,), (), _convention(seq))

@@ -21,6 +21,7 @@ References
    Rotation Matrix", J. Guidance, Control, and Dynamics 23(6), 2000.
 .. [4] A. Bjorck and C. Bowie, "An Iterative Algorithm for Computing the Best
    Estimate of an Orthogonal Matrix", SIAM J. Numer. Anal. 8(2), 1971.
+
 """
 from __future__ import annotations
 
@@ -29,16 +30,17 @@ from typing import Any, Optional, TYPE_CHECKING
 
 import numpy as np
 
-from ._quaternion import (canonical_kernel, canonical_unit_quaternion, quaternion_status,
-                          scaled_quaternion)
-from ._runtime import (FLAT_IN, FLAT_OUT, FLOAT, ROWS_IN, ROWS_OUT, call_unary, is_batch,
-                       is_single_sample, jit, kernel, kernel_layout, matrix_samples, new_array,
-                       samples, status)
-from ._validation import (NON_FINITE, NOT_ORTHONORMAL, NOT_ROTATION, OK, float_array,
-                          raise_sample_error)
+from ._quaternion import (
+    canonical_kernel, canonical_unit_quaternion, quaternion_status, scaled_quaternion)
+from ._runtime import (
+    call_unary, FLAT_IN, FLAT_OUT, FLOAT, is_batch, is_single_sample, jit, kernel, kernel_layout,
+    matrix_samples, new_array, ROWS_IN, ROWS_OUT, samples, status)
+from ._validation import (
+    float_array, NON_FINITE, NOT_ORTHONORMAL, NOT_ROTATION, OK, raise_sample_error)
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
+
     from ..type_aliases import FloatArray, Matrix9, Quaternion4
 
 DEFAULT_ORTHONORMAL_TOLERANCE = 1e-6
@@ -68,7 +70,7 @@ def store_matrix(fo: FloatArray, s: int, x: float, y: float, z: float, w: float)
 
 @jit
 def store_rotation(fo: FloatArray, s: int, x: float, y: float, z: float, w: float) -> None:
-    """Write ``q`` into row ``s`` of ``fo``: as it is if ``fo`` is (n, 4), as ``R(q)`` if (n, 9)."""
+    """Write ``q`` into row ``s`` of ``fo``: as it is if ``fo`` is (n, 4), ``R(q)`` if (n, 9)."""
     if fo.shape[1] == 9:
         store_matrix(fo, s, x, y, z, w)
     else:
@@ -115,7 +117,7 @@ def matrix_defect(m: Matrix9) -> int:
 
 @jit
 def gram_entries(m: Matrix9) -> tuple[float, float, float, float, float, float]:
-    """The six distinct entries of ``m^T m`` (9-tuple): g00, g11, g22, g01, g02, g12."""
+    """Return the six distinct entries of ``m^T m`` (9-tuple): g00, g11, g22, g01, g02, g12."""
     m00, m01, m02, m10, m11, m12, m20, m21, m22 = m
     return (m00 * m00 + m10 * m10 + m20 * m20,
             m01 * m01 + m11 * m11 + m21 * m21,
@@ -140,7 +142,7 @@ def orthonormality_deviation(m: Matrix9) -> float:
 
 @jit
 def newton_schulz_step(m: Matrix9, g: tuple[float, float, float, float, float, float]) -> Matrix9:
-    """One step ``X <- X (3 I - X^T X) / 2`` of Bjorck and Bowie's iteration; ``g``: X^T X's entries."""
+    """Take one step ``X <- X (3 I - X^T X) / 2`` of Bjorck and Bowie's iteration (g: X^T X)."""
     m00, m01, m02, m10, m11, m12, m20, m21, m22 = m
     g00, g11, g22, g01, g02, g12 = g
     w00, w11, w22 = 1.5 - 0.5 * g00, 1.5 - 0.5 * g11, 1.5 - 0.5 * g22
@@ -270,6 +272,7 @@ def nearest_rotation_quaternions(m: FloatArray) -> FloatArray:
     -------
     ndarray, shape (n, 4)
         Unit quaternions (x, y, z, w), canonical.
+
     """
     m00, m01, m02 = m[:, 0, 0], m[:, 0, 1], m[:, 0, 2]
     m10, m11, m12 = m[:, 1, 0], m[:, 1, 1], m[:, 1, 2]
@@ -312,19 +315,21 @@ def matrix_from_quaternion(q: ArrayLike) -> FloatArray:
     ------
     ValueError
         Wrong shape, a NaN/Inf component, or a zero quaternion.
+
     """
     return call_unary(_matrix_from_quaternion_kernel, q, 'q', (4,), (3, 3))
 
 
 def _kernel_tolerance(orthonormal_tolerance, non_orthonormal):
-    """The kernels' ``tolerance``: the deviation beyond which a matrix is an error."""
+    """Return the kernels' ``tolerance``: the deviation beyond which a matrix is an error."""
     try:
         valid = bool(orthonormal_tolerance >= 0.0)
     except (TypeError, ValueError):   # not a number, or an array
         valid = False
     if not valid:
         raise ValueError(
-            f'Expected `orthonormal_tolerance` to be a number >= 0, got {orthonormal_tolerance!r}.')
+            'Expected `orthonormal_tolerance` to be a number >= 0, got '
+            f'{orthonormal_tolerance!r}.')
     if type(non_orthonormal) is str:
         if non_orthonormal == 'project':
             return math.inf
@@ -338,7 +343,7 @@ def convert_matrices(R: ArrayLike, orthonormal_tolerance: float, non_orthonormal
                      out_trailing: tuple[int, ...], fused_kernel: Any, quaternion_kernel: Any,
                      convention: Optional[int] = None, batch_kernel: Any = None) -> Any:
     """
-    The body of every ``*_from_matrix`` conversion: a kernel on the quaternions of ``R``.
+    Return the body of every ``*_from_matrix`` conversion: a kernel on the quaternions of ``R``.
 
     Parameters
     ----------
@@ -369,6 +374,7 @@ def convert_matrices(R: ArrayLike, orthonormal_tolerance: float, non_orthonormal
     -------
     ndarray
         ``R``'s leading shape followed by ``out_trailing``.
+
     """
     tolerance = _kernel_tolerance(orthonormal_tolerance, non_orthonormal)
     if is_single_sample(R, (3, 3)):   # already in the canonical layout, as is its result
@@ -459,6 +465,7 @@ def quaternion_from_matrix(R: ArrayLike, *,
     .. [1] F. L. Markley, "Unit Quaternion from Rotation Matrix", JGCD 31(2), 2008.
     .. [2] I. Y. Bar-Itzhack, "New Method for Extracting the Quaternion from a
        Rotation Matrix", JGCD 23(6), 2000.
+
     """
     return convert_matrices(R, orthonormal_tolerance, non_orthonormal, (4,),
                             quaternion_from_matrix_kernel, None)

@@ -17,12 +17,13 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from ._runtime import (FLAT_IN, FLAT_OUT, call_binary, call_unary, first_status, jit, kernel,
-                       samples, status)
+from ._runtime import (
+    call_binary, call_unary, first_status, FLAT_IN, FLAT_OUT, jit, kernel, samples, status)
 from ._validation import NON_FINITE, OK, ZERO_NORM
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
+
     from ..type_aliases import FloatArray, FloatArrayOrScalar, Quaternion4, Vector3
 
 
@@ -58,7 +59,7 @@ def binary_exponent(m: float) -> int:
 @jit
 def scaled_quaternion(x: float, y: float, z: float, w: float) -> Quaternion4:
     """
-    The same quaternion, rescaled exactly so that sums of squares neither over- nor underflow.
+    Return the quaternion rescaled exactly so that sums of squares neither over- nor underflow.
 
     Unchanged when the largest component is within [2^-500, 2^500]; otherwise
     scaled by a power of two (exact, subnormals included) to [0.5, 1).
@@ -91,7 +92,8 @@ def needs_sign_flip(x: float, y: float, z: float, w: float) -> bool:
     Canonical: w > 0, or w == 0 and the first non-zero of x, y, z > 0. The rule
     makes the output unique: q and -q map to the same result.
     """
-    return w < 0.0 or (w == 0.0 and (x < 0.0 or (x == 0.0 and (y < 0.0 or (y == 0.0 and z < 0.0)))))
+    return w < 0.0 or (w == 0.0 and (
+        x < 0.0 or (x == 0.0 and (y < 0.0 or (y == 0.0 and z < 0.0)))))
 
 
 @jit
@@ -104,7 +106,7 @@ def unit_quaternion(x: float, y: float, z: float, w: float) -> Quaternion4:
 
 @jit
 def canonical_unit_quaternion(x: float, y: float, z: float, w: float) -> Quaternion4:
-    """Unit quaternion with the canonical sign (see :func:`needs_sign_flip`)."""
+    """Return the unit quaternion with the canonical sign (see :func:`needs_sign_flip`)."""
     x, y, z, w = unit_quaternion(x, y, z, w)
     if needs_sign_flip(x, y, z, w):
         x, y, z, w = -x, -y, -z, -w
@@ -267,6 +269,7 @@ def quaternion_product(p: ArrayLike, q: ArrayLike) -> FloatArray:
     ------
     ValueError
         Wrong shape, a NaN/Inf component, or a zero quaternion.
+
     """
     return call_binary(_product_kernel, p, q, ('p', 'q'), ((4,), (4,)), (4,))
 
@@ -284,13 +287,14 @@ def quaternion_conjugate(q: ArrayLike) -> FloatArray:
     -------
     ndarray, shape (..., 4)
         The conjugates (same norm as ``q``).
+
     """
     return call_unary(_conjugate_kernel, q, 'q', (4,), (4,))
 
 
 def canonical_quaternion(q: ArrayLike) -> FloatArray:
     """
-    Unit quaternion with ``w >= 0`` representing the same rotation.
+    Return the unit quaternion with ``w >= 0`` representing the same rotation.
 
     Parameters
     ----------
@@ -303,6 +307,7 @@ def canonical_quaternion(q: ArrayLike) -> FloatArray:
         ``q / |q|`` with the sign chosen so that ``w > 0``; where ``w == 0``
         the first non-zero of x, y, z is positive. ``q`` and ``-q`` give the
         same result.
+
     """
     return call_unary(canonical_kernel, q, 'q', (4,), (4,))
 
@@ -322,6 +327,7 @@ def quaternion_distance(p: ArrayLike, q: ArrayLike) -> FloatArrayOrScalar:
         ``2 atan2(|vec(p* q)|, |scalar(p* q)|)`` in [0, pi]: the angle of the
         rotation that takes ``p`` to ``q``. Accurate to ~1 ulp down to 0 (an
         ``acos`` form floors at ~1e-8). ``p`` and ``-p`` are the same rotation.
+
     """
     return call_binary(_distance_kernel, p, q, ('p', 'q'), ((4,), (4,)), ())
 
@@ -342,5 +348,6 @@ def rotate_vector(q: ArrayLike, v: ArrayLike) -> FloatArray:
     ndarray, shape (..., 3)
         The rotated vectors. With ``q`` body-to-world, this maps body
         coordinates to world coordinates (e.g. ``w_world = R w_body``).
+
     """
     return call_binary(_rotate_kernel, q, v, ('q', 'v'), ((4,), (3,)), (3,))

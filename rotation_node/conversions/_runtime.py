@@ -38,15 +38,16 @@ import os
 import threading
 from typing import Any, Callable, Optional, Sequence, TYPE_CHECKING, TypeGuard
 
-import numpy as np
 from numba import njit, types
 from numba.core.errors import RequireLiteralValue, TypingError
 from numba.extending import intrinsic, overload
+import numpy as np
 
 from ._validation import broadcast_pair, float_array, raise_sample_error
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
+
     from ..type_aliases import FloatArray
 
 # Every compiled function is inlined into its callers (numba IR inlining, not
@@ -64,7 +65,7 @@ _cached_jit = njit(cache=True, nogil=True, error_model='numpy', inline='always')
 # ------------------------------------------------------------ kernel types
 
 def array_type(ndim: int, dtype: Any = types.float64) -> Any:
-    """The numba type of a C-contiguous, aligned, writable kernel argument."""
+    """Return the numba type of a C-contiguous, aligned, writable kernel argument."""
     return types.Array(dtype, ndim, 'C')
 
 
@@ -115,6 +116,7 @@ def kernel(*argument_types: Any,
         the declared signature (or loads it from the disk cache) and then
         disables compilation, so a call with other types raises ``TypeError``
         instead of compiling again.
+
     """
     signature = (types.none if returns is None else returns)(*argument_types)
 
@@ -145,6 +147,7 @@ def compile_kernels(kernels: Optional[Sequence[Any]] = None) -> int:
     -------
     int
         How many kernels were compiled or loaded.
+
     """
     kernels = KERNELS if kernels is None else kernels
     for dispatcher in kernels:
@@ -155,7 +158,7 @@ def compile_kernels(kernels: Optional[Sequence[Any]] = None) -> int:
 # ------------------------------------------------------------ sample views
 
 def kernel_layout(a: FloatArray, trailing: tuple[int, ...]) -> FloatArray:
-    """The canonical layout (a view) of the C-contiguous ``a`` of samples of shape ``trailing``."""
+    """Return the canonical layout (a view) of C-contiguous samples ``a`` of shape ``trailing``."""
     if len(trailing) <= 1:
         return a.reshape(-1)
     return a.reshape((-1,) + trailing[1:])
@@ -194,7 +197,7 @@ def _stack_view(typingctx, a, rows, columns):
 
 def samples(a: FloatArray, width: int) -> FloatArray:
     """
-    The canonical ``a`` as a stack of samples: shape ``(n, width)``, or ``(n,)`` for width 0.
+    Return the canonical ``a`` as a stack of samples, shape ``(n, width)`` (``(n,)``: width 0).
 
     How kernels see their flat arguments. In compiled code (the overload
     below) the view costs nothing: no copy and no call. ``width`` must be a
@@ -212,7 +215,7 @@ def _samples_overload(a, width):
 
 
 def matrix_samples(a: FloatArray) -> FloatArray:
-    """The canonical matrices ``a`` (3 n, 3), or any C-contiguous 9 n values, as (n, 3, 3)."""
+    """Return the matrices ``a`` (3 n, 3), or any C-contiguous 9 n values, as (n, 3, 3)."""
     return a.reshape(-1, 3, 3)
 
 
@@ -231,7 +234,7 @@ def status(sample: int, argument: int, code: int) -> int:
 
 @jit
 def first_status(a: int, b: int) -> int:
-    """The first of two statuses that reports a bad sample (-1 if neither does)."""
+    """Return the first of two statuses that reports a bad sample (-1 if neither does)."""
     return a if a >= 0 else b
 
 
@@ -269,6 +272,7 @@ def set_threads(n: int) -> None:
         1 runs everything in the calling thread. The default is the number of
         CPUs this process may use, or the environment variable
         ``ROTATION_NODE_THREADS``.
+
     """
     global _threads, _pool
     if int(n) < 1:

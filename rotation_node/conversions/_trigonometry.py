@@ -124,7 +124,7 @@ def sin_cos(a: float) -> tuple[float, float]:
 @jit
 def sin_cos_in_place_kernel(a: FloatArray, cos_out: FloatArray) -> None:
     """
-    ``a <- sin(a)``, ``cos_out <- cos(a)`` for 1-d float64 arrays of finite angles.
+    Compute ``a <- sin(a)``, ``cos_out <- cos(a)`` for 1-d float64 arrays of finite angles.
 
     The batch form of :func:`sin_cos`, same results: one vectorised loop
     (no calls, no branches) unless some ``|a| > REDUCTION_LIMIT``.
@@ -142,7 +142,7 @@ def sin_cos_in_place_kernel(a: FloatArray, cos_out: FloatArray) -> None:
 
 @intrinsic
 def fused_multiply_add(typingctx: Any, a: Any, b: Any, c: Any) -> tuple[Any, Callable[..., Any]]:
-    """``a * b + c`` rounded once (LLVM's ``fma``; a C library call on CPUs without FMA)."""
+    """Return ``a * b + c`` rounded once (LLVM's ``fma``; a C library call without FMA)."""
     signature = types.float64(types.float64, types.float64, types.float64)
 
     def codegen(context, builder, signature, args):
@@ -220,7 +220,9 @@ def _reduced_atan_argument(ax, ay):
 @jit
 def atan2(y: float, x: float) -> float:
     """
-    ``atan2(y, x)`` of finite ``y`` and ``x`` to 0.8 ulp, without calls or branches.
+    Return the arc tangent of ``y / x`` in the quadrant of ``(x, y)``, to 0.8 ulp, branch-free.
+
+    ``y`` and ``x`` finite.
 
     See the module for the method. Values and signed zeros as C's ``atan2``.
     """

@@ -18,6 +18,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
+
     from ..type_aliases import FloatArray
 
 
@@ -62,6 +63,7 @@ def float_array(x: ArrayLike, name: str, trailing: tuple[int, ...]) -> FloatArra
     ------
     ValueError
         If ``x`` is not numeric or its shape does not end in ``trailing``.
+
     """
     try:
         a = np.asarray(x, dtype=np.float64)
@@ -77,7 +79,7 @@ def float_array(x: ArrayLike, name: str, trailing: tuple[int, ...]) -> FloatArra
 
 
 def kernel_ready(a: NDArray[Any]) -> FloatArray:
-    """``a`` itself if C-contiguous, aligned and writable (as kernels take it), else such a copy."""
+    """Return ``a`` if C-contiguous, aligned and writable (as kernels take it), else a copy."""
     return a if a.flags.carray else np.array(a, order='C')
 
 
@@ -90,6 +92,7 @@ def broadcast_pair(a: FloatArray, b: FloatArray, trailing_a: tuple[int, ...],
     -------
     a, b : ndarray
         C-contiguous, with a common leading shape (unchanged when it already was).
+
     """
     lead_a = a.shape[:a.ndim - len(trailing_a)]
     lead_b = b.shape[:b.ndim - len(trailing_b)]
@@ -110,7 +113,8 @@ def raise_sample_error(status: int, names: Sequence[str], arrays: Sequence[NDArr
     flat_index, argument, code = status >> 4, (status >> 3) & 1, status & 7
     array, trailing = arrays[argument], trailings[argument]
     lead = array.shape[:array.ndim - len(trailing)]
-    where = '' if lead == () else f' at index {tuple(int(i) for i in np.unravel_index(flat_index, lead))}'
+    index = tuple(int(i) for i in np.unravel_index(flat_index, lead)) if lead else ()
+    where = f' at index {index}' if lead else ''
     raise ValueError(f'`{names[argument]}`{where} {_DEFECT_TEXT[code]}.')
 
 
@@ -129,6 +133,7 @@ class EulerSequence(NamedTuple):
     proper : bool
         True for proper Euler sequences (first axis == third axis, e.g. ``'ZXZ'``),
         False for Tait-Bryan sequences (three different axes, e.g. ``'xyz'``).
+
     """
 
     name: str
@@ -174,6 +179,7 @@ def parse_sequence(seq: object) -> EulerSequence:
     ------
     ValueError
         If ``seq`` is not one of the 24 conventions; the message says why.
+
     """
     parsed = SEQUENCE_TABLE.get(seq) if isinstance(seq, str) else None
     if parsed is not None:

@@ -29,15 +29,16 @@ Scalar formulas (compiled, inlined; tuples in, tuples out)
 Kernels
     :func:`canonical_kernel`: canonical unit quaternions of flat quaternions.
 """
-from ._axis_angle import (quaternion_from_rotation_vector_scalar,
-                          rotation_vector_from_quaternion_scalar)
+from ._axis_angle import (
+    quaternion_from_rotation_vector_scalar, rotation_vector_from_quaternion_scalar)
 from ._matrix import matrix_at, matrix_defect
-from ._quaternion import (canonical_kernel, canonical_unit_quaternion, product, quaternion_status,
-                          scaled_quaternion, unit_quaternion, vector_status)
-from ._runtime import (BOOL, FLAT_IN, FLAT_OUT, FLOAT, INT, ROWS_IN, ROWS_OUT, array_type,
-                       call_binary, first_status, jit, kernel, kernel_layout, matrix_samples,
-                       samples, status)
-from ._validation import NON_FINITE, OK, float_array, kernel_ready, raise_sample_error
+from ._quaternion import (
+    canonical_kernel, canonical_unit_quaternion, product, quaternion_status, scaled_quaternion,
+    unit_quaternion, vector_status)
+from ._runtime import (
+    array_type, BOOL, call_binary, first_status, FLAT_IN, FLAT_OUT, FLOAT, INT, jit, kernel,
+    kernel_layout, matrix_samples, ROWS_IN, ROWS_OUT, samples, status)
+from ._validation import float_array, kernel_ready, NON_FINITE, OK, raise_sample_error
 
 __all__ = [
     'BOOL', 'FLAT_IN', 'FLAT_OUT', 'FLOAT', 'INT', 'NON_FINITE', 'OK', 'ROWS_IN', 'ROWS_OUT',

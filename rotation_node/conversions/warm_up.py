@@ -20,9 +20,10 @@ def warm_up() -> int:
     -------
     int
         The number of kernels.
+
     """
-    from .. import kinematics  # noqa: F401  (declares its kernels)
     from ._runtime import compile_kernels
+    from .. import kinematics  # noqa: F401  (declares its kernels)
     return compile_kernels()
 
 

@@ -16,13 +16,14 @@ either body ``w_b`` or world ``w_w = R w_b``, with
 The seed page's ``dq_v/dt = 1/2 (q_s w - q_v x w)`` is the WORLD-frame formula
 although it is labelled body, and its ``Omega = Rdot R^T`` is ``[w_w]x``.
 """
-from ._derivatives import (angular_velocity_from_matrix_derivative,
-                           angular_velocity_from_quaternion_derivative, matrix_derivative,
-                           quaternion_derivative)
-from ._euler_rates import (DEFAULT_SINGULARITY_THRESHOLD, EulerSingularityWarning,
-                           angular_velocity_from_euler_rates, euler_rates_from_angular_velocity)
+from ._derivatives import (
+    angular_velocity_from_matrix_derivative, angular_velocity_from_quaternion_derivative,
+    matrix_derivative, quaternion_derivative)
+from ._euler_rates import (
+    angular_velocity_from_euler_rates, DEFAULT_SINGULARITY_THRESHOLD,
+    euler_rates_from_angular_velocity, EulerSingularityWarning)
 from ._finite_difference import angular_velocity_from_quaternions
-from ._integration import INTEGRATION_METHODS, integrate_angular_velocity
+from ._integration import integrate_angular_velocity, INTEGRATION_METHODS
 
 __all__ = [
     'DEFAULT_SINGULARITY_THRESHOLD', 'EulerSingularityWarning', 'INTEGRATION_METHODS',

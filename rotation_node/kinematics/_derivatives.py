@@ -23,21 +23,22 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from ..conversions.kernels import (BOOL, FLAT_IN, FLAT_OUT, NON_FINITE, OK, ROWS_IN, ROWS_OUT,
-                                   call_binary, first_status, jit, kernel, matrix_at,
-                                   matrix_defect, matrix_samples, product, quaternion_status,
-                                   samples, status, unit_quaternion, vector_status)
 from ._validation import is_world_frame
+from ..conversions.kernels import (
+    BOOL, call_binary, first_status, FLAT_IN, FLAT_OUT, jit, kernel, matrix_at, matrix_defect,
+    matrix_samples, NON_FINITE, OK, product, quaternion_status, ROWS_IN, ROWS_OUT, samples, status,
+    unit_quaternion, vector_status)
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
-    from ..type_aliases import FloatArray
 
+    from ..type_aliases import FloatArray
 
 # ----------------------------------------------------------------- kernels
 # As in conversions: validated C-contiguous inputs with a common leading shape,
 # a preallocated output; the return value is the status of the first bad
 # sample, or -1.
+
 
 @jit
 def _matrix_status(fm, s, argument):
@@ -166,9 +167,10 @@ def quaternion_derivative(q: ArrayLike, omega: ArrayLike, frame: str = 'body') -
     ValueError
         Bad ``frame``; wrong shape, NaN/Inf or zero quaternion, naming the
         argument and the sample.
+
     """
     return call_binary(_quaternion_derivative_kernel, q, omega, ('q', 'omega'), ((4,), (3,)), (4,),
-                     is_world_frame(frame))
+                       is_world_frame(frame))
 
 
 def angular_velocity_from_quaternion_derivative(q: ArrayLike, q_dot: ArrayLike,
@@ -200,9 +202,10 @@ def angular_velocity_from_quaternion_derivative(q: ArrayLike, q_dot: ArrayLike,
     ------
     ValueError
         Bad ``frame``; wrong shape, NaN/Inf, zero ``q``.
+
     """
     return call_binary(_angular_velocity_from_quaternion_derivative_kernel, q, q_dot,
-                     ('q', 'q_dot'), ((4,), (4,)), (3,), is_world_frame(frame))
+                       ('q', 'q_dot'), ((4,), (4,)), (3,), is_world_frame(frame))
 
 
 def matrix_derivative(R: ArrayLike, omega: ArrayLike, frame: str = 'body') -> FloatArray:
@@ -229,9 +232,10 @@ def matrix_derivative(R: ArrayLike, omega: ArrayLike, frame: str = 'body') -> Fl
     ------
     ValueError
         Bad ``frame``; wrong shape, NaN/Inf, ``det(R) <= 0``.
+
     """
     return call_binary(_matrix_derivative_kernel, R, omega, ('R', 'omega'), ((3, 3), (3,)), (3, 3),
-                     is_world_frame(frame))
+                       is_world_frame(frame))
 
 
 def angular_velocity_from_matrix_derivative(R: ArrayLike, R_dot: ArrayLike,
@@ -262,6 +266,7 @@ def angular_velocity_from_matrix_derivative(R: ArrayLike, R_dot: ArrayLike,
     ------
     ValueError
         Bad ``frame``; wrong shape, NaN/Inf, ``det(R) <= 0``.
+
     """
     return call_binary(_angular_velocity_from_matrix_derivative_kernel, R, R_dot,
-                     ('R', 'R_dot'), ((3, 3), (3, 3)), (3,), is_world_frame(frame))
+                       ('R', 'R_dot'), ((3, 3), (3, 3)), (3,), is_world_frame(frame))

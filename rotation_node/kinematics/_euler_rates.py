@@ -39,6 +39,7 @@ References
 ----------
 .. [1] J. Diebel, "Representing Attitude: Euler Angles, Unit Quaternions, and
    Rotation Vectors", Stanford University, 2006.
+
 """
 from __future__ import annotations
 
@@ -48,13 +49,15 @@ import warnings
 
 import numpy as np
 
-from ..conversions import parse_sequence
-from ..conversions.kernels import (BOOL, FLAT_IN, FLAT_OUT, FLOAT, INT, array_type, call_binary,
-                                   first_status, jit, kernel, samples, vector_status)
 from ._validation import is_world_frame
+from ..conversions import parse_sequence
+from ..conversions.kernels import (
+    array_type, BOOL, call_binary, first_status, FLAT_IN, FLAT_OUT, FLOAT, INT, jit, kernel,
+    samples, vector_status)
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
+
     from ..type_aliases import FloatArray
 
 #: Default ``singularity_threshold`` (rad), ~sqrt(eps): closer to gimbal lock
@@ -185,9 +188,11 @@ def angular_velocity_from_euler_rates(angles: ArrayLike, rates: ArrayLike, seq: 
     ------
     ValueError
         Bad ``seq`` or ``frame``; wrong shape or NaN/Inf, naming the argument.
+
     """
     return call_binary(_angular_velocity_kernel, angles, rates, ('angles', 'rates'), ((3,), (3,)),
-                     (3,), *_jacobian_axes(seq, frame), _RADIANS_PER_DEGREE if degrees else 1.0)
+                       (3,), *_jacobian_axes(seq, frame),
+                       _RADIANS_PER_DEGREE if degrees else 1.0)
 
 
 def euler_rates_from_angular_velocity(
@@ -233,6 +238,7 @@ def euler_rates_from_angular_velocity(
     ValueError
         Bad ``seq``, ``frame`` or ``singularity_threshold``; wrong shape or
         NaN/Inf, naming the argument.
+
     """
     axes = _jacobian_axes(seq, frame)
     try:
@@ -244,7 +250,8 @@ def euler_rates_from_angular_velocity(
                          f'got {singularity_threshold!r}.')
     singular = np.zeros(1, dtype=np.int64)
     out = call_binary(_euler_rates_kernel, angles, omega, ('angles', 'omega'), ((3,), (3,)), (3,),
-                    *axes, _RADIANS_PER_DEGREE if degrees else 1.0, math.sin(threshold), singular)
+                      *axes, _RADIANS_PER_DEGREE if degrees else 1.0, math.sin(threshold),
+                      singular)
     if singular[0]:
         warnings.warn(
             f'{singular[0]} of {out.size // 3} samples are within {threshold:g} rad of gimbal '

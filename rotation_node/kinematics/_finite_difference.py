@@ -15,14 +15,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..conversions.kernels import (BOOL, FLAT_IN, FLAT_OUT, float_array, kernel, product,
-                                   quaternion_status, raise_sample_error,
-                                   rotation_vector_from_quaternion_scalar, samples,
-                                   scaled_quaternion)
 from ._validation import is_world_frame, sample_times
+from ..conversions.kernels import (
+    BOOL, FLAT_IN, FLAT_OUT, float_array, kernel, product, quaternion_status, raise_sample_error,
+    rotation_vector_from_quaternion_scalar, samples, scaled_quaternion)
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
+
     from ..type_aliases import FloatArray
 
 
@@ -87,6 +87,7 @@ def angular_velocity_from_quaternions(q: ArrayLike, t: ArrayLike,
     ValueError
         Bad ``frame``; ``q`` not (..., N, 4) or with a NaN/Inf or zero
         sample; ``t`` of the wrong shape, non-finite or not strictly increasing.
+
     """
     world = is_world_frame(frame)
     a = float_array(q, 'q', (4,))

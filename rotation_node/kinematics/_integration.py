@@ -39,6 +39,7 @@ References
    equations in Lie groups", Phil. Trans. R. Soc. A 357, 1999.
 .. [2] R. B. Miller, "A new strapdown attitude algorithm", J. Guidance,
    Control, and Dynamics 6(4), 1983.
+
 """
 from __future__ import annotations
 
@@ -47,15 +48,16 @@ from typing import Callable, TYPE_CHECKING
 
 import numpy as np
 
-from ..conversions.kernels import (FLAT_IN, INT, ROWS_IN, array_type, canonical_kernel,
-                                   canonical_unit_quaternion, float_array, jit, kernel,
-                                   kernel_ready, product, quaternion_from_rotation_vector_scalar,
-                                   raise_sample_error)
 from ._stage_rates import stage_rates
 from ._validation import is_world_frame, sample_times
+from ..conversions.kernels import (
+    array_type, canonical_kernel, canonical_unit_quaternion, FLAT_IN, float_array, INT, jit,
+    kernel, kernel_ready, product, quaternion_from_rotation_vector_scalar, raise_sample_error,
+    ROWS_IN)
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
+
     from ..type_aliases import FloatArray
 
 _GAUSS = math.sqrt(3.0) / 6.0  # Gauss-Legendre nodes on [0, 1]: 1/2 -+ sqrt(3)/6
@@ -134,7 +136,7 @@ def _integrate_kernel(q0, rates, h, out, method):
 
 
 def _broadcast(a, shape):
-    """``a`` broadcast to ``shape``, C-contiguous and writable: a copy only where needed."""
+    """Return ``a`` broadcast to ``shape``, C-contiguous and writable: a copy only where needed."""
     return kernel_ready(a if a.shape == shape else np.broadcast_to(a, shape))
 
 
@@ -182,6 +184,7 @@ def integrate_angular_velocity(q0: ArrayLike,
     ValueError
         Unknown ``method`` or ``frame``; bad ``q0``, ``t`` or ``omega``
         (wrong shape, NaN/Inf, zero quaternion, times not increasing).
+
     """
     try:
         code, nodes = _METHODS[method]

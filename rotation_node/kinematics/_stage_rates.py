@@ -19,6 +19,7 @@ from ..conversions.kernels import float_array
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
+
     from ..type_aliases import FloatArray
 
 
@@ -32,6 +33,7 @@ def _lagrange_stencils(t, h, nodes):
         Sample indices used for step ``k`` (``P = min(N, 4)``).
     weights : ndarray, shape (K, S, P)
         The rate at ``t_k + nodes[s] h_k`` is ``sum_p weights[k, s, p] omega[stencil[k, p]]``.
+
     """
     n = t.shape[0]
     points = min(n, 4)
@@ -84,6 +86,7 @@ def stage_rates(omega: ArrayLike | Callable[[FloatArray], ArrayLike], t: FloatAr
     ValueError
         Samples of the wrong shape or with a NaN/Inf; a function whose result
         has the wrong shape or a NaN/Inf (naming the time).
+
     """
     steps, stages = h.shape[0], nodes.shape[0]
     if callable(omega):

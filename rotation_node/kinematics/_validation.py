@@ -18,7 +18,9 @@ from ..conversions.kernels import FLAT_IN, FLAT_OUT, kernel, kernel_ready
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
+
     from ..type_aliases import FloatArray
+
 
 def is_world_frame(frame: object) -> bool:
     """
@@ -39,6 +41,7 @@ def is_world_frame(frame: object) -> bool:
     ------
     ValueError
         If ``frame`` is anything else.
+
     """
     if frame == 'body':
         return False
@@ -74,6 +77,7 @@ def sample_times(t: ArrayLike, n_samples: Optional[int] = None,
     ValueError
         Fewer than two samples; ``t`` not numeric, not of shape (N,), with a
         NaN/Inf, or not strictly increasing (naming the first offending pair).
+
     """
     try:
         t = np.asarray(t, dtype=np.float64)

@@ -7,9 +7,9 @@ seed)`` returns the truth and sensor arrays (:mod:`.motions`, :mod:`.effects`),
 The command line is ``rotation_scene`` (:mod:`.cli`).
 """
 from .effects import SensorStream
-from .simulator import (Simulation, sample_stamps_ns, simulate, simulate_blocks, write_bag,
-                        write_scene_bag)
-from .spec import Scene, load_scene, scene_from_dict
+from .simulator import (
+    sample_stamps_ns, simulate, simulate_blocks, Simulation, write_bag, write_scene_bag)
+from .spec import load_scene, Scene, scene_from_dict
 
 __all__ = ['Scene', 'SensorStream', 'Simulation', 'load_scene', 'sample_stamps_ns',
            'scene_from_dict', 'simulate', 'simulate_blocks', 'write_bag', 'write_scene_bag']

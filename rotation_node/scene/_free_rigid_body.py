@@ -20,6 +20,7 @@ H. Yoshida, "Construction of higher order symplectic integrators",
 Phys. Lett. A 150, 262 (1990).
 F. Fasso, "Comparison of splitting algorithms for the rigid body",
 J. Comput. Phys. 189, 527 (2003).
+
 """
 from __future__ import annotations
 
@@ -120,6 +121,7 @@ def integrate(q0: FloatArray, momentum0: FloatArray, momentum_norm: float,
         Unit quaternions, continuous in sign.
     momentum : ndarray, shape (n, 3)
         Body angular momentum, ``|L|`` equal to ``momentum_norm``.
+
     """
     n = t.shape[0]
     q_out = np.empty((n, 4))

@@ -36,7 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('output', help='bag to write: a rosbag2 directory, or a single MCAP '
                                        'file if it ends in .mcap, e.g. coning.mcap')
     parser.add_argument('--seed', type=_seed, default=0,
-                        help='seed of the effects\' random draws (default 0); the same scene '
+                        help="seed of the effects' random draws (default 0); the same scene "
                              'and seed give a byte-identical bag')
     parser.add_argument('--force', action='store_true', help='replace the output if it exists')
     return parser
@@ -49,8 +49,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         interrupt_on_stop_signals()
         # Imported here: a Ctrl-C while numpy and rclpy load is then one line too.
         from rotation_node.bag.output import BagOutput
+
         from .simulator import write_scene_bag
         from .spec import load_scene
+
         # Checked again when the bag is opened; here it saves loading the scene for nothing.
         BagOutput.check_absent(args.output, overwrite=args.force)
         scene = load_scene(args.scene)

@@ -38,12 +38,12 @@ import dataclasses
 from typing import Any, Callable, Mapping, TYPE_CHECKING
 
 import numpy as np
-
 from rotation_node.conversions import quaternion_from_rotation_vector, quaternion_product
 from rotation_node.stamps import NS_PER_S as _NS_PER_S
 
-from .spec import (DroppedMessages, GyroBias, GyroNoise, NanBursts, NonUnitQuaternions,
-                   OrientationNoise, OrientationUnknown, QuaternionSignFlips, TimestampJitter)
+from .spec import (
+    DroppedMessages, GyroBias, GyroNoise, NanBursts, NonUnitQuaternions, OrientationNoise,
+    OrientationUnknown, QuaternionSignFlips, TimestampJitter)
 
 if TYPE_CHECKING:
     from rotation_node.type_aliases import BoolArray, FloatArray, IntArray
@@ -73,6 +73,7 @@ class SensorStream:
         "no estimate".
     published : ndarray of bool, shape (n,)
         Whether the sample's sensor message is written.
+
     """
 
     time: np.ndarray
@@ -288,6 +289,7 @@ class EffectsStream:
         Effect parameters by name (``Scene.effects``).
     seed : int
         Scene seed, >= 0.
+
     """
 
     def __init__(self, effects: Mapping[str, object], seed: int) -> None:
@@ -323,5 +325,6 @@ def apply_effects(stream: SensorStream, effects: Mapping[str, object],
     stream : SensorStream
     changed : dict of str to ndarray of bool, shape (n,)
         For each applied effect, the samples it changed.
+
     """
     return EffectsStream(effects, seed).apply(stream)

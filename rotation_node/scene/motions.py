@@ -25,9 +25,8 @@ import math
 from typing import Optional, TYPE_CHECKING
 
 import numpy as np
-
-from rotation_node.conversions import (quaternion_from_euler, quaternion_from_rotation_vector,
-                                       quaternion_product)
+from rotation_node.conversions import (
+    quaternion_from_euler, quaternion_from_rotation_vector, quaternion_product)
 from rotation_node.kinematics import angular_velocity_from_euler_rates
 
 from . import _free_rigid_body
@@ -51,6 +50,7 @@ def sign_continuous(q: FloatArray) -> FloatArray:
     -------
     ndarray, shape (n, 4)
         ``+-q[k]``, the same rotations.
+
     """
     return _continue_signs(q, None, 1.0)[0]
 
@@ -92,6 +92,7 @@ def constant_rate_truth(orientation: ArrayLike, angular_velocity: ArrayLike,
     -------
     q : ndarray, shape (n, 4)
     w : ndarray, shape (n, 3)
+
     """
     q, w = _constant_rate_unsigned(orientation, angular_velocity, t)
     # exp(w t) comes back canonical (scalar >= 0); undo the jump at |w| t = pi.
@@ -127,6 +128,7 @@ def coning_truth(half_angle: float, frequency: float,
     -------
     q : ndarray, shape (n, 4)
     w : ndarray, shape (n, 3)
+
     """
     phase = frequency * np.asarray(t, dtype=np.float64)
     cos_phase, sin_phase = np.cos(phase), np.sin(phase)
@@ -171,6 +173,7 @@ def torque_free_truth(inertia: ArrayLike, orientation: ArrayLike, angular_veloci
     -------
     q : ndarray, shape (n, 4)
     w : ndarray, shape (n, 3)
+
     """
     t = np.ascontiguousarray(t, dtype=np.float64)
     return _TorqueFree(inertia, orientation, angular_velocity, longest_interval(t)).truth(t)
@@ -235,6 +238,7 @@ def euler_sweep_truth(sequence: str, start: ArrayLike, end: ArrayLike, duration:
     -------
     q : ndarray, shape (n, 4)
     w : ndarray, shape (n, 3)
+
     """
     q, w = _euler_sweep_unsigned(sequence, start, end, duration, t)
     return sign_continuous(q), w
@@ -269,6 +273,7 @@ def motion_truth(motion: Motion, t: FloatArray,
     -------
     q : ndarray, shape (n, 4)
     w : ndarray, shape (n, 3)
+
     """
     t = np.asarray(t, dtype=np.float64)
     return MotionStream(motion, duration, longest_interval(t)).truth(t)
@@ -297,6 +302,7 @@ class MotionStream:
     ------
     TypeError
         If ``motion`` is not a scene motion.
+
     """
 
     def __init__(self, motion: Motion, duration: float, longest: float) -> None:

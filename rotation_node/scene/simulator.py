@@ -27,17 +27,16 @@ from __future__ import annotations
 import dataclasses
 from typing import Iterator, Mapping, Optional, TYPE_CHECKING
 
-import numpy as np
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
-from sensor_msgs.msg import Imu
-
+import numpy as np
 from rotation_node.bag.writer import BagWriter
 from rotation_node.stamps import NS_PER_S as _NS_PER_S
 from rotation_node.stamps import time_message as _time_message
+from sensor_msgs.msg import Imu
 
-from .effects import UNKNOWN_COVARIANCE, EffectsStream, SensorStream
+from .effects import EffectsStream, SensorStream, UNKNOWN_COVARIANCE
 from .motions import MotionStream
-from .spec import TRUTH_ANGULAR_VELOCITY_TOPIC, TRUTH_ORIENTATION_TOPIC, Scene
+from .spec import Scene, TRUTH_ANGULAR_VELOCITY_TOPIC, TRUTH_ORIENTATION_TOPIC
 
 if TYPE_CHECKING:
     from rotation_node.type_aliases import IntArray, StrPath
@@ -66,6 +65,7 @@ class Simulation:
         ``published`` mask; equal to the truth when the scene has no effects.
     effect_masks : Mapping[str, ndarray of bool, shape (n,)]
         For each effect of the scene, the samples it changed.
+
     """
 
     scene: Scene
@@ -91,12 +91,13 @@ def sample_stamps_ns(scene: Scene) -> IntArray:
     Returns
     -------
     ndarray of int64, shape (n,)
+
     """
     return _stamps_ns(scene, 0, scene.sample_count)
 
 
 def _stamps_ns(scene, start, stop):
-    """The nominal stamps of samples ``start .. stop-1`` (elementwise as for all samples)."""
+    """Return the nominal stamps of samples ``start .. stop-1`` (as computed for all samples)."""
     whole_seconds = int(scene.start_time // 1)
     start_ns = whole_seconds * _NS_PER_S + round((scene.start_time - whole_seconds) * _NS_PER_S)
     offsets = np.round(np.arange(start, stop) * (_NS_PER_S / scene.rate))
@@ -109,7 +110,7 @@ def _block_bounds(scene, block_samples):
 
 
 def _longest_interval(scene, bounds):
-    """The longest interval between consecutive sample times, s, computed block by block."""
+    """Return the longest interval between consecutive sample times, s, computed block by block."""
     first_ns = _stamps_ns(scene, 0, 1)[0]
     longest, previous = 0.0, None
     for start, stop in bounds:
@@ -139,6 +140,7 @@ def simulate_blocks(scene: Scene, seed: int = 0,
     Parameters
     ----------
     scene : Scene
+        A validated scene.
     seed : int, optional
         Seed of the effects' random draws, >= 0. Default 0.
     block_samples : int, optional
@@ -152,6 +154,7 @@ def simulate_blocks(scene: Scene, seed: int = 0,
     ------
     ValueError
         If ``seed`` is not a non-negative integer.
+
     """
     seed = _check_seed(seed)
     bounds = _block_bounds(scene, max(int(block_samples), 1))
@@ -193,6 +196,7 @@ def simulate(scene: Scene, seed: int = 0) -> Simulation:
     ------
     ValueError
         If ``seed`` is not a non-negative integer.
+
     """
     simulation, = simulate_blocks(scene, seed, block_samples=scene.sample_count)
     return simulation
@@ -226,6 +230,7 @@ def write_bag(simulation: Simulation, path: StrPath, *, overwrite: bool = False)
     Parameters
     ----------
     simulation : Simulation
+        What :func:`simulate` returned.
     path : str or os.PathLike
         A rosbag2 directory, or a single MCAP file if it ends in ``.mcap``;
         it appears only once completely written.
@@ -236,6 +241,7 @@ def write_bag(simulation: Simulation, path: StrPath, *, overwrite: bool = False)
     ------
     BagError
         If ``path`` exists (and not ``overwrite``) or cannot be written.
+
     """
     with BagWriter(path, overwrite=overwrite) as writer:
         _write_samples(writer, simulation)
@@ -251,6 +257,7 @@ def write_scene_bag(scene: Scene, path: StrPath, *, seed: int = 0, overwrite: bo
     Parameters
     ----------
     scene : Scene
+        A validated scene.
     path : str or os.PathLike
         A rosbag2 directory, or a single MCAP file if it ends in ``.mcap``;
         it appears only once completely written.
@@ -275,6 +282,7 @@ def write_scene_bag(scene: Scene, path: StrPath, *, seed: int = 0, overwrite: bo
         (``DiskFullError`` when the disk fills); nothing is left behind.
     ValueError
         If ``seed`` is not a non-negative integer.
+
     """
     blocks = simulate_blocks(scene, _check_seed(seed), block_samples)
     samples = published = 0

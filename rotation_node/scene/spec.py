@@ -232,9 +232,10 @@ class ConstantRate:
         Initial orientation ``q0`` (x, y, z, w), unit, body-to-world.
     angular_velocity : tuple of float, shape (3,)
         Body angular velocity ``w``, rad/s.
+
     """
 
-    type: ClassVar[str] = 'constant_rate'
+    type: ClassVar[str] = 'constant_rate'  # noqa: A003
     orientation: Tuple[float, ...] = _param(_unit_quaternion)
     angular_velocity: Tuple[float, ...] = _param(_vector(3))
 
@@ -253,9 +254,10 @@ class Coning:
         Cone half angle ``a`` in [0, pi], rad.
     frequency : float
         Cone rate ``W``, rad/s (negative reverses the sense).
+
     """
 
-    type: ClassVar[str] = 'coning'
+    type: ClassVar[str] = 'coning'  # noqa: A003
     half_angle: float = _param(_real(0.0, math.pi))
     frequency: float = _param(_real())
 
@@ -274,9 +276,10 @@ class TorqueFree:
         Initial orientation (x, y, z, w), unit, body-to-world.
     angular_velocity : tuple of float, shape (3,)
         Initial body angular velocity, rad/s.
+
     """
 
-    type: ClassVar[str] = 'torque_free'
+    type: ClassVar[str] = 'torque_free'  # noqa: A003
     inertia: Tuple[float, ...] = _param(_inertia)
     orientation: Tuple[float, ...] = _param(_unit_quaternion)
     angular_velocity: Tuple[float, ...] = _param(_vector(3))
@@ -295,9 +298,10 @@ class EulerSweep:
         First, second, third angle of ``sequence``, rad. Put the middle
         angles on both sides of its singular value (+-pi/2 Tait-Bryan, 0 or pi
         proper Euler) to sweep through gimbal lock.
+
     """
 
-    type: ClassVar[str] = 'euler_sweep'
+    type: ClassVar[str] = 'euler_sweep'  # noqa: A003
     sequence: str = _param(_euler_sequence)
     start: Tuple[float, ...] = _param(_vector(3))
     end: Tuple[float, ...] = _param(_vector(3))
@@ -332,6 +336,7 @@ class GyroBias:
     random_walk : float
         Rate random walk density, rad/s/sqrt(s): each axis steps by
         N(0, random_walk^2 dt) between samples dt apart.
+
     """
 
     name: ClassVar[str] = 'gyro_bias'
@@ -403,6 +408,7 @@ class NanBursts:
         Samples per burst, >= 1 (overlapping bursts merge).
     fields : tuple of str
         Which of ``orientation``, ``angular_velocity`` turn NaN (all components).
+
     """
 
     name: ClassVar[str] = 'nan_bursts'
@@ -440,6 +446,7 @@ class Scene:
         ``header.frame_id`` of every message.
     start_time : float
         Stamp of the first sample, seconds since the Unix epoch.
+
     """
 
     duration: float = _param(_real(positive=True))
@@ -453,7 +460,7 @@ class Scene:
 
     @property
     def sample_count(self) -> int:
-        """Number of samples: at ``k / rate`` for every k with ``k / rate <= duration``."""
+        """Return the number of samples: one at ``k / rate`` for each ``k / rate <= duration``."""
         return sample_count(self.duration, self.rate)
 
 
@@ -485,6 +492,7 @@ def scene_from_dict(data: object) -> Scene:
     ------
     SceneError
         Naming the key path of the first unknown key, missing field or bad value.
+
     """
     if not isinstance(data, dict):
         raise SceneError(f'scene: expected a mapping of keys, got {describe_value(data)}')
@@ -547,6 +555,7 @@ def load_scene(path: StrPath) -> Scene:
     SceneError
         If the file cannot be read, is not YAML, or is not a valid scene; the
         message starts with the file name and names the key that is wrong.
+
     """
     data = load_ros_yaml(path, str(path), SceneError)
     try:

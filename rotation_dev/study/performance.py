@@ -26,11 +26,10 @@ import tempfile
 import time
 from typing import Optional, Tuple
 
+from rotation_dev.paths import BENCHMARKS_DIR, REPOSITORY
+
 from .report import markdown_table
 
-#: The repository's benchmarks (a source checkout; they are not installed).
-BENCHMARKS_DIR = os.path.join(
-    os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), 'benchmarks')
 #: How the documents spell the interpreter in a command.
 PYTHON = '.venv/bin/python'
 #: bench_conversions' target for the single-sample ratio: package / scipy's
@@ -179,7 +178,7 @@ def run_benchmark(benchmark, quick):
             process = subprocess.run(
                 [sys.executable, os.path.join(BENCHMARKS_DIR, benchmark.script), *args, *extra],
                 capture_output=True, text=True, timeout=benchmark.timeout,
-                cwd=os.path.dirname(BENCHMARKS_DIR))
+                cwd=REPOSITORY)
         except subprocess.TimeoutExpired:
             return BenchmarkRun(benchmark, command, 'failed', benchmark.timeout,
                                 detail=f'timed out after {benchmark.timeout:.0f} s')
@@ -264,7 +263,7 @@ def performance_markdown(runs, *, quick, command, environment):
     quick : bool
         Whether this is a ``--quick`` run.
     command : str
-        The ``rotation_bench`` command that wrote the document.
+        The command that wrote the document.
     environment : str
         Machine and versions.
 
@@ -304,8 +303,8 @@ def performance_markdown(runs, *, quick, command, environment):
             summary, growth = _library_tables(run.results)
             parts += [
                 'Single sample: time per call, validation included (shape (4,), (3,) or (3, 3)); '
-                'the best turn of 200 calls, in turns interleaved with scipy\'s same conversion and '
-                'the reference, over several passes through all rows.'
+                "the best turn of 200 calls, in turns interleaved with scipy's same conversion "
+                'and the reference, over several passes through all rows.'
                 ' Batch: time per rotation. Ratio = package / scipy (lower is better); '
                 'speed-up = scipy / package (higher is better).', '', summary, '',
                 'Time per rotation (ns) as the batch grows, package / scipy:', '', growth]

@@ -1,5 +1,5 @@
 """
-``rotation_bench [--quick] [--out DIR]``: the accuracy-vs-time study and the performance summary.
+``python -m rotation_dev.study [--quick] [--out DIR]``: the accuracy study and performance summary.
 
 Writes ``DIR/accuracy.md``, ``DIR/accuracy.png`` and ``DIR/performance.md``
 (default ``DIR``: ``docs``), each through a temporary file renamed into place.
@@ -7,7 +7,9 @@ Writes ``DIR/accuracy.md``, ``DIR/accuracy.png`` and ``DIR/performance.md``
 finishes in well under a minute; the full run takes about five. Progress goes
 to stderr.
 
-Errors are one line on stderr, ``rotation_bench: error: ...``, and exit status
+Run from the repository root with the development environment (``.venv``).
+
+Errors are one line on stderr, ``python -m rotation_dev.study: error: ...``, and exit status
 1: a bad ``--out`` (not a directory, not writable) or a missing
 ``benchmarks/`` before anything is measured; a benchmark that failed after the
 documents are written (performance.md says which and why). Ctrl-C exits with
@@ -25,11 +27,14 @@ from rotation_node.errors import BagError
 
 from . import integration, measure, performance, report
 
+#: How the study is run, as its messages and documents name it.
+PROG = 'python -m rotation_dev.study'
+
 
 def build_parser():
-    """Return the command-line parser of ``rotation_bench``."""
+    """Return the command-line parser of the study."""
     parser = argparse.ArgumentParser(
-        prog='rotation_bench',
+        prog=PROG,
         description='Measure every conversion method and peer on the hard cases (time per '
                     'rotation against worst error in eps), the attitude integrators against '
                     "exact truth, and the benchmarks' ratios; write accuracy.md, accuracy.png "
@@ -71,7 +76,7 @@ class _Progress:
 
 def _measure_and_write(args):
     """Run the study and the benchmarks, write the documents; return the exit status."""
-    command = 'rotation_bench' + (' --quick' if args.quick else '')
+    command = PROG + (' --quick' if args.quick else '')
     settings = measure.QUICK if args.quick else measure.FULL
     progress = _Progress()
 
@@ -105,23 +110,23 @@ def _measure_and_write(args):
     progress(f'wrote {", ".join(os.path.join(args.out, n) for n in outputs)}')
     failed = [run.benchmark.script for run in runs if run.status == 'failed']
     if failed:
-        print(f'rotation_bench: error: {", ".join(failed)} failed (see performance.md)',
+        print(f'{PROG}: error: {", ".join(failed)} failed (see performance.md)',
               file=sys.stderr)
     return 1 if failed else 0
 
 
 def main(argv=None):
-    """Run ``rotation_bench``; return the exit status."""
+    """Run the study; return the exit status."""
     args = build_parser().parse_args(argv)
     try:
         _check_output_directory(args.out)
         performance.require_benchmarks()
         return _measure_and_write(args)
     except (OSError, BagError) as error:
-        print(f'rotation_bench: error: {error}', file=sys.stderr)
+        print(f'{PROG}: error: {error}', file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print('rotation_bench: interrupted', file=sys.stderr)
+        print(f'{PROG}: interrupted', file=sys.stderr)
         return 130
 
 

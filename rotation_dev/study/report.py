@@ -353,7 +353,7 @@ def accuracy_markdown(families, float32, scenes, *, quick, settings, command, se
         '',
         'Every method is measured in this run, on the same inputs, side by side; no number '
         'is quoted from elsewhere. The inputs are the hard cases of NUMERICS.md '
-        '(`rotation_node.hard_cases`).',
+        '(`rotation_dev.hard_cases`).',
         '',
         '- **Error**: the geodesic angle between the rotation a method returns and the exact '
         'rotation of its input, `2 atan2(|vec(q_e* q_t)|, |scalar(q_e* q_t)|)`, in eps = '

@@ -1,5 +1,5 @@
 """
-The accuracy-vs-time study and the performance summary (``rotation_bench``).
+The accuracy-vs-time study and the performance summary (``python -m rotation_dev.study``).
 
 Every conversion method users choose between (the seed page's formulas,
 Shepperd, Markley, SVD, tf2, PlotJuggler, transforms3d, scipy and this
@@ -13,6 +13,6 @@ methods), :mod:`.measure` (timing and errors per conversion family),
 :mod:`.integration` (integrators), :mod:`.report` (``accuracy.md``,
 ``accuracy.png``), :mod:`.performance` (``performance.md``), :mod:`.cli`.
 
-scipy, transforms3d and mpmath are imported here and nowhere else in the
-package: they are study-time peers and references, never runtime dependencies.
+scipy, transforms3d and mpmath are study-time peers and references, imported
+by the study (and the tests), never by the runtime package ``rotation_node``.
 """

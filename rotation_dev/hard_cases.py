@@ -11,7 +11,6 @@ arrays; the same seed gives the same corpus. Quaternions are (x, y, z, w).
 - noisy matrices ``R + sigma N`` with sigma from 1e-16 to 1e-1.
 """
 import numpy as np
-
 from rotation_node.conversions import matrix_from_quaternion, parse_sequence
 
 
@@ -62,7 +61,7 @@ def hard_quaternions(rng, n):
 
 
 def diagonal_rotations():
-    """The rotations by pi about the coordinate axes, as matrices, shape (3, 3, 3)."""
+    """Return the rotations by pi about the coordinate axes, as matrices, shape (3, 3, 3)."""
     return np.array([np.diag(d) for d in ((1.0, -1, -1), (-1.0, 1, -1), (-1.0, -1, 1))])
 
 
@@ -74,6 +73,7 @@ def hard_matrices(rng, n):
     -------
     ndarray, shape (n + 3, 3, 3)
         Orthonormal to rounding (as computed in float64).
+
     """
     return np.concatenate([matrix_from_quaternion(hard_quaternions(rng, n)), diagonal_rotations()])
 
@@ -101,6 +101,7 @@ def near_gimbal_lock_angles(rng, n, seq):
     -------
     ndarray, shape (n, 3)
         Angles in radians, within each convention's range of the middle angle.
+
     """
     proper = parse_sequence(seq).proper
     offset = 10.0 ** rng.uniform(-16, -2, n)

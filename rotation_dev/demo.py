@@ -12,8 +12,8 @@ The main job: a simulated IMU replayed through a live ``rotation_node``, checked
 5. Print a summary (messages, orientation and rate error against the truth,
    near-singular samples) and write plots with ``rotation_bag plot``.
 
-Usage: ``python -m rotation_node.demo [--scene FILE] [--out DIR] [--rate R]``
-(``./run.sh main`` runs it with the defaults).
+Usage: ``python -m rotation_dev.demo [--scene FILE] [--out DIR] [--seed N]`` from the
+repository root (``./run.sh main`` runs it with the defaults).
 """
 import argparse
 import os
@@ -23,22 +23,13 @@ import sys
 import time
 
 import numpy as np
-
+from rotation_dev.paths import config_path
 from rotation_node import conversions as rc
 
 OUTPUTS = ('quaternion', 'euler', 'angular_velocity')
 SEQUENCE = 'xyz'
 SINGULARITY_THRESHOLD = 0.01
 DISCOVERY_SETTLE_S = 1.0
-
-
-def config_path(*parts):
-    """A file of the package's ``config/`` (source tree, or the colcon install's share)."""
-    here = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'config')
-    if os.path.isdir(here):
-        return os.path.join(here, *parts)
-    from ament_index_python.packages import get_package_share_directory
-    return os.path.join(get_package_share_directory('rotation_node'), 'config', *parts)
 
 
 def _script(name):
@@ -75,9 +66,8 @@ def _run_live(scene_bag, live_bag, params, topic, expected, log):
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
-
-    from rotation_node.bag.qos import recording_qos
     from rotation_node import messages
+    from rotation_node.bag.qos import recording_qos
     context = Context()
     rclpy.init(context=context)
     watcher = rclpy.create_node('rotation_demo_watcher', context=context)
@@ -122,7 +112,7 @@ def _run_live(scene_bag, live_bag, params, topic, expected, log):
         if player.returncode != 0:
             raise RuntimeError('rotation_bag play failed (see the log)')
         try:
-            spin_until(lambda: min(received.values()) >= expected, 30, 'the node\'s outputs')
+            spin_until(lambda: min(received.values()) >= expected, 30, "the node's outputs")
         except RuntimeError:
             pass  # the summary reports what is missing
         executor.spin_once(timeout_sec=DISCOVERY_SETTLE_S)  # the recorder is as fast as we are
@@ -194,10 +184,13 @@ def _summary(sim, live, offline, topic):
 
 def main(argv=None):
     """Run the demonstration; returns the exit code."""
-    parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
-    parser.add_argument('--scene', default=config_path('scenes', 'tumbling_box.yaml'))
+    parser = argparse.ArgumentParser(prog='python -m rotation_dev.demo',
+                                     description=__doc__.split('\n')[1])
+    parser.add_argument('--scene', default=config_path('scenes', 'tumbling_box.yaml'),
+                        help='scene file to simulate (default config/scenes/tumbling_box.yaml)')
     parser.add_argument('--out', default='out/demo', help='output directory (default out/demo)')
-    parser.add_argument('--seed', type=int, default=0)
+    parser.add_argument('--seed', type=int, default=0,
+                        help="seed of the scene's random effects (default 0)")
     args = parser.parse_args(argv)
 
     from rotation_node.scene import load_scene, simulate, write_bag

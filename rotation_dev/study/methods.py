@@ -39,10 +39,9 @@ import dataclasses
 from typing import Callable, Optional, Tuple
 
 import numpy as np
+from rotation_node import conversions as rc
 from scipy.spatial.transform import Rotation
 import transforms3d
-
-from rotation_node import conversions as rc
 
 #: Label of this package in every table.
 PACKAGE = 'rotation_node'

@@ -1,7 +1,7 @@
 """
 Time per rotation and error against exact truth, for every method on the same hard inputs.
 
-Each conversion family draws its inputs from :mod:`rotation_node.hard_cases`
+Each conversion family draws its inputs from :mod:`rotation_dev.hard_cases`
 (NUMERICS.md), computes the exact rotation of every input with
 :mod:`.reference`, and runs every method of :mod:`.methods` on them:
 
@@ -26,10 +26,10 @@ from typing import Callable, Dict, Optional, Tuple
 import warnings
 
 import numpy as np
-
+from rotation_dev.hard_cases import (
+    hard_matrices, hard_quaternions, hard_rotation_vectors, near_gimbal_lock_angles,
+    noisy_matrices)
 from rotation_node import conversions as rc
-from rotation_node.hard_cases import (hard_matrices, hard_quaternions, hard_rotation_vectors,
-                                      near_gimbal_lock_angles, noisy_matrices)
 
 from . import methods, reference
 

@@ -43,7 +43,7 @@ def product(p, q):
 
 
 def normalized(q):
-    """The unit quaternion ``q / |q|`` (mp)."""
+    """Return the unit quaternion ``q / |q|`` (mp)."""
     norm = mpmath.sqrt(sum(c * c for c in q))
     return tuple(c / norm for c in q)
 

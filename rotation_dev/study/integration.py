@@ -26,9 +26,8 @@ import dataclasses
 from typing import Tuple
 
 import numpy as np
-
+from rotation_dev.paths import config_path
 from rotation_node.conversions import quaternion_distance
-from rotation_node.demo import config_path
 from rotation_node.kinematics import integrate_angular_velocity, INTEGRATION_METHODS
 from rotation_node.scene.motions import motion_truth
 from rotation_node.scene.spec import load_scene

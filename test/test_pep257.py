@@ -1,0 +1,16 @@
+"""ament_pep257 on the whole package, with ament's own convention (as ``colcon test`` runs it)."""
+from pathlib import Path
+
+from ament_pep257.main import main
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+#: Not sources of the package: the environment, colcon's and the demo's outputs.
+EXCLUDE = ('.venv', 'build', 'install', 'log', 'out')
+
+
+@pytest.mark.linter
+@pytest.mark.pep257
+def test_pep257():
+    rc = main(argv=[str(ROOT), '--exclude', *EXCLUDE])
+    assert rc == 0, 'found code style errors / warnings (listed above)'
