@@ -15,8 +15,9 @@ import types
 
 import numpy as np
 from rosidl_parser.definition import (
-    AbstractGenericString, AbstractNestedType, AbstractSequence, Array, BasicType, BoundedSequence,
-    BoundedString, NamespacedType)
+    AbstractGenericString, AbstractNestedType, AbstractSequence, Array, BasicType,
+    BoundedSequence, BoundedString, NamespacedType)
+
 from rotation_node.bag.message_types import message_class
 
 _INTEGER_RANGES = {
@@ -129,6 +130,7 @@ def stamp_ns(msg):
 def serialized_rows(topic, messages, *, log_offset_ns=1_000_000):
     """``[(topic, type name, rclpy CDR bytes, log time)]``; log time = stamp + offset."""
     from rclpy.serialization import serialize_message
+
     from rotation_node.bag.message_types import type_name_of
     return [(topic, type_name_of(type(msg)), serialize_message(msg),
              stamp_ns(msg) + log_offset_ns) for msg in messages]
@@ -148,7 +150,7 @@ def write_rosbag2(path, rows, *, storage='mcap', compression=None, qos=None):
     """
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
-    from rosbags.typesys import get_typestore, Stores
+    from rosbags.typesys import Stores, get_typestore
     typestore = get_typestore(Stores.ROS2_JAZZY)
     writer = Writer(path, version=9, storage_plugin=StoragePlugin[storage.upper()])
     if compression:

@@ -132,7 +132,6 @@ def make_input_message(input_type, rotation, *, omega=(0.0, 0.0, 0.0), stamp_ns=
     in rotation_node.messages names.
     """
     import operator
-
     from rotation_node import messages
     from rotation_node.stamps import split_ns
     entry = messages.INPUTS[input_type]

@@ -3,6 +3,7 @@ import importlib
 import signal
 
 import pytest
+
 from rotation_node import console
 
 

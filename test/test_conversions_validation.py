@@ -1,6 +1,7 @@
 """Tests of rotation_node.conversions._validation: bad input raises ValueError naming the fault."""
 import numpy as np
 import pytest
+
 from rotation_node import conversions as rc
 
 Q = np.array([0.1, 0.2, 0.3, 0.9])

@@ -9,6 +9,7 @@ independent numpy Hamilton product, so the other tests can trust it.
 """
 import numpy as np
 import pytest
+
 from rotation_node import conversions as rc
 
 CONE_HALF_ANGLE, CONE_RATE = 0.3, 2.0

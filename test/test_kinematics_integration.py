@@ -1,6 +1,7 @@
 """Tests of rotation_node.kinematics._integration: attitude integration."""
 import numpy as np
 import pytest
+
 from rotation_node import conversions as rc
 from rotation_node import kinematics as rk
 from test_kinematics_coning import coning_orientation, coning_rate

@@ -1,6 +1,7 @@
 """Tests of rotation_node.kinematics._stage_rates: rates at the integrators' stage times."""
 import numpy as np
 import pytest
+
 from rotation_node.kinematics._integration import _METHODS
 from rotation_node.kinematics._stage_rates import stage_rates
 from rotation_node.kinematics._validation import sample_times

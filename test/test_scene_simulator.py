@@ -4,11 +4,12 @@ import tracemalloc
 
 import numpy as np
 import pytest
+
 from rotation_node.bag.mcap_io import BagReader
 from rotation_node.errors import BagError
 from rotation_node.scene import spec
-from rotation_node.scene.simulator import (
-    sample_stamps_ns, simulate, simulate_blocks, write_bag, write_scene_bag)
+from rotation_node.scene.simulator import (sample_stamps_ns, simulate, simulate_blocks,
+                                           write_bag, write_scene_bag)
 
 SCENES_DIR = os.path.join(os.path.dirname(__file__), '..', 'config', 'scenes')
 TRUTH_TOPICS = ('/truth/orientation', '/truth/angular_velocity')

@@ -5,6 +5,7 @@ import math
 import os
 
 import pytest
+
 from rotation_node.errors import SceneError
 from rotation_node.scene import effects, spec
 

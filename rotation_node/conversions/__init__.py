@@ -27,17 +27,15 @@ Large batches evaluate ``sin``, ``cos`` and ``atan2`` in vectorised loops of
 branch-free polynomials (``_trigonometry``), and batches of 65536 samples or more are split
 across threads (:func:`set_threads`, environment variable ``ROTATION_NODE_THREADS``).
 """
-from ._axis_angle import (
-    axis_angle_from_matrix, axis_angle_from_quaternion, matrix_from_axis_angle,
-    matrix_from_rotation_vector, quaternion_from_axis_angle, quaternion_from_rotation_vector,
-    rotation_vector_from_matrix, rotation_vector_from_quaternion)
-from ._euler import (
-    euler_from_matrix, euler_from_quaternion, euler_singularity_margin, matrix_from_euler,
-    quaternion_from_euler)
+from ._axis_angle import (axis_angle_from_matrix, axis_angle_from_quaternion,
+                          matrix_from_axis_angle, matrix_from_rotation_vector,
+                          quaternion_from_axis_angle, quaternion_from_rotation_vector,
+                          rotation_vector_from_matrix, rotation_vector_from_quaternion)
+from ._euler import (euler_from_matrix, euler_from_quaternion, euler_singularity_margin,
+                     matrix_from_euler, quaternion_from_euler)
 from ._matrix import matrix_from_quaternion, quaternion_from_matrix
-from ._quaternion import (
-    canonical_quaternion, quaternion_conjugate, quaternion_distance, quaternion_product,
-    rotate_vector)
+from ._quaternion import (canonical_quaternion, quaternion_conjugate, quaternion_distance,
+                          quaternion_product, rotate_vector)
 from ._runtime import set_threads
 from ._validation import EulerSequence, parse_sequence
 

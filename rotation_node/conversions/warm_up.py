@@ -22,8 +22,8 @@ def warm_up() -> int:
         The number of kernels.
 
     """
-    from ._runtime import compile_kernels
     from .. import kinematics  # noqa: F401  (declares its kernels)
+    from ._runtime import compile_kernels
     return compile_kernels()
 
 
