@@ -1,27 +1,32 @@
 """
-Benchmark ``rotation_bag convert`` against the naive way, on sensor_msgs/Imu bags.
+Benchmark ``rotation_bag convert`` against the naive way and the floor, on sensor_msgs/Imu bags.
 
-Both produce the same bag: every input message plus ``/imu/euler``
+All produce the same bag: every input message plus ``/imu/euler``
 (geometry_msgs/Vector3Stamped, extrinsic xyz = ROS roll, pitch, yaw, radians),
 from the parameters file ``config/params.yaml`` (``input_type: imu``,
 ``outputs: [euler]``).
 
-- ours: ``rotation_node.bag.convert.convert``: the live node's
-  ``ConversionPipeline`` (``process_values``), fed read-only views that
-  ``rotation_node.bag.cdr`` decodes, its outputs encoded by ``cdr`` (one
-  precompiled ``struct`` call each way instead of rclpy's CDR round trip).
+- ours: ``rotation_node.bag.convert.convert``: blocks of messages decoded into
+  arrays, converted with one library call per conversion and encoded for the
+  whole block (``rotation_node.bag.block_convert``), results identical to the
+  live node's ``ConversionPipeline``;
+- per message: the same with ``blocks=False``: the node's pipeline message by
+  message on ``rotation_node.bag.cdr`` views (the path before blocks);
 - naive: mcap-ros2-support decoding, ``scipy.spatial.transform.Rotation`` per
-  message, mcap-ros2-support encoding (``read_ros2_messages`` + ``Writer``).
+  message, mcap-ros2-support encoding (``read_ros2_messages`` + ``Writer``);
+- floor: the ``mcap`` library alone reading the input (``iter_messages``, log-time
+  order) and writing the same output messages (their bytes computed
+  beforehand): no conversion, no decoding, no bag metadata; with the garbage
+  collector set as ``convert`` sets it.
 
 Printed, all measured in this run, as CPU time of this process (the machine
 may be shared; wall time would measure the neighbours too):
 
-1. throughput of both on the same bag (default 200 000 messages) and the
-   ratio: the best of ``--repeat`` runs of each, alternating (on a shared
-   machine the neighbours still slow both down; the best run is the one they
-   disturbed least);
-2. where the time of ours goes, stage by stage, on a 20 000-message sample,
-   and what the rclpy stages that ``cdr`` replaces would cost;
+1. throughput of all four on the same bag (default 200 000 messages), the
+   ratios naive/ours (target >= 10x) and ours/floor (target <= 2x): the best of
+   ``--repeat`` runs of each, alternating (on a shared machine the neighbours
+   still slow all down; the best run is the one they disturbed least);
+2. where the time of ours goes, stage by stage, on a 20 000-message sample;
 3. time and peak memory of ours from 10^2 to 2*10^5 messages (10^6 with
    ``--million``), each size converted in a fresh process so that its peak RSS
    is its own; memory that does not grow with the bag length means streaming;
@@ -29,13 +34,16 @@ may be shared; wall time would measure the neighbours too):
    sqlite3 directory, a ROS 1 bag, beside the MCAP file), the same messages:
    ours (``convert``, which reads them all) against a naive pipeline that
    reads them with rosbags (``AnyReader``, messages deserialised), converts
-   with scipy and serialises with rosbags, in the same run; and the peak
-   memory of ours at two bag lengths, each in a fresh process.
+   with scipy and serialises with rosbags, and against the floor of that
+   format (the raw messages read by the library that reads the format,
+   written with ``mcap``), in the same run; and the peak memory of ours at
+   two bag lengths, each in a fresh process.
 
-The CPU model and numpy's SIMD level are printed first.
+The CPU model and numpy's SIMD level are printed first. ``--quick`` runs
+everything on smaller bags, once (about a minute).
 
-Run: ``.venv/bin/python benchmarks/bench_bag_convert.py [--messages N] [--repeat R] [--million]
-[--formats-only]``.
+Run: ``.venv/bin/python benchmarks/bench_bag_convert.py [--quick] [--messages N] [--repeat R]
+[--million] [--formats-only]``.
 """
 import argparse
 import gc
@@ -60,7 +68,7 @@ T0_NS = 1_700_000_000_000_000_000
 def write_imu_bag(path, count, seed=0):
     """Return an Imu bag: random orientations and angular velocities at 100 Hz."""
     from rclpy.serialization import serialize_message
-    from rotation_node.bag.mcap_io import BagWriter
+    from rotation_node.bag.writer import BagWriter
     from sensor_msgs.msg import Imu
     rng = np.random.default_rng(seed)
     msg = Imu()
@@ -164,19 +172,29 @@ def formats(directory, count, repeat, sizes):
     """Every input format: ours against the rosbags naive pipeline; memory at two lengths."""
     print(f'\n## Input formats, {count} Imu messages -> + /imu/euler (best of {repeat}, CPU s)')
     print(f'{"format":20s} {"ours":>7s} {"us/msg":>7s} {"naive":>7s} {"us/msg":>7s} '
-          f'{"naive/ours":>10s}')
+          f'{"floor":>7s} {"us/msg":>7s} {"naive/ours":>10s} {"ours/floor":>10s}')
     for fmt in FORMATS:
         source = write_format_bag(directory, fmt, count)
         convert_ours(source, os.path.join(directory, 'warm.mcap'))   # numba compilation
-        runs = {'ours': [], 'naive': []}
+        euler_datas = output_datas(os.path.join(directory, 'warm.mcap'))
+        floor = floor_mcap if fmt == 'mcap file' else floor_rosbags
+
+        def floor_run(source, output):
+            floor(source, output, euler_datas)
+
+        runs = {'ours': [], 'naive': [], 'floor': []}
         for _ in range(repeat):
-            for name, function in (('ours', convert_ours), ('naive', convert_naive_rosbags)):
+            for name, function in (('ours', convert_ours), ('naive', convert_naive_rosbags),
+                                   ('floor', floor_run)):
                 seconds, _ = _timed(function, source, os.path.join(directory, f'{name}.mcap'))
                 runs[name].append(seconds)
-        ours, naive = min(runs['ours']), min(runs['naive'])
+        ours, naive, least = min(runs['ours']), min(runs['naive']), min(runs['floor'])
         print(f'{fmt:20s} {ours:7.2f} {ours / count * 1e6:7.1f} {naive:7.2f} '
-              f'{naive / count * 1e6:7.1f} {naive / ours:9.2f}x')
+              f'{naive / count * 1e6:7.1f} {least:7.2f} {least / count * 1e6:7.1f} '
+              f'{naive / ours:9.2f}x {ours / least:9.2f}x')
         _remove(source)
+    print('floor: mcap (MCAP file) or rosbags (the others) reading, mcap writing, no work '
+          '(ROS 1: converted to CDR by rosbags)')
     print('\n## Input formats: peak memory growth of ours (fresh process each; MiB)')
     print(f'{"format":20s} ' + ' '.join(f'{f"{n} msgs":>16s}' for n in sizes))
     for fmt in FORMATS:
@@ -197,11 +215,16 @@ def _remove(path):
         os.unlink(path)
 
 
-def convert_ours(source, output):
+def convert_ours(source, output, blocks=True):
     """``rotation_bag convert SOURCE OUTPUT --params config/params.yaml --force``."""
     from rotation_node.bag.convert import convert
     from rotation_node.parameters import parameters_from_yaml
-    convert(source, output, parameters_from_yaml(PARAMS_FILE), overwrite=True)
+    convert(source, output, parameters_from_yaml(PARAMS_FILE), overwrite=True, blocks=blocks)
+
+
+def convert_per_message(source, output):
+    """``convert`` message by message (``blocks=False``): the path before blocks."""
+    convert_ours(source, output, blocks=False)
 
 
 def convert_naive(source, output):
@@ -230,11 +253,81 @@ def convert_naive(source, output):
         writer.finish()
 
 
+def output_datas(path):
+    """Return the CDR data of the ``/imu/euler`` messages of a converted bag (for the floors)."""
+    from rotation_node.bag.mcap_io import BagReader
+    with BagReader(path) as reader:
+        return [record.data for record in reader.messages([TOPIC + '/euler'])]
+
+
+def _floor_writer(stream):
+    """Return an ``mcap`` writer of the output's two channels, as the converters write them."""
+    from mcap.writer import CompressionType, Writer
+
+    from rotation_node.bag.message_types import message_definition
+    writer = Writer(stream, compression=CompressionType.NONE)
+    writer.start(profile='ros2', library='floor')
+    channels = []
+    for topic, type_name in ((TOPIC, 'sensor_msgs/msg/Imu'),
+                             (TOPIC + '/euler', 'geometry_msgs/msg/Vector3Stamped')):
+        schema = writer.register_schema(type_name, 'ros2msg',
+                                        message_definition(type_name).encode())
+        channels.append(writer.register_channel(topic, 'cdr', schema))
+    return writer, channels
+
+
+def floor_mcap(source, output, euler_datas):
+    """Read the input with ``mcap`` (log-time order) and write the output's messages: no work."""
+    from mcap.reader import make_reader
+
+    from rotation_node.bag.block_convert import collections_deferred
+    with collections_deferred(), open(source, 'rb') as stream, open(output, 'wb') as out:
+        writer, (imu, euler) = _floor_writer(out)
+        add, datas = writer.add_message, iter(euler_datas)
+        for _, _, message in make_reader(stream).iter_messages():
+            add(imu, message.log_time, message.data, message.publish_time)
+            add(euler, message.log_time, next(datas), message.publish_time)
+        writer.finish()
+
+
+def floor_rosbags(source, output, euler_datas):
+    """
+    Read the raw messages with rosbags (any format) and write the output's with ``mcap``.
+
+    A ROS 1 bag's messages are converted to CDR (``ros1_to_cdr``, as the naive
+    pipeline does): the output holds ROS 2 messages.
+    """
+    from pathlib import Path
+
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    from rotation_node.bag.block_convert import collections_deferred
+    ros2 = get_typestore(Stores.ROS2_JAZZY)
+    with collections_deferred(), AnyReader([Path(source)]) as reader, open(output, 'wb') as out:
+        writer, (imu, euler) = _floor_writer(out)
+        add, datas = writer.add_message, iter(euler_datas)
+        for _, log_time, raw in reader.messages():
+            data = raw if reader.is2 else ros2.ros1_to_cdr(raw, 'sensor_msgs/msg/Imu')
+            add(imu, log_time, bytes(data), log_time)
+            add(euler, log_time, next(datas), log_time)
+        writer.finish()
+
+
 def _timed(function, *args):
     """``(CPU seconds, result)`` of ``function(*args)``; CPU time ignores other jobs."""
     start = time.process_time()
     result = function(*args)
     return time.process_time() - start, result
+
+
+def _same_messages(path, other):
+    """Whether two bags hold the same messages (topic, bytes, times) in the same order."""
+    from rotation_node.bag.mcap_io import BagReader
+    with BagReader(path) as a, BagReader(other) as b:
+        return all((x.topic, x.data, x.log_time_ns, x.publish_time_ns)
+                   == (y.topic, y.data, y.log_time_ns, y.publish_time_ns)
+                   for x, y in zip(a.messages(), b.messages(), strict=True))
 
 
 def _euler_values(path):
@@ -245,13 +338,20 @@ def _euler_values(path):
 
 
 def compare(directory, count, repeat):
-    """Throughput of ours and naive on one bag, best of ``repeat`` runs each; checks they agree."""
+    """Throughput of ours, per message, naive and floor on one bag, best of ``repeat`` each."""
     source = os.path.join(directory, 'imu.mcap')
     write_imu_bag(source, count)
     convert_ours(source, os.path.join(directory, 'warm.mcap'))   # numba compilation
-    runs = {'ours': [], 'naive': []}
+    euler_datas = output_datas(os.path.join(directory, 'warm.mcap'))
+
+    def floor(source, output):
+        floor_mcap(source, output, euler_datas)
+
+    contenders = (('ours', convert_ours), ('per msg', convert_per_message),
+                  ('naive', convert_naive), ('floor', floor))
+    runs = {name: [] for name, _ in contenders}
     for _ in range(repeat):
-        for name, function in (('ours', convert_ours), ('naive', convert_naive)):
+        for name, function in contenders:
             seconds, _ = _timed(function, source, os.path.join(directory, f'{name}.mcap'))
             runs[name].append(seconds)
     sample = min(count, 2000)
@@ -264,7 +364,13 @@ def compare(directory, count, repeat):
         best = min(seconds)
         print(f'{name:8s} {best:9.2f} {best / count * 1e6:9.1f} {count / best:10.0f}  '
               + ' '.join(f'{s:.2f}' for s in seconds))
-    print(f'ratio naive/ours: {min(runs["naive"]) / min(runs["ours"]):.2f}x (target >= 3x)')
+    best = {name: min(seconds) for name, seconds in runs.items()}
+    print(f'ratio naive/ours: {best["naive"] / best["ours"]:.2f}x (target >= 10x); '
+          f'ours/floor: {best["ours"] / best["floor"]:.2f}x (target <= 2x); '
+          f'per message/ours: {best["per msg"] / best["ours"]:.2f}x')
+    same = _same_messages(os.path.join(directory, 'ours.mcap'),
+                          os.path.join(directory, 'per msg.mcap'))
+    print(f'ours and per message write the same messages, byte for byte: {same}')
     print(f'largest |ours - naive| Euler angle (mod 2 pi), first {sample} messages: '
           f'{difference.max():.1e} rad')
 
@@ -272,25 +378,28 @@ def compare(directory, count, repeat):
 def breakdown(directory, count=20_000):
     """Microseconds per input message spent in each stage of ``convert``, and in rclpy's."""
     from rclpy.serialization import serialize_message
-    from rotation_node.bag.cdr import fixed_layout_codec
-    from rotation_node.bag.mcap_io import BagReader, BagWriter
+    from rotation_node import messages
+    from rotation_node.bag.block_convert import BLOCK_MESSAGES
+    from rotation_node.bag.cdr_block import InputBlockDecoder, OutputBlockEncoder
+    from rotation_node.bag.mcap_io import BagReader
+    from rotation_node.bag.writer import BagWriter
+    from rotation_node.block_pipeline import BlockPipeline
     from rotation_node.parameters import parameters_from_yaml
     from rotation_node.pipeline import ConversionPipeline
 
     source = os.path.join(directory, 'sample.mcap')
     write_imu_bag(source, count, seed=1)
     params = parameters_from_yaml(PARAMS_FILE)
-    imu = fixed_layout_codec('sensor_msgs/msg/Imu')
-    encode = fixed_layout_codec('geometry_msgs/msg/Vector3Stamped').stamped_encoder()
+    encoder = OutputBlockEncoder(messages.OUTPUTS['euler'].message)
 
     def write(records, encoded):
         with BagWriter(os.path.join(directory, 'sample_out.mcap'), overwrite=True,
                        compression='none') as writer:
-            for record, outputs in zip(records, encoded):
+            outputs = (data for block in encoded for data in block)
+            for record in records:
                 writer.write_serialized(TOPIC, record.type_name, record.data, record.log_time_ns)
-                for data in outputs:
-                    writer.write_serialized(TOPIC + '/euler', 'geometry_msgs/msg/Vector3Stamped',
-                                            data, record.log_time_ns)
+                writer.write_serialized(TOPIC + '/euler', 'geometry_msgs/msg/Vector3Stamped',
+                                        next(outputs), record.log_time_ns)
 
     convert_ours(source, os.path.join(directory, 'sample_warm.mcap'))   # numba compilation
     total, _ = _timed(convert_ours, source, os.path.join(directory, 'sample_convert.mcap'))
@@ -300,24 +409,28 @@ def breakdown(directory, count=20_000):
     gc.disable()
     with BagReader(source) as reader:
         read, records = _timed(lambda: list(reader.messages()))
-    decode, views = _timed(lambda: [r.message(imu.decode) for r in records])
-    pipeline = ConversionPipeline(params)
-    process, outputs = _timed(lambda: [pipeline.process_values(v) for v in views])
-    encoding, encoded = _timed(
-        lambda: [[encode(header, values) for _, header, values in result] for result in outputs])
+    blocks = [records[i:i + BLOCK_MESSAGES] for i in range(0, count, BLOCK_MESSAGES)]
+    pipeline = BlockPipeline(ConversionPipeline(params))
+    decoder = InputBlockDecoder(messages.INPUTS['imu'], pipeline.reads_angular_velocity)
+    decode, decoded = _timed(lambda: [decoder.decode([r.data for r in b]) for b in blocks])
+    process, outputs = _timed(lambda: [pipeline.process_block(sample) for sample, _ in decoded])
+    encoding, encoded = _timed(lambda: [
+        encoder.encode(headers, out.present['euler'], out.numbers['euler'])
+        for (_, headers), out in zip(decoded, outputs)])
     written, _ = _timed(write, records, encoded)
-    # The rclpy stages that decode, encode and process_values replace.
-    deserialise, messages = _timed(lambda: [r.message() for r in records])
-    pipeline = ConversionPipeline(params)
-    rclpy_process, rclpy_outputs = _timed(lambda: [pipeline.process(m) for m in messages])
+    # What the block stages replace: rclpy messages through the per-message pipeline.
+    deserialise, rclpy_messages = _timed(lambda: [r.message() for r in records])
+    per_message = ConversionPipeline(params)
+    rclpy_process, rclpy_outputs = _timed(lambda: [per_message.process(m)
+                                                   for m in rclpy_messages])
     serialise, _ = _timed(
         lambda: [[serialize_message(out) for _, out in result] for result in rclpy_outputs])
     gc.enable()
     stages = [
         ('read (mcap, log-time order)', read),
-        ('decode Imu (cdr view)', decode),
-        ('ConversionPipeline.process_values', process),
-        ('encode Vector3Stamped (cdr)', encoding),
+        (f'decode Imu blocks of {BLOCK_MESSAGES}', decode),
+        ('BlockPipeline.process_block', process),
+        ('encode Vector3Stamped blocks', encoding),
         ('write input + output (mcap)', written),
     ]
     print(f'\n## Where the time goes ({count} messages, us per input message)')
@@ -325,9 +438,9 @@ def breakdown(directory, count=20_000):
         print(f'{name:36s} {seconds / count * 1e6:7.1f}  {seconds / total:5.0%}')
     print(f'{"sum of stages":36s} {sum(s for _, s in stages) / count * 1e6:7.1f}')
     print(f'{"convert() end to end":36s} {total / count * 1e6:7.1f}')
-    print('instead with rclpy messages (not used):')
+    print('instead with rclpy messages, one at a time (not used):')
     for name, seconds in (('deserialise Imu (rclpy)', deserialise),
-                          ('process (builds the rclpy message)', rclpy_process),
+                          ('ConversionPipeline.process', rclpy_process),
                           ('serialise Vector3Stamped (rclpy)', serialise)):
         print(f'{name:36s} {seconds / count * 1e6:7.1f}')
 
@@ -400,12 +513,16 @@ def main():
     parser.add_argument('--million', action='store_true', help='also scale to 10^6 messages')
     parser.add_argument('--formats-only', action='store_true',
                         help='only the input-format comparison (section 4)')
+    parser.add_argument('--quick', action='store_true',
+                        help='20 000 messages, one run each, small scaling sizes (~1 min)')
     parser.add_argument('--child', nargs=2, metavar=('SOURCE', 'OUTPUT'), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
         _child(*args.child)
         return
     sizes = [100, 1_000, 10_000, 100_000, 200_000] + ([1_000_000] if args.million else [])
+    if args.quick:
+        args.messages, args.repeat, sizes = min(args.messages, 20_000), 1, [1_000, 20_000]
     print_machine()
     with tempfile.TemporaryDirectory() as directory:
         if not args.formats_only:

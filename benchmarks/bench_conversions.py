@@ -6,7 +6,7 @@ For every conversion it prints, measured in this run on this machine:
 
 - single sample: time per call (shape (4,), (3,) or (3, 3), validation
   included) for the package and for scipy's corresponding call, and the ratio
-  of the package's time to the reference that issue 2 names, scipy's
+  of the package's time to the reference, scipy's
   ``Rotation.from_quat(q).as_euler(seq)`` (target <= 0.10 for every
   conversion), measured next to each row;
 - batch of 10^6: time per rotation for both and the speed-up scipy / package
@@ -110,7 +110,7 @@ def _interleaved_best_times(functions, data, number, repeat):
 
 
 def _reference(data):
-    """Return the single-sample yardstick of issue 2: scipy's quaternion to Euler angles."""
+    """Return the single-sample yardstick: scipy's quaternion to Euler angles."""
     return Rotation.from_quat(data['q']).as_euler(SEQ)
 
 
@@ -137,7 +137,7 @@ def main(argv=None):
           f'(numpy {np.__version__}); batches best of {repeat}; single samples best of '
           f'{passes} passes over all rows x {turns} interleaved turns of 200 calls')
     print('single: ratio = ours / scipy Rotation.from_quat(q).as_euler(seq), the reference '
-          'of issue 2, measured next to each row')
+          'measured next to each row')
     for ours, theirs, *_ in CONVERSIONS.values():
         ours(single), theirs(single), ours(batches[sizes[-1]])  # warm up, load kernels
     # Single samples: many short turns, in several passes through all rows, so

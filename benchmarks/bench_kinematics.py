@@ -10,7 +10,7 @@ Printed, all measured in this run on this machine:
 2. batch of 10^5 samples: time per sample for both, the speed-up peer /
    package, and the memory floor (numpy reading the inputs and writing an
    output of the same size once) with the package's time as a multiple of it;
-3. attitude integration on coning motion (NUMERICS.md): for each method the
+3. attitude integration on coning motion (docs/numerics.md): for each method the
    largest geodesic error at 100 and 200 steps over 2 s, the observed order
    log2(e100 / e200), rate evaluations per step and time per step; scipy's
    ``solve_ivp`` (RK45, adaptive) on the same problem as the peer.

@@ -1,5 +1,5 @@
 """
-The hard-case corpus of ``NUMERICS.md``, shared by the tests, benchmarks and the accuracy study.
+The hard-case corpus of ``docs/numerics.md``, shared by the tests, benchmarks and the study.
 
 Every generator takes a seeded ``numpy.random.Generator`` and returns float64
 arrays; the same seed gives the same corpus. Quaternions are (x, y, z, w).

@@ -24,10 +24,20 @@ checked against the table before it is accepted; an accepted change takes
 effect on the next message. Counters and the current conventions are
 published on ``/diagnostics`` once a second.
 
+With ``qos.reliability: auto`` each input subscription adapts to the QoS its
+publishers offer, a subscription is replaced (new QoS) without losing or
+repeating a message, and messages the publishers sent but the node never got
+are counted from their publication sequence numbers (:mod:`rotation_node.reception`)
+and reported as ``lost``. Input types with a fixed CDR layout are taken as
+serialized messages and decoded by :mod:`rotation_node.bag.cdr`; outputs are
+published as the bytes their encoders give, as ``rotation_bag convert`` writes
+them. See docs/node.md.
+
 Run it with, for example::
 
     rotation_node --ros-args -r input:=/imu/data -p outputs:='[euler, angular_velocity]'
 """
+import functools
 import gc
 import sys
 import time
@@ -37,20 +47,37 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (
     FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult)
 import rclpy
-from rclpy.event_handler import PublisherEventCallbacks
+from rclpy.event_handler import (
+    PublisherEventCallbacks, QoSSubscriptionEventType, SubscriptionEventCallbacks,
+    UnsupportedEventTypeError)
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, qos_policy_name_from_kind, QoSPolicyKind, ReliabilityPolicy
 from rotation_node import messages
-from rotation_node.bag.qos import qos_profile
-from rotation_node.errors import ParameterError
+from rotation_node.bag.cdr import fixed_layout_codec
+from rotation_node.bag.qos import AUTO, input_qos, qos_profile
+from rotation_node.errors import BagError, ParameterError
 from rotation_node.parameters import (
     NODE_NAME, NodeParameters, PARAMETERS, PARAMETERS_BY_NAME, parameters_file_sections,
     parameters_from_yaml, ParameterSpec, ROS_BUILTIN_PARAMETERS, unknown_parameter_error)
-from rotation_node.pipeline import ConversionPipeline, SKIP_REASONS, warm_up_conversions
+from rotation_node.pipeline import (
+    CONVERSION_ERROR, ConversionPipeline, SKIP_REASONS, warm_up_conversions)
+from rotation_node.reception import message_identity, Reception
 
 DIAGNOSTICS_PERIOD_S = 1.0
 ISSUE_LOG_PERIOD_S = 5.0
+# Replacing a subscription: how often the handoff is checked, how long the old one
+# may stay silent once the new one delivers, and how long the old one lives at most.
+HANDOFF_CHECK_S = 0.05
+HANDOFF_QUIET_S = 0.25
+HANDOFF_MAX_S = 2.0
+# Replacing an output publisher: how long the new one must have matched the old one's
+# subscribers (on its side) before it takes over, so that their readers match it too.
+PUBLISHER_SETTLE_S = 0.5
+# Messages taken in one callback at most, beyond the one the executor took.
+DRAIN_MAX = 100
 
 
 # ROS arguments (after --ros-args, up to --) that take a value, and those that do not.
@@ -124,6 +151,30 @@ def parameter_descriptor(spec: ParameterSpec) -> ParameterDescriptor:
     return descriptor
 
 
+class _TopicInput:
+    """
+    One topic of the input type: its subscription, QoS, and what it received.
+
+    While the subscription is being replaced (a new QoS), ``retiring`` is the
+    old one, still taken from, and ``pending`` holds the new one's messages
+    until the new one has delivered a message the old one delivered too.
+    """
+
+    def __init__(self, topic, memory):
+        self.topic = topic
+        self.name = topic.name
+        self.subscription = None
+        self.qos = None
+        self.generation = 0
+        self.retiring = None
+        self.retiring_heard = 0.0     # monotonic time of the old subscription's last message
+        self.handoff_started = 0.0
+        self.pending = []             # (data, info) of the new subscription during a handoff
+        self.pending_identities = set()
+        self.reception = Reception(memory)
+        self.lost_events = 0          # total_count_change of the rmw's message-lost events
+
+
 class RotationNode(Node):
     """
     Convert orientations and angular velocities from ``input`` to the configured outputs.
@@ -143,6 +194,9 @@ class RotationNode(Node):
     """
 
     def __init__(self, parameters_files: Sequence[str] = (), **kwargs: Any):
+        # Before the node exists: its parameter services answer as soon as they appear,
+        # not after the conversions have been compiled or loaded (seconds on a first run).
+        warm_up_conversions()
         super().__init__(NODE_NAME, **kwargs)
         try:
             for path in parameters_files:   # as rotation_bag convert reads them
@@ -152,10 +206,17 @@ class RotationNode(Node):
             raise
         self.params = NodeParameters()
         self._pipeline = None
-        self._subscriptions = []
+        self._inputs: List[Any] = []    # one _TopicInput per topic of the input type
+        self._decode = None             # CDR bytes -> view, None: rclpy deserialises
         self._output_publishers: Dict[str, Any] = {}
+        self._publish: Dict[str, Any] = {}     # output name -> publish(bytes)
+        self._encoders: Dict[str, Any] = {}    # output name -> encode(header, numbers) -> bytes
+        # output name -> [new publisher, matched since, created at]
+        self._replacing: Dict[str, Any] = {}
+        self._handoff_timer = None
+        self._message_lost: Dict[Any, Any] = {}   # input subscription -> its message-lost event
         self._next_issue_log: Dict[str, float] = {}   # reason -> time of its next warning
-        self._reported = (0, 0)   # dropped and skipped totals at the last diagnostics
+        self._reported = (0, 0, 0)   # dropped, skipped and lost totals at the last diagnostics
         # Registered before declaring, so the initial values pass the same checks.
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -170,14 +231,13 @@ class RotationNode(Node):
         except (InvalidParameterValueException, InvalidParameterTypeException) as exc:
             self.destroy_node()
             raise ParameterError(str(exc)) from None
-        warm_up_conversions()
         self._configure(None, self.params)
         # No QoS event handlers on the diagnostics publisher: each handler is one more
         # entity that rclpy's executor re-examines at every wake-up, i.e. every message.
         self._diagnostics_publisher = self.create_publisher(
             DiagnosticArray, '/diagnostics', 10,
             event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
-        self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
+        self.create_timer(DIAGNOSTICS_PERIOD_S, self._on_diagnostics_timer)
 
     # Parameters --------------------------------------------------------------------
 
@@ -197,51 +257,252 @@ class RotationNode(Node):
             self._configure(previous, self.params)
 
     def _configure(self, previous, params):
-        """Create or update the pipeline, subscription and publishers for ``params``."""
-        qos = qos_profile(params)
-        qos_changed = previous is None or qos != qos_profile(previous)
+        """Create or update the pipeline, subscriptions and publishers for ``params``."""
         stats = None if self._pipeline is None else self._pipeline.stats
         self._pipeline = ConversionPipeline(params, on_issue=self._log_issue, stats=stats)
-        # The new pipeline's input stream starts empty; a stateful one (tf) subscribes
-        # again, so that its latched topics (/tf_static) are delivered to it again.
-        stateful = messages.INPUTS[params.input_type].stream is not None
-        if qos_changed or stateful or params.input_type != previous.input_type:
-            for subscription in self._subscriptions:
-                self.destroy_subscription(subscription)
-            self._subscriptions = [
-                self._subscribe(self._pipeline.input_type, topic, params)
-                for topic in messages.INPUTS[params.input_type].topics]
+        input_type = messages.INPUTS[params.input_type]
+        if previous is None or params.input_type != previous.input_type:
+            for state in self._inputs:
+                self._finish_handoff(state)
+                self._destroy_input_subscription(state, state.subscription)
+            codec = fixed_layout_codec(input_type.type_name)
+            self._decode = None if codec is None else codec.decode
+            self._inputs = [_TopicInput(topic, _memory(params)) for topic in input_type.topics]
+        # A stateful input stream (input_type.stream) starts empty with the new pipeline:
+        # its latched topics are subscribed again, so that their publishers deliver what
+        # they keep once more, and accepted again.
+        replay = previous is not None and input_type.stream is not None
+        for state in self._inputs:
+            qos = self._input_qos(state, self._offered(state))
+            if replay and state.topic.transient_local:
+                self._finish_handoff(state)
+                state.reception.forget()
+                self._subscribe(state, qos)
+            elif qos != state.qos:
+                self._subscribe(state, qos)
+        output_qos = qos_profile(params)
         for name in list(self._output_publishers):
-            if qos_changed or name not in params.outputs:
+            replacement = self._replacing.pop(name, None)
+            if replacement is not None:   # superseded before it took over
+                self.destroy_publisher(replacement[0])
+            if name not in params.outputs:
                 self.destroy_publisher(self._output_publishers.pop(name))
-        for name, message_type in self._pipeline.output_types.items():
+                del self._publish[name]
+            elif self._output_publishers[name].qos_profile != output_qos:
+                # The old publisher publishes until the new one has matched its subscribers.
+                self._replacing[name] = [
+                    self._create_output_publisher(name, output_qos), None, time.monotonic()]
+                self._start_handoff_timer()
+        for name in params.outputs:
             if name not in self._output_publishers:
-                self._output_publishers[name] = self.create_publisher(message_type, name, qos)
+                publisher = self._create_output_publisher(name, output_qos)
+                self._output_publishers[name] = publisher
+                self._publish[name] = publisher.publish
+                self._encoders[name] = messages.OUTPUTS[name].message.encoder()
         self.get_logger().info(
             f'converting {params.input_type} messages on {self._input_topic_names()} '
             f'to {", ".join(params.outputs)} (euler.sequence {params.euler_sequence}, '
             f'{"degrees" if params.euler_degrees else "radians"})')
 
-    def _subscribe(self, message_type, topic, params):
-        """Subscribe one topic of the input type; its messages go to the pipeline."""
-        name = topic.name
-        if name == messages.INPUT_TOPIC.name:   # the common case without a closure
-            callback = self._on_input
+    def _create_output_publisher(self, name, qos):
+        # Without QoS event handlers (as the diagnostics publisher): a subscriber
+        # that cannot match reports it itself.
+        return self.create_publisher(
+            messages.OUTPUTS[name].message_class, name, qos,
+            event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
+
+    def _check_publisher_handoffs(self, now):
+        """Let each new output publisher take over once it matched the old one's subscribers."""
+        for name, replacement in list(self._replacing.items()):
+            new, old = replacement[0], self._output_publishers[name]
+            if new.get_subscription_count() < old.get_subscription_count():
+                replacement[1] = None   # (a subscriber the new QoS cannot match: HANDOFF_MAX_S)
+            elif replacement[1] is None:
+                replacement[1] = now   # matched on the publisher's side; let readers match too
+            settled = replacement[1] is not None and now - replacement[1] >= PUBLISHER_SETTLE_S
+            if settled or now - replacement[2] > HANDOFF_MAX_S:
+                del self._replacing[name]
+                self._output_publishers[name], self._publish[name] = new, new.publish
+                self.destroy_publisher(old)
+
+    # Input subscriptions and QoS ------------------------------------------------------
+
+    def _input_qos(self, state, offered, incompatible_policy=None):
+        """
+        Return the QoS to subscribe ``state``'s topic with, given the ``offered`` profiles.
+
+        With ``qos.reliability: auto``, adapted to them (kept as they are while no
+        publisher is known); ``incompatible_policy`` (a publisher the current
+        subscription cannot match offers less of it) lowers that policy even before
+        the graph shows the publisher.
+        """
+        qos = input_qos(self.params, offered, transient_local=state.topic.transient_local)
+        if self.params.qos_reliability == AUTO and state.qos is not None:
+            if not offered:
+                qos.reliability, qos.durability = state.qos.reliability, state.qos.durability
+            if incompatible_policy == QoSPolicyKind.RELIABILITY:
+                qos.reliability = ReliabilityPolicy.BEST_EFFORT
+            elif incompatible_policy == QoSPolicyKind.DURABILITY:
+                qos.durability = DurabilityPolicy.VOLATILE
+        return qos
+
+    def _offered(self, state):
+        """Return the QoS profiles the publishers of ``state``'s topic offer (auto mode only)."""
+        if self.params.qos_reliability != AUTO:
+            return []
+        name = (state.subscription.topic_name if state.subscription is not None
+                else self.resolve_topic_name(state.name))
+        return [info.qos_profile for info in self.get_publishers_info_by_topic(name)]
+
+    def _adapt(self, state, incompatible_policy=None):
+        """Subscribe ``state``'s topic again if the publishers need another QoS; log it once."""
+        offered = self._offered(state)
+        qos = self._input_qos(state, offered, incompatible_policy)
+        if qos == state.qos:
+            return
+        self.get_logger().info(
+            f'input {state.subscription.topic_name}: publishers offer {_policies(offered)}; '
+            f'subscribing {_policies([qos])} (was {_policies([state.qos])})')
+        self._subscribe(state, qos)
+
+    def _subscribe(self, state, qos):
+        """
+        Subscribe ``state``'s topic with ``qos``, replacing its subscription without loss.
+
+        The old subscription stays until the new one has delivered a message the old
+        one delivered too (or the old one has gone quiet): nothing between them is
+        missed, nothing is converted twice.
+        """
+        if state.retiring is not None:
+            self._finish_handoff(state)
+        state.generation += 1
+        callbacks = SubscriptionEventCallbacks(
+            incompatible_qos=functools.partial(self._on_incompatible_qos, state))
+        subscription = self.create_subscription(
+            self._pipeline.input_type, state.name,
+            functools.partial(self._on_input, state, state.generation), qos,
+            event_callbacks=callbacks, raw=self._decode is not None)
+        # The message-lost status is read once a second, not waited on: an event handler
+        # is one more entity the executor examines at every wake-up.
+        try:
+            with subscription.handle:
+                self._message_lost[subscription] = _rclpy.EventHandle(
+                    subscription.handle, QoSSubscriptionEventType.RCL_SUBSCRIPTION_MESSAGE_LOST)
+        except UnsupportedEventTypeError:   # a middleware without it: sequence gaps only
+            self._message_lost[subscription] = None
+        if state.subscription is not None:
+            state.retiring = state.subscription
+            state.handoff_started = state.retiring_heard = time.monotonic()
+            self._start_handoff_timer()
+        state.subscription, state.qos = subscription, qos
+        state.reception.resize(_memory(self.params))
+
+    def _finish_handoff(self, state):
+        """Destroy the retiring subscription; accept what the new one delivered meanwhile."""
+        if state.retiring is None:
+            return
+        self._destroy_input_subscription(state, state.retiring)
+        state.retiring = None
+        pending, state.pending = state.pending, []
+        state.pending_identities.clear()
+        for data, info in pending:
+            self._accept(state, data, info)
+
+    def _start_handoff_timer(self):
+        if self._handoff_timer is None:
+            self._handoff_timer = self.create_timer(HANDOFF_CHECK_S, self._check_handoffs)
+
+    def _check_handoffs(self):
+        """Finish the subscription and publisher replacements that are due; then the timer."""
+        now = time.monotonic()
+        for state in self._inputs:
+            if state.retiring is not None and (
+                    (state.pending and now - state.retiring_heard > HANDOFF_QUIET_S)
+                    or now - state.handoff_started > HANDOFF_MAX_S):
+                self._finish_handoff(state)
+        self._check_publisher_handoffs(now)
+        if not self._replacing and all(state.retiring is None for state in self._inputs):
+            self.destroy_timer(self._handoff_timer)
+            self._handoff_timer = None
+
+    def _on_incompatible_qos(self, state, event):
+        if self.params.qos_reliability == AUTO:
+            self._adapt(state, event.last_policy_kind)
         else:
-            def callback(msg):
-                self._on_input(msg, name)
-        return self.create_subscription(
-            message_type, name, callback,
-            qos_profile(params, transient_local=topic.transient_local))
+            self._log_issue('incompatible_qos', (
+                f'input {state.subscription.topic_name}: a publisher offers a '
+                f'{qos_policy_name_from_kind(event.last_policy_kind)} incompatible with '
+                f'qos.reliability {self.params.qos_reliability}; its messages are not received '
+                f'(qos.reliability auto adapts to it)'))
+
+    def _count_message_lost(self, state, subscription):
+        """Add the message-lost events of ``subscription`` since the last call to ``state``."""
+        event = self._message_lost.get(subscription)
+        if event is not None:
+            with event:
+                state.lost_events += event.take_event().total_count_change
+
+    def _destroy_input_subscription(self, state, subscription):
+        self._count_message_lost(state, subscription)
+        event = self._message_lost.pop(subscription)
+        if event is not None:
+            event.destroy_when_not_in_use()
+        self.destroy_subscription(subscription)
 
     def _input_topic_names(self):
-        return ', '.join(subscription.topic_name for subscription in self._subscriptions)
+        return ', '.join(state.subscription.topic_name for state in self._inputs)
 
     # Messages ----------------------------------------------------------------------
 
-    def _on_input(self, msg, topic=messages.INPUT_TOPIC.name):
-        for name, output in self._pipeline.process(msg, topic):
-            self._output_publishers[name].publish(output)
+    def _on_input(self, state, generation, data, info):
+        """Take one message of ``state``'s topic from its subscription of ``generation``."""
+        if state.retiring is not None:
+            if generation != state.generation:   # the old subscription
+                state.retiring_heard = time.monotonic()
+                self._accept(state, data, info)
+                if message_identity(info) in state.pending_identities:
+                    self._finish_handoff(state)
+                return
+            if not state.reception.seen(info):
+                state.pending.append((data, info))
+                state.pending_identities.add(message_identity(info))
+                return
+            self._finish_handoff(state)   # the new subscription has caught up
+        self._accept(state, data, info)
+        if state.retiring is None:
+            self._drain(state)
+
+    def _accept(self, state, data, info):
+        """Convert a message not seen before and publish its outputs."""
+        if not state.reception.accept(info):
+            return
+        if self._decode is not None:
+            try:
+                data = self._decode(data)
+            except BagError as exc:
+                self._pipeline.stats.received += 1
+                self._pipeline.stats.dropped[CONVERSION_ERROR] += 1
+                self._log_issue(CONVERSION_ERROR, f'message dropped: {exc}')
+                return
+        publish, encoders = self._publish, self._encoders
+        for name, header, numbers in self._pipeline.process_values(data, state.name):
+            publish[name](encoders[name](header, numbers))
+
+    def _drain(self, state):
+        """
+        Take and convert what else is queued on ``state``'s subscription, up to a bound.
+
+        One executor wake-up then serves every message that arrived meanwhile; rclpy's
+        executor costs more per wake-up than the conversion of a message.
+        """
+        subscription, take = state.subscription, state.subscription.handle.take_message
+        message_type, raw = subscription.msg_type, subscription.raw
+        for _ in range(DRAIN_MAX):
+            with subscription.handle:
+                taken = take(message_type, raw)
+            if taken is None:
+                return
+            self._accept(state, *taken)
 
     def _log_issue(self, reason, detail):
         # Throttled here, once per ISSUE_LOG_PERIOD_S for each reason (so a flood of one
@@ -256,21 +517,40 @@ class RotationNode(Node):
 
     # Diagnostics -------------------------------------------------------------------
 
+    def _on_diagnostics_timer(self):
+        if self.params.qos_reliability == AUTO:
+            for state in self._inputs:
+                self._adapt(state)
+        self._publish_diagnostics()
+
     def _publish_diagnostics(self):
+        for state in self._inputs:
+            for subscription in (state.subscription, state.retiring):
+                self._count_message_lost(state, subscription)
         stats = self._pipeline.stats
-        totals = (sum(stats.dropped.values()), sum(stats.skipped.values()))
-        new_dropped, new_skipped = (now - before for now, before in zip(totals, self._reported))
+        gaps = sum(state.reception.lost for state in self._inputs)
+        events = sum(state.lost_events for state in self._inputs)
+        lost = sum(max(state.reception.lost, state.lost_events) for state in self._inputs)
+        totals = (sum(stats.dropped.values()), sum(stats.skipped.values()), lost)
+        new_dropped, new_skipped, new_lost = (
+            now - before for now, before in zip(totals, self._reported))
         self._reported = totals
-        if new_dropped or new_skipped:
+        if new_dropped or new_skipped or new_lost:
             level = DiagnosticStatus.WARN
-            message = (f'{new_dropped} messages dropped, {new_skipped} partly converted '
-                       f'in the last {DIAGNOSTICS_PERIOD_S:g} s')
+            message = (f'{new_lost} messages lost, {new_dropped} dropped, {new_skipped} partly '
+                       f'converted in the last {DIAGNOSTICS_PERIOD_S:g} s')
         else:
             level, message = DiagnosticStatus.OK, 'converting'
         values = {
             'input_topic': self._input_topic_names(),
+            'input_qos': '; '.join(f'{state.subscription.topic_name}: {_policies([state.qos])}'
+                                   for state in self._inputs),
             'received': stats.received,
             'published': stats.published,
+            'lost': lost,
+            'lost.sequence_gaps': gaps,
+            'lost.message_lost_events': events,
+            'duplicates': sum(state.reception.duplicates for state in self._inputs),
             'dropped': totals[0],
             **{f'dropped.{reason}': stats.dropped[reason]
                for reason in self._pipeline.drop_reasons},
@@ -287,6 +567,17 @@ class RotationNode(Node):
             message=message, hardware_id='',
             values=[KeyValue(key=key, value=_text(value)) for key, value in values.items()])]
         self._diagnostics_publisher.publish(array)
+
+
+def _memory(params):
+    """Messages a topic's Reception remembers: two histories of the deepest subscription."""
+    return 2 * params.qos_depth + 100
+
+
+def _policies(profiles):
+    """``'reliable, volatile'`` of the profiles, ``'nothing'`` for none."""
+    return ' / '.join(sorted({f'{p.reliability.short_key}, {p.durability.short_key}'
+                              for p in profiles})) or 'nothing'
 
 
 def _own(parameters):
@@ -349,7 +640,11 @@ def main(args: Optional[List[str]] = None) -> int:
         return 1
     node = None
     try:
-        rclpy.init(args=args)
+        try:
+            rclpy.init(args=args)
+        except _rclpy.RCLError as exc:   # e.g. a malformed --ros-args remapping
+            print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
+            return 1
         node = RotationNode(parameters_files=files)
         # The ~1e5 objects of rclpy, numpy and numba live as long as the process: keep
         # them out of the cyclic collector, whose full passes over them stall a
@@ -358,6 +653,10 @@ def main(args: Optional[List[str]] = None) -> int:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except _rclpy.RCLError:
+        if rclpy.ok():
+            raise
+        # Ctrl-C during start-up: the context was shut down under a graph query.
     except ParameterError as exc:
         print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
         return 1

@@ -39,7 +39,7 @@ OUTPUTS = tuple(messages.OUTPUTS)
 
 FRAMES = ('body', 'world')
 COVARIANCE_FRAMES = ('fixed', 'body')
-RELIABILITIES = ('reliable', 'best_effort')
+RELIABILITIES = ('auto', 'reliable', 'best_effort')
 
 ROS_BUILTIN_PARAMETERS = frozenset({'use_sim_time', 'start_type_description_service'})
 """Parameters every rclpy node declares by itself; a parameters file may set them."""
@@ -266,12 +266,13 @@ class NodeParameters:
         'Body frame convention of the outputs: flu or frd',
         choices=BODY_FRAMES)
     qos_reliability: str = _parameter(
-        'qos.reliability', 'reliable',
-        'Reliability of the input subscription and of the output publishers',
+        'qos.reliability', 'auto',
+        'Reliability of the input subscriptions and output publishers; auto: inputs adapt '
+        'reliability and durability to what the publishers offer, outputs are reliable',
         choices=RELIABILITIES)
     qos_depth: int = _parameter(
-        'qos.depth', 10,
-        'History depth (keep last) of the input subscription and of the output publishers',
+        'qos.depth', 1000,
+        'History depth (keep last) of the input subscriptions and of the output publishers',
         bounds=(1, 10000))
     tf_parent_frame: str = _parameter(
         'tf.parent_frame', '',

@@ -14,6 +14,7 @@ from mcap.reader import make_reader
 from mcap.records import Channel, Footer, Header, Metadata, Schema, Statistics
 from mcap.stream_reader import StreamReader
 from mcap_ros2.decoder import DecoderFactory
+import numpy as np
 import pytest
 from rclpy.serialization import serialize_message
 from rosbags.highlevel import AnyReader
@@ -430,3 +431,38 @@ def test_reads_compressed_chunks_and_detects_their_damage(tmp_path, rng, compres
     path.write_bytes(bytes(data))
     with pytest.raises(BagError, match='compressed.mcap'):
         list(BagReader(path).messages())
+
+
+@pytest.mark.parametrize('layout', ['in_order', 'overlapping', 'equal_boundaries'])
+def test_reading_gives_the_mcap_library_log_time_order(tmp_path, layout):
+    """Chunk after chunk where chunks do not overlap, else through mcap's heap: the same order."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    rng = np.random.default_rng(5)
+    count = 3000
+    if layout == 'in_order':
+        times = np.sort(rng.integers(0, 10**6, count))
+    elif layout == 'overlapping':
+        times = rng.integers(0, 10**6, count)
+    else:
+        times = np.repeat(np.arange(count // 100), 100)   # ties across chunk boundaries
+    path = tmp_path / 'chunks.mcap'
+    with open(path, 'wb') as stream:
+        writer = Writer(stream, chunk_size=4096)
+        writer.start(profile='ros2', library='test')
+        schema = writer.register_schema('std_msgs/msg/Empty', 'ros2msg', b'')
+        channels = [writer.register_channel(f'/t{k}', 'cdr', schema) for k in range(3)]
+        for index, time in enumerate(times.tolist()):
+            writer.add_message(channels[index % 3], log_time=time,
+                               data=index.to_bytes(4, 'little') + bytes(20), publish_time=time)
+        writer.finish()
+    with open(path, 'rb') as stream:
+        expected = [(channel.topic, message.data, message.log_time)
+                    for _, channel, message in make_reader(stream).iter_messages()]
+    with BagReader(path) as reader:
+        got = [(record.topic, record.data, record.log_time_ns) for record in reader.messages()]
+        some = [(record.topic, record.data, record.log_time_ns)
+                for record in reader.messages(['/t0', '/t2'])]
+    assert got == expected
+    assert some == [message for message in expected if message[0] != '/t1']

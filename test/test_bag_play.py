@@ -63,7 +63,7 @@ def test_rate_scales_recorded_timing_with_recorded_qos(tmp_path, rng):
         client.node.create_subscription(
             Imu, '/imu', lambda msg: arrivals.append((time.monotonic(), index[stamp_ns(msg)])),
             KEEP_ALL)
-        with _play(path, '--rate', str(rate)) as player:
+        with _play(path, '--rate', str(rate), '--wait-for-subscribers', '--delay', '1') as player:
             assert client.spin_until(lambda: client.node.count_publishers('/imu') == 1, 30)
             offered, = [info.qos_profile for info in
                         client.node.get_publishers_info_by_topic('/imu')]

@@ -9,7 +9,7 @@ from rotation_dev.hard_cases import hard_matrices, hard_quaternions, hard_rotati
 from rotation_node import conversions as rc
 from scipy.spatial.transform import Rotation
 
-BOUND = 8  # eps, geodesic error of one conversion (issue 2)
+BOUND = 8  # eps, geodesic error of one conversion (the documented bound)
 ROUND_TRIP = 16
 
 

@@ -57,8 +57,8 @@ def test_matrix_from_euler_matches_transforms3d(rng, seq):
                        atol=1e-15)
 
 
-def test_seed_zxz_matrix():
-    """The seed's R_WB = R_Z(phi) R_X(theta) R_Z(psi), with its R_Z written out."""
+def test_textbook_zxz_matrix():
+    """The textbook R_WB = R_Z(phi) R_X(theta) R_Z(psi), with its R_Z written out."""
     phi, theta, psi = 0.3, 1.1, -2.0
 
     def r_z(t):

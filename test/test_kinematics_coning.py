@@ -1,5 +1,5 @@
 """
-Coning motion: the analytic ground truth for the kinematics tests (NUMERICS.md).
+Coning motion: the analytic ground truth for the kinematics tests (docs/numerics.md).
 
 Written scalar first there; here scalar last, as everywhere in the package:
 ``q(t) = (sin(a/2) cos(W t), sin(a/2) sin(W t), 0, cos(a/2))``,

@@ -64,8 +64,8 @@ def test_angular_velocity_from_central_differences(rng, frame):
     assert relative_error(from_R, omega).max() < 1e-8
 
 
-def test_seed_quaternion_formula_is_the_world_frame_one(rng):
-    """The seed's dq_v/dt = 1/2 (q_s w - q_v x w) is labelled body but is the world formula."""
+def test_textbook_quaternion_formula_is_the_world_frame_one(rng):
+    """The textbook dq_v/dt = 1/2 (q_s w - q_v x w) is labelled body but is the world formula."""
     q = random_quaternions(rng, 100)
     omega = rng.normal(size=(100, 3))
     qv, qs = q[:, :3], q[:, 3:]
@@ -81,8 +81,8 @@ def test_seed_quaternion_formula_is_the_world_frame_one(rng):
     assert np.abs(body_dot[:, :3] - seed).max() > 0.1
 
 
-def test_seed_omega_matrix_is_the_world_angular_velocity(rng):
-    """The seed's Omega = dR/dt R^T is [w_w]x; R^T dR/dt is [w_b]x."""
+def test_textbook_omega_matrix_is_the_world_angular_velocity(rng):
+    """The textbook Omega = dR/dt R^T is [w_w]x; R^T dR/dt is [w_b]x."""
     R = rc.matrix_from_quaternion(random_quaternions(rng, 50))
     R_dot = rng.normal(size=(50, 3, 3))
     np.testing.assert_allclose(rk.angular_velocity_from_matrix_derivative(R, R_dot, 'world'),

@@ -101,7 +101,7 @@ def test_extrinsic_is_reversed_intrinsic(rng, seq, frame):
 
 
 def test_zyx_closed_form_from_numerics(rng):
-    """NUMERICS.md: intrinsic ZYX (yaw, pitch, roll) and ROS 'xyz' (roll, pitch, yaw)."""
+    """docs/numerics.md: intrinsic ZYX (yaw, pitch, roll) and ROS 'xyz' (roll, pitch, yaw)."""
     psi, theta, phi = random_angles(rng, 'ZYX', 100).T
     d_psi, d_theta, d_phi = rng.normal(size=(3, 100))
     expected = np.stack([d_phi - d_psi * np.sin(theta),

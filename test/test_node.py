@@ -257,7 +257,8 @@ def test_changing_outputs_creates_and_destroys_publishers(node):
 
 def test_changing_reliability_recreates_the_subscription(node, rotation):
     best_effort = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
-    node.configure({'input_type': 'quaternion', 'outputs': ['quaternion']})
+    node.configure({'input_type': 'quaternion', 'outputs': ['quaternion'],
+                    'qos.reliability': 'reliable'})
     msg = make_input_message('quaternion', rotation)
     with pytest.raises(AssertionError, match='no match'):   # a reliable reader ignores it
         node.exchange('quaternion', [msg], {'quaternion': 1}, qos=best_effort, timeout=2.0)
@@ -367,7 +368,7 @@ def test_parameters_files_are_applied(ros, tmp_path, rotation):
                                   '--params-file', overrides], namespace='/from_file')
     try:
         assert started.get('euler.sequence') == 'zxz'
-        assert started.get('qos.depth') == 10    # from config/params.yaml
+        assert started.get('qos.depth') == 1000    # from config/params.yaml
         msg = make_input_message('odometry', rotation)
         out, = started.exchange('odometry', [msg], {'rotation_vector': 1})['rotation_vector']
         assert_output(out, 'rotation_vector', rotation)

@@ -78,7 +78,7 @@ def test_constant_rate_is_exact():
 
 
 def test_coning_matches_numerics_md_with_phase_zero_at_first_sample():
-    """NUMERICS.md, scalar first: q = [cos(a/2), sin(a/2) cos(Wt), sin(a/2) sin(Wt), 0]."""
+    """docs/numerics.md, scalar first: q = [cos(a/2), sin(a/2) cos(Wt), sin(a/2) sin(Wt), 0]."""
     a, big_w = 0.2, 3.0
     t = np.linspace(0.0, 4.0, 401)
     q, w = motions.coning_truth(a, big_w, t)

@@ -344,6 +344,9 @@ def test_missing_frame_and_cycle_keep_the_node_alive_and_show_on_diagnostics():
             assert header_stamp_ns(eulers[0].header) == T0 + 2 * S
             values = _diagnostics_values(diagnostics, f'{namespace}/rotation_node')
             assert values['input_topic'] == '/tf, /tf_static'
+            # Each topic with its own QoS, as its publishers offer it (qos.reliability auto).
+            assert values['input_qos'] == (
+                '/tf: reliable, volatile; /tf_static: reliable, transient_local'), values
             assert node.stop() == 0, node.output
     assert "'base_link' does not exist" in node.output and '[tf_unknown_frame]' in node.output
     assert 'loop: base_link -> odom -> base_link' in node.output

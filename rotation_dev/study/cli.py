@@ -1,8 +1,9 @@
 """
 ``python -m rotation_dev.study [--quick] [--out DIR]``: the accuracy study and performance summary.
 
-Writes ``DIR/accuracy.md``, ``DIR/accuracy.png`` and ``DIR/performance.md``
-(default ``DIR``: ``docs``), each through a temporary file renamed into place.
+Writes ``DIR/accuracy.md``, ``DIR/accuracy.png``, ``DIR/covariance.png`` (the
+Euler-covariance section's plot) and ``DIR/performance.md`` (default ``DIR``:
+``docs``), each through a temporary file renamed into place.
 ``--quick`` (for CI) uses fewer inputs and runs only the library benchmark; it
 finishes in well under a minute; the full run takes about five. Progress goes
 to stderr.
@@ -25,7 +26,7 @@ import time
 from rotation_node.bag.atomic_file import AtomicFile
 from rotation_node.errors import BagError
 
-from . import integration, measure, performance, report
+from . import covariance, integration, measure, performance, report
 
 #: How the study is run, as its messages and documents name it.
 PROG = 'python -m rotation_dev.study'
@@ -89,6 +90,8 @@ def _measure_and_write(args):
     progress('float32 pipeline')
     scenes = integration.integration_study(settings)
     progress('integration')
+    covariance_rows = covariance.measure(quick=args.quick)
+    progress('Euler covariance against Monte Carlo')
     study_seconds = time.monotonic() - progress.start
     environment = report.environment()
 
@@ -100,8 +103,10 @@ def _measure_and_write(args):
     outputs = {
         'accuracy.md': report.accuracy_markdown(
             families, float32, scenes, quick=args.quick, settings=settings, command=command,
-            seconds=study_seconds),
+            seconds=study_seconds).rstrip('\n') + '\n\n'
+        + covariance.covariance_markdown(covariance_rows, heading='## 7.'),
         'accuracy.png': report.accuracy_png(families, scenes),
+        'covariance.png': covariance.covariance_png(covariance_rows),
         'performance.md': performance.performance_markdown(
             runs, quick=args.quick, command=command, environment=environment),
     }

@@ -203,11 +203,12 @@ def covariance_markdown(rows: Sequence[CovarianceRow], heading: str = '##') -> s
         f'**Verdict:** the first-order standard deviations are within 1 % of the sampled ones '
         f'while sigma / margin <= {r_1:.3g} and within 10 % while sigma / margin <= '
         f'{r_10:.3g}, whether sigma grows or the margin shrinks: the ratio alone decides. '
-        'Beyond, the error grows fast and changes sign: at sigma = margin the first order '
-        'understates the spread of roll and yaw by about a quarter, and past it the first-order '
-        'value keeps growing as 1 / margin while the sampled spread saturates near that of a '
-        'uniform angle (104 deg). `euler_linearisation_ratio` computes the ratio for any '
-        'covariance.',
+        'Beyond, the error grows fast: at sigma = margin the first order overstates the '
+        'spread of the middle angle by about 30 % (the sampled angle cannot pass gimbal lock; '
+        'it folds back) and understates that of the outer angles by about 10 %, and past it '
+        'the first-order outer angles keep growing as 1 / margin while their sampled spread '
+        'saturates near that of a uniform angle (104 deg). `euler_linearisation_ratio` '
+        'computes the ratio for any covariance.',
         '',
         '![first-order Euler covariance against Monte Carlo](covariance.png)',
         '',

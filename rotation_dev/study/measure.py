@@ -2,7 +2,7 @@
 Time per rotation and error against exact truth, for every method on the same hard inputs.
 
 Each conversion family draws its inputs from :mod:`rotation_dev.hard_cases`
-(NUMERICS.md), computes the exact rotation of every input with
+(docs/numerics.md), computes the exact rotation of every input with
 :mod:`.reference`, and runs every method of :mod:`.methods` on them:
 
 - time: the inputs tiled to a batch of ``Settings.timing_batch`` rows (below
@@ -35,7 +35,7 @@ from . import methods, reference
 
 #: A method is exact on a family when its worst error is at most this many eps.
 EXACT_EPS = 8.0
-#: Noise levels of ``R + sigma N`` (NUMERICS.md: 1e-16 to 1e-1).
+#: Noise levels of ``R + sigma N`` (docs/numerics.md: 1e-16 to 1e-1).
 NOISE_SIGMAS = (1e-16, 1e-13, 1e-10, 1e-7, 1e-4, 1e-2, 1e-1)
 #: The noise level whose timing is reported for the noisy matrices.
 NOISE_TIMING_SIGMA = 1e-4

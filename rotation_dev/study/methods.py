@@ -3,20 +3,20 @@ The competing methods of the accuracy study, each written the way its users writ
 
 Every method takes a batch (the leading axis is the sample) and returns a batch;
 none validates its input beyond what its source does. Quaternions are
-(x, y, z, w), scalar last, active, body-to-world (NUMERICS.md); formulas from
+(x, y, z, w), scalar last, active, body-to-world (docs/numerics.md); formulas from
 other conventions are transcribed into this one without changing their
 numerics.
 
 Families and sources:
 
-- matrix -> quaternion: the seed page's trace formula; Shepperd [1]_ and
+- matrix -> quaternion: the textbook trace formula; Shepperd [1]_ and
   Markley [2]_, which share the pivot on the largest of trace, R00, R11, R22
   and differ only in how the chosen column of the symmetric 4x4 matrix is
   scaled (Shepperd: the pivot component from a square root; Markley: the
   column's norm); tf2's ``getRotation`` (Shepperd's formulas, pivot on the
   trace whenever it is positive); the orthogonal Procrustes (SVD) nearest rotation followed
   by Markley; scipy's ``Rotation.from_matrix``; this package.
-- quaternion -> rotation vector: the seed's ``theta = 2 acos(q_s)``,
+- quaternion -> rotation vector: the textbook ``theta = 2 acos(q_s)``,
   ``n = q_v / sqrt(1 - q_s^2)``; ``2 atan2(|q_v|, q_s)`` in plain numpy;
   scipy's ``as_rotvec``; this package.
 - quaternion -> Euler angles: tf2's ``Matrix3x3(q).getRPY`` and PlotJuggler's
@@ -84,8 +84,8 @@ class Method:
 
 # ------------------------------------------------------------ matrix -> quaternion
 
-def seed_trace_formula(m):
-    """Return the seed page's ``q_s = 1/2 sqrt(tr R + 1)``, ``q_v = vec(R - R^T) / (4 q_s)``."""
+def textbook_trace_formula(m):
+    """Return the textbook ``q_s = 1/2 sqrt(tr R + 1)``, ``q_v = vec(R - R^T) / (4 q_s)``."""
     trace = m[:, 0, 0] + m[:, 1, 1] + m[:, 2, 2]
     w = 0.5 * np.sqrt(trace + 1.0)
     skew = np.stack([m[:, 2, 1] - m[:, 1, 2], m[:, 0, 2] - m[:, 2, 0],
@@ -164,7 +164,7 @@ def svd_markley(m):
 
 
 MATRIX_TO_QUATERNION = (
-    Method('seed trace formula', seed_trace_formula, 'the seed page, numpy'),
+    Method('textbook trace formula', textbook_trace_formula, 'textbook formula, numpy'),
     Method('Shepperd 1978', shepperd, 'numpy, pivot on max(tr, R00, R11, R22)'),
     Method('tf2 getRotation', tf2_get_rotation,
            'tf2::Matrix3x3::getRotation, transcribed to numpy'),
@@ -179,11 +179,11 @@ MATRIX_TO_QUATERNION = (
 
 # ------------------------------------------------------------ quaternion -> rotation vector
 
-def seed_acos(q):
+def textbook_acos(q):
     """
-    Return the seed page's ``theta n``: ``theta = 2 acos(q_s)``, ``n = q_v / sqrt(1 - q_s^2)``.
+    Return the textbook ``theta n``: ``theta = 2 acos(q_s)``, ``n = q_v / sqrt(1 - q_s^2)``.
 
-    Assumes a unit ``q``, as the seed does.
+    Assumes a unit ``q``, as the textbook formula does.
     """
     w = q[:, 3]
     angle = 2.0 * np.arccos(w)
@@ -201,7 +201,7 @@ def numpy_atan2(q):
 
 
 QUATERNION_TO_ROTATION_VECTOR = (
-    Method('seed 2 acos(q_s)', seed_acos, 'the seed page, numpy'),
+    Method('textbook 2 acos(q_s)', textbook_acos, 'textbook formula, numpy'),
     Method('2 atan2(|q_v|, q_s)', numpy_atan2, 'numpy, np.linalg.norm'),
     Method('scipy as_rotvec', lambda q: Rotation.from_quat(q).as_rotvec(),
            'scipy Rotation.from_quat(q).as_rotvec()'),

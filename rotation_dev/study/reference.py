@@ -8,7 +8,7 @@ measured error is the method's own, not the reference's (whose rounding is
 body-to-world; a reference quaternion is a tuple of four ``mpmath.mpf``, unit.
 
 Errors are geodesic angles between rotations,
-``2 atan2(|vec(p* q)|, |scalar(p* q)|)`` (NUMERICS.md; never ``acos``, which
+``2 atan2(|vec(p* q)|, |scalar(p* q)|)`` (docs/numerics.md; never ``acos``, which
 floors at ~1e-8), reported in units of :data:`EPS`.
 
 The study and the tests use this module (mpmath is a study and test

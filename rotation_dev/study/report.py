@@ -261,13 +261,14 @@ def _headlines(families, float32, scenes):
 
     lines = []
     matrix = by_key['matrix']
-    seed = row(matrix, 'seed').cases[matrix.timed_case]
+    textbook = row(matrix, 'textbook trace').cases[matrix.timed_case]
     lines.append(
         f'- Matrix to quaternion: {methods.PACKAGE} {describe_eps(worst(matrix, methods.PACKAGE))}'
         f' at {format_ns(row(matrix, methods.PACKAGE).cases[matrix.timed_case].time_ns)} ns '
-        f"per rotation; the seed's trace formula returns NaN for {seed.errors.failures} of "
-        f'{seed.errors.samples} hard matrices (rotations by pi and near it) and is off by up to '
-        f'{describe_eps(seed.errors.worst)} on the others.')
+        f'per rotation; the textbook trace formula returns NaN for '
+        f'{textbook.errors.failures} of {textbook.errors.samples} hard matrices (rotations by '
+        f'pi and near it) and is off by up to {describe_eps(textbook.errors.worst)} on the '
+        f'others.')
     noisy = by_key['noisy']
     largest = noisy.cases[-1]
     pivots = max(row(noisy, name).cases[largest].errors.worst
@@ -280,11 +281,12 @@ def _headlines(families, float32, scenes):
         f'{describe_eps(worst(noisy, "SVD"))}.')
     rv = by_key['rotation_vector']
     unit, corpus = rv.cases
-    seed = row(rv, 'seed').cases[unit].errors
+    textbook = row(rv, 'textbook 2 acos').cases[unit].errors
     atan2 = row(rv, '2 atan2').cases
     lines.append(
-        f"- Quaternion to rotation vector: the seed's 2 acos(q_s) is off by up to "
-        f'{describe_eps(seed.worst)} and returns NaN for {seed.failures} of {seed.samples} unit '
+        f'- Quaternion to rotation vector: the textbook 2 acos(q_s) is off by up to '
+        f'{describe_eps(textbook.worst)} and returns NaN for {textbook.failures} of '
+        f'{textbook.samples} unit '
         f'quaternions (the smallest angles); 2 atan2(|q_v|, q_s) in plain numpy: '
         f'{describe_eps(atan2[unit].errors.worst)} on unit quaternions, '
         f'{describe_eps(atan2[corpus].errors.worst)} on the scaled corpus (np.linalg.norm '
@@ -352,7 +354,8 @@ def accuracy_markdown(families, float32, scenes, *, quick, settings, command, se
         f'Machine: {environment()}.',
         '',
         'Every method is measured in this run, on the same inputs, side by side; no number '
-        'is quoted from elsewhere. The inputs are the hard cases of NUMERICS.md '
+        'is quoted from elsewhere. The inputs are the hard cases described in '
+        '[numerics.md](numerics.md) '
         '(`rotation_dev.hard_cases`).',
         '',
         '- **Error**: the geodesic angle between the rotation a method returns and the exact '

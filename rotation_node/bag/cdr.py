@@ -42,7 +42,7 @@ import collections
 import functools
 import operator
 import struct
-from typing import Any, Callable, Dict, List, NamedTuple, Optional, Sequence
+from typing import Any, Callable, Dict, List, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 from rclpy.serialization import deserialize_message
@@ -200,6 +200,46 @@ class FixedLayoutCodec:
         # readers do not need it, the decoder does not expect it.
         self._end_padding = (bytes(_padding(self._struct(()).size, 4))
                              if not self._to_string_lengths else b'')
+
+    @property
+    def leaves(self) -> Tuple[_Leaf, ...]:
+        """Return the primitive fields in CDR order: ``path``, struct ``code``, ``count``."""
+        return tuple(self._leaves)
+
+    @property
+    def to_string_lengths(self) -> List[Tuple[int, ...]]:
+        """
+        Per string, the bytes from the previous string's end to the end of this one's length.
+
+        Indexed by that start offset modulo 8 (the padding depends on it): the
+        table :meth:`decode` walks to find the strings' lengths.
+        """
+        return self._to_string_lengths
+
+    def leaf_offsets(self, string_lengths: Sequence[int]) -> Dict[str, int]:
+        """
+        Return ``{path: payload offset}`` of every field when the strings have these lengths.
+
+        Offsets count from the payload start (after the 4-byte encapsulation
+        header); a string's offset is that of its uint32 length, an array's
+        that of its first element. ``string_lengths`` include the NUL.
+        """
+        offsets, offset, strings = {}, 0, iter(string_lengths)
+        for leaf in self._leaves:
+            if leaf.code == _STRING:
+                offset += _padding(offset, 4)
+                offsets[leaf.path] = offset
+                offset += 4 + next(strings)
+            else:
+                size = struct.calcsize(leaf.code)
+                offset += _padding(offset, size)
+                offsets[leaf.path] = offset
+                offset += size * (leaf.count or 1)
+        return offsets
+
+    def payload_size(self, string_lengths: Sequence[int]) -> int:
+        """Bytes of the payload :meth:`decode` reads when the strings have these lengths."""
+        return self._struct(tuple(string_lengths)).size
 
     def _struct(self, string_lengths):
         """Return the struct of the payload when the strings have these lengths (NUL included)."""

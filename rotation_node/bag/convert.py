@@ -16,12 +16,18 @@ recording); topics that are not converted are copied unchanged, with their
 schema and metadata as stored, under their ROS 2 names
 (:mod:`rotation_node.bag.topic_names`).
 
-The input messages are decoded by :mod:`rotation_node.bag.cdr` into
-read-only views where their type has a fixed layout, which
+The conversion runs in blocks (:mod:`rotation_node.bag.block_convert`): a
+block of messages of a topic is decoded into arrays, converted with one
+library call per conversion and encoded for the whole block, with the live
+node's results bit for bit (the per-message ``ConversionPipeline``'s state,
+counters and output bytes). What has no block form (some outputs, frame
+conversions, input types with several topics, a block the fast decoder
+cannot read exactly) goes message by message: input messages decoded by
+:mod:`rotation_node.bag.cdr` into read-only views where their type has a
+fixed layout, which
 :meth:`~rotation_node.pipeline.ConversionPipeline.process_values` reads as it
-reads rclpy messages, and the numbers it returns are encoded by each output's
-encoder (:meth:`rotation_node.messages.OutputMessage.encoder`): the live
-node's conversions, without building rclpy messages where the types allow it.
+reads rclpy messages, and the numbers it returns encoded by each output's
+encoder (:meth:`rotation_node.messages.OutputMessage.encoder`).
 """
 from __future__ import annotations
 
@@ -29,14 +35,13 @@ import os
 from typing import Callable, Dict, Optional, Sequence, TextIO, TYPE_CHECKING
 
 from rotation_node import messages
-from rotation_node.bag.cdr import fixed_layout_codec
+from rotation_node.bag.block_convert import collections_deferred, converted_blocks, TopicConverter
 from rotation_node.bag.mcap_io import TopicMetadata
 from rotation_node.bag.progress import ProgressBar
 from rotation_node.bag.qos import qos_profile, qos_profiles_yaml
 from rotation_node.bag.reader import open_bag
 from rotation_node.bag.writer import BagWriter
 from rotation_node.errors import BagError
-from rotation_node.pipeline import ConversionPipeline
 
 if TYPE_CHECKING:
     from rotation_node.parameters import NodeParameters
@@ -101,8 +106,8 @@ def _check_output(input_path, output_path):
 def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *,
             topics: Optional[Sequence[str]] = None, overwrite: bool = False,
             compression: Optional[str] = None, progress_stream: Optional[TextIO] = None,
-            strict: bool = False,
-            report: Optional[Callable[[str], None]] = None) -> Dict[str, PipelineStats]:
+            strict: bool = False, report: Optional[Callable[[str], None]] = None,
+            blocks: bool = True) -> Dict[str, PipelineStats]:
     """
     Write ``output_path``: the input bag plus the node's outputs for its input topics.
 
@@ -134,6 +139,10 @@ def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *
         directory (mcap, 3 files), 5000 messages``) and its notes (an
         unfinished recording, a renamed topic) once it is opened, before
         anything is written.
+    blocks : bool, optional
+        Convert in blocks where the parameters allow it (the default; see
+        :mod:`rotation_node.bag.block_convert`); False converts message by
+        message. The output is the same byte for byte.
 
     Returns
     -------
@@ -159,19 +168,18 @@ def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *
                 report(note)
         input_type = messages.INPUTS[params.input_type]
         streams = _input_streams(reader, input_type, topics)
-        pipelines = {topic: ConversionPipeline(params) for topic in streams}
         # {bag topic: (its stream's first topic, the input type's name for it)}
         routes = {bag_topic: (topic, name) for topic, stream in streams.items()
                   for bag_topic, name in stream.items()}
-        input_codec = fixed_layout_codec(input_type.type_name)
-        decode = None if input_codec is None else input_codec.decode
         encoders = {name: (messages.OUTPUTS[name].type_name,
                            messages.OUTPUTS[name].message.encoder())
                     for name in params.outputs}
         # {input topic: {output name: (output topic, type name, encode)}}
         outputs = {topic: {name: (output_topic(topic, name), *encoder)
                            for name, encoder in encoders.items()}
-                   for topic in pipelines}
+                   for topic in streams}
+        converters = {topic: TopicConverter(params, outputs[topic], blocks=blocks)
+                      for topic in streams}
         offered_qos = qos_profiles_yaml([qos_profile(params)])
         new_topics = [TopicMetadata(output_topic_name, type_name, offered_qos)
                       for topic_outputs in outputs.values()
@@ -181,23 +189,20 @@ def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *
             raise BagError(f'output topic {", ".join(clashes)} is already in {reader.path}')
 
         compression = reader.compression if compression is None else compression
-        with BagWriter(output_path, overwrite=overwrite, compression=compression) as writer, \
+        with collections_deferred(), \
+                BagWriter(output_path, overwrite=overwrite, compression=compression) as writer, \
                 ProgressBar(sum(reader.message_counts.values()), stream=progress_stream,
                             label='converting ') as progress:
             for metadata in [*reader.topic_metadata.values(), *new_topics]:
                 writer.add_topic(metadata)
-            for record in reader.messages():
-                log_time_ns, publish_time_ns = record.log_time_ns, record.publish_time_ns
-                writer.write_serialized(record.topic, record.type_name, record.data,
-                                        log_time_ns, publish_time_ns)
-                route = routes.get(record.topic)
-                if route is not None:
-                    stream, input_topic = route
-                    topic_outputs = outputs[stream]
-                    for name, header, values in pipelines[stream].process_values(
-                            record.message(decode), input_topic):
-                        topic, type_name, encode = topic_outputs[name]
-                        writer.write_serialized(topic, type_name, encode(header, values),
-                                                log_time_ns, publish_time_ns)
-                progress.update()
-    return {topic: pipeline.stats for topic, pipeline in pipelines.items()}
+            write = writer.write_serialized
+            for block in converted_blocks(reader.messages(), converters, routes):
+                for record, converted in block:
+                    log_time_ns, publish_time_ns = record.log_time_ns, record.publish_time_ns
+                    write(record.topic, record.type_name, record.data, log_time_ns,
+                          publish_time_ns)
+                    if converted:
+                        for topic, type_name, data in converted:
+                            write(topic, type_name, data, log_time_ns, publish_time_ns)
+                progress.update(len(block))
+    return {topic: converter.pipeline.stats for topic, converter in converters.items()}

@@ -23,6 +23,7 @@ import struct
 from typing import (
     Any, Callable, Collection, Dict, Iterable, Iterator, List, Optional, TYPE_CHECKING)
 
+from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.reader import SeekingReader
 from mcap.records import Channel, Chunk, Message, Schema
@@ -180,6 +181,29 @@ def checked_topics(topics: Iterable[str], available: Collection[str], path: str)
     return topics
 
 
+def _chunks_in_order(summary):
+    """
+    Return the chunk indexes in log-time order, if their messages can be read chunk by chunk.
+
+    ``SeekingReader.iter_messages`` orders messages by (log time, chunk offset,
+    place in the chunk) through a heap, a Python comparison per step. When no
+    later chunk holds a message that sorts before the end of an earlier one (a
+    recording's chunks never overlap in time), that order is each chunk's
+    messages sorted by log time, chunk after chunk, without the heap; the
+    result is the same. None when chunks overlap: then read through the heap.
+    """
+    chunks = sorted(summary.chunk_indexes,
+                    key=lambda index: (index.message_start_time, index.chunk_start_offset))
+    for position, chunk in enumerate(chunks):
+        for later in chunks[position + 1:]:
+            if later.message_start_time > chunk.message_end_time:
+                break
+            if not (later.message_start_time == chunk.message_end_time
+                    and later.chunk_start_offset > chunk.chunk_start_offset):
+                return None
+    return chunks
+
+
 class _Scan:
     """
     A linear scan of an MCAP file, record by record, as its writer wrote them.
@@ -295,6 +319,7 @@ class BagReader:
             self._read_scan(unfinished, strict)
 
     def _read_summary(self, summary):
+        self._summary = summary
         self.compression = _compression_name({c.compression for c in summary.chunk_indexes})
         counts = summary.statistics.channel_message_counts if summary.statistics else {}
         self._set_topics(summary.channels.values(), summary.schemas, counts)
@@ -404,8 +429,22 @@ class BagReader:
         # log_time_order=False, queues every chunk's messages before yielding
         # the first: it loads the whole bag.)
         try:
-            for _, channel, message in self._reader.iter_messages(topics=topics):
-                yield self._message(channel, message)
+            chunks = _chunks_in_order(self._summary)
+            if chunks is None:
+                for _, channel, message in self._reader.iter_messages(topics=topics):
+                    yield self._message(channel, message)
+                return
+            channels, log_time = self._summary.channels, operator.attrgetter('log_time')
+            wanted = {channel_id for channel_id, channel in channels.items()
+                      if topics is None or channel.topic in topics}
+            for chunk_index in chunks:
+                self._stream.seek(chunk_index.chunk_start_offset + 1 + 8)
+                records = [record for record in breakup_chunk(
+                    Chunk.read(ReadDataStream(self._stream)), validate_crc=True)
+                    if isinstance(record, Message) and record.channel_id in wanted]
+                records.sort(key=log_time)   # stable: ties in file order
+                for message in records:
+                    yield self._message(channels[message.channel_id], message)
         except _FORMAT_ERRORS as error:
             if not _is_format_error(error):
                 raise

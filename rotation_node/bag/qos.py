@@ -11,7 +11,7 @@ integers; both are read.
 """
 from __future__ import annotations
 
-from typing import Any, Iterable, List, Sequence, TYPE_CHECKING
+from typing import Any, Iterable, List, Sequence, Tuple, TYPE_CHECKING
 
 from rclpy.duration import Duration
 from rclpy.qos import (
@@ -34,6 +34,8 @@ _RELIABILITY = {
     'reliable': ReliabilityPolicy.RELIABLE,
     'best_effort': ReliabilityPolicy.BEST_EFFORT,
 }
+#: ``qos.reliability`` value that adapts the input subscriptions to the publishers.
+AUTO = 'auto'
 
 #: Depth of the reliable queue ``play`` offers at ``--rate 0``, and that
 #: ``record`` requests: deep enough that a burst never overwrites unread samples.
@@ -47,9 +49,10 @@ def _duration_yaml(duration):
 
 def qos_profile(params: NodeParameters, *, transient_local: bool = False) -> QoSProfile:
     """
-    Return the QoS of the node's input subscriptions and output publishers.
+    Return the QoS of the node's output publishers (and of explicitly configured inputs).
 
     ``rotation_bag convert`` stores it as the offered QoS of the topics it adds.
+    ``qos.reliability: auto`` gives reliable, which every subscriber matches.
 
     Parameters
     ----------
@@ -71,8 +74,42 @@ def qos_profile(params: NodeParameters, *, transient_local: bool = False) -> QoS
                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
     return QoSProfile(
         history=HistoryPolicy.KEEP_LAST, depth=params.qos_depth,
-        reliability=_RELIABILITY[params.qos_reliability],
+        reliability=_RELIABILITY.get(params.qos_reliability, ReliabilityPolicy.RELIABLE),
         durability=DurabilityPolicy.VOLATILE)
+
+
+def input_qos(params: NodeParameters, offered: Sequence[QoSProfile], *,
+              transient_local: bool = False) -> QoSProfile:
+    """
+    Return the QoS of one input subscription of the node.
+
+    With ``qos.reliability: auto`` the reliability and durability are those
+    every publisher on the topic is compatible with (:func:`matching_policies`,
+    as ``ros2 bag record`` adapts to what is offered); otherwise, or while
+    there is no publisher, those of :func:`qos_profile` (reliable when auto):
+    a reliable publisher then matches at once, and a best-effort one is
+    reported by an incompatible-QoS event. The history is that of
+    :func:`qos_profile` either way.
+
+    Parameters
+    ----------
+    params : rotation_node.parameters.NodeParameters
+        The node's parameters (``qos.reliability``, ``qos.depth``).
+    offered : list of rclpy.qos.QoSProfile
+        The profiles the topic's publishers offer (may be empty).
+    transient_local : bool, optional
+        The topic holds latched data: keep all, and reliable and transient
+        local unless adapted to the publishers.
+
+    Returns
+    -------
+    rclpy.qos.QoSProfile
+
+    """
+    profile = qos_profile(params, transient_local=transient_local)
+    if params.qos_reliability == AUTO and offered:
+        profile.reliability, profile.durability = matching_policies(offered)
+    return profile
 
 
 def qos_profiles_yaml(profiles: Iterable[QoSProfile]) -> str:
@@ -172,12 +209,39 @@ def qos_profiles_from_yaml(text: str, *, topic: str = '') -> List[QoSProfile]:
     return profiles
 
 
+def matching_policies(offered: Sequence[QoSProfile]) -> Tuple[ReliabilityPolicy, DurabilityPolicy]:
+    """
+    Return the reliability and durability that receive every publisher's messages.
+
+    As rosbag2's ``adapt_request_to_offers``: reliable only if every publisher
+    offers reliable, transient local only if every publisher offers it; best
+    effort and volatile (which every publisher matches) when there is none.
+
+    Parameters
+    ----------
+    offered : list of rclpy.qos.QoSProfile
+        The publishers' offered profiles.
+
+    Returns
+    -------
+    (rclpy.qos.ReliabilityPolicy, rclpy.qos.DurabilityPolicy)
+
+    """
+    def every(policy_name, value):
+        return bool(offered) and all(getattr(p, policy_name) == value for p in offered)
+
+    return (ReliabilityPolicy.RELIABLE if every('reliability', ReliabilityPolicy.RELIABLE)
+            else ReliabilityPolicy.BEST_EFFORT,
+            DurabilityPolicy.TRANSIENT_LOCAL
+            if every('durability', DurabilityPolicy.TRANSIENT_LOCAL)
+            else DurabilityPolicy.VOLATILE)
+
+
 def recording_qos(offered: Sequence[QoSProfile]) -> QoSProfile:
     """
     Return the subscription QoS that receives every publisher's messages.
 
-    As rosbag2 does: reliable only if every publisher offers reliable,
-    transient local only if every publisher offers it. The history keeps
+    The policies of :func:`matching_policies`; the history keeps
     ``DEEP_QUEUE_DEPTH`` samples so that bursts are not overwritten before
     the recorder takes them.
 
@@ -191,18 +255,9 @@ def recording_qos(offered: Sequence[QoSProfile]) -> QoSProfile:
     rclpy.qos.QoSProfile
 
     """
-    def every(policy_name, value):
-        return bool(offered) and all(getattr(p, policy_name) == value for p in offered)
-
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST,
-        depth=DEEP_QUEUE_DEPTH,
-        reliability=(ReliabilityPolicy.RELIABLE
-                     if every('reliability', ReliabilityPolicy.RELIABLE)
-                     else ReliabilityPolicy.BEST_EFFORT),
-        durability=(DurabilityPolicy.TRANSIENT_LOCAL
-                    if every('durability', DurabilityPolicy.TRANSIENT_LOCAL)
-                    else DurabilityPolicy.VOLATILE))
+    reliability, durability = matching_policies(offered)
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=DEEP_QUEUE_DEPTH,
+                      reliability=reliability, durability=durability)
 
 
 def playback_qos(offered: Sequence[QoSProfile], *, lossless: bool = False) -> QoSProfile:

@@ -16,7 +16,7 @@ Conventions (stated once here, relied on everywhere):
   yaw (REP 103) is ``'xyz'``, the same rotation as ``'ZYX'`` with (yaw, pitch, roll).
 - Angles in radians unless ``degrees=True``.
 
-The formulas are the numerically robust ones of ``NUMERICS.md``: Markley's
+The formulas are the numerically robust ones of ``docs/numerics.md``: Markley's
 pivot for matrices, ``atan2`` for angles, Bernardes-Viollet for Euler angles;
 conversions are exact to a few ulps on the hard cases (angles near 0 and pi,
 gimbal lock, quaternions scaled by 1e+-160).

@@ -4,7 +4,7 @@ Axis-angle and rotation vectors: the exponential and logarithm maps.
 A rotation by ``angle`` about the unit ``axis`` n is the quaternion
 ``(n sin(angle/2), cos(angle/2))`` and the rotation vector ``angle * n``.
 
-The seed's ``theta = 2 acos(q_s)`` and ``n = q_v / sqrt(1 - q_s^2)`` lose half
+The textbook ``theta = 2 acos(q_s)`` and ``n = q_v / sqrt(1 - q_s^2)`` lose half
 the digits near 0 (and all of them below ~2e-8 rad) and break for a quaternion
 slightly off unit length; here the angle is ``2 atan2(|q_v|, |q_s|)`` and the
 axis ``q_v / |q_v|``, exact to ~1 ulp for every angle and every norm. Matrix

@@ -2,7 +2,7 @@
 Euler angles in all 24 conventions (12 axis sequences, intrinsic or extrinsic).
 
 Upper-case ``seq`` is intrinsic (rotations about the moving body axes:
-``R = R1(a1) R2(a2) R3(a3)``, the seed's ``R_WB``), lower case extrinsic
+``R = R1(a1) R2(a2) R3(a3)``, the textbook ``R_WB``), lower case extrinsic
 (about the fixed axes: ``R = R3(a3) R2(a2) R1(a1)``). ROS roll-pitch-yaw
 (REP 103, tf2 ``setRPY``) is ``'xyz'`` with (roll, pitch, yaw).
 
@@ -377,7 +377,7 @@ def matrix_from_euler(angles: ArrayLike, seq: str, *, degrees: bool = False) -> 
         First, second and third angle of ``seq`` (radians unless ``degrees``).
     seq : str
         Axis sequence, as in :func:`quaternion_from_euler`. For example
-        ``'ZXZ'`` gives the seed's ``R_WB = R_Z(phi) R_X(theta) R_Z(psi)``.
+        ``'ZXZ'`` gives the textbook ``R_WB = R_Z(phi) R_X(theta) R_Z(psi)``.
     degrees : bool, optional
         Angles are in degrees.
 

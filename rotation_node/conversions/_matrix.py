@@ -2,11 +2,11 @@
 Rotation matrices: quaternion <-> matrix and the nearest rotation of a noisy matrix.
 
 ``R`` maps body coordinates to world coordinates; ``R = matrix_from_quaternion(q)``
-is the seed's ``(2 q_s^2 - 1) I + 2 q_s [q_v]x + 2 q_v q_v^T``.
+is the textbook ``(2 q_s^2 - 1) I + 2 q_s [q_v]x + 2 q_v q_v^T``.
 
 Matrix to quaternion uses Markley's pivot (the largest of trace, R00, R11, R22
 selects the best-conditioned column of the symmetric 4x4 matrix), exact to an
-ulp or two everywhere, including rotations by pi, where the seed's trace
+ulp or two everywhere, including rotations by pi, where the textbook trace
 formula returns NaN. A matrix that is not orthonormal to rounding is replaced
 by its nearest rotation (Frobenius norm): by Newton-Schulz iteration when it is
 close, else as the dominant eigenvector of Bar-Itzhack's symmetric 4x4 matrix.

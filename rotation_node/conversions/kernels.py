@@ -12,7 +12,9 @@ Declaring and calling kernels (see :mod:`._runtime` for the canonical layout)
     (``FLAT_IN``, ``ROWS_IN``, ``FLAT_OUT``, ``ROWS_OUT``, ``INT``, ``FLOAT``,
     ``BOOL``, :func:`array_type`); :func:`samples` and :func:`matrix_samples`
     (compiled views of the canonical layout), :func:`kernel_layout`;
-    :func:`call_binary` (validation, broadcasting, output, threads, errors).
+    :func:`call_binary` (validation, broadcasting, output, threads, errors);
+    :data:`BATCH_SAMPLES`, the size from which conversions with a batch schedule
+    use it (its results may differ from the single-sample path in the last bit).
 
 Validation and error reporting
     :func:`float_array`, :func:`kernel_ready`, :func:`raise_sample_error`, the statuses
@@ -36,12 +38,13 @@ from ._quaternion import (
     canonical_kernel, canonical_unit_quaternion, product, quaternion_status, scaled_quaternion,
     unit_quaternion, vector_status)
 from ._runtime import (
-    array_type, BOOL, call_binary, first_status, FLAT_IN, FLAT_OUT, FLOAT, INT, jit, kernel,
-    kernel_layout, matrix_samples, ROWS_IN, ROWS_OUT, samples, status)
+    array_type, BATCH_SAMPLES, BOOL, call_binary, first_status, FLAT_IN, FLAT_OUT, FLOAT, INT,
+    jit, kernel, kernel_layout, matrix_samples, ROWS_IN, ROWS_OUT, samples, status)
 from ._validation import float_array, kernel_ready, NON_FINITE, OK, raise_sample_error
 
 __all__ = [
-    'BOOL', 'FLAT_IN', 'FLAT_OUT', 'FLOAT', 'INT', 'NON_FINITE', 'OK', 'ROWS_IN', 'ROWS_OUT',
+    'BATCH_SAMPLES', 'BOOL', 'FLAT_IN', 'FLAT_OUT', 'FLOAT', 'INT', 'NON_FINITE', 'OK',
+    'ROWS_IN', 'ROWS_OUT',
     'array_type', 'call_binary', 'canonical_kernel', 'canonical_unit_quaternion',
     'first_status', 'float_array', 'jit', 'kernel', 'kernel_layout', 'kernel_ready', 'matrix_at',
     'matrix_defect', 'matrix_samples', 'product', 'quaternion_from_rotation_vector_scalar',

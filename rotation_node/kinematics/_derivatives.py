@@ -1,7 +1,7 @@
 """
 Angular velocity <-> time derivative of a quaternion or of a rotation matrix.
 
-Conventions (``NUMERICS.md``): ``q = (x, y, z, w)``, scalar last, Hamilton
+Conventions (``docs/numerics.md``): ``q = (x, y, z, w)``, scalar last, Hamilton
 product; ``R = R(q)`` maps body coordinates to world coordinates; the body and
 world angular velocities ``w_b`` and ``w_w = R w_b`` are defined by
 
@@ -9,7 +9,7 @@ world angular velocities ``w_b`` and ``w_w = R w_b`` are defined by
 
 Expanding the products: body ``dq_v/dt = 1/2 (q_s w_b + q_v x w_b)``, world
 ``dq_v/dt = 1/2 (q_s w_w - q_v x w_w)``, and ``dq_s/dt = -1/2 q_v . w`` in both.
-The seed page's ``dq_v/dt = 1/2 (q_s w - q_v x w)`` is labelled "omega_Body"
+The textbook ``dq_v/dt = 1/2 (q_s w - q_v x w)`` is labelled "omega_Body"
 but is the WORLD-frame formula; likewise its ``Omega = dR/dt R^T`` is
 ``[w_w]x``. Both frames are tested against finite differences.
 
@@ -153,7 +153,7 @@ def quaternion_derivative(q: ArrayLike, omega: ArrayLike, frame: str = 'body') -
         ``'body'``: ``qdot = 1/2 q (x) (w_b, 0)``, i.e.
         ``dq_v/dt = 1/2 (q_s w_b + q_v x w_b)``.
         ``'world'``: ``qdot = 1/2 (w_w, 0) (x) q``, i.e.
-        ``dq_v/dt = 1/2 (q_s w_w - q_v x w_w)``: this is the seed page's
+        ``dq_v/dt = 1/2 (q_s w_w - q_v x w_w)``: this is the textbook
         formula, which labels the vector "omega_Body" but is the world one.
         ``dq_s/dt = -1/2 q_v . w`` in both frames.
 
@@ -252,7 +252,7 @@ def angular_velocity_from_matrix_derivative(R: ArrayLike, R_dot: ArrayLike,
         Their time derivatives (1/s); leading dimensions broadcast with ``R``'s.
     frame : {'body', 'world'}, optional
         ``'body'``: ``[w_b]x = R^T Rdot``; ``'world'``: ``[w_w]x = Rdot R^T``
-        (the seed page's ``Omega``).
+        (the textbook ``Omega``).
 
     Returns
     -------

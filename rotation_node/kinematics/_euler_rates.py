@@ -2,7 +2,7 @@
 Euler-angle rates <-> angular velocity, for all 24 conventions and both frames.
 
 For an intrinsic sequence with axes ``e1, e2, e3`` and angles ``(b1, b2, b3)``
-(``R = R1 R2 R3``) the body angular velocity is (``NUMERICS.md``)
+(``R = R1 R2 R3``) the body angular velocity is (``docs/numerics.md``)
 
     w_b = R3^T R2^T e1 b1' + R3^T e2 b2' + e3 b3' = J(b2, b3) b'.
 

@@ -109,7 +109,7 @@ def _constant_rate_unsigned(orientation, angular_velocity, t):
 def coning_truth(half_angle: float, frequency: float,
                  t: FloatArray) -> tuple[FloatArray, FloatArray]:
     """
-    Return classical coning motion, phase 0 at ``t = 0`` (NUMERICS.md).
+    Return classical coning motion, phase 0 at ``t = 0`` (docs/numerics.md).
 
     With half angle ``a`` and cone rate ``W``, scalar last:
     ``q = (sin(a/2) cos(W t), sin(a/2) sin(W t), 0, cos(a/2))`` and

@@ -243,7 +243,7 @@ class ConstantRate:
 @dataclasses.dataclass(frozen=True)
 class Coning:
     """
-    Classical coning motion, analytic (NUMERICS.md, phase 0 at the first sample).
+    Classical coning motion, analytic (docs/numerics.md, phase 0 at the first sample).
 
     The body z axis sweeps a cone of half angle ``half_angle`` about the world
     z axis at ``frequency`` rad/s.

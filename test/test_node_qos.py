@@ -1,0 +1,240 @@
+"""
+Process tests of the node's input QoS and loss accounting: real processes over DDS.
+
+A ``rotation_node`` process on default parameters meets publishers of the
+test process: best effort (as sensor drivers publish), reliable, one after
+the other; a burst of several kHz; a ``qos.depth`` change in the middle of a
+1 kHz stream. What the node received is read from its outputs and from its
+/diagnostics counters (``received``, ``lost``, ``duplicates``).
+"""
+import itertools
+import re
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+import pytest
+from rcl_interfaces.msg import Log
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
+from rclpy.qos import qos_profile_sensor_data, QoSProfile
+from ros_harness import RosProcess, script, TestNode
+from rotation_node.messages import OUTPUTS
+from sensor_msgs.msg import Imu
+from std_msgs.msg import Header
+
+START_TIMEOUT_S = 60.0
+STAMP_NS = 1_700_000_000_000_000_000
+RELIABLE = QoSProfile(depth=1000)
+NAMESPACES = itertools.count()   # one namespace per test: no topic shared across tests
+
+
+@pytest.fixture(scope='module')
+def ros():
+    with TestNode('rotation_node_qos_test') as test_node:
+        test_node.diagnostics = test_node.collect(DiagnosticArray, '/diagnostics', qos=100)
+        test_node.log = test_node.collect(Log, '/rosout', qos=1000)
+        yield test_node
+
+
+class Node:
+    """A ``rotation_node`` process on default parameters in its own namespace, and its outputs."""
+
+    def __init__(self, ros, namespace):
+        self.ros = ros
+        self.namespace = namespace
+        self.fq_name = f'/{namespace}/rotation_node'
+        self.process = RosProcess([script('rotation_node'), '--ros-args',
+                                   '-r', f'__ns:=/{namespace}'])
+        self.input_topic = f'/{namespace}/input'
+        self.publishers = []
+        self.euler = []
+        self.subscription = ros.node.create_subscription(
+            OUTPUTS['euler'].message_class, f'/{namespace}/euler', self.euler.append, 10_000)
+        self.parameters = AsyncParameterClient(ros.node, self.fq_name)
+        if not self.parameters.wait_for_services(timeout_sec=START_TIMEOUT_S):
+            self.process.stop()
+            pytest.fail(f'rotation_node did not start:\n{self.process.output}')
+
+    def statuses(self):
+        """Every /diagnostics status of this node received so far."""
+        return [status for array in self.ros.diagnostics for status in array.status
+                if status.name.startswith(self.fq_name + ':')]
+
+    def diagnostics(self, condition=lambda values: True, timeout=10.0):
+        """Return the values (and 'level') of the next /diagnostics status where ``condition``."""
+        seen = len(self.statuses())
+        found = []
+
+        def arrived():
+            for status in self.statuses()[seen:]:
+                values = {kv.key: kv.value for kv in status.values}
+                if condition(values):
+                    found.append(dict(values, level=status.level))
+            return bool(found)
+        assert self.ros.spin_until(arrived, timeout), 'no matching /diagnostics'
+        return found[0]
+
+    def warned_lost(self):
+        """Whether a /diagnostics status of this node warned of lost messages."""
+        return any(status.level == DiagnosticStatus.WARN and 'lost' in status.message
+                   and not status.message.startswith('0 messages lost')
+                   for status in self.statuses())
+
+    def stamps(self):
+        """Stamps (ns) of the euler outputs received so far."""
+        return [out.header.stamp.sec * 10**9 + out.header.stamp.nanosec for out in self.euler]
+
+    def logged(self, text):
+        return [log.msg for log in self.ros.log
+                if log.name.startswith(self.namespace + '.') and text in log.msg]
+
+    def set_parameter(self, name, value):
+        future = self.parameters.set_parameters([Parameter(name, value=value)])
+        assert self.ros.spin_until(future.done, 10.0), 'parameter service timed out'
+        assert future.result().results[0].successful
+
+    def publisher(self, qos):
+        """Return a new Imu publisher on the node's input (destroyed when the node stops)."""
+        publisher = self.ros.node.create_publisher(Imu, self.input_topic, qos)
+        self.publishers.append(publisher)
+        return publisher
+
+    def stop(self):
+        for publisher in self.publishers:
+            self.ros.node.destroy_publisher(publisher)
+        self.ros.node.destroy_subscription(self.subscription)
+        return self.process.stop()
+
+
+@pytest.fixture
+def node(ros, request):
+    name = re.sub(r'[\W_]+', '_', request.node.name.removeprefix('test_'))[:30].strip('_')
+    started = Node(ros, f'{name}_{next(NAMESPACES)}')
+    yield started
+    assert started.stop() == 0, started.process.output
+
+
+def imu(k):
+    """Return the k-th Imu message of a stream: identity orientation, stamped k ms apart."""
+    msg = Imu()
+    msg.header = Header(frame_id='imu')
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(STAMP_NS + k * 1_000_000, 10**9)
+    msg.orientation.w = 1.0
+    return msg
+
+
+def publish(ros, publisher, first, count, rate):
+    """Publish messages ``first`` to ``first + count - 1`` at ``rate`` Hz, spinning between."""
+    start = time.monotonic()
+    for k in range(count):
+        while time.monotonic() < start + k / rate:
+            ros.executor.spin_once(timeout_sec=max(0.0, start + k / rate - time.monotonic()))
+        publisher.publish(imu(first + k))
+
+
+def matched(ros, publisher):
+    assert ros.spin_until(lambda: publisher.get_subscription_count() > 0, 30.0), 'no match'
+    ros.spin_for(0.5)   # the node's reader has matched the new writer too
+
+
+def expect_outputs(node, first, count, timeout=20.0):
+    """Check that messages ``first`` to ``first + count - 1`` were converted once, in order."""
+    wanted = [STAMP_NS + (first + k) * 1_000_000 for k in range(count)]
+    assert node.ros.spin_until(lambda: set(wanted) <= set(node.stamps()), timeout), (
+        len(set(wanted) & set(node.stamps())))
+    stamps = node.stamps()
+    assert len(stamps) == len(set(stamps)) and stamps == sorted(stamps)
+
+
+# QoS adaptation -----------------------------------------------------------------------------
+
+@pytest.mark.parametrize('kind, qos, adaptations', [
+    ('best_effort', qos_profile_sensor_data, 1),   # as sensor drivers publish
+    ('reliable', RELIABLE, 0),                     # reliable from the start: nothing to adapt
+])
+def test_a_publisher_of_either_kind_is_received_on_default_parameters(
+        ros, node, kind, qos, adaptations):
+    publisher = node.publisher(qos)
+    matched(ros, publisher)
+    publish(ros, publisher, 0, 100, 200.0)
+    expect_outputs(node, 0, 100)
+    values = node.diagnostics()
+    assert values['input_qos'] == f'{node.input_topic}: {kind}, volatile'
+    assert (values['lost'], values['duplicates']) == ('0', '0')
+    assert len(node.logged('subscribing')) == adaptations   # said once
+
+
+def test_publishers_of_either_kind_in_turn(ros, node):
+    """Reliable, then best effort, then reliable again: each stream arrives, each change logged."""
+    kinds = [('reliable', RELIABLE), ('best_effort', qos_profile_sensor_data),
+             ('reliable', RELIABLE)]
+    for turn, (kind, qos) in enumerate(kinds):
+        publisher = node.publisher(qos)
+        matched(ros, publisher)
+        # The node re-checks the publishers once a second: give it time to adapt.
+        assert ros.spin_until(lambda: node.diagnostics()['input_qos'].endswith(
+            f': {kind}, volatile'), 10.0)
+        publish(ros, publisher, 1000 * turn, 100, 200.0)
+        expect_outputs(node, 1000 * turn, 100)
+        ros.node.destroy_publisher(publisher)
+        ros.spin_for(0.5)
+    assert len(node.logged('subscribing best_effort, volatile')) == 1
+    assert len(node.logged('subscribing reliable, volatile (was best_effort')) == 1
+
+
+def test_an_explicit_reliability_is_kept(ros, node):
+    node.set_parameter('qos.reliability', 'reliable')
+    publisher = node.publisher(qos_profile_sensor_data)
+    ros.spin_for(2.5)
+    assert node.diagnostics()['input_qos'] == f'{node.input_topic}: reliable, volatile'
+    assert publisher.get_subscription_count() == 0
+    assert ros.spin_until(lambda: node.logged('incompatible'), 10.0)
+
+
+# Loss ----------------------------------------------------------------------------------------
+
+def test_a_burst_is_received_or_its_loss_reported(ros, node):
+    """15000 messages at up to 10 kHz, reliable, depth 1000: received + lost = sent."""
+    publisher = node.publisher(RELIABLE)
+    matched(ros, publisher)
+    publish(ros, publisher, 0, 10, 100.0)    # the node has seen the stream start
+    expect_outputs(node, 0, 10)
+    count = 15_000
+    messages = [imu(10 + k) for k in range(count)]
+    start = time.monotonic()
+    for k, msg in enumerate(messages):
+        if k % 100 == 0:   # at most 10 kHz
+            time.sleep(max(0.0, start + k / 10_000 - time.monotonic()))
+        publisher.publish(msg)
+    rate = count / (time.monotonic() - start)
+    publish(ros, publisher, 10 + count, 10, 100.0)   # a loss at the end shows as a gap too
+    total = count + 20
+    values = node.diagnostics(lambda v: int(v['received']) + int(v['lost']) >= total, 30.0)
+    assert int(values['received']) + int(values['lost']) == total, (rate, values)
+    assert int(values['lost.sequence_gaps']) == int(values['lost'])
+    assert values['published'] == values['received'] and values['duplicates'] == '0'
+    if values['lost'] != '0':
+        assert node.warned_lost()
+
+
+def test_a_depth_change_during_a_stream_loses_nothing(ros, node):
+    """qos.depth changed twice during 3 s of a 1 kHz stream: every message converted once."""
+    publisher = node.publisher(RELIABLE)
+    matched(ros, publisher)
+    changes = {1000: 100, 2000: 2000}
+    futures = []
+    for first in (0, 1000, 2000):
+        if first in changes:
+            futures.append(node.parameters.set_parameters(
+                [Parameter('qos.depth', value=changes[first])]))
+        publish(ros, publisher, first, 1000, 1000.0)
+    assert ros.spin_until(lambda: all(f.done() for f in futures), 10.0)
+    assert all(f.result().results[0].successful for f in futures)
+    values = node.diagnostics(lambda v: int(v['received']) + int(v['lost']) >= 3000, 20.0)
+    assert values['qos.depth'] == '2000'
+    assert int(values['received']) + int(values['lost']) == 3000
+    if values['lost'] == '0':
+        expect_outputs(node, 0, 3000)
+    else:   # counted, reported, and only what was counted is missing
+        assert node.warned_lost()
+        assert len(set(node.stamps())) == 3000 - int(values['lost'])
