@@ -10,6 +10,7 @@ setup(
     version='0.1.0',
     # The runtime package only: rotation_dev (study, demo, hard cases) stays in the checkout.
     packages=find_packages(include=['rotation_node', 'rotation_node.*']),
+    package_data={package_name: ['py.typed']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),

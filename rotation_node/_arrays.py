@@ -1,10 +1,19 @@
 """Argument checks shared by :mod:`rotation_node.covariance` and :mod:`rotation_node.frames`."""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from .conversions._validation import float_array
 
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
-def finite_array(x, name: str, trailing: tuple) -> np.ndarray:
+    from .type_aliases import FloatArray
+
+
+def finite_array(x: ArrayLike, name: str, trailing: tuple[int, ...]) -> FloatArray:
     """
     Return ``x`` as a float64 array whose shape ends in ``trailing``, every element finite.
 

@@ -29,9 +29,11 @@ the per-message call makes. Decisions that a last-bit difference could flip
 per-message pipeline's own expression wherever the block's estimate is not
 clearly on one side.
 """
+from __future__ import annotations
+
 from dataclasses import dataclass
 import math
-from typing import Callable, Dict, List, NamedTuple, Optional, Tuple
+from typing import Callable, Dict, List, NamedTuple, Optional, Tuple, TYPE_CHECKING
 import warnings
 
 import numba
@@ -45,6 +47,9 @@ from rotation_node.pipeline import (
     NON_FINITE_ORIENTATION, NON_UNIT_QUATERNION, ORIENTATION_UNKNOWN, SAMPLE_TRANSFORMS,
     TIMESTAMP_NOT_INCREASING, ZERO_QUATERNION)
 from rotation_node.stamps import seconds_text
+
+if TYPE_CHECKING:
+    from rotation_node.parameters import NodeParameters
 
 #: Most samples in one block: below the conversions' batch schedules (see the module notes).
 BLOCK_SAMPLES = BATCH_SAMPLES - 1
@@ -85,7 +90,7 @@ BLOCK_VALUES = (ORIENTATION, ANGULAR_VELOCITY, OUTPUT_QUATERNION, EULER_ANGLES,
                 PUBLISHED_EULER, EULER_RATES)
 
 
-def block_support(params) -> Optional[str]:
+def block_support(params: NodeParameters) -> Optional[str]:
     """
     Return why the parameters' streams cannot be converted in blocks, or None if they can.
 

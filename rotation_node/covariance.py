@@ -47,6 +47,9 @@ orientation) is projected out. Both maps are invariant under ``q -> -q``.
 Round trips ``d -> a -> d`` and ``d -> q -> d`` are exact to rounding
 (``J J^-1 = I``, ``M^T M = I``); ``a -> d -> a`` too, away from gimbal lock.
 """
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
 import warnings
 
 import numpy as np
@@ -56,6 +59,9 @@ from .conversions import matrix_from_quaternion, parse_sequence
 from .kinematics import (
     angular_velocity_from_euler_rates, DEFAULT_SINGULARITY_THRESHOLD,
     euler_rates_from_angular_velocity, EulerSingularityWarning)
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 __all__ = [
     'body_rotation_vector_covariance', 'euler_covariance_from_rotation_vector_covariance',
@@ -90,7 +96,7 @@ def _frame_is_world(frame: str) -> bool:
     raise ValueError(f"Expected `frame` to be 'world' or 'body', got {frame!r}.")
 
 
-def rotation_vector_covariance_jacobian(angles, seq: str, frame: str = 'world',
+def rotation_vector_covariance_jacobian(angles: ArrayLike, seq: str, frame: str = 'world',
                                         degrees: bool = False) -> np.ndarray:
     """
     Jacobian ``J = dd/da`` of the rotation-vector perturbation w.r.t. the Euler angles.
@@ -124,8 +130,8 @@ def rotation_vector_covariance_jacobian(angles, seq: str, frame: str = 'world',
     return np.swapaxes(columns, -1, -2)
 
 
-def rotation_vector_covariance_from_euler_covariance(angles, covariance, seq: str,
-                                                     frame: str = 'world',
+def rotation_vector_covariance_from_euler_covariance(angles: ArrayLike, covariance: ArrayLike,
+                                                     seq: str, frame: str = 'world',
                                                      degrees: bool = False) -> np.ndarray:
     """
     Rotation-vector covariance of an orientation whose Euler angles have ``covariance``.
@@ -162,7 +168,8 @@ def rotation_vector_covariance_from_euler_covariance(angles, covariance, seq: st
 
 
 def euler_covariance_from_rotation_vector_covariance(
-        angles, covariance, seq: str, frame: str = 'world', degrees: bool = False, *,
+        angles: ArrayLike, covariance: ArrayLike, seq: str, frame: str = 'world',
+        degrees: bool = False, *,
         singularity_threshold: float = DEFAULT_SINGULARITY_THRESHOLD) -> np.ndarray:
     """
     First-order covariance of the Euler angles of an uncertain orientation.
@@ -213,6 +220,7 @@ def euler_covariance_from_rotation_vector_covariance(
     # One row of angles per column of J^-1: equal leading shapes need no broadcast copy.
     rows = np.repeat(a[..., None, :], 3, axis=-2)
     frame_name = 'world' if world else 'body'
+    near: np.ndarray | bool
     try:
         near = (_middle_margin(a, parse_sequence(seq), degrees)
                 <= float(singularity_threshold) * (1.0 + 1e-9))
@@ -247,7 +255,8 @@ def _middle_margin(angles: np.ndarray, spec, degrees: bool) -> np.ndarray:
     return np.arctan2(s, c) if spec.proper else np.arctan2(c, s)
 
 
-def euler_linearisation_ratio(angles, covariance, seq: str, degrees: bool = False) -> np.ndarray:
+def euler_linearisation_ratio(angles: ArrayLike, covariance: ArrayLike, seq: str,
+                              degrees: bool = False) -> np.ndarray:
     """
     How far the first-order Euler covariance can be trusted: ``sigma_max / margin``.
 
@@ -305,7 +314,8 @@ def _tangent_basis(q: np.ndarray, world: bool) -> np.ndarray:
     return m
 
 
-def quaternion_covariance_from_rotation_vector_covariance(quaternion, covariance,
+def quaternion_covariance_from_rotation_vector_covariance(quaternion: ArrayLike,
+                                                          covariance: ArrayLike,
                                                           frame: str = 'world') -> np.ndarray:
     """
     4x4 covariance of the quaternion components of an uncertain orientation.
@@ -336,7 +346,8 @@ def quaternion_covariance_from_rotation_vector_covariance(quaternion, covariance
     return 0.25 * _congruence(m, finite_array(covariance, 'covariance', (3, 3)))
 
 
-def rotation_vector_covariance_from_quaternion_covariance(quaternion, covariance,
+def rotation_vector_covariance_from_quaternion_covariance(quaternion: ArrayLike,
+                                                          covariance: ArrayLike,
                                                           frame: str = 'world') -> np.ndarray:
     """
     Rotation-vector covariance of an orientation given its 4x4 quaternion covariance.
@@ -369,7 +380,8 @@ def rotation_vector_covariance_from_quaternion_covariance(quaternion, covariance
     return 4.0 * _congruence(np.swapaxes(m, -1, -2), sigma)
 
 
-def world_rotation_vector_covariance(quaternion, body_covariance) -> np.ndarray:
+def world_rotation_vector_covariance(quaternion: ArrayLike,
+                                     body_covariance: ArrayLike) -> np.ndarray:
     """
     World-frame (fixed axes) rotation-vector covariance from the body-frame one.
 
@@ -391,7 +403,8 @@ def world_rotation_vector_covariance(quaternion, body_covariance) -> np.ndarray:
     return _congruence(r, finite_array(body_covariance, 'body_covariance', (3, 3)))
 
 
-def body_rotation_vector_covariance(quaternion, world_covariance) -> np.ndarray:
+def body_rotation_vector_covariance(quaternion: ArrayLike,
+                                    world_covariance: ArrayLike) -> np.ndarray:
     """
     Body-frame rotation-vector covariance from the world-frame (fixed axes) one.
 

@@ -27,7 +27,7 @@ class DiskFullError(BagError):
 
     """
 
-    def __init__(self, message, *, kept, dropped):
+    def __init__(self, message: str, *, kept: int, dropped: int) -> None:
         super().__init__(message)
         self.kept = kept
         self.dropped = dropped

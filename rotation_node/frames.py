@@ -30,11 +30,17 @@ with ``w >= 0``.
 :class:`FrameConversion` says which way a conversion goes; the two common ones
 are :data:`NED_FRD_FROM_ENU_FLU` and :data:`ENU_FLU_FROM_NED_FRD`.
 """
+from __future__ import annotations
+
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ._arrays import finite_array
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 __all__ = ['BODY_FRAMES', 'ENU_FLU_FROM_NED_FRD', 'FrameConversion', 'NED_FRD_FROM_ENU_FLU',
            'WORLD_FRAMES']
@@ -102,7 +108,7 @@ class FrameConversion:
     target_world: str = 'enu'
     target_body: str = 'flu'
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         """Validate the frame names."""
         _checked(self.source_world, WORLD_FRAMES, 'source_world')
         _checked(self.target_world, WORLD_FRAMES, 'target_world')
@@ -146,7 +152,7 @@ class FrameConversion:
         """Return the 3x3 signed permutation that maps body coordinates (``B`` or ``I``)."""
         return _signed_permutation_matrix(self._body)
 
-    def quaternion(self, quaternion) -> np.ndarray:
+    def quaternion(self, quaternion: ArrayLike) -> np.ndarray:
         """
         Return the orientation ``(x, y, z, w)`` in the target frames.
 
@@ -180,7 +186,7 @@ class FrameConversion:
         out = np.stack(np.broadcast_arrays(x, y, z, w), axis=-1)
         return np.where(out[..., 3:] < 0.0, -out, out) + 0.0
 
-    def matrix(self, matrix) -> np.ndarray:
+    def matrix(self, matrix: ArrayLike) -> np.ndarray:
         """
         Return the body-to-world rotation matrix in the target frames, ``P R B`` (exact).
 
@@ -203,7 +209,7 @@ class FrameConversion:
         (wi, ws), (bi, bs) = self._world, self._body
         return m[..., wi[:, None], bi] * (ws[:, None] * bs)
 
-    def world_vector(self, vector) -> np.ndarray:
+    def world_vector(self, vector: ArrayLike) -> np.ndarray:
         """
         Return a world-coordinate vector (world angular velocity, position) in the target world.
 
@@ -225,7 +231,7 @@ class FrameConversion:
         """
         return _permute_vector(finite_array(vector, 'vector', (3,)), self._world)
 
-    def body_vector(self, vector) -> np.ndarray:
+    def body_vector(self, vector: ArrayLike) -> np.ndarray:
         """
         Return a body-coordinate vector (body angular velocity) in the target body frame.
 
@@ -247,7 +253,7 @@ class FrameConversion:
         """
         return _permute_vector(finite_array(vector, 'vector', (3,)), self._body)
 
-    def world_covariance(self, covariance) -> np.ndarray:
+    def world_covariance(self, covariance: ArrayLike) -> np.ndarray:
         """
         Return a world-frame covariance (fixed-axes rotation vector) in the target world.
 
@@ -269,7 +275,7 @@ class FrameConversion:
         """
         return _permute_covariance(finite_array(covariance, 'covariance', (3, 3)), self._world)
 
-    def body_covariance(self, covariance) -> np.ndarray:
+    def body_covariance(self, covariance: ArrayLike) -> np.ndarray:
         """
         Return a body-frame covariance (body-axes rotation vector) in the target body frame.
 

@@ -21,14 +21,19 @@ factory instead, which returns a function ``(topic, message) -> samples``.
 This module does not import rclpy: message classes and the CDR encoders are
 looked up when first used.
 """
+from __future__ import annotations
+
 from dataclasses import dataclass
 import functools
 import math
 import operator
-from typing import Any, Callable, Iterable, NamedTuple, Optional, Sequence, Tuple
+from typing import Any, Callable, Iterable, NamedTuple, Optional, Sequence, Tuple, TYPE_CHECKING
 
 import numpy as np
 from rotation_node import conversions, kinematics, tf_input
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 # Forms of an input orientation.
 QUATERNION = 'quaternion'
@@ -388,7 +393,8 @@ class OutputMessage:
         """
         from rotation_node.bag import cdr
         if self.stamped_numbers:
-            return cdr.fixed_layout_codec(self.type_name).stamped_encoder()
+            codec = cdr.fixed_layout_codec(self.type_name)   # stamped numbers: a fixed layout
+            return codec.stamped_encoder()  # type: ignore[union-attr]
         if self.layout is not None:
             encode_data = cdr.float64_multi_array_encoder(self.layout)
             return lambda header, numbers: encode_data(numbers)
@@ -510,7 +516,7 @@ class OutputType:
     name: str
     message: OutputMessage
     needs: Tuple[str, ...]
-    compute: Optional[Callable[..., Sequence[float]]]
+    compute: Optional[Callable[..., ArrayLike]]
     description: str
     panels: Callable[[Any], list]
 

@@ -41,7 +41,7 @@ import functools
 import gc
 import sys
 import time
-from typing import List, Optional, Sequence
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (
@@ -54,15 +54,14 @@ from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValu
 from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
-from rclpy.qos import (
-    DurabilityPolicy, qos_policy_name_from_kind, QoSPolicyKind, ReliabilityPolicy)
+from rclpy.qos import DurabilityPolicy, qos_policy_name_from_kind, QoSPolicyKind, ReliabilityPolicy
 from rotation_node import messages
 from rotation_node.bag.cdr import fixed_layout_codec
 from rotation_node.bag.qos import AUTO, input_qos, qos_profile
 from rotation_node.errors import BagError, ParameterError
 from rotation_node.parameters import (
     NODE_NAME, NodeParameters, PARAMETERS, PARAMETERS_BY_NAME, parameters_file_sections,
-    parameters_from_yaml, ROS_BUILTIN_PARAMETERS, unknown_parameter_error)
+    parameters_from_yaml, ParameterSpec, ROS_BUILTIN_PARAMETERS, unknown_parameter_error)
 from rotation_node.pipeline import (
     CONVERSION_ERROR, ConversionPipeline, SKIP_REASONS, warm_up_conversions)
 from rotation_node.reception import message_identity, Reception
@@ -87,7 +86,7 @@ _ROS_FLAGS_WITH_VALUE = frozenset((
     '--log-file-name', '--log-config-file'))
 
 
-def ros_arguments(args: Sequence[str]) -> List[tuple]:
+def ros_arguments(args: Sequence[str]) -> List[Tuple[str, Optional[str]]]:
     """
     Return the ``(flag, value)`` pairs of the ROS arguments in a command line.
 
@@ -104,7 +103,8 @@ def ros_arguments(args: Sequence[str]) -> List[tuple]:
         without a value (``--disable-stdout-logs``) with None.
 
     """
-    pairs, in_ros_args, index = [], False, 0
+    pairs: List[Tuple[str, Optional[str]]] = []
+    in_ros_args, index = False, 0
     while index < len(args):
         token = args[index]
         if token == '--ros-args':
@@ -137,7 +137,7 @@ def check_parameter_names(args: Sequence[str]) -> None:
                 raise unknown_parameter_error(name, f' in {flag} {value}')
 
 
-def parameter_descriptor(spec) -> ParameterDescriptor:
+def parameter_descriptor(spec: ParameterSpec) -> ParameterDescriptor:
     """Return the ROS descriptor of one row of the parameter table."""
     descriptor = ParameterDescriptor(
         name=spec.name, description=spec.description,
@@ -193,7 +193,7 @@ class RotationNode(Node):
 
     """
 
-    def __init__(self, parameters_files: Sequence[str] = (), **kwargs):
+    def __init__(self, parameters_files: Sequence[str] = (), **kwargs: Any):
         # Before the node exists: its parameter services answer as soon as they appear,
         # not after the conversions have been compiled or loaded (seconds on a first run).
         warm_up_conversions()
@@ -206,15 +206,16 @@ class RotationNode(Node):
             raise
         self.params = NodeParameters()
         self._pipeline = None
-        self._inputs = []               # one _TopicInput per topic of the input type
+        self._inputs: List[Any] = []    # one _TopicInput per topic of the input type
         self._decode = None             # CDR bytes -> view, None: rclpy deserialises
-        self._output_publishers = {}
-        self._publish = {}              # output name -> publish(bytes)
-        self._encoders = {}             # output name -> encode(header, numbers) -> bytes
-        self._replacing = {}    # output name -> [new publisher, matched since, created at]
+        self._output_publishers: Dict[str, Any] = {}
+        self._publish: Dict[str, Any] = {}     # output name -> publish(bytes)
+        self._encoders: Dict[str, Any] = {}    # output name -> encode(header, numbers) -> bytes
+        # output name -> [new publisher, matched since, created at]
+        self._replacing: Dict[str, Any] = {}
         self._handoff_timer = None
-        self._message_lost = {}         # input subscription -> its message-lost event handle
-        self._next_issue_log = {}   # reason -> monotonic time of its next allowed warning
+        self._message_lost: Dict[Any, Any] = {}   # input subscription -> its message-lost event
+        self._next_issue_log: Dict[str, float] = {}   # reason -> time of its next warning
         self._reported = (0, 0, 0)   # dropped, skipped and lost totals at the last diagnostics
         # Registered before declaring, so the initial values pass the same checks.
         self.add_on_set_parameters_callback(self._check_parameters)
@@ -614,7 +615,7 @@ def usage() -> str:
             + ', '.join(spec.name for spec in PARAMETERS) + '.\n')
 
 
-def main(args: Optional[Sequence[str]] = None) -> int:
+def main(args: Optional[List[str]] = None) -> int:
     """
     Run the node until Ctrl-C (``--help``: print its usage).
 

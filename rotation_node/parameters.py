@@ -11,11 +11,13 @@ node and the offline conversion accept exactly the same values.
 Values are typed as ROS types them: a double parameter needs a float (``0.0``,
 not ``0``), a string array a list of strings. This module does not import rclpy.
 """
+from __future__ import annotations
+
 from dataclasses import dataclass, field, fields, replace
 import math
 from pathlib import Path
 import re
-from typing import Any, Callable, Mapping, Optional
+from typing import Any, Callable, Mapping, Optional, TYPE_CHECKING
 
 from rotation_node import messages
 from rotation_node.conversions import parse_sequence
@@ -23,6 +25,9 @@ from rotation_node.errors import ParameterError
 from rotation_node.frames import BODY_FRAMES, WORLD_FRAMES
 from rotation_node.ros_yaml import load_ros_yaml
 from rotation_node.validation import describe_value, did_you_mean
+
+if TYPE_CHECKING:
+    from rotation_node.type_aliases import StrPath
 
 NODE_NAME = 'rotation_node'
 
@@ -91,7 +96,7 @@ class ParameterSpec:
             return f'from {self.bounds[0]:g} to {self.bounds[1]:g}'
         return self.rule
 
-    def checked(self, value):
+    def checked(self, value: Any) -> Any:
         """
         Return ``value`` in canonical form (string arrays as tuples) if it is valid.
 
@@ -283,7 +288,7 @@ class NodeParameters:
         rule='a TF frame name without a leading /, not tf.parent_frame; required with '
              'input_type tf')
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         """Check every value, then the input type's own parameters; string arrays as tuples."""
         for spec in PARAMETERS:
             object.__setattr__(self, spec.attribute, spec.checked(getattr(self, spec.attribute)))
@@ -337,7 +342,7 @@ def unknown_parameter_error(name: str, where: str = '') -> ParameterError:
         f"the node's parameters are {', '.join(PARAMETERS_BY_NAME)}")
 
 
-def parameters_from_yaml(path, node_name: str = NODE_NAME) -> NodeParameters:
+def parameters_from_yaml(path: StrPath, node_name: str = NODE_NAME) -> NodeParameters:
     """
     Read the node's parameters from a ROS 2 parameters file.
 
@@ -392,7 +397,7 @@ def parameters_from_yaml(path, node_name: str = NODE_NAME) -> NodeParameters:
         raise ParameterError(f'parameters file {path}: {exc}') from None
 
 
-def parameters_file_sections(path) -> list:
+def parameters_file_sections(path: StrPath) -> list[tuple[str, dict[str, Any]]]:
     """
     Read the sections of a ROS 2 parameters file, for any node.
 

@@ -237,8 +237,8 @@ class ConversionPipeline:
         # Per-stream state.
         self._previous_quaternion = None     # last orientation, for the finite difference
         self._previous_stamp_ns = None
-        self._previous_output_quaternion = None   # for quaternion.continuity
-        self._previous_euler = None               # for euler.unwrap
+        self._previous_output_quaternion: Optional[np.ndarray] = None   # quaternion.continuity
+        self._previous_euler: Optional[Tuple[float, float, float]] = None   # euler.unwrap
 
     @property
     def input_type(self) -> type:
@@ -338,7 +338,7 @@ class ConversionPipeline:
         Counts the sample's outputs, or the sample as dropped (then returns none).
         """
         try:
-            values = {}
+            values: Dict[str, Any] = {}
             for name, requires, compute in self._plan:
                 for required in requires:
                     if values[required] is None:

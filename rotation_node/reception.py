@@ -58,9 +58,9 @@ class Reception:
     def __init__(self, memory: int):
         self.lost = 0
         self.duplicates = 0
-        self._seen = set()
-        self._order = collections.deque()
-        self._last_numbers = []   # per publisher, the most recently heard first
+        self._seen: set = set()
+        self._order: collections.deque = collections.deque()
+        self._last_numbers: list = []   # per publisher, the most recently heard first
         self.resize(memory)
 
     def seen(self, info: Mapping[str, Any]) -> bool:

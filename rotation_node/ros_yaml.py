@@ -112,8 +112,8 @@ def _strtod(text):
         match = _STRTOD_WORD.fullmatch(text)
         if match is None:
             return text
-        sign, infinity, _ = match.groups()
-        return (-1.0 if sign == '-' else 1.0) * (math.inf if infinity else math.nan)
+        sign_text, infinity, _ = match.groups()
+        return (-1.0 if sign_text == '-' else 1.0) * (math.inf if infinity else math.nan)
     if math.isinf(value) or (abs(value) < sys.float_info.min and not _exact(text, value)):
         return text   # strtod's ERANGE: beyond the float range, or rounded below it
     return value
@@ -169,7 +169,8 @@ _ROS_SCALAR_TAG = 'tag:rotation_node,2024:ros-scalar'
 _RosLoader.yaml_implicit_resolvers = {
     key: [(_ROS_SCALAR_TAG, re.compile(r'.*', re.DOTALL))] for key in (None, '')}
 _RosLoader.add_constructor(
-    _ROS_SCALAR_TAG, lambda loader, node: ros_scalar(loader.construct_scalar(node)))
+    _ROS_SCALAR_TAG,
+    lambda loader, node: ros_scalar(loader.construct_scalar(node)))  # type: ignore[arg-type]
 
 
 class _RosLoaderWithoutAliases(_RosLoader):

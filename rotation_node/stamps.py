@@ -45,7 +45,7 @@ def split_ns(nanoseconds: int) -> Tuple[int, int]:
     return divmod(int(nanoseconds), NS_PER_S)
 
 
-def time_message(nanoseconds: int):
+def time_message(nanoseconds: int) -> Any:
     """Return a builtin_interfaces/Time holding ``nanoseconds``."""
     from builtin_interfaces.msg import Time
     seconds, rest = split_ns(nanoseconds)

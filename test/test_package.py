@@ -132,6 +132,7 @@ def test_colcon_build_installs_what_ros2_run_and_ros2_launch_need(colcon_install
     assert sorted(p.name for p in (share / 'rotation_node' / 'launch').iterdir()) == sorted(
         p.name for p in (ROOT / 'launch').glob('*.launch.py'))
     assert (colcon_install / SITE / 'rotation_node' / 'conversions' / '__init__.py').is_file()
+    assert (colcon_install / SITE / 'rotation_node' / 'py.typed').is_file()   # PEP 561
     assert not (colcon_install / SITE / 'rotation_dev').exists()
 
 

@@ -12,11 +12,19 @@ replaced only when asked to.
 (Bags are written differently, by :mod:`rotation_node.bag.output`: under a
 visible ``.part`` name that a crash leaves for recovery.)
 """
+from __future__ import annotations
+
 import os
 import secrets
+from typing import Optional, TYPE_CHECKING
 
 from rotation_node.bag.output import rename_exclusive
 from rotation_node.errors import BagError
+
+if TYPE_CHECKING:
+    from types import TracebackType
+
+    from rotation_node.type_aliases import StrPath
 
 
 class AtomicFile:
@@ -42,7 +50,7 @@ class AtomicFile:
 
     """
 
-    def __init__(self, path, *, overwrite=False):
+    def __init__(self, path: StrPath, *, overwrite: bool = False) -> None:
         self.path = os.fspath(path)
         self.overwrite = overwrite
         if os.path.isdir(self.path):
@@ -61,11 +69,11 @@ class AtomicFile:
         self.stream = os.fdopen(descriptor, 'wb')
 
     @property
-    def closed(self):
+    def closed(self) -> bool:
         """Whether the file was committed or discarded."""
         return self.stream.closed
 
-    def commit(self):
+    def commit(self) -> None:
         """Flush to disk and rename the temporary file to the destination."""
         if self.closed:
             return
@@ -85,7 +93,7 @@ class AtomicFile:
             self.discard()
             raise BagError(f'cannot write output {self.path}: {error.strerror}') from None
 
-    def discard(self):
+    def discard(self) -> None:
         """Close and remove the temporary file; the destination is untouched."""
         self.stream.close()
         try:
@@ -93,10 +101,11 @@ class AtomicFile:
         except FileNotFoundError:
             pass
 
-    def __enter__(self):
+    def __enter__(self) -> AtomicFile:
         return self
 
-    def __exit__(self, exc_type, exc, traceback):
+    def __exit__(self, exc_type: Optional[type[BaseException]], exc: Optional[BaseException],
+                 traceback: Optional[TracebackType]) -> None:
         if exc_type is None:
             self.commit()
         else:

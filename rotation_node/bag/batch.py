@@ -9,15 +9,20 @@ N``); :func:`convert_bags_on_dask` submits the same tasks to a Dask
 distributed cluster, for fleets that outgrow one machine. The outputs are
 named after the inputs (:func:`batch_output_path`).
 """
+from __future__ import annotations
+
 import concurrent.futures
 import dataclasses
 import multiprocessing
 import os
 import signal
-from typing import Callable, List, Optional, Sequence
+from typing import Any, Callable, Dict, List, Optional, Sequence, TYPE_CHECKING
 
 from rotation_node.bag.stop_signal import Terminated
 from rotation_node.errors import BagError, RotationNodeError
+
+if TYPE_CHECKING:
+    from rotation_node.parameters import NodeParameters
 
 _STORAGE_SUFFIXES = ('.zstd', '.mcap', '.db3', '.bag')
 _converting = False   # in a worker process: whether it is converting a bag now
@@ -73,7 +78,7 @@ def batch_output_paths(input_paths: Sequence[str], output_directory: str) -> Lis
         given twice.
 
     """
-    outputs = {}
+    outputs: Dict[str, str] = {}
     for input_path in input_paths:
         output = batch_output_path(input_path, output_directory)
         if output in outputs:
@@ -92,9 +97,9 @@ def _summary(stats, params) -> str:
         for topic, topic_stats in stats.items())
 
 
-def convert_bag(input_path: str, output_path: str, params, *, topics=None,
-                overwrite: bool = False, strict: bool = False,
-                compression: Optional[str] = None) -> BagResult:
+def convert_bag(input_path: str, output_path: str, params: NodeParameters, *,
+                topics: Optional[Sequence[str]] = None, overwrite: bool = False,
+                strict: bool = False, compression: Optional[str] = None) -> BagResult:
     """
     Convert one bag as ``rotation_bag convert`` does; report a failure instead of raising it.
 
@@ -125,7 +130,7 @@ def convert_bag(input_path: str, output_path: str, params, *, topics=None,
 
     """
     from rotation_node.bag.convert import convert
-    notes = []
+    notes: List[str] = []
     try:
         with open(os.devnull, 'w') as no_progress_bar:
             stats = convert(input_path, output_path, params, topics=topics, overwrite=overwrite,
@@ -147,8 +152,9 @@ def _without_path(line, path):
     return line[len(prefix):] if line.startswith(prefix) else line
 
 
-def convert_bags(input_paths: Sequence[str], output_directory: str, params, *, jobs: int = 1,
-                 topics=None, overwrite: bool = False, strict: bool = False,
+def convert_bags(input_paths: Sequence[str], output_directory: str, params: NodeParameters,
+                 *, jobs: int = 1, topics: Optional[Sequence[str]] = None,
+                 overwrite: bool = False, strict: bool = False,
                  compression: Optional[str] = None,
                  on_result: Optional[Callable[[BagResult], None]] = None) -> List[BagResult]:
     """
@@ -250,8 +256,9 @@ def _convert_bag_in_worker(*args, **kwargs):
         _converting = False
 
 
-def convert_bags_on_dask(client, input_paths: Sequence[str], output_directory: str, params, *,
-                         topics=None, overwrite: bool = False, strict: bool = False,
+def convert_bags_on_dask(client: Any, input_paths: Sequence[str], output_directory: str,
+                         params: NodeParameters, *, topics: Optional[Sequence[str]] = None,
+                         overwrite: bool = False, strict: bool = False,
                          compression: Optional[str] = None,
                          on_result: Optional[Callable[[BagResult], None]] = None,
                          timeout: Optional[float] = None) -> List[BagResult]:

@@ -17,16 +17,21 @@ messages (all topics, log-time order) and gives each message with its
 outputs, in order: the output bag is written as the per-message conversion
 writes it, and memory holds one block.
 """
+from __future__ import annotations
+
 import contextlib
 import gc
 import itertools
-from typing import Dict, Iterable, Iterator, List, Optional, Tuple
+from typing import Any, Dict, Iterable, Iterator, List, Optional, Tuple, TYPE_CHECKING
 
 from rotation_node import messages
 from rotation_node.bag.cdr import fixed_layout_codec
 from rotation_node.bag.cdr_block import block_encoder, InputBlockDecoder
 from rotation_node.block_pipeline import BLOCK_SAMPLES, block_support, BlockPipeline
 from rotation_node.pipeline import ConversionPipeline
+
+if TYPE_CHECKING:
+    from rotation_node.parameters import NodeParameters
 
 #: Messages read per block (of all topics together).
 BLOCK_MESSAGES = BLOCK_SAMPLES
@@ -39,7 +44,7 @@ Output = Tuple[str, str, bytes]
 
 
 @contextlib.contextmanager
-def collections_deferred():
+def collections_deferred() -> Iterator[None]:
     """
     Run the block with the cyclic garbage collector's passes made rarer; restore them after.
 
@@ -58,7 +63,7 @@ def collections_deferred():
         gc.set_threshold(*threshold)
 
 
-def block_form_missing(params) -> Optional[str]:
+def block_form_missing(params: NodeParameters) -> Optional[str]:
     """
     Return why a topic of the parameters' input type is converted message by message, or None.
 
@@ -105,7 +110,7 @@ class TopicConverter:
 
     """
 
-    def __init__(self, params, outputs: Dict[str, tuple], *, blocks: bool = True):
+    def __init__(self, params: NodeParameters, outputs: Dict[str, tuple], *, blocks: bool = True):
         self.pipeline = ConversionPipeline(params)
         self._outputs = [(name, *outputs[name]) for name in params.outputs]
         self._by_name = {name: output for name, *output in self._outputs}
@@ -171,7 +176,7 @@ class TopicConverter:
 
 def converted_blocks(records: Iterable, converters: Dict[str, TopicConverter],
                      routes: Optional[Dict[str, Tuple[str, str]]] = None
-                     ) -> Iterator[List[Tuple[object, List[Output]]]]:
+                     ) -> Iterator[List[Tuple[Any, List[Output]]]]:
     """
     Give the records in blocks, each record with the outputs of its stream's converter.
 

@@ -36,16 +36,17 @@ not little-endian CDR is left to rclpy. Encoding gives rclpy's bytes, except
 that the padding is zero where rclpy leaves it uninitialised, so that equal
 messages give equal bytes and bags are reproducible.
 """
+from __future__ import annotations
+
 import collections
 import functools
 import operator
 import struct
-from typing import NamedTuple
+from typing import Any, Callable, Dict, List, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 from rclpy.serialization import deserialize_message
 from rosidl_parser.definition import Array, BasicType, NamespacedType, UnboundedString
-
 from rotation_node.bag.message_types import message_class
 from rotation_node.errors import BagError
 
@@ -89,7 +90,7 @@ class _Leaf(NamedTuple):
 
     path: str     # 'header.stamp.sec'
     code: str     # struct code; _STRING for a string
-    count: int    # elements of a fixed array; 0 for a single value or a string
+    count: int  # type: ignore[assignment]  # elements of a fixed array; 0: a value or string
 
 
 _STRING_LENGTH = _Leaf('<string length>', 'I', 0)
@@ -98,7 +99,8 @@ _STRING_LENGTH = _Leaf('<string length>', 'I', 0)
 @functools.lru_cache(maxsize=None)
 def _view_class(msg_class):
     """Return the named tuple class that views messages of ``msg_class``."""
-    view = collections.namedtuple(msg_class.__name__, msg_class.get_fields_and_field_types())
+    view = collections.namedtuple(  # type: ignore[misc]
+        msg_class.__name__, msg_class.get_fields_and_field_types())
     view.__doc__ = (f'Read-only view of a decoded {msg_class.__module__.split(".")[0]}/msg/'
                     f'{msg_class.__name__} (rotation_node.bag.cdr).')
     return view
@@ -178,10 +180,10 @@ class FixedLayoutCodec:
 
     """
 
-    def __init__(self, type_name):
+    def __init__(self, type_name: str) -> None:
         self.type_name = type_name
         self.message_class = message_class(type_name)
-        self._leaves = []
+        self._leaves: List[_Leaf] = []
         try:
             self._build, _ = _compile(self.message_class, '', self._leaves, 0)
         except _NotFixedLayout as error:
@@ -193,19 +195,19 @@ class FixedLayoutCodec:
         self._to_string_lengths = [
             tuple(_fixed_format([*run, _STRING_LENGTH], start)[1] - start for start in range(8))
             for run in _runs_before_strings(self._leaves)[0]]
-        self._structs = {}
+        self._structs: Dict[Any, Any] = {}
         # rmw_fastrtps pads types without strings ("plain" types) to 4 bytes;
         # readers do not need it, the decoder does not expect it.
         self._end_padding = (bytes(_padding(self._struct(()).size, 4))
                              if not self._to_string_lengths else b'')
 
     @property
-    def leaves(self):
+    def leaves(self) -> Tuple[_Leaf, ...]:
         """Return the primitive fields in CDR order: ``path``, struct ``code``, ``count``."""
         return tuple(self._leaves)
 
     @property
-    def to_string_lengths(self):
+    def to_string_lengths(self) -> List[Tuple[int, ...]]:
         """
         Per string, the bytes from the previous string's end to the end of this one's length.
 
@@ -214,7 +216,7 @@ class FixedLayoutCodec:
         """
         return self._to_string_lengths
 
-    def leaf_offsets(self, string_lengths):
+    def leaf_offsets(self, string_lengths: Sequence[int]) -> Dict[str, int]:
         """
         Return ``{path: payload offset}`` of every field when the strings have these lengths.
 
@@ -235,7 +237,7 @@ class FixedLayoutCodec:
                 offset += size * (leaf.count or 1)
         return offsets
 
-    def payload_size(self, string_lengths):
+    def payload_size(self, string_lengths: Sequence[int]) -> int:
         """Bytes of the payload :meth:`decode` reads when the strings have these lengths."""
         return self._struct(tuple(string_lengths)).size
 
@@ -249,7 +251,7 @@ class FixedLayoutCodec:
                 _payload_format(self._leaves, string_lengths))
         return compiled
 
-    def decode(self, data):
+    def decode(self, data: bytes) -> Any:
         """
         Decode one message.
 
@@ -297,7 +299,7 @@ class FixedLayoutCodec:
         return BagError(f'{self.type_name}: CDR data of {len(data)} bytes is truncated '
                         f'(needs at least {_ENCAPSULATION_SIZE + payload_size})')
 
-    def encode(self, msg):
+    def encode(self, msg: Any) -> bytes:
         """
         Encode one message.
 
@@ -319,7 +321,8 @@ class FixedLayoutCodec:
             an array of the wrong length...).
 
         """
-        values, lengths = [], []
+        values: List[Any] = []
+        lengths: List[int] = []
         for leaf, get in zip(self._leaves, self._getters):
             value = get(msg)
             if leaf.code == _STRING:
@@ -347,7 +350,7 @@ class FixedLayoutCodec:
                 return f'{leaf.path} = {value!r}: {error}'
         return 'the values do not match the fields'
 
-    def stamped_encoder(self):
+    def stamped_encoder(self) -> Callable[[Any, Sequence[float]], bytes]:
         """
         Return an encoder from a header and numbers, without a message object.
 
@@ -404,7 +407,7 @@ def _fixed_format(leaves, offset):
 
 def _runs_before_strings(leaves):
     """Return the leaves between strings: the runs before each string, then after the last."""
-    runs = [[]]
+    runs: List[List[_Leaf]] = [[]]
     for leaf in leaves:
         if leaf.code == _STRING:
             runs.append([])
@@ -426,7 +429,7 @@ def _payload_format(leaves, string_lengths):
 
 
 @functools.lru_cache(maxsize=None)
-def fixed_layout_codec(type_name):
+def fixed_layout_codec(type_name: str) -> Optional[FixedLayoutCodec]:
     """
     Return the codec of a message type, or None if its layout is not fixed.
 
@@ -452,7 +455,7 @@ def fixed_layout_codec(type_name):
         return None
 
 
-def float64_multi_array_encoder(layout):
+def float64_multi_array_encoder(layout: Any) -> Callable[[Sequence[float]], bytes]:
     """
     Return an encoder of std_msgs/Float64MultiArray messages with a given layout.
 
@@ -484,7 +487,7 @@ def float64_multi_array_encoder(layout):
 
 
 @functools.lru_cache(maxsize=None)
-def message_encoder(type_name):
+def message_encoder(type_name: str) -> Optional[Callable[[Any], bytes]]:
     """
     Return ``encode(msg) -> bytes`` for a type this module encodes, or None.
 

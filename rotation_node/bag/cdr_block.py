@@ -16,7 +16,9 @@ truncated message, a ``frame_id`` that is not NUL-terminated UTF-8, which
 the per-message path rewrites), :meth:`InputBlockDecoder.decode` returns
 None and the caller converts that block message by message.
 """
-from typing import List, NamedTuple, Optional, Sequence
+from __future__ import annotations
+
+from typing import Any, List, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 from rotation_node import messages
@@ -90,7 +92,7 @@ class InputBlockDecoder:
         self._rate_unknown = None if self._rate is None else (
             input_type.angular_velocity_unknown_field)
 
-    def decode(self, datas: Sequence[bytes]):
+    def decode(self, datas: Sequence[bytes]) -> Optional[Tuple[Any, Any]]:
         """
         Decode a block of messages.
 

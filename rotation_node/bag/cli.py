@@ -25,12 +25,14 @@ behind (``record`` keeps what it recorded: on a full disk as a closed bag)
 and the input is never modified. With several inputs, each bag gets one line
 and the exit status is 1 if any failed.
 """
+from __future__ import annotations
+
 import argparse
 import os
 import sys
+from typing import List, Optional, Sequence
 
 from rclpy.utilities import remove_ros_args
-
 from rotation_node.bag.stop_signal import exit_status, interrupt_on_stop_signals, signal_name
 from rotation_node.errors import BagError, RotationNodeError
 
@@ -64,7 +66,7 @@ def _convert(args, ros_args):
         _convert_many(args, inputs, output, params)
         return
     from rotation_node.bag.convert import convert, output_topic
-    notes = []   # printed once the bag is written: a failure stays one line
+    notes: List[str] = []   # printed once the bag is written: a failure stays one line
     stats = convert(inputs[0], output, params, topics=args.topic, overwrite=args.force,
                     compression=args.compression, strict=args.strict, report=notes.append)
     for note in notes:
@@ -104,7 +106,7 @@ def _plot(args, ros_args):
     bag_name = os.path.splitext(os.path.basename(os.path.normpath(args.input)))[0]
     output = args.output or bag_name + args.topic.replace('/', '_') + '.png'
     params = None if args.params is None else parameters_from_yaml(args.params)
-    notes = []
+    notes: List[str] = []
     count = plot_topic(args.input, args.topic, output, params=params, overwrite=args.force,
                        strict=args.strict, report=notes.append)
     for note in notes:
@@ -126,7 +128,7 @@ def _positive_int(text):
     return value
 
 
-def build_parser():
+def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser of ``rotation_bag``."""
     parser = argparse.ArgumentParser(
         prog=PROG, description='Record, play, convert and plot ROS 2 bags.')
@@ -206,7 +208,7 @@ def build_parser():
     return parser
 
 
-def main(argv=None):
+def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run ``rotation_bag``; return the exit status."""
     argv = sys.argv if argv is None else [PROG, *argv]
     args = build_parser().parse_args(remove_ros_args(argv)[1:])

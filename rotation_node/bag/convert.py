@@ -29,11 +29,13 @@ fixed layout, which
 reads rclpy messages, and the numbers it returns encoded by each output's
 encoder (:meth:`rotation_node.messages.OutputMessage.encoder`).
 """
+from __future__ import annotations
+
 import os
+from typing import Callable, Dict, Optional, Sequence, TextIO, TYPE_CHECKING
 
 from rotation_node import messages
-from rotation_node.bag.block_convert import (
-    collections_deferred, converted_blocks, TopicConverter)
+from rotation_node.bag.block_convert import collections_deferred, converted_blocks, TopicConverter
 from rotation_node.bag.mcap_io import TopicMetadata
 from rotation_node.bag.progress import ProgressBar
 from rotation_node.bag.qos import qos_profile, qos_profiles_yaml
@@ -41,8 +43,13 @@ from rotation_node.bag.reader import open_bag
 from rotation_node.bag.writer import BagWriter
 from rotation_node.errors import BagError
 
+if TYPE_CHECKING:
+    from rotation_node.parameters import NodeParameters
+    from rotation_node.pipeline import PipelineStats
+    from rotation_node.type_aliases import StrPath
 
-def output_topic(input_topic, output_name):
+
+def output_topic(input_topic: str, output_name: str) -> str:
     """Topic of the output ``output_name`` of ``input_topic``: ``/imu`` -> ``/imu/euler``."""
     return f'{input_topic.rstrip("/")}/{output_name}'
 
@@ -96,8 +103,11 @@ def _check_output(input_path, output_path):
         raise BagError(f'output {output_path} is inside the input bag {input_path}')
 
 
-def convert(input_path, output_path, params, *, topics=None, overwrite=False,
-            compression=None, progress_stream=None, strict=False, report=None, blocks=True):
+def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *,
+            topics: Optional[Sequence[str]] = None, overwrite: bool = False,
+            compression: Optional[str] = None, progress_stream: Optional[TextIO] = None,
+            strict: bool = False, report: Optional[Callable[[str], None]] = None,
+            blocks: bool = True) -> Dict[str, PipelineStats]:
     """
     Write ``output_path``: the input bag plus the node's outputs for its input topics.
 

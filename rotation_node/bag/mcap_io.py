@@ -13,12 +13,15 @@ Messages are stored as CDR bytes, which reading returns unchanged, so a bag
 round trip is byte-exact. Reading streams chunk by chunk: memory does not grow
 with the length of the bag.
 """
+from __future__ import annotations
+
 import dataclasses
 import functools
 import operator
 import os
 import struct
-from typing import Collection, Iterable, List, Optional
+from typing import (
+    Any, Callable, Collection, Dict, Iterable, Iterator, List, Optional, TYPE_CHECKING)
 
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
@@ -31,6 +34,9 @@ from rotation_node.bag.compression import decompressed_message, ZSTD_MAGIC
 from rotation_node.bag.message_types import message_class
 from rotation_node.errors import BagError
 import zstandard
+
+if TYPE_CHECKING:
+    from rotation_node.type_aliases import StrPath
 
 MESSAGE_ENCODING = 'cdr'
 SCHEMA_ENCODINGS = ('ros2msg', 'ros2idl')
@@ -112,14 +118,15 @@ class BagMessage:
 
     __slots__ = ('topic', 'type_name', 'data', 'log_time_ns', 'publish_time_ns')
 
-    def __init__(self, topic, type_name, data, log_time_ns, publish_time_ns):
+    def __init__(self, topic: str, type_name: str, data: bytes, log_time_ns: int,
+                 publish_time_ns: int) -> None:
         self.topic = topic
         self.type_name = type_name
         self.data = data
         self.log_time_ns = log_time_ns
         self.publish_time_ns = publish_time_ns
 
-    def message(self, decode=None):
+    def message(self, decode: Optional[Callable[[bytes], Any]] = None) -> Any:
         """
         Deserialise the message.
 
@@ -151,7 +158,7 @@ class BagMessage:
                 f'message on {self.topic} at {self.log_time_ns} ns is not a valid '
                 f'{self.type_name}: {error}') from None
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return (f'BagMessage({self.topic!r}, {self.type_name!r}, <{len(self.data)} bytes>, '
                 f'log_time_ns={self.log_time_ns}, publish_time_ns={self.publish_time_ns})')
 
@@ -274,9 +281,9 @@ class BagReader:
 
     """
 
-    def __init__(self, path, *, strict=False):
+    def __init__(self, path: StrPath, *, strict: bool = False) -> None:
         self.path = os.fspath(path)
-        self.recovered = None
+        self.recovered: Optional[int] = None
         self.compression = 'none'
         try:
             self._stream = open(self.path, 'rb')
@@ -306,7 +313,7 @@ class BagReader:
                 raise
             unfinished = error
         if summary is not None and summary.chunk_indexes:
-            self._scan_count = None
+            self._scan_count: Optional[int] = None
             self._read_summary(summary)
         else:
             self._read_scan(unfinished, strict)
@@ -320,7 +327,9 @@ class BagReader:
     def _read_scan(self, unfinished, strict):
         """Index a file without summary by reading it once; decide how much to recover."""
         scan = _Scan(self._stream)
-        schemas, channels, counts = {}, {}, {}
+        schemas: Dict[int, Any] = {}
+        channels: Dict[int, Any] = {}
+        counts: Dict[int, int] = {}
         total, previous, self._scan_ordered = 0, -1, True
         for record in scan:
             if isinstance(record, Schema):
@@ -347,9 +356,9 @@ class BagReader:
         self._set_topics(channels.values(), schemas, counts)
 
     def _set_topics(self, channels, schemas, counts):
-        self.topic_metadata = {}
-        self.message_counts = {}
-        self._type_names = {}
+        self.topic_metadata: Dict[str, TopicMetadata] = {}
+        self.message_counts: Dict[str, int] = {}
+        self._type_names: Dict[int, str] = {}
         for channel in channels:
             metadata = self._topic_metadata(channel, schemas.get(channel.schema_id))
             known = self.topic_metadata.setdefault(channel.topic, metadata)
@@ -375,7 +384,7 @@ class BagReader:
             type_hash=channel.metadata.get('topic_type_hash', ''),
             serialization_format=channel.message_encoding)
 
-    def messages(self, topics=None):
+    def messages(self, topics: Optional[Iterable[str]] = None) -> Iterator[BagMessage]:
         """
         Iterate over the messages in log-time order (ties in file order).
 
@@ -444,7 +453,9 @@ class BagReader:
     def _scanned_messages(self, topics):
         """Return the messages the opening scan counted, no more (the file may still grow)."""
         wanted = None if topics is None else set(topics)
-        channels, remaining = {}, self._scan_count
+        channels: Dict[int, Any] = {}
+        remaining = self._scan_count
+        assert remaining is not None   # set by the opening scan
         for record in _Scan(self._stream):
             if remaining == 0:
                 return
@@ -460,18 +471,18 @@ class BagReader:
                         raise BagError(
                             f'{self.path} is corrupt: {_described(error)}') from None
 
-    def close(self):
+    def close(self) -> None:
         """Close the file."""
         self._stream.close()
 
-    def __enter__(self):
+    def __enter__(self) -> BagReader:
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
 
-def __getattr__(name):
+def __getattr__(name: str) -> Any:
     # BagWriter lives in rotation_node.bag.writer (which imports this module).
     if name == 'BagWriter':
         from rotation_node.bag.writer import BagWriter

@@ -32,7 +32,7 @@ _PRIMITIVE_TYPES = frozenset((
 _DEFINITION_DELIMITER = '=' * 80 + '\n'
 
 
-def split_type_name(type_name):
+def split_type_name(type_name: str) -> tuple[str, str, str]:
     """
     Split a message type name into package, interface kind and type.
 
@@ -55,11 +55,12 @@ def split_type_name(type_name):
     match = _TYPE_NAME.fullmatch(type_name) if isinstance(type_name, str) else None
     if match is None:
         raise BagError(f"invalid message type name {type_name!r}: expected 'pkg/msg/Type'")
-    return match.groups()
+    package, kind, name = match.groups()
+    return package, kind, name
 
 
 @functools.lru_cache(maxsize=None)
-def message_class(type_name):
+def message_class(type_name: str) -> type:
     """
     Return the Python message class of a type name.
 
@@ -92,7 +93,7 @@ def message_class(type_name):
     return cls
 
 
-def type_name_of(msg_class):
+def type_name_of(msg_class: type) -> str:
     """
     Return the type name ``'pkg/msg/Type'`` of a rosidl-generated message class.
 
@@ -156,7 +157,7 @@ def _dependencies(text, package):
 
 
 @functools.lru_cache(maxsize=None)
-def message_definition(type_name):
+def message_definition(type_name: str) -> str:
     """
     Return the complete ``ros2msg`` definition of a message type, as rosbag2 stores it.
 
@@ -205,7 +206,7 @@ def message_definition(type_name):
 
 
 @functools.lru_cache(maxsize=None)
-def type_hash(type_name):
+def type_hash(type_name: str) -> str:
     """
     Return the REP-2011 type hash (``'RIHS01_...'``) of a message type.
 

@@ -18,13 +18,19 @@ reserved beyond the end of the storage file (``fallocate`` with
 the reservation fails before any write does, and the bag can still be closed
 as a valid bag holding every chunk written so far.
 """
+from __future__ import annotations
+
 import ctypes
 import ctypes.util
 import errno
 import os
 import shutil
+from typing import Optional, TYPE_CHECKING
 
 from rotation_node.errors import BagError
+
+if TYPE_CHECKING:
+    from rotation_node.type_aliases import StrPath
 
 PART_SUFFIX = '.part'
 STORAGE_SUFFIX = '.mcap'
@@ -220,7 +226,7 @@ class BagOutput:
 
     """
 
-    def __init__(self, path, *, overwrite=False):
+    def __init__(self, path: StrPath, *, overwrite: bool = False) -> None:
         self.path = os.fspath(path).rstrip(os.sep) or os.fspath(path)
         self.overwrite = overwrite
         self.single_file = is_single_file(self.path)
@@ -253,7 +259,7 @@ class BagOutput:
         self.closed = False
 
     @staticmethod
-    def check_absent(path, *, overwrite=False) -> None:
+    def check_absent(path: StrPath, *, overwrite: bool = False) -> None:
         """
         Raise ``BagError`` if ``path`` exists (without ``overwrite``) or is being written.
 
@@ -292,7 +298,7 @@ class BagOutput:
         os.fsync(self.stream.fileno())
         self.stream.close()
 
-    def finish(self, metadata_yaml: str = None) -> None:
+    def finish(self, metadata_yaml: Optional[str] = None) -> None:
         """
         Close the storage file, write ``metadata.yaml`` (directories) and rename to ``path``.
 

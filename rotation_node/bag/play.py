@@ -21,15 +21,17 @@ subscriber misses what was published before: with ``wait_for_subscribers``
 topic has a subscriber, and ``delay`` (``--delay``, as in ``ros2 bag play``)
 holds back the first message further.
 """
+from __future__ import annotations
+
 import math
 import threading
 import time
+from typing import Callable, List, Optional, Sequence, TYPE_CHECKING
 
 import rclpy
 from rclpy.duration import Duration
 from rclpy.qos import ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
-
 from rotation_node.bag.mcap_io import MESSAGE_ENCODING
 from rotation_node.bag.message_types import message_class
 from rotation_node.bag.qos import DEEP_QUEUE_DEPTH, playback_qos, qos_profiles_from_yaml
@@ -37,6 +39,9 @@ from rotation_node.bag.reader import open_bag
 from rotation_node.bag.stop_signal import StopSignal
 from rotation_node.bag.topic_arguments import checked_topic_names
 from rotation_node.errors import BagError
+
+if TYPE_CHECKING:
+    from rotation_node.type_aliases import StrPath
 
 NODE_NAME = 'rotation_bag_play'
 ACK_BATCH = DEEP_QUEUE_DEPTH // 4
@@ -147,8 +152,10 @@ def _play_once(reader, topics, publishers, rate, stop):
     return count
 
 
-def play(path, *, rate=1.0, topics=None, loop=False, delay=0.0, wait_for_subscribers=False,
-         ros_args=None, strict=False, report=None):
+def play(path: StrPath, *, rate: float = 1.0, topics: Optional[Sequence[str]] = None,
+         loop: bool = False, delay: float = 0.0, wait_for_subscribers: bool = False,
+         ros_args: Optional[List[str]] = None, strict: bool = False,
+         report: Optional[Callable[[str], None]] = None) -> int:
     """
     Publish the messages of a bag until it ends (or forever with ``loop``) or Ctrl-C.
 
@@ -196,8 +203,9 @@ def play(path, *, rate=1.0, topics=None, loop=False, delay=0.0, wait_for_subscri
         raise BagError(f'delay must be a number of seconds in [0, {MAX_DELAY_S:.4g}], '
                        f'got {delay}')
     with open_bag(path, strict=strict) as reader:
-        for note in reader.notes if report is not None else ():
-            report(note)
+        if report is not None:
+            for note in reader.notes:
+                report(note)
         topics = _playable_topics(reader, topics, report)
         rclpy.init(args=ros_args, signal_handler_options=SignalHandlerOptions.NO)
         try:

@@ -14,8 +14,10 @@ plot has a gap. A type several input types share (Vector3Stamped) is read as
 ``input_type`` of the parameters. The time axis is the header stamp where the
 message has one, else the log time, in seconds since the first message.
 """
+from __future__ import annotations
+
 import math
-from typing import Any, Tuple
+from typing import Any, Callable, Optional, Tuple, TYPE_CHECKING
 
 # A bare Figure renders PNG with the Agg backend and never touches pyplot's
 # global state or a display.
@@ -28,6 +30,9 @@ from rotation_node.bag.reader import open_bag
 from rotation_node.errors import BagError
 from rotation_node.parameters import NodeParameters
 from rotation_node.stamps import header_stamp_ns
+
+if TYPE_CHECKING:
+    from rotation_node.type_aliases import StrPath
 
 
 def _converted_output(topics, topic):
@@ -45,7 +50,7 @@ def _input_type(type_name, params):
     candidates = [entry for entry in messages.INPUTS.values()
                   if entry.type_name == type_name and entry.stream is None]
     preferred = [entry for entry in candidates if entry.name == params.input_type]
-    return (preferred or candidates or [None])[0]
+    return next(iter(preferred or candidates), None)
 
 
 def _input_orientation(entry, params):
@@ -127,8 +132,9 @@ def _time_ns(record, msg):
     return header_stamp_ns(header)
 
 
-def plot_topic(bag_path, topic, output_path, *, params=None, overwrite=False, strict=False,
-               report=None):
+def plot_topic(bag_path: StrPath, topic: str, output_path: StrPath, *,
+               params: Optional[NodeParameters] = None, overwrite: bool = False,
+               strict: bool = False, report: Optional[Callable[[str], None]] = None) -> int:
     """
     Draw ``topic`` of ``bag_path`` over time into the PNG ``output_path``.
 
@@ -166,8 +172,9 @@ def plot_topic(bag_path, topic, output_path, *, params=None, overwrite=False, st
     params = NodeParameters() if params is None else params
     with open_bag(bag_path, strict=strict) as reader, \
             AtomicFile(output_path, overwrite=overwrite) as output:
-        for note in reader.notes if report is not None else ():
-            report(note)
+        if report is not None:
+            for note in reader.notes:
+                report(note)
         times_ns, panels, values = plot_series(reader, topic, params)
         _draw(reader.topic_name(topic), times_ns, values, panels).savefig(
             output.stream, format='png', dpi=110)

@@ -1,6 +1,7 @@
 """A one-line progress bar on a terminal, nothing elsewhere."""
 import sys
 import time
+from typing import Optional, TextIO
 
 _REFRESH_S = 0.2
 _CHECK_EVERY = 1024   # messages between clock reads: keeps update() to an increment
@@ -25,7 +26,8 @@ class ProgressBar:
 
     """
 
-    def __init__(self, total, *, stream=None, label=''):
+    def __init__(self, total: int, *, stream: Optional[TextIO] = None,
+                 label: str = '') -> None:
         self.total = max(int(total), 1)
         self.stream = sys.stderr if stream is None else stream
         self.label = label
@@ -35,7 +37,7 @@ class ProgressBar:
         self._start = time.monotonic()
         self._next_draw = self._start
 
-    def update(self, items=1):
+    def update(self, items: int = 1) -> None:
         """Count ``items`` more; redraw at most every 0.2 s."""
         self.count += items
         if self.enabled and self.count >= self._next_check:
@@ -53,15 +55,15 @@ class ProgressBar:
             f'{self.count}/{self.total} messages  {now - self._start:.1f} s')
         self.stream.flush()
 
-    def close(self):
+    def close(self) -> None:
         """Draw the final state and end the line."""
         if self.enabled:
             self._draw()
             self.stream.write('\n')
             self.stream.flush()
 
-    def __enter__(self):
+    def __enter__(self) -> 'ProgressBar':
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> None:
         self.close()

@@ -9,7 +9,9 @@ avoid_ros_namespace_conventions, policies by name (``keep_last``) and durations
 as ``{sec, nsec}``. Bags written before version 9 hold the policies as
 integers; both are read.
 """
-from typing import Any, Iterable
+from __future__ import annotations
+
+from typing import Any, Iterable, List, Sequence, Tuple, TYPE_CHECKING
 
 from rclpy.duration import Duration
 from rclpy.qos import (
@@ -17,6 +19,9 @@ from rclpy.qos import (
 from rotation_node.errors import BagError
 from rotation_node.stamps import split_ns
 import yaml
+
+if TYPE_CHECKING:
+    from rotation_node.parameters import NodeParameters
 
 _POLICIES = (
     ('history', HistoryPolicy),
@@ -42,7 +47,7 @@ def _duration_yaml(duration):
     return {'sec': seconds, 'nsec': nanoseconds}
 
 
-def qos_profile(params, *, transient_local: bool = False) -> QoSProfile:
+def qos_profile(params: NodeParameters, *, transient_local: bool = False) -> QoSProfile:
     """
     Return the QoS of the node's output publishers (and of explicitly configured inputs).
 
@@ -73,7 +78,8 @@ def qos_profile(params, *, transient_local: bool = False) -> QoSProfile:
         durability=DurabilityPolicy.VOLATILE)
 
 
-def input_qos(params, offered, *, transient_local: bool = False) -> QoSProfile:
+def input_qos(params: NodeParameters, offered: Sequence[QoSProfile], *,
+              transient_local: bool = False) -> QoSProfile:
     """
     Return the QoS of one input subscription of the node.
 
@@ -106,7 +112,7 @@ def input_qos(params, offered, *, transient_local: bool = False) -> QoSProfile:
     return profile
 
 
-def qos_profiles_yaml(profiles):
+def qos_profiles_yaml(profiles: Iterable[QoSProfile]) -> str:
     """
     Serialise QoS profiles to rosbag2's ``offered_qos_profiles`` YAML.
 
@@ -162,7 +168,7 @@ def _policy(entry, key, policy_type):
     return policy_type[str(value).upper()]
 
 
-def qos_profiles_from_yaml(text, *, topic=''):
+def qos_profiles_from_yaml(text: str, *, topic: str = '') -> List[QoSProfile]:
     """
     Parse rosbag2's ``offered_qos_profiles`` YAML into QoS profiles.
 
@@ -203,7 +209,7 @@ def qos_profiles_from_yaml(text, *, topic=''):
     return profiles
 
 
-def matching_policies(offered):
+def matching_policies(offered: Sequence[QoSProfile]) -> Tuple[ReliabilityPolicy, DurabilityPolicy]:
     """
     Return the reliability and durability that receive every publisher's messages.
 
@@ -231,7 +237,7 @@ def matching_policies(offered):
             else DurabilityPolicy.VOLATILE)
 
 
-def recording_qos(offered):
+def recording_qos(offered: Sequence[QoSProfile]) -> QoSProfile:
     """
     Return the subscription QoS that receives every publisher's messages.
 
@@ -254,7 +260,7 @@ def recording_qos(offered):
                       reliability=reliability, durability=durability)
 
 
-def playback_qos(offered, *, lossless=False):
+def playback_qos(offered: Sequence[QoSProfile], *, lossless: bool = False) -> QoSProfile:
     """
     Return the publisher QoS that replays a topic as it was recorded.
 

@@ -38,7 +38,7 @@ from pathlib import Path
 import re
 import sqlite3
 import tempfile
-from typing import Iterator, List, Optional, Union
+from typing import Dict, Iterable, Iterator, List, Optional, Union
 import urllib.parse
 
 from rotation_node.bag.compression import (
@@ -121,9 +121,12 @@ def _sqlite3_file(path):
         return RosbagsInput(path, reader, (ReaderError, ZstdError), [
             (connection, TopicMetadata(
                 name=connection.topic, type_name=connection.msgtype,
-                offered_qos_profiles=rosbags_qos_yaml(connection.ext.offered_qos_profiles),
+                # sqlite3 storage: every connection has rosbag2's extension.
+                offered_qos_profiles=rosbags_qos_yaml(
+                    connection.ext.offered_qos_profiles),  # type: ignore[union-attr]
                 type_hash=connection.digest,
-                serialization_format=connection.ext.serialization_format,
+                serialization_format=(
+                    connection.ext.serialization_format),  # type: ignore[union-attr]
                 **_definition(connection.msgtype, connection.msgdef)), decompressed_message)
             for connection in reader.connections])
     except BaseException:
@@ -237,11 +240,12 @@ class InputBag:
     """
 
     def __init__(self, path: str, description: str, sources: list, *,
-                 compression: Optional[str] = None, note: Optional[str] = None):
+                 compression: Optional[str] = None, note: Optional[str] = None) -> None:
         self.path = path
         self.description = description
         self._sources = sources
-        self.topic_metadata, self.message_counts = {}, {}
+        self.topic_metadata: Dict[str, TopicMetadata] = {}
+        self.message_counts: Dict[str, int] = {}
         self._source_topics = []   # per source, its topics
         for source in sources:
             for topic, metadata in source.topic_metadata.items():
@@ -286,7 +290,7 @@ class InputBag:
         name, = checked_topics([self.renames.get(name, name)], self.topics, self.path)
         return name
 
-    def messages(self, topics=None) -> Iterator[BagMessage]:
+    def messages(self, topics: Optional[Iterable[str]] = None) -> Iterator[BagMessage]:
         """
         Iterate over the messages in log-time order, across all storage files.
 
@@ -328,10 +332,10 @@ class InputBag:
 
     _tmpdir = None
 
-    def __enter__(self):
+    def __enter__(self) -> 'InputBag':
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
 

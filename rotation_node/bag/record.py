@@ -13,9 +13,12 @@ output when recording stops; after a SIGKILL or a power loss the ``.part``
 holds everything up to the last flush. When the disk fills, recording stops
 and the bag is closed with what fitted.
 """
+from __future__ import annotations
+
 import functools
 import math
 import time
+from typing import Any, Dict, Iterable, List, Optional, Sequence, TYPE_CHECKING
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -28,6 +31,9 @@ from rotation_node.bag.stop_signal import StopSignal
 from rotation_node.bag.topic_arguments import checked_topic_names
 from rotation_node.bag.writer import BagWriter, CHUNK_PERIOD_S, DEFAULT_COMPRESSION
 from rotation_node.errors import BagError, DiskFullError
+
+if TYPE_CHECKING:
+    from rotation_node.type_aliases import StrPath
 
 NODE_NAME = 'rotation_bag_record'
 DISCOVERY_PERIOD_S = 0.1
@@ -57,16 +63,17 @@ class BagRecorder(Node):
 
     """
 
-    def __init__(self, writer, topics, *, node_name=NODE_NAME, **kwargs):
+    def __init__(self, writer: BagWriter, topics: Iterable[str], *, node_name: str = NODE_NAME,
+                 **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
         self._writer = writer
         self._pending = [self.resolve_topic_name(topic) for topic in topics]
-        self.counts = {}
+        self.counts: Dict[str, int] = {}
         self._discovery = self.create_timer(DISCOVERY_PERIOD_S, self._discover)
         self._discover()
 
     @property
-    def pending_topics(self):
+    def pending_topics(self) -> List[str]:
         """Return the requested topics that have no publisher yet."""
         return list(self._pending)
 
@@ -115,8 +122,9 @@ def _spin(executor, writer, stop, deadline):
         writer.flush_if_due()
 
 
-def record(output, topics, *, duration=None, overwrite=False, compression=DEFAULT_COMPRESSION,
-           ros_args=None):
+def record(output: StrPath, topics: Sequence[str], *, duration: Optional[float] = None,
+           overwrite: bool = False, compression: str = DEFAULT_COMPRESSION,
+           ros_args: Optional[List[str]] = None) -> Dict[str, int]:
     """
     Record ``topics`` into ``output`` until Ctrl-C, SIGTERM, ``duration`` or a full disk.
 

@@ -9,7 +9,7 @@ the stored data into the ROS 2 CDR bytes passed on. Both formats store one
 time per message, the time the recorder received it: it is the log time and
 the publish time.
 """
-from typing import Callable, Iterable, Iterator, Optional, Tuple
+from typing import Any, Callable, Dict, Iterable, Iterator, List, Optional, Tuple
 
 from rotation_node.bag.mcap_io import BagMessage, checked_topics, TopicMetadata
 from rotation_node.errors import BagError
@@ -44,15 +44,17 @@ class RosbagsInput:
 
     """
 
-    def __init__(self, path: str, reader, errors: tuple,
-                 topics: Iterable[Tuple[object, TopicMetadata, Callable[[bytes], bytes]]],
-                 compression: str = 'none'):
+    def __init__(self, path: str, reader: Any, errors: tuple,
+                 topics: Iterable[Tuple[Any, TopicMetadata, Callable[[bytes], bytes]]],
+                 compression: str = 'none') -> None:
         self.path = path
         self.recovered: Optional[int] = None
         self.compression = compression
         self._reader, self._errors = reader, errors
-        self.topic_metadata, self.message_counts = {}, {}
-        self._connections, self._to_cdr = {}, {}
+        self.topic_metadata: Dict[str, TopicMetadata] = {}
+        self.message_counts: Dict[str, int] = {}
+        self._connections: Dict[str, List[Any]] = {}
+        self._to_cdr: Dict[int, Callable[[bytes], bytes]] = {}
         for connection, metadata, to_cdr in topics:
             known = self.topic_metadata.setdefault(connection.topic, metadata)
             if known.type_name != metadata.type_name:
@@ -64,7 +66,7 @@ class RosbagsInput:
             self._to_cdr[connection.id] = to_cdr
         self.topics = {topic: m.type_name for topic, m in self.topic_metadata.items()}
 
-    def messages(self, topics=None) -> Iterator[BagMessage]:
+    def messages(self, topics: Optional[Iterable[str]] = None) -> Iterator[BagMessage]:
         """
         Iterate over the messages of the given topics (default all) in time order, as CDR.
 
@@ -88,8 +90,8 @@ class RosbagsInput:
         """Close the reader."""
         self._reader.close()
 
-    def __enter__(self):
+    def __enter__(self) -> 'RosbagsInput':
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> None:
         self.close()

@@ -12,8 +12,11 @@ be closed cleanly.
 second signal is ignored, so that removing the unfinished output cannot be
 interrupted. The tools exit with ``128 + signal number`` (130, 143).
 """
+from __future__ import annotations
+
 import signal
 import threading
+from typing import Any, Dict, Optional
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
@@ -64,24 +67,24 @@ class StopSignal:
 
     """
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.event = threading.Event()
-        self.signal_number = None
-        self._previous = {}
+        self.signal_number: Optional[int] = None
+        self._previous: Dict[int, Any] = {}
 
     def _handle(self, signal_number, frame):
         self.signal_number = signal_number
         self.event.set()
 
-    def is_set(self):
+    def is_set(self) -> bool:
         """Whether a stop signal arrived."""
         return self.event.is_set()
 
-    def __enter__(self):
+    def __enter__(self) -> StopSignal:
         for number in STOP_SIGNALS:
             self._previous[number] = signal.signal(number, self._handle)
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> None:
         for number, handler in self._previous.items():
             signal.signal(number, handler)

@@ -6,15 +6,19 @@ deep inside node or publisher creation; here the same rule (the ROS 2 topic
 name rules, after expansion of ``~`` and substitutions) gives one
 ``BagError`` line naming the topic and what is wrong with it.
 """
+from __future__ import annotations
+
+from typing import Iterable, List
+
 from rclpy.exceptions import InvalidTopicNameException
 from rclpy.expand_topic_name import expand_topic_name
 from rclpy.validate_full_topic_name import validate_full_topic_name
 from rclpy.validate_topic_name import validate_topic_name
-
 from rotation_node.errors import BagError
 
 
-def checked_topic_names(topics, *, node_name='node', namespace='/'):
+def checked_topic_names(topics: Iterable[str], *, node_name: str = 'node',
+                        namespace: str = '/') -> List[str]:
     """
     Return ``topics`` as a list after checking that each is a valid ROS 2 topic name.
 

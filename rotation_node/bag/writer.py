@@ -30,11 +30,14 @@ std_msgs/Float64MultiArray): rclpy's bytes, with the alignment padding zeroed
 instead of uninitialised, so that the same messages give the same bag; other
 types with ``rclpy.serialization``.
 """
+from __future__ import annotations
+
 import errno
 import math
 import operator
 import os
 import time
+from typing import Any, Dict, List, Optional, Tuple, TYPE_CHECKING
 
 import mcap
 from mcap.writer import CompressionType, Writer
@@ -45,6 +48,11 @@ from rotation_node.bag.message_types import message_definition, type_hash, type_
 from rotation_node.bag.output import BagOutput
 from rotation_node.errors import BagError, DiskFullError
 import yaml
+
+if TYPE_CHECKING:
+    from types import TracebackType
+
+    from rotation_node.type_aliases import StrPath
 
 PROFILE = 'ros2'
 #: Version of the rosbag2 metadata written (Jazzy's).
@@ -152,8 +160,9 @@ class BagWriter:
 
     """
 
-    def __init__(self, path, *, overwrite=False, compression=DEFAULT_COMPRESSION,
-                 keep_unfinished=False, chunk_period_s=None):
+    def __init__(self, path: StrPath, *, overwrite: bool = False,
+                 compression: str = DEFAULT_COMPRESSION, keep_unfinished: bool = False,
+                 chunk_period_s: Optional[float] = None) -> None:
         self.path = os.fspath(path)
         self.compression = compression
         chunk_compression = compression_type(compression)
@@ -163,13 +172,13 @@ class BagWriter:
         # Chunks are cut here (flush()), never by the library: its chunk size is unreachable.
         self._writer = Writer(self._output.stream, compression=chunk_compression,
                               chunk_size=2**62)
-        self._schema_ids = {}
-        self._channels = {}
-        self._topics = []
-        self._counts = {}
+        self._schema_ids: Dict[Tuple[str, str, str], int] = {}
+        self._channels: Dict[str, Any] = {}
+        self._topics: List[TopicMetadata] = []
+        self._counts: Dict[int, int] = {}
         self._start_ns = _MAX_TIMESTAMP
         self._end_ns = 0
-        self._pending = []
+        self._pending: List[Any] = []
         self._pending_bytes = 0
         self._registered_bytes = 0      # schemas and channels since the last chunk
         self._summary_bytes = 0         # schemas and channels repeated in the summary
@@ -190,16 +199,16 @@ class BagWriter:
             raise
 
     @property
-    def message_count(self):
+    def message_count(self) -> int:
         """Messages flushed to disk so far."""
         return sum(self._counts.values())
 
     @property
-    def message_counts(self):
+    def message_counts(self) -> Dict[str, int]:
         """``{topic: messages flushed to disk so far}`` for every registered topic."""
         return {topic: self._counts[channel.id] for topic, channel in self._channels.items()}
 
-    def add_topic(self, metadata):
+    def add_topic(self, metadata: TopicMetadata) -> None:
         """
         Register a topic with explicit metadata (QoS, definition).
 
@@ -266,7 +275,8 @@ class BagWriter:
                 f'cannot write {type_name}')
         return channel
 
-    def write(self, topic, msg, log_time_ns, publish_time_ns=None):
+    def write(self, topic: str, msg: Any, log_time_ns: int,
+              publish_time_ns: Optional[int] = None) -> None:
         """
         Serialise and write one message.
 
@@ -302,7 +312,8 @@ class BagWriter:
             channel.encode = message_encoder(channel.type_name) or serialize_message
         self._add(channel.id, channel.encode(msg), log_time_ns, publish_time_ns)
 
-    def write_serialized(self, topic, type_name, data, log_time_ns, publish_time_ns=None):
+    def write_serialized(self, topic: str, type_name: str, data: bytes, log_time_ns: int,
+                         publish_time_ns: Optional[int] = None) -> None:
         """
         Write one message that is already CDR-serialised.
 
@@ -346,7 +357,7 @@ class BagWriter:
                 not len(pending) % _CHECK_CLOCK_EVERY and time.monotonic() >= self._flush_due):
             self.flush()
 
-    def flush_if_due(self):
+    def flush_if_due(self) -> None:
         """Write a chunk, or sync to disk, if one is due (call it when idle)."""
         now = time.monotonic()
         if self._pending and now >= self._flush_due:
@@ -370,7 +381,7 @@ class BagWriter:
         metadata = 2 * (2048 + 1024 * channels)
         return 2 * self._summary_bytes + chunk_indexes + metadata + _SUMMARY_FIXED
 
-    def flush(self):
+    def flush(self) -> None:
         """
         Write the messages collected so far as one chunk (to disk, if a sync is due).
 
@@ -455,7 +466,7 @@ class BagWriter:
         kept = (f'; what was written is in {self.part_path}' if self.keep_unfinished else '')
         raise BagError(f'cannot write output {self.path}: {error.strerror}{kept}') from None
 
-    def rosbag2_metadata(self):
+    def rosbag2_metadata(self) -> Dict[str, Any]:
         """
         Return the rosbag2 bag metadata (version 9) of what is written so far.
 
@@ -500,7 +511,7 @@ class BagWriter:
             'ros_distro': os.environ.get('ROS_DISTRO', 'jazzy'),
         }
 
-    def close(self):
+    def close(self) -> None:
         """
         Write what is collected, finish the bag and rename it to ``path``; idempotent.
 
@@ -535,7 +546,7 @@ class BagWriter:
             self.abort()
             raise
 
-    def abort(self):
+    def abort(self) -> None:
         """Stop writing: remove the ``.part`` (or keep it, with ``keep_unfinished``)."""
         if self._output.closed:
             return
@@ -544,10 +555,11 @@ class BagWriter:
         else:
             self._output.discard()
 
-    def __enter__(self):
+    def __enter__(self) -> BagWriter:
         return self
 
-    def __exit__(self, exc_type, exc, traceback):
+    def __exit__(self, exc_type: Optional[type[BaseException]], exc: Optional[BaseException],
+                 traceback: Optional[TracebackType]) -> None:
         if exc_type is None:
             self.close()
         else:

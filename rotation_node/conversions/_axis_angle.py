@@ -11,7 +11,10 @@ axis ``q_v / |q_v|``, exact to ~1 ulp for every angle and every norm. Matrix
 forms go through the quaternion (never ``acos`` of the trace, which is
 useless near pi).
 """
+from __future__ import annotations
+
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -27,9 +30,15 @@ from ._runtime import (
 from ._trigonometry import sin_cos, sin_cos_in_place_kernel
 from ._validation import NON_FINITE, OK, ZERO_NORM
 
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from ..type_aliases import FloatArray, FloatArrayOrScalar, Quaternion4, Vector3
+
 
 @jit
-def rotation_quaternion(ux, uy, uz, k, half_angle_cos):
+def rotation_quaternion(ux: float, uy: float, uz: float, k: float,
+                        half_angle_cos: float) -> Quaternion4:
     """``(k u, cos(a/2))`` with the canonical sign."""
     x, y, z, w = k * ux, k * uy, k * uz, half_angle_cos
     if needs_sign_flip(x, y, z, w):
@@ -38,7 +47,8 @@ def rotation_quaternion(ux, uy, uz, k, half_angle_cos):
 
 
 @jit
-def rotation_vector_quaternion(vx, vy, vz, theta, half_angle_sin, half_angle_cos):
+def rotation_vector_quaternion(vx: float, vy: float, vz: float, theta: float,
+                               half_angle_sin: float, half_angle_cos: float) -> Quaternion4:
     """
     Exponential map from ``sin`` and ``cos`` of half the norm ``theta = |v|``.
 
@@ -50,14 +60,15 @@ def rotation_vector_quaternion(vx, vy, vz, theta, half_angle_sin, half_angle_cos
 
 
 @jit
-def axis_angle_quaternion(ax, ay, az, half_angle_sin, half_angle_cos):
+def axis_angle_quaternion(ax: float, ay: float, az: float, half_angle_sin: float,
+                          half_angle_cos: float) -> Quaternion4:
     """Quaternion of a rotation about the non-zero axis ``a``, from sin/cos of half the angle."""
     n = vector_norm(ax, ay, az)
     return rotation_quaternion(ax / n, ay / n, az / n, half_angle_sin, half_angle_cos)
 
 
 @jit
-def quaternion_from_rotation_vector_scalar(vx, vy, vz):
+def quaternion_from_rotation_vector_scalar(vx: float, vy: float, vz: float) -> Quaternion4:
     """Exponential map: unit canonical quaternion of the rotation vector ``v``."""
     theta = vector_norm(vx, vy, vz)
     half_sin, half_cos = sin_cos(0.5 * theta)
@@ -65,14 +76,16 @@ def quaternion_from_rotation_vector_scalar(vx, vy, vz):
 
 
 @jit
-def quaternion_from_axis_angle_scalar(ax, ay, az, angle):
+def quaternion_from_axis_angle_scalar(ax: float, ay: float, az: float,
+                                      angle: float) -> Quaternion4:
     """Return the unit canonical quaternion of a rotation by ``angle`` about a non-zero axis."""
     half_sin, half_cos = sin_cos(0.5 * angle)
     return axis_angle_quaternion(ax, ay, az, half_sin, half_cos)
 
 
 @jit
-def axis_angle_from_quaternion_scalar(x, y, z, w):
+def axis_angle_from_quaternion_scalar(x: float, y: float, z: float,
+                                      w: float) -> Quaternion4:
     """Return the unit axis and angle in [0, pi]; the identity gives axis (1, 0, 0), angle 0."""
     x, y, z, w = scaled_quaternion(x, y, z, w)
     if w < 0.0:
@@ -84,7 +97,7 @@ def axis_angle_from_quaternion_scalar(x, y, z, w):
 
 
 @jit
-def rotation_vector_from_quaternion_scalar(x, y, z, w):
+def rotation_vector_from_quaternion_scalar(x: float, y: float, z: float, w: float) -> Vector3:
     """Logarithm map: rotation vector with norm in [0, pi]."""
     ax, ay, az, angle = axis_angle_from_quaternion_scalar(x, y, z, w)
     return ax * angle, ay * angle, az * angle
@@ -230,7 +243,7 @@ def _store_rotation_vector(fo, s, x, y, z, w):
 
 
 @kernel(FLAT_IN, FLAT_OUT)
-def axis_angle_kernel(q, out):
+def axis_angle_kernel(q: FloatArray, out: FloatArray) -> int:
     """``(x, y, z, angle)`` of quaternions into ``out`` (4 n); returns the status."""
     fq, fo = samples(q, 4), samples(out, 4)
     for s in range(fq.shape[0]):
@@ -242,7 +255,7 @@ def axis_angle_kernel(q, out):
 
 
 @kernel(FLAT_IN, FLAT_OUT)
-def rotation_vector_kernel(q, out):
+def rotation_vector_kernel(q: FloatArray, out: FloatArray) -> int:
     """Rotation vectors of quaternions into ``out`` (3 n); returns the status."""
     fq, fo = samples(q, 4), samples(out, 3)
     for s in range(fq.shape[0]):
@@ -283,14 +296,14 @@ def _rotation_vector_from_matrix_kernel(m, out, tolerance):
 
 # ------------------------------------------------------------ public API
 
-def _split_axis_angle(packed):
+def _split_axis_angle(packed: FloatArray) -> tuple[FloatArray, FloatArrayOrScalar]:
     """Split ``(..., 4)`` rows ``(x, y, z, angle)`` into ``(axis, angle)`` (one sample: scalar)."""
     if packed.ndim == 1:
         return packed[:3], packed[3]
     return packed[..., :3], packed[..., 3]
 
 
-def quaternion_from_axis_angle(axis, angle):
+def quaternion_from_axis_angle(axis: ArrayLike, angle: ArrayLike) -> FloatArray:
     """
     Quaternions of rotations by ``angle`` about ``axis``.
 
@@ -316,7 +329,7 @@ def quaternion_from_axis_angle(axis, angle):
                        ((3,), ()), (4,), batch_kernel=_quaternion_from_axis_angle_batch_kernel)
 
 
-def matrix_from_axis_angle(axis, angle):
+def matrix_from_axis_angle(axis: ArrayLike, angle: ArrayLike) -> FloatArray:
     """
     Rotation matrices of rotations by ``angle`` about ``axis``.
 
@@ -337,7 +350,7 @@ def matrix_from_axis_angle(axis, angle):
                        ((3,), ()), (3, 3), batch_kernel=_matrix_from_axis_angle_batch_kernel)
 
 
-def axis_angle_from_quaternion(q):
+def axis_angle_from_quaternion(q: ArrayLike) -> tuple[FloatArray, FloatArrayOrScalar]:
     """
     Axis and angle of quaternions.
 
@@ -358,8 +371,10 @@ def axis_angle_from_quaternion(q):
     return _split_axis_angle(packed)
 
 
-def axis_angle_from_matrix(R, *, orthonormal_tolerance=DEFAULT_ORTHONORMAL_TOLERANCE,
-                           non_orthonormal='project'):
+def axis_angle_from_matrix(R: ArrayLike, *,
+                           orthonormal_tolerance: float = DEFAULT_ORTHONORMAL_TOLERANCE,
+                           non_orthonormal: str = 'project',
+                           ) -> tuple[FloatArray, FloatArrayOrScalar]:
     """
     Axis and angle of rotation matrices (through the quaternion, exact near pi).
 
@@ -384,7 +399,7 @@ def axis_angle_from_matrix(R, *, orthonormal_tolerance=DEFAULT_ORTHONORMAL_TOLER
     return _split_axis_angle(packed)
 
 
-def quaternion_from_rotation_vector(v):
+def quaternion_from_rotation_vector(v: ArrayLike) -> FloatArray:
     """
     Exponential map: quaternions of rotation vectors.
 
@@ -404,7 +419,7 @@ def quaternion_from_rotation_vector(v):
                       batch_kernel=_quaternion_from_rotation_vector_batch_kernel)
 
 
-def matrix_from_rotation_vector(v):
+def matrix_from_rotation_vector(v: ArrayLike) -> FloatArray:
     """
     Exponential map: rotation matrices of rotation vectors (Rodrigues).
 
@@ -424,7 +439,7 @@ def matrix_from_rotation_vector(v):
                       batch_kernel=_matrix_from_rotation_vector_batch_kernel)
 
 
-def rotation_vector_from_quaternion(q):
+def rotation_vector_from_quaternion(q: ArrayLike) -> FloatArray:
     """
     Logarithm map: rotation vectors of quaternions.
 
@@ -442,8 +457,9 @@ def rotation_vector_from_quaternion(q):
     return call_unary(rotation_vector_kernel, q, 'q', (4,), (3,))
 
 
-def rotation_vector_from_matrix(R, *, orthonormal_tolerance=DEFAULT_ORTHONORMAL_TOLERANCE,
-                                non_orthonormal='project'):
+def rotation_vector_from_matrix(R: ArrayLike, *,
+                                orthonormal_tolerance: float = DEFAULT_ORTHONORMAL_TOLERANCE,
+                                non_orthonormal: str = 'project') -> FloatArray:
     """
     Logarithm map: rotation vectors of rotation matrices.
 

@@ -22,7 +22,10 @@ References
    e0276302, 2022.
 
 """
+from __future__ import annotations
+
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -35,7 +38,12 @@ from ._runtime import (
     call_unary, FLAT_IN, FLAT_OUT, FLOAT, INT, jit, kernel, matrix_samples, ROWS_IN, ROWS_OUT,
     samples, STAGE_CHUNK)
 from ._trigonometry import atan2_in_place_kernel, sin_cos
-from ._validation import parse_sequence, SEQUENCE_TABLE
+from ._validation import EulerSequence, parse_sequence, SEQUENCE_TABLE
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from ..type_aliases import FloatArray, FloatArrayOrScalar, Quaternion4, Vector3
 
 _TWO_PI = 2.0 * math.pi
 _DEGREES_PER_RADIAN = 180.0 / math.pi
@@ -54,7 +62,8 @@ def _elementary(axis, angle):
 
 
 @jit
-def quaternion_from_euler_scalar(a1, a2, a3, i, j, k, intrinsic):
+def quaternion_from_euler_scalar(a1: float, a2: float, a3: float, i: int, j: int, k: int,
+                                 intrinsic: bool) -> Quaternion4:
     """Return the unit canonical quaternion of Euler angles (radians) about axes i, j, k."""
     e1x, e1y, e1z, e1w = _elementary(i, a1)
     e2x, e2y, e2z, e2w = _elementary(j, a2)
@@ -118,7 +127,8 @@ def _bernardes_viollet_terms(x, y, z, w, i, j, k, intrinsic):
 
 
 @jit
-def euler_atan2_arguments(x, y, z, w, i, j, k, intrinsic):
+def euler_atan2_arguments(x: float, y: float, z: float, w: float, i: int, j: int, k: int,
+                          intrinsic: bool) -> tuple[Vector3, Vector3]:
     """
     Return the three ``atan2`` argument pairs of the conversion: ``(y1, y2, y3), (x1, x2, x3)``.
 
@@ -130,7 +140,8 @@ def euler_atan2_arguments(x, y, z, w, i, j, k, intrinsic):
 
 
 @jit
-def euler_from_half_angles(half_middle, half_sum, half_diff, h_ab, i, j, k, intrinsic):
+def euler_from_half_angles(half_middle: float, half_sum: float, half_diff: float, h_ab: float,
+                           i: int, j: int, k: int, intrinsic: bool) -> Vector3:
     """
     Euler angles from the three ``atan2`` results of :func:`euler_atan2_arguments`.
 
@@ -157,7 +168,8 @@ def euler_from_half_angles(half_middle, half_sum, half_diff, h_ab, i, j, k, intr
 
 
 @jit
-def euler_from_quaternion_scalar(x, y, z, w, i, j, k, intrinsic):
+def euler_from_quaternion_scalar(x: float, y: float, z: float, w: float, i: int, j: int, k: int,
+                                 intrinsic: bool) -> Vector3:
     """Euler angles (radians) of a quaternion for the sequence ``(i, j, k)``."""
     (y1, y2, y3), (x1, x2, x3) = euler_atan2_arguments(x, y, z, w, i, j, k, intrinsic)
     return euler_from_half_angles(math.atan2(y1, x1), math.atan2(y2, x2), math.atan2(y3, x3),
@@ -165,7 +177,8 @@ def euler_from_quaternion_scalar(x, y, z, w, i, j, k, intrinsic):
 
 
 @jit
-def singularity_margin_scalar(x, y, z, w, i, j, k, intrinsic):
+def singularity_margin_scalar(x: float, y: float, z: float, w: float, i: int, j: int, k: int,
+                              intrinsic: bool) -> float:
     """
     Distance (rad) of the middle angle from its nearest singular value.
 
@@ -180,7 +193,7 @@ def singularity_margin_scalar(x, y, z, w, i, j, k, intrinsic):
 # ----------------------------------------------------------------- kernels
 
 @jit
-def unpack_convention(convention):
+def unpack_convention(convention: int) -> tuple[int, int, int, bool, bool]:
     """Axes ``(i, j, k)``, intrinsic flag and degrees flag packed by :func:`convention_code`."""
     return (convention & 3, (convention >> 2) & 3, (convention >> 4) & 3,
             (convention >> 6) & 1 == 1, (convention >> 7) == 1)
@@ -297,7 +310,7 @@ def _singularity_margin_kernel(q, out, convention):
 
 # ------------------------------------------------------------ public API
 
-def convention_code(spec):
+def convention_code(spec: EulerSequence) -> int:
     """Return the kernels' code: ``i | j << 2 | k << 4 | intrinsic << 6`` (degrees: ``| 128``)."""
     i, j, k = spec.axes
     return i | j << 2 | k << 4 | int(spec.intrinsic) << 6
@@ -307,7 +320,7 @@ _CONVENTIONS = {name: convention_code(spec) for name, spec in SEQUENCE_TABLE.ite
 _DEGREES_FLAG = 1 << 7   # angles in degrees rather than radians
 
 
-def _convention(seq, degrees=False):
+def _convention(seq: str, degrees: bool = False) -> int:
     """Return the kernels' code of ``seq`` and the angle unit; ValueError for another ``seq``."""
     try:
         code = _CONVENTIONS[seq]
@@ -317,13 +330,14 @@ def _convention(seq, degrees=False):
     return (code | _DEGREES_FLAG) if degrees else code
 
 
-def _from_angles(angles, seq, degrees, out_trailing):
+def _from_angles(angles: ArrayLike, seq: str, degrees: bool,
+                 out_trailing: tuple[int, ...]) -> FloatArray:
     matrices = out_trailing == (3, 3)
     kernel_ = _matrix_from_euler_kernel if matrices else _quaternion_from_euler_kernel
     return call_unary(kernel_, angles, 'angles', (3,), out_trailing, _convention(seq, degrees))
 
 
-def quaternion_from_euler(angles, seq, *, degrees=False):
+def quaternion_from_euler(angles: ArrayLike, seq: str, *, degrees: bool = False) -> FloatArray:
     """
     Quaternions of Euler angles.
 
@@ -353,7 +367,7 @@ def quaternion_from_euler(angles, seq, *, degrees=False):
     return _from_angles(angles, seq, degrees, (4,))
 
 
-def matrix_from_euler(angles, seq, *, degrees=False):
+def matrix_from_euler(angles: ArrayLike, seq: str, *, degrees: bool = False) -> FloatArray:
     """
     Rotation matrices of Euler angles.
 
@@ -376,7 +390,7 @@ def matrix_from_euler(angles, seq, *, degrees=False):
     return _from_angles(angles, seq, degrees, (3, 3))
 
 
-def euler_from_quaternion(q, seq, *, degrees=False):
+def euler_from_quaternion(q: ArrayLike, seq: str, *, degrees: bool = False) -> FloatArray:
     """
     Euler angles of quaternions.
 
@@ -412,9 +426,9 @@ def euler_from_quaternion(q, seq, *, degrees=False):
                       batch_kernel=_euler_from_quaternion_batch_kernel)
 
 
-def euler_from_matrix(R, seq, *, degrees=False,
-                      orthonormal_tolerance=DEFAULT_ORTHONORMAL_TOLERANCE,
-                      non_orthonormal='project'):
+def euler_from_matrix(R: ArrayLike, seq: str, *, degrees: bool = False,
+                      orthonormal_tolerance: float = DEFAULT_ORTHONORMAL_TOLERANCE,
+                      non_orthonormal: str = 'project') -> FloatArray:
     """
     Euler angles of rotation matrices.
 
@@ -442,7 +456,7 @@ def euler_from_matrix(R, seq, *, degrees=False,
                             _convention(seq, degrees), _euler_from_quaternion_batch_kernel)
 
 
-def euler_singularity_margin(q, seq):
+def euler_singularity_margin(q: ArrayLike, seq: str) -> FloatArrayOrScalar:
     """
     How far each orientation is from gimbal lock in the convention ``seq``.
 

@@ -23,7 +23,10 @@ References
    Estimate of an Orthogonal Matrix", SIAM J. Numer. Anal. 8(2), 1971.
 
 """
+from __future__ import annotations
+
 import math
+from typing import Any, Optional, TYPE_CHECKING
 
 import numpy as np
 
@@ -35,11 +38,16 @@ from ._runtime import (
 from ._validation import (
     float_array, NON_FINITE, NOT_ORTHONORMAL, NOT_ROTATION, OK, raise_sample_error)
 
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from ..type_aliases import FloatArray, Matrix9, Quaternion4
+
 DEFAULT_ORTHONORMAL_TOLERANCE = 1e-6
 
 
 @jit
-def matrix_entries(x, y, z, w):
+def matrix_entries(x: float, y: float, z: float, w: float) -> Matrix9:
     """Row-major entries of ``R(q)``; ``q`` any non-zero scale (rescaled exactly first)."""
     x, y, z, w = scaled_quaternion(x, y, z, w)
     s = 2.0 / (x * x + y * y + z * z + w * w)
@@ -52,7 +60,7 @@ def matrix_entries(x, y, z, w):
 
 
 @jit
-def store_matrix(fo, s, x, y, z, w):
+def store_matrix(fo: FloatArray, s: int, x: float, y: float, z: float, w: float) -> None:
     """Write ``R(q)`` into row ``s`` of ``fo`` (shape (n, 9), row-major matrices)."""
     # One unpacking assignment: indexing the tuple in a loop would spill it
     # to the stack and cost ~2x the whole kernel.
@@ -61,7 +69,7 @@ def store_matrix(fo, s, x, y, z, w):
 
 
 @jit
-def store_rotation(fo, s, x, y, z, w):
+def store_rotation(fo: FloatArray, s: int, x: float, y: float, z: float, w: float) -> None:
     """Write ``q`` into row ``s`` of ``fo``: as it is if ``fo`` is (n, 4), ``R(q)`` if (n, 9)."""
     if fo.shape[1] == 9:
         store_matrix(fo, s, x, y, z, w)
@@ -84,7 +92,7 @@ EIGENVECTOR_PENDING = -2
 
 
 @jit
-def matrix_at(fm, s):
+def matrix_at(fm: FloatArray, s: int) -> Matrix9:
     """Matrix ``s`` of ``fm`` (shape (n, 3, 3)) as a 9-tuple, row-major."""
     return (fm[s, 0, 0], fm[s, 0, 1], fm[s, 0, 2],
             fm[s, 1, 0], fm[s, 1, 1], fm[s, 1, 2],
@@ -92,7 +100,7 @@ def matrix_at(fm, s):
 
 
 @jit
-def matrix_defect(m):
+def matrix_defect(m: Matrix9) -> int:
     """Defect code of a matrix (9-tuple): NON_FINITE, NOT_ROTATION (det <= 0) or OK."""
     m00, m01, m02, m10, m11, m12, m20, m21, m22 = m
     if not (math.isfinite(m00) and math.isfinite(m01) and math.isfinite(m02)
@@ -108,7 +116,7 @@ def matrix_defect(m):
 
 
 @jit
-def gram_entries(m):
+def gram_entries(m: Matrix9) -> tuple[float, float, float, float, float, float]:
     """Return the six distinct entries of ``m^T m`` (9-tuple): g00, g11, g22, g01, g02, g12."""
     m00, m01, m02, m10, m11, m12, m20, m21, m22 = m
     return (m00 * m00 + m10 * m10 + m20 * m20,
@@ -120,20 +128,20 @@ def gram_entries(m):
 
 
 @jit
-def gram_deviation(g):
+def gram_deviation(g: tuple[float, float, float, float, float, float]) -> float:
     """Largest absolute element of ``m^T m - I`` from its entries ``g`` (:func:`gram_entries`)."""
     g00, g11, g22, g01, g02, g12 = g
     return max(abs(g00 - 1.0), abs(g11 - 1.0), abs(g22 - 1.0), abs(g01), abs(g02), abs(g12))
 
 
 @jit
-def orthonormality_deviation(m):
+def orthonormality_deviation(m: Matrix9) -> float:
     """Largest absolute element of ``m^T m - I`` (9-tuple)."""
     return gram_deviation(gram_entries(m))
 
 
 @jit
-def newton_schulz_step(m, g):
+def newton_schulz_step(m: Matrix9, g: tuple[float, float, float, float, float, float]) -> Matrix9:
     """Take one step ``X <- X (3 I - X^T X) / 2`` of Bjorck and Bowie's iteration (g: X^T X)."""
     m00, m01, m02, m10, m11, m12, m20, m21, m22 = m
     g00, g11, g22, g01, g02, g12 = g
@@ -151,7 +159,7 @@ def newton_schulz_step(m, g):
 
 
 @jit
-def newton_schulz_orthonormalized(m):
+def newton_schulz_orthonormalized(m: Matrix9) -> tuple[bool, Matrix9]:
     """
     ``(converged, x)``: the orthogonal polar factor of ``m`` (9-tuple) by Newton-Schulz.
 
@@ -169,7 +177,7 @@ def newton_schulz_orthonormalized(m):
 
 
 @jit
-def quaternion_from_orthonormal(m):
+def quaternion_from_orthonormal(m: Matrix9) -> Quaternion4:
     """Markley's quaternion of a rotation matrix (9-tuple), unit and canonical."""
     m00, m01, m02, m10, m11, m12, m20, m21, m22 = m
     trace = m00 + m11 + m22
@@ -185,7 +193,8 @@ def quaternion_from_orthonormal(m):
 
 
 @jit
-def quaternion_of_matrix(fm, s, tolerance):
+def quaternion_of_matrix(fm: FloatArray, s: int,
+                         tolerance: float) -> tuple[int, float, float, float, float]:
     """
     ``(bad, x, y, z, w)``: the quaternion of the rotation nearest to matrix ``s`` of ``fm``.
 
@@ -226,7 +235,7 @@ def _matrix_from_quaternion_kernel(q, out):
 
 
 @kernel(ROWS_IN, FLAT_OUT, FLOAT)
-def quaternion_from_matrix_kernel(m, out, tolerance):
+def quaternion_from_matrix_kernel(m: FloatArray, out: FloatArray, tolerance: float) -> int:
     """
     Quaternions of the matrices ``m`` (3 n, 3) into ``out`` (4 n).
 
@@ -246,7 +255,7 @@ def quaternion_from_matrix_kernel(m, out, tolerance):
     return -1 - pending
 
 
-def nearest_rotation_quaternions(m):
+def nearest_rotation_quaternions(m: FloatArray) -> FloatArray:
     """
     Quaternions of the rotations nearest (Frobenius norm) to matrices with det > 0.
 
@@ -287,7 +296,7 @@ def nearest_rotation_quaternions(m):
 
 # ------------------------------------------------------------ public API
 
-def matrix_from_quaternion(q):
+def matrix_from_quaternion(q: ArrayLike) -> FloatArray:
     """
     Rotation matrices of quaternions.
 
@@ -330,8 +339,9 @@ def _kernel_tolerance(orthonormal_tolerance, non_orthonormal):
         f"Expected `non_orthonormal` to be 'project' or 'raise', got {non_orthonormal!r}.")
 
 
-def convert_matrices(R, orthonormal_tolerance, non_orthonormal, out_trailing,
-                     fused_kernel, quaternion_kernel, convention=None, batch_kernel=None):
+def convert_matrices(R: ArrayLike, orthonormal_tolerance: float, non_orthonormal: str,
+                     out_trailing: tuple[int, ...], fused_kernel: Any, quaternion_kernel: Any,
+                     convention: Optional[int] = None, batch_kernel: Any = None) -> Any:
     """
     Return the body of every ``*_from_matrix`` conversion: a kernel on the quaternions of ``R``.
 
@@ -413,8 +423,9 @@ def _flat_quaternions(a, m, tolerance):
     return q
 
 
-def quaternion_from_matrix(R, *, orthonormal_tolerance=DEFAULT_ORTHONORMAL_TOLERANCE,
-                           non_orthonormal='project'):
+def quaternion_from_matrix(R: ArrayLike, *,
+                           orthonormal_tolerance: float = DEFAULT_ORTHONORMAL_TOLERANCE,
+                           non_orthonormal: str = 'project') -> FloatArray:
     """
     Quaternions of rotation matrices.
 

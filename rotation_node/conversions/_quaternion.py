@@ -12,15 +12,23 @@ called from the loop kernels of every module; they assume finite, non-zero
 input (the kernels check with :func:`quaternion_defect` first). How kernels
 are declared, compiled and called is :mod:`._runtime`'s business.
 """
+from __future__ import annotations
+
 import math
+from typing import TYPE_CHECKING
 
 from ._runtime import (
     call_binary, call_unary, first_status, FLAT_IN, FLAT_OUT, jit, kernel, samples, status)
 from ._validation import NON_FINITE, OK, ZERO_NORM
 
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from ..type_aliases import FloatArray, FloatArrayOrScalar, Quaternion4, Vector3
+
 
 @jit
-def quaternion_defect(x, y, z, w):
+def quaternion_defect(x: float, y: float, z: float, w: float) -> int:
     """Defect code of a quaternion: OK, NON_FINITE or ZERO_NORM."""
     if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z) and math.isfinite(w)):
         return NON_FINITE
@@ -30,7 +38,7 @@ def quaternion_defect(x, y, z, w):
 
 
 @jit
-def vector_defect(x, y, z):
+def vector_defect(x: float, y: float, z: float) -> int:
     """Defect code of a 3-vector: OK or NON_FINITE."""
     if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
         return NON_FINITE
@@ -43,13 +51,13 @@ _SAFE_HIGH = 2.0 ** 500
 
 
 @jit
-def binary_exponent(m):
+def binary_exponent(m: float) -> int:
     """``e`` with ``m = f 2**e``, f in [0.5, 1): scaling by ``2**-e`` is exact."""
     return math.frexp(m)[1]
 
 
 @jit
-def scaled_quaternion(x, y, z, w):
+def scaled_quaternion(x: float, y: float, z: float, w: float) -> Quaternion4:
     """
     Return the quaternion rescaled exactly so that sums of squares neither over- nor underflow.
 
@@ -64,7 +72,7 @@ def scaled_quaternion(x, y, z, w):
 
 
 @jit
-def vector_norm(x, y, z):
+def vector_norm(x: float, y: float, z: float) -> float:
     """Euclidean norm of a 3-vector without under- or overflow."""
     m = max(abs(x), abs(y), abs(z))
     if _SAFE_LOW < m < _SAFE_HIGH:
@@ -77,7 +85,7 @@ def vector_norm(x, y, z):
 
 
 @jit
-def needs_sign_flip(x, y, z, w):
+def needs_sign_flip(x: float, y: float, z: float, w: float) -> bool:
     """
     Whether ``-q`` is the canonical sign of ``q``.
 
@@ -89,7 +97,7 @@ def needs_sign_flip(x, y, z, w):
 
 
 @jit
-def unit_quaternion(x, y, z, w):
+def unit_quaternion(x: float, y: float, z: float, w: float) -> Quaternion4:
     """``q / |q|`` with its sign kept; any non-zero norm (exact power-of-two rescaling first)."""
     x, y, z, w = scaled_quaternion(x, y, z, w)
     n = math.sqrt(x * x + y * y + z * z + w * w)
@@ -97,7 +105,7 @@ def unit_quaternion(x, y, z, w):
 
 
 @jit
-def canonical_unit_quaternion(x, y, z, w):
+def canonical_unit_quaternion(x: float, y: float, z: float, w: float) -> Quaternion4:
     """Return the unit quaternion with the canonical sign (see :func:`needs_sign_flip`)."""
     x, y, z, w = unit_quaternion(x, y, z, w)
     if needs_sign_flip(x, y, z, w):
@@ -106,7 +114,8 @@ def canonical_unit_quaternion(x, y, z, w):
 
 
 @jit
-def product(px, py, pz, pw, qx, qy, qz, qw):
+def product(px: float, py: float, pz: float, pw: float,
+            qx: float, qy: float, qz: float, qw: float) -> Quaternion4:
     """Hamilton product ``p (x) q``."""
     return (pw * qx + px * qw + py * qz - pz * qy,
             pw * qy - px * qz + py * qw + pz * qx,
@@ -115,7 +124,8 @@ def product(px, py, pz, pw, qx, qy, qz, qw):
 
 
 @jit
-def conjugate_product(px, py, pz, pw, qx, qy, qz, qw):
+def conjugate_product(px: float, py: float, pz: float, pw: float,
+                      qx: float, qy: float, qz: float, qw: float) -> Quaternion4:
     """
     ``p* (x) q``, the rotation from ``p`` to ``q``, with each cancelling pair grouped.
 
@@ -130,7 +140,8 @@ def conjugate_product(px, py, pz, pw, qx, qy, qz, qw):
 
 
 @jit
-def rotated_vector(x, y, z, w, vx, vy, vz):
+def rotated_vector(x: float, y: float, z: float, w: float,
+                   vx: float, vy: float, vz: float) -> Vector3:
     """
     ``R(q) v`` for a unit quaternion: ``v + w t + u x t`` with ``t = 2 u x v``.
 
@@ -149,20 +160,20 @@ def rotated_vector(x, y, z, w, vx, vy, vz):
 
 
 @jit
-def half_angle_atan2(vector_norm_value, scalar):
+def half_angle_atan2(vector_norm_value: float, scalar: float) -> float:
     """Rotation angle ``2 atan2(|q_v|, |q_s|)`` in [0, pi]: ~1 ulp for every angle."""
     return 2.0 * math.atan2(vector_norm_value, abs(scalar))
 
 
 @jit
-def quaternion_status(fq, s, argument):
+def quaternion_status(fq: FloatArray, s: int, argument: int) -> int:
     """Status of sample ``s`` of the flat quaternions ``fq`` (-1 when fine)."""
     code = quaternion_defect(fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3])
     return -1 if code == OK else status(s, argument, code)
 
 
 @jit
-def vector_status(fv, s, argument):
+def vector_status(fv: FloatArray, s: int, argument: int) -> int:
     """Status of sample ``s`` of the flat 3-vectors ``fv`` (-1 when fine)."""
     code = vector_defect(fv[s, 0], fv[s, 1], fv[s, 2])
     return -1 if code == OK else status(s, argument, code)
@@ -198,7 +209,7 @@ def _conjugate_kernel(q, out):
 
 
 @kernel(FLAT_IN, FLAT_OUT)
-def canonical_kernel(q, out):
+def canonical_kernel(q: FloatArray, out: FloatArray) -> int:
     """Canonical unit quaternions of ``q`` into ``out``; returns the status."""
     fq, fo = samples(q, 4), samples(out, 4)
     for s in range(fq.shape[0]):
@@ -238,7 +249,7 @@ def _rotate_kernel(q, v, out):
 
 # ------------------------------------------------------------ public API
 
-def quaternion_product(p, q):
+def quaternion_product(p: ArrayLike, q: ArrayLike) -> FloatArray:
     """
     Hamilton product of two quaternions.
 
@@ -263,7 +274,7 @@ def quaternion_product(p, q):
     return call_binary(_product_kernel, p, q, ('p', 'q'), ((4,), (4,)), (4,))
 
 
-def quaternion_conjugate(q):
+def quaternion_conjugate(q: ArrayLike) -> FloatArray:
     """
     Conjugate ``(-x, -y, -z, w)``: the inverse rotation.
 
@@ -281,7 +292,7 @@ def quaternion_conjugate(q):
     return call_unary(_conjugate_kernel, q, 'q', (4,), (4,))
 
 
-def canonical_quaternion(q):
+def canonical_quaternion(q: ArrayLike) -> FloatArray:
     """
     Return the unit quaternion with ``w >= 0`` representing the same rotation.
 
@@ -301,7 +312,7 @@ def canonical_quaternion(q):
     return call_unary(canonical_kernel, q, 'q', (4,), (4,))
 
 
-def quaternion_distance(p, q):
+def quaternion_distance(p: ArrayLike, q: ArrayLike) -> FloatArrayOrScalar:
     """
     Geodesic angle between the rotations of two quaternions.
 
@@ -321,7 +332,7 @@ def quaternion_distance(p, q):
     return call_binary(_distance_kernel, p, q, ('p', 'q'), ((4,), (4,)), ())
 
 
-def rotate_vector(q, v):
+def rotate_vector(q: ArrayLike, v: ArrayLike) -> FloatArray:
     """
     Rotate vectors by quaternions: ``R(q) v``.
 

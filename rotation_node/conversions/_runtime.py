@@ -30,10 +30,13 @@ writable (a system-wide ROS install), numba caches them in the user's cache
 directory instead (``$XDG_CACHE_HOME/numba``, by default ``~/.cache/numba``),
 or wherever ``NUMBA_CACHE_DIR`` says.
 """
+from __future__ import annotations
+
 from concurrent.futures import ThreadPoolExecutor
 import math
 import os
 import threading
+from typing import Any, Callable, Optional, Sequence, TYPE_CHECKING, TypeGuard
 
 from numba import njit, types
 from numba.core.errors import RequireLiteralValue, TypingError
@@ -41,6 +44,11 @@ from numba.extending import intrinsic, overload
 import numpy as np
 
 from ._validation import broadcast_pair, float_array, raise_sample_error
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from ..type_aliases import FloatArray
 
 # Every compiled function is inlined into its callers (numba IR inlining, not
 # left to LLVM). A helper that is called rather than inlined costs a call per
@@ -56,7 +64,7 @@ _cached_jit = njit(cache=True, nogil=True, error_model='numpy', inline='always')
 
 # ------------------------------------------------------------ kernel types
 
-def array_type(ndim, dtype=types.float64):
+def array_type(ndim: int, dtype: Any = types.float64) -> Any:
     """Return the numba type of a C-contiguous, aligned, writable kernel argument."""
     return types.Array(dtype, ndim, 'C')
 
@@ -73,13 +81,13 @@ INT, FLOAT, BOOL = types.int64, types.float64, types.boolean
 STATUS = types.int64
 
 #: Every kernel declared with :func:`kernel`, in declaration order.
-KERNELS = []
+KERNELS: list[Any] = []
 
 
 _compiling = threading.Lock()
 
 
-def _compile(dispatcher):
+def _compile(dispatcher: Any) -> None:
     """Compile ``dispatcher`` for its one signature (or load it from the disk cache), once."""
     with _compiling:   # threads of one large batch may all make the first call
         if not dispatcher.kernel_compiled:
@@ -88,7 +96,8 @@ def _compile(dispatcher):
             dispatcher.kernel_compiled = True
 
 
-def kernel(*argument_types, returns=STATUS):
+def kernel(*argument_types: Any,
+           returns: Any = STATUS) -> Callable[[Callable[..., Any]], Any]:
     """
     Declare a kernel: compiled for exactly one signature, on first use.
 
@@ -130,7 +139,7 @@ def kernel(*argument_types, returns=STATUS):
     return decorate
 
 
-def compile_kernels(kernels=None):
+def compile_kernels(kernels: Optional[Sequence[Any]] = None) -> int:
     """
     Compile every kernel (or those given) for its one signature, from the disk cache where cached.
 
@@ -148,14 +157,14 @@ def compile_kernels(kernels=None):
 
 # ------------------------------------------------------------ sample views
 
-def kernel_layout(a, trailing):
+def kernel_layout(a: FloatArray, trailing: tuple[int, ...]) -> FloatArray:
     """Return the canonical layout (a view) of C-contiguous samples ``a`` of shape ``trailing``."""
     if len(trailing) <= 1:
         return a.reshape(-1)
     return a.reshape((-1,) + trailing[1:])
 
 
-def _rows_per_sample(trailing):
+def _rows_per_sample(trailing: tuple[int, ...]) -> int:
     return trailing[0] if trailing else 1
 
 
@@ -186,7 +195,7 @@ def _stack_view(typingctx, a, rows, columns):
     return result(a, rows, columns), codegen
 
 
-def samples(a, width):
+def samples(a: FloatArray, width: int) -> FloatArray:
     """
     Return the canonical ``a`` as a stack of samples, shape ``(n, width)`` (``(n,)``: width 0).
 
@@ -205,7 +214,7 @@ def _samples_overload(a, width):
     return lambda a, width: _stack_view(a, k, 0)
 
 
-def matrix_samples(a):
+def matrix_samples(a: FloatArray) -> FloatArray:
     """Return the matrices ``a`` (3 n, 3), or any C-contiguous 9 n values, as (n, 3, 3)."""
     return a.reshape(-1, 3, 3)
 
@@ -218,13 +227,13 @@ def _matrix_samples_overload(a):
 # ------------------------------------------------------------ status packing
 
 @jit
-def status(sample, argument, code):
+def status(sample: int, argument: int, code: int) -> int:
     """Kernel status for a bad sample: ``(sample << 4) | (argument << 3) | code``."""
     return (sample << 4) | (argument << 3) | code
 
 
 @jit
-def first_status(a, b):
+def first_status(a: int, b: int) -> int:
     """Return the first of two statuses that reports a bad sample (-1 if neither does)."""
     return a if a >= 0 else b
 
@@ -237,7 +246,7 @@ def first_status(a, b):
 BATCH_SAMPLES = 1024
 
 
-def is_batch(a, trailing):
+def is_batch(a: FloatArray, trailing: tuple[int, ...]) -> bool:
     """Whether ``a`` (samples of shape ``trailing``) is large enough for a batch schedule."""
     return a.size >= BATCH_SAMPLES * math.prod(trailing)
 
@@ -253,7 +262,7 @@ _threads = int(os.environ.get('ROTATION_NODE_THREADS', 0)) or len(os.sched_getaf
 _pool = None
 
 
-def set_threads(n):
+def set_threads(n: int) -> None:
     """
     Set how many threads large batches (>= 65536 samples) are split across.
 
@@ -274,7 +283,8 @@ def set_threads(n):
         _pool = None
 
 
-def _run(kernel_, inputs, trailings, out, out_trailing, args):
+def _run(kernel_: Any, inputs: Sequence[FloatArray], trailings: Sequence[tuple[int, ...]],
+         out: FloatArray, out_trailing: tuple[int, ...], args: tuple[Any, ...]) -> int:
     """
     Run ``kernel_(*inputs, out, *args)`` on canonical arrays, in threads for large batches.
 
@@ -314,7 +324,7 @@ _NO_SAMPLES = np.empty(0)
 new_array = np.empty
 
 
-def is_single_sample(x, trailing):
+def is_single_sample(x: object, trailing: tuple[int, ...]) -> TypeGuard[FloatArray]:
     """Whether ``x`` is one sample that needs no conversion: the fast path of a call."""
     # ``is``: every native float64 array shares numpy's one float64 dtype; an
     # equal but distinct dtype object just takes the general path. ``carray``:
@@ -323,7 +333,9 @@ def is_single_sample(x, trailing):
             and x.flags.carray)
 
 
-def call_unary(kernel_, x, name, trailing, out_trailing, convention=None, batch_kernel=None):
+def call_unary(kernel_: Any, x: ArrayLike, name: str, trailing: tuple[int, ...],
+               out_trailing: tuple[int, ...], convention: Optional[int] = None,
+               batch_kernel: Any = None) -> Any:
     """
     Validate ``x``, run ``kernel_(x, out[, convention])``, raise for a bad sample.
 
@@ -356,7 +368,9 @@ def call_unary(kernel_, x, name, trailing, out_trailing, convention=None, batch_
     return out[()] if out.ndim == 0 else out
 
 
-def call_binary(kernel_, x, y, names, trailings, out_trailing, *args, batch_kernel=None):
+def call_binary(kernel_: Any, x: ArrayLike, y: ArrayLike, names: tuple[str, str],
+                trailings: tuple[tuple[int, ...], tuple[int, ...]], out_trailing: tuple[int, ...],
+                *args: Any, batch_kernel: Any = None) -> Any:
     """
     Validate and broadcast ``x`` and ``y``, run ``kernel_(x, y, out, *args)``, raise if bad.
 

@@ -48,12 +48,18 @@ mpmath, 0.76 the worst found, next to ``t = 7/16``; fdlibm's own reduction
 Signed zeros are handled as C's ``atan2`` does (``atan2(+-0, -0) = +-pi``);
 arguments must be finite.
 """
+from __future__ import annotations
+
 import math
+from typing import Any, Callable, TYPE_CHECKING
 
 from numba import types
 from numba.extending import intrinsic
 
 from ._runtime import jit
+
+if TYPE_CHECKING:
+    from ..type_aliases import FloatArray
 
 # fdlibm k_sin.c and k_cos.c.
 _S1 = -1.66666666666666324348e-01
@@ -80,7 +86,7 @@ REDUCTION_LIMIT = 2.0 ** 19
 
 
 @jit
-def reduced_sin_cos(a):
+def reduced_sin_cos(a: float) -> tuple[float, float]:
     """
     ``(sin a, cos a)`` for ``|a| <= REDUCTION_LIMIT``, without calls or branches.
 
@@ -108,7 +114,7 @@ def reduced_sin_cos(a):
 
 
 @jit
-def sin_cos(a):
+def sin_cos(a: float) -> tuple[float, float]:
     """``(sin a, cos a)`` of any finite ``a`` (accuracy: see the module)."""
     if abs(a) <= REDUCTION_LIMIT:
         return reduced_sin_cos(a)
@@ -116,7 +122,7 @@ def sin_cos(a):
 
 
 @jit
-def sin_cos_in_place_kernel(a, cos_out):
+def sin_cos_in_place_kernel(a: FloatArray, cos_out: FloatArray) -> None:
     """
     Compute ``a <- sin(a)``, ``cos_out <- cos(a)`` for 1-d float64 arrays of finite angles.
 
@@ -135,7 +141,7 @@ def sin_cos_in_place_kernel(a, cos_out):
 
 
 @intrinsic
-def fused_multiply_add(typingctx, a, b, c):
+def fused_multiply_add(typingctx: Any, a: Any, b: Any, c: Any) -> tuple[Any, Callable[..., Any]]:
     """Return ``a * b + c`` rounded once (LLVM's ``fma``; a C library call without FMA)."""
     signature = types.float64(types.float64, types.float64, types.float64)
 
@@ -212,7 +218,7 @@ def _reduced_atan_argument(ax, ay):
 
 
 @jit
-def atan2(y, x):
+def atan2(y: float, x: float) -> float:
     """
     Return the arc tangent of ``y / x`` in the quadrant of ``(x, y)``, to 0.8 ulp, branch-free.
 
@@ -252,7 +258,7 @@ def atan2(y, x):
 
 
 @jit
-def atan2_in_place_kernel(y, x):
+def atan2_in_place_kernel(y: FloatArray, x: FloatArray) -> None:
     """``y <- atan2(y, x)`` for 1-d float64 arrays of finite values: one vectorised loop."""
     for i in range(y.shape[0]):
         y[i] = atan2(y[i], x[i])

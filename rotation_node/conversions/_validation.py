@@ -10,9 +10,17 @@ report the first bad sample as a status
 sample is fine); :func:`raise_sample_error` turns it into a ``ValueError``
 that names the argument, the sample and what was wrong.
 """
-from collections import namedtuple
+from __future__ import annotations
+
+from typing import Any, NamedTuple, NoReturn, Sequence, TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike, NDArray
+
+    from ..type_aliases import FloatArray
+
 
 # Defect codes returned by the kernels (0 = sample is fine).
 OK = 0
@@ -32,7 +40,7 @@ _SHAPE_TEXT = {(): '(...)', (3,): '(..., 3)', (4,): '(..., 4)', (3, 3): '(..., 3
                (4, 4): '(..., 4, 4)'}
 
 
-def float_array(x, name, trailing):
+def float_array(x: ArrayLike, name: str, trailing: tuple[int, ...]) -> FloatArray:
     """
     Return ``x`` as a C-contiguous float64 array whose shape ends in ``trailing``.
 
@@ -70,12 +78,13 @@ def float_array(x, name, trailing):
     return kernel_ready(a)
 
 
-def kernel_ready(a):
+def kernel_ready(a: NDArray[Any]) -> FloatArray:
     """Return ``a`` if C-contiguous, aligned and writable (as kernels take it), else a copy."""
     return a if a.flags.carray else np.array(a, order='C')
 
 
-def broadcast_pair(a, b, trailing_a, trailing_b):
+def broadcast_pair(a: FloatArray, b: FloatArray, trailing_a: tuple[int, ...],
+                   trailing_b: tuple[int, ...]) -> tuple[FloatArray, FloatArray]:
     """
     Broadcast two arrays from :func:`float_array` against each other's leading shapes.
 
@@ -98,7 +107,8 @@ def broadcast_pair(a, b, trailing_a, trailing_b):
             kernel_ready(np.broadcast_to(b, lead + trailing_b)))
 
 
-def raise_sample_error(status, names, arrays, trailings):
+def raise_sample_error(status: int, names: Sequence[str], arrays: Sequence[NDArray[Any]],
+                       trailings: Sequence[tuple[int, ...]]) -> NoReturn:
     """Raise the ``ValueError`` for the bad sample that a kernel's ``status`` reports."""
     flat_index, argument, code = status >> 4, (status >> 3) & 1, status & 7
     array, trailing = arrays[argument], trailings[argument]
@@ -108,25 +118,31 @@ def raise_sample_error(status, names, arrays, trailings):
     raise ValueError(f'`{names[argument]}`{where} {_DEFECT_TEXT[code]}.')
 
 
-EulerSequence = namedtuple('EulerSequence', 'name axes intrinsic proper')
-EulerSequence.__doc__ = """\
-A validated Euler axis sequence.
+class EulerSequence(NamedTuple):
+    """
+    A validated Euler axis sequence.
 
-Attributes
-----------
-name : str
-    The sequence as given, e.g. ``'xyz'`` (extrinsic) or ``'ZYX'`` (intrinsic).
-axes : tuple of int
-    Axis indices (0 = x, 1 = y, 2 = z) in the order the angles are given.
-intrinsic : bool
-    True for upper case (rotations about the moving body axes).
-proper : bool
-    True for proper Euler sequences (first axis == third axis, e.g. ``'ZXZ'``),
-    False for Tait-Bryan sequences (three different axes, e.g. ``'xyz'``).
-"""
+    Attributes
+    ----------
+    name : str
+        The sequence as given, e.g. ``'xyz'`` (extrinsic) or ``'ZYX'`` (intrinsic).
+    axes : tuple of int
+        Axis indices (0 = x, 1 = y, 2 = z) in the order the angles are given.
+    intrinsic : bool
+        True for upper case (rotations about the moving body axes).
+    proper : bool
+        True for proper Euler sequences (first axis == third axis, e.g. ``'ZXZ'``),
+        False for Tait-Bryan sequences (three different axes, e.g. ``'xyz'``).
+
+    """
+
+    name: str
+    axes: tuple[int, int, int]
+    intrinsic: bool
+    proper: bool
 
 
-def _all_sequences():
+def _all_sequences() -> dict[str, EulerSequence]:
     table = {}
     for a in range(3):
         for b in range(3):
@@ -143,7 +159,7 @@ def _all_sequences():
 SEQUENCE_TABLE = _all_sequences()
 
 
-def parse_sequence(seq):
+def parse_sequence(seq: object) -> EulerSequence:
     """
     Validate an Euler axis sequence.
 

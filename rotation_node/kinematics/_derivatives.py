@@ -18,13 +18,21 @@ The inverses project onto the tangent space: ``w_b = 2 vec(q* (x) qdot)`` and
 rotation cannot have (``q . qdot`` and the symmetric part of ``R^T Rdot``), so
 they are the least-squares angular velocity for a noisy derivative.
 """
+from __future__ import annotations
+
 import math
+from typing import TYPE_CHECKING
 
 from ._validation import is_world_frame
 from ..conversions.kernels import (
     BOOL, call_binary, first_status, FLAT_IN, FLAT_OUT, jit, kernel, matrix_at, matrix_defect,
     matrix_samples, NON_FINITE, OK, product, quaternion_status, ROWS_IN, ROWS_OUT, samples, status,
     unit_quaternion, vector_status)
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from ..type_aliases import FloatArray
 
 # ----------------------------------------------------------------- kernels
 # As in conversions: validated C-contiguous inputs with a common leading shape,
@@ -129,7 +137,7 @@ def _angular_velocity_from_matrix_derivative_kernel(R, R_dot, out, world):
 
 # ------------------------------------------------------------ public API
 
-def quaternion_derivative(q, omega, frame='body'):
+def quaternion_derivative(q: ArrayLike, omega: ArrayLike, frame: str = 'body') -> FloatArray:
     """
     Time derivative of a unit quaternion rotating with angular velocity ``omega``.
 
@@ -165,7 +173,8 @@ def quaternion_derivative(q, omega, frame='body'):
                        is_world_frame(frame))
 
 
-def angular_velocity_from_quaternion_derivative(q, q_dot, frame='body'):
+def angular_velocity_from_quaternion_derivative(q: ArrayLike, q_dot: ArrayLike,
+                                                frame: str = 'body') -> FloatArray:
     """
     Angular velocity of a quaternion and its time derivative.
 
@@ -199,7 +208,7 @@ def angular_velocity_from_quaternion_derivative(q, q_dot, frame='body'):
                        ('q', 'q_dot'), ((4,), (4,)), (3,), is_world_frame(frame))
 
 
-def matrix_derivative(R, omega, frame='body'):
+def matrix_derivative(R: ArrayLike, omega: ArrayLike, frame: str = 'body') -> FloatArray:
     """
     Time derivative of a rotation matrix rotating with angular velocity ``omega``.
 
@@ -229,7 +238,8 @@ def matrix_derivative(R, omega, frame='body'):
                        is_world_frame(frame))
 
 
-def angular_velocity_from_matrix_derivative(R, R_dot, frame='body'):
+def angular_velocity_from_matrix_derivative(R: ArrayLike, R_dot: ArrayLike,
+                                            frame: str = 'body') -> FloatArray:
     """
     Angular velocity of a rotation matrix and its time derivative.
 

@@ -41,7 +41,10 @@ References
    Rotation Vectors", Stanford University, 2006.
 
 """
+from __future__ import annotations
+
 import math
+from typing import TYPE_CHECKING
 import warnings
 
 import numpy as np
@@ -51,6 +54,11 @@ from ..conversions import parse_sequence
 from ..conversions.kernels import (
     array_type, BOOL, call_binary, first_status, FLAT_IN, FLAT_OUT, FLOAT, INT, jit, kernel,
     samples, vector_status)
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from ..type_aliases import FloatArray
 
 #: Default ``singularity_threshold`` (rad), ~sqrt(eps): closer to gimbal lock
 #: the rates exceed 6.7e7 |omega| and a one-ulp change of the middle angle
@@ -148,7 +156,8 @@ def _euler_rates_kernel(angles, omega, out, i, j, n, parity, proper, reverse, wo
     return -1
 
 
-def angular_velocity_from_euler_rates(angles, rates, seq, frame='body', degrees=False):
+def angular_velocity_from_euler_rates(angles: ArrayLike, rates: ArrayLike, seq: str,
+                                      frame: str = 'body', degrees: bool = False) -> FloatArray:
     """
     Angular velocity of Euler angles changing at the given rates.
 
@@ -186,8 +195,10 @@ def angular_velocity_from_euler_rates(angles, rates, seq, frame='body', degrees=
                        _RADIANS_PER_DEGREE if degrees else 1.0)
 
 
-def euler_rates_from_angular_velocity(angles, omega, seq, frame='body', degrees=False, *,
-                                      singularity_threshold=DEFAULT_SINGULARITY_THRESHOLD):
+def euler_rates_from_angular_velocity(
+        angles: ArrayLike, omega: ArrayLike, seq: str, frame: str = 'body',
+        degrees: bool = False, *,
+        singularity_threshold: float = DEFAULT_SINGULARITY_THRESHOLD) -> FloatArray:
     """
     Euler-angle rates of an orientation turning with angular velocity ``omega``.
 

@@ -9,12 +9,21 @@ angular velocity over the step. By the Magnus expansion
 estimate at the midpoint time, and exact for a constant angular velocity.
 It aliases when the true rotation per step reaches pi (``|w| h >= pi``).
 """
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from ._validation import is_world_frame, sample_times
 from ..conversions.kernels import (
     BOOL, FLAT_IN, FLAT_OUT, float_array, kernel, product, quaternion_status, raise_sample_error,
     rotation_vector_from_quaternion_scalar, samples, scaled_quaternion)
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from ..type_aliases import FloatArray
 
 
 @kernel(FLAT_IN, FLAT_IN, FLAT_OUT, BOOL)
@@ -44,7 +53,8 @@ def _finite_difference_kernel(q, h, out, world):
     return -1
 
 
-def angular_velocity_from_quaternions(q, t, frame='body'):
+def angular_velocity_from_quaternions(q: ArrayLike, t: ArrayLike,
+                                      frame: str = 'body') -> FloatArray:
     """
     Angular velocity between consecutive orientations of a time series.
 

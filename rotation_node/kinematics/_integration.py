@@ -41,7 +41,10 @@ References
    Control, and Dynamics 6(4), 1983.
 
 """
+from __future__ import annotations
+
 import math
+from typing import Callable, TYPE_CHECKING
 
 import numpy as np
 
@@ -51,6 +54,11 @@ from ..conversions.kernels import (
     array_type, canonical_kernel, canonical_unit_quaternion, FLAT_IN, float_array, INT, jit,
     kernel, kernel_ready, product, quaternion_from_rotation_vector_scalar, raise_sample_error,
     ROWS_IN)
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from ..type_aliases import FloatArray
 
 _GAUSS = math.sqrt(3.0) / 6.0  # Gauss-Legendre nodes on [0, 1]: 1/2 -+ sqrt(3)/6
 
@@ -132,7 +140,10 @@ def _broadcast(a, shape):
     return kernel_ready(a if a.shape == shape else np.broadcast_to(a, shape))
 
 
-def integrate_angular_velocity(q0, omega, t, *, method='magnus4', frame='body'):
+def integrate_angular_velocity(q0: ArrayLike,
+                               omega: ArrayLike | Callable[[FloatArray], ArrayLike],
+                               t: ArrayLike, *, method: str = 'magnus4',
+                               frame: str = 'body') -> FloatArray:
     """
     Integrate angular velocity into orientations.
 

@@ -9,9 +9,18 @@ at the ends): its error is ``O(h^4)``, so no method of order <= 4 loses its orde
 on smooth sampled data. With fewer than four samples the polynomial through all
 of them is used.
 """
+from __future__ import annotations
+
+from typing import Callable, TYPE_CHECKING
+
 import numpy as np
 
 from ..conversions.kernels import float_array
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from ..type_aliases import FloatArray
 
 
 def _lagrange_stencils(t, h, nodes):
@@ -50,7 +59,8 @@ def _first_non_finite(values, trailing_ndim):
     return tuple(int(i) for i in np.unravel_index(np.flatnonzero(bad)[0], bad.shape))
 
 
-def stage_rates(omega, t, h, nodes):
+def stage_rates(omega: ArrayLike | Callable[[FloatArray], ArrayLike], t: FloatArray,
+                h: FloatArray, nodes: FloatArray) -> FloatArray:
     """
     Angular velocity at ``t_k + nodes[s] h_k`` for every step ``k``.
 

@@ -7,14 +7,22 @@ shapes, broadcasting, kernel status codes and error messages across the
 package). This module adds what only kinematics needs: the reference frame of
 an angular velocity and a strictly increasing vector of sample times.
 """
+from __future__ import annotations
+
 import math
+from typing import Optional, TYPE_CHECKING
 
 import numpy as np
 
 from ..conversions.kernels import FLAT_IN, FLAT_OUT, kernel, kernel_ready
 
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
-def is_world_frame(frame):
+    from ..type_aliases import FloatArray
+
+
+def is_world_frame(frame: object) -> bool:
     """
     Validate ``frame`` and say whether it is the world frame.
 
@@ -42,7 +50,8 @@ def is_world_frame(frame):
     raise ValueError(f"Expected `frame` to be 'body' or 'world', got {frame!r}.")
 
 
-def sample_times(t, n_samples=None, series_name='t'):
+def sample_times(t: ArrayLike, n_samples: Optional[int] = None,
+                 series_name: str = 't') -> tuple[FloatArray, FloatArray]:
     """
     Validate sample times and return them with the steps between them.
 

@@ -22,10 +22,16 @@ F. Fasso, "Comparison of splitting algorithms for the rigid body",
 J. Comput. Phys. 189, 527 (2003).
 
 """
+from __future__ import annotations
+
 import math
+from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
+
+if TYPE_CHECKING:
+    from rotation_node.type_aliases import FloatArray, IntArray
 
 #: Largest rotation (rad) the fastest axis flow makes in one internal step;
 #: 1e-3 keeps the relative energy error near 1e-14 and the trajectory within
@@ -42,7 +48,7 @@ def _yoshida_axis_flows():
     """
     c1 = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
     c0 = 1.0 - 2.0 * c1
-    flows = []
+    flows: list[tuple[int, float]] = []
     for c in (c1, c0, c1):
         for axis, fraction in ((0, c / 2), (1, c / 2), (2, c), (1, c / 2), (0, c / 2)):
             if flows and flows[-1][0] == axis:
@@ -84,7 +90,9 @@ def _axis_flow(q, momentum, inverse_inertia, axis, duration):
 
 
 @numba.njit(cache=True)
-def integrate(q0, momentum0, momentum_norm, inverse_inertia, t, substeps, axes, fractions):
+def integrate(q0: FloatArray, momentum0: FloatArray, momentum_norm: float,
+              inverse_inertia: FloatArray, t: FloatArray, substeps: int, axes: IntArray,
+              fractions: FloatArray) -> tuple[FloatArray, FloatArray]:
     """
     Integrate a free rigid body from ``t[0]`` and return its state at every ``t``.
 

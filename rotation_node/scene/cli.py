@@ -9,6 +9,7 @@ on Ctrl-C or SIGTERM one line, status 130 or 143, no output file.
 """
 import argparse
 import sys
+from typing import Optional, Sequence
 
 from rotation_node.bag.stop_signal import exit_status, interrupt_on_stop_signals, signal_name
 from rotation_node.errors import RotationNodeError
@@ -24,7 +25,7 @@ def _seed(text):
     return seed
 
 
-def build_parser():
+def build_parser() -> argparse.ArgumentParser:
     """Return the command-line parser of ``rotation_scene``."""
     parser = argparse.ArgumentParser(
         prog='rotation_scene',
@@ -41,15 +42,17 @@ def build_parser():
     return parser
 
 
-def main(argv=None):
+def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run ``rotation_scene``; return the exit status."""
     args = build_parser().parse_args(argv)
     try:
         interrupt_on_stop_signals()
         # Imported here: a Ctrl-C while numpy and rclpy load is then one line too.
         from rotation_node.bag.output import BagOutput
+
         from .simulator import write_scene_bag
         from .spec import load_scene
+
         # Checked again when the bag is opened; here it saves loading the scene for nothing.
         BagOutput.check_absent(args.output, overwrite=args.force)
         scene = load_scene(args.scene)

@@ -32,12 +32,21 @@ same number of values, so enabling one effect never changes another's draws.
 Conventions: quaternions (x, y, z, w), body-to-world; angular velocity in the
 body frame, rad/s; covariances row-major 3x3 as in ``sensor_msgs/Imu``.
 """
+from __future__ import annotations
+
 import dataclasses
+from typing import Any, Callable, Mapping, TYPE_CHECKING
 
 import numpy as np
-
 from rotation_node.conversions import quaternion_from_rotation_vector, quaternion_product
 from rotation_node.stamps import NS_PER_S as _NS_PER_S
+
+from .spec import (
+    DroppedMessages, GyroBias, GyroNoise, NanBursts, NonUnitQuaternions, OrientationNoise,
+    OrientationUnknown, QuaternionSignFlips, TimestampJitter)
+
+if TYPE_CHECKING:
+    from rotation_node.type_aliases import BoolArray, FloatArray, IntArray
 
 #: ``sensor_msgs/Imu``: covariance element 0 set to -1 means "no estimate".
 UNKNOWN_COVARIANCE = -1.0
@@ -76,7 +85,8 @@ class SensorStream:
     published: np.ndarray
 
     @classmethod
-    def from_truth(cls, time, stamp_ns, orientation, angular_velocity):
+    def from_truth(cls, time: FloatArray, stamp_ns: IntArray, orientation: FloatArray,
+                   angular_velocity: FloatArray) -> SensorStream:
         """
         Return a perfect sensor: the truth, zero covariances, every sample published.
 
@@ -91,7 +101,7 @@ class SensorStream:
                    angular_velocity_covariance=np.zeros((n, 9)),
                    published=np.ones(n, dtype=bool))
 
-    def __len__(self):
+    def __len__(self) -> int:
         return len(self.time)
 
 
@@ -100,7 +110,9 @@ def _isotropic_covariance(n, std):
     return np.tile((std * std * np.eye(3)).ravel(), (n, 1))
 
 
-def add_gyro_bias(stream, params, rng, state):
+def add_gyro_bias(stream: SensorStream, params: GyroBias,
+                  rng: np.random.Generator,
+                  state: dict[str, Any]) -> tuple[SensorStream, BoolArray]:
     """
     Return the stream with ``b_k = constant + random walk`` added to the angular velocity.
 
@@ -122,7 +134,9 @@ def add_gyro_bias(stream, params, rng, state):
     return dataclasses.replace(stream, angular_velocity=stream.angular_velocity + bias), changed
 
 
-def add_gyro_noise(stream, params, rng, state):
+def add_gyro_noise(stream: SensorStream, params: GyroNoise,
+                   rng: np.random.Generator,
+                   state: dict[str, Any]) -> tuple[SensorStream, BoolArray]:
     """Return the stream with N(0, std^2) white noise on each gyro axis, and its covariance."""
     noise = params.std * rng.standard_normal((len(stream), 3))
     return dataclasses.replace(
@@ -131,7 +145,9 @@ def add_gyro_noise(stream, params, rng, state):
     ), np.full(len(stream), params.std > 0)
 
 
-def add_orientation_noise(stream, params, rng, state):
+def add_orientation_noise(stream: SensorStream, params: OrientationNoise,
+                          rng: np.random.Generator,
+                          state: dict[str, Any]) -> tuple[SensorStream, BoolArray]:
     """
     Return the stream with orientation ``q (x) exp(v)``, and its covariance ``std^2 I``.
 
@@ -147,14 +163,18 @@ def add_orientation_noise(stream, params, rng, state):
     ), np.full(len(stream), params.std > 0)
 
 
-def flip_quaternion_signs(stream, params, rng, state):
+def flip_quaternion_signs(stream: SensorStream, params: QuaternionSignFlips,
+                          rng: np.random.Generator,
+                          state: dict[str, Any]) -> tuple[SensorStream, BoolArray]:
     """Return the stream with each orientation replaced by ``-q`` with ``probability``."""
     flipped = rng.random(len(stream)) < params.probability
     sign = np.where(flipped, -1.0, 1.0)[:, np.newaxis]
     return dataclasses.replace(stream, orientation=stream.orientation * sign), flipped
 
 
-def scale_quaternions(stream, params, rng, state):
+def scale_quaternions(stream: SensorStream, params: NonUnitQuaternions,
+                      rng: np.random.Generator,
+                      state: dict[str, Any]) -> tuple[SensorStream, BoolArray]:
     """Return the stream with each orientation multiplied by a factor uniform in ``scale``."""
     low, high = params.scale
     factor = rng.uniform(low, high, len(stream))
@@ -162,7 +182,9 @@ def scale_quaternions(stream, params, rng, state):
             factor != 1.0)
 
 
-def insert_nan_bursts(stream, params, rng, state):
+def insert_nan_bursts(stream: SensorStream, params: NanBursts,
+                      rng: np.random.Generator,
+                      state: dict[str, Any]) -> tuple[SensorStream, BoolArray]:
     """
     Return the stream with NaN in every component of ``fields`` during bursts.
 
@@ -184,7 +206,9 @@ def insert_nan_bursts(stream, params, rng, state):
     return dataclasses.replace(stream, **changes), in_burst
 
 
-def hide_orientation(stream, params, rng, state):
+def hide_orientation(stream: SensorStream, params: OrientationUnknown,
+                     rng: np.random.Generator,
+                     state: dict[str, Any]) -> tuple[SensorStream, BoolArray]:
     """
     Return the stream with the orientation hidden, each sample with ``probability``.
 
@@ -205,7 +229,9 @@ def hide_orientation(stream, params, rng, state):
                                orientation_covariance=covariance), unknown
 
 
-def jitter_timestamps(stream, params, rng, state):
+def jitter_timestamps(stream: SensorStream, params: TimestampJitter,
+                      rng: np.random.Generator,
+                      state: dict[str, Any]) -> tuple[SensorStream, BoolArray]:
     """
     Return the stream with each ``header.stamp`` offset by N(0, std^2) s, rounded to ns.
 
@@ -217,14 +243,16 @@ def jitter_timestamps(stream, params, rng, state):
     return dataclasses.replace(stream, stamp_ns=stream.stamp_ns + offset_ns), offset_ns != 0
 
 
-def drop_messages(stream, params, rng, state):
+def drop_messages(stream: SensorStream, params: DroppedMessages,
+                  rng: np.random.Generator,
+                  state: dict[str, Any]) -> tuple[SensorStream, BoolArray]:
     """Return the stream with each sample unpublished with ``probability``."""
     dropped = rng.random(len(stream)) < params.probability
     return dataclasses.replace(stream, published=stream.published & ~dropped), dropped
 
 
 #: Effect functions by scene name, in the order they apply.
-EFFECTS = {
+EFFECTS: dict[str, Callable[..., tuple[SensorStream, BoolArray]]] = {
     'gyro_bias': add_gyro_bias,
     'gyro_noise': add_gyro_noise,
     'orientation_noise': add_orientation_noise,
@@ -237,7 +265,7 @@ EFFECTS = {
 }
 
 
-def effect_rng(seed, name):
+def effect_rng(seed: int, name: str) -> np.random.Generator:
     """
     Return the generator of effect ``name`` for scene seed ``seed``.
 
@@ -264,11 +292,13 @@ class EffectsStream:
 
     """
 
-    def __init__(self, effects, seed):
-        self._effects = [(name, effect, effects[name], effect_rng(seed, name), {})
-                         for name, effect in EFFECTS.items() if name in effects]
+    def __init__(self, effects: Mapping[str, object], seed: int) -> None:
+        self._effects: list[tuple[str, Callable[..., tuple[SensorStream, BoolArray]], object,
+                                  np.random.Generator, dict[str, Any]]] = [
+            (name, effect, effects[name], effect_rng(seed, name), {})
+            for name, effect in EFFECTS.items() if name in effects]
 
-    def apply(self, stream):
+    def apply(self, stream: SensorStream) -> tuple[SensorStream, dict[str, BoolArray]]:
         """Return the next block with the effects applied, and what each changed in it."""
         changed = {}
         for name, effect, params, rng, state in self._effects:
@@ -276,7 +306,8 @@ class EffectsStream:
         return stream, changed
 
 
-def apply_effects(stream, effects, seed):
+def apply_effects(stream: SensorStream, effects: Mapping[str, object],
+                  seed: int) -> tuple[SensorStream, dict[str, BoolArray]]:
     """
     Return the stream with the scene's effects applied, and what each changed.
 

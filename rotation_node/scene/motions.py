@@ -19,19 +19,25 @@ samples, carrying the sign continuity and the integrator's state across
 blocks, with results bit-identical to :func:`motion_truth` over all samples at
 once: the simulator streams scenes of any length in bounded memory.
 """
+from __future__ import annotations
+
 import math
+from typing import Optional, TYPE_CHECKING
 
 import numpy as np
-
-from rotation_node.conversions import (quaternion_from_euler, quaternion_from_rotation_vector,
-                                       quaternion_product)
+from rotation_node.conversions import (
+    quaternion_from_euler, quaternion_from_rotation_vector, quaternion_product)
 from rotation_node.kinematics import angular_velocity_from_euler_rates
 
 from . import _free_rigid_body
-from .spec import Coning, ConstantRate, EulerSweep, TorqueFree
+from .spec import Coning, ConstantRate, EulerSweep, Motion, TorqueFree
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from rotation_node.type_aliases import FloatArray
 
 
-def sign_continuous(q):
+def sign_continuous(q: FloatArray) -> FloatArray:
     """
     Return the quaternion series with signs chosen so that consecutive ones have ``dot >= 0``.
 
@@ -68,7 +74,8 @@ def _continue_signs(q, previous, previous_sign):
     return q * signs[:, np.newaxis], q[-1].copy(), float(signs[-1])
 
 
-def constant_rate_truth(orientation, angular_velocity, t):
+def constant_rate_truth(orientation: ArrayLike, angular_velocity: ArrayLike,
+                        t: FloatArray) -> tuple[FloatArray, FloatArray]:
     """
     Return the exact rotation at constant body rate: ``q(t) = q0 (x) exp(w t)``.
 
@@ -99,7 +106,8 @@ def _constant_rate_unsigned(orientation, angular_velocity, t):
     return q, w.copy()
 
 
-def coning_truth(half_angle, frequency, t):
+def coning_truth(half_angle: float, frequency: float,
+                 t: FloatArray) -> tuple[FloatArray, FloatArray]:
     """
     Return classical coning motion, phase 0 at ``t = 0`` (docs/numerics.md).
 
@@ -134,7 +142,8 @@ def coning_truth(half_angle, frequency, t):
     return q, w
 
 
-def torque_free_truth(inertia, orientation, angular_velocity, t):
+def torque_free_truth(inertia: ArrayLike, orientation: ArrayLike, angular_velocity: ArrayLike,
+                      t: FloatArray) -> tuple[FloatArray, FloatArray]:
     """
     Return a free rigid body's motion: ``I w' = (I w) x w`` with attitude.
 
@@ -170,7 +179,7 @@ def torque_free_truth(inertia, orientation, angular_velocity, t):
     return _TorqueFree(inertia, orientation, angular_velocity, longest_interval(t)).truth(t)
 
 
-def longest_interval(t):
+def longest_interval(t: FloatArray) -> float:
     """Return the longest interval between consecutive times ``t`` (0 for fewer than two)."""
     return float(np.max(np.diff(t), initial=0.0))
 
@@ -189,12 +198,12 @@ class _TorqueFree:
         self.substeps = max(1, math.ceil(fastest * longest / _free_rigid_body.MAX_STEP_ANGLE))
         q0 = np.array(orientation, dtype=np.float64)
         self.q = q0 / np.linalg.norm(q0)
-        self.time = None
+        self.time: Optional[float] = None
 
     def truth(self, t):
         t = np.ascontiguousarray(t, dtype=np.float64)
         first = self.time is None
-        times = t if first else np.concatenate(([self.time], t))
+        times = t if self.time is None else np.concatenate(([self.time], t))
         q, momentum = _free_rigid_body.integrate(
             self.q, self.momentum, self.momentum_norm, self.inverse_inertia, times,
             self.substeps, _free_rigid_body.AXES, _free_rigid_body.FRACTIONS)
@@ -204,7 +213,8 @@ class _TorqueFree:
         return q, momentum * self.inverse_inertia
 
 
-def euler_sweep_truth(sequence, start, end, duration, t):
+def euler_sweep_truth(sequence: str, start: ArrayLike, end: ArrayLike, duration: float,
+                      t: FloatArray) -> tuple[FloatArray, FloatArray]:
     """
     Return the rotation whose Euler angles move linearly from ``start`` to ``end``.
 
@@ -245,7 +255,8 @@ def _euler_sweep_unsigned(sequence, start, end, duration, t):
     return q, w
 
 
-def motion_truth(motion, t, duration):
+def motion_truth(motion: Motion, t: FloatArray,
+                 duration: float) -> tuple[FloatArray, FloatArray]:
     """
     Return the truth ``(q, w)`` of a scene's motion at times ``t``.
 
@@ -294,7 +305,7 @@ class MotionStream:
 
     """
 
-    def __init__(self, motion, duration, longest):
+    def __init__(self, motion: Motion, duration: float, longest: float) -> None:
         if not isinstance(motion, (ConstantRate, Coning, TorqueFree, EulerSweep)):
             raise TypeError(f'motion_truth: not a scene motion: {motion!r}')
         self._motion = motion
@@ -305,7 +316,7 @@ class MotionStream:
         self._previous = None       # last unsigned quaternion, and its sign
         self._previous_sign = 1.0
 
-    def truth(self, t):
+    def truth(self, t: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Return ``(q, w)`` at the times ``t`` that follow the previous call's."""
         motion = self._motion
         if isinstance(motion, Coning):
@@ -315,6 +326,7 @@ class MotionStream:
         if isinstance(motion, ConstantRate):
             q, w = _constant_rate_unsigned(motion.orientation, motion.angular_velocity, t)
         else:
+            assert isinstance(motion, EulerSweep)
             q, w = _euler_sweep_unsigned(motion.sequence, motion.start, motion.end,
                                          self._duration, t)
         q, self._previous, self._previous_sign = _continue_signs(

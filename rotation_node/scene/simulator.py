@@ -22,8 +22,10 @@ Every message has ``header.frame_id`` = the scene's ``frame_id`` and log time
 seed give a byte-identical bag (``BagWriter.write`` encodes these types with
 zero padding, see :mod:`rotation_node.bag.cdr`).
 """
+from __future__ import annotations
+
 import dataclasses
-from typing import Mapping
+from typing import Iterator, Mapping, Optional, TYPE_CHECKING
 
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
 import numpy as np
@@ -35,6 +37,9 @@ from sensor_msgs.msg import Imu
 from .effects import EffectsStream, SensorStream, UNKNOWN_COVARIANCE
 from .motions import MotionStream
 from .spec import Scene, TRUTH_ANGULAR_VELOCITY_TOPIC, TRUTH_ORIENTATION_TOPIC
+
+if TYPE_CHECKING:
+    from rotation_node.type_aliases import IntArray, StrPath
 
 
 @dataclasses.dataclass(frozen=True)
@@ -77,7 +82,7 @@ class Simulation:
 BLOCK_SAMPLES = 20_000
 
 
-def sample_stamps_ns(scene):
+def sample_stamps_ns(scene: Scene) -> IntArray:
     """
     Return the nominal stamps ``start_time + k / rate``, k = 0 .. n-1, in ns since the epoch.
 
@@ -122,7 +127,8 @@ def _check_seed(seed):
     return int(seed)
 
 
-def simulate_blocks(scene, seed=0, block_samples=BLOCK_SAMPLES):
+def simulate_blocks(scene: Scene, seed: int = 0,
+                    block_samples: int = BLOCK_SAMPLES) -> Iterator[Simulation]:
     """
     Yield the simulation of a scene in consecutive blocks of samples.
 
@@ -154,11 +160,12 @@ def simulate_blocks(scene, seed=0, block_samples=BLOCK_SAMPLES):
     bounds = _block_bounds(scene, max(int(block_samples), 1))
     longest = _longest_interval(scene, bounds) if len(bounds) > 1 else None
     first_ns = _stamps_ns(scene, 0, 1)[0]
-    motion = effects = None
+    motion: Optional[MotionStream] = None
+    effects: Optional[EffectsStream] = None
     for start, stop in bounds:
         stamp_ns = _stamps_ns(scene, start, stop)
         time = (stamp_ns - first_ns) / _NS_PER_S
-        if motion is None:
+        if motion is None or effects is None:
             motion = MotionStream(scene.motion, scene.duration,
                                   float(np.max(np.diff(time), initial=0.0))
                                   if longest is None else longest)
@@ -170,7 +177,7 @@ def simulate_blocks(scene, seed=0, block_samples=BLOCK_SAMPLES):
                          sensor=sensor, effect_masks=masks)
 
 
-def simulate(scene, seed=0):
+def simulate(scene: Scene, seed: int = 0) -> Simulation:
     """
     Return the truth and the sensor stream of a scene, as arrays.
 
@@ -216,7 +223,7 @@ def _imu_message(sensor, k, frame_id):
     return msg
 
 
-def write_bag(simulation, path, *, overwrite=False):
+def write_bag(simulation: Simulation, path: StrPath, *, overwrite: bool = False) -> None:
     """
     Write a simulation as a ROS 2 MCAP bag (the layout in this module's docstring).
 
@@ -240,7 +247,8 @@ def write_bag(simulation, path, *, overwrite=False):
         _write_samples(writer, simulation)
 
 
-def write_scene_bag(scene, path, *, seed=0, overwrite=False, block_samples=BLOCK_SAMPLES):
+def write_scene_bag(scene: Scene, path: StrPath, *, seed: int = 0, overwrite: bool = False,
+                    block_samples: int = BLOCK_SAMPLES) -> tuple[int, int]:
     """
     Simulate a scene and write it as a bag, streaming: memory does not grow with its length.
 

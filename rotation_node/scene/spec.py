@@ -15,15 +15,20 @@ first, then missing fields, then invalid values.
 Conventions: quaternions (x, y, z, w), scalar last, active, body-to-world;
 angular velocities in the body frame, rad/s; angles in radians.
 """
+from __future__ import annotations
+
 import dataclasses
 import math
 import re
-from typing import ClassVar, Mapping, Tuple
+from typing import ClassVar, Mapping, Tuple, TYPE_CHECKING, Union
 
 from rotation_node.conversions import parse_sequence
 from rotation_node.errors import SceneError
 from rotation_node.ros_yaml import load_ros_yaml
 from rotation_node.validation import describe_value, did_you_mean
+
+if TYPE_CHECKING:
+    from rotation_node.type_aliases import StrPath
 
 #: Default ``start_time``: 2025-01-01T00:00:00Z, in seconds since the Unix epoch.
 DEFAULT_START_TIME = 1735689600.0
@@ -303,6 +308,9 @@ class EulerSweep:
 
 
 #: Motion classes by their scene ``type``.
+#: What a scene's ``motion`` is.
+Motion = Union[ConstantRate, Coning, TorqueFree, EulerSweep]
+
 MOTIONS = {cls.type: cls for cls in (ConstantRate, Coning, TorqueFree, EulerSweep)}
 
 
@@ -443,19 +451,20 @@ class Scene:
 
     duration: float = _param(_real(positive=True))
     rate: float = _param(_real(positive=True))
-    motion: object
+    # Required, as are duration and rate: mypy takes any `_param(...)` for a default.
+    motion: Motion  # type: ignore[misc]
     effects: Mapping[str, object] = dataclasses.field(default_factory=dict)
     topic: str = _param(_topic, '/imu')
     frame_id: str = _param(_frame_id, 'imu_link')
     start_time: float = _param(_real(0.0), DEFAULT_START_TIME)
 
     @property
-    def sample_count(self):
+    def sample_count(self) -> int:
         """Return the number of samples: one at ``k / rate`` for each ``k / rate <= duration``."""
         return sample_count(self.duration, self.rate)
 
 
-def sample_count(duration, rate):
+def sample_count(duration: float, rate: float) -> int:
     """
     Return the number of samples ``t_k = k / rate`` with ``t_k <= duration``.
 
@@ -466,7 +475,7 @@ def sample_count(duration, rate):
     return math.floor(n + 1e-9 * max(1.0, n)) + 1
 
 
-def scene_from_dict(data):
+def scene_from_dict(data: object) -> Scene:
     """
     Validate a scene given as parsed YAML.
 
@@ -528,7 +537,7 @@ def _effects(data):
             for name, params in data.items()}
 
 
-def load_scene(path):
+def load_scene(path: StrPath) -> Scene:
     """
     Load and validate a YAML scene file.
 
