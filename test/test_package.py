@@ -158,7 +158,9 @@ def test_installed_node_starts_without_oracles_and_stops_on_ctrl_c(
         if not ready:
             node.stop()
             pytest.fail(f'no subscription to /input within 120 s; the node said:\n{node.output}')
-        assert 'rotation_node' in client.node.get_node_names()
+        # Node names travel on their own discovery topic, after the endpoints.
+        assert client.spin_until(
+            lambda: 'rotation_node' in client.node.get_node_names(), timeout=30)
         assert node.stop() == 0, node.output
 
 
