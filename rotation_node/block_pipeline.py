@@ -55,10 +55,6 @@ if TYPE_CHECKING:
 BLOCK_SAMPLES = BATCH_SAMPLES - 1
 
 
-def _quaternion_rate(params, q, omega):
-    return kinematics.quaternion_derivative(q, omega, frame=params.angular_velocity_output_frame)
-
-
 def _axis_angle(params, q):
     axis, angle = conversions.axis_angle_from_quaternion(q)
     return np.concatenate((axis, angle[:, None]), axis=1)
@@ -67,12 +63,12 @@ def _axis_angle(params, q):
 BLOCK_OUTPUTS: Dict[str, Optional[Callable[..., np.ndarray]]] = {
     'quaternion': None,
     'euler': None,
-    'rotation_vector': lambda params, q: conversions.rotation_vector_from_quaternion(q),
+    'rotation_vector': messages.OUTPUTS['rotation_vector'].compute,   # vectorised as it is
     'axis_angle': _axis_angle,
     'matrix': lambda params, q: conversions.matrix_from_quaternion(q).reshape(-1, 9),
     'angular_velocity': None,
     'euler_rates': None,
-    'quaternion_rate': _quaternion_rate,
+    'quaternion_rate': messages.OUTPUTS['quaternion_rate'].compute,
 }
 """
 The outputs with a block form: ``{name: compute(params, *values) -> (n, k) array}``.
