@@ -1,5 +1,6 @@
 """Tests of rotation_node.conversions._runtime: one signature per kernel, sample views, warm-up."""
 import importlib
+import importlib.util
 import inspect
 import math
 import os
@@ -246,6 +247,33 @@ def test_importing_conversions_loads_nothing_beyond_numpy_and_numba():
                   '             if m.split(".")[0] not in sys.stdlib_module_names\n'
                   '             and not m.startswith("rotation_node.conversions.")))\n')
     assert out.strip() == "['rotation_node', 'rotation_node.conversions']"
+
+
+def test_the_first_call_does_not_import_scipy_linalg_and_numba_linear_algebra_still_works():
+    """numba's BLAS probe is answered without importing scipy.linalg; np.dot still compiles."""
+    out = _python('import importlib.util, sys\n'
+                  'import numba, numpy as np\n'
+                  'from rotation_node import conversions\n'
+                  'conversions.euler_from_quaternion([0.1, 0.2, 0.3, 0.9], "xyz")\n'
+                  'print("scipy.linalg" in sys.modules)\n'
+                  'import numba.np.arraymath, numba.np.linalg\n'
+                  'print(numba.np.arraymath._HAVE_BLAS'
+                  ' == (importlib.util.find_spec("scipy") is not None))\n'
+                  'print(numba.np.linalg.ensure_blas.__module__)\n'
+                  'dot = numba.njit(lambda a, b: np.dot(a, b))\n'
+                  'a = np.arange(9.0).reshape(3, 3)\n'
+                  'print(np.array_equal(dot(a, a), a @ a))\n')
+    assert out.split() == ['False', 'True', 'numba.np.linalg', 'True']
+
+
+def test_numba_registries_loaded_before_the_first_call_are_left_as_they_are():
+    out = _python('import sys\n'
+                  'import numba.np.arraymath\n'
+                  'have_blas = numba.np.arraymath._HAVE_BLAS\n'
+                  'from rotation_node import conversions\n'
+                  'conversions.quaternion_conjugate([0.0, 0.0, 0.0, 1.0])\n'
+                  'print(numba.np.arraymath._HAVE_BLAS == have_blas, "scipy.linalg" in sys.modules)\n')
+    assert out.split() == ['True', str(importlib.util.find_spec('scipy') is not None)]
 
 
 def test_kernels_are_cached_in_the_user_cache_where_the_package_is_read_only(tmp_path):

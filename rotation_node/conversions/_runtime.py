@@ -33,8 +33,10 @@ or wherever ``NUMBA_CACHE_DIR`` says.
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
+import importlib.util
 import math
 import os
+import sys
 import threading
 from typing import Any, Callable, Optional, Sequence, TYPE_CHECKING, TypeGuard
 
@@ -87,10 +89,44 @@ KERNELS: list[Any] = []
 _compiling = threading.Lock()
 
 
+def _import_numba_registries_without_scipy_linalg() -> None:
+    """
+    Import numba's array-math registry without its import of ``scipy.linalg``.
+
+    The first compilation or cache load in a process makes numba import all
+    its lowering registries. One of them, ``numba.np.arraymath``, probes for
+    BLAS when it is imported by importing ``scipy.linalg.cython_blas``, which
+    imports all of ``scipy.linalg``: 0.15 s of a 0.4 s cold start, measured
+    (``benchmarks/bench_cold_start.py``), for kernels that never call BLAS.
+    The probe is answered here by whether scipy is installed at all
+    (``importlib.util.find_spec``, which imports nothing), the case it tells
+    apart in practice. numba's linear algebra (``np.dot`` in a user's function)
+    still imports ``scipy.linalg`` itself when such a function is compiled: only
+    the module-import-time probe is replaced, and only for that one import.
+    """
+    if 'numba.np.arraymath' in sys.modules:
+        return
+    import numba.np.linalg as numba_linalg
+    probe = getattr(numba_linalg, 'ensure_blas', None)
+    if probe is None:   # another numba: leave its import as it is
+        return
+
+    def scipy_installed():
+        if importlib.util.find_spec('scipy') is None:
+            raise ImportError('scipy is required for linear algebra')
+
+    numba_linalg.ensure_blas = scipy_installed
+    try:
+        import numba.np.arraymath  # noqa: F401  (runs the probe)
+    finally:
+        numba_linalg.ensure_blas = probe
+
+
 def _compile(dispatcher: Any) -> None:
     """Compile ``dispatcher`` for its one signature (or load it from the disk cache), once."""
     with _compiling:   # threads of one large batch may all make the first call
         if not dispatcher.kernel_compiled:
+            _import_numba_registries_without_scipy_linalg()
             dispatcher.compile(dispatcher.kernel_signature)
             dispatcher.disable_compile()
             dispatcher.kernel_compiled = True
