@@ -250,7 +250,7 @@ def test_importing_conversions_loads_nothing_beyond_numpy_and_numba():
 
 
 def test_the_first_call_does_not_import_scipy_linalg_and_numba_linear_algebra_still_works():
-    """numba's BLAS probe is answered without importing scipy.linalg; np.dot still compiles."""
+    """The BLAS probe is answered without importing scipy.linalg; np.dot still compiles."""
     out = _python('import importlib.util, sys\n'
                   'import numba, numpy as np\n'
                   'from rotation_node import conversions\n'
@@ -272,7 +272,8 @@ def test_numba_registries_loaded_before_the_first_call_are_left_as_they_are():
                   'have_blas = numba.np.arraymath._HAVE_BLAS\n'
                   'from rotation_node import conversions\n'
                   'conversions.quaternion_conjugate([0.0, 0.0, 0.0, 1.0])\n'
-                  'print(numba.np.arraymath._HAVE_BLAS == have_blas, "scipy.linalg" in sys.modules)\n')
+                  'print(numba.np.arraymath._HAVE_BLAS == have_blas,\n'
+                  '      "scipy.linalg" in sys.modules)\n')
     assert out.split() == ['True', str(importlib.util.find_spec('scipy') is not None)]
 
 
