@@ -21,7 +21,6 @@ from __future__ import annotations
 from collections.abc import Mapping as AnyMapping
 import dataclasses
 import difflib
-import functools
 import math
 import re
 from typing import Any, Callable, ClassVar, Iterable, Mapping, Optional
@@ -473,16 +472,21 @@ def declare(kind: Kind, default: Any = dataclasses.MISSING, *,
     return Declaration(kind=kind, check=check).field(default, default_factory)
 
 
-@functools.lru_cache(maxsize=None)
+_DECLARATIONS: dict[type, tuple[Declaration, ...]] = {}
+
+
 def declarations(cls: type) -> tuple[Declaration, ...]:
     """Return the declarations of the dataclass ``cls``'s declared fields, in field order."""
-    return tuple(
-        dataclasses.replace(
-            f.metadata[Declaration._METADATA], attribute=f.name,
-            name=f.metadata[Declaration._METADATA].name or f.name,
-            required=f.default is dataclasses.MISSING
-            and f.default_factory is dataclasses.MISSING)
-        for f in dataclasses.fields(cls) if Declaration._METADATA in f.metadata)
+    found = _DECLARATIONS.get(cls)
+    if found is None:
+        found = _DECLARATIONS[cls] = tuple(
+            dataclasses.replace(
+                f.metadata[Declaration._METADATA], attribute=f.name,
+                name=f.metadata[Declaration._METADATA].name or f.name,
+                required=f.default is dataclasses.MISSING
+                and f.default_factory is dataclasses.MISSING)
+            for f in dataclasses.fields(cls) if Declaration._METADATA in f.metadata)
+    return found
 
 
 def checked_values(cls: type, data: Any, where: Where, *, skip: Iterable[str] = (),

@@ -94,7 +94,8 @@ def test_a_real_must_be_finite(value):
 
 
 @pytest.mark.parametrize('kind, value, words', [
-    (Real(0.0, math.pi), 4.0, 'from 0 to 3.14159'), (Real(0.0, math.pi), -0.1, 'from 0 to 3.14159'),
+    (Real(0.0, math.pi), 4.0, 'from 0 to 3.14159'),
+    (Real(0.0, math.pi), -0.1, 'from 0 to 3.14159'),
     (Real(0.0), -1e-3, '>= 0'), (Real(maximum=2.0), 2.5, '<= 2'), (Real(positive=True), 0, '> 0'),
     (Real(positive=True), -1.0, '> 0')])
 def test_a_real_out_of_range_names_the_range(kind, value, words):
@@ -125,7 +126,8 @@ def test_text_checks_type_pattern_and_parser():
 def test_a_choice_names_the_nearest_choice():
     kind = Choice(('enu', 'ned'))
     assert kind.checked('ned', TOP) == 'ned'
-    assert problem(kind, 'nde') == "x: 'nde' is not allowed (did you mean 'ned'?); one of: enu, ned"
+    assert problem(kind, 'nde') == \
+        "x: 'nde' is not allowed (did you mean 'ned'?); one of: enu, ned"
     assert problem(kind, 1) == 'x: expected a string, got int 1'
     assert kind.constraints == 'one of: enu, ned' and kind.choices == ('enu', 'ned')
 
@@ -224,7 +226,8 @@ def changed(**changes):
                              'duration, motion, effects, frame'),
     ({'duration': 1.0}, 'motion: missing'),
     (changed(duration=0), 'duration: must be > 0, got 0.0'),
-    (changed(frame='enuu'), "frame: 'enuu' is not allowed (did you mean 'enu'?); one of: enu, ned"),
+    (changed(frame='enuu'),
+     "frame: 'enuu' is not allowed (did you mean 'enu'?); one of: enu, ned"),
     (changed(motion='spin'), "motion: expected a mapping with a type, got str 'spin'"),
     (changed(motion={'rate': 1.0}), 'motion.type: missing; expected one of spin, rest'),
     (changed(motion={'type': 'spn'}),
@@ -234,7 +237,7 @@ def changed(**changes):
     (changed(motion={'type': 'spin', 'rate': 1.0}), 'motion.axis: missing'),
     (changed(motion={'type': 'spin', 'rate': 1.0, 'axis': [0, 'z', 1]}),
      "motion.axis[1]: expected a number, got str 'z'"),
-    (changed(effects=['noise']), "effects: expected a mapping of effect names, got list"),
+    (changed(effects=['noise']), 'effects: expected a mapping of effect names, got list'),
     (changed(effects={'nois': {}}),
      "effects.nois: unknown effect (did you mean 'noise'?); expected one of noise, bias"),
     (changed(effects={'noise': {}}), 'effects.noise.std: missing'),
