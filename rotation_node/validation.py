@@ -5,7 +5,7 @@ A dataclass declares each field with :func:`declare`: the field's :class:`Kind`
 (a boolean, an integer or a real number within bounds, a string, one of some
 choices, a list of choices, a fixed-size vector, one of several dataclasses
 chosen by a tag, named sections...) and, where the domain asks for more (a
-unit quaternion, distinct frames), a further check. :func:`checked_values`
+unit quaternion, a frame name without a leading /), a further check. :func:`checked_values`
 then checks a mapping (a parsed YAML file, ROS parameters) against those
 declarations: unknown keys first, with the nearest valid name (``difflib``),
 then missing required keys, then each value by its kind, so a misspelt key
@@ -18,12 +18,12 @@ megabyte-long string is not copied into a log line.
 """
 from __future__ import annotations
 
-from collections.abc import Mapping as AnyMapping
+from collections.abc import Mapping
 import dataclasses
 import difflib
 import math
 import re
-from typing import Any, Callable, ClassVar, Iterable, Mapping, Optional
+from typing import Any, Callable, ClassVar, Iterable, Optional
 
 _MAX_REPR = 80
 
@@ -518,7 +518,7 @@ def checked_values(cls: type, data: Any, where: Where, *, skip: Iterable[str] = 
     """
     if data is None:
         data = {}
-    if not isinstance(data, AnyMapping):
+    if not isinstance(data, Mapping):
         raise where.type_error('a mapping', data)
     skip = tuple(skip)
     fields = {declaration.name: declaration for declaration in declarations(cls)}
