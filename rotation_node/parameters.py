@@ -13,18 +13,20 @@ not ``0``), a string array a list of strings. This module does not import rclpy.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, replace
 import math
 from pathlib import Path
 import re
-from typing import Any, Callable, Mapping, Optional, TYPE_CHECKING
+from typing import Any, cast, Mapping, Optional, Tuple, TYPE_CHECKING
 
 from rotation_node import messages
 from rotation_node.conversions import parse_sequence
 from rotation_node.errors import ParameterError
 from rotation_node.frames import BODY_FRAMES, WORLD_FRAMES
 from rotation_node.ros_yaml import load_ros_yaml
-from rotation_node.validation import describe_value, did_you_mean
+from rotation_node.validation import (
+    Boolean, check_fields, checked_values, Choice, ChoiceList, Declaration, declarations,
+    did_you_mean, Integer, Real, Text, Where)
 
 if TYPE_CHECKING:
     from rotation_node.type_aliases import StrPath
@@ -45,10 +47,13 @@ ROS_BUILTIN_PARAMETERS = frozenset({'use_sim_time', 'start_type_description_serv
 """Parameters every rclpy node declares by itself; a parameters file may set them."""
 
 
-@dataclass(frozen=True)
-class ParameterSpec:
+@dataclass(frozen=True, kw_only=True)
+class ParameterSpec(Declaration):
     """
     One node parameter: ROS name, default, description and allowed values.
+
+    A :class:`~rotation_node.validation.Declaration` whose ``name`` is the ROS
+    name and whose ``kind`` gives the type and allowed values.
 
     Attributes
     ----------
@@ -59,27 +64,20 @@ class ParameterSpec:
         is a ROS string array).
     description : str
         One-line description, shown by ``ros2 param describe``.
-    choices : tuple of str, optional
-        Allowed values of a string parameter, or of each string-array element.
-    bounds : tuple of (float, float) or (int, int), optional
-        Inclusive range of a numeric parameter.
+    kind : rotation_node.validation.Kind
+        Type and allowed values (choices, bounds).
     check : callable, optional
-        Further check of a value of the right type; raises ParameterError.
+        Further check ``check(value, where)`` of a value of the right kind.
     rule : str, optional
-        The allowed values in words, where ``choices`` and ``bounds`` cannot say it.
+        The allowed values in words, where the kind cannot say them.
     attribute : str
         Name of the :class:`NodeParameters` field that holds the value.
 
     """
 
-    name: str
     default: Any
     description: str
-    choices: Optional[tuple] = None
-    bounds: Optional[tuple] = None
-    check: Optional[Callable[[Any], None]] = None
     rule: str = ''
-    attribute: str = ''
 
     @property
     def type(self) -> type:  # noqa: A003
@@ -87,95 +85,35 @@ class ParameterSpec:
         return type(self.default)
 
     @property
+    def choices(self) -> Optional[tuple]:
+        """Return the allowed values of a string, or of each string-array element (or None)."""
+        return getattr(self.kind, 'choices', None)
+
+    @property
+    def bounds(self) -> Optional[tuple]:
+        """Return the inclusive range ``(low, high)`` of a number (or None)."""
+        return getattr(self.kind, 'bounds', None)
+
+    @property
     def constraints(self) -> str:
         """Return the allowed values in words ('' when the type is the only constraint)."""
-        if self.choices is not None:
-            prefix = 'each one of' if self.type is tuple else 'one of'
-            return f'{prefix}: {", ".join(self.choices)}'
-        if self.bounds is not None:
-            return f'from {self.bounds[0]:g} to {self.bounds[1]:g}'
-        return self.rule
-
-    def checked(self, value: Any) -> Any:
-        """
-        Return ``value`` in canonical form (string arrays as tuples) if it is valid.
-
-        Raises
-        ------
-        ParameterError
-            The value has the wrong type or is not allowed; the message names the
-            parameter.
-
-        """
-        value = _checked_type(self, value)
-        if self.choices is not None:
-            for item in (value if self.type is tuple else (value,)):
-                if item not in self.choices:
-                    raise ParameterError(
-                        f"parameter '{self.name}': {item!r} is not allowed"
-                        f'{did_you_mean(item, self.choices)}; {self.constraints}')
-        if self.bounds is not None and not self.bounds[0] <= value <= self.bounds[1]:
-            raise ParameterError(
-                f"parameter '{self.name}': {value!r} is out of range; "
-                f'allowed {self.constraints}')
-        if self.check is not None:
-            self.check(value)
-        return value
+        return self.kind.constraints or self.rule
 
 
-_TYPE_NAMES = {
-    str: 'a string', bool: 'a boolean', int: 'an integer',
-    float: 'a floating-point number (write 0.0, not 0)', tuple: 'a list of strings'}
+_PARAMETER = Where(error_type=ParameterError, template="parameter '{}'")
+"""How errors name a parameter: ``parameter 'qos.depth': ...``."""
 
 
-def _checked_type(spec, value):
-    if spec.type is tuple and value is None:
-        value = ()   # ROS gives an empty list in a parameters file (outputs: []) as no value
-    if spec.type is tuple:
-        ok = isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value)
-        value = tuple(value) if ok else value
-    elif spec.type is bool:
-        ok = isinstance(value, bool)
-    else:  # bool is an int subclass, but a bool is not a number here
-        ok = isinstance(value, spec.type) and not isinstance(value, bool)
-    if not ok:
-        raise ParameterError(
-            f"parameter '{spec.name}': expected {_TYPE_NAMES[spec.type]}, "
-            f'got {describe_value(value)}')
-    if spec.type is float and not math.isfinite(value):
-        raise ParameterError(f"parameter '{spec.name}': must be finite, got {value!r}")
+def _frame_name(value: str, where: Where) -> str:
+    if value.startswith('/'):
+        raise where.error(f"{value!r} starts with '/'; TF frame names do not "
+                          f'(write {value.lstrip("/")!r})')
     return value
 
 
-def _check_sequence(value):
-    try:
-        parse_sequence(value)
-    except ValueError as exc:
-        raise ParameterError(
-            f"parameter 'euler.sequence': {value!r} is not an Euler sequence ({exc})"
-        ) from None
-
-
-def _check_outputs(value):
-    if not value:
-        raise ParameterError(
-            f"parameter 'outputs': list at least one output; choose from {', '.join(OUTPUTS)}")
-    repeated = sorted({name for name in value if value.count(name) > 1})
-    if repeated:
-        raise ParameterError(f"parameter 'outputs': {', '.join(repeated)} listed twice")
-
-
-def _check_frame_name(name):
-    def check(value):
-        if value.startswith('/'):
-            raise ParameterError(f"parameter '{name}': {value!r} starts with '/'; TF frame "
-                                 f'names do not (write {value.lstrip("/")!r})')
-    return check
-
-
-def _parameter(name, default, description, **constraints):
-    return field(default=default, metadata={'spec': ParameterSpec(
-        name, default, description, **constraints)})
+def _parameter(name, default, description, kind, **options):
+    return ParameterSpec(name=name, default=default, description=description, kind=kind,
+                         **options).field(default)
 
 
 @dataclass(frozen=True)
@@ -198,100 +136,102 @@ class NodeParameters:
     input_type: str = _parameter(
         'input_type', 'imu',
         'Message type subscribed on the topic "input"; changing it recreates the subscription',
-        choices=INPUT_TYPES)
+        Choice(INPUT_TYPES))
     outputs: tuple = _parameter(
         'outputs', ('euler',),
         'Outputs to publish, each on the relative topic of the same name',
-        choices=OUTPUTS, check=_check_outputs)
+        ChoiceList(OUTPUTS, item='output'))
     euler_sequence: str = _parameter(
         'euler.sequence', 'xyz',
         'Euler axis sequence of the euler input and outputs: lower case extrinsic, '
         'upper case intrinsic; xyz is ROS roll, pitch, yaw (REP 103)',
-        check=_check_sequence,
+        Text('an Euler sequence', parser=parse_sequence),
         rule='three of x, y, z, no two consecutive alike, all lower case (extrinsic) '
              'or all upper case (intrinsic)')
     euler_degrees: bool = _parameter(
         'euler.degrees', False,
-        'Euler angles (input and output) and Euler rates in degrees instead of radians')
+        'Euler angles (input and output) and Euler rates in degrees instead of radians',
+        Boolean())
     euler_unwrap: bool = _parameter(
         'euler.unwrap', False,
         'Keep the first and third Euler angles continuous over time instead of '
-        'wrapping them to (-pi, pi]')
+        'wrapping them to (-pi, pi]',
+        Boolean())
     euler_singularity_threshold: float = _parameter(
         'euler.singularity_threshold', 0.01,
         'Distance (rad) of the middle Euler angle from gimbal lock below which a '
         'sample counts as near-singular',
-        bounds=(0.0, math.pi / 2))
+        Real(0.0, math.pi / 2, integers=False))
     quaternion_continuity: bool = _parameter(
         'quaternion.continuity', False,
         'Choose the sign of each output quaternion to be continuous with the previous '
-        'one, instead of w >= 0')
+        'one, instead of w >= 0',
+        Boolean())
     quaternion_norm_tolerance: float = _parameter(
         'quaternion.norm_tolerance', 1e-3,
         'Largest | |q| - 1 | of an input quaternion normalised without a warning',
-        bounds=(0.0, 1.0))
+        Real(0.0, 1.0, integers=False))
     angular_velocity_input_frame: str = _parameter(
         'angular_velocity.input_frame', 'body',
         'Frame of the angular velocity carried by Imu and Odometry inputs '
         '(body as REP 145 says)',
-        choices=FRAMES)
+        Choice(FRAMES))
     angular_velocity_output_frame: str = _parameter(
         'angular_velocity.output_frame', 'body',
         'Frame of the angular_velocity output',
-        choices=FRAMES)
+        Choice(FRAMES))
     covariance_frame: str = _parameter(
         'covariance.frame', 'fixed',
         'Axes of the input orientation covariance: fixed (rotation about the world axes, '
         'REP 145) or body (about the body axes)',
-        choices=COVARIANCE_FRAMES)
+        Choice(COVARIANCE_FRAMES))
     covariance_max_linearisation_ratio: float = _parameter(
         'covariance.max_linearisation_ratio', 0.3,
         'Largest orientation standard deviation over distance from gimbal lock (rad/rad) for '
         'which euler_stddev and euler_covariance are published (about 10 % accurate at 0.3)',
-        bounds=(0.0, 1e6))
+        Real(0.0, 1e6, integers=False))
     frames_input_world: str = _parameter(
         'frames.input_world', 'enu',
         'World frame convention of the input: enu (x east, y north, z up; REP 103) or ned',
-        choices=WORLD_FRAMES)
+        Choice(WORLD_FRAMES))
     frames_input_body: str = _parameter(
         'frames.input_body', 'flu',
         'Body frame convention of the input: flu (x forward, y left, z up; REP 103) or frd',
-        choices=BODY_FRAMES)
+        Choice(BODY_FRAMES))
     frames_output_world: str = _parameter(
         'frames.output_world', 'enu',
         'World frame convention of the outputs: enu or ned',
-        choices=WORLD_FRAMES)
+        Choice(WORLD_FRAMES))
     frames_output_body: str = _parameter(
         'frames.output_body', 'flu',
         'Body frame convention of the outputs: flu or frd',
-        choices=BODY_FRAMES)
+        Choice(BODY_FRAMES))
     qos_reliability: str = _parameter(
         'qos.reliability', 'auto',
         'Reliability of the input subscriptions and output publishers; auto: inputs adapt '
         'reliability and durability to what the publishers offer, outputs are reliable',
-        choices=RELIABILITIES)
+        Choice(RELIABILITIES))
     qos_depth: int = _parameter(
         'qos.depth', 1000,
         'History depth (keep last) of the input subscriptions and of the output publishers',
-        bounds=(1, 10000))
+        Integer(1, 10000))
     tf_parent_frame: str = _parameter(
         'tf.parent_frame', '',
         'input_type tf: the frame the orientation is expressed in (tf2 target frame, '
         'e.g. map)',
-        check=_check_frame_name('tf.parent_frame'),
+        Text(), check=_frame_name,
         rule='a TF frame name without a leading /; required with input_type tf')
     tf_child_frame: str = _parameter(
         'tf.child_frame', '',
         'input_type tf: the frame whose orientation is published (tf2 source frame, '
         'e.g. base_link)',
-        check=_check_frame_name('tf.child_frame'),
+        Text(), check=_frame_name,
         rule='a TF frame name without a leading /, not tf.parent_frame; required with '
              'input_type tf')
 
     def __post_init__(self) -> None:
         """Check every value, then the input type's own parameters; string arrays as tuples."""
-        for spec in PARAMETERS:
-            object.__setattr__(self, spec.attribute, spec.checked(getattr(self, spec.attribute)))
+        check_fields(self, _PARAMETER)
         check = messages.INPUTS[self.input_type].check_parameters
         if check is not None:
             check(self)
@@ -311,12 +251,8 @@ class NodeParameters:
             A name is not a parameter of the node, or a value is invalid.
 
         """
-        changes = {}
-        for name, value in values.items():
-            if name not in PARAMETERS_BY_NAME:
-                raise unknown_parameter_error(name)
-            changes[PARAMETERS_BY_NAME[name].attribute] = value
-        return replace(self, **changes)
+        return replace(self, **checked_values(type(self), values, _PARAMETER,
+                                              unknown=unknown_parameter_error))
 
     def to_ros(self) -> dict:
         """Return ``{ROS name: value}``, string arrays as lists (what rclpy expects)."""
@@ -324,7 +260,7 @@ class NodeParameters:
                 for spec, value in ((s, getattr(self, s.attribute)) for s in PARAMETERS)}
 
 
-PARAMETERS = tuple(replace(f.metadata['spec'], attribute=f.name) for f in fields(NodeParameters))
+PARAMETERS = cast(Tuple[ParameterSpec, ...], declarations(NodeParameters))
 """The parameter table: one :class:`ParameterSpec` per :class:`NodeParameters` field."""
 
 PARAMETERS_BY_NAME = {spec.name: spec for spec in PARAMETERS}

@@ -120,8 +120,10 @@ def test_every_euler_convention_is_accepted(sequence):
     ('outputs', 'euler', "'outputs': expected a list of strings, got str"),
     ('euler.degrees', 1, "'euler.degrees': expected a boolean, got int"),
     ('euler.unwrap', 'true', "'euler.unwrap': expected a boolean, got str"),
-    ('euler.singularity_threshold', -0.1, "'euler.singularity_threshold': -0.1 is out of range"),
-    ('euler.singularity_threshold', 2.0, "'euler.singularity_threshold': 2.0 is out of range"),
+    ('euler.singularity_threshold', -0.1,
+     "'euler.singularity_threshold': must be from 0 to 1.5708, got -0.1"),
+    ('euler.singularity_threshold', 2.0,
+     "'euler.singularity_threshold': must be from 0 to 1.5708, got 2.0"),
     ('euler.singularity_threshold', 0, "'euler.singularity_threshold': expected a floating"),
     ('euler.singularity_threshold', math.nan, "'euler.singularity_threshold': must be finite"),
     ('quaternion.norm_tolerance', True, "'quaternion.norm_tolerance': expected a floating"),
@@ -129,7 +131,7 @@ def test_every_euler_convention_is_accepted(sequence):
     ('angular_velocity.input_frame', 'imu', "'angular_velocity.input_frame': 'imu' is not"),
     ('angular_velocity.output_frame', 'World', "'angular_velocity.output_frame': 'World'"),
     ('qos.reliability', 'sensor_data', "'qos.reliability': 'sensor_data' is not allowed"),
-    ('qos.depth', 0, "'qos.depth': 0 is out of range; allowed from 1 to 10000"),
+    ('qos.depth', 0, "'qos.depth': must be from 1 to 10000, got 0"),
     ('qos.depth', 10.0, "'qos.depth': expected an integer, got float"),
 ])
 def test_invalid_values_are_rejected_naming_the_parameter(name, value, message):
