@@ -23,6 +23,7 @@ looked up when first used.
 """
 from __future__ import annotations
 
+import array
 from dataclasses import dataclass
 import functools
 import math
@@ -482,7 +483,7 @@ def float64_multi_array(dimensions: Sequence[Tuple[str, int, int]]) -> OutputMes
     def build(header, numbers):
         message = Float64MultiArray()
         message.layout = layout
-        message.data = numbers
+        message.data = array.array('d', numbers)   # a tuple, list or array of float64
         return message
     return OutputMessage('std_msgs/msg/Float64MultiArray', build, lambda msg: msg.data,
                          layout=layout)
@@ -547,8 +548,15 @@ def _euler_panels(title, unit_suffix):
 
 
 def _axis_angle(params, q):
+    """``[x, y, z, angle]`` of each quaternion: shape (..., 4), one sample or a block."""
     axis, angle = conversions.axis_angle_from_quaternion(q)
-    return (*axis.tolist(), float(angle))
+    return np.concatenate((axis, np.expand_dims(angle, -1)), axis=-1)
+
+
+def _matrix(params, q):
+    """The rotation matrices row-major: shape (..., 9), one sample or a block."""
+    matrix = conversions.matrix_from_quaternion(q)
+    return matrix.reshape(*matrix.shape[:-2], 9)
 
 
 def _euler_stddev(params, covariance):
@@ -594,7 +602,7 @@ _OUTPUT_LIST = (
                         Panel('Rotation angle', 'rad', ('angle',), 3)]),
     OutputType(
         'matrix', float64_multi_array([('rows', 3, 9), ('cols', 3, 3)]), (ORIENTATION,),
-        lambda params, q: conversions.matrix_from_quaternion(q).ravel().tolist(),
+        _matrix,
         'the rotation matrix (body to world) row-major; layout dimensions `rows` (size 3, '
         'stride 9) and `cols` (size 3, stride 3); no header',
         lambda params: [Panel('Rotation matrix (body to world)', '',
