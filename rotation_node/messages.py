@@ -548,13 +548,13 @@ def _euler_panels(title, unit_suffix):
 
 
 def _axis_angle(params, q):
-    """``[x, y, z, angle]`` of each quaternion: shape (..., 4), one sample or a block."""
+    """Return ``[x, y, z, angle]`` of each quaternion: shape (..., 4), one sample or a block."""
     axis, angle = conversions.axis_angle_from_quaternion(q)
     return np.concatenate((axis, np.expand_dims(angle, -1)), axis=-1)
 
 
 def _matrix(params, q):
-    """The rotation matrices row-major: shape (..., 9), one sample or a block."""
+    """Return the rotation matrices row-major: shape (..., 9), one sample or a block."""
     matrix = conversions.matrix_from_quaternion(q)
     return matrix.reshape(*matrix.shape[:-2], 9)
 
