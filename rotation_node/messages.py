@@ -391,11 +391,19 @@ class OutputMessage:
         Without building an rclpy message where the type allows it; the bytes
         are those of ``rotation_node.bag.cdr.message_encoder`` for the built
         message, or rclpy's serialisation for types that module cannot encode.
+
+        Raises
+        ------
+        ValueError
+            If :attr:`stamped_numbers` is set on a type without a fixed CDR layout.
+
         """
         from rotation_node.bag import cdr
         if self.stamped_numbers:
-            codec = cdr.fixed_layout_codec(self.type_name)   # stamped numbers: a fixed layout
-            return codec.stamped_encoder()  # type: ignore[union-attr]
+            codec = cdr.fixed_layout_codec(self.type_name)
+            if codec is None:
+                raise ValueError(f'stamped_numbers: {self.type_name} has no fixed CDR layout')
+            return codec.stamped_encoder()
         if self.layout is not None:
             encode_data = cdr.float64_multi_array_encoder(self.layout)
             return lambda header, numbers: encode_data(numbers)
