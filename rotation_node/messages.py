@@ -558,13 +558,16 @@ def _euler_panels(title, unit_suffix):
 def _axis_angle(params, q):
     """Return ``[x, y, z, angle]`` of each quaternion: shape (..., 4), one sample or a block."""
     axis, angle = conversions.axis_angle_from_quaternion(q)
-    return np.concatenate((axis, np.expand_dims(angle, -1)), axis=-1)
+    numbers = np.empty(axis.shape[:-1] + (4,))
+    numbers[..., :3] = axis
+    numbers[..., 3] = angle
+    return numbers
 
 
 def _matrix(params, q):
     """Return the rotation matrices row-major: shape (..., 9), one sample or a block."""
     matrix = conversions.matrix_from_quaternion(q)
-    return matrix.reshape(*matrix.shape[:-2], 9)
+    return matrix.reshape(matrix.shape[:-2] + (9,))
 
 
 def _euler_stddev(params, covariance):
