@@ -112,7 +112,7 @@ def test_no_module_of_the_package_is_exempt_from_mypys_checks():
               and 'rotation_node' in section and (
                   config[section].getboolean('ignore_errors', False)
                   or not config[section].getboolean('check_untyped_defs', True))]
-    assert not exempt, f'setup.cfg exempts {exempt} from mypy\'s checks'
+    assert not exempt, f'setup.cfg exempts {exempt} from the checks of mypy'
 
 
 def test_mypy_finds_no_error_in_the_package():
