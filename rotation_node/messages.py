@@ -514,7 +514,9 @@ class OutputType:
     compute : callable or None
         ``compute(params, *values) -> numbers``, ``values`` those of ``needs`` in
         order, ``numbers`` in the order :attr:`OutputMessage.build` takes them;
-        None to publish the one value needed as it is.
+        None to publish the one value needed as it is. Those of the outputs in
+        :data:`rotation_node.block_pipeline.BLOCK_OUTPUTS` also take arrays of
+        samples, one row each, and return one row of numbers per sample.
     description : str
         The published numbers in words, for the documentation tables.
     panels : callable
