@@ -33,7 +33,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
-from typing import Callable, Dict, List, NamedTuple, Optional, Tuple, TYPE_CHECKING
+from typing import Any, Dict, FrozenSet, List, NamedTuple, Optional, Tuple, TYPE_CHECKING
 import warnings
 
 import numba
@@ -55,28 +55,17 @@ if TYPE_CHECKING:
 BLOCK_SAMPLES = BATCH_SAMPLES - 1
 
 
-def _axis_angle(params, q):
-    axis, angle = conversions.axis_angle_from_quaternion(q)
-    return np.concatenate((axis, angle[:, None]), axis=1)
-
-
-BLOCK_OUTPUTS: Dict[str, Optional[Callable[..., np.ndarray]]] = {
-    'quaternion': None,
-    'euler': None,
-    'rotation_vector': messages.OUTPUTS['rotation_vector'].compute,   # vectorised as it is
-    'axis_angle': _axis_angle,
-    'matrix': lambda params, q: conversions.matrix_from_quaternion(q).reshape(-1, 9),
-    'angular_velocity': None,
-    'euler_rates': None,
-    'quaternion_rate': messages.OUTPUTS['quaternion_rate'].compute,
-}
+BLOCK_OUTPUTS: FrozenSet[str] = frozenset((
+    'quaternion', 'euler', 'rotation_vector', 'axis_angle', 'matrix', 'angular_velocity',
+    'euler_rates', 'quaternion_rate'))
 """
-The outputs with a block form: ``{name: compute(params, *values) -> (n, k) array}``.
+The outputs with a block form: those whose registry ``compute`` also works on blocks.
 
-``values`` are those the output's :class:`~rotation_node.messages.OutputType`
-``needs``, in order, as arrays of the samples that have them all; None
-publishes the one value needed as it is. The block computation of each must
-give the per-message ``compute``'s numbers bit for bit (tested). An output
+Each one's :class:`~rotation_node.messages.OutputType` ``compute(params,
+*values)`` is given the values it ``needs`` as arrays of the samples that
+have them all (one row per sample) and returns an ``(n, k)`` array, each row
+bit for bit what the same ``compute`` gives for that sample alone (tested);
+a ``compute`` of None publishes the one value needed as it is. An output
 missing here (a new registry entry, the covariance outputs) is converted by
 the per-message pipeline.
 """
@@ -274,8 +263,9 @@ class BlockPipeline:
     def _converted(self, block):
         params = self.params
         n = len(block.stamp_ns)
-        events: List[Tuple[int, int, str, str, str]] = []   # (sample, rank, reason, kind, detail)
-        state = {}
+        # (sample, rank, reason, kind: 'dropped', 'skipped' or None, detail)
+        events: List[Tuple[int, int, str, Optional[str], str]] = []
+        state: Dict[str, Any] = {}   # pipeline attribute -> its value after the block
         stats = {'received': n, 'published': 0, 'normalised': 0, 'near_singular': 0}
         kept, q = self._orientation(block, events, stats)
         known = kept & block.orientation_known
@@ -304,7 +294,7 @@ class BlockPipeline:
             present = kept.copy()
             for need in output.needs:
                 present &= values[need][0]
-            compute = BLOCK_OUTPUTS[output.name]
+            compute = output.compute
             needed = [values[need][1][present] for need in output.needs]
             if compute is None:
                 numbers = needed[0]

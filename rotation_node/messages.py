@@ -23,6 +23,7 @@ looked up when first used.
 """
 from __future__ import annotations
 
+import array
 from dataclasses import dataclass
 import functools
 import math
@@ -390,11 +391,19 @@ class OutputMessage:
         Without building an rclpy message where the type allows it; the bytes
         are those of ``rotation_node.bag.cdr.message_encoder`` for the built
         message, or rclpy's serialisation for types that module cannot encode.
+
+        Raises
+        ------
+        ValueError
+            If :attr:`stamped_numbers` is set on a type without a fixed CDR layout.
+
         """
         from rotation_node.bag import cdr
         if self.stamped_numbers:
-            codec = cdr.fixed_layout_codec(self.type_name)   # stamped numbers: a fixed layout
-            return codec.stamped_encoder()  # type: ignore[union-attr]
+            codec = cdr.fixed_layout_codec(self.type_name)
+            if codec is None:
+                raise ValueError(f'stamped_numbers: {self.type_name} has no fixed CDR layout')
+            return codec.stamped_encoder()
         if self.layout is not None:
             encode_data = cdr.float64_multi_array_encoder(self.layout)
             return lambda header, numbers: encode_data(numbers)
@@ -482,7 +491,7 @@ def float64_multi_array(dimensions: Sequence[Tuple[str, int, int]]) -> OutputMes
     def build(header, numbers):
         message = Float64MultiArray()
         message.layout = layout
-        message.data = numbers
+        message.data = array.array('d', numbers)   # a tuple, list or array of float64
         return message
     return OutputMessage('std_msgs/msg/Float64MultiArray', build, lambda msg: msg.data,
                          layout=layout)
@@ -505,7 +514,9 @@ class OutputType:
     compute : callable or None
         ``compute(params, *values) -> numbers``, ``values`` those of ``needs`` in
         order, ``numbers`` in the order :attr:`OutputMessage.build` takes them;
-        None to publish the one value needed as it is.
+        None to publish the one value needed as it is. Those of the outputs in
+        :data:`rotation_node.block_pipeline.BLOCK_OUTPUTS` also take arrays of
+        samples, one row each, and return one row of numbers per sample.
     description : str
         The published numbers in words, for the documentation tables.
     panels : callable
@@ -547,8 +558,18 @@ def _euler_panels(title, unit_suffix):
 
 
 def _axis_angle(params, q):
+    """Return ``[x, y, z, angle]`` of each quaternion: shape (..., 4), one sample or a block."""
     axis, angle = conversions.axis_angle_from_quaternion(q)
-    return (*axis.tolist(), float(angle))
+    numbers = np.empty(axis.shape[:-1] + (4,))
+    numbers[..., :3] = axis
+    numbers[..., 3] = angle
+    return numbers
+
+
+def _matrix(params, q):
+    """Return the rotation matrices row-major: shape (..., 9), one sample or a block."""
+    matrix = conversions.matrix_from_quaternion(q)
+    return matrix.reshape(matrix.shape[:-2] + (9,))
 
 
 def _euler_stddev(params, covariance):
@@ -594,7 +615,7 @@ _OUTPUT_LIST = (
                         Panel('Rotation angle', 'rad', ('angle',), 3)]),
     OutputType(
         'matrix', float64_multi_array([('rows', 3, 9), ('cols', 3, 3)]), (ORIENTATION,),
-        lambda params, q: conversions.matrix_from_quaternion(q).ravel().tolist(),
+        _matrix,
         'the rotation matrix (body to world) row-major; layout dimensions `rows` (size 3, '
         'stride 9) and `cols` (size 3, stride 3); no header',
         lambda params: [Panel('Rotation matrix (body to world)', '',

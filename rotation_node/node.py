@@ -37,11 +37,12 @@ Run it with, for example::
 
     rotation_node --ros-args -r input:=/imu/data -p outputs:='[euler, angular_velocity]'
 """
+from dataclasses import dataclass
 import functools
 import gc
 import sys
 import time
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Set, Tuple
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (
@@ -54,7 +55,12 @@ from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValu
 from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, qos_policy_name_from_kind, QoSPolicyKind, ReliabilityPolicy
+from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
+from rclpy.qos import (
+    DurabilityPolicy, qos_policy_name_from_kind, QoSPolicyKind, QoSProfile, ReliabilityPolicy)
+from rclpy.subscription import Subscription
+from rclpy.timer import Timer
 from rotation_node import messages
 from rotation_node.bag.cdr import fixed_layout_codec
 from rotation_node.bag.qos import AUTO, input_qos, qos_profile
@@ -64,7 +70,7 @@ from rotation_node.parameters import (
     parameters_from_yaml, ParameterSpec, ROS_BUILTIN_PARAMETERS, unknown_parameter_error)
 from rotation_node.pipeline import (
     CONVERSION_ERROR, ConversionPipeline, SKIP_REASONS, warm_up_conversions)
-from rotation_node.reception import message_identity, Reception
+from rotation_node.reception import Identity, message_identity, Reception
 
 DIAGNOSTICS_PERIOD_S = 1.0
 ISSUE_LOG_PERIOD_S = 5.0
@@ -121,8 +127,10 @@ def ros_arguments(args: Sequence[str]) -> List[Tuple[str, Optional[str]]]:
     return pairs
 
 
-def _parameters_files(args):
-    return [value for flag, value in ros_arguments(args) if flag == '--params-file']
+def _parameters_files(args: Sequence[str]) -> List[str]:
+    # A --params-file without a file is rclpy's to report (as its other malformed arguments).
+    return [value for flag, value in ros_arguments(args)
+            if flag == '--params-file' and value is not None]
 
 
 def check_parameter_names(args: Sequence[str]) -> None:
@@ -160,19 +168,35 @@ class _TopicInput:
     until the new one has delivered a message the old one delivered too.
     """
 
-    def __init__(self, topic, memory):
+    def __init__(self, topic: messages.InputTopic, memory: int):
         self.topic = topic
         self.name = topic.name
-        self.subscription = None
-        self.qos = None
+        self.subscription: Optional[Subscription] = None   # set when the node subscribes
+        self.qos: Optional[QoSProfile] = None
         self.generation = 0
-        self.retiring = None
+        self.retiring: Optional[Subscription] = None
         self.retiring_heard = 0.0     # monotonic time of the old subscription's last message
         self.handoff_started = 0.0
-        self.pending = []             # (data, info) of the new subscription during a handoff
-        self.pending_identities = set()
+        # (data, info) of the new subscription during a handoff
+        self.pending: List[Tuple[Any, Dict[str, Any]]] = []
+        self.pending_identities: Set[Identity] = set()
         self.reception = Reception(memory)
         self.lost_events = 0          # total_count_change of the rmw's message-lost events
+
+    def subscribed(self) -> Tuple[Subscription, QoSProfile]:
+        """Return the subscription messages are taken from and its QoS (set on configuring)."""
+        if self.subscription is None or self.qos is None:
+            raise RuntimeError(f'input {self.name}: not subscribed')
+        return self.subscription, self.qos
+
+
+@dataclass
+class _PublisherReplacement:
+    """An output's new publisher (a new QoS), until it takes over from the old one."""
+
+    publisher: Publisher
+    created_at: float                      # monotonic
+    matched_since: Optional[float] = None  # since when it has matched the old one's subscribers
 
 
 class RotationNode(Node):
@@ -205,16 +229,20 @@ class RotationNode(Node):
             self.destroy_node()
             raise
         self.params = NodeParameters()
-        self._pipeline = None
-        self._inputs: List[Any] = []    # one _TopicInput per topic of the input type
-        self._decode = None             # CDR bytes -> view, None: rclpy deserialises
-        self._output_publishers: Dict[str, Any] = {}
-        self._publish: Dict[str, Any] = {}     # output name -> publish(bytes)
-        self._encoders: Dict[str, Any] = {}    # output name -> encode(header, numbers) -> bytes
-        # output name -> [new publisher, matched since, created at]
-        self._replacing: Dict[str, Any] = {}
-        self._handoff_timer = None
-        self._message_lost: Dict[Any, Any] = {}   # input subscription -> its message-lost event
+        # Set by _configure, which __init__ calls below, before any callback can run.
+        self._pipeline: ConversionPipeline
+        self._configured = False   # while declaring, parameter changes only set self.params
+        self._inputs: List[_TopicInput] = []   # one per topic of the input type
+        # CDR bytes -> view; None: rclpy deserialises
+        self._decode: Optional[Callable[[bytes], Any]] = None
+        self._output_publishers: Dict[str, Publisher] = {}
+        self._publish: Dict[str, Callable[[bytes], None]] = {}   # output name -> publish(bytes)
+        # output name -> encode(header, numbers) -> bytes
+        self._encoders: Dict[str, Callable[[Any, Sequence[float]], bytes]] = {}
+        self._replacing: Dict[str, _PublisherReplacement] = {}   # by output name
+        self._handoff_timer: Optional[Timer] = None
+        # input subscription -> its message-lost event (None: the rmw has none)
+        self._message_lost: Dict[Subscription, Any] = {}
         self._next_issue_log: Dict[str, float] = {}   # reason -> time of its next warning
         self._reported = (0, 0, 0)   # dropped, skipped and lost totals at the last diagnostics
         # Registered before declaring, so the initial values pass the same checks.
@@ -232,6 +260,7 @@ class RotationNode(Node):
             self.destroy_node()
             raise ParameterError(str(exc)) from None
         self._configure(None, self.params)
+        self._configured = True
         # No QoS event handlers on the diagnostics publisher: each handler is one more
         # entity that rclpy's executor re-examines at every wake-up, i.e. every message.
         self._diagnostics_publisher = self.create_publisher(
@@ -241,7 +270,7 @@ class RotationNode(Node):
 
     # Parameters --------------------------------------------------------------------
 
-    def _check_parameters(self, parameters):
+    def _check_parameters(self, parameters: List[Parameter]) -> SetParametersResult:
         """Validate a parameter change (all of it, or none of it, is applied)."""
         try:
             self.params.replaced(_own(parameters))
@@ -249,22 +278,26 @@ class RotationNode(Node):
             return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
 
-    def _apply_parameters(self, parameters):
+    def _apply_parameters(self, parameters: List[Parameter]) -> None:
         """Apply a validated change; it takes effect on the next message."""
         previous, self.params = self.params, self.params.replaced(_own(parameters))
         # Not while declaring (__init__ configures once), nor for others' parameters.
-        if self._pipeline is not None and self.params != previous:
+        if self._configured and self.params != previous:
             self._configure(previous, self.params)
 
-    def _configure(self, previous, params):
-        """Create or update the pipeline, subscriptions and publishers for ``params``."""
-        stats = None if self._pipeline is None else self._pipeline.stats
+    def _configure(self, previous: Optional[NodeParameters], params: NodeParameters) -> None:
+        """
+        Create or update the pipeline, subscriptions and publishers for ``params``.
+
+        ``previous`` are the parameters configured before; None the first time.
+        """
+        stats = None if previous is None else self._pipeline.stats
         self._pipeline = ConversionPipeline(params, on_issue=self._log_issue, stats=stats)
         input_type = messages.INPUTS[params.input_type]
         if previous is None or params.input_type != previous.input_type:
             for state in self._inputs:
                 self._finish_handoff(state)
-                self._destroy_input_subscription(state, state.subscription)
+                self._destroy_input_subscription(state, state.subscribed()[0])
             codec = fixed_layout_codec(input_type.type_name)
             self._decode = None if codec is None else codec.decode
             self._inputs = [_TopicInput(topic, _memory(params)) for topic in input_type.topics]
@@ -284,14 +317,14 @@ class RotationNode(Node):
         for name in list(self._output_publishers):
             replacement = self._replacing.pop(name, None)
             if replacement is not None:   # superseded before it took over
-                self.destroy_publisher(replacement[0])
+                self.destroy_publisher(replacement.publisher)
             if name not in params.outputs:
                 self.destroy_publisher(self._output_publishers.pop(name))
                 del self._publish[name]
             elif self._output_publishers[name].qos_profile != output_qos:
                 # The old publisher publishes until the new one has matched its subscribers.
-                self._replacing[name] = [
-                    self._create_output_publisher(name, output_qos), None, time.monotonic()]
+                self._replacing[name] = _PublisherReplacement(
+                    self._create_output_publisher(name, output_qos), time.monotonic())
                 self._start_handoff_timer()
         for name in params.outputs:
             if name not in self._output_publishers:
@@ -304,30 +337,34 @@ class RotationNode(Node):
             f'to {", ".join(params.outputs)} (euler.sequence {params.euler_sequence}, '
             f'{"degrees" if params.euler_degrees else "radians"})')
 
-    def _create_output_publisher(self, name, qos):
+    def _create_output_publisher(self, name: str, qos: QoSProfile) -> Publisher:
         # Without QoS event handlers (as the diagnostics publisher): a subscriber
         # that cannot match reports it itself.
         return self.create_publisher(
             messages.OUTPUTS[name].message_class, name, qos,
             event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
 
-    def _check_publisher_handoffs(self, now):
+    def _check_publisher_handoffs(self, now: float) -> None:
         """Let each new output publisher take over once it matched the old one's subscribers."""
         for name, replacement in list(self._replacing.items()):
-            new, old = replacement[0], self._output_publishers[name]
+            new, old = replacement.publisher, self._output_publishers[name]
             if new.get_subscription_count() < old.get_subscription_count():
-                replacement[1] = None   # (a subscriber the new QoS cannot match: HANDOFF_MAX_S)
-            elif replacement[1] is None:
-                replacement[1] = now   # matched on the publisher's side; let readers match too
-            settled = replacement[1] is not None and now - replacement[1] >= PUBLISHER_SETTLE_S
-            if settled or now - replacement[2] > HANDOFF_MAX_S:
+                # (a subscriber the new QoS cannot match: HANDOFF_MAX_S)
+                replacement.matched_since = None
+            elif replacement.matched_since is None:
+                # matched on the publisher's side; let readers match too
+                replacement.matched_since = now
+            settled = (replacement.matched_since is not None
+                       and now - replacement.matched_since >= PUBLISHER_SETTLE_S)
+            if settled or now - replacement.created_at > HANDOFF_MAX_S:
                 del self._replacing[name]
                 self._output_publishers[name], self._publish[name] = new, new.publish
                 self.destroy_publisher(old)
 
     # Input subscriptions and QoS ------------------------------------------------------
 
-    def _input_qos(self, state, offered, incompatible_policy=None):
+    def _input_qos(self, state: _TopicInput, offered: List[QoSProfile],
+                   incompatible_policy: Optional[QoSPolicyKind] = None) -> QoSProfile:
         """
         Return the QoS to subscribe ``state``'s topic with, given the ``offered`` profiles.
 
@@ -346,7 +383,7 @@ class RotationNode(Node):
                 qos.durability = DurabilityPolicy.VOLATILE
         return qos
 
-    def _offered(self, state):
+    def _offered(self, state: _TopicInput) -> List[QoSProfile]:
         """Return the QoS profiles the publishers of ``state``'s topic offer (auto mode only)."""
         if self.params.qos_reliability != AUTO:
             return []
@@ -354,18 +391,20 @@ class RotationNode(Node):
                 else self.resolve_topic_name(state.name))
         return [info.qos_profile for info in self.get_publishers_info_by_topic(name)]
 
-    def _adapt(self, state, incompatible_policy=None):
+    def _adapt(self, state: _TopicInput,
+               incompatible_policy: Optional[QoSPolicyKind] = None) -> None:
         """Subscribe ``state``'s topic again if the publishers need another QoS; log it once."""
         offered = self._offered(state)
         qos = self._input_qos(state, offered, incompatible_policy)
-        if qos == state.qos:
+        subscription, current_qos = state.subscribed()
+        if qos == current_qos:
             return
         self.get_logger().info(
-            f'input {state.subscription.topic_name}: publishers offer {_policies(offered)}; '
-            f'subscribing {_policies([qos])} (was {_policies([state.qos])})')
+            f'input {subscription.topic_name}: publishers offer {_policies(offered)}; '
+            f'subscribing {_policies([qos])} (was {_policies([current_qos])})')
         self._subscribe(state, qos)
 
-    def _subscribe(self, state, qos):
+    def _subscribe(self, state: _TopicInput, qos: QoSProfile) -> None:
         """
         Subscribe ``state``'s topic with ``qos``, replacing its subscription without loss.
 
@@ -397,7 +436,7 @@ class RotationNode(Node):
         state.subscription, state.qos = subscription, qos
         state.reception.resize(_memory(self.params))
 
-    def _finish_handoff(self, state):
+    def _finish_handoff(self, state: _TopicInput) -> None:
         """Destroy the retiring subscription; accept what the new one delivered meanwhile."""
         if state.retiring is None:
             return
@@ -408,11 +447,11 @@ class RotationNode(Node):
         for data, info in pending:
             self._accept(state, data, info)
 
-    def _start_handoff_timer(self):
+    def _start_handoff_timer(self) -> None:
         if self._handoff_timer is None:
             self._handoff_timer = self.create_timer(HANDOFF_CHECK_S, self._check_handoffs)
 
-    def _check_handoffs(self):
+    def _check_handoffs(self) -> None:
         """Finish the subscription and publisher replacements that are due; then the timer."""
         now = time.monotonic()
         for state in self._inputs:
@@ -421,40 +460,45 @@ class RotationNode(Node):
                     or now - state.handoff_started > HANDOFF_MAX_S):
                 self._finish_handoff(state)
         self._check_publisher_handoffs(now)
-        if not self._replacing and all(state.retiring is None for state in self._inputs):
-            self.destroy_timer(self._handoff_timer)
+        timer = self._handoff_timer   # this callback's timer
+        if (timer is not None and not self._replacing
+                and all(state.retiring is None for state in self._inputs)):
+            self.destroy_timer(timer)
             self._handoff_timer = None
 
-    def _on_incompatible_qos(self, state, event):
+    def _on_incompatible_qos(self, state: _TopicInput, event: Any) -> None:
         if self.params.qos_reliability == AUTO:
             self._adapt(state, event.last_policy_kind)
         else:
             self._log_issue('incompatible_qos', (
-                f'input {state.subscription.topic_name}: a publisher offers a '
+                f'input {state.subscribed()[0].topic_name}: a publisher offers a '
                 f'{qos_policy_name_from_kind(event.last_policy_kind)} incompatible with '
                 f'qos.reliability {self.params.qos_reliability}; its messages are not received '
                 f'(qos.reliability auto adapts to it)'))
 
-    def _count_message_lost(self, state, subscription):
-        """Add the message-lost events of ``subscription`` since the last call to ``state``."""
-        event = self._message_lost.get(subscription)
+    def _count_message_lost(self, state: _TopicInput,
+                            subscription: Optional[Subscription]) -> None:
+        """Add the message-lost events of ``subscription`` (or none) since the last call."""
+        event = None if subscription is None else self._message_lost.get(subscription)
         if event is not None:
             with event:
                 state.lost_events += event.take_event().total_count_change
 
-    def _destroy_input_subscription(self, state, subscription):
+    def _destroy_input_subscription(self, state: _TopicInput,
+                                    subscription: Subscription) -> None:
         self._count_message_lost(state, subscription)
         event = self._message_lost.pop(subscription)
         if event is not None:
             event.destroy_when_not_in_use()
         self.destroy_subscription(subscription)
 
-    def _input_topic_names(self):
-        return ', '.join(state.subscription.topic_name for state in self._inputs)
+    def _input_topic_names(self) -> str:
+        return ', '.join(state.subscribed()[0].topic_name for state in self._inputs)
 
     # Messages ----------------------------------------------------------------------
 
-    def _on_input(self, state, generation, data, info):
+    def _on_input(self, state: _TopicInput, generation: int, data: Any,
+                  info: Dict[str, Any]) -> None:
         """Take one message of ``state``'s topic from its subscription of ``generation``."""
         if state.retiring is not None:
             if generation != state.generation:   # the old subscription
@@ -472,7 +516,7 @@ class RotationNode(Node):
         if state.retiring is None:
             self._drain(state)
 
-    def _accept(self, state, data, info):
+    def _accept(self, state: _TopicInput, data: Any, info: Dict[str, Any]) -> None:
         """Convert a message not seen before and publish its outputs."""
         if not state.reception.accept(info):
             return
@@ -488,14 +532,15 @@ class RotationNode(Node):
         for name, header, numbers in self._pipeline.process_values(data, state.name):
             publish[name](encoders[name](header, numbers))
 
-    def _drain(self, state):
+    def _drain(self, state: _TopicInput) -> None:
         """
         Take and convert what else is queued on ``state``'s subscription, up to a bound.
 
         One executor wake-up then serves every message that arrived meanwhile; rclpy's
         executor costs more per wake-up than the conversion of a message.
         """
-        subscription, take = state.subscription, state.subscription.handle.take_message
+        subscription = state.subscribed()[0]
+        take = subscription.handle.take_message
         message_type, raw = subscription.msg_type, subscription.raw
         for _ in range(DRAIN_MAX):
             with subscription.handle:
@@ -504,7 +549,7 @@ class RotationNode(Node):
                 return
             self._accept(state, *taken)
 
-    def _log_issue(self, reason, detail):
+    def _log_issue(self, reason: str, detail: str) -> None:
         # Throttled here, once per ISSUE_LOG_PERIOD_S for each reason (so a flood of one
         # problem cannot hide the first report of another), and not with rclpy's
         # throttle_duration_sec: that looks up the caller on every call, milliseconds
@@ -517,13 +562,13 @@ class RotationNode(Node):
 
     # Diagnostics -------------------------------------------------------------------
 
-    def _on_diagnostics_timer(self):
+    def _on_diagnostics_timer(self) -> None:
         if self.params.qos_reliability == AUTO:
             for state in self._inputs:
                 self._adapt(state)
         self._publish_diagnostics()
 
-    def _publish_diagnostics(self):
+    def _publish_diagnostics(self) -> None:
         for state in self._inputs:
             for subscription in (state.subscription, state.retiring):
                 self._count_message_lost(state, subscription)
@@ -541,10 +586,11 @@ class RotationNode(Node):
                        f'converted in the last {DIAGNOSTICS_PERIOD_S:g} s')
         else:
             level, message = DiagnosticStatus.OK, 'converting'
+        subscribed = [state.subscribed() for state in self._inputs]
         values = {
             'input_topic': self._input_topic_names(),
-            'input_qos': '; '.join(f'{state.subscription.topic_name}: {_policies([state.qos])}'
-                                   for state in self._inputs),
+            'input_qos': '; '.join(f'{subscription.topic_name}: {_policies([qos])}'
+                                   for subscription, qos in subscribed),
             'received': stats.received,
             'published': stats.published,
             'lost': lost,
@@ -569,23 +615,23 @@ class RotationNode(Node):
         self._diagnostics_publisher.publish(array)
 
 
-def _memory(params):
+def _memory(params: NodeParameters) -> int:
     """Messages a topic's Reception remembers: two histories of the deepest subscription."""
     return 2 * params.qos_depth + 100
 
 
-def _policies(profiles):
+def _policies(profiles: Sequence[QoSProfile]) -> str:
     """``'reliable, volatile'`` of the profiles, ``'nothing'`` for none."""
     return ' / '.join(sorted({f'{p.reliability.short_key}, {p.durability.short_key}'
                               for p in profiles})) or 'nothing'
 
 
-def _own(parameters):
+def _own(parameters: List[Parameter]) -> Dict[str, Any]:
     """Return ``{name: value}`` of the node's own parameters (not use_sim_time etc.)."""
     return {p.name: p.value for p in parameters if p.name in PARAMETERS_BY_NAME}
 
 
-def _text(value):
+def _text(value: Any) -> str:
     if isinstance(value, list):
         return ','.join(value)
     if isinstance(value, bool):

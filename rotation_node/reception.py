@@ -21,7 +21,7 @@ count is exact for one publisher per topic, an estimate with several. This
 module does not import rclpy.
 """
 import collections
-from typing import Any, Mapping, Optional, Tuple
+from typing import Any, Deque, List, Mapping, Optional, Set, Tuple
 
 #: Publishers (sequences of publication numbers) followed per topic; a new one
 #: beyond this replaces the one heard from least recently.
@@ -58,9 +58,9 @@ class Reception:
     def __init__(self, memory: int):
         self.lost = 0
         self.duplicates = 0
-        self._seen: set = set()
-        self._order: collections.deque = collections.deque()
-        self._last_numbers: list = []   # per publisher, the most recently heard first
+        self._seen: Set[Identity] = set()
+        self._order: Deque[Identity] = collections.deque()   # of _seen, oldest first
+        self._last_numbers: List[int] = []   # per publisher, the most recently heard first
         self.resize(memory)
 
     def seen(self, info: Mapping[str, Any]) -> bool:
@@ -93,7 +93,7 @@ class Reception:
             self.lost += self._gap(number)
         return True
 
-    def _gap(self, number):
+    def _gap(self, number: int) -> int:
         """Messages missing before ``number`` in the sequence it continues."""
         last_numbers = self._last_numbers
         if len(last_numbers) == 1 and last_numbers[0] < number:   # one publisher, in order

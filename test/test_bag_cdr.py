@@ -246,6 +246,7 @@ def test_stamped_encoder_encodes_header_and_numbers(type_name, text, rng):
     numbers = _flat(view)[3:]   # after sec, nanosec, frame_id
     encode = codec.stamped_encoder()
     assert encode(view.header, numbers) == encode(msg.header, numbers) == codec.encode(msg)
+    assert encode(msg.header, np.array(numbers, dtype=np.float64)) == codec.encode(msg)
 
 
 @pytest.mark.parametrize('type_name', ['geometry_msgs/msg/TransformStamped',
@@ -274,6 +275,7 @@ LAYOUTS = {
 def test_float64_multi_array(layout, count, rng, rosbags_store):
     msg = Float64MultiArray(layout=LAYOUTS[layout], data=rng.normal(size=count).tolist())
     data = float64_multi_array_encoder(msg.layout)(msg.data)
+    assert float64_multi_array_encoder(msg.layout)(np.array(msg.data)) == data   # rows too
     assert len(data) == len(serialize_message(msg))
     assert deserialize_message(data, Float64MultiArray) == msg
     assert message_encoder('std_msgs/msg/Float64MultiArray')(msg) == data

@@ -40,6 +40,33 @@ def test_every_block_output_is_a_registry_output():
     assert set(BLOCK_OUTPUTS) <= set(messages.OUTPUTS)
 
 
+def _values_of(need, n, rng):
+    """Arrays of ``n`` samples of a pipeline value: random, then the identity and a half turn."""
+    if need == messages.ANGULAR_VELOCITY:
+        return rng.normal(size=(n, 3))
+    q = rng.normal(size=(n, 4))
+    q[-2:] = [[0.0, 0.0, 0.0, 1.0], [0.0, 0.0, 1.0, 0.0]]
+    if need == messages.OUTPUT_QUATERNION:   # unit, w >= 0
+        q = conversions.canonical_quaternion(q)
+    return q
+
+
+@pytest.mark.parametrize('name', [name for name in sorted(BLOCK_OUTPUTS)
+                                  if messages.OUTPUTS[name].compute is not None])
+def test_each_block_output_computes_a_block_as_each_sample_alone(name):
+    output = messages.OUTPUTS[name]
+    params = NodeParameters(input_type='imu', outputs=(name,))
+    rng = np.random.default_rng(7)
+    values = [_values_of(need, 40, rng) for need in output.needs]
+    block = np.asarray(output.compute(params, *values), dtype=np.float64)
+    assert block.shape[0] == 40 and block.ndim == 2
+    for s in range(40):
+        alone = np.asarray(output.compute(params, *(value[s] for value in values)),
+                           dtype=np.float64)
+        assert alone.shape == block[s].shape and alone.tobytes() == block[s].tobytes(), (
+            s, alone, block[s])
+
+
 @pytest.mark.parametrize('values, reason', [
     ({'outputs': ('euler_stddev',)}, 'output euler_stddev'),
     ({'frames_input_body': 'frd'}, 'frame conversion'),

@@ -140,6 +140,13 @@ def test_an_output_of_a_type_without_a_fixed_layout_is_serialised_by_rclpy():
     assert deserialize_message(data, joints.message_class) == build(header, [1.5, -2.0])
 
 
+def test_stamped_numbers_of_a_type_without_a_fixed_layout_is_refused():
+    joints = OutputMessage('sensor_msgs/msg/JointState', lambda header, numbers: None,
+                           lambda msg: msg.position, stamped_numbers=True)
+    with pytest.raises(ValueError, match='stamped_numbers: sensor_msgs/msg/JointState'):
+        joints.encoder()
+
+
 @pytest.mark.parametrize('name', OUTPUTS)
 def test_each_output_plots_every_number_once(name):
     output = OUTPUTS[name]

@@ -445,6 +445,14 @@ def test_an_unknown_parameter_on_the_command_line_names_the_nearest():
         f"'qos.depth'?); the node's parameters are {', '.join(p.name for p in PARAMETERS)}\n")
 
 
+def test_a_params_file_flag_without_a_file_is_one_error_line():
+    result = subprocess.run([script('rotation_node'), '--ros-args', '--params-file'],
+                            capture_output=True, text=True, timeout=START_TIMEOUT_S)
+    assert result.returncode == 1 and 'Traceback' not in result.stderr
+    last = result.stderr.splitlines()[-1]
+    assert last.startswith('rotation_node: error: ') and 'No file path provided' in last
+
+
 def test_node_prefixed_parameters_are_checked_for_this_node_only():
     check_parameter_names(['x', '--ros-args', '-p', 'other:zzz:=1', '-p',
                            'rotation_node:qos.depth:=5', '-p', 'use_sim_time:=true'])

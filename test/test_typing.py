@@ -5,6 +5,7 @@ mypy runs with the configuration in setup.cfg (``[mypy]``) and caches in
 ``.mypy_cache`` (ignored by git): a first run takes ~20 s, later ones a few.
 """
 import ast
+import configparser
 import os
 import subprocess
 import sys
@@ -101,6 +102,17 @@ def test_the_annotation_check_finds_what_is_missing():
 
 def test_py_typed_marks_the_package_as_typed():
     assert os.path.isfile(os.path.join(PACKAGE, 'py.typed'))
+
+
+def test_no_module_of_the_package_is_exempt_from_mypys_checks():
+    config = configparser.ConfigParser()
+    config.read(os.path.join(ROOT, 'setup.cfg'))
+    assert config['mypy'].getboolean('check_untyped_defs')
+    exempt = [section for section in config.sections() if section.startswith('mypy-')
+              and 'rotation_node' in section and (
+                  config[section].getboolean('ignore_errors', False)
+                  or not config[section].getboolean('check_untyped_defs', True))]
+    assert not exempt, f'setup.cfg exempts {exempt} from the checks of mypy'
 
 
 def test_mypy_finds_no_error_in_the_package():

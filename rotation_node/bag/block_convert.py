@@ -22,11 +22,12 @@ from __future__ import annotations
 import contextlib
 import gc
 import itertools
-from typing import Any, Dict, Iterable, Iterator, List, Optional, Tuple, TYPE_CHECKING
+from typing import (
+    Any, Dict, Iterable, Iterator, List, NamedTuple, Optional, Tuple, TYPE_CHECKING)
 
 from rotation_node import messages
 from rotation_node.bag.cdr import fixed_layout_codec
-from rotation_node.bag.cdr_block import block_encoder, InputBlockDecoder
+from rotation_node.bag.cdr_block import block_encoder, InputBlockDecoder, OutputBlockEncoder
 from rotation_node.block_pipeline import BLOCK_SAMPLES, block_support, BlockPipeline
 from rotation_node.pipeline import ConversionPipeline
 
@@ -41,6 +42,14 @@ DEFERRED_COLLECTION_THRESHOLD = 50_000
 
 #: ``(output topic, type name, CDR data)`` of one output message.
 Output = Tuple[str, str, bytes]
+
+
+class _BlockForm(NamedTuple):
+    """What a topic converted in blocks uses: the pipeline, the decoder, the output encoders."""
+
+    pipeline: BlockPipeline
+    decoder: InputBlockDecoder
+    encoders: List[OutputBlockEncoder]   # one per output, in the order of ``outputs``
 
 
 @contextlib.contextmanager
@@ -118,12 +127,13 @@ class TopicConverter:
         codec = fixed_layout_codec(input_type.type_name)
         self._decode = None if codec is None else codec.decode
         self.block_form_missing = block_form_missing(params) if blocks else 'blocks disabled'
-        self._blocks = None
+        self._blocks: Optional[_BlockForm] = None
         if self.block_form_missing is None:
-            self._blocks = BlockPipeline(self.pipeline)
-            self._decoder = InputBlockDecoder(input_type, self._blocks.reads_angular_velocity)
-            self._encoders = [block_encoder(messages.OUTPUTS[name].message)
-                              for name in params.outputs]
+            block_pipeline = BlockPipeline(self.pipeline)
+            self._blocks = _BlockForm(
+                block_pipeline,
+                InputBlockDecoder(input_type, block_pipeline.reads_angular_velocity),
+                [OutputBlockEncoder(messages.OUTPUTS[name].message) for name in params.outputs])
 
     def convert(self, records: List, input_topics: Optional[List[str]] = None
                 ) -> List[List[Output]]:
@@ -141,7 +151,7 @@ class TopicConverter:
 
         """
         if self._blocks is not None and len(records) > 1:   # a plain type: one topic
-            converted = self._converted_block(records)
+            converted = self._converted_block(self._blocks, records)
             if converted is not None:
                 return converted
         if input_topics is None:
@@ -157,16 +167,17 @@ class TopicConverter:
             result.append((topic, type_name, encode(header, values)))
         return result
 
-    def _converted_block(self, records) -> Optional[List[List[Output]]]:
-        decoded = self._decoder.decode([record.data for record in records])
+    def _converted_block(self, blocks: _BlockForm, records: List
+                         ) -> Optional[List[List[Output]]]:
+        decoded = blocks.decoder.decode([record.data for record in records])
         if decoded is None:
             return None
         block, headers = decoded
-        converted = self._blocks.process_block(block)
+        converted = blocks.pipeline.process_block(block)
         if converted is None:
             return None
-        result = [[] for _ in records]
-        for (name, topic, type_name, _), encoder in zip(self._outputs, self._encoders):
+        result: List[List[Output]] = [[] for _ in records]
+        for (name, topic, type_name, _), encoder in zip(self._outputs, blocks.encoders):
             present = converted.present[name]
             datas = encoder.encode(headers, present, converted.numbers[name])
             for index, data in zip(present.nonzero()[0].tolist(), datas):
@@ -176,7 +187,7 @@ class TopicConverter:
 
 def converted_blocks(records: Iterable, converters: Dict[str, TopicConverter],
                      routes: Optional[Dict[str, Tuple[str, str]]] = None
-                     ) -> Iterator[List[Tuple[Any, List[Output]]]]:
+                     ) -> Iterator[List[Tuple[Any, Optional[List[Output]]]]]:
     """
     Give the records in blocks, each record with the outputs of its stream's converter.
 
@@ -185,7 +196,7 @@ def converted_blocks(records: Iterable, converters: Dict[str, TopicConverter],
     records : iterable of BagMessage
         The input, in the order it is to be written.
     converters : dict
-        ``{stream: TopicConverter}``; records of other topics get no outputs.
+        ``{stream: TopicConverter}``; records of other topics get None.
     routes : dict, optional
         ``{bag topic: (stream, the input type's topic name)}``; by default
         each converter's stream is one bag topic of that name (a plain input
@@ -193,8 +204,9 @@ def converted_blocks(records: Iterable, converters: Dict[str, TopicConverter],
 
     Yields
     ------
-    list of (BagMessage, list of Output)
-        One block of at most :data:`BLOCK_MESSAGES` records, in input order.
+    list of (BagMessage, list of Output or None)
+        One block of at most :data:`BLOCK_MESSAGES` records, in input order;
+        None for a record of no converted stream.
 
     """
     if routes is None:
@@ -204,7 +216,7 @@ def converted_blocks(records: Iterable, converters: Dict[str, TopicConverter],
         block = list(itertools.islice(records, BLOCK_MESSAGES))
         if not block:
             return
-        outputs = [None] * len(block)
+        outputs: List[Optional[List[Output]]] = [None] * len(block)
         by_stream: Dict[str, Tuple[List[int], List[str]]] = {}
         for index, record in enumerate(block):
             route = routes.get(record.topic)

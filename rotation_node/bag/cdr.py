@@ -378,6 +378,8 @@ class FixedLayoutCodec:
         structs = self._struct
 
         def encode(header, numbers):
+            if isinstance(numbers, np.ndarray):
+                numbers = numbers.tolist()   # Python floats: packed faster than numpy's
             stamp, raw = header.stamp, header.frame_id.encode()
             length = len(raw) + 1
             try:
@@ -482,6 +484,8 @@ def float64_multi_array_encoder(layout: Any) -> Callable[[Sequence[float]], byte
     padding = _padding(len(payload) + 4, 8)   # after the data's uint32 count
 
     def encode(data):
+        if isinstance(data, np.ndarray):
+            data = data.tolist()   # Python floats: packed faster than numpy's
         return head + struct.pack(f'<I{padding}x{len(data)}d', len(data), *data)
     return encode
 

@@ -18,7 +18,7 @@ None and the caller converts that block message by message.
 """
 from __future__ import annotations
 
-from typing import Any, List, NamedTuple, Optional, Sequence, Tuple
+from typing import List, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 from rotation_node import messages
@@ -86,13 +86,14 @@ class InputBlockDecoder:
         components = ('x', 'y', 'z', 'w') if (
             input_type.orientation_form == messages.QUATERNION) else ('x', 'y', 'z')
         self._orientation = [f'{input_type.orientation_field}.{c}' for c in components]
-        self._rate = (None if not angular_velocity or input_type.angular_velocity_field is None
-                      else [f'{input_type.angular_velocity_field}.{c}' for c in 'xyz'])
+        # Paths of the angular velocity read: none when it is not read.
+        self._rate: List[str] = (
+            [] if not angular_velocity or input_type.angular_velocity_field is None
+            else [f'{input_type.angular_velocity_field}.{c}' for c in 'xyz'])
         self._orientation_unknown = input_type.orientation_unknown_field
-        self._rate_unknown = None if self._rate is None else (
-            input_type.angular_velocity_unknown_field)
+        self._rate_unknown = input_type.angular_velocity_unknown_field if self._rate else None
 
-    def decode(self, datas: Sequence[bytes]) -> Optional[Tuple[Any, Any]]:
+    def decode(self, datas: Sequence[bytes]) -> Optional[Tuple[SampleBlock, BlockHeaders]]:
         """
         Decode a block of messages.
 
@@ -135,8 +136,8 @@ class InputBlockDecoder:
         orientation = np.empty((n, len(self._orientation)))
         orientation_known = np.ones(n, dtype=bool)
         stamp_ns = np.empty(n, dtype=np.int64)
-        rate = None if self._rate is None else np.empty((n, 3))
-        rate_known = None if self._rate is None else np.ones(n, dtype=bool)
+        rate = np.empty((n, len(self._rate)))
+        rate_known = np.ones(n, dtype=bool)
         headers = []
         for g, key in enumerate(unique.tolist()):
             members = np.flatnonzero(group == g)
@@ -158,13 +159,13 @@ class InputBlockDecoder:
             if self._orientation_unknown is not None:
                 flag = _float64s(buffer, base + offsets[self._orientation_unknown], 1)[:, 0]
                 orientation_known[members] = flag != -1.0
-            if rate is not None:
-                for column, path in enumerate(self._rate):
-                    rate[members, column] = _float64s(buffer, base + offsets[path], 1)[:, 0]
-                if self._rate_unknown is not None:
-                    flag = _float64s(buffer, base + offsets[self._rate_unknown], 1)[:, 0]
-                    rate_known[members] = flag != -1.0
-        return (SampleBlock(stamp_ns, orientation, orientation_known, rate, rate_known),
+            for column, path in enumerate(self._rate):
+                rate[members, column] = _float64s(buffer, base + offsets[path], 1)[:, 0]
+            if self._rate_unknown is not None:
+                flag = _float64s(buffer, base + offsets[self._rate_unknown], 1)[:, 0]
+                rate_known[members] = flag != -1.0
+        return (SampleBlock(stamp_ns, orientation, orientation_known,
+                            rate if self._rate else None, rate_known if self._rate else None),
                 BlockHeaders(group, headers))
 
 
@@ -206,8 +207,8 @@ class OutputBlockEncoder:
 
     def __init__(self, message: messages.OutputMessage):
         self.type_name = message.type_name
-        self._prefix = None
-        self._width = None
+        self._prefix: Optional[bytes] = None   # the data's prefix of a Float64MultiArray
+        self._width: int   # numbers per message
         if message.layout is not None:   # std_msgs/Float64MultiArray of a fixed size
             self._width = message.layout.dim[0].stride   # the outermost stride: every element
             encode = message.encoder()
