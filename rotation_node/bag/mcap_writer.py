@@ -29,8 +29,9 @@ import zlib
 
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
-from mcap.records import (Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Metadata,
-                          MetadataIndex, Schema, Statistics, SummaryOffset)
+from mcap.records import (
+    Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Metadata, MetadataIndex, Schema,
+    Statistics, SummaryOffset)
 from mcap.writer import CompressionType, MCAP0_MAGIC
 import numpy as np
 

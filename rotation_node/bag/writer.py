@@ -45,8 +45,8 @@ import numpy as np
 from rclpy.serialization import serialize_message
 from rotation_node.bag.cdr import message_encoder
 from rotation_node.bag.mcap_io import TopicMetadata
-from rotation_node.bag.mcap_writer import (ChunkWriter, MESSAGE_INDEX_ENTRY,
-                                           MESSAGE_INDEX_OVERHEAD, MESSAGE_RECORD_OVERHEAD)
+from rotation_node.bag.mcap_writer import (
+    ChunkWriter, MESSAGE_INDEX_ENTRY, MESSAGE_INDEX_OVERHEAD, MESSAGE_RECORD_OVERHEAD)
 from rotation_node.bag.message_types import message_definition, type_hash, type_name_of
 from rotation_node.bag.output import BagOutput
 from rotation_node.errors import BagError, DiskFullError
