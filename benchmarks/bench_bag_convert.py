@@ -432,7 +432,7 @@ def breakdown(directory, count=20_000):
         lambda: [[serialize_message(out) for _, out in result] for result in rclpy_outputs])
     gc.enable()
     stages = [
-        ('read (mcap, log-time order)', read),
+        ('read (BagReader, log-time order)', read),
         (f'decode Imu blocks of {BLOCK_MESSAGES}', decode),
         ('BlockPipeline.process_block', process),
         ('encode Vector3Stamped blocks', encoding),
