@@ -32,7 +32,7 @@ encoder (:meth:`rotation_node.messages.OutputMessage.encoder`).
 from __future__ import annotations
 
 import os
-from typing import Callable, Dict, Optional, Sequence, TextIO, TYPE_CHECKING
+from typing import Callable, Dict, List, Optional, Sequence, TextIO, TYPE_CHECKING
 
 from rotation_node import messages
 from rotation_node.bag.block_convert import collections_deferred, converted_blocks, TopicConverter
@@ -196,7 +196,7 @@ def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *
             for metadata in [*reader.topic_metadata.values(), *new_topics]:
                 writer.add_topic(metadata)
             for block in converted_blocks(reader.messages(), converters, routes):
-                written = []
+                written: List[tuple] = []
                 add = written.append
                 for record, converted in block:
                     log_time_ns, publish_time_ns = record.log_time_ns, record.publish_time_ns

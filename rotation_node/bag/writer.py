@@ -405,14 +405,15 @@ class BagWriter:
         if not messages:
             return
         topics, type_names, datas, log_times, publish_times = zip(*messages)
-        channel_ids = {}
+        channel_ids: Dict[str, int] = {}
+        known = True
         for topic, type_name in dict.fromkeys(zip(topics, type_names)):
             channel = self._channels.get(topic)
             if channel is None or channel.type_name != type_name:
-                channel_ids = None   # a new topic, or a type clash: message by message
+                known = False   # a new topic, or a type clash: message by message
                 break
             channel_ids[topic] = channel.id
-        if (channel_ids is None or self._failed or self._chunk_period_s is not None
+        if (not known or self._failed or self._chunk_period_s is not None
                 or _timestamps(log_times) is None or _timestamps(publish_times) is None):
             for message in messages:
                 self.write_serialized(*message)
@@ -479,8 +480,8 @@ class BagWriter:
             return
         fitting = self._reserve_chunk()
         dropped = count - fitting
-        pending = (self._pending_channels, self._pending_log_times,
-                   self._pending_publish_times, self._pending_datas)
+        pending: Tuple[List[Any], ...] = (self._pending_channels, self._pending_log_times,
+                                          self._pending_publish_times, self._pending_datas)
         if dropped:
             pending = tuple(values[:fitting] for values in pending)
         try:
