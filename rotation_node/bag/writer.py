@@ -24,6 +24,12 @@ the same bytes. Before each chunk is written, the space to close the bag
 full, ``DiskFullError`` says so, the chunk is dropped, and ``close()`` still
 writes a valid bag of everything written before.
 
+Each chunk is written whole by :class:`rotation_node.bag.mcap_writer.ChunkWriter`
+(the file the ``mcap`` library's writer would write, without its per-message
+cost); ``write_serialized_block`` takes a block of serialised messages at once
+(what ``rotation_bag convert`` uses) and writes the same bytes as writing them
+one by one.
+
 ``BagWriter.write`` encodes messages with :mod:`rotation_node.bag.cdr` where it
 can (fixed-layout types such as sensor_msgs/Imu, and
 std_msgs/Float64MultiArray): rclpy's bytes, with the alignment padding zeroed
