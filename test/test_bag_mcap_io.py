@@ -6,6 +6,7 @@ AnyReader (which decodes from the definitions stored in the bag, with no type
 store of its own), and record by record with the mcap library's validating
 reader and mcap-ros2-support's decoder.
 """
+import io
 import os
 import pathlib
 
@@ -466,3 +467,74 @@ def test_reading_gives_the_mcap_library_log_time_order(tmp_path, layout):
                 for record in reader.messages(['/t0', '/t2'])]
     assert got == expected
     assert some == [message for message in expected if message[0] != '/t1']
+
+
+def _chunks_of(data):
+    from mcap.records import Chunk
+    return [record for record in StreamReader(io.BytesIO(data), emit_chunks=True).records
+            if isinstance(record, Chunk)]
+
+
+@pytest.mark.parametrize('compression', ['ZSTD', 'LZ4', 'NONE'])
+def test_chunk_message_records_are_the_mcap_librarys_messages(rng, compression):
+    """Every Message of each chunk, in file order, as the library's breakup_chunk reads it."""
+    from mcap.records import Message
+    from mcap.stream_reader import breakup_chunk
+    from mcap.writer import CompressionType, Writer
+    from rotation_node.bag.mcap_io import chunk_message_records
+    stream = io.BytesIO()
+    writer = Writer(stream, compression=CompressionType[compression], chunk_size=4096)
+    writer.start()
+    schema = writer.register_schema('std_msgs/msg/String', 'ros2msg', b'string data')
+    channels = [writer.register_channel('/a', 'cdr', schema)]
+    for k in range(600):
+        if k in (100, 350):   # channels in the middle of a chunk
+            channels.append(writer.register_channel(f'/c{k}', 'cdr', schema))
+        writer.add_message(channels[int(rng.integers(len(channels)))],
+                           log_time=int(rng.integers(0, 2**64, dtype=np.uint64)),
+                           data=bytes(int(rng.integers(0, 100))), publish_time=2**64 - 1 - k,
+                           sequence=k)
+    writer.finish()
+    chunks = _chunks_of(stream.getvalue())
+    assert len(chunks) > 5
+    for chunk in chunks:
+        data, headers, starts = chunk_message_records(chunk)
+        expected = [r for r in breakup_chunk(chunk, validate_crc=True) if isinstance(r, Message)]
+        assert [(int(h['channel_id']), int(h['sequence']), int(h['log_time']),
+                 int(h['publish_time']), data[start:start + int(h['length']) - 22])
+                for h, start in zip(headers, starts)] == [
+            (m.channel_id, m.sequence, m.log_time, m.publish_time, m.data) for m in expected]
+
+
+def test_chunk_message_records_skip_unknown_records_and_refuse_cut_ones():
+    import struct
+    import zlib
+
+    from mcap.exceptions import McapError
+    from mcap.records import Chunk
+    from mcap.stream_reader import CRCValidationError
+    from rotation_node.bag.mcap_io import chunk_message_records
+
+    def message(channel_id, log_time, data):
+        return struct.pack('<BQHIQQ', 0x05, 22 + len(data), channel_id, 0, log_time, 7) + data
+
+    def chunk(data, crc=None):
+        return Chunk(compression='', data=data, message_start_time=0, message_end_time=0,
+                     uncompressed_crc=zlib.crc32(data) if crc is None else crc,
+                     uncompressed_size=len(data))
+
+    unknown = struct.pack('<BQ', 0x90, 3) + b'xyz'
+    data = message(1, 5, b'first') + unknown + message(2, 3, b'') + message(1, 4, b'third')
+    stored, headers, starts = chunk_message_records(chunk(data))
+    assert [(int(h['channel_id']), int(h['log_time']),
+             stored[start:start + int(h['length']) - 22])
+            for h, start in zip(headers, starts)] == [(1, 5, b'first'), (2, 3, b''),
+                                                      (1, 4, b'third')]
+    with pytest.raises(McapError, match='ends at'):
+        chunk_message_records(chunk(data[:-2]))
+    with pytest.raises(McapError, match='cut short'):
+        chunk_message_records(chunk(data + b'\x05\0'))
+    with pytest.raises(McapError, match='is 21 bytes'):
+        chunk_message_records(chunk(struct.pack('<BQ', 0x05, 21) + bytes(21)))
+    with pytest.raises(CRCValidationError):
+        chunk_message_records(chunk(data, crc=zlib.crc32(data) ^ 1))

@@ -9,12 +9,13 @@ import os
 import pathlib
 
 from fault_helpers import can_mount, FULL_DISKS, linear_scan, small_disk, small_filesystem
+from mcap.data_stream import RecordBuilder
 from mcap.reader import make_reader
 import pytest
 from rosbags.highlevel import AnyReader
 from rotation_node.bag import output as output_module
 from rotation_node.bag import writer as writer_module
-from rotation_node.bag.mcap_io import BagReader
+from rotation_node.bag.mcap_io import BagReader, TopicMetadata
 from rotation_node.bag.writer import BagWriter
 from rotation_node.errors import BagError, DiskFullError
 from std_msgs.msg import String
@@ -253,3 +254,123 @@ def test_full_disk_without_reservation_is_a_write_error(tmp_path, rng, monkeypat
                 (t, s) for t, _, s in messages[:len(recovered)]]
         else:
             assert os.listdir(small) == []
+
+
+def _serialized(rng, count):
+    """``count`` (topic, type name, CDR data, log time, publish time) on three topics."""
+    from rclpy.serialization import serialize_message
+    messages = []
+    for k, (topic, msg, stamp) in enumerate(_strings(rng, count, size=int(rng.integers(50, 400)))):
+        if k % 7 == 0:
+            topic = '/third'
+        messages.append((topic, 'std_msgs/msg/String', serialize_message(msg), stamp,
+                         stamp - 500))
+    return messages
+
+
+@pytest.mark.parametrize('compression', ['zstd', 'lz4', 'none'])
+def test_block_writes_the_bytes_of_message_by_message(tmp_path, rng, monkeypatch, compression):
+    monkeypatch.setattr(writer_module, 'CHUNK_SIZE', 8192)
+    messages = _serialized(rng, 1500)
+    paths = []
+    for name, block in (('each', None), ('blocks', 97), ('one block', len(messages))):
+        os.mkdir(tmp_path / name)
+        paths.append(tmp_path / name / 'bag.mcap')
+        with BagWriter(paths[-1], compression=compression) as writer:
+            writer.add_topic(TopicMetadata('/other', 'std_msgs/msg/String'))
+            if block is None:
+                for message in messages:
+                    writer.write_serialized(*message)
+            else:
+                for start in range(0, len(messages), block):
+                    # '/text' and '/third' are registered by the first block, as they come.
+                    writer.write_serialized_block(messages[start:start + block])
+                writer.write_serialized_block([])
+    first = paths[0].read_bytes()
+    assert all(path.read_bytes() == first for path in paths[1:])
+    with open(paths[0], 'rb') as stream:
+        assert len(make_reader(stream).get_summary().chunk_indexes) > 20
+    assert [(t, log, publish, d) for t, log, publish, d in linear_scan(paths[0])] == [
+        (t, log, publish, d) for t, _, d, log, publish in messages]
+
+
+@pytest.mark.parametrize('bad, error', [
+    ((-1, 5), 'log_time_ns must be in'),
+    ((5, 1.5), 'publish_time_ns must be an integer number of nanoseconds, got 1.5'),
+    ((2**64, 5), 'log_time_ns must be in'),
+    ((5, None), None),
+])
+def test_block_stops_where_message_by_message_stops(tmp_path, rng, bad, error):
+    messages = _serialized(rng, 50)
+    topic, type_name, data, _, _ = messages[30]
+    messages[30] = (topic, type_name, data, *bad)
+    with BagWriter(tmp_path / 'bad.mcap') as writer:
+        if error is None:        # publish time None: the log time, as write_serialized
+            writer.write_serialized_block(messages)
+        else:
+            with pytest.raises(BagError, match=error):
+                writer.write_serialized_block(messages)
+            with pytest.raises(BagError, match='holds std_msgs/msg/String .* cannot write'):
+                writer.write_serialized_block([(topic, 'std_msgs/msg/Int32', b'', 1, 1)])
+    written = linear_scan(tmp_path / 'bad.mcap')
+    assert len(written) == (50 if error is None else 30)
+    if error is None:
+        assert written[30][1:3] == (5, 5)
+
+
+def test_live_recording_writes_a_chunk_every_period(tmp_path, monkeypatch):
+    """Messages at 100 Hz, ``flush_if_due`` every 0.1 s: one chunk of each second, on disk."""
+    clock = [100.0]
+    monkeypatch.setattr(writer_module.time, 'monotonic', lambda: clock[0])
+    writer = BagWriter(tmp_path / 'live.mcap', chunk_period_s=1.0, keep_unfinished=True)
+    for k in range(350):
+        writer.write('/text', String(data=str(k)), T0 + k * 10_000_000)
+        clock[0] = 100.0 + (k + 1) / 100
+        if k % 10 == 9:
+            writer.flush_if_due()
+            flushed = (k + 1) // 100 * 100
+            assert len(linear_scan(writer.part_path)) == writer.message_count == flushed
+    writer.close()
+    with open(tmp_path / 'live.mcap', 'rb') as stream:
+        summary = make_reader(stream, validate_crcs=True).get_summary()
+    spans = [(index.message_start_time - T0, index.message_end_time - T0)
+             for index in summary.chunk_indexes]
+    assert spans == [(s * 10**9, s * 10**9 + 990_000_000) for s in range(3)] + [
+        (3 * 10**9, 3_490_000_000)]
+
+
+@pytest.mark.parametrize('compression', ['zstd', 'none'])
+def test_reservations_cover_every_chunk_and_the_close(tmp_path, rng, monkeypatch, compression):
+    """Each reservation covers the chunk written after it and everything written to close."""
+    monkeypatch.setattr(writer_module, 'CHUNK_SIZE', 2048)
+    monkeypatch.setattr(writer_module, '_SUMMARY_FIXED', 0)
+    reservations = []
+
+    def reserve(self, length):
+        reservations.append((self.stream.tell(), length))
+
+    monkeypatch.setattr(output_module.BagOutput, 'reserve', reserve)
+    # Many channels, schemas and chunks: the per-chunk and per-channel sizes add up.
+    messages = [(f'/topic_{k % 40}', 'std_msgs/msg/String', data, log, publish)
+                for k, (_, _, data, log, publish) in enumerate(_serialized(rng, 3000))]
+    path = tmp_path / 'reserved'
+    with BagWriter(path, compression=compression) as writer:
+        for k, message in enumerate(messages):
+            writer.write_serialized(*message)
+            if k == 1500:
+                writer.add_topic(TopicMetadata('/late', 'std_msgs/msg/Float64MultiArray'))
+    size = os.path.getsize(path / 'reserved_0.mcap') + os.path.getsize(path / 'metadata.yaml')
+    assert len(reservations) > 100
+    for (offset, length), (next_offset, _) in zip(reservations, reservations[1:]):
+        assert next_offset <= offset + length
+    offset, length = reservations[-1]
+    assert size <= offset + length
+    # The summary's chunk indexes, reserved per chunk and per channel in it, on their own.
+    with open(path / 'reserved_0.mcap', 'rb') as stream:
+        chunk_indexes = make_reader(stream).get_summary().chunk_indexes
+    builder = RecordBuilder()
+    for index in chunk_indexes:
+        index.write(builder)
+    entries = sum(len(index.message_index_offsets) for index in chunk_indexes)
+    assert builder.count <= (writer_module._SUMMARY_PER_CHUNK * len(chunk_indexes)
+                             + writer_module._SUMMARY_PER_CHANNEL_IN_CHUNK * entries)

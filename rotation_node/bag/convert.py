@@ -32,7 +32,7 @@ encoder (:meth:`rotation_node.messages.OutputMessage.encoder`).
 from __future__ import annotations
 
 import os
-from typing import Callable, Dict, Optional, Sequence, TextIO, TYPE_CHECKING
+from typing import Callable, Dict, List, Optional, Sequence, TextIO, TYPE_CHECKING
 
 from rotation_node import messages
 from rotation_node.bag.block_convert import collections_deferred, converted_blocks, TopicConverter
@@ -195,14 +195,16 @@ def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *
                             label='converting ') as progress:
             for metadata in [*reader.topic_metadata.values(), *new_topics]:
                 writer.add_topic(metadata)
-            write = writer.write_serialized
             for block in converted_blocks(reader.messages(), converters, routes):
+                written: List[tuple] = []
+                add = written.append
                 for record, converted in block:
                     log_time_ns, publish_time_ns = record.log_time_ns, record.publish_time_ns
-                    write(record.topic, record.type_name, record.data, log_time_ns,
-                          publish_time_ns)
+                    add((record.topic, record.type_name, record.data, log_time_ns,
+                         publish_time_ns))
                     if converted:
                         for topic, type_name, data in converted:
-                            write(topic, type_name, data, log_time_ns, publish_time_ns)
+                            add((topic, type_name, data, log_time_ns, publish_time_ns))
+                writer.write_serialized_block(written)
                 progress.update(len(block))
     return {topic: converter.pipeline.stats for topic, converter in converters.items()}

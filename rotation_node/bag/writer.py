@@ -24,6 +24,12 @@ the same bytes. Before each chunk is written, the space to close the bag
 full, ``DiskFullError`` says so, the chunk is dropped, and ``close()`` still
 writes a valid bag of everything written before.
 
+Each chunk is written whole by :class:`rotation_node.bag.mcap_writer.ChunkWriter`
+(the file the ``mcap`` library's writer would write, without its per-message
+cost); ``write_serialized_block`` takes a block of serialised messages at once
+(what ``rotation_bag convert`` uses) and writes the same bytes as writing them
+one by one.
+
 ``BagWriter.write`` encodes messages with :mod:`rotation_node.bag.cdr` where it
 can (fixed-layout types such as sensor_msgs/Imu, and
 std_msgs/Float64MultiArray): rclpy's bytes, with the alignment padding zeroed
@@ -37,13 +43,16 @@ import math
 import operator
 import os
 import time
-from typing import Any, Dict, List, Optional, Tuple, TYPE_CHECKING
+from typing import Any, Dict, List, Optional, Sequence, Tuple, TYPE_CHECKING
 
 import mcap
-from mcap.writer import CompressionType, Writer
+from mcap.writer import CompressionType
+import numpy as np
 from rclpy.serialization import serialize_message
 from rotation_node.bag.cdr import message_encoder
 from rotation_node.bag.mcap_io import TopicMetadata
+from rotation_node.bag.mcap_writer import (
+    ChunkWriter, MESSAGE_INDEX_ENTRY, MESSAGE_INDEX_OVERHEAD, MESSAGE_RECORD_OVERHEAD)
 from rotation_node.bag.message_types import message_definition, type_hash, type_name_of
 from rotation_node.bag.output import BagOutput
 from rotation_node.errors import BagError, DiskFullError
@@ -72,9 +81,10 @@ CHUNK_PERIOD_S = 1.0
 
 _MAX_TIMESTAMP = 2**64 - 1
 _CHECK_CLOCK_EVERY = 64              # messages between clock reads (a power of two)
-_MESSAGE_OVERHEAD = 31 + 16          # message record header + message index entry
+_MESSAGE_OVERHEAD = MESSAGE_RECORD_OVERHEAD + MESSAGE_INDEX_ENTRY
 _CHUNK_OVERHEAD = 4096               # chunk record, compression frame, page rounding
-_SUMMARY_PER_CHUNK = 64              # chunk index record, besides its per-channel entries
+_SUMMARY_PER_CHUNK = 96              # chunk index record (77 bytes with 'zstd'), besides
+#                                      its per-channel entries
 _SUMMARY_PER_CHANNEL_IN_CHUNK = 10
 _SUMMARY_FIXED = 64 * 1024           # statistics, offsets, footer, metadata.yaml's block
 
@@ -89,6 +99,20 @@ def _timestamp(value, name):
     if not 0 <= value <= _MAX_TIMESTAMP:
         raise BagError(f'{name} must be in [0, 2**64) ns, got {value}')
     return value
+
+
+def _timestamps(values):
+    """
+    Return ``values`` as a uint64 array if all are integers in [0, 2**64), else None.
+
+    The check of :func:`_timestamp` for a whole block: Python (or numpy)
+    integers only, no bools, floats or strings.
+    """
+    array = np.array(values)
+    kind = array.dtype.kind
+    if kind == 'u' or (kind == 'i' and (not array.size or array.min() >= 0)):
+        return array
+    return None
 
 
 def compression_type(name: str) -> CompressionType:
@@ -169,16 +193,16 @@ class BagWriter:
         self.keep_unfinished = keep_unfinished
         self._output = BagOutput(self.path, overwrite=overwrite)
         self.part_path = self._output.part_path
-        # Chunks are cut here (flush()), never by the library: its chunk size is unreachable.
-        self._writer = Writer(self._output.stream, compression=chunk_compression,
-                              chunk_size=2**62)
+        # Chunks are cut here (flush()) and written whole.
+        self._writer = ChunkWriter(self._output.stream, compression=chunk_compression)
         self._schema_ids: Dict[Tuple[str, str, str], int] = {}
         self._channels: Dict[str, Any] = {}
         self._topics: List[TopicMetadata] = []
-        self._counts: Dict[int, int] = {}
-        self._start_ns = _MAX_TIMESTAMP
-        self._end_ns = 0
-        self._pending: List[Any] = []
+        # The chunk in progress: each message's channel id, log and publish times, data.
+        self._pending_channels: List[int] = []
+        self._pending_log_times: List[int] = []
+        self._pending_publish_times: List[int] = []
+        self._pending_datas: List[Any] = []
         self._pending_bytes = 0
         self._registered_bytes = 0      # schemas and channels since the last chunk
         self._summary_bytes = 0         # schemas and channels repeated in the summary
@@ -201,12 +225,13 @@ class BagWriter:
     @property
     def message_count(self) -> int:
         """Messages flushed to disk so far."""
-        return sum(self._counts.values())
+        return self._writer.statistics.message_count
 
     @property
     def message_counts(self) -> Dict[str, int]:
         """``{topic: messages flushed to disk so far}`` for every registered topic."""
-        return {topic: self._counts[channel.id] for topic, channel in self._channels.items()}
+        counts = self._writer.statistics.channel_message_counts
+        return {topic: counts.get(channel.id, 0) for topic, channel in self._channels.items()}
 
     def add_topic(self, metadata: TopicMetadata) -> None:
         """
@@ -258,7 +283,6 @@ class BagWriter:
                              + len(topic_hash) + 128)
         self._channels[metadata.name] = _Channel(channel_id, metadata.type_name)
         self._topics.append(metadata)
-        self._counts[channel_id] = 0
 
     def _add_registered(self, size):
         self._registered_bytes += size
@@ -350,17 +374,76 @@ class BagWriter:
                            else _timestamp(publish_time_ns, 'publish_time_ns'))
         if self._failed:
             raise BagError(f'cannot write to {self.path} after a failed write')
-        pending = self._pending
-        pending.append((channel_id, log_time_ns, data, publish_time_ns))
+        self._pending_channels.append(channel_id)
+        self._pending_log_times.append(log_time_ns)
+        self._pending_publish_times.append(publish_time_ns)
+        datas = self._pending_datas
+        datas.append(data)
         self._pending_bytes += len(data)
         if self._pending_bytes >= CHUNK_SIZE or (
-                not len(pending) % _CHECK_CLOCK_EVERY and time.monotonic() >= self._flush_due):
+                not len(datas) % _CHECK_CLOCK_EVERY and time.monotonic() >= self._flush_due):
             self.flush()
+
+    def write_serialized_block(self, messages: Sequence[Tuple[str, str, Any, int, int]]
+                               ) -> None:
+        """
+        Write messages that are already CDR-serialised, in order; as ``write_serialized`` each.
+
+        The bag is the one ``write_serialized`` called for each message in
+        turn writes, byte for byte (chunks are cut after the same messages),
+        with the per-message work done for the whole block where it can be:
+        the topics' channels looked up once, the times checked as one array.
+
+        Parameters
+        ----------
+        messages : sequence of tuple
+            ``(topic, type name, data, log_time_ns, publish_time_ns)`` each.
+
+        Raises
+        ------
+        BagError
+            As ``write_serialized``, for the first message it would raise it
+            for; the messages before it are written.
+        DiskFullError
+            As ``write``.
+
+        """
+        if not messages:
+            return
+        topics, type_names, datas, log_times, publish_times = zip(*messages)
+        channel_ids: Dict[str, int] = {}
+        known = True
+        for topic, type_name in dict.fromkeys(zip(topics, type_names)):
+            channel = self._channels.get(topic)
+            if channel is None or channel.type_name != type_name:
+                known = False   # a new topic, or a type clash: message by message
+                break
+            channel_ids[topic] = channel.id
+        if (not known or self._failed or self._chunk_period_s is not None
+                or _timestamps(log_times) is None or _timestamps(publish_times) is None):
+            for message in messages:
+                self.write_serialized(*message)
+            return
+        channels = list(map(channel_ids.__getitem__, topics))
+        ends = np.cumsum(np.fromiter(map(len, datas), np.int64, len(datas)))
+        start, written = 0, 0         # first message not pending yet; its bytes before it
+        while start < len(datas):
+            # The message that fills the chunk in progress, as _add would find it.
+            end = int(np.searchsorted(ends, written + CHUNK_SIZE - self._pending_bytes))
+            end = min(max(end, start) + 1, len(datas))
+            self._pending_channels += channels[start:end]
+            self._pending_log_times += log_times[start:end]
+            self._pending_publish_times += publish_times[start:end]
+            self._pending_datas += datas[start:end]
+            self._pending_bytes += int(ends[end - 1]) - written
+            start, written = end, int(ends[end - 1])
+            if self._pending_bytes >= CHUNK_SIZE:
+                self.flush()
 
     def flush_if_due(self) -> None:
         """Write a chunk, or sync to disk, if one is due (call it when idle)."""
         now = time.monotonic()
-        if self._pending and now >= self._flush_due:
+        if self._pending_datas and now >= self._flush_due:
             self.flush()
         elif now >= self._sync_due:
             self._sync(now)
@@ -395,34 +478,26 @@ class BagWriter:
             If writing failed otherwise (the bag cannot be closed then).
 
         """
-        pending = self._pending
         now = time.monotonic()
         if self._chunk_period_s is not None:
             self._flush_due = now + self._chunk_period_s
-        if not pending:
+        count = len(self._pending_datas)
+        if not count:
             return
-        fitting = self._reserve_chunk(pending)
-        dropped = len(pending) - fitting
+        fitting = self._reserve_chunk()
+        dropped = count - fitting
+        pending: Tuple[List[Any], ...] = (self._pending_channels, self._pending_log_times,
+                                          self._pending_publish_times, self._pending_datas)
         if dropped:
-            pending = pending[:fitting]
-        add_message = self._writer.add_message
-        counts = self._counts
+            pending = tuple(values[:fitting] for values in pending)
         try:
-            for channel_id, log_time_ns, data, publish_time_ns in pending:
-                add_message(channel_id=channel_id, log_time=log_time_ns, data=data,
-                            publish_time=publish_time_ns)
+            self._writer.write_chunk(*pending)
             self._writer.flush()
         except OSError as error:
             self._fail(error)
         if now >= self._sync_due:
             self._sync(now)
-        for channel_id, log_time_ns, _, _ in pending:
-            counts[channel_id] += 1
-            if log_time_ns < self._start_ns:
-                self._start_ns = log_time_ns
-            if log_time_ns > self._end_ns:
-                self._end_ns = log_time_ns
-        if pending:
+        if fitting:
             self._chunk_count += 1
             self._registered_bytes = 0
         self._drop_pending()
@@ -431,9 +506,9 @@ class BagWriter:
                 f'disk full writing {self.path}: kept {self.message_count} messages, '
                 f'{dropped} not written', kept=self.message_count, dropped=dropped)
 
-    def _reserve_chunk(self, pending):
+    def _reserve_chunk(self):
         """
-        Reserve the space for a chunk of ``pending`` and for closing the bag.
+        Reserve the space for a chunk of the pending messages and for closing the bag.
 
         Returns
         -------
@@ -442,11 +517,13 @@ class BagWriter:
             on a full disk the most of the halves tried (0 if none).
 
         """
-        count = len(pending)
+        count = len(self._pending_datas)
         data_bytes = self._pending_bytes
+        # A message index record per channel (its entries are in _MESSAGE_OVERHEAD).
+        indexes = MESSAGE_INDEX_OVERHEAD * len(self._channels)
         while count:
             chunk_size = (data_bytes + _MESSAGE_OVERHEAD * count + self._registered_bytes
-                          + _CHUNK_OVERHEAD)
+                          + indexes + _CHUNK_OVERHEAD)
             try:
                 self._output.reserve(chunk_size + self._summary_reserve())
                 return count
@@ -454,11 +531,14 @@ class BagWriter:
                 if error.errno != errno.ENOSPC:
                     self._fail(error)
             count //= 2
-            data_bytes = sum(len(message[2]) for message in pending[:count])
+            data_bytes = sum(map(len, self._pending_datas[:count]))
         return 0
 
     def _drop_pending(self):
-        self._pending = []
+        self._pending_channels = []
+        self._pending_log_times = []
+        self._pending_publish_times = []
+        self._pending_datas = []
         self._pending_bytes = 0
 
     def _fail(self, error):
@@ -476,9 +556,10 @@ class BagWriter:
             The contents of ``metadata.yaml``'s ``rosbag2_bagfile_information``.
 
         """
-        count = self.message_count
-        start = self._start_ns if count else 0
-        duration = {'nanoseconds': self._end_ns - start if count else 0}
+        statistics = self._writer.statistics
+        count = statistics.message_count
+        start = statistics.message_start_time if count else 0
+        duration = {'nanoseconds': statistics.message_end_time - start if count else 0}
         storage_name = self._output.storage_name
         return {
             'version': ROSBAG2_METADATA_VERSION,
@@ -495,7 +576,8 @@ class BagWriter:
                     'type_description_hash': (type_hash(topic.type_name)
                                               if topic.type_hash is None else topic.type_hash),
                 },
-                'message_count': self._counts[self._channels[topic.name].id],
+                'message_count': statistics.channel_message_counts.get(
+                    self._channels[topic.name].id, 0),
             } for topic in self._topics],
             # rosbag2's own (file or message) compression: none; MCAP compresses chunks.
             'compression_format': '',
