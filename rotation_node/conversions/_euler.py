@@ -316,18 +316,19 @@ def convention_code(spec: EulerSequence) -> int:
     return i | j << 2 | k << 4 | int(spec.intrinsic) << 6
 
 
-_CONVENTIONS = {name: convention_code(spec) for name, spec in SEQUENCE_TABLE.items()}
 _DEGREES_FLAG = 1 << 7   # angles in degrees rather than radians
+# The codes of every sequence, for angles in radians and in degrees.
+_RADIAN_CODES = {name: convention_code(spec) for name, spec in SEQUENCE_TABLE.items()}
+_DEGREE_CODES = {name: code | _DEGREES_FLAG for name, code in _RADIAN_CODES.items()}
 
 
 def _convention(seq: str, degrees: bool = False) -> int:
     """Return the kernels' code of ``seq`` and the angle unit; ValueError for another ``seq``."""
     try:
-        code = _CONVENTIONS[seq]
+        return (_DEGREE_CODES if degrees else _RADIAN_CODES)[seq]
     except (KeyError, TypeError):
         parse_sequence(seq)  # raises the explanatory ValueError
         raise
-    return (code | _DEGREES_FLAG) if degrees else code
 
 
 def _from_angles(angles: ArrayLike, seq: str, degrees: bool,

@@ -378,15 +378,19 @@ def convert_matrices(R: ArrayLike, orthonormal_tolerance: float, non_orthonormal
     """
     tolerance = _kernel_tolerance(orthonormal_tolerance, non_orthonormal)
     if is_single_sample(R, (3, 3)):   # already in the canonical layout, as is its result
-        a = m = R
-        shape, batch, out = out_trailing, False, new_array(out_trailing)
-        flat_out = out
-    else:
-        a = float_array(R, 'R', (3, 3))
-        m = kernel_layout(a, (3, 3))
-        shape, batch = a.shape[:-2] + out_trailing, is_batch(a, (3, 3))
-        out = np.empty(shape)
-        flat_out = kernel_layout(out, out_trailing)
+        out = new_array(out_trailing)
+        if convention is None:
+            bad = fused_kernel.call_unchecked(R, out, tolerance)
+        else:
+            bad = fused_kernel.call_unchecked(R, out, tolerance, convention)
+        if bad == -1:
+            return out
+        # A defect, or the eigenvector method: the general path takes over.
+    a = float_array(R, 'R', (3, 3))
+    m = kernel_layout(a, (3, 3))
+    shape, batch = a.shape[:-2] + out_trailing, is_batch(a, (3, 3))
+    out = np.empty(shape)
+    flat_out = kernel_layout(out, out_trailing)
     if not batch:
         if convention is None:
             bad = fused_kernel(m, flat_out, tolerance)
