@@ -30,8 +30,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ._matrix import (
-    convert_matrices, DEFAULT_ORTHONORMAL_TOLERANCE, EIGENVECTOR_PENDING, quaternion_of_matrix,
-    store_rotation)
+    convert_matrices, DEFAULT_NON_ORTHONORMAL, DEFAULT_ORTHONORMAL_TOLERANCE, EIGENVECTOR_PENDING,
+    quaternion_of_matrix, store_rotation)
 from ._quaternion import (
     needs_sign_flip, product, quaternion_status, scaled_quaternion, vector_status)
 from ._runtime import (
@@ -429,7 +429,7 @@ def euler_from_quaternion(q: ArrayLike, seq: str, *, degrees: bool = False) -> F
 
 def euler_from_matrix(R: ArrayLike, seq: str, *, degrees: bool = False,
                       orthonormal_tolerance: float = DEFAULT_ORTHONORMAL_TOLERANCE,
-                      non_orthonormal: str = 'project') -> FloatArray:
+                      non_orthonormal: str = DEFAULT_NON_ORTHONORMAL) -> FloatArray:
     """
     Euler angles of rotation matrices.
 

@@ -43,7 +43,10 @@ if TYPE_CHECKING:
 
     from ..type_aliases import FloatArray, Matrix9, Quaternion4
 
+#: Defaults of the ``*_from_matrix`` conversions' ``orthonormal_tolerance`` and
+#: ``non_orthonormal``: every matrix is replaced by its nearest rotation.
 DEFAULT_ORTHONORMAL_TOLERANCE = 1e-6
+DEFAULT_NON_ORTHONORMAL = 'project'
 
 
 @jit
@@ -376,7 +379,11 @@ def convert_matrices(R: ArrayLike, orthonormal_tolerance: float, non_orthonormal
         ``R``'s leading shape followed by ``out_trailing``.
 
     """
-    tolerance = _kernel_tolerance(orthonormal_tolerance, non_orthonormal)
+    if (orthonormal_tolerance is DEFAULT_ORTHONORMAL_TOLERANCE
+            and non_orthonormal is DEFAULT_NON_ORTHONORMAL):
+        tolerance = math.inf   # the defaults themselves, valid: no check (~80 ns a call)
+    else:
+        tolerance = _kernel_tolerance(orthonormal_tolerance, non_orthonormal)
     if is_single_sample(R, (3, 3)):   # already in the canonical layout, as is its result
         out = new_array(out_trailing)
         if convention is None:
@@ -429,7 +436,7 @@ def _flat_quaternions(a, m, tolerance):
 
 def quaternion_from_matrix(R: ArrayLike, *,
                            orthonormal_tolerance: float = DEFAULT_ORTHONORMAL_TOLERANCE,
-                           non_orthonormal: str = 'project') -> FloatArray:
+                           non_orthonormal: str = DEFAULT_NON_ORTHONORMAL) -> FloatArray:
     """
     Quaternions of rotation matrices.
 
