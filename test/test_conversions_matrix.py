@@ -90,6 +90,22 @@ def test_non_orthonormal_raise_mode():
                                                  orthonormal_tolerance=1e-2)[3], 1.0, atol=1e-6)
 
 
+def test_defaults_given_explicitly_act_as_the_defaults(rng):
+    """The defaults are recognised by identity (no check): equal values take the checked path."""
+    m = rc.matrix_from_quaternion(rng.normal(size=4)) + rng.normal(scale=1e-3, size=(3, 3))
+    tolerance, mode = float('1e-6'), ''.join(['pro', 'ject'])   # equal, distinct objects
+    for function in (rc.quaternion_from_matrix, rc.rotation_vector_from_matrix,
+                     lambda r, **k: rc.euler_from_matrix(r, 'zyz', **k)):
+        assert np.array_equal(function(m, orthonormal_tolerance=tolerance, non_orthonormal=mode),
+                              function(m))
+    for got, expected in zip(rc.axis_angle_from_matrix(m, orthonormal_tolerance=tolerance,
+                                                       non_orthonormal=mode),
+                             rc.axis_angle_from_matrix(m)):
+        assert np.array_equal(got, expected)
+    with pytest.raises(ValueError, match='orthonormal'):   # the default tolerance, raise mode
+        rc.euler_from_matrix(m, 'zyz', non_orthonormal='raise')
+
+
 def test_float32_roundoff_passes_default_tolerance_in_raise_mode(rng):
     m = rc.matrix_from_quaternion(rng.normal(size=(20, 4))).astype(np.float32)
     q = rc.quaternion_from_matrix(m, non_orthonormal='raise')

@@ -7,14 +7,14 @@ import os
 import subprocess
 import sys
 
-from numba import njit
+from numba import njit, typeof, types
 from numba.core.errors import TypingError
 from numba.core.registry import CPUDispatcher
 import numpy as np
 import pytest
 from rotation_node import conversions as rc
 from rotation_node import kinematics as rk
-from rotation_node.conversions import _runtime
+from rotation_node.conversions import _quaternion, _runtime
 from rotation_node.conversions._runtime import KERNELS, matrix_samples, samples
 
 _MODULES = ['rotation_node.conversions._quaternion', 'rotation_node.conversions._matrix',
@@ -93,10 +93,11 @@ def _variants(sample, lead_shapes=((), (1,), (5,), (5, 2), (2, 1, 3), (1100,))):
     yield sample.astype(np.int64) if np.all(sample == np.round(sample)) else sample
 
 
-Q = [0.1, -0.2, 0.3, 0.9]
+# float64 arrays: with one of them as the other argument, a single sample takes the fast path.
+Q = np.array([0.1, -0.2, 0.3, 0.9])
 M = rc.matrix_from_quaternion(Q)
-V = [0.3, -0.2, 0.1]
-A = [0.3, -0.2, 0.1]
+V = np.array([0.3, -0.2, 0.1])
+A = np.array([0.3, -0.2, 0.1])
 
 
 def _public_calls():
@@ -203,6 +204,60 @@ def test_a_kernel_called_with_other_types_raises_instead_of_compiling():
     with pytest.raises(TypeError):
         kernel(np.zeros(4, dtype=np.float32), np.zeros(4))
     assert len(kernel.signatures) == 1
+
+
+def _checking_unchecked_call(dispatcher, calls):
+    """Return a ``call_unchecked`` asserting its contract: arrays of the declared types."""
+    declared = dispatcher.kernel_signature.args
+
+    def call(*args):
+        assert len(args) == len(declared)
+        for argument, expected in zip(args, declared):
+            if isinstance(expected, types.Array):
+                assert typeof(argument) == expected, (dispatcher.py_func.__qualname__, argument)
+        calls.append(dispatcher)
+        return dispatcher(*args)
+
+    return call
+
+
+@pytest.mark.parametrize('name, call, sample', _CASES, ids=[c[0] for c in _CASES])
+def test_single_samples_reach_the_compiled_code_with_its_declared_types(
+        monkeypatch, name, call, sample):
+    """The single-sample path skips numba's typing: its arrays must be the declared ones."""
+    calls = []
+    for dispatcher in KERNELS:
+        monkeypatch.setattr(dispatcher, 'call_unchecked',
+                            _checking_unchecked_call(dispatcher, calls))
+    x = np.array(sample, dtype=np.float64) if np.ndim(sample) else float(sample)
+    expected = call(x)
+    assert calls, f'{name}: a single sample did not take the single-sample path'
+    bad = np.full(np.shape(sample), np.nan) if np.ndim(sample) else math.nan
+    with pytest.raises(ValueError, match='NaN'):
+        call(bad)
+    monkeypatch.undo()
+    got = call(x)
+    for a, b in zip(got if isinstance(got, tuple) else (got,),
+                    expected if isinstance(expected, tuple) else (expected,)):
+        assert np.array_equal(a, b)
+
+
+def test_the_first_unchecked_call_is_typed():
+    """A call site passing arrays of the wrong dimensions gets a TypeError, not a wrong read."""
+    kernel = _quaternion._conjugate_kernel
+    unchecked = kernel.call_unchecked
+    try:
+        kernel.call_unchecked = typed_first = _runtime.typed_first_call(kernel)
+        with pytest.raises(TypeError):
+            kernel.call_unchecked(np.zeros((1, 4)), np.zeros(4))
+        assert kernel.call_unchecked is typed_first
+        out = np.zeros(4)
+        assert kernel.call_unchecked(np.array([1.0, 2.0, 3.0, 4.0]), out) == -1
+        assert out.tolist() == [-1.0, -2.0, -3.0, 4.0]
+        assert kernel.call_unchecked is not typed_first   # now the compiled code itself
+        assert kernel.call_unchecked(np.array([0.0, 0.0, math.inf, 1.0]), out) >= 0
+    finally:
+        kernel.call_unchecked = unchecked
 
 
 # Loops called only from other compiled code (inlined there), never from Python.

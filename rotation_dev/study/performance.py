@@ -11,7 +11,8 @@ process) and collects their ratios, with the command that reproduces each:
 - ``bench_node.py``: CPU time per message of the live node against a bare
   rclpy relay (its printed median ratio is read);
 - ``bench_bag_convert.py``: ``rotation_bag convert`` against the naive
-  mcap-ros2-support + scipy pipeline (its printed ratio is read).
+  mcap-ros2-support + scipy pipeline and against the floor of reading and
+  writing the same bag with ``mcap`` alone (its two printed ratios are read).
 
 A ``--quick`` run measures the library only (``bench_conversions.py --quick``);
 the node and converter benchmarks are listed with their commands.
@@ -39,9 +40,35 @@ SINGLE_SAMPLE_TARGET = 0.10
 
 
 @dataclasses.dataclass(frozen=True)
+class Ratio:
+    """
+    One ratio a benchmark script prints, and its target (the script's own).
+
+    Attributes
+    ----------
+    name : str
+        What it divides, e.g. ``'naive / ours'``.
+    target : str
+        ``'<= x'`` or ``'>= x'``.
+    pattern : str
+        Regular expression whose group 1 is the ratio in the printed output.
+
+    """
+
+    name: str
+    target: str
+    pattern: str
+
+    def meets(self, ratio):
+        """Return whether ``ratio`` meets the target."""
+        relation, bound = self.target.split()
+        return ratio <= float(bound) if relation == '<=' else ratio >= float(bound)
+
+
+@dataclasses.dataclass(frozen=True)
 class Benchmark:
     """
-    One benchmark script and how to read its ratio.
+    One benchmark script and how to read its ratios.
 
     Attributes
     ----------
@@ -51,14 +78,14 @@ class Benchmark:
     quick_args, full_args : tuple of str or None
         Arguments in a quick and in a full run; None: not run.
     ratio : str
-        What the ratio is (package against peer).
-    target : str
-        What the ratio should be; ``'<= x'`` or ``'>= x'`` where ``pattern`` reads it.
-    pattern : str or None
-        Regular expression whose group 1 is the ratio in the printed output
-        (None: read from the JSON results).
+        What the ratios are (package against peer).
+    ratios : tuple of Ratio
+        The ratios read from the printed output, with their targets; empty:
+        the results are read from the script's JSON output instead.
     timeout : float
         Seconds before the run is abandoned.
+    json_target : str
+        The targets, in words, of a benchmark read from its JSON output.
 
     """
 
@@ -68,9 +95,9 @@ class Benchmark:
     quick_args: Optional[Tuple[str, ...]]
     full_args: Optional[Tuple[str, ...]]
     ratio: str
-    target: str
-    pattern: Optional[str]
+    ratios: Tuple[Ratio, ...]
     timeout: float
+    json_target: str = ''
 
     def args(self, quick):
         """Return the script's arguments in this run, or None if it is not run."""
@@ -80,25 +107,34 @@ class Benchmark:
         """Return the shell command that reproduces the run."""
         return ' '.join((PYTHON, f'benchmarks/{self.script}', *args))
 
-    def meets(self, ratio):
-        """Return whether ``ratio`` meets a ``target`` of the form ``'<= x'`` or ``'>= x'``."""
-        relation, bound = self.target.split()
-        return ratio <= float(bound) if relation == '<=' else ratio >= float(bound)
+    @property
+    def target(self):
+        """Return the targets in words, as the summary table shows them."""
+        if not self.ratios:
+            return self.json_target
+        if len(self.ratios) == 1:
+            return self.ratios[0].target
+        return ', '.join(f'{r.name} {r.target}' for r in self.ratios)
 
 
 LIBRARY = Benchmark(
     'library', 'Library against scipy', 'bench_conversions.py', ('--quick',), (),
     'time, package / scipy from_quat().as_euler() (single sample) and scipy / package '
-    '(batch), per conversion',
-    'single sample <= 0.10, batch speed-up >= 2 (>= 3 Euler)', None, 600.0)
+    '(batch), per conversion', (), 600.0,
+    json_target=f'single sample <= {SINGLE_SAMPLE_TARGET:.2f}, batch speed-up >= 2 '
+                '(>= 3 Euler)')
 NODE = Benchmark(
     'node', 'Node against a bare relay', 'bench_node.py', None, (),
-    'CPU time per message, rotation_node / bare relay (median)', '<= 1.0',
-    r'median ratio rotation_node / relay = ([0-9.]+)', 300.0)
+    'CPU time per message, rotation_node / bare relay (median)',
+    (Ratio('rotation_node / relay', '<= 1.0',
+           r'median ratio rotation_node / relay = ([0-9.]+)'),), 300.0)
 BAG = Benchmark(
-    'bag', 'Bag converter against the naive pipeline', 'bench_bag_convert.py', None, (),
-    'throughput, rotation_bag convert / naive (mcap-ros2-support + scipy per message)',
-    '>= 10', r'ratio naive/ours: ([0-9.]+)x', 1800.0)
+    'bag', 'Bag converter against the naive pipeline and the mcap floor', 'bench_bag_convert.py',
+    None, (),
+    'CPU time, naive (mcap-ros2-support + scipy per message) / rotation_bag convert, and '
+    'rotation_bag convert / floor (reading and writing the same bag with mcap alone)',
+    (Ratio('naive / ours', '>= 10', r'ratio naive/ours: ([0-9.]+)x'),
+     Ratio('ours / floor', '<= 2', r'ours/floor: ([0-9.]+)x')), 1800.0)
 BENCHMARKS = (LIBRARY, NODE, BAG)
 
 
@@ -117,8 +153,8 @@ class BenchmarkRun:
         Wall time of the run.
     output : str
         What it printed.
-    ratio : float or None
-        The headline ratio read from the output (node, bag).
+    ratios : tuple of float or None
+        The ratios read from the output (node, bag), as ``benchmark.ratios``.
     results : dict or None
         The JSON results (library).
     detail : str
@@ -131,7 +167,7 @@ class BenchmarkRun:
     status: str
     seconds: float = 0.0
     output: str = ''
-    ratio: Optional[float] = None
+    ratios: Optional[Tuple[float, ...]] = None
     results: Optional[dict] = None
     detail: str = ''
 
@@ -148,7 +184,7 @@ def require_benchmarks():
 
 def run_benchmark(benchmark, quick):
     """
-    Run one benchmark script as its own process and read its ratio.
+    Run one benchmark script as its own process and read its ratios.
 
     Parameters
     ----------
@@ -160,7 +196,7 @@ def run_benchmark(benchmark, quick):
     Returns
     -------
     BenchmarkRun
-        Its status, output and ratio.
+        Its status, output and ratios (or JSON results).
 
     """
     args = benchmark.args(quick)
@@ -170,7 +206,7 @@ def run_benchmark(benchmark, quick):
                             detail='--quick runs the library benchmark only')
     with tempfile.TemporaryDirectory() as directory:
         json_path = os.path.join(directory, 'results.json')
-        extra = ('--json', json_path) if benchmark.pattern is None else ()
+        extra = () if benchmark.ratios else ('--json', json_path)
         command = benchmark.command(args + (('--json', 'results.json') if extra else ()))
         start = time.monotonic()
         try:
@@ -188,16 +224,23 @@ def run_benchmark(benchmark, quick):
             last = process.stderr.strip().splitlines()[-1:] or ['its output is below']
             return BenchmarkRun(benchmark, command, 'failed', seconds, process.stdout,
                                 detail=f'exit status {process.returncode}; {last[0]}')
-        if benchmark.pattern is None:
+        if not benchmark.ratios:
             with open(json_path) as stream:
                 return BenchmarkRun(benchmark, command, 'measured', seconds, process.stdout,
                                     results=json.load(stream))
-    match = re.search(benchmark.pattern, process.stdout)
-    if match is None:
+    ratios = read_ratios(benchmark, process.stdout)
+    if ratios is None:
         return BenchmarkRun(benchmark, command, 'failed', seconds, process.stdout,
-                            detail='its output has no ratio line (format changed?)')
-    return BenchmarkRun(benchmark, command, 'measured', seconds, process.stdout,
-                        ratio=float(match.group(1)))
+                            detail='its output lacks a ratio line (format changed?)')
+    return BenchmarkRun(benchmark, command, 'measured', seconds, process.stdout, ratios=ratios)
+
+
+def read_ratios(benchmark, output):
+    """Return the values of ``benchmark.ratios`` printed in ``output`` (None: one is missing)."""
+    matches = [re.search(ratio.pattern, output) for ratio in benchmark.ratios]
+    if any(match is None for match in matches):
+        return None
+    return tuple(float(match.group(1)) for match in matches)
 
 
 # ------------------------------------------------------------ the document
@@ -212,7 +255,7 @@ def _library_tables(results):
     summary = markdown_table(
         ('conversion', 'single: package (µs)', 'single: scipy, same conversion (µs)',
          'single: reference (µs)', 'single: ratio package/reference',
-         f'single ≤ {SINGLE_SAMPLE_TARGET}',
+         f'single ≤ {SINGLE_SAMPLE_TARGET:.2f}',
          f'batch 10^{len(str(batch_n)) - 1}: package (ns)', 'batch: scipy (ns)',
          'batch: speed-up scipy/package', 'speed-up target', 'batch target met'),
         [(f'`{name}`', f'{r["single_us"]:.2f}', f'{r["single_scipy_us"]:.2f}',
@@ -244,11 +287,18 @@ def _summary_cell(run):
         return f'failed ({run.detail})'
     if run.results is not None:
         return _library_headline(run.results)
-    return f'**{run.ratio:.3f}** ({_met_words(run)})'
+    return '; '.join(_measured_ratios(run, with_target=False))
 
 
-def _met_words(run):
-    return 'target met' if run.benchmark.meets(run.ratio) else 'target **missed**'
+def _measured_ratios(run, *, with_target):
+    """Return a phrase per ratio of ``run``: its value, its name and whether it met its target."""
+    phrases = []
+    for ratio, value in zip(run.benchmark.ratios, run.ratios):
+        met = 'target met' if ratio.meets(value) else 'target **missed**'
+        name = f' {ratio.name}' if len(run.benchmark.ratios) > 1 else ''
+        phrases.append(f'**{value:.3f}**{name} ('
+                       + (f'target {ratio.target}: {met})' if with_target else f'{met})'))
+    return phrases
 
 
 def performance_markdown(runs, *, quick, command, environment):
@@ -308,6 +358,7 @@ def performance_markdown(runs, *, quick, command, environment):
                 'speed-up = scipy / package (higher is better).', '', summary, '',
                 'Time per rotation (ns) as the batch grows, package / scipy:', '', growth]
         else:
-            parts += [f'Measured ratio: **{run.ratio:.3f}** (target {run.benchmark.target}: '
-                      f'{_met_words(run)}). Its output:', '', '```', run.output.rstrip(), '```']
+            parts += [('Measured ratios: ' if len(run.ratios) > 1 else 'Measured ratio: ')
+                      + ', '.join(_measured_ratios(run, with_target=True)) + '. Its output:',
+                      '', '```', run.output.rstrip(), '```']
     return '\n'.join(parts) + '\n'

@@ -19,8 +19,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ._matrix import (
-    convert_matrices, DEFAULT_ORTHONORMAL_TOLERANCE, EIGENVECTOR_PENDING, quaternion_of_matrix,
-    store_rotation)
+    convert_matrices, DEFAULT_NON_ORTHONORMAL, DEFAULT_ORTHONORMAL_TOLERANCE, EIGENVECTOR_PENDING,
+    quaternion_of_matrix, store_rotation)
 from ._quaternion import (
     half_angle_atan2, needs_sign_flip, quaternion_status, scaled_quaternion, vector_defect,
     vector_norm, vector_status)
@@ -373,7 +373,7 @@ def axis_angle_from_quaternion(q: ArrayLike) -> tuple[FloatArray, FloatArrayOrSc
 
 def axis_angle_from_matrix(R: ArrayLike, *,
                            orthonormal_tolerance: float = DEFAULT_ORTHONORMAL_TOLERANCE,
-                           non_orthonormal: str = 'project',
+                           non_orthonormal: str = DEFAULT_NON_ORTHONORMAL,
                            ) -> tuple[FloatArray, FloatArrayOrScalar]:
     """
     Axis and angle of rotation matrices (through the quaternion, exact near pi).
@@ -459,7 +459,7 @@ def rotation_vector_from_quaternion(q: ArrayLike) -> FloatArray:
 
 def rotation_vector_from_matrix(R: ArrayLike, *,
                                 orthonormal_tolerance: float = DEFAULT_ORTHONORMAL_TOLERANCE,
-                                non_orthonormal: str = 'project') -> FloatArray:
+                                non_orthonormal: str = DEFAULT_NON_ORTHONORMAL) -> FloatArray:
     """
     Logarithm map: rotation vectors of rotation matrices.
 

@@ -30,8 +30,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ._matrix import (
-    convert_matrices, DEFAULT_ORTHONORMAL_TOLERANCE, EIGENVECTOR_PENDING, quaternion_of_matrix,
-    store_rotation)
+    convert_matrices, DEFAULT_NON_ORTHONORMAL, DEFAULT_ORTHONORMAL_TOLERANCE, EIGENVECTOR_PENDING,
+    quaternion_of_matrix, store_rotation)
 from ._quaternion import (
     needs_sign_flip, product, quaternion_status, scaled_quaternion, vector_status)
 from ._runtime import (
@@ -316,18 +316,19 @@ def convention_code(spec: EulerSequence) -> int:
     return i | j << 2 | k << 4 | int(spec.intrinsic) << 6
 
 
-_CONVENTIONS = {name: convention_code(spec) for name, spec in SEQUENCE_TABLE.items()}
 _DEGREES_FLAG = 1 << 7   # angles in degrees rather than radians
+# The codes of every sequence, for angles in radians and in degrees.
+_RADIAN_CODES = {name: convention_code(spec) for name, spec in SEQUENCE_TABLE.items()}
+_DEGREE_CODES = {name: code | _DEGREES_FLAG for name, code in _RADIAN_CODES.items()}
 
 
 def _convention(seq: str, degrees: bool = False) -> int:
     """Return the kernels' code of ``seq`` and the angle unit; ValueError for another ``seq``."""
     try:
-        code = _CONVENTIONS[seq]
+        return (_DEGREE_CODES if degrees else _RADIAN_CODES)[seq]
     except (KeyError, TypeError):
         parse_sequence(seq)  # raises the explanatory ValueError
         raise
-    return (code | _DEGREES_FLAG) if degrees else code
 
 
 def _from_angles(angles: ArrayLike, seq: str, degrees: bool,
@@ -428,7 +429,7 @@ def euler_from_quaternion(q: ArrayLike, seq: str, *, degrees: bool = False) -> F
 
 def euler_from_matrix(R: ArrayLike, seq: str, *, degrees: bool = False,
                       orthonormal_tolerance: float = DEFAULT_ORTHONORMAL_TOLERANCE,
-                      non_orthonormal: str = 'project') -> FloatArray:
+                      non_orthonormal: str = DEFAULT_NON_ORTHONORMAL) -> FloatArray:
     """
     Euler angles of rotation matrices.
 

@@ -43,7 +43,10 @@ if TYPE_CHECKING:
 
     from ..type_aliases import FloatArray, Matrix9, Quaternion4
 
+#: Defaults of the ``*_from_matrix`` conversions' ``orthonormal_tolerance`` and
+#: ``non_orthonormal``: every matrix is replaced by its nearest rotation.
 DEFAULT_ORTHONORMAL_TOLERANCE = 1e-6
+DEFAULT_NON_ORTHONORMAL = 'project'
 
 
 @jit
@@ -376,17 +379,25 @@ def convert_matrices(R: ArrayLike, orthonormal_tolerance: float, non_orthonormal
         ``R``'s leading shape followed by ``out_trailing``.
 
     """
-    tolerance = _kernel_tolerance(orthonormal_tolerance, non_orthonormal)
-    if is_single_sample(R, (3, 3)):   # already in the canonical layout, as is its result
-        a = m = R
-        shape, batch, out = out_trailing, False, new_array(out_trailing)
-        flat_out = out
+    if (orthonormal_tolerance is DEFAULT_ORTHONORMAL_TOLERANCE
+            and non_orthonormal is DEFAULT_NON_ORTHONORMAL):
+        tolerance = math.inf   # the defaults themselves, valid: no check (~80 ns a call)
     else:
-        a = float_array(R, 'R', (3, 3))
-        m = kernel_layout(a, (3, 3))
-        shape, batch = a.shape[:-2] + out_trailing, is_batch(a, (3, 3))
-        out = np.empty(shape)
-        flat_out = kernel_layout(out, out_trailing)
+        tolerance = _kernel_tolerance(orthonormal_tolerance, non_orthonormal)
+    if is_single_sample(R, (3, 3)):   # already in the canonical layout, as is its result
+        out = new_array(out_trailing)
+        if convention is None:
+            bad = fused_kernel.call_unchecked(R, out, tolerance)
+        else:
+            bad = fused_kernel.call_unchecked(R, out, tolerance, convention)
+        if bad == -1:
+            return out
+        # A defect, or the eigenvector method: the general path takes over.
+    a = float_array(R, 'R', (3, 3))
+    m = kernel_layout(a, (3, 3))
+    shape, batch = a.shape[:-2] + out_trailing, is_batch(a, (3, 3))
+    out = np.empty(shape)
+    flat_out = kernel_layout(out, out_trailing)
     if not batch:
         if convention is None:
             bad = fused_kernel(m, flat_out, tolerance)
@@ -425,7 +436,7 @@ def _flat_quaternions(a, m, tolerance):
 
 def quaternion_from_matrix(R: ArrayLike, *,
                            orthonormal_tolerance: float = DEFAULT_ORTHONORMAL_TOLERANCE,
-                           non_orthonormal: str = 'project') -> FloatArray:
+                           non_orthonormal: str = DEFAULT_NON_ORTHONORMAL) -> FloatArray:
     """
     Quaternions of rotation matrices.
 

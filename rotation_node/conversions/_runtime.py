@@ -132,6 +132,28 @@ def _compile(dispatcher: Any) -> None:
             dispatcher.kernel_compiled = True
 
 
+def typed_first_call(dispatcher: Any) -> Callable[..., Any]:
+    """
+    Return the first ``call_unchecked`` of a kernel: a typed call that installs the unchecked one.
+
+    ``call_unchecked`` is the kernel's compiled code, called without numba's
+    typing of the arguments (~100 ns less per call): the caller guarantees
+    that every array argument has exactly the declared type (float64,
+    C-contiguous, aligned, writable, the declared number of dimensions), as
+    :func:`is_single_sample` checks; a wrong number of dimensions would be
+    read out of bounds. Its first call goes through numba's typing instead,
+    so that a call site that breaks the contract raises ``TypeError``; then
+    the compiled code replaces it.
+    """
+    def call(*args):
+        status_ = dispatcher(*args)
+        dispatcher.call_unchecked = (
+            dispatcher.overloads[dispatcher.kernel_signature.args].entry_point)
+        return status_
+
+    return call
+
+
 def kernel(*argument_types: Any,
            returns: Any = STATUS) -> Callable[[Callable[..., Any]], Any]:
     """
@@ -151,7 +173,9 @@ def kernel(*argument_types: Any,
         A decorator returning the numba dispatcher. Its first call compiles
         the declared signature (or loads it from the disk cache) and then
         disables compilation, so a call with other types raises ``TypeError``
-        instead of compiling again.
+        instead of compiling again. Its attribute ``call_unchecked`` runs the
+        same compiled code without numba's typing of the arguments (see
+        :func:`typed_first_call`), for the single-sample path of a call.
 
     """
     signature = (types.none if returns is None else returns)(*argument_types)
@@ -169,6 +193,7 @@ def kernel(*argument_types: Any,
             return dispatcher
 
         dispatcher._compile_for_args = compile_on_first_call
+        dispatcher.call_unchecked = typed_first_call(dispatcher)
         KERNELS.append(dispatcher)
         return dispatcher
 
@@ -347,12 +372,14 @@ def _run(kernel_: Any, inputs: Sequence[FloatArray], trailings: Sequence[tuple[i
 
 # ------------------------------------------------------------ calls
 
-# A single-sample call costs ~1 us in all, and numba's dispatch is a third of
-# it, so the single-sample path passes numba what it types fastest: the
-# caller's array as it is (its natural shape is the canonical layout), a
-# scalar result computed into shape (1,), a scalar argument passed as a float
-# (a 0-d array costs ~170 ns more, a numpy scalar ~60 ns), and the names it
-# uses are module globals (``np.empty`` looked up through the module costs ~30 ns).
+# A single-sample call costs ~1 us in all, and numba's dispatch (typing every
+# argument, choosing the compiled signature) would be ~100 ns of it. The
+# single-sample path makes the checks that typing would make itself, in
+# :func:`is_single_sample`, and calls the compiled code directly
+# (``kernel_.call_unchecked``): the caller's array as it is (its natural shape
+# is the canonical layout), a scalar result computed into shape (1,), a scalar
+# argument as a float. The names it uses are module globals (``np.empty``
+# looked up through the module costs ~30 ns).
 _FLOAT64 = np.dtype(np.float64)
 _NDARRAY = np.ndarray
 _ONE = (1,)
@@ -361,7 +388,13 @@ new_array = np.empty
 
 
 def is_single_sample(x: object, trailing: tuple[int, ...]) -> TypeGuard[FloatArray]:
-    """Whether ``x`` is one sample that needs no conversion: the fast path of a call."""
+    """
+    Whether ``x`` is one sample that needs no conversion: the fast path of a call.
+
+    When it is, ``x`` has exactly the type of a kernel's array argument of
+    ``max(1, len(trailing))`` dimensions, and may be passed to the kernel's
+    ``call_unchecked``.
+    """
     # ``is``: every native float64 array shares numpy's one float64 dtype; an
     # equal but distinct dtype object just takes the general path. ``carray``:
     # C-contiguous, aligned and writable, as kernels take their arguments.
@@ -381,14 +414,15 @@ def call_unary(kernel_: Any, x: ArrayLike, name: str, trailing: tuple[int, ...],
     argument: unpacking ``*args`` costs ~50 ns of a ~1 us single-sample call).
     Large inputs go to ``batch_kernel`` (same signature) where one is given,
     and large batches are split across threads. A single float64 sample skips
-    straight to the kernel, which checks its values.
+    straight to the compiled code (``kernel_.call_unchecked``), which checks
+    its values.
     """
     if is_single_sample(x, trailing):
         out = new_array(out_trailing or _ONE)
         if convention is None:
-            bad = kernel_(x, out)
+            bad = kernel_.call_unchecked(x, out)
         else:
-            bad = kernel_(x, out, convention)
+            bad = kernel_.call_unchecked(x, out, convention)
         if bad < 0:
             return out if out_trailing else out[0]
         a = x
@@ -428,10 +462,11 @@ def call_binary(kernel_: Any, x: ArrayLike, y: ArrayLike, names: tuple[str, str]
             type(y) is float if scalar_y else is_single_sample(y, trailings[1])):
         a, b = x, y
         out = new_array(out_trailing or _ONE)
+        # One tuple: cheaper than f(a, b, out, *args).
         if scalar_y:
-            bad = kernel_(*((a, _NO_SAMPLES, out, b) + args))
+            bad = kernel_.call_unchecked(*((a, _NO_SAMPLES, out, b) + args))
         else:
-            bad = kernel_(*((a, b, out) + args))   # one tuple: cheaper than f(a, b, out, *args)
+            bad = kernel_.call_unchecked(*((a, b, out) + args))
         if bad < 0:
             return out if out_trailing else out[0]
     else:
