@@ -32,6 +32,7 @@ class RosProcess:
         self.args = [str(a) for a in args]
         environment = dict(os.environ)
         environment['PYTHONUNBUFFERED'] = '1'
+        environment['PYTHONFAULTHANDLER'] = '1'   # a crash prints where each thread was
         if env:
             environment.update(env)
         self.proc = subprocess.Popen(

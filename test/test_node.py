@@ -489,7 +489,7 @@ def test_namespace_and_input_remapping(namespaced, rotation):
 
 
 def test_ctrl_c_exits_cleanly(namespaced):
-    assert namespaced.stop() == 0
+    assert namespaced.stop() == 0, namespaced.process.output
     assert 'Traceback' not in namespaced.process.output
 
 
