@@ -484,6 +484,20 @@ class RotationNode(Node):
             with event:
                 state.lost_events += event.take_event().total_count_change
 
+    def destroy_node(self) -> None:
+        """
+        Destroy the node: the message-lost event handles first, then what rclpy destroys.
+
+        Each handle belongs to an input subscription, which ``Node.destroy_node``
+        destroys; a handle left alive would be finalised later (at interpreter
+        exit, in any order) against a subscription and middleware already gone.
+        """
+        for event in self._message_lost.values():
+            if event is not None:
+                event.destroy_when_not_in_use()
+        self._message_lost.clear()
+        super().destroy_node()
+
     def _destroy_input_subscription(self, state: _TopicInput,
                                     subscription: Subscription) -> None:
         self._count_message_lost(state, subscription)

@@ -493,6 +493,31 @@ def test_ctrl_c_exits_cleanly(namespaced):
     assert 'Traceback' not in namespaced.process.output
 
 
+def test_destroying_the_node_destroys_its_message_lost_event_handles_first():
+    """No event handle outlives the subscription it belongs to."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.impl.implementation_singleton import rclpy_implementation
+    from rotation_node.node import RotationNode
+    context = Context()
+    rclpy.init(context=context)
+    try:
+        node = RotationNode(context=context)
+        events = [e for e in node._message_lost.values() if e is not None]
+        assert events, 'Fast DDS reports message-lost events'
+        for event in events:
+            with event:
+                pass
+        node.destroy_node()
+        assert not node._message_lost
+        for event in events:
+            with pytest.raises(rclpy_implementation.InvalidHandle):
+                with event:
+                    pass
+    finally:
+        rclpy.try_shutdown(context=context)
+
+
 def test_issue_warnings_are_throttled_per_reason():
     """A flood of one problem logs it once per period and cannot hide another problem."""
     import rclpy
