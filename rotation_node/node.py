@@ -221,6 +221,9 @@ class RotationNode(Node):
         # Before the node exists: its parameter services answer as soon as they appear,
         # not after the conversions have been compiled or loaded (seconds on a first run).
         warm_up_conversions()
+        # input subscription -> its message-lost event (None: the rmw has none); first,
+        # as destroy_node reads it, also when a parameters file is refused below
+        self._message_lost: Dict[Subscription, Any] = {}
         super().__init__(NODE_NAME, **kwargs)
         try:
             for path in parameters_files:   # as rotation_bag convert reads them
@@ -241,8 +244,6 @@ class RotationNode(Node):
         self._encoders: Dict[str, Callable[[Any, Sequence[float]], bytes]] = {}
         self._replacing: Dict[str, _PublisherReplacement] = {}   # by output name
         self._handoff_timer: Optional[Timer] = None
-        # input subscription -> its message-lost event (None: the rmw has none)
-        self._message_lost: Dict[Subscription, Any] = {}
         self._next_issue_log: Dict[str, float] = {}   # reason -> time of its next warning
         self._reported = (0, 0, 0)   # dropped, skipped and lost totals at the last diagnostics
         # Registered before declaring, so the initial values pass the same checks.
