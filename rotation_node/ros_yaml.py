@@ -168,6 +168,7 @@ _ROS_SCALAR_TAG = 'tag:rotation_node,2024:ros-scalar'
 # only (yaml.SafeLoader is unchanged).
 _RosLoader.yaml_implicit_resolvers = {
     key: [(_ROS_SCALAR_TAG, re.compile(r'.*', re.DOTALL))] for key in (None, '')}
+# The tag is only ever resolved for scalars, whose node is a ScalarNode; mypy sees a Node.
 _RosLoader.add_constructor(
     _ROS_SCALAR_TAG,
     lambda loader, node: ros_scalar(loader.construct_scalar(node)))  # type: ignore[arg-type]

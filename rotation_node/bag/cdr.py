@@ -99,6 +99,7 @@ _STRING_LENGTH = _Leaf('<string length>', 'I', 0)
 @functools.lru_cache(maxsize=None)
 def _view_class(msg_class):
     """Return the named tuple class that views messages of ``msg_class``."""
+    # mypy cannot type a namedtuple whose fields are only known at run time.
     view = collections.namedtuple(  # type: ignore[misc]
         msg_class.__name__, msg_class.get_fields_and_field_types())
     view.__doc__ = (f'Read-only view of a decoded {msg_class.__module__.split(".")[0]}/msg/'

@@ -96,6 +96,15 @@ def _sqlite_tables(path: str) -> set:
         raise BagError(f'{path}: damaged sqlite3 database: {error}') from None
 
 
+def _with_rosbag2_extension(connections, path):
+    """Give ``(connection, its rosbag2 extension)``: what sqlite3 storage records per topic."""
+    from rosbags.interfaces import ConnectionExtRosbag2
+    for connection in connections:
+        if not isinstance(connection.ext, ConnectionExtRosbag2):   # never from sqlite3 storage
+            raise BagError(f'{path}: topic {connection.topic} has no rosbag2 metadata')
+        yield connection, connection.ext
+
+
 def _sqlite3_file(path):
     """
     Open one rosbag2 sqlite3 storage file with ``rosbags``.
@@ -121,14 +130,10 @@ def _sqlite3_file(path):
         return RosbagsInput(path, reader, (ReaderError, ZstdError), [
             (connection, TopicMetadata(
                 name=connection.topic, type_name=connection.msgtype,
-                # sqlite3 storage: every connection has rosbag2's extension.
-                offered_qos_profiles=rosbags_qos_yaml(
-                    connection.ext.offered_qos_profiles),  # type: ignore[union-attr]
-                type_hash=connection.digest,
-                serialization_format=(
-                    connection.ext.serialization_format),  # type: ignore[union-attr]
+                offered_qos_profiles=rosbags_qos_yaml(ext.offered_qos_profiles),
+                type_hash=connection.digest, serialization_format=ext.serialization_format,
                 **_definition(connection.msgtype, connection.msgdef)), decompressed_message)
-            for connection in reader.connections])
+            for connection, ext in _with_rosbag2_extension(reader.connections, path)])
     except BaseException:
         reader.close()
         raise
