@@ -36,7 +36,7 @@ import numpy as np
 from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.serialization import deserialize_message
 from rotation_node.bag.compression import decompressed_message, ZSTD_MAGIC
-from rotation_node.bag.mcap_writer import MESSAGE_HEADER
+from rotation_node.bag.mcap_writer import MESSAGE_FIELDS, MESSAGE_HEADER
 from rotation_node.bag.message_types import message_class
 from rotation_node.errors import BagError
 import zstandard
@@ -57,7 +57,6 @@ _FORMAT_ERRORS = (McapError, CRCValidationError, struct.error, UnicodeDecodeErro
                   zstandard.ZstdError, RuntimeError)
 _LZ4_ERROR_PREFIX = 'LZ4F_'
 _RECORD_PREFIX = struct.Struct('<BQ')   # opcode, length of what follows
-_MESSAGE_FIELDS = MESSAGE_HEADER.itemsize - _RECORD_PREFIX.size   # channel ... publish time
 _HEADER_BYTES = np.arange(MESSAGE_HEADER.itemsize)
 _ZSTD_MAGIC = np.frombuffer(ZSTD_MAGIC, np.uint8)
 
@@ -253,7 +252,7 @@ def chunk_message_records(chunk: Chunk) -> tuple:
             raise McapError(f'record at {position} of a chunk of {end} bytes is cut short')
         opcode, length = unpack(data, position)
         if opcode == Opcode.MESSAGE:
-            if length < _MESSAGE_FIELDS:
+            if length < MESSAGE_FIELDS:
                 raise McapError(f'message record at {position} of a chunk is {length} bytes')
             add(position)
         position += _RECORD_PREFIX.size + length
@@ -516,7 +515,7 @@ class BagReader:
             headers, starts, channel_ids = headers[kept], starts[kept], channel_ids[kept]
         order = np.argsort(headers['log_time'], kind='stable')   # ties in file order
         headers, starts = headers[order], starts[order]
-        ends = starts + (headers['length'].astype(np.int64) - _MESSAGE_FIELDS)
+        ends = starts + (headers['length'].astype(np.int64) - MESSAGE_FIELDS)
         channel_ids = channel_ids[order].tolist()
         channels = self._summary.channels
         topics = {channel_id: channel.topic for channel_id, channel in channels.items()}

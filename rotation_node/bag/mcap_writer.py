@@ -43,13 +43,15 @@ MESSAGE_HEADER = np.dtype([('opcode', 'u1'), ('length', '<u8'), ('channel_id', '
                            ('sequence', '<u4'), ('log_time', '<u8'), ('publish_time', '<u8')])
 #: Bytes of a Message record besides its data.
 MESSAGE_RECORD_OVERHEAD = MESSAGE_HEADER.itemsize
+#: What a Message record's length counts besides the data: channel id, sequence, log and
+#: publish time.
+MESSAGE_FIELDS = 2 + 4 + 8 + 8
 #: Bytes of a MessageIndex record besides its 16-byte entries (opcode, length, channel, size).
 MESSAGE_INDEX_OVERHEAD = 1 + 8 + 2 + 4
 #: Bytes per message in a MessageIndex record (log time, offset).
 MESSAGE_INDEX_ENTRY = 16
 
 _MESSAGE_INDEX_HEADER = struct.Struct('<BQHI')
-_MESSAGE_FIELDS = 2 + 4 + 8 + 8      # the record's length counts these and the data
 _FOOTER_PREFIX = struct.Struct('<BQQQ')
 
 
@@ -156,7 +158,7 @@ class ChunkWriter:
         lengths = np.fromiter(map(len, datas), np.int64, count)
         headers = np.empty(count, MESSAGE_HEADER)
         headers['opcode'] = Opcode.MESSAGE
-        headers['length'] = lengths + _MESSAGE_FIELDS
+        headers['length'] = lengths + MESSAGE_FIELDS
         channels = np.asarray(channel_ids, np.uint16)
         headers['channel_id'] = channels
         headers['sequence'] = 0

@@ -101,18 +101,19 @@ def _timestamp(value, name):
     return value
 
 
-def _timestamps(values):
+def _all_timestamps(values):
     """
-    Return ``values`` as a uint64 array if all are integers in [0, 2**64), else None.
+    Return whether every value is an integer in [0, 2**64), as :func:`_timestamp` checks.
 
-    The check of :func:`_timestamp` for a whole block: Python (or numpy)
-    integers only, no bools, floats or strings.
+    The check for a whole block, as one numpy array: integer values (Python or
+    numpy integers; bools among integers, as ``operator.index`` takes them)
+    that fit uint64. Anything else (floats, strings, an integer out of range,
+    which makes the array's dtype object) answers False, and each value is
+    then checked by :func:`_timestamp`, which names the bad one.
     """
     array = np.array(values)
     kind = array.dtype.kind
-    if kind == 'u' or (kind == 'i' and (not array.size or array.min() >= 0)):
-        return array
-    return None
+    return kind == 'u' or (kind == 'i' and (not array.size or bool(array.min() >= 0)))
 
 
 def compression_type(name: str) -> CompressionType:
@@ -420,7 +421,7 @@ class BagWriter:
                 break
             channel_ids[topic] = channel.id
         if (not known or self._failed or self._chunk_period_s is not None
-                or _timestamps(log_times) is None or _timestamps(publish_times) is None):
+                or not _all_timestamps(log_times) or not _all_timestamps(publish_times)):
             for message in messages:
                 self.write_serialized(*message)
             return
