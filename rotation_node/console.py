@@ -1,15 +1,18 @@
 """
 Entry points of the console scripts: a Ctrl-C while a program loads is one line too.
 
-Loading numpy, numba and rclpy takes a second or more; a Ctrl-C (or SIGTERM)
-in that time would end the program with a traceback from deep inside an
-import. Each script starts here instead, with nothing heavy imported: the
-program's module is imported under a handler that turns the interrupt into
-one line and exit status 130 (143 for SIGTERM), then its ``main`` runs.
+Loading numpy, numba and rclpy takes a second or more. Each script starts
+here instead, with nothing heavy imported: the program's module is imported
+while SIGINT and SIGTERM only set a flag (:class:`StopSignal`; an exception
+raised from a handler in the middle of an import could be swallowed or leave
+a traceback). If one came, the program says so on one line and exits with
+130 (143 for SIGTERM) instead of running its ``main``.
 """
 import importlib
 import signal
 import sys
+
+from rotation_node.bag.stop_signal import StopSignal
 
 _PROGRAMS = {
     'rotation_node': 'rotation_node.node',
@@ -18,26 +21,13 @@ _PROGRAMS = {
 }
 
 
-class _Terminated(Exception):
-    pass
-
-
-def _terminated(signal_number, frame):
-    raise _Terminated()
-
-
 def _run(program):
-    previous = signal.signal(signal.SIGTERM, _terminated)
-    try:
+    with StopSignal() as stop:
         main = importlib.import_module(_PROGRAMS[program]).main
-    except KeyboardInterrupt:
-        print(f'{program}: interrupted while starting (SIGINT)', file=sys.stderr)
-        return 128 + signal.SIGINT
-    except _Terminated:
-        print(f'{program}: interrupted while starting (SIGTERM)', file=sys.stderr)
-        return 128 + signal.SIGTERM
-    finally:
-        signal.signal(signal.SIGTERM, previous)
+    if stop.signal_number is not None:
+        name = signal.Signals(stop.signal_number).name
+        print(f'{program}: interrupted while starting ({name})', file=sys.stderr)
+        return 128 + stop.signal_number
     return main()
 
 

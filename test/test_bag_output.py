@@ -4,14 +4,16 @@ Tests of rotation_node.bag.output: exclusive creation, atomic renames, what a cr
 Fault injection on real ``rotation_bag convert`` processes: SIGKILL at a
 seeded random point of the output (the ``.part`` then holds a byte prefix of
 the complete bag, whose messages a linear scan recovers in order), SIGTERM (no
-file left, one line, status 143; for many bags with --jobs, the workers stop
-too), two converts of the same output at once
-(exactly one fails, with one line), and a full disk (one line, nothing left).
+file left, one line, status 143, or, if it came after the last message, the
+complete bag; for many bags with --jobs, the workers stop too), two converts
+of the same output at once (exactly one fails, with one line), and a full disk
+(one line, nothing left).
 Also: the output's chunk compression follows the input's unless told.
 """
 import os
 import signal
 import subprocess
+import time
 
 from fault_helpers import FULL_DISKS, linear_scan, small_disk, wait_for
 from mcap.reader import make_reader
@@ -116,6 +118,34 @@ def test_sigterm_removes_the_part_and_says_so_on_one_line(workspace, tmp_path):
     assert os.listdir(tmp_path) == []
 
 
+def test_sigterm_at_any_moment_leaves_nothing_or_the_complete_bag(workspace, tmp_path):
+    """SIGTERM spread over a whole run: 143, one line and nothing; or the complete output."""
+    reference = linear_scan(workspace / 'reference' / 'out.mcap')
+    started = time.monotonic()
+    process = _convert(workspace, tmp_path / 'timed')
+    process.communicate(timeout=90)
+    duration = time.monotonic() - started
+    outcomes = set()
+    for k in range(6):
+        output = tmp_path / f'out{k}'
+        process = _convert(workspace, output)
+        time.sleep(duration * (k + 0.5) / 6)
+        process.send_signal(signal.SIGTERM)
+        _, stderr = process.communicate(timeout=60)
+        left = sorted(os.listdir(tmp_path))
+        assert f'out{k}.part' not in left, left
+        if process.returncode == 143:
+            assert stderr.splitlines() in (['rotation_bag convert: interrupted (SIGTERM)'],
+                                           ['rotation_bag: interrupted while starting (SIGTERM)'])
+        else:   # -15: before Python installed any handler, or while it exits
+            assert process.returncode in (0, -signal.SIGTERM), stderr
+        if f'out{k}' in left:
+            assert process.returncode != 143
+            assert linear_scan(output / f'out{k}_0.mcap') == reference
+        outcomes.add(process.returncode)
+    assert 143 in outcomes, 'no run was interrupted'
+
+
 def test_sigterm_stops_a_many_bag_convert_and_its_workers(workspace, tmp_path):
     """SIGTERM to ``convert A B C OUTDIR --jobs 2``: the workers stop too, no .part is left."""
     inputs = []
@@ -130,7 +160,8 @@ def test_sigterm_stops_a_many_bag_convert_and_its_workers(workspace, tmp_path):
     stderr = _sigterm_once_written(process, many / 'a.part' / 'a_0.mcap')
     assert process.returncode == 143, stderr
     *done, last = stderr.splitlines()
-    assert last == 'rotation_bag convert: interrupted (SIGTERM)'
+    assert last == 'rotation_bag convert: interrupted (SIGTERM)', stderr
+    assert all(' -> ' in line for line in done), stderr
     # A bag that finished before the signal is complete and has its line; nothing else is left.
     finished = sorted(os.listdir(many))
     assert [line.split(' -> ')[1].split(':')[0] for line in done] == [

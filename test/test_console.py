@@ -7,28 +7,31 @@ import pytest
 from rotation_node import console
 
 
+class _Program:
+    ran = False
+
+    @classmethod
+    def main(cls):
+        cls.ran = True
+        return 0
+
+
 @pytest.mark.parametrize('program', sorted(console._PROGRAMS))
-def test_ctrl_c_while_loading_is_one_line_and_130(monkeypatch, capsys, program):
+@pytest.mark.parametrize('number', [signal.SIGINT, signal.SIGTERM], ids=lambda n: n.name)
+def test_a_signal_while_loading_is_one_line_and_main_does_not_run(
+        monkeypatch, capsys, program, number):
     def interrupted_import(name):
-        raise KeyboardInterrupt()
+        signal.raise_signal(number)   # the handler runs now, in this thread, and only notes it
+        return _Program
 
     monkeypatch.setattr(importlib, 'import_module', interrupted_import)
-    assert getattr(console, program)() == 130
+    before = {n: signal.getsignal(n) for n in (signal.SIGINT, signal.SIGTERM)}
+    _Program.ran = False
+    assert getattr(console, program)() == 128 + number
+    assert not _Program.ran
     assert capsys.readouterr().err.splitlines() == [
-        f'{program}: interrupted while starting (SIGINT)']
-
-
-def test_sigterm_while_loading_is_one_line_and_143(monkeypatch, capsys):
-    def terminated_import(name):
-        signal.raise_signal(signal.SIGTERM)   # the handler raises in this thread
-        raise AssertionError('SIGTERM did not interrupt the import')
-
-    monkeypatch.setattr(importlib, 'import_module', terminated_import)
-    before = signal.getsignal(signal.SIGTERM)
-    assert console.rotation_bag() == 143
-    assert capsys.readouterr().err.splitlines() == [
-        'rotation_bag: interrupted while starting (SIGTERM)']
-    assert signal.getsignal(signal.SIGTERM) is before
+        f'{program}: interrupted while starting ({number.name})']
+    assert {n: signal.getsignal(n) for n in before} == before
 
 
 def test_each_program_runs_its_main(monkeypatch):

@@ -18,15 +18,14 @@ import os
 import signal
 from typing import Any, Callable, Dict, List, Optional, Sequence, TYPE_CHECKING
 
-from rotation_node.bag.stop_signal import Terminated
+from rotation_node.bag.stop_signal import raise_if_stopped, stop_at_checkpoints
 from rotation_node.errors import BagError, RotationNodeError
 
 if TYPE_CHECKING:
     from rotation_node.parameters import NodeParameters
 
 _STORAGE_SUFFIXES = ('.zstd', '.mcap', '.db3', '.bag')
-_converting = False   # in a worker process: whether it is converting a bag now
-_stopped = False      # in a worker process: whether SIGTERM came (no further bag is started)
+_POLL_SECONDS = 0.05   # how often the parent of the workers looks for a stop signal
 
 
 @dataclasses.dataclass(frozen=True)
@@ -207,18 +206,30 @@ def convert_bags(input_paths: Sequence[str], output_directory: str, params: Node
     with concurrent.futures.ProcessPoolExecutor(max_workers=min(jobs, len(input_paths)),
                                                 mp_context=context,
                                                 initializer=_init_worker) as pool:
-        futures = [pool.submit(_convert_bag_in_worker, input_path, output_path, params,
+        pending = {pool.submit(_convert_bag_in_worker, input_path, output_path, params,
                                topics=topics, overwrite=overwrite, strict=strict,
                                compression=compression)
-                   for input_path, output_path in zip(input_paths, outputs)]
-        try:
-            for future in concurrent.futures.as_completed(futures):
+                   for input_path, output_path in zip(input_paths, outputs)}
+
+        def report(futures):
+            for future in futures:
                 results.append(future.result())
                 on_result(results[-1])
-        except BaseException:   # Ctrl-C, SIGTERM: stop the workers too
+
+        try:
+            while pending:
+                done, pending = concurrent.futures.wait(
+                    pending, timeout=_POLL_SECONDS,
+                    return_when=concurrent.futures.FIRST_COMPLETED)
+                report(done)
+                raise_if_stopped()
+        except BaseException:   # Ctrl-C, SIGTERM, an error: stop the workers too
             for process in list((getattr(pool, '_processes', None) or {}).values()):
                 process.terminate()
             pool.shutdown(wait=True, cancel_futures=True)
+            # A bag a worker completed before it saw SIGTERM is written: it gets its line.
+            report(future for future in pending if future.done() and not future.cancelled()
+                   and future.exception() is None)
             raise
     return results
 
@@ -228,32 +239,17 @@ def _init_worker():
     Set a worker process's signals: Ctrl-C is the parent's, SIGTERM stops the worker.
 
     The parent, interrupted, sends SIGTERM to its workers: a conversion then
-    stops as ``rotation_bag convert`` does on SIGTERM (its unfinished output
-    removed), and no queued bag is started; an idle worker exits at once.
+    stops at its next check, as ``rotation_bag convert`` does on SIGTERM (its
+    unfinished output removed), and no queued bag is started.
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, _stop_worker)
-
-
-def _stop_worker(signal_number, frame):
-    global _stopped
-    signal.signal(signal.SIGTERM, signal.SIG_IGN)   # the clean-up is not interrupted
-    _stopped = True
-    if _converting:
-        raise Terminated()
-    os._exit(128 + signal_number)
+    stop_at_checkpoints((signal.SIGTERM,))
 
 
 def _convert_bag_in_worker(*args, **kwargs):
     """:func:`convert_bag` in a worker process, stoppable by SIGTERM (see ``_init_worker``)."""
-    global _converting
-    if _stopped:   # a bag queued before the parent was interrupted
-        raise Terminated()
-    _converting = True
-    try:
-        return convert_bag(*args, **kwargs)
-    finally:
-        _converting = False
+    raise_if_stopped()   # a bag queued before the parent was interrupted is not started
+    return convert_bag(*args, **kwargs)
 
 
 def convert_bags_on_dask(client: Any, input_paths: Sequence[str], output_directory: str,

@@ -33,7 +33,7 @@ import sys
 from typing import List, Optional, Sequence
 
 from rclpy.utilities import remove_ros_args
-from rotation_node.bag.stop_signal import exit_status, interrupt_on_stop_signals, signal_name
+from rotation_node.bag.stop_signal import exit_status, signal_name, stop_at_checkpoints
 from rotation_node.errors import BagError, RotationNodeError
 
 PROG = 'rotation_bag'
@@ -212,8 +212,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run ``rotation_bag``; return the exit status."""
     argv = sys.argv if argv is None else [PROG, *argv]
     args = build_parser().parse_args(remove_ros_args(argv)[1:])
+    stop_at_checkpoints()
     try:
-        interrupt_on_stop_signals()
         args.run(args, argv)
     except (RotationNodeError, OSError) as error:
         _error(args, error)

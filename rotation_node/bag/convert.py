@@ -40,6 +40,7 @@ from rotation_node.bag.mcap_io import TopicMetadata
 from rotation_node.bag.progress import ProgressBar
 from rotation_node.bag.qos import qos_profile, qos_profiles_yaml
 from rotation_node.bag.reader import open_bag
+from rotation_node.bag.stop_signal import raise_if_stopped
 from rotation_node.bag.writer import BagWriter
 from rotation_node.errors import BagError
 
@@ -196,6 +197,7 @@ def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *
             for metadata in [*reader.topic_metadata.values(), *new_topics]:
                 writer.add_topic(metadata)
             for block in converted_blocks(reader.messages(), converters, routes):
+                raise_if_stopped()
                 written: List[tuple] = []
                 add = written.append
                 for record, converted in block:
@@ -207,4 +209,5 @@ def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *
                             add((topic, type_name, data, log_time_ns, publish_time_ns))
                 writer.write_serialized_block(written)
                 progress.update(len(block))
+            raise_if_stopped()   # the last chance before the output is committed
     return {topic: converter.pipeline.stats for topic, converter in converters.items()}

@@ -27,6 +27,7 @@ from rotation_node import conversions, messages
 from rotation_node.bag.atomic_file import AtomicFile
 from rotation_node.bag.convert import output_topic
 from rotation_node.bag.reader import open_bag
+from rotation_node.bag.stop_signal import raise_if_stopped
 from rotation_node.errors import BagError
 from rotation_node.parameters import NodeParameters
 from rotation_node.stamps import header_stamp_ns
@@ -178,6 +179,7 @@ def plot_topic(bag_path: StrPath, topic: str, output_path: StrPath, *,
         times_ns, panels, values = plot_series(reader, topic, params)
         _draw(reader.topic_name(topic), times_ns, values, panels).savefig(
             output.stream, format='png', dpi=110)
+        raise_if_stopped()   # the last chance before the PNG is committed
     return len(times_ns)
 
 
@@ -216,6 +218,7 @@ def plot_series(reader: Any, topic: str,
     panels, numbers = _panels(reader.topics, topic, params)
     times, rows = [], []
     for record in records:
+        raise_if_stopped()
         msg = record.message()
         times.append(_time_ns(record, msg))
         rows.append(numbers(msg))

@@ -1,52 +1,35 @@
 """
 What Ctrl-C (SIGINT) and SIGTERM do in the command-line tools.
 
-``record`` and ``play`` stop by a flag (:class:`StopSignal`), polled between
-messages: an exception raised from a signal handler could interrupt a write
-halfway through a record; a flag lets the current message finish and the bag
-be closed cleanly.
+A signal handler never raises. Python runs a handler between any two
+bytecodes of the main thread, also inside a ``__del__`` method, a generator
+being closed or a library's ``except`` clause: an exception raised there can
+be printed and swallowed ("Exception ignored in ..."), or turned into another
+error (numpy reports one as a ``TypeError`` from a comparison), and the
+program then goes on or dies with a traceback. So a signal only sets a flag,
+and the programs look at it where stopping is safe:
 
-``convert``, ``plot`` and ``rotation_scene`` stop by an exception
-(:func:`interrupt_on_stop_signals`): ``KeyboardInterrupt`` for SIGINT,
-:class:`Terminated` (a ``KeyboardInterrupt``) for SIGTERM, raised once; the
-second signal is ignored, so that removing the unfinished output cannot be
-interrupted. The tools exit with ``128 + signal number`` (130, 143).
+- ``record`` and ``play`` poll a :class:`StopSignal` between messages, close
+  the bag cleanly and exit 0;
+- ``convert``, ``plot`` and ``rotation_scene`` install one for the whole
+  process (:func:`stop_at_checkpoints`) and call :func:`raise_if_stopped`
+  between blocks of messages. It raises ``KeyboardInterrupt`` for SIGINT or
+  :class:`Terminated` (a ``KeyboardInterrupt``) for SIGTERM, the clean-up of
+  the unfinished output runs, and the tools exit with ``128 + signal number``
+  (130, 143). A signal that arrives after the last block is noted and
+  ignored: the output is complete, the program finishes and exits 0.
 """
 from __future__ import annotations
 
 import signal
 import threading
-from typing import Any, Dict, Optional
+from typing import Any, Dict, List, Optional
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 class Terminated(KeyboardInterrupt):
     """SIGTERM arrived; raised as Ctrl-C's ``KeyboardInterrupt`` is, so the same clean-up runs."""
-
-
-def _raise_once(signal_number, frame):
-    for number in STOP_SIGNALS:
-        signal.signal(number, signal.SIG_IGN)
-    if signal_number == signal.SIGTERM:
-        raise Terminated()
-    raise KeyboardInterrupt()
-
-
-def interrupt_on_stop_signals() -> None:
-    """Make the first SIGINT or SIGTERM raise ``KeyboardInterrupt`` or ``Terminated``."""
-    for number in STOP_SIGNALS:
-        signal.signal(number, _raise_once)
-
-
-def exit_status(interrupt: KeyboardInterrupt) -> int:
-    """Return the exit status after ``interrupt``: 143 for SIGTERM, 130 for Ctrl-C."""
-    return 128 + (signal.SIGTERM if isinstance(interrupt, Terminated) else signal.SIGINT)
-
-
-def signal_name(interrupt: KeyboardInterrupt) -> str:
-    """``'SIGTERM'`` or ``'SIGINT'``."""
-    return 'SIGTERM' if isinstance(interrupt, Terminated) else 'SIGINT'
 
 
 class StopSignal:
@@ -63,28 +46,75 @@ class StopSignal:
         Set once a stop signal arrived; ``event.wait(timeout)`` sleeps until
         then, so waits end at once on Ctrl-C.
     signal_number : int or None
-        The signal that arrived.
+        The first signal that arrived.
 
     """
 
-    def __init__(self) -> None:
+    def __init__(self, signals: tuple = STOP_SIGNALS) -> None:
         self.event = threading.Event()
         self.signal_number: Optional[int] = None
+        self._signals = signals
         self._previous: Dict[int, Any] = {}
 
     def _handle(self, signal_number, frame):
-        self.signal_number = signal_number
+        if self.signal_number is None:
+            self.signal_number = signal_number
         self.event.set()
 
     def is_set(self) -> bool:
         """Whether a stop signal arrived."""
         return self.event.is_set()
 
+    def interrupt(self) -> Optional[KeyboardInterrupt]:
+        """Return what the signal that arrived stands for (``Terminated`` for SIGTERM), or None."""
+        if self.signal_number is None:
+            return None
+        return Terminated() if self.signal_number == signal.SIGTERM else KeyboardInterrupt()
+
     def __enter__(self) -> StopSignal:
-        for number in STOP_SIGNALS:
+        for number in self._signals:
             self._previous[number] = signal.signal(number, self._handle)
+        _active.append(self)
         return self
 
     def __exit__(self, *exc: object) -> None:
+        _active.remove(self)
         for number, handler in self._previous.items():
             signal.signal(number, handler)
+
+
+_active: List[StopSignal] = []   # the StopSignals in force, the innermost last
+
+
+def stop_at_checkpoints(signals: tuple = STOP_SIGNALS) -> StopSignal:
+    """
+    Make ``signals`` set a flag for the rest of the process; return its :class:`StopSignal`.
+
+    For a program's main function: the work then stops where it calls
+    :func:`raise_if_stopped`, and a signal after the work is ignored.
+    """
+    return StopSignal(signals).__enter__()
+
+
+def raise_if_stopped() -> None:
+    """
+    Raise ``KeyboardInterrupt`` or :class:`Terminated` if a stop signal arrived; else nothing.
+
+    Call it where a long computation may stop: between blocks of messages,
+    before a commit. Without a :class:`StopSignal` in force (a library caller)
+    it does nothing, and Ctrl-C behaves as Python's default.
+    """
+    if _active:
+        interrupt = _active[-1].interrupt()
+        if interrupt is not None:
+            raise interrupt
+
+
+def exit_status(interrupt: KeyboardInterrupt) -> int:
+    """Return the exit status after ``interrupt``: 143 for SIGTERM, 130 for Ctrl-C."""
+    return 128 + (signal.SIGTERM if isinstance(interrupt, Terminated) else signal.SIGINT)
+
+
+def signal_name(interrupt: KeyboardInterrupt) -> str:
+    """``'SIGTERM'`` or ``'SIGINT'``."""
+    return 'SIGTERM' if isinstance(interrupt, Terminated) else 'SIGINT'

@@ -11,7 +11,7 @@ import argparse
 import sys
 from typing import Optional, Sequence
 
-from rotation_node.bag.stop_signal import exit_status, interrupt_on_stop_signals, signal_name
+from rotation_node.bag.stop_signal import exit_status, signal_name, stop_at_checkpoints
 from rotation_node.errors import RotationNodeError
 
 
@@ -45,8 +45,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run ``rotation_scene``; return the exit status."""
     args = build_parser().parse_args(argv)
+    stop_at_checkpoints()
     try:
-        interrupt_on_stop_signals()
         # Imported here: a Ctrl-C while numpy and rclpy load is then one line too.
         from rotation_node.bag.output import BagOutput
 

@@ -29,6 +29,7 @@ from typing import Iterator, Mapping, Optional, TYPE_CHECKING
 
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
 import numpy as np
+from rotation_node.bag.stop_signal import raise_if_stopped
 from rotation_node.bag.writer import BagWriter
 from rotation_node.stamps import NS_PER_S as _NS_PER_S
 from rotation_node.stamps import time_message as _time_message
@@ -291,6 +292,7 @@ def write_scene_bag(scene: Scene, path: StrPath, *, seed: int = 0, overwrite: bo
             _write_samples(writer, simulation)
             samples += len(simulation.time)
             published += int(simulation.sensor.published.sum())
+        raise_if_stopped()   # the last chance before the bag is committed
     return samples, published
 
 
@@ -300,6 +302,7 @@ def _write_samples(writer, simulation):
     frame_id = simulation.scene.frame_id
     topic = simulation.scene.topic
     for k, stamp_ns in enumerate(simulation.stamp_ns.tolist()):
+        raise_if_stopped()
         if sensor.published[k]:
             writer.write(topic, _imu_message(sensor, k, frame_id), stamp_ns)
         orientation = QuaternionStamped()
