@@ -419,6 +419,7 @@ class BagReader:
         self.topic_metadata: Dict[str, TopicMetadata] = {}
         self.message_counts: Dict[str, int] = {}
         self._type_names: Dict[int, str] = {}
+        self._channel_topics: Dict[int, str] = {}
         for channel in channels:
             metadata = self._topic_metadata(channel, schemas.get(channel.schema_id))
             known = self.topic_metadata.setdefault(channel.topic, metadata)
@@ -426,6 +427,7 @@ class BagReader:
                 raise BagError(f'topic {channel.topic} in {self.path} has two types: '
                                f'{known.type_name} and {metadata.type_name}')
             self._type_names[channel.id] = metadata.type_name
+            self._channel_topics[channel.id] = channel.topic
             self.message_counts[channel.topic] = (
                 self.message_counts.get(channel.topic, 0) + counts.get(channel.id, 0))
         self.topics = {topic: m.type_name for topic, m in self.topic_metadata.items()}
@@ -517,9 +519,7 @@ class BagReader:
         headers, starts = headers[order], starts[order]
         ends = starts + (headers['length'].astype(np.int64) - MESSAGE_FIELDS)
         channel_ids = channel_ids[order].tolist()
-        channels = self._summary.channels
-        topics = {channel_id: channel.topic for channel_id, channel in channels.items()}
-        messages = list(map(BagMessage, map(topics.__getitem__, channel_ids),
+        messages = list(map(BagMessage, map(self._channel_topics.__getitem__, channel_ids),
                             map(self._type_names.__getitem__, channel_ids),
                             map(data.__getitem__, map(slice, starts.tolist(), ends.tolist())),
                             headers['log_time'].tolist(), headers['publish_time'].tolist()))
@@ -528,7 +528,7 @@ class BagReader:
         first_bytes = np.frombuffer(data, np.uint8)[
             starts[long_enough, None] + np.arange(_ZSTD_MAGIC.size)]
         for index in long_enough[(first_bytes == _ZSTD_MAGIC).all(axis=1)].tolist():
-            if channels[channel_ids[index]].message_encoding == MESSAGE_ENCODING:
+            if self._summary.channels[channel_ids[index]].message_encoding == MESSAGE_ENCODING:
                 messages[index].data = decompressed_message(messages[index].data)
         return messages
 
