@@ -177,7 +177,8 @@ def convert_bags(input_paths: Sequence[str], output_directory: str, params: Node
     Returns
     -------
     list of BagResult
-        In the order the bags finished.
+        In the order the bags finished (those done within one poll, 50 ms,
+        in input order).
 
     Raises
     ------
@@ -206,30 +207,37 @@ def convert_bags(input_paths: Sequence[str], output_directory: str, params: Node
     with concurrent.futures.ProcessPoolExecutor(max_workers=min(jobs, len(input_paths)),
                                                 mp_context=context,
                                                 initializer=_init_worker) as pool:
-        pending = {pool.submit(_convert_bag_in_worker, input_path, output_path, params,
+        futures = [pool.submit(_convert_bag_in_worker, input_path, output_path, params,
                                topics=topics, overwrite=overwrite, strict=strict,
                                compression=compression)
-                   for input_path, output_path in zip(input_paths, outputs)}
+                   for input_path, output_path in zip(input_paths, outputs)]
+        reported = set()
 
-        def report(futures):
+        def report_completed():
+            """Report every bag completed since the last call, in input order."""
             for future in futures:
-                results.append(future.result())
-                on_result(results[-1])
+                if (future not in reported and future.done() and not future.cancelled()
+                        and future.exception() is None):
+                    reported.add(future)
+                    results.append(future.result())
+                    on_result(results[-1])
 
         try:
+            pending = set(futures)
             while pending:
                 done, pending = concurrent.futures.wait(
                     pending, timeout=_POLL_SECONDS,
                     return_when=concurrent.futures.FIRST_COMPLETED)
-                report(done)
+                for future in done:
+                    future.result()   # a worker's error (not a bad bag: that is a result)
+                report_completed()
                 raise_if_stopped()
         except BaseException:   # Ctrl-C, SIGTERM, an error: stop the workers too
             for process in list((getattr(pool, '_processes', None) or {}).values()):
                 process.terminate()
             pool.shutdown(wait=True, cancel_futures=True)
             # A bag a worker completed before it saw SIGTERM is written: it gets its line.
-            report(future for future in pending if future.done() and not future.cancelled()
-                   and future.exception() is None)
+            report_completed()
             raise
     return results
 
