@@ -21,7 +21,7 @@ import struct
 from typing import Union
 
 from rosbags.convert.converter import generate_message_converter, LATCH, STATIC_MSGTYPE_RENAMES
-from rosbags.highlevel import AnyReader, AnyReaderError
+from rosbags.highlevel import AnyReaderError
 from rosbags.rosbag1 import ReaderError
 from rosbags.rosbag1.reader import decompressors as ros1_decompressors
 from rosbags.serde import SerdeError
@@ -30,6 +30,7 @@ from rosbags.typesys.base import TypesysError
 from rotation_node.bag.mcap_io import TopicMetadata
 from rotation_node.bag.message_types import message_class
 from rotation_node.bag.qos import rosbags_qos_yaml
+from rotation_node.bag.ros1_chunks import ChunkedAnyReader
 from rotation_node.bag.rosbags_input import RosbagsInput
 from rotation_node.errors import BagError
 
@@ -69,7 +70,7 @@ def open_ros1_bag(path: Union[str, os.PathLike]) -> RosbagsInput:
 
     """
     path = str(path)
-    reader = AnyReader([Path(path)])
+    reader = ChunkedAnyReader(Path(path))
     try:
         reader.open()
     except _FORMAT_ERRORS as error:
