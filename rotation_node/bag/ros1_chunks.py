@@ -25,16 +25,19 @@ from collections import Counter
 from io import BytesIO
 import os
 from pathlib import Path
-from typing import Any, Collection, Dict, Iterator, List, Optional, Sequence, Tuple
+from typing import BinaryIO, Collection, Dict, Generator, List, Optional, Sequence, Tuple
 
 import numpy as np
 from rosbags.highlevel import AnyReader
+from rosbags.interfaces import Connection
 from rosbags.rosbag1 import ReaderError
 from rosbags.rosbag1.reader import ChunkInfo, Header, read_bytes, read_uint32, Reader, RecordType
 from rosbags.typesys import get_typestore, Stores
 
 #: One entry of an index data record (version 1): the message's time and its offset in the chunk.
 INDEX_ENTRY = np.dtype([('sec', '<u4'), ('nsec', '<u4'), ('offset', '<u4')])
+#: What ``messages`` yields: the connection, the time (ns) and the message's ROS 1 data.
+Message = Tuple[Connection, int, bytes]
 # What the chunk decompressors (bz2, lz4) raise for data they cannot decompress.
 _DECOMPRESSION_ERRORS = (OSError, ValueError, EOFError, RuntimeError)
 
@@ -81,7 +84,7 @@ class ChunkedReader(Reader):
     yields, in the same order.
     """
 
-    def open(self) -> None:
+    def open(self) -> None:  # noqa: A003  (rosbags names it so)
         """Open the bag and read its header, connections, chunk infos and chunk headers."""
         super().open()   # read_index_data below skips every index data record
         counts: Counter = Counter()
@@ -93,8 +96,8 @@ class ChunkedReader(Reader):
     def read_index_data(self, pos: int, indexes: Dict[int, list]) -> None:
         """Skip at open: a chunk's index data records are read when it is reached."""
 
-    def messages(self, connections: Collection[Any] = (), start: Optional[int] = None,
-                 stop: Optional[int] = None) -> Iterator[Tuple[Any, int, bytes]]:
+    def messages(self, connections: Collection[Connection] = (), start: Optional[int] = None,
+                 stop: Optional[int] = None) -> Generator[Message, None, None]:
         """
         Yield ``(connection, time_ns, data)`` in the order of rosbags' ``Reader.messages``.
 
@@ -168,37 +171,47 @@ class ChunkedReader(Reader):
         return index[np.lexsort((np.arange(len(index)), rank, index['time']))]
 
     def _chunk_index(self, i, ranks):
-        """Return ``(connection, entries)`` of the index data records of chunk ``i`` in ``ranks``."""
+        """Return ``(connection, entries)`` of chunk ``i``'s index data records in ``ranks``."""
         info = self.chunk_infos[i]
         chunk = self.chunks[info.pos]
-        self.bio.seek(chunk.datapos + chunk.datasize)
+        bio = self._file()
+        bio.seek(chunk.datapos + chunk.datasize)
         records = []
-        for _ in range(len(info.connection_counts)):
-            header = Header.read(self.bio, RecordType.IDXDATA)
-            version = header.get_uint32('ver')
-            if version != 1:
-                raise ReaderError(f'IDXDATA version {version} is not supported.')
-            connection, count = header.get_uint32('conn'), header.get_uint32('count')
-            size = read_uint32(self.bio)
-            if size != count * INDEX_ENTRY.itemsize or count != info.connection_counts.get(
-                    connection):
-                raise ReaderError(f'Index data of connection {connection} after the chunk at '
-                                  f'byte {info.pos} is damaged: {count} entries in {size} bytes, '
-                                  f'the chunk info counts '
-                                  f'{info.connection_counts.get(connection, 0)}.')
-            if connection in ranks:
-                entries = np.frombuffer(read_bytes(self.bio, size), INDEX_ENTRY)
-                records.append((connection, entries))
-            else:
-                self.bio.seek(size, os.SEEK_CUR)
+        try:
+            for _ in range(len(info.connection_counts)):
+                header = Header.read(bio, RecordType.IDXDATA)
+                version = header.get_uint32('ver')
+                if version != 1:
+                    raise ReaderError(f'IDXDATA version {version} is not supported.')
+                connection, count = header.get_uint32('conn'), header.get_uint32('count')
+                size = read_uint32(bio)
+                expected = info.connection_counts.get(connection, 0)
+                if size != count * INDEX_ENTRY.itemsize or count != expected:
+                    raise ReaderError(f'connection {connection}: {count} entries in {size} '
+                                      f'bytes, the chunk info counts {expected}.')
+                if connection in ranks:
+                    records.append((connection, np.frombuffer(read_bytes(bio, size),
+                                                              INDEX_ENTRY)))
+                else:
+                    bio.seek(size, os.SEEK_CUR)
+        except ReaderError as error:
+            raise ReaderError(f'The index data after the chunk at byte {info.pos} cannot be '
+                              f'read: {error}') from None
         return records
+
+    def _file(self) -> BinaryIO:
+        """Return the bag's file, open."""
+        if self.bio is None:
+            raise ReaderError('Reader is not open.')
+        return self.bio
 
     def _chunk_data(self, i):
         """Return the decompressed data of chunk ``i`` as a stream."""
         pos = self.chunk_infos[i].pos
         chunk = self.chunks[pos]
-        self.bio.seek(chunk.datapos)
-        data = read_bytes(self.bio, chunk.datasize)
+        bio = self._file()
+        bio.seek(chunk.datapos)
+        data = read_bytes(bio, chunk.datasize)
         try:
             return BytesIO(chunk.decompressor(data))
         except _DECOMPRESSION_ERRORS as error:
@@ -213,26 +226,34 @@ class ChunkedReader(Reader):
         if stop is not None:
             index = index[index['time'] < stop]
         connections = {c.id: c for c in self.connections}
-        streams = {}
+        streams: Dict[int, BytesIO] = {}
         for time, connection, i, offset in zip(*(index[name].tolist() for name in (
                 'time', 'connection', 'chunk', 'offset'))):
             stream = streams.get(i)
             if stream is None:
                 stream = streams[i] = self._chunk_data(i)
             stream.seek(offset)
-            while True:   # connection records may stand before the message data
-                header = Header.read(stream)
-                op = header.get_uint8('op')
-                if op != RecordType.CONNECTION:
-                    break
-                stream.seek(read_uint32(stream), os.SEEK_CUR)
-            if op != RecordType.MSGDATA:
-                raise ReaderError('Expected to find message data.')
-            data = read_bytes(stream, read_uint32(stream))
-            if header.get_uint32('conn') != connection or header.get_time('time') != time:
+            try:
+                header, data = _message_record(stream)
+                if header.get_uint32('conn') != connection or header.get_time('time') != time:
+                    raise ReaderError('it is not the message its index names.')
+            except ReaderError as error:
                 raise ReaderError(f'The message at offset {offset} of the chunk at byte '
-                                  f'{self.chunk_infos[i].pos} is not the one its index names.')
+                                  f'{self.chunk_infos[i].pos} cannot be read: {error}') from None
             yield connections[connection], time, data
+
+
+def _message_record(stream):
+    """Return the header and data of the message data record at the stream's position."""
+    while True:   # connection records may stand before the message data
+        header = Header.read(stream)
+        op = header.get_uint8('op')
+        if op != RecordType.CONNECTION:
+            break
+        stream.seek(read_uint32(stream), os.SEEK_CUR)
+    if op != RecordType.MSGDATA:
+        raise ReaderError('Expected to find message data.')
+    return header, read_bytes(stream, read_uint32(stream))
 
 
 class ChunkedAnyReader(AnyReader):
