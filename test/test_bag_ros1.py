@@ -157,6 +157,14 @@ def _damage_compressed_data(path):
     return data
 
 
+def _damage_chunk_info_time(path):
+    data, _, _ = _index_data_record(path)
+    field = data.rindex(b'start_time=') + len('start_time=')
+    sec, nsec = struct.unpack_from('<II', data, field)
+    data[field:field + 8] = struct.pack('<II', sec + 1, nsec)   # later than the first messages
+    return data
+
+
 def _truncate_chunk(path):
     data, _, chunk = _index_data_record(path)
     data[chunk.datapos - 4:chunk.datapos] = struct.pack('<I', chunk.datasize - 100)
@@ -168,6 +176,7 @@ DAMAGES = {
     'index version': (_damage_index_field('ver', 2), 'IDXDATA version 2 is not supported'),
     'index offset': (_damage_first_offset, 'The message at offset 5 of the chunk'),
     'compressed data': (_damage_compressed_data, 'cannot be decompressed'),
+    'chunk info time': (_damage_chunk_info_time, "outside the chunk info's time range"),
     'truncated chunk': (_truncate_chunk, 'index data after the chunk at byte'),
 }
 

@@ -6,11 +6,15 @@ own reader (which indexes every message when it opens the bag) is the oracle:
 the same messages, bytes and order, also where chunks overlap in time and
 where timestamps are equal across chunks.
 """
+from io import BytesIO
+import weakref
+
 import numpy as np
 import pytest
 from rosbags.rosbag1 import Reader, Writer
 from rosbags.rosbag1.reader import ChunkInfo
 from rosbags.typesys import get_typestore, Stores
+from rotation_node.bag import ros1_chunks
 from rotation_node.bag.ros1_chunks import ChunkedReader, overlapping_chunk_groups
 
 TOPICS = ('/a', '/b', '/c')
@@ -101,10 +105,28 @@ def test_equal_times_across_chunks_keep_rosbags_order(tmp_path, rng):
         assert len({m[1] for m in messages}) == 4
 
 
+class _ChunkStreams:
+    """The decompressed chunks the reader holds, counted through the streams that wrap them."""
+
+    def __init__(self, monkeypatch):
+        self.alive, self.created = weakref.WeakSet(), 0
+        streams = self
+
+        class Counted(BytesIO):
+            def __init__(self, data=b''):
+                super().__init__(data)
+                if data:
+                    streams.alive.add(self)
+                    streams.created += 1
+
+        monkeypatch.setattr(ros1_chunks, 'BytesIO', Counted)
+
+
 def test_only_one_chunk_group_is_indexed_at_a_time(tmp_path, rng, monkeypatch):
     """No per-message index at open; the largest index held is the largest chunk's."""
     rows = _string_rows(rng, 10**12 + np.arange(3000) * 1000)
     path = _write_bag(tmp_path / 'long.bag', rows, chunk_bytes=1500)
+    streams = _ChunkStreams(monkeypatch)
     sizes = []
     group_index = ChunkedReader.group_index
 
@@ -122,7 +144,29 @@ def test_only_one_chunk_group_is_indexed_at_a_time(tmp_path, rng, monkeypatch):
         for _ in reader.messages():
             read += 1
             assert reader.indexes == {} and sum(sizes) - sizes[-1] < read <= sum(sizes)
-    assert sizes == chunk_sizes
+            assert len(streams.alive) <= 1
+    assert sizes == chunk_sizes and streams.created == len(chunk_sizes)
+
+
+@pytest.mark.parametrize('bytes_held', [ros1_chunks.CHUNK_BYTES_HELD, 3000, 1])
+def test_overlapping_chunks_are_held_within_the_bound(tmp_path, rng, monkeypatch, bytes_held):
+    """Every chunk overlaps: at most CHUNK_BYTES_HELD (and the one read) held, same messages."""
+    path = _write_bag(tmp_path / 'scrambled.bag',
+                      _string_rows(rng, rng.integers(0, 10**6, 1000)), chunk_bytes=1000)
+    monkeypatch.setattr(ros1_chunks, 'CHUNK_BYTES_HELD', bytes_held)
+    streams = _ChunkStreams(monkeypatch)
+    with ChunkedReader(path) as reader:
+        chunks = len(reader.chunk_infos)
+        assert overlapping_chunk_groups(reader.chunk_infos) == [list(range(chunks))]
+        most = 0
+        for _ in reader.messages():
+            most = max(most, len(streams.alive))
+            assert sum(len(s.getvalue()) for s in streams.alive) <= bytes_held + 2000
+    if bytes_held > 10**6:
+        assert (most, streams.created) == (chunks, chunks)   # all held, each decompressed once
+    else:
+        assert most <= bytes_held // 1000 + 1 and streams.created > chunks
+    _assert_read_as_rosbags_reads(path)
 
 
 def test_overlapping_chunk_groups_merge_time_ranges():

@@ -1,9 +1,10 @@
 """
 ROS 1 bags (format version 2.0) read as ROS 2 messages.
 
-The ``rosbags`` package reads the bag (``AnyReader``, every chunk
-compression of ROS 1: none, bz2, lz4) and builds the bag's message types from
-the definitions stored in it; each message is then converted, as
+The ``rosbags`` package reads the bag (every chunk compression of ROS 1:
+none, bz2, lz4), one chunk at a time (:mod:`rotation_node.bag.ros1_chunks`),
+and builds the bag's message types from the definitions stored in it
+(``AnyReader``); each message is then converted, as
 ``rosbags-convert`` converts a ROS 1 bag to ROS 2, to the ROS 2 type of the
 same name (``sensor_msgs/Imu`` -> ``sensor_msgs/msg/Imu``, ``tf/tfMessage``
 -> ``tf2_msgs/msg/TFMessage``) and serialized as CDR: ``std_msgs/Header``

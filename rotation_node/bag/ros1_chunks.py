@@ -21,7 +21,7 @@ in the ``connections`` asked for; then in the order rosbags indexes them
 damaged bag raises :class:`rosbags.rosbag1.ReaderError` when the damage is
 reached.
 """
-from collections import Counter
+from collections import Counter, OrderedDict
 from io import BytesIO
 import os
 from pathlib import Path
@@ -38,6 +38,9 @@ from rosbags.typesys import get_typestore, Stores
 INDEX_ENTRY = np.dtype([('sec', '<u4'), ('nsec', '<u4'), ('offset', '<u4')])
 #: What ``messages`` yields: the connection, the time (ns) and the message's ROS 1 data.
 Message = Tuple[Connection, int, bytes]
+#: At most this many bytes of decompressed chunks are held while the messages of overlapping
+#: chunks are read (besides the chunk being read); a chunk let go is decompressed again if needed.
+CHUNK_BYTES_HELD = 64 * 2**20
 # What the chunk decompressors (bz2, lz4) raise for data they cannot decompress.
 _DECOMPRESSION_ERRORS = (OSError, ValueError, EOFError, RuntimeError)
 
@@ -148,22 +151,23 @@ class ChunkedReader(Reader):
         Raises
         ------
         rosbags.rosbag1.ReaderError
-            If an index data record is damaged.
+            If an index data record is damaged or has a time outside the time
+            range of its chunk info.
 
         """
-        parts = [(i, connection, entries) for i in group
-                 for connection, entries in self._chunk_index(i, ranks)]
-        index = np.empty(sum(len(entries) for _, _, entries in parts),
+        parts = [(i, connection, times, offsets) for i in group
+                 for connection, times, offsets in self._chunk_index(i, ranks)]
+        index = np.empty(sum(len(times) for _, _, times, _ in parts),
                          [('time', '<i8'), ('connection', '<i8'), ('chunk', '<i8'),
                           ('offset', '<i8')])
         rank = np.empty(len(index), np.int64)
         end = 0
-        for i, connection, entries in parts:
-            part = slice(end, end + len(entries))
-            index['time'][part] = entries['sec'].astype(np.int64) * 10**9 + entries['nsec']
+        for i, connection, times, offsets in parts:
+            part = slice(end, end + len(times))
+            index['time'][part] = times
             index['connection'][part] = connection
             index['chunk'][part] = i
-            index['offset'][part] = entries['offset']
+            index['offset'][part] = offsets
             rank[part] = ranks[connection]
             end = part.stop
         # rosbags: each connection's entries stably sorted by time, then merged by time
@@ -171,7 +175,7 @@ class ChunkedReader(Reader):
         return index[np.lexsort((np.arange(len(index)), rank, index['time']))]
 
     def _chunk_index(self, i, ranks):
-        """Return ``(connection, entries)`` of chunk ``i``'s index data records in ``ranks``."""
+        """Return ``(connection, times, offsets)`` of chunk ``i``'s index data in ``ranks``."""
         info = self.chunk_infos[i]
         chunk = self.chunks[info.pos]
         bio = self._file()
@@ -189,11 +193,16 @@ class ChunkedReader(Reader):
                 if size != count * INDEX_ENTRY.itemsize or count != expected:
                     raise ReaderError(f'connection {connection}: {count} entries in {size} '
                                       f'bytes, the chunk info counts {expected}.')
-                if connection in ranks:
-                    records.append((connection, np.frombuffer(read_bytes(bio, size),
-                                                              INDEX_ENTRY)))
-                else:
+                if connection not in ranks:
                     bio.seek(size, os.SEEK_CUR)
+                    continue
+                entries = np.frombuffer(read_bytes(bio, size), INDEX_ENTRY)
+                times = entries['sec'].astype(np.int64) * 10**9 + entries['nsec']
+                # The groups' order relies on the chunk info's times.
+                if count and (times.min() < info.start_time or times.max() >= info.end_time):
+                    raise ReaderError(f'connection {connection}: a time outside the chunk '
+                                      "info's time range.")
+                records.append((connection, times, entries['offset']))
         except ReaderError as error:
             raise ReaderError(f'The index data after the chunk at byte {info.pos} cannot be '
                               f'read: {error}') from None
@@ -205,33 +214,59 @@ class ChunkedReader(Reader):
             raise ReaderError('Reader is not open.')
         return self.bio
 
-    def _chunk_data(self, i):
-        """Return the decompressed data of chunk ``i`` as a stream."""
+    def decompressed_chunk(self, i: int) -> bytes:
+        """
+        Return the decompressed data of chunk ``i`` (an index into ``chunk_infos``).
+
+        Raises
+        ------
+        rosbags.rosbag1.ReaderError
+            If the chunk is cut short or cannot be decompressed.
+
+        """
         pos = self.chunk_infos[i].pos
         chunk = self.chunks[pos]
         bio = self._file()
         bio.seek(chunk.datapos)
         data = read_bytes(bio, chunk.datasize)
         try:
-            return BytesIO(chunk.decompressor(data))
+            return chunk.decompressor(data)
         except _DECOMPRESSION_ERRORS as error:
             raise ReaderError(f'The chunk at byte {pos} cannot be decompressed: '
                               f'{error}') from None
 
     def _group_messages(self, group, ranks, start, stop):
-        """Yield the messages of one chunk group; its chunks are freed when it ends."""
+        """
+        Yield the messages of one chunk group.
+
+        A chunk is freed after its last message, and the least recently read
+        ones when more than ``CHUNK_BYTES_HELD`` are held (read again if
+        needed).
+        """
         index = self.group_index(group, ranks)
         if start is not None:
             index = index[index['time'] >= start]
         if stop is not None:
             index = index[index['time'] < stop]
         connections = {c.id: c for c in self.connections}
-        streams: Dict[int, BytesIO] = {}
+        chunks, counts = np.unique(index['chunk'], return_counts=True)
+        unread = dict(zip(chunks.tolist(), counts.tolist()))
+        held: 'OrderedDict[int, Tuple[BytesIO, int]]' = OrderedDict()   # stream, size
+        held_bytes, current, stream = 0, -1, BytesIO()
         for time, connection, i, offset in zip(*(index[name].tolist() for name in (
                 'time', 'connection', 'chunk', 'offset'))):
-            stream = streams.get(i)
-            if stream is None:
-                stream = streams[i] = self._chunk_data(i)
+            if i != current:
+                current = i
+                if i in held:
+                    stream = held[i][0]
+                    held.move_to_end(i)
+                else:
+                    chunk = self.decompressed_chunk(i)
+                    held[i] = stream, size = BytesIO(chunk), len(chunk)
+                    del chunk
+                    held_bytes += size
+                    while held_bytes > CHUNK_BYTES_HELD and len(held) > 1:
+                        held_bytes -= held.popitem(last=False)[1][1]
             stream.seek(offset)
             try:
                 header, data = _message_record(stream)
@@ -240,6 +275,10 @@ class ChunkedReader(Reader):
             except ReaderError as error:
                 raise ReaderError(f'The message at offset {offset} of the chunk at byte '
                                   f'{self.chunk_infos[i].pos} cannot be read: {error}') from None
+            unread[i] -= 1
+            if not unread[i]:   # its last message: let the chunk go
+                held_bytes -= held.pop(i)[1]
+                current, stream = -1, BytesIO()
             yield connections[connection], time, data
 
 
