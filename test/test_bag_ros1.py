@@ -126,6 +126,14 @@ def test_convert_runs_the_pipelines_on_a_ros1_bag(tmp_path, ros1_bag):
     assert (thing.a, thing.b) == (42, 'hello')
 
 
+def test_a_ros1_bag_is_known_by_its_content_not_its_name(ros1_bag):
+    path, written = ros1_bag
+    renamed = path.rename(path.with_name('recording.bag.orig'))
+    with open_bag(renamed) as bag:
+        assert bag.description == 'ROS 1 bag (lz4 chunks)'
+        assert [r.log_time_ns for r in bag.messages(['/imu'])] == [row[0] for row in written]
+
+
 def _index_data_record(path):
     """Return the bag's bytes and the position of the first index data record (after a chunk)."""
     with ChunkedReader(path) as reader:
