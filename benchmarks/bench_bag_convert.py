@@ -43,7 +43,7 @@ The CPU model and numpy's SIMD level are printed first. ``--quick`` runs
 everything on smaller bags, once (about a minute).
 
 Run: ``.venv/bin/python benchmarks/bench_bag_convert.py [--quick] [--messages N] [--repeat R]
-[--million] [--formats-only]``.
+[--million] [--formats-only [--format NAME ...]]``.
 """
 import argparse
 import gc
@@ -168,12 +168,12 @@ def convert_naive_rosbags(source, output):
         writer.finish()
 
 
-def formats(directory, count, repeat, sizes):
-    """Every input format: ours against the rosbags naive pipeline; memory at two lengths."""
+def formats(directory, count, repeat, sizes, names=FORMATS):
+    """Each input format of ``names``: ours against the rosbags naive pipeline; memory."""
     print(f'\n## Input formats, {count} Imu messages -> + /imu/euler (best of {repeat}, CPU s)')
     print(f'{"format":20s} {"ours":>7s} {"us/msg":>7s} {"naive":>7s} {"us/msg":>7s} '
           f'{"floor":>7s} {"us/msg":>7s} {"naive/ours":>10s} {"ours/floor":>10s}')
-    for fmt in FORMATS:
+    for fmt in names:
         source = write_format_bag(directory, fmt, count)
         convert_ours(source, os.path.join(directory, 'warm.mcap'))   # numba compilation
         euler_datas = output_datas(os.path.join(directory, 'warm.mcap'))
@@ -197,7 +197,7 @@ def formats(directory, count, repeat, sizes):
           '(ROS 1: converted to CDR by rosbags)')
     print('\n## Input formats: peak memory growth of ours (fresh process each; MiB)')
     print(f'{"format":20s} ' + ' '.join(f'{f"{n} msgs":>16s}' for n in sizes))
-    for fmt in FORMATS:
+    for fmt in names:
         growth = []
         for size in sizes:
             source = write_format_bag(directory, fmt, size, seed=3)
@@ -518,6 +518,8 @@ def main():
     parser.add_argument('--million', action='store_true', help='also scale to 10^6 messages')
     parser.add_argument('--formats-only', action='store_true',
                         help='only the input-format comparison (section 4)')
+    parser.add_argument('--format', action='append', choices=FORMATS, dest='formats',
+                        help='an input format of section 4 (repeatable; default all)')
     parser.add_argument('--quick', action='store_true',
                         help='20 000 messages, one run each, small scaling sizes (~1 min)')
     parser.add_argument('--child', nargs=2, metavar=('SOURCE', 'OUTPUT'), help=argparse.SUPPRESS)
@@ -534,7 +536,8 @@ def main():
             compare(directory, args.messages, args.repeat)
             breakdown(directory)
             scaling(directory, sizes)
-        formats(directory, args.messages, args.repeat, [args.messages // 10, args.messages])
+        formats(directory, args.messages, args.repeat, [args.messages // 10, args.messages],
+                args.formats or FORMATS)
 
 
 if __name__ == '__main__':

@@ -5,15 +5,20 @@ The bags are written by the rosbags ROS 1 writer from ROS 1 (Noetic) message
 types; every value read back through rclpy must be the value written (header
 ``seq`` dropped), converted values are checked against scipy.
 """
+import os
+import struct
+
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag1 import Writer
 from rosbags.typesys import get_types_from_msg, get_typestore, Stores
+from rotation_node.bag.cli import main
 from rotation_node.bag.convert import convert
 from rotation_node.bag.qos import qos_profiles_from_yaml
 from rotation_node.bag.reader import open_bag
+from rotation_node.bag.ros1_chunks import ChunkedReader
 from rotation_node.parameters import NodeParameters
 from scipy.spatial.transform import Rotation
 
@@ -119,3 +124,86 @@ def test_convert_runs_the_pipelines_on_a_ros1_bag(tmp_path, ros1_bag):
         (_, _, data), = reader.messages([connection])
         thing = reader.deserialize(data, connection.msgtype)
     assert (thing.a, thing.b) == (42, 'hello')
+
+
+def test_a_ros1_bag_is_known_by_its_content_not_its_name(ros1_bag):
+    path, written = ros1_bag
+    renamed = path.rename(path.with_name('recording.bag.orig'))
+    with open_bag(renamed) as bag:
+        assert bag.description == 'ROS 1 bag (lz4 chunks)'
+        assert [r.log_time_ns for r in bag.messages(['/imu'])] == [row[0] for row in written]
+
+
+def _index_data_record(path):
+    """Return the bag's bytes and the position of the first index data record (after a chunk)."""
+    with ChunkedReader(path) as reader:
+        chunk = reader.chunks[reader.chunk_infos[0].pos]
+        return bytearray(path.read_bytes()), chunk.datapos + chunk.datasize, chunk
+
+
+def _damage_index_field(name, value):
+    def damage(path):
+        data, position, _ = _index_data_record(path)
+        field = data.index(name.encode() + b'=', position) + len(name) + 1
+        data[field:field + 4] = struct.pack('<I', value)
+        return data
+    return damage
+
+
+def _damage_first_offset(path):
+    data, position, _ = _index_data_record(path)
+    header_size, = struct.unpack_from('<I', data, position)
+    entry = position + 4 + header_size + 4
+    data[entry + 8:entry + 12] = struct.pack('<I', 5)   # the offset of the first message
+    return data
+
+
+def _damage_compressed_data(path):
+    data, _, chunk = _index_data_record(path)
+    middle = chunk.datapos + chunk.datasize // 2
+    data[middle:middle + 64] = b'\xff' * 64
+    return data
+
+
+def _damage_chunk_info_time(path):
+    data, _, _ = _index_data_record(path)
+    field = data.rindex(b'start_time=') + len('start_time=')
+    sec, nsec = struct.unpack_from('<II', data, field)
+    data[field:field + 8] = struct.pack('<II', sec + 1, nsec)   # later than the first messages
+    return data
+
+
+def _truncate_chunk(path):
+    data, _, chunk = _index_data_record(path)
+    data[chunk.datapos - 4:chunk.datapos] = struct.pack('<I', chunk.datasize - 100)
+    return data
+
+
+DAMAGES = {
+    'index count': (_damage_index_field('count', 7), 'index data after the chunk at byte'),
+    'index version': (_damage_index_field('ver', 2), 'IDXDATA version 2 is not supported'),
+    'index offset': (_damage_first_offset, 'The message at offset 5 of the chunk'),
+    'compressed data': (_damage_compressed_data, 'cannot be decompressed'),
+    'chunk info time': (_damage_chunk_info_time, "outside the chunk info's time range"),
+    'truncated chunk': (_truncate_chunk, 'index data after the chunk at byte'),
+}
+
+
+@pytest.mark.parametrize('damage', DAMAGES)
+def test_a_damaged_bag_is_one_line_exit_1_nothing_written(tmp_path, capsys, ros1_bag, damage):
+    path, _ = ros1_bag
+    make, reason = DAMAGES[damage]
+    path.write_bytes(bytes(make(path)))
+    (tmp_path / 'params.yaml').write_text(
+        'rotation_node:\n  ros__parameters:\n    input_type: imu\n    outputs: [euler]\n')
+    before = sorted(os.listdir(tmp_path))
+    cwd = os.getcwd()
+    os.chdir(tmp_path)
+    try:
+        status = main(['convert', path.name, 'out.mcap', '--params', 'params.yaml'])
+    finally:
+        os.chdir(cwd)
+    lines = capsys.readouterr().err.splitlines()
+    assert status == 1 and len(lines) == 1, lines
+    assert lines[0].startswith('rotation_bag convert: error: ') and 'old.bag' in lines[0]
+    assert reason in lines[0] and sorted(os.listdir(tmp_path)) == before

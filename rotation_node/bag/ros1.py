@@ -1,9 +1,10 @@
 """
 ROS 1 bags (format version 2.0) read as ROS 2 messages.
 
-The ``rosbags`` package reads the bag (``AnyReader``, every chunk
-compression of ROS 1: none, bz2, lz4) and builds the bag's message types from
-the definitions stored in it; each message is then converted, as
+The ``rosbags`` package reads the bag (every chunk compression of ROS 1:
+none, bz2, lz4), one chunk at a time (:mod:`rotation_node.bag.ros1_chunks`),
+and builds the bag's message types from the definitions stored in it
+(``AnyReader``); each message is then converted, as
 ``rosbags-convert`` converts a ROS 1 bag to ROS 2, to the ROS 2 type of the
 same name (``sensor_msgs/Imu`` -> ``sensor_msgs/msg/Imu``, ``tf/tfMessage``
 -> ``tf2_msgs/msg/TFMessage``) and serialized as CDR: ``std_msgs/Header``
@@ -21,7 +22,7 @@ import struct
 from typing import Union
 
 from rosbags.convert.converter import generate_message_converter, LATCH, STATIC_MSGTYPE_RENAMES
-from rosbags.highlevel import AnyReader, AnyReaderError
+from rosbags.highlevel import AnyReaderError
 from rosbags.rosbag1 import ReaderError
 from rosbags.rosbag1.reader import decompressors as ros1_decompressors
 from rosbags.serde import SerdeError
@@ -30,6 +31,7 @@ from rosbags.typesys.base import TypesysError
 from rotation_node.bag.mcap_io import TopicMetadata
 from rotation_node.bag.message_types import message_class
 from rotation_node.bag.qos import rosbags_qos_yaml
+from rotation_node.bag.ros1_chunks import ChunkedAnyReader
 from rotation_node.bag.rosbags_input import RosbagsInput
 from rotation_node.errors import BagError
 
@@ -69,7 +71,7 @@ def open_ros1_bag(path: Union[str, os.PathLike]) -> RosbagsInput:
 
     """
     path = str(path)
-    reader = AnyReader([Path(path)])
+    reader = ChunkedAnyReader(Path(path))
     try:
         reader.open()
     except _FORMAT_ERRORS as error:
