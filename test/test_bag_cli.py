@@ -8,6 +8,7 @@ the installed console script run as subprocesses.
 """
 import os
 import shutil
+import signal
 import subprocess
 
 from bag_helpers import imu_messages, stamp_ns
@@ -68,7 +69,10 @@ def _damage(workspace, how):
 
 
 def _run(capsys, *argv):
+    handlers = [signal.getsignal(number) for number in (signal.SIGINT, signal.SIGTERM)]
     status = main([str(a) for a in argv])
+    # The stop flag is main's only: Ctrl-C works again in the caller.
+    assert [signal.getsignal(n) for n in (signal.SIGINT, signal.SIGTERM)] == handlers
     return status, capsys.readouterr().err
 
 

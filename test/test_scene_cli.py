@@ -16,7 +16,9 @@ CONING = os.path.join(SCENES_DIR, 'coning.yaml')
 
 def test_writes_the_bag_and_says_what_it_wrote(tmp_path, capsys):
     out = tmp_path / 'coning.mcap'
+    handlers = [signal.getsignal(number) for number in (signal.SIGINT, signal.SIGTERM)]
     assert main([CONING, str(out)]) == 0
+    assert [signal.getsignal(n) for n in (signal.SIGINT, signal.SIGTERM)] == handlers
     printed = capsys.readouterr().out
     assert '401 samples' in printed and 'motion coning' in printed
     with BagReader(out) as reader:

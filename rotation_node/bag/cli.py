@@ -33,7 +33,7 @@ import sys
 from typing import List, Optional, Sequence
 
 from rclpy.utilities import remove_ros_args
-from rotation_node.bag.stop_signal import exit_status, signal_name, stop_at_checkpoints
+from rotation_node.bag.stop_signal import exit_status, signal_name, StopSignal
 from rotation_node.errors import BagError, RotationNodeError
 
 PROG = 'rotation_bag'
@@ -212,15 +212,16 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run ``rotation_bag``; return the exit status."""
     argv = sys.argv if argv is None else [PROG, *argv]
     args = build_parser().parse_args(remove_ros_args(argv)[1:])
-    stop_at_checkpoints()
-    try:
-        args.run(args, argv)
-    except (RotationNodeError, OSError) as error:
-        _error(args, error)
-        return EXIT_ERROR
-    except KeyboardInterrupt as interrupt:
-        print(f'{PROG} {args.command}: interrupted ({signal_name(interrupt)})', file=sys.stderr)
-        return exit_status(interrupt)
+    with StopSignal():   # a signal stops the work where it checks (see stop_signal)
+        try:
+            args.run(args, argv)
+        except (RotationNodeError, OSError) as error:
+            _error(args, error)
+            return EXIT_ERROR
+        except KeyboardInterrupt as interrupt:
+            print(f'{PROG} {args.command}: interrupted ({signal_name(interrupt)})',
+                  file=sys.stderr)
+            return exit_status(interrupt)
     return 0
 
 

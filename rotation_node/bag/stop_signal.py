@@ -11,13 +11,14 @@ and the programs look at it where stopping is safe:
 
 - ``record`` and ``play`` poll a :class:`StopSignal` between messages, close
   the bag cleanly and exit 0;
-- ``convert``, ``plot`` and ``rotation_scene`` install one for the whole
-  process (:func:`stop_at_checkpoints`) and call :func:`raise_if_stopped`
-  between blocks of messages. It raises ``KeyboardInterrupt`` for SIGINT or
-  :class:`Terminated` (a ``KeyboardInterrupt``) for SIGTERM, the clean-up of
-  the unfinished output runs, and the tools exit with ``128 + signal number``
-  (130, 143). A signal that arrives after the last block is noted and
-  ignored: the output is complete, the program finishes and exits 0.
+- ``convert``, ``plot`` and ``rotation_scene`` run under one (their ``main``;
+  a ``--jobs`` worker process under :func:`stop_at_checkpoints`) and call
+  :func:`raise_if_stopped` between blocks of messages. It raises
+  ``KeyboardInterrupt`` for SIGINT or :class:`Terminated` (a
+  ``KeyboardInterrupt``) for SIGTERM, the clean-up of the unfinished output
+  runs, and the tools exit with ``128 + signal number`` (130, 143). A signal
+  that arrives after the last block is noted and ignored: the output is
+  complete, the program finishes and exits 0.
 """
 from __future__ import annotations
 
@@ -90,8 +91,9 @@ def stop_at_checkpoints(signals: tuple = STOP_SIGNALS) -> StopSignal:
     """
     Make ``signals`` set a flag for the rest of the process; return its :class:`StopSignal`.
 
-    For a program's main function: the work then stops where it calls
-    :func:`raise_if_stopped`, and a signal after the work is ignored.
+    For a worker process: its work then stops where it calls
+    :func:`raise_if_stopped`, and a signal between two tasks is kept for
+    the next one's first check.
     """
     return StopSignal(signals).__enter__()
 

@@ -11,7 +11,7 @@ import argparse
 import sys
 from typing import Optional, Sequence
 
-from rotation_node.bag.stop_signal import exit_status, signal_name, stop_at_checkpoints
+from rotation_node.bag.stop_signal import exit_status, signal_name, StopSignal
 from rotation_node.errors import RotationNodeError
 
 
@@ -45,31 +45,31 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run ``rotation_scene``; return the exit status."""
     args = build_parser().parse_args(argv)
-    stop_at_checkpoints()
-    try:
-        # Imported here: a Ctrl-C while numpy and rclpy load is then one line too.
-        from rotation_node.bag.output import BagOutput
+    with StopSignal():   # a signal stops the simulation where it checks
+        try:
+            # Imported here, where a signal only sets the stop flag (see bag.stop_signal).
+            from rotation_node.bag.output import BagOutput
 
-        from .simulator import write_scene_bag
-        from .spec import load_scene
+            from .simulator import write_scene_bag
+            from .spec import load_scene
 
-        # Checked again when the bag is opened; here it saves loading the scene for nothing.
-        BagOutput.check_absent(args.output, overwrite=args.force)
-        scene = load_scene(args.scene)
-        # Streamed: memory does not grow with the scene's length.
-        n, published = write_scene_bag(scene, args.output, seed=args.seed,
-                                       overwrite=args.force)
-    except (RotationNodeError, OSError) as exc:
-        one_line = ' '.join(str(exc).split())
-        print(f'rotation_scene: error: {one_line}', file=sys.stderr)
-        return 1
-    except KeyboardInterrupt as interrupt:
-        print(f'rotation_scene: interrupted ({signal_name(interrupt)})', file=sys.stderr)
-        return exit_status(interrupt)
-    effects = ', '.join(scene.effects) or 'none'
-    print(f'{args.output}: {n} samples over {scene.duration:g} s at {scene.rate:g} Hz, '
-          f'motion {scene.motion.type}, effects {effects}; '
-          f'{published} sensor messages on {scene.topic}, {n} on each truth topic')
+            # Checked again when the bag is opened; here it saves loading the scene for nothing.
+            BagOutput.check_absent(args.output, overwrite=args.force)
+            scene = load_scene(args.scene)
+            # Streamed: memory does not grow with the scene's length.
+            n, published = write_scene_bag(scene, args.output, seed=args.seed,
+                                           overwrite=args.force)
+        except (RotationNodeError, OSError) as exc:
+            one_line = ' '.join(str(exc).split())
+            print(f'rotation_scene: error: {one_line}', file=sys.stderr)
+            return 1
+        except KeyboardInterrupt as interrupt:
+            print(f'rotation_scene: interrupted ({signal_name(interrupt)})', file=sys.stderr)
+            return exit_status(interrupt)
+        effects = ', '.join(scene.effects) or 'none'
+        print(f'{args.output}: {n} samples over {scene.duration:g} s at {scene.rate:g} Hz, '
+              f'motion {scene.motion.type}, effects {effects}; '
+              f'{published} sensor messages on {scene.topic}, {n} on each truth topic')
     return 0
 
 
