@@ -48,6 +48,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (
     FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult)
 import rclpy
+from rclpy.duration import Duration
 from rclpy.event_handler import (
     PublisherEventCallbacks, QoSSubscriptionEventType, SubscriptionEventCallbacks,
     UnsupportedEventTypeError)
@@ -81,6 +82,8 @@ HANDOFF_QUIET_S = 0.25
 HANDOFF_MAX_S = 2.0
 # Replacing an output publisher: how long the new one must have matched the old one's
 # subscribers (on its side) before it takes over, so that their readers match it too.
+# The old one then lives until its subscribers acknowledged what it sent (HANDOFF_MAX_S
+# at most): a reliable writer destroyed earlier takes its unacknowledged messages along.
 PUBLISHER_SETTLE_S = 0.5
 # Messages taken in one callback at most, beyond the one the executor took.
 DRAIN_MAX = 100
@@ -243,6 +246,8 @@ class RotationNode(Node):
         # output name -> encode(header, numbers) -> bytes
         self._encoders: Dict[str, Callable[[Any, Sequence[float]], bytes]] = {}
         self._replacing: Dict[str, _PublisherReplacement] = {}   # by output name
+        # publishers no longer published on, until acknowledged: (publisher, retired at)
+        self._retiring_publishers: List[Tuple[Publisher, float]] = []
         self._handoff_timer: Optional[Timer] = None
         self._next_issue_log: Dict[str, float] = {}   # reason -> time of its next warning
         self._reported = (0, 0, 0)   # dropped, skipped and lost totals at the last diagnostics
@@ -320,7 +325,7 @@ class RotationNode(Node):
             if replacement is not None:   # superseded before it took over
                 self.destroy_publisher(replacement.publisher)
             if name not in params.outputs:
-                self.destroy_publisher(self._output_publishers.pop(name))
+                self._retire_publisher(self._output_publishers.pop(name))
                 del self._publish[name]
             elif self._output_publishers[name].qos_profile != output_qos:
                 # The old publisher publishes until the new one has matched its subscribers.
@@ -346,7 +351,7 @@ class RotationNode(Node):
             event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
 
     def _check_publisher_handoffs(self, now: float) -> None:
-        """Let each new output publisher take over once it matched the old one's subscribers."""
+        """Let new output publishers take over once matched; destroy acknowledged old ones."""
         for name, replacement in list(self._replacing.items()):
             new, old = replacement.publisher, self._output_publishers[name]
             if new.get_subscription_count() < old.get_subscription_count():
@@ -360,7 +365,18 @@ class RotationNode(Node):
             if settled or now - replacement.created_at > HANDOFF_MAX_S:
                 del self._replacing[name]
                 self._output_publishers[name], self._publish[name] = new, new.publish
-                self.destroy_publisher(old)
+                self._retire_publisher(old)
+        for retiring in list(self._retiring_publishers):
+            publisher, retired_at = retiring
+            if (publisher.wait_for_all_acked(Duration())   # a check, without waiting
+                    or now - retired_at > HANDOFF_MAX_S):
+                self._retiring_publishers.remove(retiring)
+                self.destroy_publisher(publisher)
+
+    def _retire_publisher(self, publisher: Publisher) -> None:
+        """Stop publishing on ``publisher``; destroy it once what it sent is acknowledged."""
+        self._retiring_publishers.append((publisher, time.monotonic()))
+        self._start_handoff_timer()
 
     # Input subscriptions and QoS ------------------------------------------------------
 
@@ -462,7 +478,7 @@ class RotationNode(Node):
                 self._finish_handoff(state)
         self._check_publisher_handoffs(now)
         timer = self._handoff_timer   # this callback's timer
-        if (timer is not None and not self._replacing
+        if (timer is not None and not self._replacing and not self._retiring_publishers
                 and all(state.retiring is None for state in self._inputs)):
             self.destroy_timer(timer)
             self._handoff_timer = None
