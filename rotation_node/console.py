@@ -9,10 +9,9 @@ a traceback). If one came, the program says so on one line and exits with
 130 (143 for SIGTERM) instead of running its ``main``.
 """
 import importlib
-import signal
 import sys
 
-from rotation_node.bag.stop_signal import StopSignal
+from rotation_node.bag.stop_signal import exit_status, signal_name, StopSignal
 
 _PROGRAMS = {
     'rotation_node': 'rotation_node.node',
@@ -24,10 +23,11 @@ _PROGRAMS = {
 def _run(program):
     with StopSignal() as stop:
         main = importlib.import_module(_PROGRAMS[program]).main
-    if stop.signal_number is not None:
-        name = signal.Signals(stop.signal_number).name
-        print(f'{program}: interrupted while starting ({name})', file=sys.stderr)
-        return 128 + stop.signal_number
+    interrupt = stop.interrupt()
+    if interrupt is not None:
+        print(f'{program}: interrupted while starting ({signal_name(interrupt)})',
+              file=sys.stderr)
+        return exit_status(interrupt)
     return main()
 
 
