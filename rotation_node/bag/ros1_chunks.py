@@ -123,12 +123,13 @@ class ChunkedReader(Reader):
         for rank, connection in enumerate(connections or self.connections):
             ranks.setdefault(connection.id, rank)
         infos = self.chunk_infos
+        by_id = {c.id: c for c in self.connections}
         for group in overlapping_chunk_groups(infos):
             if stop is not None and min(infos[i].start_time for i in group) >= stop:
                 return
             if ((start is None or max(infos[i].end_time for i in group) > start)
                     and any(c in ranks for i in group for c in infos[i].connection_counts)):
-                yield from self._group_messages(group, ranks, start, stop)
+                yield from self._group_messages(group, ranks, by_id, start, stop)
 
     def group_index(self, group: Sequence[int], ranks: Dict[int, int]) -> np.ndarray:
         """
@@ -235,9 +236,9 @@ class ChunkedReader(Reader):
             raise ReaderError(f'The chunk at byte {pos} cannot be decompressed: '
                               f'{error}') from None
 
-    def _group_messages(self, group, ranks, start, stop):
+    def _group_messages(self, group, ranks, by_id, start, stop):
         """
-        Yield the messages of one chunk group.
+        Yield the messages of one chunk group (``by_id``: the connections by id).
 
         A chunk is freed after its last message, and the least recently read
         ones when more than ``CHUNK_BYTES_HELD`` are held (read again if
@@ -248,7 +249,6 @@ class ChunkedReader(Reader):
             index = index[index['time'] >= start]
         if stop is not None:
             index = index[index['time'] < stop]
-        connections = {c.id: c for c in self.connections}
         chunks, counts = np.unique(index['chunk'], return_counts=True)
         unread = dict(zip(chunks.tolist(), counts.tolist()))
         held: 'OrderedDict[int, Tuple[BytesIO, int]]' = OrderedDict()   # stream, size
@@ -279,7 +279,7 @@ class ChunkedReader(Reader):
             if not unread[i]:   # its last message: let the chunk go
                 held_bytes -= held.pop(i)[1]
                 current, stream = -1, BytesIO()
-            yield connections[connection], time, data
+            yield by_id[connection], time, data
 
 
 def _message_record(stream):
