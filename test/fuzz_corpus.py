@@ -81,19 +81,46 @@ class Source:
     payloads: List[Tuple[bytes, int]]
 
 
-def _ros2_rows(seed):
-    """``[(topic, type name, CDR bytes, log time)]`` in log-time order, from rclpy."""
-    from bag_helpers import imu_messages, interleaved, serialized_rows
-    from rclpy.serialization import serialize_message
-    from std_msgs.msg import String
+def _rows(seed, store_name):
+    """
+    ``[(topic, type name, serialized bytes, log time)]`` in log-time order.
+
+    Serialized by rosbags: CDR with the Jazzy types, or ROS 1 with the Noetic
+    types (rclpy's CDR leaves its alignment padding uninitialised: not
+    reproducible). Random unit orientations and angular velocities at 100 Hz,
+    a String on ``/status`` every 50 ms.
+    """
+    from rosbags.typesys import get_typestore, Stores
+    store = get_typestore(getattr(Stores, store_name))
+    types_ = store.types
+    ros1 = store_name == 'ROS1_NOETIC'
+    serialize = store.serialize_ros1 if ros1 else store.serialize_cdr
     rng = np.random.default_rng(seed)
-    imu = imu_messages(rng, IMU_COUNT)
-    imu_rows = serialized_rows(IMU_TOPIC, imu)
-    first = imu_rows[0][3]
-    status_rows = [(STATUS_TOPIC, 'std_msgs/msg/String',
-                    serialize_message(String(data=f'status {k}: ok')), first + 3_000_000 + k * 50_000_000)
-                   for k in range(STATUS_COUNT)]
-    return interleaved(imu_rows, status_rows), imu
+    quaternions = rng.normal(size=(IMU_COUNT, 4))
+    quaternions /= np.linalg.norm(quaternions, axis=1, keepdims=True)
+    rates = rng.normal(size=(IMU_COUNT, 3))
+    vector = types_['geometry_msgs/msg/Vector3']
+    start_ns = 1_700_000_000 * 10**9
+    rows = []
+    for k, (q, w) in enumerate(zip(quaternions.tolist(), rates.tolist())):
+        stamp_ns = start_ns + k * 10_000_000
+        header = {'stamp': types_['builtin_interfaces/msg/Time'](*divmod(stamp_ns, 10**9)),
+                  'frame_id': 'imu_link', **({'seq': k} if ros1 else {})}
+        value = types_['sensor_msgs/msg/Imu'](
+            header=types_['std_msgs/msg/Header'](**header),
+            orientation=types_['geometry_msgs/msg/Quaternion'](*q),
+            orientation_covariance=np.diag([1e-6, 2e-6, 4e-6]).ravel(),
+            angular_velocity=vector(*w), angular_velocity_covariance=np.zeros(9),
+            linear_acceleration=vector(0.0, 0.0, 9.81),
+            linear_acceleration_covariance=np.zeros(9))
+        rows.append((IMU_TOPIC, 'sensor_msgs/msg/Imu',
+                     bytes(serialize(value, 'sensor_msgs/msg/Imu')), stamp_ns + 1_000_000))
+    for k in range(STATUS_COUNT):
+        value = types_['std_msgs/msg/String'](data=f'status {k}: ok')
+        rows.append((STATUS_TOPIC, 'std_msgs/msg/String',
+                     bytes(serialize(value, 'std_msgs/msg/String')),
+                     start_ns + 4_000_000 + k * 50_000_000))
+    return sorted(rows, key=lambda row: row[3])
 
 
 #: Where a string length field is in a message: CDR (4-byte encapsulation header first),
@@ -123,37 +150,11 @@ def _write_mcap_file(path, rows, compression, chunked):
         writer.finish()
 
 
-def _write_ros1_bag(path, imu, compression):
-    """A ROS 1 bag by rosbags' writer, the same messages serialized as ROS 1, small chunks."""
+def _write_ros1_bag(path, rows, compression):
+    """A ROS 1 bag by rosbags' writer, small chunks."""
     from rosbags.rosbag1 import Writer
     from rosbags.typesys import get_typestore, Stores
     store = get_typestore(Stores.ROS1_NOETIC)
-    types_ = store.types
-    rows = []
-    for seq, msg in enumerate(imu):
-        stamp = types_['builtin_interfaces/msg/Time'](sec=msg.header.stamp.sec,
-                                                      nanosec=msg.header.stamp.nanosec)
-        value = types_['sensor_msgs/msg/Imu'](
-            header=types_['std_msgs/msg/Header'](seq=seq, stamp=stamp,
-                                                 frame_id=msg.header.frame_id),
-            orientation=types_['geometry_msgs/msg/Quaternion'](
-                x=msg.orientation.x, y=msg.orientation.y, z=msg.orientation.z,
-                w=msg.orientation.w),
-            orientation_covariance=np.array(msg.orientation_covariance),
-            angular_velocity=types_['geometry_msgs/msg/Vector3'](
-                x=msg.angular_velocity.x, y=msg.angular_velocity.y, z=msg.angular_velocity.z),
-            angular_velocity_covariance=np.array(msg.angular_velocity_covariance),
-            linear_acceleration=types_['geometry_msgs/msg/Vector3'](x=0.0, y=0.0, z=9.81),
-            linear_acceleration_covariance=np.array(msg.linear_acceleration_covariance))
-        time_ns = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec + 1_000_000
-        rows.append((IMU_TOPIC, 'sensor_msgs/msg/Imu',
-                     bytes(store.serialize_ros1(value, 'sensor_msgs/msg/Imu')), time_ns))
-    for k in range(STATUS_COUNT):
-        value = types_['std_msgs/msg/String'](data=f'status {k}: ok')
-        rows.append((STATUS_TOPIC, 'std_msgs/msg/String',
-                     bytes(store.serialize_ros1(value, 'std_msgs/msg/String')),
-                     rows[0][3] + 3_000_000 + k * 50_000_000))
-    rows.sort(key=lambda row: row[3])
     writer = Writer(path)
     writer.chunk_threshold = 2048
     if compression != 'none':
@@ -164,7 +165,6 @@ def _write_ros1_bag(path, imu, compression):
             if topic not in connections:
                 connections[topic] = writer.add_connection(topic, type_name, typestore=store)
             writer.write(connections[topic], time_ns, data)
-    return [(data, _ROS1_LENGTH_AT[topic]) for topic, _, data, _ in rows]
 
 
 def _storage_file(directory):
@@ -177,8 +177,9 @@ def build_sources(directory, seed=2311) -> Dict[str, Source]:
     from bag_helpers import write_rosbag2
     from pathlib import Path
     os.makedirs(directory, exist_ok=True)
-    rows, imu = _ros2_rows(seed)
+    rows, ros1_rows = _rows(seed, 'ROS2_JAZZY'), _rows(seed, 'ROS1_NOETIC')
     cdr_payloads = [(data, _CDR_LENGTH_AT[topic]) for topic, _, data, _ in rows]
+    ros1_payloads = [(data, _ROS1_LENGTH_AT[topic]) for topic, _, data, _ in ros1_rows]
     sources = {}
 
     def add(name, fmt, path, storage_file, payloads):
@@ -192,14 +193,14 @@ def build_sources(directory, seed=2311) -> Dict[str, Source]:
         add(name, 'mcap file', path, path, cdr_payloads)
     for storage, compression in (('mcap', None), ('mcap', 'storage'), ('sqlite3', None)):
         name = f'rosbag2-{storage}' + (f'-{compression}' if compression else '')
-        path = write_rosbag2(Path(directory) / name, [row[:2] + row[2:] for row in rows],
+        path = write_rosbag2(Path(directory) / name, rows,
                              storage=storage, compression=compression)
         add(name, f'rosbag2 {storage}', path, _storage_file(path), cdr_payloads)
     for compression in ('none', 'bz2', 'lz4'):
         name = f'ros1-{compression}'
         path = os.path.join(directory, name + '.bag')
-        payloads = _write_ros1_bag(path, imu, compression)
-        add(name, 'ROS 1 bag', path, path, payloads)
+        _write_ros1_bag(path, ros1_rows, compression)
+        add(name, 'ROS 1 bag', path, path, ros1_payloads)
     return sources
 
 
@@ -518,6 +519,7 @@ def materialize(case: Case, sources: Dict[str, Source], directory: str) -> Tuple
     """
     source = sources[case.source]
     rng = np.random.default_rng(case.seed)
+    os.makedirs(directory, exist_ok=True)
     if os.path.isdir(source.path):
         target_dir = os.path.join(directory, os.path.basename(source.path))
         shutil.copytree(source.path, target_dir)
@@ -604,7 +606,8 @@ def _escape_site(error):
     return text(frames[-1] if frames else None), text(own[-1] if own else None)
 
 
-def _run_main(argv, play_counts):
+def run_main(argv: List[str], play_counts: Dict[str, int]) -> tuple:
+    """Run ``rotation_bag argv`` in-process: ``(exit status, stderr, escaped exception)``."""
     from unittest import mock
 
     from rotation_node.bag import cli, play
@@ -723,6 +726,16 @@ def classify(command: str, input_path: str, status, stderr: str, escaped, out_di
         f'; notes: {" | ".join(lines)}' if lines else '')
 
 
+def command_line(command: str, input_path: str, out_dir: str, params: str) -> List[str]:
+    """The arguments of ``rotation_bag`` for a run; its output goes into ``out_dir``."""
+    return {'convert': ['convert', input_path, os.path.join(out_dir, 'converted'),
+                        '--params', params],
+            # play's read path: the stand-in publishers, no waiting between messages
+            'play': ['play', input_path, '--rate', '1e300'],
+            'plot': ['plot', input_path, '--topic', IMU_TOPIC, '-o',
+                     os.path.join(out_dir, 'plot.png')]}[command]
+
+
 def run_case(case: Case, sources: Dict[str, Source], directory: str, params: str) -> List[dict]:
     """Materialize a case under ``directory``, run its commands, return one result per command."""
     case_dir = os.path.join(directory, case.case_id)
@@ -734,14 +747,10 @@ def run_case(case: Case, sources: Dict[str, Source], directory: str, params: str
         for command in case.commands:
             out_dir = os.path.join(case_dir, f'out_{command}')
             os.makedirs(out_dir)
-            argv = {'convert': ['convert', input_path, os.path.join(out_dir, 'converted'),
-                                '--params', params],
-                    'play': ['play', input_path, '--rate', '1e300'],
-                    'plot': ['plot', input_path, '--topic', IMU_TOPIC, '-o',
-                             os.path.join(out_dir, 'plot.png')]}[command]
+            argv = command_line(command, input_path, out_dir, params)
             play_counts: Dict[str, int] = {}
             started = time.perf_counter()
-            status, stderr, escaped = _run_main(argv, play_counts)
+            status, stderr, escaped = run_main(argv, play_counts)
             seconds = time.perf_counter() - started
             klass, detail = classify(command, input_path, status, stderr, escaped, out_dir,
                                      play_counts)
@@ -771,14 +780,19 @@ def _address_space():
     raise RuntimeError('no VmSize in /proc/self/status')
 
 
+def limit_address_space(extra: int = MEMORY_LIMIT) -> None:
+    """Let this process map at most ``extra`` bytes more than it has mapped now."""
+    limit = _address_space() + extra
+    resource.setrlimit(resource.RLIMIT_AS, (limit, resource.getrlimit(resource.RLIMIT_AS)[1]))
+
+
 def _child(cases, sources, directory, params, pipe):
     """Run ``cases`` in this (forked) process, one JSON line per event on ``pipe``."""
     tmp = os.path.join(directory, 'tmp')
     os.makedirs(tmp, exist_ok=True)
     tempfile.tempdir = tmp
     os.environ['TMPDIR'] = tmp
-    limit = _address_space() + MEMORY_LIMIT
-    resource.setrlimit(resource.RLIMIT_AS, (limit, resource.getrlimit(resource.RLIMIT_AS)[1]))
+    limit_address_space()
     # What a damaged input does is under test, not durability: the outputs' fsync
     # calls (a third of a conversion's time here) are skipped.
     os.fsync = lambda descriptor: None

@@ -54,9 +54,11 @@ def test_layouts_tile_the_files_and_find_every_stored_message(sources):
 def test_the_corpus_is_seeded_and_damages_its_inputs(sources, tmp_path):
     cases = fuzz_corpus.corpus(sources)
     assert len(cases) >= 250
-    assert [case.case_id for case in cases] == [
-        case.case_id for case in fuzz_corpus.corpus(fuzz_corpus.build_sources(
-            str(tmp_path / 'again')))]
+    again = fuzz_corpus.build_sources(str(tmp_path / 'again'))
+    assert {name: fuzz_corpus.tree_hash(source.path) for name, source in again.items()} == {
+        name: fuzz_corpus.tree_hash(source.path) for name, source in sources.items()}
+    assert [case.case_id for case in fuzz_corpus.corpus(again)] == [
+        case.case_id for case in cases]
     for case in cases[::7]:
         first, _ = fuzz_corpus.materialize(case, sources, str(tmp_path / 'a' / case.case_id))
         second, _ = fuzz_corpus.materialize(case, sources, str(tmp_path / 'b' / case.case_id))

@@ -26,22 +26,18 @@ import fuzz_corpus  # noqa: E402  (test/ is put on the path first)
 
 def _reproduce(case, sources, directory):
     import traceback
-    os.makedirs(directory, exist_ok=True)
     input_path, description = fuzz_corpus.materialize(case, sources, directory)
     print(f'{case.case_id}: {input_path} ({description}); seed {case.seed}')
     params = os.path.join(directory, 'params.yaml')
     with open(params, 'w') as stream:
         stream.write(fuzz_corpus.PARAMS_YAML)
+    fuzz_corpus.limit_address_space()   # as in the test's child: 1 GiB more at most
     for command in case.commands:
         out = os.path.join(directory, f'out_{command}')
-        argv = {'convert': ['convert', input_path, os.path.join(out, 'converted'),
-                            '--params', params],
-                'play': ['play', input_path, '--rate', '1e300'],
-                'plot': ['plot', input_path, '--topic', fuzz_corpus.IMU_TOPIC, '-o',
-                         os.path.join(out, 'plot.png')]}[command]
+        argv = fuzz_corpus.command_line(command, input_path, out, params)
         os.makedirs(out, exist_ok=True)
         print(f'$ rotation_bag {" ".join(argv)}')
-        status, stderr, escaped = fuzz_corpus._run_main(argv, {})
+        status, stderr, escaped = fuzz_corpus.run_main(argv, {})
         print(stderr, end='')
         if escaped is not None:
             traceback.print_exception(escaped)
