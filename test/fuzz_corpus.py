@@ -48,7 +48,7 @@ import tempfile
 import time
 import traceback
 import types
-from typing import Callable, Dict, List, Optional, Tuple
+from typing import Callable, Dict, List, Tuple
 
 import numpy as np
 
@@ -57,11 +57,12 @@ STATUS_TOPIC = '/status'
 IMU_COUNT = 40
 STATUS_COUNT = 8
 WRITTEN = {IMU_TOPIC: IMU_COUNT, STATUS_TOPIC: STATUS_COUNT}
-OUTPUT_NAME = 'euler'
+#: convert's output: a single MCAP file (rosbags reads it back as the oracle).
+CONVERTED = 'converted.mcap'
 MEMORY_LIMIT = 1 << 30
 CASE_TIMEOUT_S = 60.0
 #: Every PLOT_EVERY-th case is plotted too (a plot costs ten conversions).
-PLOT_EVERY = 25
+PLOT_EVERY = 40
 ACCEPTED = ('clean', 'note', 'error line')
 COLUMNS = ('clean', 'note', 'error line', 'traceback', 'silent loss', 'memory')
 PARAMS_YAML = 'rotation_node:\n  ros__parameters:\n    input_type: imu\n    outputs: [euler]\n'
@@ -74,7 +75,7 @@ class Source:
     """One undamaged bag: ``path`` (a file or rosbag2 directory), its storage file, payloads."""
 
     name: str
-    format: str
+    bag_format: str
     path: str
     storage_file: str
     #: ``[(message bytes as stored, offset of a string length field in them)]``
@@ -130,7 +131,7 @@ _ROS1_LENGTH_AT = {IMU_TOPIC: 12, STATUS_TOPIC: 0}
 
 
 def _write_mcap_file(path, rows, compression, chunked):
-    """A plain ``.mcap`` by the mcap library: profile ros2, ros2msg schemas, small chunks."""
+    """Write a ``.mcap`` with the mcap library: ros2 profile, ros2msg schemas, 2 kB chunks."""
     from mcap.writer import CompressionType, Writer
 
     from rotation_node.bag.message_types import message_definition
@@ -151,7 +152,7 @@ def _write_mcap_file(path, rows, compression, chunked):
 
 
 def _write_ros1_bag(path, rows, compression):
-    """A ROS 1 bag by rosbags' writer, small chunks."""
+    """Write a ROS 1 bag with rosbags' writer, in small chunks."""
     from rosbags.rosbag1 import Writer
     from rosbags.typesys import get_typestore, Stores
     store = get_typestore(Stores.ROS1_NOETIC)
@@ -208,7 +209,7 @@ def build_sources(directory, seed=2311) -> Dict[str, Source]:
 
 @dataclasses.dataclass
 class Layout:
-    """Records ``[(start, end, kind)]`` and length fields ``[(offset, width, byte order, what)]``."""
+    """Records ``[(start, end, kind)]``, length fields ``[(offset, width, byte order, what)]``."""
 
     records: List[Tuple[int, int, str]]
     lengths: List[Tuple[int, int, str, str]]
@@ -255,7 +256,8 @@ def _mcap_records(data, start, end, layout, inside=''):
             if isinstance(spec, int):
                 field += spec
             elif spec.startswith('L'):
-                layout.lengths.append((field, int(spec[1]), '<', f'{kind} field at {field - body}'))
+                layout.lengths.append((field, int(spec[1]), '<',
+                                       f'{kind} field at {field - body}'))
                 field += int(spec[1])
             elif spec == 'records':
                 layout.lengths.append((field, 8, '<', f'{kind} records length'))
@@ -329,7 +331,7 @@ def ros1_layout(data: bytes) -> Layout:
 
 
 def sqlite_layout(data: bytes) -> Layout:
-    """A SQLite file: its pages as records; the header's page count and freelist fields."""
+    """Return the layout of a SQLite file: its pages, the header's page count and freelist."""
     page_size, = struct.unpack_from('>H', data, 16)
     page_size = 65536 if page_size == 1 else page_size
     records = [(start, min(start + page_size, len(data)), f'page {start // page_size + 1}')
@@ -341,7 +343,7 @@ def sqlite_layout(data: bytes) -> Layout:
 
 
 def _payload_lengths(data, payloads):
-    """String length fields of the messages found stored as they are (uncompressed)."""
+    """Return the string length fields of the messages stored as they are (uncompressed)."""
     found = []
     for payload, length_at in payloads:
         at = bytes(data).find(payload)
@@ -351,7 +353,7 @@ def _payload_lengths(data, payloads):
 
 
 def layout_of(source: Source, data: bytes) -> Layout:
-    """The layout of a source's storage file, with the message string lengths found in it."""
+    """Return the layout of a source's storage file, with the message string lengths in it."""
     if data.startswith(_MCAP_MAGIC):
         layout = mcap_layout(data)
     elif data.startswith(_ROS1_MAGIC):
@@ -470,7 +472,7 @@ class Case:
 
     case_id: str
     source: str
-    format: str
+    bag_format: str
     damage: str
     seed: int
     commands: Tuple[str, ...]
@@ -483,13 +485,13 @@ def corpus(sources: Dict[str, Source], seed: int = 23) -> List[Case]:
         entries = [('none', 0)]
         entries += [(damage, k) for damage, count in CASES_PER_DAMAGE.items()
                     for k in range(count)]
-        if source.format == 'rosbag2 sqlite3':
+        if source.bag_format == 'rosbag2 sqlite3':
             entries += [('sql ' + label, k) for k, (label, _) in enumerate(_SQL_ROWS)]
-        if source.format.startswith('rosbag2') and 'storage' not in name:
+        if source.bag_format.startswith('rosbag2') and 'storage' not in name:
             entries += [('metadata ' + label, k) for k, (label, _) in enumerate(_METADATA_GARBAGE)]
         for damage, k in entries:
-            cases.append(Case(f'{name}.{damage.replace(" ", "_")}.{k}', name,
-                              'metadata.yaml' if damage.startswith('metadata') else source.format,
+            bag_format = 'metadata.yaml' if damage.startswith('metadata') else source.bag_format
+            cases.append(Case(f'{name}.{damage.replace(" ", "_")}.{k}', name, bag_format,
                               damage, seed * 100_003 + len(cases), ()))
     for index, case in enumerate(cases):
         case.commands = ('convert', 'play') + (('plot',) if index % PLOT_EVERY == 0 else ())
@@ -497,7 +499,7 @@ def corpus(sources: Dict[str, Source], seed: int = 23) -> List[Case]:
 
 
 def damage_class(case: Case) -> str:
-    """The row of the outcome table: the damage without its variant (``sql``, ``metadata``)."""
+    """Return the row of the outcome table: the damage without its variant (sql, metadata)."""
     if case.damage.startswith('sql '):
         return 'sqlite3 rows'
     if case.damage.startswith('metadata '):
@@ -586,7 +588,7 @@ class _Publisher:
 
 
 def _stand_in_rclpy(counts):
-    """What ``play`` uses of rclpy, without a ROS graph: publishers count what they publish."""
+    """Return what ``play`` uses of rclpy, without a ROS graph: publishers that count."""
     logger = types.SimpleNamespace(info=lambda text: None)
     node = types.SimpleNamespace(
         create_publisher=lambda cls, topic, qos: _Publisher(counts, cls, topic, qos),
@@ -680,8 +682,8 @@ def classify(command: str, input_path: str, status, stderr: str, escaped, out_di
         return 'bad exit', f'exit {status!r}: ' + ' | '.join(lines)[:300]
     written = sum(WRITTEN.values())
     if command == 'convert':
-        output = os.path.join(out_dir, 'converted')
-        if left != ['converted']:
+        output = os.path.join(out_dir, CONVERTED)
+        if left != [CONVERTED]:
             return 'left behind', f'exit 0 and {out_dir} holds {left}'
         try:
             counts = _rosbags_counts(output)
@@ -691,23 +693,26 @@ def classify(command: str, input_path: str, status, stderr: str, escaped, out_di
         for line in lines:
             topic_line, description = _TOPIC_LINE.match(line), _DESCRIPTION.match(line)
             if topic_line:
-                outputs[topic_line[1]] = (int(topic_line[2]), topic_line[3], int(topic_line[4]))
+                outputs[topic_line[1]] = (int(topic_line[2]), topic_line[3], int(topic_line[4]),
+                                          topic_line[5])
             elif description and described is None and description[1] == input_path:
                 described = int(description[3])
             elif line != f'wrote {output}':
                 notes.append(line)
-        for topic, (received, out_topic, published) in outputs.items():
+        for topic, (received, out_topic, published, reasons) in outputs.items():
             if counts.get(topic, 0) != received or counts.get(out_topic, 0) != published:
                 return 'counts disagree', (
                     f'printed {topic} {received} -> {published}, the output holds '
                     f'{counts.get(topic, 0)} -> {counts.get(out_topic, 0)}')
-        converted = {out_topic for _, out_topic, _ in outputs.values()}
+            if published < received and not reasons:   # each message skipped has its reason
+                return 'silent loss', f'{topic}: {received} messages, {published} converted'
+        converted = {out_topic for _, out_topic, _, _ in outputs.values()}
         read = sum(count for topic, count in counts.items() if topic not in converted)
         klass = _loss_class(read, written, notes)
         if klass == 'clean' and described != read:
             return 'counts disagree', f'described {described} messages, read {read}, no note'
-        return klass, f'read {read} of {written}' + (f'; notes: {" | ".join(notes)}'
-                                                      if notes else '')
+        return klass, f'read {read} of {written}' + (
+            f'; notes: {" | ".join(notes)}' if notes else '')
     if command == 'plot':
         plotted = [_PLOTTED.match(line) for line in lines]
         count = next((int(m[1]) for m in plotted if m), None)
@@ -727,8 +732,8 @@ def classify(command: str, input_path: str, status, stderr: str, escaped, out_di
 
 
 def command_line(command: str, input_path: str, out_dir: str, params: str) -> List[str]:
-    """The arguments of ``rotation_bag`` for a run; its output goes into ``out_dir``."""
-    return {'convert': ['convert', input_path, os.path.join(out_dir, 'converted'),
+    """Return the arguments of ``rotation_bag`` for a run; its output goes into ``out_dir``."""
+    return {'convert': ['convert', input_path, os.path.join(out_dir, CONVERTED),
                         '--params', params],
             # play's read path: the stand-in publishers, no waiting between messages
             'play': ['play', input_path, '--rate', '1e300'],
@@ -749,9 +754,9 @@ def run_case(case: Case, sources: Dict[str, Source], directory: str, params: str
             os.makedirs(out_dir)
             argv = command_line(command, input_path, out_dir, params)
             play_counts: Dict[str, int] = {}
-            started = time.perf_counter()
+            started = time.process_time()
             status, stderr, escaped = run_main(argv, play_counts)
-            seconds = time.perf_counter() - started
+            seconds = time.process_time() - started
             klass, detail = classify(command, input_path, status, stderr, escaped, out_dir,
                                      play_counts)
             if tree_hash(input_path) != before:
@@ -761,10 +766,9 @@ def run_case(case: Case, sources: Dict[str, Source], directory: str, params: str
                 klass, detail = 'left behind', f'temporary files {leftovers} ({klass}: {detail})'
                 for name in leftovers:
                     shutil.rmtree(os.path.join(tempfile.gettempdir(), name), ignore_errors=True)
-            results.append(dict(case=case.case_id, source=case.source, format=case.format,
-                                damage=case.damage, damage_class=damage_class(case),
-                                seed=case.seed, command=command, mutation=description,
-                                status=status, klass=klass, detail=detail, seconds=seconds))
+            results.append({**_result_fields(case, command), 'mutation': description,
+                            'status': status, 'klass': klass, 'detail': detail,
+                            'seconds': seconds})
     finally:
         shutil.rmtree(case_dir, ignore_errors=True)
     return results
@@ -805,11 +809,15 @@ def _child(cases, sources, directory, params, pipe):
             stream.flush()
 
 
+def _result_fields(case, command):
+    return {'case': case.case_id, 'source': case.source, 'format': case.bag_format,
+            'damage': case.damage, 'damage_class': damage_class(case), 'seed': case.seed,
+            'command': command}
+
+
 def _broken(case, klass, detail):
-    return [dict(case=case.case_id, source=case.source, format=case.format, damage=case.damage,
-                 damage_class=damage_class(case), seed=case.seed, command=command,
-                 mutation='', status=None, klass=klass, detail=detail)
-            for command in case.commands]
+    return [{**_result_fields(case, command), 'mutation': '', 'status': None, 'klass': klass,
+             'detail': detail, 'seconds': None} for command in case.commands]
 
 
 def run_cases(cases: List[Case], sources: Dict[str, Source], directory: str, *,
@@ -874,7 +882,7 @@ def run_cases(cases: List[Case], sources: Dict[str, Source], directory: str, *,
 # --- The table ----------------------------------------------------------------------------------
 
 def outcome_table(results: List[dict], command: str) -> str:
-    """A markdown table of the runs of ``command``: format x damage class by outcome."""
+    """Return a markdown table of the runs of ``command``: format x damage by outcome."""
     rows: Dict[Tuple[str, str], Dict[str, int]] = {}
     for result in results:
         if result['command'] != command:
@@ -894,7 +902,7 @@ def outcome_table(results: List[dict], command: str) -> str:
 
 
 def failures(results: List[dict]) -> List[dict]:
-    """The runs whose outcome is not accepted."""
+    """Return the runs whose outcome is not accepted."""
     return [result for result in results if result['klass'] not in ACCEPTED]
 
 

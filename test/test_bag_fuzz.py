@@ -42,7 +42,7 @@ def test_layouts_tile_the_files_and_find_every_stored_message(sources):
         records = layout.records
         assert all(end == start for (_, end, _), (start, _, _) in zip(records, records[1:]))
         head, tail = {'mcap file': (8, 8), 'rosbag2 mcap': (8, 8), 'ROS 1 bag': (13, 0),
-                      'rosbag2 sqlite3': (0, 0)}[source.format]
+                      'rosbag2 sqlite3': (0, 0)}[source.bag_format]
         assert (records[0][0], records[-1][1]) == (head, len(data) - tail), source.name
         stored_plainly = source.name in ('mcap-none', 'mcap-none-unchunked', 'rosbag2-mcap',
                                          'rosbag2-sqlite3', 'ros1-none')

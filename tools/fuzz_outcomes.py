@@ -60,7 +60,7 @@ def main():
             return
         if args.only:
             cases = [case for case in cases if args.only in case.case_id
-                     or args.only in case.format]
+                     or args.only in case.bag_format]
         results = fuzz_corpus.run_cases(cases, sources, os.path.join(directory, 'run'))
     if args.json:
         import json
