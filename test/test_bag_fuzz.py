@@ -27,8 +27,6 @@ def sources(tmp_path_factory):
 @pytest.fixture(scope='module')
 def results(sources, tmp_path_factory):
     """Every case of the corpus run once (all tests below read these results)."""
-    import rotation_node.bag.cli  # noqa: F401 -- imported once here, not in every child
-    import rotation_node.bag.plot  # noqa: F401
     return fuzz_corpus.run_cases(fuzz_corpus.corpus(sources), sources,
                                  str(tmp_path_factory.mktemp('fuzz_runs')))
 

@@ -67,7 +67,7 @@ def main():
         with open(args.json, 'w') as stream:
             json.dump(results, stream, indent=1)
     for command, title in (('convert', 'convert'), ('play', 'play (read path, no ROS graph)'),
-                           ('plot', f'plot (every {fuzz_corpus.PLOT_EVERY}th case)')):
+                           ('plot', f'plot (one case in {fuzz_corpus.PLOT_EVERY} of each source)')):
         print(f'\n{title}\n')
         print(fuzz_corpus.outcome_table(results, command))
     summary = fuzz_corpus.failure_summary(results, limit=200)
