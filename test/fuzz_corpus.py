@@ -841,18 +841,20 @@ def _warm_up(sources, directory, params):
 
 
 def run_cases(cases: List[Case], sources: Dict[str, Source], directory: str, *,
-              timeout_s: float = CASE_TIMEOUT_S) -> List[dict]:
+              timeout_s: float = CASE_TIMEOUT_S, warm_up: bool = True) -> List[dict]:
     """
     Run every case in forked children limited to ``MEMORY_LIMIT`` more address space.
 
     A child that dies (a crash) or takes longer than ``timeout_s`` for one case
     (killed: a hang) costs that case; the next child goes on with the next.
+    ``warm_up``: convert and plot an undamaged source here first.
     """
     os.makedirs(directory, exist_ok=True)
     params = os.path.join(directory, 'params.yaml')
     with open(params, 'w') as stream:
         stream.write(PARAMS_YAML)
-    _warm_up(sources, directory, params)
+    if warm_up:
+        _warm_up(sources, directory, params)
     results: List[dict] = []
     index = 0
     while index < len(cases):

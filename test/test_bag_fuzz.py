@@ -12,6 +12,9 @@ saying what was not; or exit 1 and one line naming the input. Never a
 traceback, never more memory, the input untouched, nothing left behind.
 ``tools/fuzz_outcomes.py`` prints the outcome table and reproduces a case.
 """
+import os
+import time
+
 import fuzz_corpus
 import pytest
 
@@ -97,3 +100,52 @@ def test_the_outcome_table_counts_every_run_once(results):
             assert int(row[2]) == sum(int(cell) for cell in row[3:] if cell.strip())
         assert int(rows[-1][2]) == sum(r['command'] == command for r in results)
     assert sum(r['command'] == 'convert' for r in results) == len({r['case'] for r in results})
+
+
+_ERROR = 'rotation_bag convert: error: /bags/in.mcap is corrupt\n'
+_NOTE = '/bags/in.mcap: 1 message of /status lost at offset 9\n'
+
+
+@pytest.mark.parametrize('expected, command, status, stderr, more', [
+    ('memory', 'convert', None, '', {'escaped': MemoryError()}),
+    ('traceback', 'convert', None, '', {'escaped': KeyError('x')}),
+    ('traceback', 'plot', 1, 'Traceback (most recent call last):\n', {}),
+    ('error line', 'convert', 1, _ERROR, {}),
+    ('bad error line', 'convert', 1, 'rotation_bag convert: error: a message is bad\n', {}),
+    ('bad error line', 'convert', 1, _NOTE + _ERROR, {}),
+    ('error line', 'play', 1, _NOTE + _ERROR.replace('convert', 'play'), {}),
+    ('left behind', 'convert', 1, _ERROR, {'left': ['converted.mcap.part']}),
+    ('bad exit', 'play', 2, '', {}),
+    ('silent loss', 'play', 0, '', {'published': {'/imu': 40, '/status': 7}}),
+    ('note', 'play', 0, _NOTE, {'published': {'/imu': 40, '/status': 7}}),
+    ('clean', 'play', 0, '', {'published': {'/imu': 40, '/status': 8}}),
+    ('silent loss', 'plot', 0, 'plotted 39 messages of /imu to p.png\n', {'left': ['plot.png']}),
+    ('counts disagree', 'plot', 0, 'plotted 41 messages of /imu to p.png\n',
+     {'left': ['plot.png']}),
+])
+def test_each_outcome_is_classified_as_what_it_is(
+        tmp_path, expected, command, status, stderr, more):
+    for name in more.get('left', ()):
+        (tmp_path / name).write_bytes(b'')
+    klass, _ = fuzz_corpus.classify(command, '/bags/in.mcap', status, stderr,
+                                    more.get('escaped'), str(tmp_path), more.get('published', {}))
+    assert klass == expected
+
+
+def test_a_crash_or_a_hang_costs_one_case_and_the_next_runs(sources, tmp_path, monkeypatch):
+    cases = [case for case in fuzz_corpus.corpus(sources) if case.damage == 'truncate'][:3]
+    real_run_case = fuzz_corpus.run_case
+
+    def run_case(case, *args):   # runs in the child
+        if case is cases[0]:
+            os._exit(9)
+        if case is cases[1]:
+            time.sleep(60)
+        return real_run_case(case, *args)
+
+    monkeypatch.setattr(fuzz_corpus, 'run_case', run_case)
+    results = fuzz_corpus.run_cases(cases, sources, str(tmp_path), timeout_s=3)
+    outcomes = [{r['klass'] for r in results if r['case'] == case.case_id} for case in cases]
+    assert outcomes[:2] == [{'crash'}, {'hang'}]
+    assert outcomes[2] and outcomes[2] <= set(fuzz_corpus.ACCEPTED)
+    assert len(results) == sum(len(case.commands) for case in cases)

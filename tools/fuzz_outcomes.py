@@ -66,8 +66,9 @@ def main():
         import json
         with open(args.json, 'w') as stream:
             json.dump(results, stream, indent=1)
+    plotted = f'plot (one case in {fuzz_corpus.PLOT_EVERY} of each source)'
     for command, title in (('convert', 'convert'), ('play', 'play (read path, no ROS graph)'),
-                           ('plot', f'plot (one case in {fuzz_corpus.PLOT_EVERY} of each source)')):
+                           ('plot', plotted)):
         print(f'\n{title}\n')
         print(fuzz_corpus.outcome_table(results, command))
     summary = fuzz_corpus.failure_summary(results, limit=200)
