@@ -61,7 +61,7 @@ WRITTEN = {IMU_TOPIC: IMU_COUNT, STATUS_TOPIC: STATUS_COUNT}
 CONVERTED = 'converted.mcap'
 MEMORY_LIMIT = 1 << 30
 CASE_TIMEOUT_S = 60.0
-#: One case in PLOT_EVERY of each source is plotted too.
+#: One case in PLOT_EVERY of each source (and its metadata.yaml) is plotted too.
 PLOT_EVERY = 24
 ACCEPTED = ('clean', 'note', 'error line')
 COLUMNS = ('clean', 'note', 'error line', 'traceback', 'silent loss', 'memory')
@@ -374,6 +374,15 @@ def _flip(data, rng, layout):
     return bytes(data), f'{flips} bytes flipped'
 
 
+def _flip_header(data, rng, layout):
+    # Where the structure is: the first 48 bytes of a record (lengths, names, offsets).
+    data = bytearray(data)
+    start, end, kind = layout.records[int(rng.integers(len(layout.records)))]
+    offset = int(rng.integers(start, min(end, start + 48)))
+    data[offset] ^= 1 << int(rng.integers(8))
+    return bytes(data), f'a bit of byte {offset} flipped ({kind} at {start})'
+
+
 def _truncate(data, rng, layout):
     # Half anywhere, half in the last quarter (where an interrupted writer stops).
     low = 0 if rng.random() < 0.5 else len(data) * 3 // 4
@@ -420,12 +429,14 @@ def _swap(data, rng, layout):
 
 
 DAMAGE: Dict[str, Callable] = {
-    'flip': _flip, 'truncate': _truncate, 'length': _length, 'zero 64': _zero(64),
-    'zero 512': _zero(512), 'zero 4096': _zero(4096), 'swap': _swap,
+    'flip': _flip, 'flip header': _flip_header, 'truncate': _truncate, 'length': _length,
+    'zero 64': _zero(64), 'zero 512': _zero(512), 'zero 4096': _zero(4096), 'swap': _swap,
 }
 #: Cases per source and damage.
 CASES_PER_DAMAGE = {'flip': 5, 'truncate': 4, 'length': 6, 'zero 64': 2, 'zero 512': 2,
                     'zero 4096': 2, 'swap': 3}
+#: Damages added later: their cases come after the others, which keep their seeds.
+LATER_CASES_PER_DAMAGE = {'flip header': 3}
 
 # Rows of the sqlite3 messages table that are not what rosbag2 writes.
 _SQL_ROWS = [
@@ -480,7 +491,7 @@ class Case:
 
 def corpus(sources: Dict[str, Source], seed: int = 23) -> List[Case]:
     """Every case, in a fixed order: per source, an undamaged control and each damage."""
-    cases = []
+    cases: List[Case] = []
     for number, (name, source) in enumerate(sources.items()):
         entries = [('none', 0)]
         entries += [(damage, k) for damage, count in CASES_PER_DAMAGE.items()
@@ -489,14 +500,28 @@ def corpus(sources: Dict[str, Source], seed: int = 23) -> List[Case]:
             entries += [('sql ' + label, k) for k, (label, _) in enumerate(_SQL_ROWS)]
         if source.bag_format.startswith('rosbag2') and 'storage' not in name:
             entries += [('metadata ' + label, k) for k, (label, _) in enumerate(_METADATA_GARBAGE)]
-        for position, (damage, k) in enumerate(entries):
-            bag_format = 'metadata.yaml' if damage.startswith('metadata') else source.bag_format
-            # A plot costs ten conversions: one case in PLOT_EVERY of each source, damages varied
-            plotted = (position + 7 * number) % PLOT_EVERY == 1
-            cases.append(Case(f'{name}.{damage.replace(" ", "_")}.{k}', name, bag_format,
-                              damage, seed * 100_003 + len(cases),
-                              ('convert', 'play', 'plot') if plotted else ('convert', 'play')))
+        _add_cases(cases, number, name, source, entries, seed)
+    for number, (name, source) in enumerate(sources.items()):
+        _add_cases(cases, number, name, source, [
+            (damage, k) for damage, count in LATER_CASES_PER_DAMAGE.items()
+            for k in range(count)], seed, plots=False)
     return cases
+
+
+def _add_cases(cases, number, name, source, entries, seed, plots=True):
+    groups: Dict[str, list] = {}   # by the format of the table: storage or metadata.yaml
+    for damage, k in entries:
+        bag_format = 'metadata.yaml' if damage.startswith('metadata') else source.bag_format
+        groups.setdefault(bag_format, []).append((damage, k))
+    for bag_format, group in groups.items():
+        # A plot costs ten conversions: one case in PLOT_EVERY of each group, at least
+        # one, a different damage for each source.
+        plotted = (1 + 7 * number) % min(PLOT_EVERY, len(group)) if plots else -1
+        for position, (damage, k) in enumerate(group):
+            cases.append(Case(
+                f'{name}.{damage.replace(" ", "_")}.{k}', name, bag_format, damage,
+                seed * 100_003 + len(cases), ('convert', 'play', 'plot')
+                if position % PLOT_EVERY == plotted else ('convert', 'play')))
 
 
 def damage_class(case: Case) -> str:
