@@ -202,6 +202,10 @@ def build_sources(directory, seed=2311) -> Dict[str, Source]:
         path = os.path.join(directory, name + '.bag')
         _write_ros1_bag(path, ros1_rows, compression)
         add(name, 'ROS 1 bag', path, path, ros1_payloads)
+    # rosbag2's message compression: each row a zstd frame
+    path = write_rosbag2(Path(directory) / 'rosbag2-sqlite3-message', rows, storage='sqlite3',
+                         compression='message')
+    add('rosbag2-sqlite3-message', 'rosbag2 sqlite3', path, _storage_file(path), [])
     return sources
 
 
@@ -435,8 +439,9 @@ DAMAGE: Dict[str, Callable] = {
 #: Cases per source and damage.
 CASES_PER_DAMAGE = {'flip': 5, 'truncate': 4, 'length': 6, 'zero 64': 2, 'zero 512': 2,
                     'zero 4096': 2, 'swap': 3}
-#: Damages added later: their cases come after the others, which keep their seeds.
+#: Damages and sources added later: their cases come after the others, which keep their seeds.
 LATER_CASES_PER_DAMAGE = {'flip header': 3}
+LATER_SOURCES = ('rosbag2-sqlite3-message',)
 
 # Rows of the sqlite3 messages table that are not what rosbag2 writes.
 _SQL_ROWS = [
@@ -489,22 +494,36 @@ class Case:
     commands: Tuple[str, ...]
 
 
+def _entries(name, source, damages):
+    entries = [('none', 0)]
+    entries += [(damage, k) for damage, count in damages.items() for k in range(count)]
+    if source.bag_format == 'rosbag2 sqlite3':
+        entries += [('sql ' + label, k) for k, (label, _) in enumerate(_SQL_ROWS)]
+    if source.bag_format.startswith('rosbag2') and 'storage' not in name:
+        entries += [('metadata ' + label, k) for k, (label, _) in enumerate(_METADATA_GARBAGE)]
+    return entries
+
+
 def corpus(sources: Dict[str, Source], seed: int = 23) -> List[Case]:
-    """Every case, in a fixed order: per source, an undamaged control and each damage."""
+    """
+    Return every case, in a fixed order: per source, an undamaged control and each damage.
+
+    A case's seed is its place in the corpus: the damages and sources added
+    later (``LATER_CASES_PER_DAMAGE``, ``LATER_SOURCES``) come after the
+    others, which keep their seeds.
+    """
     cases: List[Case] = []
-    for number, (name, source) in enumerate(sources.items()):
-        entries = [('none', 0)]
-        entries += [(damage, k) for damage, count in CASES_PER_DAMAGE.items()
-                    for k in range(count)]
-        if source.bag_format == 'rosbag2 sqlite3':
-            entries += [('sql ' + label, k) for k, (label, _) in enumerate(_SQL_ROWS)]
-        if source.bag_format.startswith('rosbag2') and 'storage' not in name:
-            entries += [('metadata ' + label, k) for k, (label, _) in enumerate(_METADATA_GARBAGE)]
-        _add_cases(cases, number, name, source, entries, seed)
-    for number, (name, source) in enumerate(sources.items()):
+    first = [(name, source) for name, source in sources.items() if name not in LATER_SOURCES]
+    later = [(name, source) for name, source in sources.items() if name in LATER_SOURCES]
+    for number, (name, source) in enumerate(first):
+        _add_cases(cases, number, name, source, _entries(name, source, CASES_PER_DAMAGE), seed)
+    for number, (name, source) in enumerate(first):
         _add_cases(cases, number, name, source, [
             (damage, k) for damage, count in LATER_CASES_PER_DAMAGE.items()
             for k in range(count)], seed, plots=False)
+    for number, (name, source) in enumerate(later, len(first)):
+        _add_cases(cases, number, name, source, _entries(
+            name, source, {**CASES_PER_DAMAGE, **LATER_CASES_PER_DAMAGE}), seed)
     return cases
 
 
