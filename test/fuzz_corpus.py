@@ -5,13 +5,17 @@ Sources are bags of a few dozen ``sensor_msgs/msg/Imu`` messages on ``/imu``
 and some ``std_msgs/msg/String`` on ``/status``, written by writers the
 package did not write: the ``mcap`` library (a plain ``.mcap``, chunks
 uncompressed, lz4 or zstd, or no chunks), the ``rosbags`` rosbag2 writer
-(mcap and sqlite3 directories) and the ``rosbags`` ROS 1 writer (chunks
-uncompressed, bz2 or lz4). Each case is a copy of a source with one seeded
-mutation of a storage file (or of ``metadata.yaml``): flipped bytes,
-truncation, a length field set to 2^31..2^64-1 (the fields found by parsing
-the file: :func:`mcap_layout`, :func:`ros1_layout`, :func:`sqlite_layout`),
-zeroed regions, swapped records, TEXT (NULL, integer) rows in the sqlite3
-messages table, garbage in ``metadata.yaml``.
+(mcap directories, with and without zstd chunks; sqlite3 directories, with and
+without zstd message compression) and the ``rosbags`` ROS 1 writer (chunks
+uncompressed, bz2 or lz4); the messages are serialized by rosbags. Each case
+is a copy of a source with one seeded mutation of a storage file (or of
+``metadata.yaml``): flipped bytes (anywhere, or one bit in a record's first
+48 bytes), truncation, a length field set to 2^31..2^64-1 (the fields found
+by parsing the file: :func:`mcap_layout`, :func:`ros1_layout`,
+:func:`sqlite_layout`, and the string lengths of the messages stored
+uncompressed), zeroed regions, swapped records, rows of the sqlite3 tables
+that are not what rosbag2 writes (TEXT, INTEGER, empty or short data, an
+unknown topic), garbage in ``metadata.yaml``.
 
 Every case runs ``rotation_bag convert``, the read path of ``play`` (with a
 stand-in for rclpy's publishers: no ROS graph) and, for a subset,
@@ -23,9 +27,11 @@ a note for what was not read (``note``), and exit 1 with one line naming the
 input (``error line``). Everything else is a failure: an exception escaping
 ``main`` (``traceback``; ``memory`` for a MemoryError, an allocation beyond
 the limit), fewer messages than written without a note (``silent loss``),
+a converted topic with fewer messages than its input and no reason printed,
 printed counts that disagree with the output read back by rosbags (``counts
 disagree``), a changed input, something left in the output directory or the
-temporary directory, a hang or a crash of the child.
+temporary directory, a hang or a crash of the child. Cases are seeded by their
+place in the corpus, which only grows at its end (:func:`corpus`).
 
 ``python tools/fuzz_outcomes.py`` prints the table (:func:`outcome_table`).
 """
