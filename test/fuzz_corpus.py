@@ -20,7 +20,7 @@ unknown topic), garbage in ``metadata.yaml``.
 Every case runs ``rotation_bag convert``, the read path of ``play`` (with a
 stand-in for rclpy's publishers: no ROS graph) and, for a subset,
 ``plot``, through :func:`rotation_node.bag.cli.main`, in a forked child whose
-address space is limited to 1 GiB above what it holds when it starts
+address space is limited to 1 GB above what it holds when it starts
 (:func:`run_cases`). Each run is classified (:func:`classify`); the accepted
 outcomes are exit 0 with every message written read (``clean``), exit 0 with
 a note for what was not read (``note``), and exit 1 with one line naming the
@@ -65,7 +65,8 @@ STATUS_COUNT = 8
 WRITTEN = {IMU_TOPIC: IMU_COUNT, STATUS_TOPIC: STATUS_COUNT}
 #: convert's output: a single MCAP file (rosbags reads it back as the oracle).
 CONVERTED = 'converted.mcap'
-MEMORY_LIMIT = 1 << 30
+#: "Never more than 1 GB": what a child may map beyond what it maps when it starts.
+MEMORY_LIMIT = 10**9
 CASE_TIMEOUT_S = 60.0
 #: One case in PLOT_EVERY of each source (and its metadata.yaml) is plotted too.
 PLOT_EVERY = 24
@@ -825,7 +826,7 @@ def run_case(case: Case, sources: Dict[str, Source], directory: str, params: str
     return results
 
 
-# --- The forked runner: 1 GiB of address space, a watchdog ------------------------------------
+# --- The forked runner: 1 GB more address space, a watchdog ---------------------------------
 
 def _address_space():
     with open('/proc/self/status') as stream:
@@ -841,9 +842,8 @@ def limit_address_space(extra: int = MEMORY_LIMIT) -> None:
     resource.setrlimit(resource.RLIMIT_AS, (limit, resource.getrlimit(resource.RLIMIT_AS)[1]))
 
 
-def _child(cases, sources, directory, params, pipe):
+def _child(cases, sources, directory, params, pipe, tmp):
     """Run ``cases`` in this (forked) process, one JSON line per event on ``pipe``."""
-    tmp = os.path.join(directory, 'tmp')
     os.makedirs(tmp, exist_ok=True)
     tempfile.tempdir = tmp
     os.environ['TMPDIR'] = tmp
@@ -890,14 +890,83 @@ def _warm_up(sources, directory, params):
     shutil.rmtree(out_dir)
 
 
+class _Worker:
+    """A forked child running a list of cases; restarted after the case that killed it."""
+
+    def __init__(self, cases, sources, directory, params, tmp):
+        self.pending = list(cases)
+        self.results: List[dict] = []
+        self._args = (sources, directory, params)
+        self._tmp = tmp
+        self.pid = None
+        self._start()
+
+    def _start(self):
+        self.started, self._buffer = None, b''
+        self.last_event = time.monotonic()
+        if not self.pending:
+            self.pid = None
+            return
+        read_end, write_end = os.pipe()
+        pid = os.fork()
+        if pid == 0:   # pragma: no cover -- the child
+            status = 0
+            try:
+                os.close(read_end)
+                _child(self.pending, *self._args, write_end, self._tmp)
+            except BaseException:   # noqa: B902 -- the child must never return into pytest
+                traceback.print_exc()
+                status = 3
+            finally:
+                os._exit(status)
+        os.close(write_end)
+        self.pid, self.fd = pid, read_end
+
+    def read(self):
+        """Take what the child wrote; at its end, account for it and start the next child."""
+        data = os.read(self.fd, 1 << 16)
+        self.last_event = time.monotonic()
+        self._buffer += data
+        *lines, self._buffer = self._buffer.split(b'\n')
+        for line in lines:
+            event = json.loads(line)
+            if 'start' in event:
+                self.started = self.pending[0]
+            else:
+                self.results.extend(event['results'])
+                self.started = None
+                self.pending.pop(0)
+        if not data:
+            self._ended(None)
+
+    def kill(self, timeout_s):
+        os.kill(self.pid, signal.SIGKILL)
+        self._ended(f'no result within {timeout_s} s')
+
+    def _ended(self, hang):
+        os.close(self.fd)
+        _, wait_status = os.waitpid(self.pid, 0)
+        started = self.started
+        if started is not None:
+            self.results.extend(_broken(started, 'hang', hang) if hang else _broken(
+                started, 'crash', f'the child ended with wait status {wait_status}'))
+            shutil.rmtree(os.path.join(self._args[1], started.case_id), ignore_errors=True)
+            self.pending.pop(0)
+        elif self.pending:
+            raise RuntimeError(f'the fuzz child failed outside a case (status {wait_status})')
+        self._start()
+
+
 def run_cases(cases: List[Case], sources: Dict[str, Source], directory: str, *,
-              timeout_s: float = CASE_TIMEOUT_S, warm_up: bool = True) -> List[dict]:
+              timeout_s: float = CASE_TIMEOUT_S, warm_up: bool = True,
+              jobs: int = 2) -> List[dict]:
     """
-    Run every case in forked children limited to ``MEMORY_LIMIT`` more address space.
+    Run every case in ``jobs`` forked children, each allowed ``MEMORY_LIMIT`` more address space.
 
     A child that dies (a crash) or takes longer than ``timeout_s`` for one case
-    (killed: a hang) costs that case; the next child goes on with the next.
-    ``warm_up``: convert and plot an undamaged source here first.
+    (killed: a hang) costs that case; a new child goes on with the next.
+    ``warm_up``: convert and plot an undamaged source here first. Returns the
+    results in the order of ``cases``.
     """
     os.makedirs(directory, exist_ok=True)
     params = os.path.join(directory, 'params.yaml')
@@ -905,51 +974,22 @@ def run_cases(cases: List[Case], sources: Dict[str, Source], directory: str, *,
         stream.write(PARAMS_YAML)
     if warm_up:
         _warm_up(sources, directory, params)
-    results: List[dict] = []
-    index = 0
-    while index < len(cases):
-        read_end, write_end = os.pipe()
-        pid = os.fork()
-        if pid == 0:   # pragma: no cover -- the child
-            status = 0
-            try:
-                os.close(read_end)
-                _child(cases[index:], sources, directory, params, write_end)
-            except BaseException:   # noqa: B902 -- the child must never return into pytest
-                traceback.print_exc()
-                status = 3
-            finally:
-                os._exit(status)
-        os.close(write_end)
-        started = None
-        with os.fdopen(read_end) as stream:
-            while True:
-                ready, _, _ = select.select([stream], [], [], timeout_s)
-                if not ready:
-                    os.kill(pid, signal.SIGKILL)
-                    break
-                line = stream.readline()
-                if not line:
-                    break
-                event = json.loads(line)
-                if 'start' in event:
-                    started = cases[index]
-                else:
-                    results.extend(event['results'])
-                    started = None
-                    index += 1
-        _, wait_status = os.waitpid(pid, 0)
-        if started is not None:
-            if not ready:
-                results.extend(_broken(started, 'hang', f'no result within {timeout_s} s'))
-            else:
-                results.extend(_broken(started, 'crash', f'the child ended with wait status '
-                                                         f'{wait_status}'))
-            shutil.rmtree(os.path.join(directory, started.case_id), ignore_errors=True)
-            index += 1
-        elif index < len(cases) and os.waitstatus_to_exitcode(wait_status) != 0:
-            raise RuntimeError(f'the fuzz child failed outside a case (status {wait_status})')
-    return results
+    workers = [_Worker(cases[job::jobs], sources, directory, params,
+                       os.path.join(directory, f'tmp{job}')) for job in range(jobs)]
+    while True:
+        running = {worker.fd: worker for worker in workers if worker.pid is not None}
+        if not running:
+            break
+        wait = min(worker.last_event for worker in running.values()) + timeout_s
+        ready, _, _ = select.select(list(running), [], [], max(0.0, wait - time.monotonic()))
+        for fd in ready:
+            running[fd].read()
+        for worker in running.values():
+            if worker.pid is not None and time.monotonic() - worker.last_event > timeout_s:
+                worker.kill(timeout_s)
+    order = {case.case_id: index for index, case in enumerate(cases)}
+    return sorted((result for worker in workers for result in worker.results),
+                  key=lambda result: order[result['case']])
 
 
 # --- The table ----------------------------------------------------------------------------------

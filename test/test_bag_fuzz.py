@@ -6,7 +6,7 @@ ROS 1 writers), each damaged in seeded ways (flipped bytes, truncation, length
 fields set to 2^31..2^64-1, zeroed regions, swapped records, TEXT rows in
 sqlite3, garbage in ``metadata.yaml``; see ``fuzz_corpus``), are converted,
 played (the read path; rclpy's publishers stood in for) and some plotted by
-``rotation_bag`` in-process, in a child process with 1 GiB of address space.
+``rotation_bag`` in-process, in forked children allowed 1 GB more address space.
 Every run must end with exit 0 and every message written read, or a note
 saying what was not; or exit 1 and one line naming the input. Never a
 traceback, never more memory, the input untouched, nothing left behind.

@@ -31,7 +31,7 @@ def _reproduce(case, sources, directory):
     params = os.path.join(directory, 'params.yaml')
     with open(params, 'w') as stream:
         stream.write(fuzz_corpus.PARAMS_YAML)
-    fuzz_corpus.limit_address_space()   # as in the test's child: 1 GiB more at most
+    fuzz_corpus.limit_address_space()   # as in the test's child: 1 GB more at most
     for command in case.commands:
         out = os.path.join(directory, f'out_{command}')
         argv = fuzz_corpus.command_line(command, input_path, out, params)
