@@ -32,6 +32,9 @@ printed counts that disagree with the output read back by rosbags (``counts
 disagree``), a changed input, something left in the output directory or the
 temporary directory, a hang or a crash of the child. Cases are seeded by their
 place in the corpus, which only grows at its end (:func:`corpus`).
+Informational, not a failure: an exit 0 that read fewer messages than
+independent readers read and decode from the same damaged input
+(:func:`oracle_counts`).
 
 ``python tools/fuzz_outcomes.py`` prints the table (:func:`outcome_table`).
 """
@@ -39,6 +42,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import hashlib
 import io
 import json
@@ -783,6 +787,90 @@ def classify(command: str, input_path: str, status, stderr: str, escaped, out_di
         f'; notes: {" | ".join(lines)}' if lines else '')
 
 
+@functools.lru_cache(maxsize=None)
+def _typestore(name):
+    """Return a rosbags type store, made once (it compiles its deserializers as they are used)."""
+    from rosbags.typesys import get_typestore, Stores
+    return get_typestore(getattr(Stores, name))
+
+
+def _decodable(typestore, type_name, data, ros1=False):
+    try:
+        (typestore.deserialize_ros1 if ros1 else typestore.deserialize_cdr)(data, type_name)
+    except Exception:   # noqa: B902 -- the oracle: whatever rosbags cannot decode
+        return False
+    return True
+
+
+def _counted(messages, counts):
+    """Count ``(topic, decodable)`` into ``counts`` until the reader fails; return ``counts``."""
+    try:
+        for topic, decodable in messages:
+            if decodable:
+                counts[topic] = counts.get(topic, 0) + 1
+    except (Exception, MemoryError):   # noqa: B902 -- where the oracle stops
+        pass
+    return counts
+
+
+def _mcap_scan(path, typestore):
+    from mcap.records import Channel, Message, Schema
+    from mcap.stream_reader import StreamReader
+    schemas, channels = {}, {}
+    with open(path, 'rb') as stream:
+        for record in StreamReader(stream, validate_crcs=True).records:
+            if isinstance(record, Schema):
+                schemas[record.id] = record.name
+            elif isinstance(record, Channel):
+                channels[record.id] = (record.topic, schemas.get(record.schema_id, ''))
+            elif isinstance(record, Message) and record.channel_id in channels:
+                topic, type_name = channels[record.channel_id]
+                yield topic, _decodable(typestore, type_name, record.data)
+
+
+def _mcap_indexed(path, typestore):
+    from mcap.reader import make_reader
+    with open(path, 'rb') as stream:
+        for schema, channel, message in make_reader(stream, validate_crcs=True).iter_messages():
+            yield channel.topic, _decodable(typestore, schema.name if schema else '', message.data)
+
+
+def _rosbags_messages(path, typestore, reader_class, ros1=False):
+    with reader_class(path) as reader:
+        for connection, _, data in reader.messages():
+            yield connection.topic, isinstance(data, (bytes, memoryview)) and _decodable(
+                typestore, connection.msgtype, bytes(data), ros1)
+
+
+def oracle_counts(input_path: str, source: Source) -> Dict[str, int]:
+    """
+    Return ``{topic: messages}`` that independent readers read and rosbags decodes, at best.
+
+    A lower bound of what is readable in a damaged input: the mcap library
+    (a linear scan, CRCs checked, and its indexed reader) for MCAP, rosbags'
+    readers for rosbag2 directories and ROS 1 bags, each counted up to where
+    it fails; the best of them.
+    """
+    from rosbags.rosbag1 import Reader as Ros1Reader
+    from rosbags.rosbag2 import Reader as Rosbag2Reader
+    if source.bag_format == 'ROS 1 bag':
+        store = _typestore('ROS1_NOETIC')
+        readings = [_rosbags_messages(input_path, store, Ros1Reader, ros1=True)]
+    else:
+        store = _typestore('ROS2_JAZZY')
+        readings = [_rosbags_messages(input_path, store, Rosbag2Reader)] \
+            if os.path.isdir(input_path) else []
+        storage = (os.path.join(input_path, os.path.basename(source.storage_file))
+                   if os.path.isdir(input_path) else input_path)
+        if storage.endswith('.mcap'):
+            readings += [_mcap_scan(storage, store), _mcap_indexed(storage, store)]
+    counts = [_counted(reading, {}) for reading in readings]
+    return max(counts, key=lambda c: sum(c.values()), default={})
+
+
+_READ = re.compile(r'^(?:read|published|plotted) (\d+) of ')
+
+
 def command_line(command: str, input_path: str, out_dir: str, params: str) -> List[str]:
     """Return the arguments of ``rotation_bag`` for a run; its output goes into ``out_dir``."""
     return {'convert': ['convert', input_path, os.path.join(out_dir, CONVERTED),
@@ -821,6 +909,15 @@ def run_case(case: Case, sources: Dict[str, Source], directory: str, params: str
             results.append({**_result_fields(case, command), 'mutation': description,
                             'status': status, 'klass': klass, 'detail': detail,
                             'seconds': seconds})
+        # Informational: exit 0 with fewer messages than independent readers read and decode.
+        oracle = oracle_counts(input_path, sources[case.source]) if any(
+            result['status'] == 0 for result in results) else {}
+        for result in results:
+            read = _READ.match(result['detail']) if result['status'] == 0 else None
+            readable = (oracle.get(IMU_TOPIC, 0) if result['command'] == 'plot'
+                        else sum(oracle.values()))
+            result['below_oracle'] = bool(read) and int(read[1]) < readable
+            result['oracle'] = readable
     finally:
         shutil.rmtree(case_dir, ignore_errors=True)
     return results
@@ -868,7 +965,8 @@ def _result_fields(case, command):
 
 def _broken(case, klass, detail):
     return [{**_result_fields(case, command), 'mutation': '', 'status': None, 'klass': klass,
-             'detail': detail, 'seconds': None} for command in case.commands]
+             'detail': detail, 'seconds': None, 'below_oracle': False, 'oracle': None}
+            for command in case.commands]
 
 
 def _warm_up(sources, directory, params):
@@ -995,23 +1093,41 @@ def run_cases(cases: List[Case], sources: Dict[str, Source], directory: str, *,
 # --- The table ----------------------------------------------------------------------------------
 
 def outcome_table(results: List[dict], command: str) -> str:
-    """Return a markdown table of the runs of ``command``: format x damage by outcome."""
+    """
+    Return a markdown table of the runs of ``command``: format x damage by outcome.
+
+    The last column, informational, counts the runs that ended with exit 0
+    having read fewer messages than independent readers (:func:`oracle_counts`).
+    """
     rows: Dict[Tuple[str, str], Dict[str, int]] = {}
     for result in results:
         if result['command'] != command:
             continue
         row = rows.setdefault((result['format'], result['damage_class']), {})
         row[result['klass']] = row.get(result['klass'], 0) + 1
+    below: Dict[Tuple[str, str], int] = {}
+    for result in results:
+        if result['command'] == command and result.get('below_oracle'):
+            key = (result['format'], result['damage_class'])
+            below[key] = below.get(key, 0) + 1
     others = sorted({k for row in rows.values() for k in row} - set(COLUMNS))
-    header = ['format', 'damage', 'cases', *COLUMNS, *others]
+    header = ['format', 'damage', 'cases', *COLUMNS, *others, '(exit 0, < independent readers)']
     body = [[fmt, damage, str(sum(row.values())), *(str(row.get(k, 0) or '') for k in COLUMNS),
-             *(str(row.get(k, 0) or '') for k in others)]
+             *(str(row.get(k, 0) or '') for k in others), str(below.get((fmt, damage), '') or '')]
             for (fmt, damage), row in sorted(rows.items())]
     totals = [sum(row.get(k, 0) for row in rows.values()) for k in (*COLUMNS, *others)]
     body.append(['**all**', '', str(sum(sum(row.values()) for row in rows.values())),
-                 *map(str, totals)])
+                 *map(str, totals), str(sum(below.values()))])
     return '\n'.join('| ' + ' | '.join(cells) + ' |'
                      for cells in [header, ['---'] * len(header), *body])
+
+
+def below_oracle_summary(results: List[dict]) -> str:
+    """One line per exit-0 run that read fewer messages than the independent readers did."""
+    return '\n'.join(
+        f'{r["case"]} [{r["command"]}] (seed {r["seed"]}; {r["mutation"]}): {r["klass"]}, '
+        f'{r["detail"]}; independent readers read {r["oracle"]}'
+        for r in results if r.get('below_oracle'))
 
 
 def failures(results: List[dict]) -> List[dict]:

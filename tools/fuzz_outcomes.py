@@ -74,6 +74,10 @@ def main():
     summary = fuzz_corpus.failure_summary(results, limit=200)
     print('\nfailures\n' if summary else '\nno failures')
     print(summary)
+    below = fuzz_corpus.below_oracle_summary(results)
+    print('\nexit 0, fewer messages than the independent readers read and decode '
+          '(informational, not a failure of the test)\n')
+    print(below or 'none')
 
 
 if __name__ == '__main__':
