@@ -102,8 +102,7 @@ def _rows(seed, store_name):
     reproducible). Random unit orientations and angular velocities at 100 Hz,
     a String on ``/status`` every 50 ms.
     """
-    from rosbags.typesys import get_typestore, Stores
-    store = get_typestore(getattr(Stores, store_name))
+    store = _typestore(store_name)
     types_ = store.types
     ros1 = store_name == 'ROS1_NOETIC'
     serialize = store.serialize_ros1 if ros1 else store.serialize_cdr
