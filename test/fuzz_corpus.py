@@ -1036,6 +1036,13 @@ class _Worker:
         if not data:
             self._ended(None)
 
+    def stop(self):
+        """Kill the child and reap it, without accounting for its case."""
+        os.kill(self.pid, signal.SIGKILL)
+        os.waitpid(self.pid, 0)
+        os.close(self.fd)
+        self.pid = None
+
     def kill(self, timeout_s):
         os.kill(self.pid, signal.SIGKILL)
         self._ended(f'no result within {timeout_s} s')
@@ -1071,19 +1078,26 @@ def run_cases(cases: List[Case], sources: Dict[str, Source], directory: str, *,
         stream.write(PARAMS_YAML)
     if warm_up:
         _warm_up(sources, directory, params)
-    workers = [_Worker(cases[job::jobs], sources, directory, params,
-                       os.path.join(directory, f'tmp{job}')) for job in range(jobs)]
-    while True:
-        running = {worker.fd: worker for worker in workers if worker.pid is not None}
-        if not running:
-            break
-        wait = min(worker.last_event for worker in running.values()) + timeout_s
-        ready, _, _ = select.select(list(running), [], [], max(0.0, wait - time.monotonic()))
-        for fd in ready:
-            running[fd].read()
-        for worker in running.values():
-            if worker.pid is not None and time.monotonic() - worker.last_event > timeout_s:
-                worker.kill(timeout_s)
+    workers: List[_Worker] = []
+    try:
+        for job in range(jobs):
+            workers.append(_Worker(cases[job::jobs], sources, directory, params,
+                                   os.path.join(directory, f'tmp{job}')))
+        while True:
+            running = {worker.fd: worker for worker in workers if worker.pid is not None}
+            if not running:
+                break
+            wait = min(worker.last_event for worker in running.values()) + timeout_s
+            ready, _, _ = select.select(list(running), [], [], max(0.0, wait - time.monotonic()))
+            for fd in ready:
+                running[fd].read()
+            for worker in running.values():
+                if worker.pid is not None and time.monotonic() - worker.last_event > timeout_s:
+                    worker.kill(timeout_s)
+    finally:   # interrupted (Ctrl-C): no child outlives the run
+        for worker in workers:
+            if worker.pid is not None:
+                worker.stop()
     order = {case.case_id: index for index, case in enumerate(cases)}
     return sorted((result for worker in workers for result in worker.results),
                   key=lambda result: order[result['case']])
