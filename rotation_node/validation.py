@@ -410,6 +410,19 @@ class Sections(Kind):
                 for name, fields in value.items()}
 
 
+@dataclasses.dataclass(frozen=True)
+class Section(Kind):
+    """A mapping that is one dataclass ``cls``, its keys checked as :func:`built` checks them."""
+
+    cls: type
+
+    def checked(self, value: Any, where: Where) -> Any:
+        """Return the dataclass the mapping ``value`` describes."""
+        if not isinstance(value, dict):
+            raise where.type_error('a mapping', value)
+        return built(self.cls, value, where)
+
+
 # --- declared fields ----------------------------------------------------------
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
