@@ -23,10 +23,11 @@ from rotation_node import messages
 from rotation_node.conversions import parse_sequence
 from rotation_node.errors import ParameterError
 from rotation_node.frames import BODY_FRAMES, WORLD_FRAMES
+from rotation_node.mounting import IDENTITY, quaternion_from_rotation_values
 from rotation_node.ros_yaml import load_ros_yaml
 from rotation_node.validation import (
     Boolean, check_fields, checked_values, Choice, ChoiceList, Declaration, declarations,
-    did_you_mean, Integer, Real, Text, Where)
+    did_you_mean, Integer, Real, Reals, Text, Where)
 
 if TYPE_CHECKING:
     from rotation_node.type_aliases import StrPath
@@ -109,6 +110,19 @@ def _frame_name(value: str, where: Where) -> str:
         raise where.error(f"{value!r} starts with '/'; TF frame names do not "
                           f'(write {value.lstrip("/")!r})')
     return value
+
+
+def _rotation(value: tuple, where: Where) -> tuple:
+    """Check: [x, y, z, w] of unit norm, or [roll, pitch, yaw] in degrees."""
+    try:
+        quaternion_from_rotation_values(value)
+    except ValueError as exc:
+        raise where.error(str(exc)) from None
+    return value
+
+
+_ROTATION_RULE = ('[x, y, z, w] (unit quaternion) or [roll, pitch, yaw] (degrees, ROS RPY), '
+                  'floating-point numbers')
 
 
 def _parameter(name, default, description, kind, **options):
@@ -206,6 +220,24 @@ class NodeParameters:
         'frames.output_body', 'flu',
         'Body frame convention of the outputs: flu or frd',
         Choice(BODY_FRAMES))
+    mounting_body_rotation: tuple = _parameter(
+        'mounting.body_rotation', IDENTITY,
+        'M in R\' = W R M: the output body frame\'s orientation in the input\'s body frame '
+        '(e.g. base_link in imu_link); applied to orientation, angular velocity and covariance',
+        Reals((3, 4), integers=False), check=_rotation, rule=_ROTATION_RULE)
+    mounting_world_rotation: tuple = _parameter(
+        'mounting.world_rotation', IDENTITY,
+        'W in R\' = W R M: the input world frame\'s orientation in the output world frame',
+        Reals((3, 4), integers=False), check=_rotation, rule=_ROTATION_RULE)
+    mounting_yaw_offset: float = _parameter(
+        'mounting.yaw_offset', 0.0,
+        'Added to the yaw (rad), as robot_localization\'s yaw_offset: W = Rz(yaw_offset + '
+        'magnetic_declination) mounting.world_rotation',
+        Real(integers=False))
+    mounting_magnetic_declination: float = _parameter(
+        'mounting.magnetic_declination', 0.0,
+        'Added to the yaw (rad), as robot_localization\'s magnetic_declination_radians',
+        Real(integers=False))
     qos_reliability: str = _parameter(
         'qos.reliability', 'auto',
         'Reliability of the input subscriptions and output publishers; auto: inputs adapt '
