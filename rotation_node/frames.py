@@ -100,7 +100,7 @@ def _left_product_terms(p):
 
 
 def _left_product(scale, terms, components):
-    """Return the four components of ``q_W (x) q`` from ``q``'s, with :func:`_left_product_terms`."""
+    """Return the components of ``q_W (x) q`` from ``q``'s, by :func:`_left_product_terms`."""
     out = []
     for row in terms:
         total = None
@@ -201,7 +201,7 @@ class FrameConversion:
         return _BODY_FLIP if self.changes_body else _IDENTITY
 
     def world_matrix(self) -> np.ndarray:
-        """Return the 3x3 signed permutation that maps world coordinates (``P``, ``N``... or ``I``)."""
+        """Return the 3x3 signed permutation that maps world coordinates (``P``, ``N``, ``I``)."""
         return _signed_permutation_matrix(self._world)
 
     def body_matrix(self) -> np.ndarray:

@@ -664,7 +664,7 @@ def _own(parameters: List[Parameter]) -> Dict[str, Any]:
 
 def _text(value: Any) -> str:
     if isinstance(value, list):
-        return ','.join(value)
+        return ','.join(map(_text, value))
     if isinstance(value, bool):
         return str(value).lower()
     return str(value)

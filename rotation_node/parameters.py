@@ -222,21 +222,21 @@ class NodeParameters:
         Choice(BODY_FRAMES))
     mounting_body_rotation: tuple = _parameter(
         'mounting.body_rotation', IDENTITY,
-        'M in R\' = W R M: the output body frame\'s orientation in the input\'s body frame '
+        "M in R' = W R M: the output body frame's orientation in the input's body frame "
         '(e.g. base_link in imu_link); applied to orientation, angular velocity and covariance',
         Reals((3, 4), integers=False), check=_rotation, rule=_ROTATION_RULE)
     mounting_world_rotation: tuple = _parameter(
         'mounting.world_rotation', IDENTITY,
-        'W in R\' = W R M: the input world frame\'s orientation in the output world frame',
+        "W in R' = W R M: the input world frame's orientation in the output world frame",
         Reals((3, 4), integers=False), check=_rotation, rule=_ROTATION_RULE)
     mounting_yaw_offset: float = _parameter(
         'mounting.yaw_offset', 0.0,
-        'Added to the yaw (rad), as robot_localization\'s yaw_offset: W = Rz(yaw_offset + '
+        "Added to the yaw (rad), as robot_localization's yaw_offset: W = Rz(yaw_offset + "
         'magnetic_declination) mounting.world_rotation',
         Real(integers=False))
     mounting_magnetic_declination: float = _parameter(
         'mounting.magnetic_declination', 0.0,
-        'Added to the yaw (rad), as robot_localization\'s magnetic_declination_radians',
+        "Added to the yaw (rad), as robot_localization's magnetic_declination_radians",
         Real(integers=False))
     qos_reliability: str = _parameter(
         'qos.reliability', 'auto',

@@ -36,10 +36,10 @@ import warnings
 import numpy as np
 from rotation_node import conversions, covariance, kinematics, messages
 from rotation_node.frames import FrameConversion
-from rotation_node.mounting import Mounting
 from rotation_node.messages import (
     ANGULAR_VELOCITY, EULER_ANGLES, EULER_COVARIANCE, EULER_RATES, ORIENTATION,
     ORIENTATION_COVARIANCE, OUTPUT_QUATERNION, PUBLISHED_EULER, Sample)
+from rotation_node.mounting import Mounting
 from rotation_node.parameters import INPUT_TYPES, NodeParameters, OUTPUTS
 from rotation_node.stamps import header_stamp_ns, seconds_text
 

@@ -37,7 +37,7 @@ def matrices_of(conversion):
 
 
 def test_nwu_by_its_axes():
-    """North-west-up: east is -y, north is x, up is z; from NED: (x, -y, -z)."""
+    """Check north-west-up: east is -y, north is x, up is z; from NED: (x, -y, -z)."""
     to_nwu = FrameConversion('enu', 'flu', 'nwu', 'flu')
     assert np.array_equal(to_nwu.world_vector([1.0, 0.0, 0.0]), [0.0, -1.0, 0.0])
     assert np.array_equal(to_nwu.world_vector([0.0, 1.0, 0.0]), [1.0, 0.0, 0.0])
@@ -155,7 +155,7 @@ def mp_product(p, q):
 
 
 def world_quaternion(source, target, half):
-    """The world change's exact quaternion (x, y, z, w), by hand: a rotation about an axis."""
+    """Return the world change's exact quaternion (x, y, z, w), by hand (about one axis)."""
     zero, one = half * 0, half / half
     table = {('enu', 'ned'): [half, half, zero, zero], ('ned', 'enu'): [half, half, zero, zero],
              ('enu', 'nwu'): [zero, zero, -half, half],    # Rz(-90 deg)

@@ -211,6 +211,20 @@ def test_finite_difference_angular_velocity(node, rotation):
     assert out.header == messages[1].header
 
 
+def test_mounting_and_yaw_offset_apply_to_orientation_and_angular_velocity(node, rotation):
+    node.configure({'input_type': 'imu', 'outputs': ['quaternion', 'angular_velocity'],
+                    'mounting.body_rotation': [10.0, -20.0, 30.0],
+                    'mounting.yaw_offset': 0.5})
+    msg = make_input_message('imu', rotation, omega=OMEGA_BODY, stamp_ns=STAMP_NS)
+    got = node.exchange('imu', [msg], {'quaternion': 1, 'angular_velocity': 1})
+    m = Rotation.from_euler('xyz', [10.0, -20.0, 30.0], degrees=True)
+    mounted = Rotation.from_euler('z', 0.5) * rotation * m
+    assert_output(got['quaternion'][0], 'quaternion', mounted)
+    assert_output(got['angular_velocity'][0], 'angular_velocity', mounted,
+                  m.inv().apply(OMEGA_BODY))
+    assert node.get('mounting.body_rotation') == [10.0, -20.0, 30.0]
+
+
 # Runtime parameter changes ----------------------------------------------------------
 
 def test_a_convention_change_applies_to_the_next_message(node, rotation):

@@ -4,14 +4,13 @@ import os
 
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation, Slerp
-
 from rotation_node.bag.mcap_io import BagReader
 from rotation_node.errors import BagError
 from rotation_node.scene import cli, spec
 from rotation_node.scene.reference import (
     reference_index_range, reference_stamps_ns, truth_path, TRUTH_SUFFIX)
 from rotation_node.scene.simulator import simulate, write_bag, write_scene_bag
+from scipy.spatial.transform import Rotation, Slerp
 
 START_TIME = 1735689600.0
 MOUNTING = Rotation.from_euler('xyz', [20.0, -35.0, 110.0], degrees=True).as_quat()
@@ -34,7 +33,7 @@ TORQUE_FREE = {'type': 'torque_free', 'inertia': [1, 2, 3], 'orientation': [0, 0
 
 
 def read(path, topic):
-    """Return stamps (ns), quaternions and angular velocities (Imu) of a topic."""
+    """Return stamps (ns), quaternions, angular velocities (Imu) and log times of a topic."""
     stamps, quaternions, rates, log_times = [], [], [], []
     with BagReader(path) as reader:
         for record in reader.messages([topic]):
@@ -50,7 +49,7 @@ def read(path, topic):
 
 
 def oracle_constant_rate(t):
-    """The constant-rate motion at times t, by scipy: q0 * exp(w t)."""
+    """Return the constant-rate motion at times t, by scipy: q0 * exp(w t)."""
     q0 = Rotation.from_quat(CONSTANT_RATE['orientation'])
     return q0 * Rotation.from_rotvec(np.outer(t, CONSTANT_RATE['angular_velocity']))
 
@@ -158,7 +157,8 @@ def test_existing_truth_file_is_one_line_and_nothing_is_written(tmp_path, capsys
     assert (tmp_path / 'out.mcap.truth.json').read_text() == 'kept'
     assert cli.main([str(scene_file), str(out), '--force']) == 0
     assert 'reference stream: 16 messages on /reference/pose' in capsys.readouterr().out
-    assert json.loads((tmp_path / 'out.mcap.truth.json').read_text())['reference']['messages'] == 16
+    truth = json.loads((tmp_path / 'out.mcap.truth.json').read_text())
+    assert truth['reference']['messages'] == 16
 
 
 def test_failed_bag_leaves_no_truth_file(tmp_path):

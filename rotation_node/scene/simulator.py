@@ -31,9 +31,8 @@ which :func:`write_scene_bag` writes beside the bag when the bag is complete.
 from __future__ import annotations
 
 import dataclasses
-from typing import Iterator, Mapping, Optional, TYPE_CHECKING
-
 import json
+from typing import Iterator, Mapping, Optional, TYPE_CHECKING
 
 from geometry_msgs.msg import PoseStamped, QuaternionStamped, Vector3Stamped
 import numpy as np

@@ -440,11 +440,11 @@ def scene_from_dict(data: object) -> Scene:
     reference = scene.reference
     if reference is not None:
         if reference.topic in (scene.topic, TRUTH_ORIENTATION_TOPIC, TRUTH_ANGULAR_VELOCITY_TOPIC):
-            raise SceneError(f'reference.topic: {reference.topic} is already the sensor\'s or a '
+            raise SceneError(f"reference.topic: {reference.topic} is already the sensor's or a "
                              'truth topic')
         if abs(reference.time_offset) >= scene.duration:
             raise SceneError(f'reference.time_offset: {reference.time_offset!r} s leaves no '
-                             f'overlap with the scene\'s {scene.duration!r} s')
+                             f"overlap with the scene's {scene.duration!r} s")
         m = sample_count(scene.duration, reference.rate)
         if m > MAX_SAMPLES:
             raise SceneError(f'reference.rate: duration * rate gives {m} samples, more than '
