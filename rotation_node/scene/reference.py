@@ -144,11 +144,6 @@ class ReferenceStream:
         self._rng = effect_rng(seed, 'reference.orientation_noise')
         self._started = False
 
-    @property
-    def remaining(self) -> int:
-        """Samples not yet returned."""
-        return self._stop - self._next
-
     def _pre_roll(self, first_time):
         """Run the motion from 0 to just before ``first_time`` (the integrator starts at 0)."""
         step = 1.0 / self.reference.rate
