@@ -238,6 +238,19 @@ class NodeParameters:
         'mounting.magnetic_declination', 0.0,
         "Added to the yaw (rad), as robot_localization's magnetic_declination_radians",
         Real(integers=False))
+    mounting_tf_sensor_frame: str = _parameter(
+        'mounting.tf_sensor_frame', '',
+        'With mounting.tf_body_frame: M is read once from /tf_static, the orientation of '
+        'tf_body_frame in this frame (e.g. imu_link)',
+        Text(), check=_frame_name,
+        rule='a TF frame name without a leading /; with mounting.tf_body_frame')
+    mounting_tf_body_frame: str = _parameter(
+        'mounting.tf_body_frame', '',
+        'With mounting.tf_sensor_frame: the output body frame whose orientation in '
+        'tf_sensor_frame is M (e.g. base_link)',
+        Text(), check=_frame_name,
+        rule='a TF frame name without a leading /, not mounting.tf_sensor_frame; with '
+             'mounting.tf_sensor_frame and mounting.body_rotation left at identity')
     qos_reliability: str = _parameter(
         'qos.reliability', 'auto',
         'Reliability of the input subscriptions and output publishers; auto: inputs adapt '
@@ -264,6 +277,7 @@ class NodeParameters:
     def __post_init__(self) -> None:
         """Check every value, then the input type's own parameters; string arrays as tuples."""
         check_fields(self, _PARAMETER)
+        _check_mounting_frames(self)
         check = messages.INPUTS[self.input_type].check_parameters
         if check is not None:
             check(self)
@@ -290,6 +304,36 @@ class NodeParameters:
         """Return ``{ROS name: value}``, string arrays as lists (what rclpy expects)."""
         return {spec.name: list(value) if isinstance(value, tuple) else value
                 for spec, value in ((s, getattr(self, s.attribute)) for s in PARAMETERS)}
+
+
+def mounting_frames_problem(params: NodeParameters) -> str:
+    """
+    Return why only one of the two ``mounting.tf_*`` frames is set ('' if both or neither).
+
+    Not checked on construction: ROS declares and sets parameters one at a
+    time, so the node checks it once all are set (at start-up, and in
+    ``set_parameters_atomically``); ``convert`` and ``export`` before reading.
+    """
+    sensor, body = params.mounting_tf_sensor_frame, params.mounting_tf_body_frame
+    if bool(sensor) == bool(body):
+        return ''
+    given, missing = (('tf_sensor_frame', 'tf_body_frame') if sensor
+                      else ('tf_body_frame', 'tf_sensor_frame'))
+    return (f"parameter 'mounting.{missing}': required with 'mounting.{given}' (the mounting "
+            'is read from /tf_static between the two frames)')
+
+
+def _check_mounting_frames(params: NodeParameters) -> None:
+    """Check: two different mounting frames, and then no mounting.body_rotation."""
+    sensor, body = params.mounting_tf_sensor_frame, params.mounting_tf_body_frame
+    if not (sensor and body):
+        return
+    if sensor == body:
+        raise ParameterError(f"parameters 'mounting.tf_sensor_frame' and "
+                             f"'mounting.tf_body_frame' are both {sensor!r}; name two frames")
+    if quaternion_from_rotation_values(params.mounting_body_rotation) != IDENTITY:
+        raise ParameterError("parameter 'mounting.body_rotation': set it or the "
+                             'mounting.tf_* frames, not both')
 
 
 PARAMETERS = cast(Tuple[ParameterSpec, ...], declarations(NodeParameters))

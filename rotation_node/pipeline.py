@@ -35,6 +35,7 @@ import warnings
 
 import numpy as np
 from rotation_node import conversions, covariance, kinematics, messages
+from rotation_node.errors import ParameterError
 from rotation_node.frames import FrameConversion
 from rotation_node.messages import (
     ANGULAR_VELOCITY, EULER_ANGLES, EULER_COVARIANCE, EULER_RATES, ORIENTATION,
@@ -82,6 +83,9 @@ def mounting_of(params: NodeParameters) -> Optional[Mounting]:
     without mounting, bit for bit. Applied after the frame conventions
     (``frames.*``), in the output's conventions: ``R_out = W (F_w R_in F_b) M``.
     """
+    if params.mounting_tf_sensor_frame or params.mounting_tf_body_frame:
+        raise ParameterError('mounting.tf_sensor_frame and mounting.tf_body_frame: the mounting '
+                             'must be read from /tf_static first (static_mounting.resolved)')
     mounting = Mounting.from_parts(
         params.mounting_body_rotation, params.mounting_world_rotation,
         params.mounting_yaw_offset, params.mounting_magnetic_declination)

@@ -35,7 +35,7 @@ def test_the_issues_name_every_parameter():
         'covariance.frame', 'covariance.max_linearisation_ratio', 'frames.input_world',
         'frames.input_body', 'frames.output_world', 'frames.output_body',
         'mounting.body_rotation', 'mounting.world_rotation', 'mounting.yaw_offset',
-        'mounting.magnetic_declination',
+        'mounting.magnetic_declination', 'mounting.tf_sensor_frame', 'mounting.tf_body_frame',
         'qos.reliability', 'qos.depth', 'tf.parent_frame', 'tf.child_frame'}
 
 

@@ -32,6 +32,7 @@ from rotation_node.bag.reader import open_bag
 from rotation_node.bag.stop_signal import raise_if_stopped
 from rotation_node.errors import BagError
 from rotation_node.stamps import header_stamp_ns
+from rotation_node.static_mounting import resolved_from_bag
 
 if TYPE_CHECKING:
     from rotation_node.parameters import NodeParameters
@@ -227,6 +228,7 @@ def export(input_path: StrPath, output_path: StrPath, params: NodeParameters, *,
                    f'{sum(reader.message_counts.values())} messages')
             for note in reader.notes:
                 report(note)
+        params = resolved_from_bag(reader, params)   # the mounting from /tf_static, if asked
         streams = _input_streams(reader, messages.INPUTS[params.input_type],
                                  None if topic is None else [topic])
         if len(streams) > 1:
