@@ -1,9 +1,10 @@
 """
-The mounting rotation read once from ``/tf_static`` (``mounting.tf_sensor_frame``, ``mounting.tf_body_frame``).
+The mounting rotation read once from ``/tf_static`` between two named frames.
 
-With both parameters set, the body-side rotation ``M`` of ``R' = W R M``
-(:mod:`rotation_node.mounting`) is the orientation of ``tf_body_frame`` in
-``tf_sensor_frame`` as the static transforms give it: tf2's
+With ``mounting.tf_sensor_frame`` and ``mounting.tf_body_frame`` set, the
+body-side rotation ``M`` of ``R' = W R M`` (:mod:`rotation_node.mounting`) is
+the orientation of ``tf_body_frame`` in ``tf_sensor_frame`` as the static
+transforms give it: tf2's
 ``lookupTransform(tf_sensor_frame, tf_body_frame)``, composed along the tree
 (e.g. ``imu_link`` -> ``base_link`` through the robot's URDF). It is looked up
 once: the live node until the transforms connect the two frames (its input is
@@ -54,7 +55,7 @@ def resolved(params: NodeParameters, quaternion: Any) -> NodeParameters:
 
 
 def placeholder(params: NodeParameters) -> NodeParameters:
-    """Return the parameters with the frames cleared (identity ``M``), until the lookup succeeds."""
+    """Return the parameters with the frames cleared (identity ``M``) until the lookup succeeds."""
     return params.replaced({'mounting.tf_sensor_frame': '', 'mounting.tf_body_frame': ''})
 
 
@@ -115,6 +116,7 @@ def resolved_from_bag(reader: Any, params: NodeParameters) -> NodeParameters:
     reader : rotation_node.bag.reader.InputBag
         The open bag.
     params : NodeParameters
+        The node's parameters; returned as they are unless they name the frames.
 
     Raises
     ------

@@ -117,8 +117,8 @@ def test_convert_reads_the_mounting_from_the_bags_tf_static(tmp_path, rng):
     ([static_message(edge('base_link', 'plate', BASE_PLATE))],
      "gives no orientation of 'base_link' in 'imu_link'"),
 ])
-def test_missing_transforms_are_one_line_and_nothing_written(tmp_path, rng, capsys, tf_static,
-                                                              message):
+def test_missing_transforms_are_one_line_and_nothing_written(tmp_path, rng, capsys,
+                                                             tf_static, message):
     bag = tmp_path / 'in.mcap'
     write_bag(bag, rng, tf_static)
     params = params_file(tmp_path, input_type='imu', outputs=['quaternion'],

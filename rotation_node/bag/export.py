@@ -22,7 +22,7 @@ from __future__ import annotations
 import csv
 import io
 import os
-from typing import Any, Callable, Dict, List, Optional, Sequence, TYPE_CHECKING
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, TYPE_CHECKING
 
 from rotation_node import messages
 from rotation_node.bag.atomic_file import AtomicFile
@@ -160,18 +160,19 @@ def _rows(values_per_record, widths, positions):
 
     ``values_per_record``: for each record, ``[(output name, header, numbers)]``.
     """
-    rows = []
+    rows: List[Tuple[int, str, List[Optional[float]]]] = []
     total = sum(widths.values())
     for values in values_per_record:
-        header, cells = None, None
+        header: Any = None
+        cells: List[Optional[float]] = []
         for name, sample_header, numbers in values:
             if sample_header is not header:
-                if cells is not None:
+                if header is not None:
                     rows.append((header_stamp_ns(header), header.frame_id, cells))
                 header, cells = sample_header, [None] * total
             start = positions[name]
             cells[start:start + widths[name]] = [float(x) for x in numbers]
-        if cells is not None:
+        if header is not None:
             rows.append((header_stamp_ns(header), header.frame_id, cells))
     return rows
 

@@ -35,7 +35,7 @@ from rotation_node.stamps import NS_PER_S as _NS_PER_S
 
 from .effects import effect_rng
 from .motions import MotionStream
-from .spec import Reference, Scene
+from .spec import GyroNoise, OrientationNoise, Reference, Scene
 
 if TYPE_CHECKING:
     from rotation_node.type_aliases import StrPath
@@ -193,6 +193,8 @@ def truth_record(scene: Scene, seed: int, reference_messages: int,
     reference = _reference(scene)
     noise = scene.effects.get('orientation_noise')
     gyro = scene.effects.get('gyro_noise')
+    assert noise is None or isinstance(noise, OrientationNoise)
+    assert gyro is None or isinstance(gyro, GyroNoise)
     return {
         'convention': CONVENTION,
         'reference': {'topic': reference.topic, 'type': REFERENCE_TYPES[reference.message],
