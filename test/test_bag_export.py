@@ -204,3 +204,40 @@ def test_parquet_holds_the_csvs_values(imu_bag, tmp_path):
         got = np.array([np.nan if x is None else x for x in table.column(column).to_pylist()])
         expected = numbers(rows, header, [column])[:, 0]
         assert np.array_equal(got, expected, equal_nan=True), column
+
+
+def test_tf_input_exports_one_row_per_lookup(tmp_path):
+    """The tf input type: /tf and /tf_static together, one row per sample the lookup gives."""
+    from geometry_msgs.msg import TransformStamped
+    from rotation_node.bag.mcap_io import BagWriter
+    from tf2_msgs.msg import TFMessage
+
+    def edge(parent, child, rotation, stamp_ns):
+        msg = TransformStamped()
+        msg.header.frame_id, msg.child_frame_id = parent, child
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 10**9)
+        r = msg.transform.rotation
+        r.x, r.y, r.z, r.w = (float(c) for c in rotation.as_quat())
+        return msg
+
+    start = 1_700_000_000 * 10**9
+    mount = Rotation.from_euler('xyz', [0.0, 0.0, 30.0], degrees=True)
+    yaws = [0.1 * k for k in range(6)]
+    bag = tmp_path / 'tf.mcap'
+    with BagWriter(bag) as writer:
+        writer.write('/tf_static', TFMessage(transforms=[edge('odom', 'base_link', mount, 0)]),
+                     start)
+        for k, yaw in enumerate(yaws):
+            stamp = start + k * 10**7
+            writer.write('/tf', TFMessage(transforms=[
+                edge('map', 'odom', Rotation.from_euler('z', yaw), stamp)]), stamp + 1)
+    out = tmp_path / 'tf.csv'
+    params = params_file(tmp_path, input_type='tf', outputs=['euler'],
+                         tf={'parent_frame': 'map', 'child_frame': 'base_link'})
+    assert main(['export', str(bag), str(out), '--params', str(params)]) == 0
+    header, rows = read_csv(out)
+    assert header == ['stamp_ns', 'frame_id', 'roll', 'pitch', 'yaw']
+    assert [int(row[0]) for row in rows] == [start + k * 10**7 for k in range(6)]
+    assert {row[1] for row in rows} == {'map'}
+    yaw = numbers(rows, header, ['yaw'])[:, 0]
+    assert np.abs(yaw - (np.array(yaws) + np.radians(30.0))).max() < 1e-12
