@@ -43,9 +43,9 @@ from rotation_node.conversions.kernels import BATCH_SAMPLES
 from rotation_node.messages import (
     ANGULAR_VELOCITY, EULER_ANGLES, EULER_RATES, ORIENTATION, OUTPUT_QUATERNION, PUBLISHED_EULER)
 from rotation_node.pipeline import (
-    _needed_values, ConversionPipeline, EULER_RATES_NEAR_SINGULAR, NON_FINITE_ANGULAR_VELOCITY,
-    NON_FINITE_ORIENTATION, NON_UNIT_QUATERNION, ORIENTATION_UNKNOWN, SAMPLE_TRANSFORMS,
-    TIMESTAMP_NOT_INCREASING, ZERO_QUATERNION)
+    _needed_values, ConversionPipeline, EULER_RATES_NEAR_SINGULAR, mounting_of,
+    NON_FINITE_ANGULAR_VELOCITY, NON_FINITE_ORIENTATION, NON_UNIT_QUATERNION, ORIENTATION_UNKNOWN,
+    SAMPLE_TRANSFORMS, TIMESTAMP_NOT_INCREASING, ZERO_QUATERNION)
 from rotation_node.stamps import seconds_text
 
 if TYPE_CHECKING:
@@ -212,6 +212,7 @@ class BlockPipeline:
         self._plan = {value.name for value in _needed_values(params.outputs)}
         self._outputs = [messages.OUTPUTS[name] for name in params.outputs]
         self._angle_period = 360.0 if params.euler_degrees else 2.0 * math.pi
+        self._mounting = mounting_of(params)   # the pipeline's own rule, on arrays
 
     @property
     def reads_angular_velocity(self) -> bool:
@@ -269,6 +270,8 @@ class BlockPipeline:
         stats = {'received': n, 'published': 0, 'normalised': 0, 'near_singular': 0}
         kept, q = self._orientation(block, events, stats)
         known = kept & block.orientation_known
+        if self._mounting is not None and known.any():
+            q[known] = self._mounting.quaternion(q[known])
         values: Dict[str, Tuple[np.ndarray, np.ndarray]] = {ORIENTATION: (known, q)}
         if ANGULAR_VELOCITY in self._plan:
             values[ANGULAR_VELOCITY] = self._angular_velocity(block, kept, known, q, events,
@@ -372,6 +375,12 @@ class BlockPipeline:
                                f'angular velocity {tuple(raw[s].tolist())} has a NaN or Inf '
                                'component: angular-velocity outputs skipped'))
             measured_ok = measured & finite
+            if self._mounting is not None and measured_ok.any():
+                raw = raw.copy()
+                raw[measured_ok] = (
+                    self._mounting.world_vector(raw[measured_ok])
+                    if params.angular_velocity_input_frame == 'world'
+                    else self._mounting.body_vector(raw[measured_ok]))
             frame = params.angular_velocity_output_frame
             if params.angular_velocity_input_frame == frame:
                 omega[measured_ok] = raw[measured_ok]

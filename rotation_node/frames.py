@@ -1,17 +1,21 @@
 """
-World ENU <-> NED and body FLU <-> FRD conventions, exactly.
+World ENU <-> NED <-> NWU and body FLU <-> FRD conventions, exactly.
 
 Pure numpy; no rclpy import. ROS (REP 103) uses a world frame with x east, y
 north, z up (ENU) and body axes x forward, y left, z up (FLU); PX4, ArduPilot
 and most aerospace software use x north, y east, z down (NED) and x forward,
-y right, z down (FRD). Both changes are signed permutations of the axes:
+y right, z down (FRD); some IMU drivers and magnetometer-based filters report
+x north, y west, z up (NWU). The changes are signed permutations of the axes:
 
     P = NED from ENU = ENU from NED = [[0, 1, 0], [1, 0, 0], [0, 0, -1]]
     B = FRD from FLU = FLU from FRD = diag(1, -1, -1)
+    N = NWU from ENU = [[0, 1, 0], [-1, 0, 0], [0, 0, 1]] (Rz(-90 deg)), ENU from NWU = N^T
+    NWU from NED = NED from NWU = diag(1, -1, -1) (Rx(180 deg))
 
-Both are rotations by pi (``det = +1``) and their own inverses. With ``R``
+All are rotations (``det = +1``); P and B are their own inverses. With ``R``
 mapping body to world, an orientation, world and body vectors (angular
-velocity ``w_w = R w_b``) and rotation-vector covariances change as
+velocity ``w_w = R w_b``) and rotation-vector covariances change as (``P``
+standing for whichever world change applies)
 
     R' = P R B,   w_w' = P w_w,   w_b' = B w_b,
     Sigma_world' = P Sigma_world P,   Sigma_body' = B Sigma_body B
@@ -22,10 +26,13 @@ and ``q_B = (1, 0, 0, 0)``; written out (``s = 1/sqrt(2)``)
 
     q (x) q_B = (w, z, -y, -x),    q_P (x) q = s (w + z, w - z, y - x, -(x + y)).
 
+and ``q_N = (0, 0, -1, 1)/sqrt(2)`` (ENU to NWU), ``(0, 0, 1, 1)/sqrt(2)``
+(NWU to ENU), ``(1, 0, 0, 0)`` (NED <-> NWU).
+
 Matrices, vectors and covariances are exact (only elements move and change
-sign); quaternions are exact for a body change and within 2 eps (of a unit
-quaternion) for a world change. Quaternions keep their norm and are returned
-with ``w >= 0``.
+sign); quaternions are exact for a body change and for NED <-> NWU, and within
+2 eps (of a unit quaternion) for the other world changes. Quaternions keep
+their norm and are returned with ``w >= 0``.
 
 :class:`FrameConversion` says which way a conversion goes; the two common ones
 are :data:`NED_FRD_FROM_ENU_FLU` and :data:`ENU_FLU_FROM_NED_FRD`.
@@ -33,6 +40,7 @@ are :data:`NED_FRD_FROM_ENU_FLU` and :data:`ENU_FLU_FROM_NED_FRD`.
 from __future__ import annotations
 
 from dataclasses import dataclass
+import functools
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -45,16 +53,62 @@ if TYPE_CHECKING:
 __all__ = ['BODY_FRAMES', 'ENU_FLU_FROM_NED_FRD', 'FrameConversion', 'NED_FRD_FROM_ENU_FLU',
            'WORLD_FRAMES']
 
-#: World frame conventions: x east, y north, z up (REP 103), or x north, y east, z down.
-WORLD_FRAMES = ('enu', 'ned')
+#: World frame conventions: x east, y north, z up (REP 103); x north, y east, z down;
+#: x north, y west, z up.
+WORLD_FRAMES = ('enu', 'ned', 'nwu')
 #: Body frame conventions: x forward, y left, z up (REP 103), or forward, right, down.
 BODY_FRAMES = ('flu', 'frd')
 
 _HALF_SQRT2 = float(np.sqrt(0.5))
 # Signed permutations as (index, sign): row i of the matrix has sign[i] in column index[i].
 _IDENTITY = (np.array([0, 1, 2]), np.array([1.0, 1.0, 1.0]))
-_WORLD_SWAP = (np.array([1, 0, 2]), np.array([1.0, 1.0, -1.0]))  # P
 _BODY_FLIP = (np.array([0, 1, 2]), np.array([1.0, -1.0, -1.0]))  # B
+
+# Each world convention's coordinates from ENU's: a signed permutation (index, sign).
+_FROM_ENU = {'enu': _IDENTITY,
+             'ned': (np.array([1, 0, 2]), np.array([1.0, 1.0, -1.0])),    # P
+             'nwu': (np.array([1, 0, 2]), np.array([1.0, -1.0, 1.0]))}    # N
+# The world change's quaternion, q_W = scale * (x, y, z, w) with x, y, z, w in {-1, 0, 1}.
+_WORLD_QUATERNIONS = {
+    ('enu', 'ned'): (_HALF_SQRT2, (1, 1, 0, 0)), ('ned', 'enu'): (_HALF_SQRT2, (1, 1, 0, 0)),
+    ('enu', 'nwu'): (_HALF_SQRT2, (0, 0, -1, 1)), ('nwu', 'enu'): (_HALF_SQRT2, (0, 0, 1, 1)),
+    ('ned', 'nwu'): (1.0, (1, 0, 0, 0)), ('nwu', 'ned'): (1.0, (1, 0, 0, 0))}
+
+
+@functools.lru_cache(maxsize=None)
+def _world_change(source: str, target: str):
+    """Return the signed permutation of world coordinates from ``source`` to ``target``."""
+    matrix = (_signed_permutation_matrix(_FROM_ENU[target])
+              @ _signed_permutation_matrix(_FROM_ENU[source]).T)
+    index = np.argmax(np.abs(matrix), axis=1)
+    return index, matrix[np.arange(3), index]
+
+
+@functools.lru_cache(maxsize=None)
+def _left_product_terms(p):
+    """
+    Return the terms of ``p (x) q`` for p of entries in {-1, 0, 1}: per component (sign, index).
+
+    Zero terms are left out, so the sum of the rest rounds as the written-out formula does.
+    """
+    px, py, pz, pw = p
+    rows = [[(pw, 0), (px, 3), (py, 2), (-pz, 1)],     # x: pw x + px w + py z - pz y
+            [(pw, 1), (-px, 2), (py, 3), (pz, 0)],     # y: pw y - px z + py w + pz x
+            [(pw, 2), (px, 1), (-py, 0), (pz, 3)],     # z: pw z + px y - py x + pz w
+            [(pw, 3), (-px, 0), (-py, 1), (-pz, 2)]]   # w: pw w - px x - py y - pz z
+    return [[(sign, index) for sign, index in row if sign != 0] for row in rows]
+
+
+def _left_product(scale, terms, components):
+    """Return the components of ``q_W (x) q`` from ``q``'s, by :func:`_left_product_terms`."""
+    out = []
+    for row in terms:
+        total = None
+        for sign, index in row:
+            term = components[index] if sign > 0 else -components[index]
+            total = term if total is None else total + term
+        out.append(total if scale == 1.0 else scale * total)
+    return out
 
 
 def _signed_permutation_matrix(perm) -> np.ndarray:
@@ -88,7 +142,7 @@ class FrameConversion:
 
     Parameters
     ----------
-    source_world, target_world : {'enu', 'ned'}
+    source_world, target_world : {'enu', 'ned', 'nwu'}
         World frame of the input and of the output.
     source_body, target_body : {'flu', 'frd'}
         Body frame of the input and of the output.
@@ -117,7 +171,7 @@ class FrameConversion:
 
     @property
     def changes_world(self) -> bool:
-        """Tell whether the world frame changes (ENU <-> NED)."""
+        """Tell whether the world frame changes (ENU, NED, NWU)."""
         return self.source_world != self.target_world
 
     @property
@@ -138,14 +192,16 @@ class FrameConversion:
 
     @property
     def _world(self):
-        return _WORLD_SWAP if self.changes_world else _IDENTITY
+        if not self.changes_world:
+            return _IDENTITY
+        return _world_change(self.source_world, self.target_world)
 
     @property
     def _body(self):
         return _BODY_FLIP if self.changes_body else _IDENTITY
 
     def world_matrix(self) -> np.ndarray:
-        """Return the 3x3 signed permutation that maps world coordinates (``P`` or ``I``)."""
+        """Return the 3x3 signed permutation that maps world coordinates (``P``, ``N``, ``I``)."""
         return _signed_permutation_matrix(self._world)
 
     def body_matrix(self) -> np.ndarray:
@@ -178,8 +234,8 @@ class FrameConversion:
         if self.changes_body:
             x, y, z, w = w, z, -y, -x
         if self.changes_world:
-            x, y, z, w = (_HALF_SQRT2 * (w + z), _HALF_SQRT2 * (w - z), _HALF_SQRT2 * (y - x),
-                          -_HALF_SQRT2 * (x + y))
+            scale, p = _WORLD_QUATERNIONS[self.source_world, self.target_world]
+            x, y, z, w = _left_product(scale, _left_product_terms(p), (x, y, z, w))
         if single:
             sign = -1.0 if w < 0.0 else 1.0
             return np.array([sign * x + 0.0, sign * y + 0.0, sign * z + 0.0, sign * w + 0.0])

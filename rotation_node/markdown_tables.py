@@ -24,7 +24,7 @@ def _yaml_value(value):
     if isinstance(value, bool):
         return 'true' if value else 'false'
     if isinstance(value, tuple):
-        return '[' + ', '.join(value) + ']'
+        return '[' + ', '.join(repr(v) if isinstance(v, float) else v for v in value) + ']'
     if value == '':
         return "''"
     return f'{value:g}' if isinstance(value, float) else str(value)

@@ -67,11 +67,15 @@ from rotation_node.bag.cdr import fixed_layout_codec
 from rotation_node.bag.qos import AUTO, input_qos, qos_profile
 from rotation_node.errors import BagError, ParameterError
 from rotation_node.parameters import (
-    NODE_NAME, NodeParameters, PARAMETERS, PARAMETERS_BY_NAME, parameters_file_sections,
-    parameters_from_yaml, ParameterSpec, ROS_BUILTIN_PARAMETERS, unknown_parameter_error)
+    mounting_frames_problem, NODE_NAME, NodeParameters, PARAMETERS, PARAMETERS_BY_NAME,
+    parameters_file_sections, parameters_from_yaml, ParameterSpec, ROS_BUILTIN_PARAMETERS,
+    unknown_parameter_error)
 from rotation_node.pipeline import (
     CONVERSION_ERROR, ConversionPipeline, SKIP_REASONS, warm_up_conversions)
 from rotation_node.reception import Identity, message_identity, Reception
+from rotation_node.static_mounting import (
+    MOUNTING_UNKNOWN, needs_static_mounting, placeholder, resolved, StaticMountingLookup,
+    TF_STATIC_TOPIC)
 
 DIAGNOSTICS_PERIOD_S = 1.0
 ISSUE_LOG_PERIOD_S = 5.0
@@ -238,6 +242,11 @@ class RotationNode(Node):
         # Set by _configure, which __init__ calls below, before any callback can run.
         self._pipeline: ConversionPipeline
         self._configured = False   # while declaring, parameter changes only set self.params
+        # mounting.tf_*: the lookup until /tf_static connects the frames (input dropped
+        # meanwhile), its subscription, and the rotation found (for the same frames)
+        self._static_mounting: Optional[StaticMountingLookup] = None
+        self._tf_static: Optional[Subscription] = None
+        self._mounting_found: Optional[Tuple[Tuple[str, str], Tuple[float, ...]]] = None
         self._inputs: List[_TopicInput] = []   # one per topic of the input type
         # CDR bytes -> view; None: rclpy deserialises
         self._decode: Optional[Callable[[bytes], Any]] = None
@@ -265,6 +274,10 @@ class RotationNode(Node):
         except (InvalidParameterValueException, InvalidParameterTypeException) as exc:
             self.destroy_node()
             raise ParameterError(str(exc)) from None
+        problem = mounting_frames_problem(self.params)
+        if problem:   # both frames or neither, once all parameters are set
+            self.destroy_node()
+            raise ParameterError(problem)
         self._configure(None, self.params)
         self._configured = True
         # No QoS event handlers on the diagnostics publisher: each handler is one more
@@ -279,9 +292,12 @@ class RotationNode(Node):
     def _check_parameters(self, parameters: List[Parameter]) -> SetParametersResult:
         """Validate a parameter change (all of it, or none of it, is applied)."""
         try:
-            self.params.replaced(_own(parameters))
+            changed = self.params.replaced(_own(parameters))
         except ParameterError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
+        problem = mounting_frames_problem(changed) if self._configured else ''
+        if problem:   # (set both frames with set_parameters_atomically)
+            return SetParametersResult(successful=False, reason=problem)
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, parameters: List[Parameter]) -> None:
@@ -298,7 +314,8 @@ class RotationNode(Node):
         ``previous`` are the parameters configured before; None the first time.
         """
         stats = None if previous is None else self._pipeline.stats
-        self._pipeline = ConversionPipeline(params, on_issue=self._log_issue, stats=stats)
+        self._pipeline = ConversionPipeline(self._mounted(params), on_issue=self._log_issue,
+                                            stats=stats)
         input_type = messages.INPUTS[params.input_type]
         if previous is None or params.input_type != previous.input_type:
             for state in self._inputs:
@@ -342,6 +359,48 @@ class RotationNode(Node):
             f'converting {params.input_type} messages on {self._input_topic_names()} '
             f'to {", ".join(params.outputs)} (euler.sequence {params.euler_sequence}, '
             f'{"degrees" if params.euler_degrees else "radians"})')
+
+    def _mounted(self, params: NodeParameters) -> NodeParameters:
+        """
+        Return the parameters for the pipeline: the mounting from /tf_static if asked.
+
+        Until /tf_static connects the two frames: the frames cleared, the lookup
+        kept in ``_static_mounting`` (input is dropped, ``mounting_unknown``) and
+        /tf_static subscribed (transient local: what static broadcasters latched).
+        """
+        self._static_mounting = None
+        if not needs_static_mounting(params):
+            if self._tf_static is not None:
+                self.destroy_subscription(self._tf_static)
+                self._tf_static = None
+            return params
+        frames = (params.mounting_tf_sensor_frame, params.mounting_tf_body_frame)
+        if self._mounting_found is not None and self._mounting_found[0] == frames:
+            return resolved(params, self._mounting_found[1])
+        self._static_mounting = StaticMountingLookup(params)
+        if self._tf_static is None:
+            from rotation_node.bag.message_types import message_class
+            self._tf_static = self.create_subscription(
+                message_class('tf2_msgs/msg/TFMessage'), TF_STATIC_TOPIC, self._on_tf_static,
+                QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                           durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        return placeholder(params)
+
+    def _on_tf_static(self, msg: Any) -> None:
+        """Add static transforms until the mounting is found; then convert with it."""
+        lookup = self._static_mounting
+        if lookup is None:
+            return
+        found = lookup.add(msg)
+        if found is None:
+            return
+        self._static_mounting = None
+        self._mounting_found = ((lookup.sensor, lookup.body), found.mounting_body_rotation)
+        self._pipeline = ConversionPipeline(found, on_issue=self._log_issue,
+                                            stats=self._pipeline.stats)
+        self.get_logger().info(
+            f'mounting from /tf_static: {lookup.frames} = '
+            f'{[round(c, 9) for c in found.mounting_body_rotation]} (x, y, z, w)')
 
     def _create_output_publisher(self, name: str, qos: QoSProfile) -> Publisher:
         # Without QoS event handlers (as the diagnostics publisher): a subscriber
@@ -551,6 +610,13 @@ class RotationNode(Node):
         """Convert a message not seen before and publish its outputs."""
         if not state.reception.accept(info):
             return
+        if self._static_mounting is not None:   # the mounting is not known yet
+            self._pipeline.stats.received += 1
+            self._pipeline.stats.dropped[MOUNTING_UNKNOWN] += 1
+            self._log_issue(MOUNTING_UNKNOWN, 'message dropped: no mounting yet, waiting for '
+                            f'/tf_static to give {self._static_mounting.frames}: '
+                            f'{self._static_mounting.problem}')
+            return
         if self._decode is not None:
             try:
                 data = self._decode(data)
@@ -630,7 +696,7 @@ class RotationNode(Node):
             'duplicates': sum(state.reception.duplicates for state in self._inputs),
             'dropped': totals[0],
             **{f'dropped.{reason}': stats.dropped[reason]
-               for reason in self._pipeline.drop_reasons},
+               for reason in (*self._pipeline.drop_reasons, MOUNTING_UNKNOWN)},
             'skipped': totals[1],
             **{f'skipped.{reason}': stats.skipped[reason] for reason in SKIP_REASONS},
             'normalised': stats.normalised,
@@ -664,7 +730,7 @@ def _own(parameters: List[Parameter]) -> Dict[str, Any]:
 
 def _text(value: Any) -> str:
     if isinstance(value, list):
-        return ','.join(value)
+        return ','.join(map(_text, value))
     if isinstance(value, bool):
         return str(value).lower()
     return str(value)

@@ -23,10 +23,11 @@ from rotation_node import messages
 from rotation_node.conversions import parse_sequence
 from rotation_node.errors import ParameterError
 from rotation_node.frames import BODY_FRAMES, WORLD_FRAMES
+from rotation_node.mounting import IDENTITY, quaternion_from_rotation_values
 from rotation_node.ros_yaml import load_ros_yaml
 from rotation_node.validation import (
     Boolean, check_fields, checked_values, Choice, ChoiceList, Declaration, declarations,
-    did_you_mean, Integer, Real, Text, Where)
+    did_you_mean, Integer, Real, Reals, Text, Where)
 
 if TYPE_CHECKING:
     from rotation_node.type_aliases import StrPath
@@ -109,6 +110,19 @@ def _frame_name(value: str, where: Where) -> str:
         raise where.error(f"{value!r} starts with '/'; TF frame names do not "
                           f'(write {value.lstrip("/")!r})')
     return value
+
+
+def _rotation(value: tuple, where: Where) -> tuple:
+    """Check: [x, y, z, w] of unit norm, or [roll, pitch, yaw] in degrees."""
+    try:
+        quaternion_from_rotation_values(value)
+    except ValueError as exc:
+        raise where.error(str(exc)) from None
+    return value
+
+
+_ROTATION_RULE = ('[x, y, z, w] (unit quaternion) or [roll, pitch, yaw] (degrees, ROS RPY), '
+                  'floating-point numbers')
 
 
 def _parameter(name, default, description, kind, **options):
@@ -206,6 +220,37 @@ class NodeParameters:
         'frames.output_body', 'flu',
         'Body frame convention of the outputs: flu or frd',
         Choice(BODY_FRAMES))
+    mounting_body_rotation: tuple = _parameter(
+        'mounting.body_rotation', IDENTITY,
+        "M in R' = W R M: the output body frame's orientation in the input's body frame "
+        '(e.g. base_link in imu_link); applied to orientation, angular velocity and covariance',
+        Reals((3, 4), integers=False), check=_rotation, rule=_ROTATION_RULE)
+    mounting_world_rotation: tuple = _parameter(
+        'mounting.world_rotation', IDENTITY,
+        "W in R' = W R M: the input world frame's orientation in the output world frame",
+        Reals((3, 4), integers=False), check=_rotation, rule=_ROTATION_RULE)
+    mounting_yaw_offset: float = _parameter(
+        'mounting.yaw_offset', 0.0,
+        "Added to the yaw (rad), as robot_localization's yaw_offset: W = Rz(yaw_offset + "
+        'magnetic_declination) mounting.world_rotation',
+        Real(integers=False))
+    mounting_magnetic_declination: float = _parameter(
+        'mounting.magnetic_declination', 0.0,
+        "Added to the yaw (rad), as robot_localization's magnetic_declination_radians",
+        Real(integers=False))
+    mounting_tf_sensor_frame: str = _parameter(
+        'mounting.tf_sensor_frame', '',
+        'With mounting.tf_body_frame: M is read once from /tf_static, the orientation of '
+        'tf_body_frame in this frame (e.g. imu_link)',
+        Text(), check=_frame_name,
+        rule='a TF frame name without a leading /; with mounting.tf_body_frame')
+    mounting_tf_body_frame: str = _parameter(
+        'mounting.tf_body_frame', '',
+        'With mounting.tf_sensor_frame: the output body frame whose orientation in '
+        'tf_sensor_frame is M (e.g. base_link)',
+        Text(), check=_frame_name,
+        rule='a TF frame name without a leading /, not mounting.tf_sensor_frame; with '
+             'mounting.tf_sensor_frame and mounting.body_rotation left at identity')
     qos_reliability: str = _parameter(
         'qos.reliability', 'auto',
         'Reliability of the input subscriptions and output publishers; auto: inputs adapt '
@@ -232,6 +277,7 @@ class NodeParameters:
     def __post_init__(self) -> None:
         """Check every value, then the input type's own parameters; string arrays as tuples."""
         check_fields(self, _PARAMETER)
+        _check_mounting_frames(self)
         check = messages.INPUTS[self.input_type].check_parameters
         if check is not None:
             check(self)
@@ -258,6 +304,36 @@ class NodeParameters:
         """Return ``{ROS name: value}``, string arrays as lists (what rclpy expects)."""
         return {spec.name: list(value) if isinstance(value, tuple) else value
                 for spec, value in ((s, getattr(self, s.attribute)) for s in PARAMETERS)}
+
+
+def mounting_frames_problem(params: NodeParameters) -> str:
+    """
+    Return why only one of the two ``mounting.tf_*`` frames is set ('' if both or neither).
+
+    Not checked on construction: ROS declares and sets parameters one at a
+    time, so the node checks it once all are set (at start-up, and in
+    ``set_parameters_atomically``); ``convert`` and ``export`` before reading.
+    """
+    sensor, body = params.mounting_tf_sensor_frame, params.mounting_tf_body_frame
+    if bool(sensor) == bool(body):
+        return ''
+    given, missing = (('tf_sensor_frame', 'tf_body_frame') if sensor
+                      else ('tf_body_frame', 'tf_sensor_frame'))
+    return (f"parameter 'mounting.{missing}': required with 'mounting.{given}' (the mounting "
+            'is read from /tf_static between the two frames)')
+
+
+def _check_mounting_frames(params: NodeParameters) -> None:
+    """Check: two different mounting frames, and then no mounting.body_rotation."""
+    sensor, body = params.mounting_tf_sensor_frame, params.mounting_tf_body_frame
+    if not (sensor and body):
+        return
+    if sensor == body:
+        raise ParameterError(f"parameters 'mounting.tf_sensor_frame' and "
+                             f"'mounting.tf_body_frame' are both {sensor!r}; name two frames")
+    if quaternion_from_rotation_values(params.mounting_body_rotation) != IDENTITY:
+        raise ParameterError("parameter 'mounting.body_rotation': set it or the "
+                             'mounting.tf_* frames, not both')
 
 
 PARAMETERS = cast(Tuple[ParameterSpec, ...], declarations(NodeParameters))

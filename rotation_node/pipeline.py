@@ -35,10 +35,12 @@ import warnings
 
 import numpy as np
 from rotation_node import conversions, covariance, kinematics, messages
+from rotation_node.errors import ParameterError
 from rotation_node.frames import FrameConversion
 from rotation_node.messages import (
     ANGULAR_VELOCITY, EULER_ANGLES, EULER_COVARIANCE, EULER_RATES, ORIENTATION,
     ORIENTATION_COVARIANCE, OUTPUT_QUATERNION, PUBLISHED_EULER, Sample)
+from rotation_node.mounting import Mounting
 from rotation_node.parameters import INPUT_TYPES, NodeParameters, OUTPUTS
 from rotation_node.stamps import header_stamp_ns, seconds_text
 
@@ -71,6 +73,23 @@ in this order, to every sample before any value is computed from it (e.g. a
 change of the input's world or body frame convention). None means the parameters
 need no transform.
 """
+
+
+def mounting_of(params: NodeParameters) -> Optional[Mounting]:
+    """
+    Return the ``mounting.*`` parameters' :class:`~rotation_node.mounting.Mounting`, or None.
+
+    None when it is the identity: the outputs are then those of a pipeline
+    without mounting, bit for bit. Applied after the frame conventions
+    (``frames.*``), in the output's conventions: ``R_out = W (F_w R_in F_b) M``.
+    """
+    if params.mounting_tf_sensor_frame or params.mounting_tf_body_frame:
+        raise ParameterError('mounting.tf_sensor_frame and mounting.tf_body_frame: the mounting '
+                             'must be read from /tf_static first (static_mounting.resolved)')
+    mounting = Mounting.from_parts(
+        params.mounting_body_rotation, params.mounting_world_rotation,
+        params.mounting_yaw_offset, params.mounting_magnetic_declination)
+    return None if mounting.is_identity else mounting
 
 
 def input_message_type(input_type: str) -> type:
@@ -233,6 +252,7 @@ class ConversionPipeline:
         frames = FrameConversion(params.frames_input_world, params.frames_input_body,
                                  params.frames_output_world, params.frames_output_body)
         self._frames = None if frames.is_identity else frames
+        self._mounting = mounting_of(params)
         self._angle_period = 360.0 if params.euler_degrees else 2.0 * math.pi
         # Per-stream state.
         self._previous_quaternion = None     # last orientation, for the finite difference
@@ -401,7 +421,9 @@ class ConversionPipeline:
                 self._report(NON_UNIT_QUATERNION,
                              f'quaternion {orientation} has norm {norm:.9g}; normalised')
             q = np.array(orientation)
-        return q if self._frames is None else self._frames.quaternion(q)
+        if self._frames is not None:
+            q = self._frames.quaternion(q)
+        return q if self._mounting is None else self._mounting.quaternion(q)
 
     def _angular_velocity(self, sample, values):
         """
@@ -423,6 +445,9 @@ class ConversionPipeline:
             if self._frames is not None:
                 omega = (self._frames.world_vector(omega) if input_frame == 'world'
                          else self._frames.body_vector(omega))
+            if self._mounting is not None:
+                omega = (self._mounting.world_vector(omega) if input_frame == 'world'
+                         else self._mounting.body_vector(omega))
             if input_frame == frame:
                 return np.array(omega)
             if q is None:
@@ -514,11 +539,14 @@ class ConversionPipeline:
                        'uncertainty outputs skipped')
             return None
         sigma = np.array(block).reshape(3, 3)
-        if self._frames is None:
-            return sigma
-        if self.params.covariance_frame == 'fixed':
-            return self._frames.world_covariance(sigma)
-        return self._frames.body_covariance(sigma)
+        fixed = self.params.covariance_frame == 'fixed'
+        if self._frames is not None:
+            sigma = (self._frames.world_covariance(sigma) if fixed
+                     else self._frames.body_covariance(sigma))
+        if self._mounting is not None:
+            sigma = (self._mounting.world_covariance(sigma) if fixed
+                     else self._mounting.body_covariance(sigma))
+        return sigma
 
     def _euler_covariance(self, sample, values):
         """Return the first-order Euler covariance; None near gimbal lock or past linearity."""

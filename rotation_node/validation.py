@@ -356,6 +356,29 @@ class Vector(Kind):
 
 
 @dataclasses.dataclass(frozen=True)
+class Reals(Kind):
+    """
+    A list of finite real numbers, as many as one of ``sizes``, stored as a tuple of float.
+
+    ``integers=False``: each must be a float, as in a ROS double array.
+    """
+
+    sizes: tuple = (3,)
+    integers: bool = True
+
+    def checked(self, value: Any, where: Where) -> tuple:
+        """Return ``value`` as a tuple of float if it is a list of finite numbers of a size."""
+        number = Real(integers=self.integers)
+        expected = f'a list of {" or ".join(map(str, self.sizes))} numbers'
+        if isinstance(value, (str, bytes, dict)) or not isinstance(value, Iterable):
+            raise where.type_error(expected, value)
+        items = list(value)
+        if len(items) not in self.sizes:
+            raise where.error(f'expected {expected}, got {len(items)}')
+        return tuple(number.checked(x, where.index(i)) for i, x in enumerate(items))
+
+
+@dataclasses.dataclass(frozen=True)
 class Tagged(Kind):
     """
     A mapping that is one of several dataclasses, chosen by the value of its key ``tag``.
@@ -408,6 +431,19 @@ class Sections(Kind):
                     f'expected one of {", ".join(self.classes)}')
         return {name: built(self.classes[name], fields, where.key(name))
                 for name, fields in value.items()}
+
+
+@dataclasses.dataclass(frozen=True)
+class Section(Kind):
+    """A mapping that is one dataclass ``cls``, its keys checked as :func:`built` checks them."""
+
+    cls: type
+
+    def checked(self, value: Any, where: Where) -> Any:
+        """Return the dataclass the mapping ``value`` describes."""
+        if not isinstance(value, dict):
+            raise where.type_error('a mapping', value)
+        return built(self.cls, value, where)
 
 
 # --- declared fields ----------------------------------------------------------

@@ -144,6 +144,10 @@ _parameters = st.fixed_dictionaries({
     'quaternion_norm_tolerance': st.sampled_from([1e-6, 0.01]),
     'angular_velocity_input_frame': st.sampled_from(['body', 'world']),
     'angular_velocity_output_frame': st.sampled_from(['body', 'world']),
+    'mounting_body_rotation': st.sampled_from([(0.0, 0.0, 0.0, 1.0), (10.0, -80.0, 135.0)]),
+    'mounting_world_rotation': st.sampled_from([(0.0, 0.0, 0.0, 1.0),
+                                                (0.5, -0.5, 0.5, 0.5)]),
+    'mounting_yaw_offset': st.sampled_from([0.0, 0.3]),
 })
 
 
@@ -175,6 +179,9 @@ def _imu_records(path):
     {},
     {'euler_degrees': True, 'euler_sequence': 'ZXZ', 'quaternion_continuity': True},
     {'angular_velocity_output_frame': 'world', 'euler_unwrap': False},
+    {'mounting_body_rotation': (0.1, -0.2, 0.3, 0.9273618495495703),
+     'mounting_world_rotation': (3.0, -2.0, 47.0), 'mounting_magnetic_declination': -0.2,
+     'angular_velocity_output_frame': 'world', 'quaternion_continuity': True},
 ])
 def test_every_effect_scene_matches_the_per_message_pipeline(every_effect_bag, values):
     params = NodeParameters(input_type='imu', outputs=_outputs_for('imu'), **values)

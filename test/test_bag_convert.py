@@ -302,3 +302,50 @@ def test_px4_imu_with_covariance_live_node_equals_convert(tmp_path, rng):
         offline = _outputs(converted, f'/imu/{name}')
         assert len(live) == len(offline) == expected_counts[name], name
         assert live == offline, name
+
+
+def test_convert_with_a_mounting_turns_the_estimate_into_the_scenes_reference(tmp_path):
+    """
+    Convert a scene's IMU stream into its reference: at dt = 0 that is W R M.
+
+    ``convert`` with ``mounting.*`` set to the scene's M and W writes it (the
+    reference and scipy are the oracles).
+    """
+    from rotation_node.bag.cli import main
+    from rotation_node.scene.simulator import write_scene_bag
+    from rotation_node.scene.spec import scene_from_dict
+    m = Rotation.from_euler('xyz', [30.0, -45.0, 120.0], degrees=True)
+    w = Rotation.from_euler('xyz', [1.0, 2.0, -75.0], degrees=True)
+    scene = scene_from_dict({
+        'duration': 1.0, 'rate': 50.0,
+        'motion': {'type': 'constant_rate', 'orientation': [0.0, 0.0, 0.0, 1.0],
+                   'angular_velocity': [0.4, -0.9, 1.3]},
+        'reference': {'rate': 50.0, 'message': 'imu', 'mounting': m.as_quat().tolist(),
+                      'world_alignment': w.as_quat().tolist()}})
+    source, output = tmp_path / 'scene.mcap', tmp_path / 'mounted.mcap'
+    write_scene_bag(scene, source)
+    params = tmp_path / 'params.yaml'
+    params.write_text(yaml.safe_dump({'rotation_node': {'ros__parameters': {
+        'input_type': 'imu', 'outputs': ['quaternion', 'angular_velocity'],
+        'mounting': {'body_rotation': [30.0, -45.0, 120.0],
+                     'world_rotation': w.as_quat().tolist()}}}}))
+    assert main(['convert', str(source), str(output), '--params', str(params),
+                 '--topic', '/imu']) == 0
+    with BagReader(output) as reader:
+        got = [record.message() for record in reader.messages(['/imu/quaternion'])]
+        rates = [record.message() for record in reader.messages(['/imu/angular_velocity'])]
+        truth = [record.message() for record in reader.messages(['/truth/orientation'])]
+        reference = [record.message() for record in reader.messages(['/reference/pose'])]
+    assert len(got) == len(truth) == len(reference) == 51
+    as_array = [[q.x, q.y, q.z, q.w] for q in (msg.quaternion for msg in got)]
+    mounted = Rotation.from_quat(as_array)
+    expected = w * Rotation.from_quat([[q.x, q.y, q.z, q.w] for q in
+                                       (msg.quaternion for msg in truth)]) * m
+    assert (expected.inv() * mounted).magnitude().max() < 1e-14
+    ref = Rotation.from_quat([[q.x, q.y, q.z, q.w] for q in
+                              (msg.orientation for msg in reference)])
+    assert (ref.inv() * mounted).magnitude().max() < 1e-14
+    for out, ref_msg in zip(rates, reference):
+        assert out.header.stamp == ref_msg.header.stamp
+        v, r = out.vector, ref_msg.angular_velocity
+        assert max(abs(v.x - r.x), abs(v.y - r.y), abs(v.z - r.z)) < 1e-14

@@ -23,13 +23,32 @@ mp.mp.dps = 40
 # Hand transcription: x_ned = y_enu, y_ned = x_enu, z_ned = -z_enu; FRD = (x, -y, -z) of FLU.
 P = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 B = np.diag([1.0, -1.0, -1.0])
+# x_nwu = y_enu (north), y_nwu = -x_enu (west), z_nwu = z_enu (up).
+N = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+# Each world's coordinates from ENU's, by hand.
+FROM_ENU = {'enu': np.eye(3), 'ned': P, 'nwu': N}
 ALL = [FrameConversion(*f) for f in itertools.product(WORLD_FRAMES, BODY_FRAMES,
                                                       WORLD_FRAMES, BODY_FRAMES)]
 
 
 def matrices_of(conversion):
-    return (P if conversion.changes_world else np.eye(3),
+    return (FROM_ENU[conversion.target_world] @ FROM_ENU[conversion.source_world].T,
             B if conversion.changes_body else np.eye(3))
+
+
+def test_nwu_by_its_axes():
+    """Check north-west-up: east is -y, north is x, up is z; from NED: (x, -y, -z)."""
+    to_nwu = FrameConversion('enu', 'flu', 'nwu', 'flu')
+    assert np.array_equal(to_nwu.world_vector([1.0, 0.0, 0.0]), [0.0, -1.0, 0.0])
+    assert np.array_equal(to_nwu.world_vector([0.0, 1.0, 0.0]), [1.0, 0.0, 0.0])
+    assert np.array_equal(FrameConversion('ned', 'frd', 'nwu', 'frd').world_vector([1, 2, 3]),
+                          [1.0, -2.0, -3.0])
+    # Level, facing east (identity in ENU): yaw -90 deg in NWU (x north, counter-clockwise).
+    q = to_nwu.quaternion([0.0, 0.0, 0.0, 1.0])
+    assert np.abs(rc.euler_from_quaternion(q, 'xyz', degrees=True) - [0, 0, -90]).max() < 1e-13
+    # NED <-> NWU quaternions are exact: (x, y, z, w) -> (w, -z, y, -x), sign to w >= 0.
+    assert np.array_equal(FrameConversion('ned', 'flu', 'nwu', 'flu').quaternion(
+        [0.1, 0.2, 0.3, 0.9]), [-0.9, 0.3, -0.2, 0.1])
 
 
 def random_quaternions(rng, n):
@@ -135,11 +154,28 @@ def mp_product(p, q):
             pw * qz + px * qy - py * qx + pz * qw, pw * qw - px * qx - py * qy - pz * qz]
 
 
+def world_quaternion(source, target, half):
+    """Return the world change's exact quaternion (x, y, z, w), by hand (about one axis)."""
+    zero, one = half * 0, half / half
+    table = {('enu', 'ned'): [half, half, zero, zero], ('ned', 'enu'): [half, half, zero, zero],
+             ('enu', 'nwu'): [zero, zero, -half, half],    # Rz(-90 deg)
+             ('nwu', 'enu'): [zero, zero, half, half],     # Rz(+90 deg)
+             ('ned', 'nwu'): [one, zero, zero, zero], ('nwu', 'ned'): [one, zero, zero, zero]}
+    return table.get((source, target), [zero, zero, zero, one])
+
+
+@pytest.mark.parametrize('source, target', itertools.product(WORLD_FRAMES, WORLD_FRAMES))
+def test_hand_world_quaternions_are_the_hand_matrices(source, target):
+    q = np.array(world_quaternion(source, target, np.sqrt(0.5)), dtype=float)
+    expected = FROM_ENU[target] @ FROM_ENU[source].T
+    assert np.abs(Rotation.from_quat(q).as_matrix() - expected).max() < 4 * EPS
+
+
 @pytest.mark.parametrize('conversion', ALL, ids=str)
 def test_quaternion_within_two_eps_of_the_exact_product(rng, conversion):
     half = mp.sqrt(mp.mpf(1) / 2)
     zero, one = mp.mpf(0), mp.mpf(1)
-    q_world = [half, half, zero, zero] if conversion.changes_world else [zero, zero, zero, one]
+    q_world = world_quaternion(conversion.source_world, conversion.target_world, half)
     q_body = [one, zero, zero, zero] if conversion.changes_body else [zero, zero, zero, one]
     qs = np.concatenate([random_quaternions(rng, 100),
                          [[0, 0, 0, 1], [1, 0, 0, 0], [0.5, 0.5, 0.5, 0.5], [1, -1, 1e-300, 0]]])
@@ -207,7 +243,7 @@ def test_names_and_inverse():
 
 
 @pytest.mark.parametrize('call, message', [
-    (lambda: FrameConversion('enu', 'flu', 'nwu', 'frd'), '`target_world`'),
+    (lambda: FrameConversion('enu', 'flu', 'nue', 'frd'), '`target_world`'),
     (lambda: FrameConversion('enu', 'fru', 'ned', 'frd'), '`source_body`'),
     (lambda: NED_FRD_FROM_ENU_FLU.quaternion([0, 0, 1]), '`quaternion`'),
     (lambda: NED_FRD_FROM_ENU_FLU.quaternion([0, 0, np.inf, 1]), '`quaternion`'),

@@ -15,7 +15,7 @@ import pytest
 from rcl_interfaces.msg import Log
 from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from ros_harness import (
     make_input_message, oracle_output, output_values, PLAIN_INPUT_TYPES, RosProcess, script,
     TestNode)
@@ -211,6 +211,48 @@ def test_finite_difference_angular_velocity(node, rotation):
     assert out.header == messages[1].header
 
 
+def test_mounting_and_yaw_offset_apply_to_orientation_and_angular_velocity(node, rotation):
+    node.configure({'input_type': 'imu', 'outputs': ['quaternion', 'angular_velocity'],
+                    'mounting.body_rotation': [10.0, -20.0, 30.0],
+                    'mounting.yaw_offset': 0.5})
+    msg = make_input_message('imu', rotation, omega=OMEGA_BODY, stamp_ns=STAMP_NS)
+    got = node.exchange('imu', [msg], {'quaternion': 1, 'angular_velocity': 1})
+    m = Rotation.from_euler('xyz', [10.0, -20.0, 30.0], degrees=True)
+    mounted = Rotation.from_euler('z', 0.5) * rotation * m
+    assert_output(got['quaternion'][0], 'quaternion', mounted)
+    assert_output(got['angular_velocity'][0], 'angular_velocity', mounted,
+                  m.inv().apply(OMEGA_BODY))
+    assert node.get('mounting.body_rotation') == [10.0, -20.0, 30.0]
+
+
+def test_mounting_from_tf_static_once_the_frames_connect(node, rotation):
+    from geometry_msgs.msg import TransformStamped
+    from tf2_msgs.msg import TFMessage
+    result, = node.set({'mounting.tf_sensor_frame': 'imu_link'})   # one frame alone
+    assert not result.successful and 'mounting.tf_body_frame' in result.reason
+    node.configure({'input_type': 'imu', 'outputs': ['quaternion'],
+                    'mounting.tf_sensor_frame': 'imu_link',
+                    'mounting.tf_body_frame': 'base_link'})
+    msg = make_input_message('imu', rotation, omega=OMEGA_BODY, stamp_ns=STAMP_NS)
+    node.exchange('imu', [msg], {})   # before /tf_static: dropped, counted
+    node.next_diagnostics(lambda v: int(v['dropped.mounting_unknown']) >= 1)
+    mount = Rotation.from_euler('xyz', [0.0, 180.0, 90.0], degrees=True)   # imu_link in base
+    edge = TransformStamped()
+    edge.header.frame_id, edge.child_frame_id = 'base_link', 'imu_link'
+    q = edge.transform.rotation
+    q.x, q.y, q.z, q.w = (float(c) for c in mount.as_quat())
+    publisher = node.ros.node.create_publisher(TFMessage, '/tf_static', QoSProfile(
+        depth=1, reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    try:
+        publisher.publish(TFMessage(transforms=[edge]))
+        node.ros.spin_for(0.5)
+        out, = node.exchange('imu', [msg], {'quaternion': 1})['quaternion']
+    finally:
+        node.ros.node.destroy_publisher(publisher)
+    assert_output(out, 'quaternion', rotation * mount.inv())
+
+
 # Runtime parameter changes ----------------------------------------------------------
 
 def test_a_convention_change_applies_to_the_next_message(node, rotation):
@@ -381,7 +423,9 @@ def test_parameters_files_are_applied(ros, tmp_path, rotation):
     (['-p', 'outputs:=[euler,eulr]'], "'eulr' is not allowed"),
     (['-p', 'euler.degrees:=1'], 'euler.degrees'),
     (['-p', 'qos.depth:=0'], 'qos.depth'),
-], ids=['sequence', 'outputs', 'type', 'range'])
+    (['-p', 'mounting.tf_sensor_frame:=imu_link'], "'mounting.tf_body_frame': required"),
+    (['-p', 'mounting.body_rotation:=[0.0,0.0,2.0,0.0]'], 'unit quaternion'),
+], ids=['sequence', 'outputs', 'type', 'range', 'one_mounting_frame', 'mounting_norm'])
 def test_an_invalid_initial_value_exits_non_zero_with_the_reason(args, message):
     process = RosProcess([script('rotation_node'), '--ros-args', *args])
     process.proc.wait(timeout=START_TIMEOUT_S)

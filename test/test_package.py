@@ -55,6 +55,9 @@ IMPORT_KEYS = {
     # Only rotation_node.bag.batch.convert_bags_on_dask imports it, for a caller who
     # brings a Dask cluster client (and so has it); not a dependency of the package.
     'distributed': None, 'dask': None,
+    # Only rotation_bag export's Parquet output imports it (without it: one error line
+    # asking for it); CSV needs nothing more. Not a dependency of the package.
+    'pyarrow': None,
 }
 
 

@@ -34,6 +34,8 @@ def test_the_issues_name_every_parameter():
         'angular_velocity.input_frame', 'angular_velocity.output_frame',
         'covariance.frame', 'covariance.max_linearisation_ratio', 'frames.input_world',
         'frames.input_body', 'frames.output_world', 'frames.output_body',
+        'mounting.body_rotation', 'mounting.world_rotation', 'mounting.yaw_offset',
+        'mounting.magnetic_declination', 'mounting.tf_sensor_frame', 'mounting.tf_body_frame',
         'qos.reliability', 'qos.depth', 'tf.parent_frame', 'tf.child_frame'}
 
 
@@ -52,6 +54,14 @@ def test_ros_names_round_trip():
     ros = params.to_ros()
     assert ros['outputs'] == ['euler', 'matrix'] and ros['euler.sequence'] == 'ZYZ'
     assert NodeParameters.from_ros(ros) == params
+
+
+def test_rotations_are_stored_as_tuples_of_float_from_any_sequence():
+    import array
+    params = NodeParameters.from_ros({'mounting.body_rotation': array.array('d', [1.0, 2.0, 3.0]),
+                                      'mounting.world_rotation': [0.0, 0.0, 0.6, 0.8]})
+    assert params.mounting_body_rotation == (1.0, 2.0, 3.0)
+    assert params.to_ros()['mounting.world_rotation'] == [0.0, 0.0, 0.6, 0.8]
 
 
 def test_string_arrays_are_stored_as_tuples():
@@ -133,6 +143,17 @@ def test_every_euler_convention_is_accepted(sequence):
     ('qos.reliability', 'sensor_data', "'qos.reliability': 'sensor_data' is not allowed"),
     ('qos.depth', 0, "'qos.depth': must be from 1 to 10000, got 0"),
     ('qos.depth', 10.0, "'qos.depth': expected an integer, got float"),
+    ('mounting.body_rotation', [0.0, 0.0, 0.0, 2.0],
+     "'mounting.body_rotation': expected a unit quaternion [x, y, z, w], got norm 2.0"),
+    ('mounting.body_rotation', [0.0, 0.0], "'mounting.body_rotation': expected a list of 3 or "
+     '4 numbers, got 2'),
+    ('mounting.world_rotation', [0, 0, 90], "'mounting.world_rotation[0]': expected a floating"),
+    ('mounting.world_rotation', 'yaw', "'mounting.world_rotation': expected a list of 3 or 4"),
+    ('mounting.world_rotation', [0.0, math.inf, 0.0], "'mounting.world_rotation[1]': must be "
+     'finite'),
+    ('mounting.yaw_offset', 1, "'mounting.yaw_offset': expected a floating"),
+    ('mounting.magnetic_declination', math.nan, "'mounting.magnetic_declination': must be "
+     'finite'),
 ])
 def test_invalid_values_are_rejected_naming_the_parameter(name, value, message):
     with pytest.raises(ParameterError, match=re.escape(message)):

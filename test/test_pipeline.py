@@ -409,6 +409,81 @@ def test_frames_apply_to_euler_and_rotation_vector_inputs(rotation):
         np.testing.assert_allclose(got.reshape(3, 3), expected, atol=1e-14)
 
 
+# Mounting and world alignment --------------------------------------------------------
+
+MOUNT_M = Rotation.from_euler('xyz', [15.0, -40.0, 100.0], degrees=True)
+MOUNT_W = Rotation.from_euler('xyz', [2.0, -3.0, 60.0], degrees=True)
+MOUNTING = {'mounting_body_rotation': tuple(MOUNT_M.as_quat()),
+            'mounting_world_rotation': (2.0, -3.0, 40.0), 'mounting_yaw_offset': 0.2,
+            'mounting_magnetic_declination': math.radians(20.0) - 0.2}
+
+
+@pytest.mark.parametrize('covariance_frame', ['fixed', 'body'])
+@pytest.mark.parametrize('output_frame', ['body', 'world'])
+@pytest.mark.parametrize('input_frame', ['body', 'world'])
+def test_mounting_applies_w_r_m_to_orientation_rates_and_covariance(
+        covariance_frame, output_frame, input_frame, rotation, rng):
+    """The outputs are scipy's of the mounted motion: W R M, M^T w, W S W^T or M^T S M."""
+    omega = rng.normal(size=3)
+    outputs = ['quaternion', 'angular_velocity', *UNCERTAINTY]
+    p = pipeline(input_type='imu', outputs=outputs, covariance_frame=covariance_frame,
+                 angular_velocity_input_frame=input_frame,
+                 angular_velocity_output_frame=output_frame, **MOUNTING)
+    measured = omega if input_frame == 'body' else rotation.apply(omega)
+    out = outputs_of(p, make_input_message('imu', rotation, omega=measured, stamp_ns=STAMP_NS))
+    mounted = MOUNT_W * rotation * MOUNT_M
+    sigma = np.reshape(INPUT_COVARIANCE, (3, 3))
+    side = MOUNT_W.as_matrix() if covariance_frame == 'fixed' else MOUNT_M.as_matrix().T
+    for name in outputs:
+        expected = oracle_output(name, mounted, MOUNT_M.inv().apply(omega), frame=output_frame,
+                                 covariance=(side @ sigma @ side.T).ravel(),
+                                 covariance_frame=covariance_frame)
+        if name == 'quaternion':
+            assert same_rotation(output_values(out[name]), expected)
+        else:
+            np.testing.assert_allclose(output_values(out[name]), expected, rtol=1e-7,
+                                       atol=1e-12, err_msg=name)
+
+
+def test_mounting_finite_difference_rate_is_the_mounted_bodys(rotation, rng):
+    omega = rng.normal(size=3)
+    p = pipeline(input_type='quaternion', outputs=['angular_velocity'], **MOUNTING)
+    for k in range(2):
+        moved = rotation * Rotation.from_rotvec(omega * k * 0.01)
+        out = outputs_of(p, make_input_message('quaternion', moved,
+                                               stamp_ns=STAMP_NS + k * 10_000_000))
+    np.testing.assert_allclose(output_values(out['angular_velocity']),
+                               MOUNT_M.inv().apply(omega), rtol=1e-9, atol=1e-12)
+
+
+def test_yaw_offset_and_declination_add_to_the_ros_yaw(rotation):
+    p = pipeline(input_type='imu', outputs=['euler'], mounting_yaw_offset=0.3,
+                 mounting_magnetic_declination=-0.1)
+    got = output_values(outputs_of(p, make_input_message('imu', rotation))['euler'])
+    expected = rotation.as_euler('xyz') + [0.0, 0.0, 0.2]
+    assert np.allclose(np.remainder(got - expected + np.pi, 2 * np.pi) - np.pi, 0.0, atol=1e-12)
+
+
+def test_mounting_after_the_frame_conventions(rotation):
+    """R_out = W (P R B) M: a PX4 stream mounted in REP 103 terms."""
+    p = pipeline(input_type='quaternion', outputs=['matrix'], **PX4_FRAMES, **MOUNTING)
+    px4 = Rotation.from_matrix(NED_FROM_ENU @ rotation.as_matrix() @ FRD_FROM_FLU)
+    got = output_values(outputs_of(p, make_input_message('quaternion', px4))['matrix'])
+    np.testing.assert_allclose(got.reshape(3, 3), (MOUNT_W * rotation * MOUNT_M).as_matrix(),
+                               atol=1e-14)
+
+
+def test_identity_mounting_is_bit_for_bit_no_mounting(rotation, rng):
+    msg = make_input_message('imu', rotation, omega=rng.normal(size=3), stamp_ns=STAMP_NS)
+    outputs = list(OUTPUTS)
+    plain = pipeline(input_type='imu', outputs=outputs).process_values(msg)
+    identity = pipeline(input_type='imu', outputs=outputs,
+                        mounting_body_rotation=(0.0, 0.0, 0.0),
+                        mounting_world_rotation=(0.0, 0.0, 0.0, 1.0)).process_values(msg)
+    assert [(n, np.asarray(v).tobytes()) for n, _, v in plain] == \
+        [(n, np.asarray(v).tobytes()) for n, _, v in identity]
+
+
 # State over time ------------------------------------------------------------------
 
 def yaw_messages(yaws, input_type='quaternion'):

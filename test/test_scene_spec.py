@@ -64,6 +64,15 @@ def test_defaults_of_optional_keys():
     assert scene.motion == spec.Coning(half_angle=0.2, frequency=3.0)
 
 
+def test_reference_only_when_asked_and_its_defaults():
+    assert spec.scene_from_dict(scene_dict()).reference is None
+    reference = spec.scene_from_dict(scene_dict(changes={'reference': {'rate': 120}})).reference
+    assert reference == spec.Reference(
+        rate=120.0, topic='/reference/pose', frame_id='mocap', message='pose', time_offset=0.0,
+        mounting=(0.0, 0.0, 0.0, 1.0), world_alignment=(0.0, 0.0, 0.0, 1.0),
+        orientation_noise=0.0)
+
+
 def test_effect_defaults():
     scene = spec.scene_from_dict(scene_dict(changes={'effects': {
         'orientation_unknown': None, 'gyro_bias': {},
@@ -167,6 +176,23 @@ BAD_SCENES = [
     ('coning', {'effects.timestamp_jitter': {'std': -1e-3}}, 'effects.timestamp_jitter.std'),
     ('coning', {'effects.orientation_unknown': {'probability': 2}},
      'effects.orientation_unknown.probability'),
+    ('coning', {'reference': 120.0}, 'reference'),
+    ('coning', {'reference': {}}, 'reference.rate'),
+    ('coning', {'reference': {'rate': 0.0}}, 'reference.rate'),
+    ('coning', {'reference': {'rate': 120.0, 'mountng': [0, 0, 0, 1]}}, 'reference.mountng'),
+    ('coning', {'reference': {'rate': 120.0, 'mounting': [0, 0, 0, 2]}}, 'reference.mounting'),
+    ('coning', {'reference': {'rate': 120.0, 'world_alignment': [0, 0, 1]}},
+     'reference.world_alignment'),
+    ('coning', {'reference': {'rate': 120.0, 'message': 'odometry'}}, 'reference.message'),
+    ('coning', {'reference': {'rate': 120.0, 'orientation_noise': -0.1}},
+     'reference.orientation_noise'),
+    ('coning', {'reference': {'rate': 120.0, 'time_offset': 1.0}}, 'reference.time_offset'),
+    ('coning', {'reference': {'rate': 120.0, 'time_offset': -1.5}}, 'reference.time_offset'),
+    ('coning', {'reference': {'rate': 120.0, 'topic': '/imu'}}, 'reference.topic'),
+    ('coning', {'reference': {'rate': 120.0, 'topic': '/truth/orientation'}}, 'reference.topic'),
+    ('coning', {'reference': {'rate': 120.0, 'topic': 'mocap'}}, 'reference.topic'),
+    ('coning', {'reference': {'rate': 120.0, 'frame_id': '/mocap'}}, 'reference.frame_id'),
+    ('coning', {'reference': {'rate': 1e8}}, 'reference.rate'),
 ]
 
 

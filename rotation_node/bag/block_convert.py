@@ -159,6 +159,43 @@ class TopicConverter:
         return [self._converted_message(record, topic)
                 for record, topic in zip(records, input_topics)]
 
+    def convert_values(self, records: List, input_topics: Optional[List[str]] = None
+                       ) -> List[List[Tuple[str, Any, Any]]]:
+        """
+        Return the outputs of each record as numbers: ``[(output name, header, numbers)]``.
+
+        What :meth:`convert` encodes, before encoding (``rotation_bag export``):
+        the same block or per-message conversion, counters and state. Outputs
+        of one sample share its ``header`` object (a read-only view).
+        """
+        if self._blocks is not None and len(records) > 1:
+            converted = self._block_values(self._blocks, records)
+            if converted is not None:
+                return converted
+        if input_topics is None:
+            input_topics = [messages.INPUT_TOPIC.name] * len(records)
+        return [self.pipeline.process_values(record.message(self._decode), topic)
+                for record, topic in zip(records, input_topics)]
+
+    def _block_values(self, blocks: _BlockForm, records: List
+                      ) -> Optional[List[List[Tuple[str, Any, Any]]]]:
+        decoded = blocks.decoder.decode([record.data for record in records])
+        if decoded is None:
+            return None
+        converted = blocks.pipeline.process_block(decoded[0])
+        if converted is None:
+            return None
+        result: List[List[Tuple[str, Any, Any]]] = [[] for _ in records]
+        headers: Dict[int, Any] = {}
+        for name, *_ in self._outputs:
+            present = converted.present[name]
+            for index, numbers in zip(present.nonzero()[0].tolist(), converted.numbers[name]):
+                header = headers.get(index)
+                if header is None:
+                    header = headers[index] = records[index].message(self._decode).header
+                result[index].append((name, header, numbers))
+        return result
+
     def _converted_message(self, record, input_topic) -> List[Output]:
         outputs, result = self._by_name, []
         for name, header, values in self.pipeline.process_values(

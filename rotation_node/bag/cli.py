@@ -10,6 +10,7 @@ Usage::
                          [--compression C] [--force] [--strict]
     rotation_bag convert IN1 IN2 ... OUTDIR --params FILE [--jobs N] [...]
     rotation_bag plot IN --topic /imu/euler [-o plot.png] [--params FILE] [--force] [--strict]
+    rotation_bag export IN OUT.csv|OUT.parquet --params FILE [--topic T] [--force] [--strict]
 
 ``IN`` is any bag :func:`rotation_node.bag.reader.open_bag` reads (a rosbag2
 directory, MCAP, sqlite3, split, compressed, ROS 1, an unfinished recording;
@@ -114,6 +115,21 @@ def _plot(args, ros_args):
     _say(f'plotted {count} messages of {args.topic} to {output}')
 
 
+def _export(args, ros_args):
+    from rotation_node.bag.export import export
+    from rotation_node.parameters import parameters_from_yaml
+    params = parameters_from_yaml(args.params)
+    notes: List[str] = []   # printed once the table is written: a failure stays one line
+    rows, stats = export(args.input, args.output, params, topic=args.topic,
+                         overwrite=args.force, strict=args.strict, report=notes.append)
+    for note in notes:
+        _say(note)
+    skipped = [f'{reason} {count}' for reason, count in
+               sorted({**stats.dropped, **stats.skipped}.items())]
+    _say(f'wrote {rows} rows ({", ".join(params.outputs)}) of {stats.received} messages to '
+         f'{args.output}' + ''.join(f'; {note}' for note in skipped))
+
+
 def _say(text):
     print(text, file=sys.stderr)
 
@@ -131,7 +147,7 @@ def _positive_int(text):
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser of ``rotation_bag``."""
     parser = argparse.ArgumentParser(
-        prog=PROG, description='Record, play, convert and plot ROS 2 bags.')
+        prog=PROG, description='Record, play, convert, plot and export ROS 2 bags.')
     commands = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
 
     record = commands.add_parser('record', help='record live topics to an MCAP bag')
@@ -205,6 +221,25 @@ def build_parser() -> argparse.ArgumentParser:
                       help='refuse unfinished recordings instead of plotting what a scan '
                            'recovers')
     plot.set_defaults(run=_plot)
+
+    export = commands.add_parser(
+        'export', help="write the node's outputs for one topic as a CSV or Parquet table",
+        description="Write the converted values of one input topic (the node's outputs, as "
+                    'convert computes them) as a table: stamp_ns, frame_id, then named columns '
+                    'for each output (qx..qw, roll/pitch/yaw, ...). CSV, or Parquet when the '
+                    'name ends in .parquet (needs pyarrow).')
+    export.add_argument('input', metavar='IN', help='any bag (rosbag2 directory, .mcap, .db3, '
+                                                    'ROS 1 .bag...)')
+    export.add_argument('output', metavar='OUT', help='table to write: *.csv or *.parquet')
+    export.add_argument('--params', required=True, metavar='FILE',
+                        help="the node's parameters file (input_type, outputs, conventions)")
+    export.add_argument('--topic', metavar='T',
+                        help='input topic (default: the one topic of the input_type)')
+    export.add_argument('--force', action='store_true', help='replace OUT')
+    export.add_argument('--strict', action='store_true',
+                        help='refuse unfinished recordings instead of exporting what a scan '
+                             'recovers')
+    export.set_defaults(run=_export)
     return parser
 
 

@@ -43,6 +43,7 @@ from rotation_node.bag.reader import open_bag
 from rotation_node.bag.stop_signal import raise_if_stopped
 from rotation_node.bag.writer import BagWriter
 from rotation_node.errors import BagError
+from rotation_node.static_mounting import resolved_from_bag
 
 if TYPE_CHECKING:
     from rotation_node.parameters import NodeParameters
@@ -167,6 +168,7 @@ def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *
                    f'{sum(reader.message_counts.values())} messages')
             for note in reader.notes:
                 report(note)
+        params = resolved_from_bag(reader, params)   # the mounting from /tf_static, if asked
         input_type = messages.INPUTS[params.input_type]
         streams = _input_streams(reader, input_type, topics)
         # {bag topic: (its stream's first topic, the input type's name for it)}

@@ -31,7 +31,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog='rotation_scene',
         description='Simulate a scene file (motion + sensor effects) into a ROS 2 MCAP bag '
                     'holding the sensor_msgs/Imu stream and the truth on /truth/orientation '
-                    'and /truth/angular_velocity.')
+                    'and /truth/angular_velocity (and, when the scene has a reference, a second '
+                    'stream and OUT.truth.json).')
     parser.add_argument('scene', help='scene file (YAML), e.g. config/scenes/coning.yaml')
     parser.add_argument('output', help='bag to write: a rosbag2 directory, or a single MCAP '
                                        'file if it ends in .mcap, e.g. coning.mcap')
@@ -70,6 +71,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         print(f'{args.output}: {n} samples over {scene.duration:g} s at {scene.rate:g} Hz, '
               f'motion {scene.motion.type}, effects {effects}; '
               f'{published} sensor messages on {scene.topic}, {n} on each truth topic')
+        if scene.reference is not None:
+            from .reference import reference_index_range, truth_path
+            first, stop = reference_index_range(scene)
+            print(f'{args.output}: reference stream: {stop - first} messages on '
+                  f'{scene.reference.topic} at {scene.reference.rate:g} Hz; its truth in '
+                  f'{truth_path(args.output)}')
     return 0
 
 

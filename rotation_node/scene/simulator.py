@@ -21,14 +21,22 @@ Every message has ``header.frame_id`` = the scene's ``frame_id`` and log time
 = the nominal stamp, so a bag replays in sample order; the same scene and
 seed give a byte-identical bag (``BagWriter.write`` encodes these types with
 zero padding, see :mod:`rotation_node.bag.cdr`).
+
+A scene with a ``reference`` also gets its second stream
+(:mod:`rotation_node.scene.reference`) on the reference's topic, with the
+reference's ``frame_id``, log time = its stamp, interleaved in stamp order
+(a sensor sample first on a tie), and its truth in ``<bag>.truth.json``,
+which :func:`write_scene_bag` writes beside the bag when the bag is complete.
 """
 from __future__ import annotations
 
 import dataclasses
+import json
 from typing import Iterator, Mapping, Optional, TYPE_CHECKING
 
-from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
+from geometry_msgs.msg import PoseStamped, QuaternionStamped, Vector3Stamped
 import numpy as np
+from rotation_node.bag.atomic_file import AtomicFile
 from rotation_node.bag.stop_signal import raise_if_stopped
 from rotation_node.bag.writer import BagWriter
 from rotation_node.stamps import NS_PER_S as _NS_PER_S
@@ -37,6 +45,7 @@ from sensor_msgs.msg import Imu
 
 from .effects import EffectsStream, SensorStream, UNKNOWN_COVARIANCE
 from .motions import MotionStream
+from .reference import ReferenceBlock, ReferenceStream, truth_path, truth_record
 from .spec import Scene, TRUTH_ANGULAR_VELOCITY_TOPIC, TRUTH_ORIENTATION_TOPIC
 
 if TYPE_CHECKING:
@@ -66,6 +75,10 @@ class Simulation:
         ``published`` mask; equal to the truth when the scene has no effects.
     effect_masks : Mapping[str, ndarray of bool, shape (n,)]
         For each effect of the scene, the samples it changed.
+    reference : ReferenceBlock or None
+        The reference stream's samples stamped up to this block's last stamp
+        (after the previous block's), to the end of the stream in the last
+        block; None when the scene has no reference.
 
     """
 
@@ -77,6 +90,7 @@ class Simulation:
     truth_angular_velocity: np.ndarray
     sensor: SensorStream
     effect_masks: Mapping[str, np.ndarray]
+    reference: Optional[ReferenceBlock] = None
 
 
 #: Samples simulated and written at a time by :func:`write_scene_bag` (memory is bounded by it).
@@ -163,6 +177,7 @@ def simulate_blocks(scene: Scene, seed: int = 0,
     first_ns = _stamps_ns(scene, 0, 1)[0]
     motion: Optional[MotionStream] = None
     effects: Optional[EffectsStream] = None
+    reference = None if scene.reference is None else ReferenceStream(scene, seed)
     for start, stop in bounds:
         stamp_ns = _stamps_ns(scene, start, stop)
         time = (stamp_ns - first_ns) / _NS_PER_S
@@ -173,9 +188,13 @@ def simulate_blocks(scene: Scene, seed: int = 0,
             effects = EffectsStream(scene.effects, seed)
         q, w = motion.truth(time)
         sensor, masks = effects.apply(SensorStream.from_truth(time, stamp_ns, q, w))
+        reference_block = None
+        if reference is not None:
+            reference_block = reference.until(
+                int(stamp_ns[-1]) if stop < bounds[-1][1] else np.iinfo(np.int64).max)
         yield Simulation(scene=scene, seed=seed, stamp_ns=stamp_ns, time=time,
                          truth_orientation=q, truth_angular_velocity=w,
-                         sensor=sensor, effect_masks=masks)
+                         sensor=sensor, effect_masks=masks, reference=reference_block)
 
 
 def simulate(scene: Scene, seed: int = 0) -> Simulation:
@@ -244,8 +263,7 @@ def write_bag(simulation: Simulation, path: StrPath, *, overwrite: bool = False)
         If ``path`` exists (and not ``overwrite``) or cannot be written.
 
     """
-    with BagWriter(path, overwrite=overwrite) as writer:
-        _write_samples(writer, simulation)
+    _write_simulations(simulation.scene, [simulation], path, overwrite)
 
 
 def write_scene_bag(scene: Scene, path: StrPath, *, seed: int = 0, overwrite: bool = False,
@@ -269,6 +287,10 @@ def write_scene_bag(scene: Scene, path: StrPath, *, seed: int = 0, overwrite: bo
     block_samples : int, optional
         Samples simulated at a time.
 
+    A scene with a ``reference`` also gets its stream in the bag and its truth
+    in ``<path>.truth.json`` (:func:`rotation_node.scene.reference.truth_path`),
+    which appears once the bag is complete.
+
     Returns
     -------
     samples : int
@@ -279,30 +301,79 @@ def write_scene_bag(scene: Scene, path: StrPath, *, seed: int = 0, overwrite: bo
     Raises
     ------
     BagError
-        If ``path`` exists (and not ``overwrite``) or cannot be written
-        (``DiskFullError`` when the disk fills); nothing is left behind.
+        If ``path`` (or the truth file) exists (and not ``overwrite``) or
+        cannot be written (``DiskFullError`` when the disk fills); nothing is
+        left behind.
     ValueError
         If ``seed`` is not a non-negative integer.
 
     """
-    blocks = simulate_blocks(scene, _check_seed(seed), block_samples)
-    samples = published = 0
-    with BagWriter(path, overwrite=overwrite) as writer:
-        for simulation in blocks:
-            _write_samples(writer, simulation)
-            samples += len(simulation.time)
-            published += int(simulation.sensor.published.sum())
-        raise_if_stopped()   # the last chance before the bag is committed
+    return _write_simulations(scene, simulate_blocks(scene, _check_seed(seed), block_samples),
+                              path, overwrite)
+
+
+def _write_simulations(scene, simulations, path, overwrite):
+    """Write the blocks ``simulations`` as one bag, and its truth file if it has a reference."""
+    truth = (None if scene.reference is None
+             else AtomicFile(truth_path(path), overwrite=overwrite))
+    samples = published = references = 0
+    seed = 0
+    try:
+        with BagWriter(path, overwrite=overwrite) as writer:
+            for simulation in simulations:
+                _write_samples(writer, simulation)
+                seed = simulation.seed
+                samples += len(simulation.time)
+                published += int(simulation.sensor.published.sum())
+                references += 0 if simulation.reference is None else len(simulation.reference)
+            raise_if_stopped()   # the last chance before the bag is committed
+        if truth is not None:
+            record = truth_record(scene, seed, references, published)
+            truth.stream.write((json.dumps(record, indent=2) + '\n').encode())
+            truth.commit()
+    finally:
+        if truth is not None and not truth.closed:
+            truth.discard()
     return samples, published
 
 
+def _reference_message(scene, block, j):
+    """Return sample ``j`` of a reference block as its message type."""
+    reference = scene.reference
+    if reference.message == 'imu':
+        msg = Imu()
+        _set_quaternion(msg.orientation, block.orientation[j])
+        msg.orientation_covariance = block.orientation_covariance
+        _set_vector(msg.angular_velocity, block.angular_velocity[j])
+        msg.linear_acceleration_covariance[0] = UNKNOWN_COVARIANCE
+    else:
+        msg = PoseStamped()
+        _set_quaternion(msg.pose.orientation, block.orientation[j])
+    msg.header.stamp = _time_message(block.stamp_ns[j])
+    msg.header.frame_id = reference.frame_id
+    return msg
+
+
 def _write_samples(writer, simulation):
-    """Write every sample of ``simulation`` (one block or all) in sample order."""
+    """
+    Write every sample of ``simulation`` (one block or all) in sample order.
+
+    With a block of the reference stream, its messages are interleaved by
+    stamp, each before the first sensor sample stamped later than it.
+    """
     sensor = simulation.sensor
-    frame_id = simulation.scene.frame_id
-    topic = simulation.scene.topic
+    scene = simulation.scene
+    frame_id = scene.frame_id
+    topic = scene.topic
+    reference = simulation.reference
+    pending = [] if reference is None else reference.stamp_ns.tolist()
+    j = 0
     for k, stamp_ns in enumerate(simulation.stamp_ns.tolist()):
         raise_if_stopped()
+        while j < len(pending) and pending[j] < stamp_ns:
+            writer.write(scene.reference.topic, _reference_message(scene, reference, j),
+                         pending[j])
+            j += 1
         if sensor.published[k]:
             writer.write(topic, _imu_message(sensor, k, frame_id), stamp_ns)
         orientation = QuaternionStamped()
@@ -314,3 +385,5 @@ def _write_samples(writer, simulation):
         angular_velocity.header = orientation.header
         _set_vector(angular_velocity.vector, simulation.truth_angular_velocity[k])
         writer.write(TRUTH_ANGULAR_VELOCITY_TOPIC, angular_velocity, stamp_ns)
+    for j in range(j, len(pending)):
+        writer.write(scene.reference.topic, _reference_message(scene, reference, j), pending[j])

@@ -21,14 +21,14 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
-from typing import ClassVar, Mapping, Tuple, TYPE_CHECKING, Union
+from typing import ClassVar, Mapping, Optional, Tuple, TYPE_CHECKING, Union
 
 from rotation_node.conversions import parse_sequence
 from rotation_node.errors import SceneError
 from rotation_node.ros_yaml import load_ros_yaml
 from rotation_node.validation import (
-    built, ChoiceList, declare, describe_value, Integer, Real, Sections, Tagged, Text, Vector,
-    Where)
+    built, Choice, ChoiceList, declare, describe_value, Integer, Real, Section, Sections, Tagged,
+    Text, Vector, Where)
 
 if TYPE_CHECKING:
     from rotation_node.type_aliases import StrPath
@@ -300,6 +300,63 @@ EFFECT_PARAMETERS = {cls.name: cls for cls in (
     DroppedMessages, TimestampJitter, OrientationUnknown, NanBursts)}
 
 
+# --- the reference stream -----------------------------------------------------
+
+#: Message types of a reference stream: ``geometry_msgs/PoseStamped`` or ``sensor_msgs/Imu``.
+REFERENCE_MESSAGES = ('pose', 'imu')
+
+_IDENTITY_QUATERNION = (0.0, 0.0, 0.0, 1.0)
+
+
+@dataclasses.dataclass(frozen=True)
+class Reference:
+    """
+    A second stream of the scene's motion, as a reference system (mocap, an INS) sees it.
+
+    Its orientation at its own stamp ``t`` is
+    ``R_ref(t) = W . R(t + time_offset) . M`` (body-to-world matrices), with
+    ``R`` the scene's truth, ``W = world_alignment`` and ``M = mounting``: the
+    convention of ``rotation_bag compare`` with the scene's sensor stream as
+    the estimate (``R_est = R`` without its effects). Samples are at
+    ``start_time + k / rate`` for every ``k`` whose ``t + time_offset`` lies in
+    ``[0, duration]`` of the scene.
+
+    Attributes
+    ----------
+    rate : float
+        Samples per second (> 0).
+    topic : str
+        Absolute topic of the stream; not the sensor's or a truth topic.
+    frame_id : str
+        ``header.frame_id`` of its messages (the reference's world frame for a pose).
+    message : str
+        ``pose`` (``geometry_msgs/PoseStamped``, position zero) or ``imu``
+        (``sensor_msgs/Imu`` with the body angular velocity ``M^T w(t + time_offset)``).
+    time_offset : float
+        ``dt``, s: the reference at ``t`` shows the motion at ``t + dt``.
+    mounting : tuple of float, shape (4,)
+        ``M`` (x, y, z, w), unit: the reference body's orientation in the sensor's body frame.
+    world_alignment : tuple of float, shape (4,)
+        ``W`` (x, y, z, w), unit: the sensor's world frame's orientation in the
+        reference's world frame.
+    orientation_noise : float
+        Standard deviation (rad) of a body-frame rotation vector ``v``: each
+        orientation is ``q_ref (x) exp(v)``.
+
+    """
+
+    rate: float = declare(Real(positive=True))
+    topic: str = declare(_TOPIC, '/reference/pose')
+    frame_id: str = declare(_FRAME_ID, 'mocap')
+    message: str = declare(Choice(REFERENCE_MESSAGES), 'pose')
+    time_offset: float = declare(Real(), 0.0)
+    mounting: Tuple[float, ...] = declare(Vector(4), _IDENTITY_QUATERNION,
+                                          check=_unit_quaternion)
+    world_alignment: Tuple[float, ...] = declare(Vector(4), _IDENTITY_QUATERNION,
+                                                 check=_unit_quaternion)
+    orientation_noise: float = declare(Real(0.0), 0.0)
+
+
 # --- the scene ----------------------------------------------------------------
 
 @dataclasses.dataclass(frozen=True)
@@ -323,6 +380,8 @@ class Scene:
         ``header.frame_id`` of every message.
     start_time : float
         Stamp of the first sample, seconds since the Unix epoch.
+    reference : Reference or None
+        A second stream of the same motion, only when the scene asks for one.
 
     """
 
@@ -334,6 +393,7 @@ class Scene:
     topic: str = declare(_TOPIC, '/imu', check=_not_truth_topic)
     frame_id: str = declare(_FRAME_ID, 'imu_link')
     start_time: float = declare(Real(0.0), DEFAULT_START_TIME)
+    reference: Optional[Reference] = declare(Section(Reference), None)
 
     @property
     def sample_count(self) -> int:
@@ -377,6 +437,18 @@ def scene_from_dict(data: object) -> Scene:
     n = scene.sample_count
     if n > MAX_SAMPLES:
         raise SceneError(f'duration: duration * rate gives {n} samples, more than {MAX_SAMPLES}')
+    reference = scene.reference
+    if reference is not None:
+        if reference.topic in (scene.topic, TRUTH_ORIENTATION_TOPIC, TRUTH_ANGULAR_VELOCITY_TOPIC):
+            raise SceneError(f"reference.topic: {reference.topic} is already the sensor's or a "
+                             'truth topic')
+        if abs(reference.time_offset) >= scene.duration:
+            raise SceneError(f'reference.time_offset: {reference.time_offset!r} s leaves no '
+                             f"overlap with the scene's {scene.duration!r} s")
+        m = sample_count(scene.duration, reference.rate)
+        if m > MAX_SAMPLES:
+            raise SceneError(f'reference.rate: duration * rate gives {m} samples, more than '
+                             f'{MAX_SAMPLES}')
     if scene.start_time + scene.duration + 1 > _MAX_STAMP_SECONDS:
         raise SceneError(f'start_time: stamps must stay below {_MAX_STAMP_SECONDS} s '
                          f'(builtin_interfaces/Time.sec is an int32)')
