@@ -27,8 +27,9 @@ published on ``/diagnostics`` once a second.
 With ``qos.reliability: auto`` each input subscription adapts to the QoS its
 publishers offer, a subscription is replaced (new QoS) without losing or
 repeating a message, and messages the publishers sent but the node never got
-are counted from their publication sequence numbers (:mod:`rotation_node.reception`)
-and reported as ``lost``. Input types with a fixed CDR layout are taken as
+are counted from their publication sequence numbers (:mod:`rotation_node.reception`;
+the numbers of a publisher that left are forgotten, so that a publisher restarting
+is counted exactly) and reported as ``lost``. Input types with a fixed CDR layout are taken as
 serialized messages and decoded by :mod:`rotation_node.bag.cdr`; outputs are
 published as the bytes their encoders give, as ``rotation_bag convert`` writes
 them. See docs/node.md.
@@ -183,8 +184,23 @@ class _TopicInput:
         # (data, info) of the new subscription during a handoff
         self.pending: List[Tuple[Any, Dict[str, Any]]] = []
         self.pending_identities: Set[Identity] = set()
-        self.reception = Reception(memory)
+        self.reception = Reception(memory, on_new_publisher=self._publisher_started)
         self.lost_events = 0          # total_count_change of the rmw's message-lost events
+
+    def matched_publishers(self) -> int:
+        """Return how many publishers the topic's subscriptions (current, retiring) match."""
+        return max((subscription.get_publisher_count()
+                    for subscription in (self.subscription, self.retiring)
+                    if subscription is not None), default=0)
+
+    def forget_publishers_that_left(self) -> None:
+        """Keep the sequence numbers of the publishers still matched only (see Reception)."""
+        self.reception.retain(self.matched_publishers())
+
+    def _publisher_started(self) -> None:
+        # A publisher joined or restarted: whose message just came is matched (at least one),
+        # and one that left is no longer: a later gap must not be credited to it.
+        self.reception.retain(max(self.matched_publishers(), 1))
 
     def subscribed(self) -> Tuple[Subscription, QoSProfile]:
         """Return the subscription messages are taken from and its QoS (set on configuring)."""
@@ -603,6 +619,7 @@ class RotationNode(Node):
         for state in self._inputs:
             for subscription in (state.subscription, state.retiring):
                 self._count_message_lost(state, subscription)
+            state.forget_publishers_that_left()
         stats = self._pipeline.stats
         gaps = sum(state.reception.lost for state in self._inputs)
         events = sum(state.lost_events for state in self._inputs)
