@@ -17,11 +17,14 @@ unknown parameter (in a file or ``-p``) or an invalid value ends the process
 with one line on stderr and exit status 1.
 
 At runtime, ROS 2 applies parameter changes as its services define: a
-``set_parameters`` request with several parameters checks and applies each
-one on its own (some may be applied while others are rejected), while
-``set_parameters_atomically`` applies all of them or none. Every value is
-checked against the table before it is accepted; an accepted change takes
-effect on the next message. Counters and the current conventions are
+``set_parameters`` request with several parameters (``ros2 param set``, ``ros2
+param load``) checks and applies each one on its own (some may be applied while
+others are rejected), while ``set_parameters_atomically`` applies all of them or
+none. Every value is checked against the table before it is accepted; the rule
+between parameters (``input_type: tf`` needs both ``tf`` frames) is checked
+once a whole request is in, whatever the order of its parameters, and a request
+that breaks it is set back entirely. An accepted change takes effect on the next
+message. Counters and the current conventions are
 published on ``/diagnostics`` once a second.
 
 With ``qos.reliability: auto`` each input subscription adapts to the QoS its
@@ -48,19 +51,22 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Set, Tuple
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (
     FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult)
+from rcl_interfaces.srv import SetParameters
 import rclpy
 from rclpy.duration import Duration
 from rclpy.event_handler import (
     PublisherEventCallbacks, QoSSubscriptionEventType, SubscriptionEventCallbacks,
     UnsupportedEventTypeError)
-from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.exceptions import (
+    InvalidParameterTypeException, InvalidParameterValueException, ParameterNotDeclaredException)
 from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
 from rclpy.qos import (
-    DurabilityPolicy, qos_policy_name_from_kind, QoSPolicyKind, QoSProfile, ReliabilityPolicy)
+    DurabilityPolicy, qos_policy_name_from_kind, qos_profile_parameters, QoSPolicyKind,
+    QoSProfile, ReliabilityPolicy)
 from rclpy.subscription import Subscription
 from rclpy.timer import Timer
 from rotation_node import messages
@@ -267,6 +273,10 @@ class RotationNode(Node):
         self._handoff_timer: Optional[Timer] = None
         self._next_issue_log: Dict[str, float] = {}   # reason -> time of its next warning
         self._reported = (0, 0, 0)   # dropped, skipped and lost totals at the last diagnostics
+        # While a set_parameters request is applied: {ROS name: value} of the node's own
+        # parameters it set so far (their combination is checked once all are in).
+        self._request: Optional[Dict[str, Any]] = None
+        self._serve_set_parameters()
         # Registered before declaring, so the initial values pass the same checks.
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -292,17 +302,88 @@ class RotationNode(Node):
 
     # Parameters --------------------------------------------------------------------
 
+    def _serve_set_parameters(self) -> None:
+        """
+        Answer the ``set_parameters`` service here instead of in rclpy's parameter service.
+
+        rclpy applies a request's parameters one at a time, each checked on its own:
+        ``ros2 param load`` of a file setting ``input_type: tf`` and the frames it
+        needs in one request would have ``input_type`` refused for the order alone.
+        :meth:`_on_set_parameters` applies them as rclpy does, checks their
+        combination once all are in, and takes the request back if it is invalid.
+        """
+        name = f'{self.get_name()}/set_parameters'
+        resolved = self.resolve_service_name(name)
+        for service in list(self.services):
+            if service.service_name == resolved:
+                self.destroy_service(service)
+        self.create_service(SetParameters, name, self._on_set_parameters,
+                            qos_profile=qos_profile_parameters)
+
+    def _on_set_parameters(self, request: SetParameters.Request,
+                           response: SetParameters.Response) -> SetParameters.Response:
+        """
+        Apply a ``set_parameters`` request: each parameter, then their combination.
+
+        Each parameter is checked and set on its own, as rclpy's service does (one
+        may fail while others are set); the node's own parameters are then checked
+        together (``input_type: tf`` needs both frames, wherever they stand in the
+        request). An invalid combination sets every parameter of the request back:
+        each result says why, and the node is left as it was.
+        """
+        parameters = [Parameter.from_parameter_msg(message) for message in request.parameters]
+        before = {p.name: self.get_parameter(p.name) for p in parameters
+                  if self.has_parameter(p.name)}
+        results = []
+        self._request = {}
+        try:
+            for parameter in parameters:
+                try:
+                    results.append(self.set_parameters_atomically([parameter]))
+                except ParameterNotDeclaredException as exc:
+                    results.append(SetParametersResult(successful=False, reason=str(exc)))
+            changes = self._request
+        finally:
+            self._request = None
+        try:
+            params = self.params.replaced(changes)
+        except ParameterError as exc:
+            applied = {p.name: before[p.name] for p, result in zip(parameters, results)
+                       if result.successful}
+            self._request = {}   # set back: the node's state does not change
+            try:
+                if applied:
+                    self.set_parameters_atomically(list(applied.values()))
+            finally:
+                self._request = None
+            reason = f'not applied: {exc}'
+            results = [SetParametersResult(successful=False, reason=reason)
+                       if result.successful else result for result in results]
+        else:
+            self._change_to(params)
+        response.results = results
+        return response
+
     def _check_parameters(self, parameters: List[Parameter]) -> SetParametersResult:
         """Validate a parameter change (all of it, or none of it, is applied)."""
         try:
-            self.params.replaced(_own(parameters))
+            if self._request is None:
+                self.params.replaced(_own(parameters))
+            else:   # part of a set_parameters request: the combination comes at its end
+                NodeParameters.check_each(_own(parameters))
         except ParameterError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, parameters: List[Parameter]) -> None:
         """Apply a validated change; it takes effect on the next message."""
-        previous, self.params = self.params, self.params.replaced(_own(parameters))
+        if self._request is not None:
+            self._request.update(_own(parameters))
+            return
+        self._change_to(self.params.replaced(_own(parameters)))
+
+    def _change_to(self, params: NodeParameters) -> None:
+        previous, self.params = self.params, params
         # Not while declaring (__init__ configures once), nor for others' parameters.
         if self._configured and self.params != previous:
             self._configure(previous, self.params)

@@ -254,6 +254,23 @@ class NodeParameters:
         return replace(self, **checked_values(type(self), values, _PARAMETER,
                                               unknown=unknown_parameter_error))
 
+    @classmethod
+    def check_each(cls, values: Mapping[str, Any]) -> None:
+        """
+        Check each value of ``{ROS name: value}`` on its own, not their combination.
+
+        What :meth:`replaced` checks, except the input type's own rule over several
+        parameters (``input_type: tf`` needs both frames): for the values of one
+        ``set_parameters`` request, whose combination is checked once all are in.
+
+        Raises
+        ------
+        ParameterError
+            A name is not a parameter of the node, or a value is invalid.
+
+        """
+        checked_values(cls, values, _PARAMETER, unknown=unknown_parameter_error)
+
     def to_ros(self) -> dict:
         """Return ``{ROS name: value}``, string arrays as lists (what rclpy expects)."""
         return {spec.name: list(value) if isinstance(value, tuple) else value
