@@ -58,12 +58,14 @@ from rclpy.event_handler import (
     PublisherEventCallbacks, QoSSubscriptionEventType, SubscriptionEventCallbacks,
     UnsupportedEventTypeError)
 from rclpy.exceptions import (
-    InvalidParameterTypeException, InvalidParameterValueException, ParameterNotDeclaredException)
+    InvalidHandle, InvalidParameterTypeException, InvalidParameterValueException,
+    NotInitializedException, ParameterNotDeclaredException)
 from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
+from rclpy.signals import install_signal_handlers, SignalHandlerOptions
 from rclpy.qos import (
     DurabilityPolicy, qos_policy_name_from_kind, qos_profile_parameters, QoSPolicyKind,
     QoSProfile, ReliabilityPolicy)
@@ -72,6 +74,7 @@ from rclpy.timer import Timer
 from rotation_node import messages
 from rotation_node.bag.cdr import fixed_layout_codec
 from rotation_node.bag.qos import AUTO, input_qos, qos_profile
+from rotation_node.bag.stop_signal import signal_name, StopSignal
 from rotation_node.errors import BagError, ParameterError
 from rotation_node.parameters import (
     NODE_NAME, NodeParameters, PARAMETERS, PARAMETERS_BY_NAME, parameters_file_sections,
@@ -790,17 +793,43 @@ def usage() -> str:
             + ', '.join(spec.name for spec in PARAMETERS) + '.\n')
 
 
-def main(args: Optional[List[str]] = None) -> int:
+def main(args: Optional[List[str]] = None, stop_signal: Optional[StopSignal] = None) -> int:
     """
-    Run the node until Ctrl-C (``--help``: print its usage).
+    Run the node until Ctrl-C or SIGTERM (``--help``: print its usage).
+
+    Parameters
+    ----------
+    args : list of str, optional
+        The command line (``sys.argv`` by default).
+    stop_signal : StopSignal, optional
+        The console script's, in force since the program started loading; a
+        new one otherwise.
 
     Returns
     -------
     int
-        0 after Ctrl-C or shutdown; 1 if a parameters file or an initial parameter
-        value is invalid (one line on stderr says which).
+        0 after Ctrl-C, SIGTERM or shutdown, at any moment (during start-up with
+        one line on stderr saying so); 1 if a parameters file or an initial
+        parameter value is invalid (one line on stderr says which).
+
+    Notes
+    -----
+    Start-up runs with SIGINT and SIGTERM only setting a flag (:class:`StopSignal`),
+    and rclpy initialised without its signal handlers: its handler shuts the
+    context down from another thread, which in the middle of the node's
+    construction surfaces as whatever rclpy call comes next
+    (``NotInitializedException``...). rclpy's handlers are installed once the node
+    exists (chained to the flag), so that a signal ends ``spin``.
 
     """
+    if stop_signal is None:
+        with StopSignal() as stop:
+            return _run(args, stop)
+    return _run(args, stop_signal)
+
+
+def _run(args: Optional[List[str]], stop: StopSignal) -> int:
+    """Run :func:`main` with ``stop`` in force."""
     argv = sys.argv if args is None else list(args)
     if {'-h', '--help'} & set(_non_ros_arguments(argv[1:])):
         print(usage(), end='')
@@ -814,24 +843,32 @@ def main(args: Optional[List[str]] = None) -> int:
         print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
         return 1
     node = None
+    spinning = False
     try:
-        try:
-            rclpy.init(args=args)
-        except _rclpy.RCLError as exc:   # e.g. a malformed --ros-args remapping
-            print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
-            return 1
-        node = RotationNode(parameters_files=files)
-        # The ~1e5 objects of rclpy, numpy and numba live as long as the process: keep
-        # them out of the cyclic collector, whose full passes over them stall a
-        # callback for ~50 ms (50 messages at 1 kHz).
-        gc.freeze()
-        rclpy.spin(node)
+        if not stop.is_set():
+            try:
+                rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+            except _rclpy.RCLError as exc:   # e.g. a malformed --ros-args remapping
+                print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
+                return 1
+        if not stop.is_set():
+            node = RotationNode(parameters_files=files)
+        # From here a signal also shuts the context down (rclpy's handler, chained to
+        # the flag's), which ends spin; one that came before is seen below.
+        install_signal_handlers(SignalHandlerOptions.ALL)
+        if not stop.is_set() and node is not None:
+            # The ~1e5 objects of rclpy, numpy and numba live as long as the process: keep
+            # them out of the cyclic collector, whose full passes over them stall a
+            # callback for ~50 ms (50 messages at 1 kHz).
+            gc.freeze()
+            spinning = True
+            rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except _rclpy.RCLError:
+    except (_rclpy.RCLError, NotInitializedException, InvalidHandle):
         if rclpy.ok():
             raise
-        # Ctrl-C during start-up: the context was shut down under a graph query.
+        # A stop request shut the context down under an rclpy call.
     except ParameterError as exc:
         print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
         return 1
@@ -839,6 +876,10 @@ def main(args: Optional[List[str]] = None) -> int:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+    interrupt = stop.interrupt()
+    if interrupt is not None and not spinning:
+        print(f'{NODE_NAME}: interrupted while starting ({signal_name(interrupt)})',
+              file=sys.stderr)
     return 0
 
 

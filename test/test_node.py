@@ -7,7 +7,9 @@ so tests do not depend on each other's settings. Values are compared with scipy
 (``ros_harness.oracle_output``); test_pipeline.py covers the conversions in depth.
 """
 from pathlib import Path
+import signal
 import subprocess
+import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 import numpy as np
@@ -610,6 +612,73 @@ def test_namespace_and_input_remapping(namespaced, rotation):
 def test_ctrl_c_exits_cleanly(namespaced):
     assert namespaced.stop() == 0, namespaced.process.output
     assert 'Traceback' not in namespaced.process.output
+
+
+START_UP_MOMENTS = {
+    # where the signal comes: (the name in rotation_node.node to wrap, before or after it)
+    'before rclpy.init': ('rclpy.init', 'before'),
+    'between rclpy.init and the node': ('warm_up_conversions', 'before'),
+    'while the node is configured': ('RotationNode._configure', 'before'),
+    'before rclpy handles signals': ('install_signal_handlers', 'before'),
+    'once rclpy handles signals': ('install_signal_handlers', 'after'),
+}
+
+
+@pytest.mark.parametrize('moment', START_UP_MOMENTS)
+@pytest.mark.parametrize('number', [signal.SIGINT, signal.SIGTERM], ids=lambda n: n.name)
+def test_a_signal_at_any_moment_of_start_up_is_one_line_and_exit_0(monkeypatch, capsys,
+                                                                   moment, number):
+    """In-process: the signal is raised in the main thread at that moment of main()."""
+    import rclpy
+    from rotation_node import node as node_module
+    path, when = START_UP_MOMENTS[moment]
+    owner_name, _, attribute = path.rpartition('.')
+    owner = {'': node_module, 'rclpy': rclpy,
+             'RotationNode': node_module.RotationNode}[owner_name]
+    original = getattr(owner, attribute)
+    raised = []
+
+    def wrapped(*args, **kwargs):
+        if when == 'before':
+            raised.append(number)
+            signal.raise_signal(number)
+        result = original(*args, **kwargs)
+        if when == 'after':
+            raised.append(number)
+            signal.raise_signal(number)
+        return result
+
+    monkeypatch.setattr(owner, attribute, wrapped)
+    handlers = {n: signal.getsignal(n) for n in (signal.SIGINT, signal.SIGTERM)}
+    assert node_module.main(['rotation_node']) == 0
+    assert raised == [number]
+    assert capsys.readouterr().err.splitlines() == [
+        f'rotation_node: interrupted while starting ({number.name})']
+    assert not rclpy.ok()
+    assert {n: signal.getsignal(n) for n in handlers} == handlers
+
+
+@pytest.mark.parametrize('number', [signal.SIGINT, signal.SIGTERM], ids=lambda n: n.name)
+def test_a_signal_while_the_node_loads_exits_0_with_one_line(number):
+    process = RosProcess([script('rotation_node')])
+    time.sleep(0.3)   # loading numpy, numba, rclpy: seconds
+    process.proc.send_signal(number)
+    process.output, _ = process.proc.communicate(timeout=START_TIMEOUT_S)
+    assert process.proc.returncode == 0, process.output
+    assert process.output.splitlines()[-1] == (
+        f'rotation_node: interrupted while starting ({number.name})')
+    assert 'Traceback' not in process.output
+
+
+def test_sigterm_while_spinning_exits_0(ros):
+    started = NodeUnderTest(ros, ['-r', '__ns:=/sigterm'], namespace='/sigterm')
+    for subscription in started.subscriptions.values():
+        ros.node.destroy_subscription(subscription)
+    started.process.proc.send_signal(signal.SIGTERM)
+    started.process.output, _ = started.process.proc.communicate(timeout=15.0)
+    assert started.process.proc.returncode == 0, started.process.output
+    assert 'Traceback' not in started.process.output
+    assert 'interrupted while starting' not in started.process.output
 
 
 def test_destroying_the_node_destroys_its_message_lost_event_handles_first():
