@@ -65,10 +65,10 @@ from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
-from rclpy.signals import install_signal_handlers, SignalHandlerOptions
 from rclpy.qos import (
     DurabilityPolicy, qos_policy_name_from_kind, qos_profile_parameters, QoSPolicyKind,
     QoSProfile, ReliabilityPolicy)
+from rclpy.signals import install_signal_handlers, SignalHandlerOptions
 from rclpy.subscription import Subscription
 from rclpy.timer import Timer
 from rotation_node import messages
