@@ -853,9 +853,9 @@ def _run(args: Optional[List[str]], stop: StopSignal) -> int:
                 return 1
         if not stop.is_set():
             node = RotationNode(parameters_files=files)
-        # From here a signal also shuts the context down (rclpy's handler, chained to
-        # the flag's), which ends spin; one that came before is seen below.
-        install_signal_handlers(SignalHandlerOptions.ALL)
+            # From here a signal also shuts the context down (rclpy's handler, chained to
+            # the flag's), which ends spin; one that came before is seen below.
+            install_signal_handlers(SignalHandlerOptions.ALL)
         if not stop.is_set() and node is not None:
             # The ~1e5 objects of rclpy, numpy and numba live as long as the process: keep
             # them out of the cyclic collector, whose full passes over them stall a
