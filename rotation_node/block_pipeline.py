@@ -45,7 +45,8 @@ from rotation_node.messages import (
 from rotation_node.pipeline import (
     _needed_values, ConversionPipeline, EULER_RATES_NEAR_SINGULAR, mounting_of,
     NON_FINITE_ANGULAR_VELOCITY, NON_FINITE_ORIENTATION, NON_UNIT_QUATERNION, ORIENTATION_UNKNOWN,
-    SAMPLE_TRANSFORMS, TIMESTAMP_NOT_INCREASING, ZERO_QUATERNION)
+    ORIENTATION_UNKNOWN_DETAIL, SAMPLE_TRANSFORMS, TIMESTAMP_NOT_INCREASING, ZERO_QUATERNION,
+    ZERO_QUATERNION_DETAIL)
 from rotation_node.stamps import seconds_text
 
 if TYPE_CHECKING:
@@ -268,8 +269,8 @@ class BlockPipeline:
         events: List[Tuple[int, int, str, Optional[str], str]] = []
         state: Dict[str, Any] = {}   # pipeline attribute -> its value after the block
         stats = {'received': n, 'published': 0, 'normalised': 0, 'near_singular': 0}
-        kept, q = self._orientation(block, events, stats)
-        known = kept & block.orientation_known
+        kept, zero, q = self._orientation(block, events, stats)
+        known = kept & block.orientation_known & ~zero
         if self._mounting is not None and known.any():
             q[known] = self._mounting.quaternion(q[known])
         values: Dict[str, Tuple[np.ndarray, np.ndarray]] = {ORIENTATION: (known, q)}
@@ -309,16 +310,22 @@ class BlockPipeline:
             outputs.numbers[output.name] = np.ascontiguousarray(numbers, dtype=np.float64)
             published += present
         stats['published'] = int(published.sum())
-        unknown = kept & ~block.orientation_known & (published < len(self._outputs))
+        unknown = kept & ~known & (published < len(self._outputs))
         for s in np.flatnonzero(unknown).tolist():
-            events.append((s, 99, ORIENTATION_UNKNOWN, 'skipped',
-                           'orientation unknown (Imu orientation_covariance[0] == -1): '
-                           'outputs that need it skipped'))
+            if zero[s]:
+                events.append((s, 99, ZERO_QUATERNION, 'skipped', ZERO_QUATERNION_DETAIL))
+            else:
+                events.append((s, 99, ORIENTATION_UNKNOWN, 'skipped', ORIENTATION_UNKNOWN_DETAIL))
         events.sort(key=lambda event: event[:2])
         return state, stats, [event[2:] for event in events], outputs
 
     def _orientation(self, block, events, stats):
-        """Return which samples are kept and their input quaternions (any norm); count drops."""
+        """
+        Return the kept samples, the zero quaternions and the quaternions (any norm).
+
+        Counts the drops. A zero quaternion is an unknown orientation, as in the
+        pipeline: kept, and counted once the outputs are known.
+        """
         params, form = self.params, self.input_type.orientation_form
         orientation = block.orientation
         n = len(orientation)
@@ -331,19 +338,17 @@ class BlockPipeline:
                            'NaN or Inf component'))
         use = known & finite
         q = np.zeros((n, 4))
+        zero = np.zeros(n, dtype=bool)
         if form == messages.EULER:
             if use.any():
                 q[use] = conversions.quaternion_from_euler(
                     orientation[use], params.euler_sequence, degrees=params.euler_degrees)
-            return kept, q
+            return kept, zero, q
         if form == messages.ROTATION_VECTOR:
             if use.any():
                 q[use] = conversions.quaternion_from_rotation_vector(orientation[use])
-            return kept, q
+            return kept, zero, q
         zero = use & (orientation == 0.0).all(axis=1)
-        for s in np.flatnonzero(zero).tolist():
-            events.append((s, 0, ZERO_QUATERNION, 'dropped', 'message dropped: zero quaternion'))
-        kept &= ~zero
         use &= ~zero
         q[use] = orientation[use]
         # The pipeline's test is on math.hypot; where this estimate is not clearly
@@ -358,7 +363,7 @@ class BlockPipeline:
                 stats['normalised'] += 1
                 events.append((s, 0, NON_UNIT_QUATERNION, None,
                                f'quaternion {values} has norm {norm:.9g}; normalised'))
-        return kept, q
+        return kept, zero, q
 
     def _angular_velocity(self, block, kept, known, q, events, state):
         """Return the angular velocity in the output frame: measured, or by finite difference."""

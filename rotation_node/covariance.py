@@ -49,7 +49,8 @@ Round trips ``d -> a -> d`` and ``d -> q -> d`` are exact to rounding
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+import math
+from typing import Optional, Sequence, TYPE_CHECKING
 import warnings
 
 import numpy as np
@@ -64,14 +65,71 @@ if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
 __all__ = [
-    'body_rotation_vector_covariance', 'euler_covariance_from_rotation_vector_covariance',
-    'euler_linearisation_ratio',
+    'body_rotation_vector_covariance', 'covariance_defect',
+    'euler_covariance_from_rotation_vector_covariance', 'euler_linearisation_ratio',
+    'MAX_ROTATION_VECTOR_VARIANCE',
     'quaternion_covariance_from_rotation_vector_covariance', 'rotation_vector_covariance_jacobian',
     'rotation_vector_covariance_from_euler_covariance',
     'rotation_vector_covariance_from_quaternion_covariance', 'world_rotation_vector_covariance',
 ]
 
 _IDENTITY = np.eye(3)
+
+#: Largest variance (rad^2) of a rotation-vector component that says anything about an
+#: orientation: a standard deviation of pi rad spans every rotation about that axis. Above
+#: it a covariance stands for "unknown" (drivers write 1e9 or DBL_MAX, 1.8e308, for that).
+MAX_ROTATION_VECTOR_VARIANCE = math.pi ** 2
+
+#: Relative tolerance of :func:`covariance_defect`: asymmetry and correlations beyond +-1
+#: (and a negative determinant of the correlation matrix) within it are rounding.
+COVARIANCE_TOLERANCE = 1e-9
+
+
+def covariance_defect(covariance: Sequence[float]) -> Optional[str]:
+    """
+    Say why a finite 3 x 3 matrix is not a covariance, or return None if it is one.
+
+    Parameters
+    ----------
+    covariance : sequence of 9 float
+        The matrix row-major, every element finite.
+
+    Returns
+    -------
+    str or None
+        ``'a negative variance'``, ``'not symmetric'`` or ``'not positive
+        semi-definite'`` (a correlation beyond +-1, or a negative determinant),
+        each up to a relative rounding of :data:`COVARIANCE_TOLERANCE`; None for
+        a covariance. Plain float arithmetic: cheap enough for every message.
+
+    """
+    s00, s01, s02, s10, s11, s12, s20, s21, s22 = (float(v) for v in covariance)
+    variances = (s00, s11, s22)
+    if min(variances) < 0.0:
+        return 'a negative variance'
+    tolerance = COVARIANCE_TOLERANCE
+    scales = (math.sqrt(s00 * s11), math.sqrt(s00 * s22), math.sqrt(s11 * s22))
+    pairs = ((s01, s10), (s02, s20), (s12, s21))
+    if any(abs(a - b) > tolerance * scale for (a, b), scale in zip(pairs, scales)):
+        return 'not symmetric'
+    # Correlations of the symmetric part; a zero variance allows no covariance with it.
+    correlations = []
+    for (a, b), scale in zip(pairs, scales):
+        mean = 0.5 * a + 0.5 * b
+        if scale == 0.0:
+            if mean != 0.0:
+                return 'not positive semi-definite'
+            correlations.append(0.0)
+            continue
+        correlation = mean / scale
+        if abs(correlation) > 1.0 + tolerance:
+            return 'not positive semi-definite'
+        correlations.append(correlation)
+    c01, c02, c12 = correlations
+    determinant = 1.0 + 2.0 * c01 * c02 * c12 - c01 * c01 - c02 * c02 - c12 * c12
+    if determinant < -tolerance:
+        return 'not positive semi-definite'
+    return None
 
 
 def _congruence(a: np.ndarray, sigma: np.ndarray) -> np.ndarray:

@@ -302,8 +302,9 @@ _INPUT_LIST = (
               covariance_field='orientation_covariance',
               orientation_unknown_field='orientation_covariance',
               angular_velocity_unknown_field='angular_velocity_covariance',
-              notes='orientation unknown when `orientation_covariance[0] == -1`; angular '
-                    'velocity by finite difference when `angular_velocity_covariance[0] == -1`'),
+              notes='orientation unknown when `orientation_covariance[0] == -1` or the '
+                    'quaternion is (0, 0, 0, 0); angular velocity by finite difference when '
+                    '`angular_velocity_covariance[0] == -1`'),
     InputType('odometry', 'nav_msgs/msg/Odometry', QUATERNION, 'pose.pose.orientation',
               angular_velocity_field='twist.twist.angular', covariance_field='pose.covariance',
               covariance_indices=_POSE_ROTATION_BLOCK),

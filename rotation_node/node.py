@@ -17,18 +17,22 @@ unknown parameter (in a file or ``-p``) or an invalid value ends the process
 with one line on stderr and exit status 1.
 
 At runtime, ROS 2 applies parameter changes as its services define: a
-``set_parameters`` request with several parameters checks and applies each
-one on its own (some may be applied while others are rejected), while
-``set_parameters_atomically`` applies all of them or none. Every value is
-checked against the table before it is accepted; an accepted change takes
-effect on the next message. Counters and the current conventions are
+``set_parameters`` request with several parameters (``ros2 param set``, ``ros2
+param load``) checks and applies each one on its own (some may be applied while
+others are rejected), while ``set_parameters_atomically`` applies all of them or
+none. Every value is checked against the table before it is accepted; the rule
+between parameters (``input_type: tf`` needs both ``tf`` frames) is checked
+once a whole request is in, whatever the order of its parameters, and a request
+that breaks it is set back entirely. An accepted change takes effect on the next
+message. Counters and the current conventions are
 published on ``/diagnostics`` once a second.
 
 With ``qos.reliability: auto`` each input subscription adapts to the QoS its
 publishers offer, a subscription is replaced (new QoS) without losing or
 repeating a message, and messages the publishers sent but the node never got
-are counted from their publication sequence numbers (:mod:`rotation_node.reception`)
-and reported as ``lost``. Input types with a fixed CDR layout are taken as
+are counted from their publication sequence numbers (:mod:`rotation_node.reception`;
+the numbers of a publisher that left are forgotten, so that a publisher restarting
+is counted exactly) and reported as ``lost``. Input types with a fixed CDR layout are taken as
 serialized messages and decoded by :mod:`rotation_node.bag.cdr`; outputs are
 published as the bytes their encoders give, as ``rotation_bag convert`` writes
 them. See docs/node.md.
@@ -47,24 +51,30 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Set, Tuple
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (
     FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult)
+from rcl_interfaces.srv import SetParameters
 import rclpy
 from rclpy.duration import Duration
 from rclpy.event_handler import (
     PublisherEventCallbacks, QoSSubscriptionEventType, SubscriptionEventCallbacks,
     UnsupportedEventTypeError)
-from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.exceptions import (
+    InvalidHandle, InvalidParameterTypeException, InvalidParameterValueException,
+    NotInitializedException, ParameterNotDeclaredException)
 from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
 from rclpy.qos import (
-    DurabilityPolicy, qos_policy_name_from_kind, QoSPolicyKind, QoSProfile, ReliabilityPolicy)
+    DurabilityPolicy, qos_policy_name_from_kind, qos_profile_parameters, QoSPolicyKind,
+    QoSProfile, ReliabilityPolicy)
+from rclpy.signals import install_signal_handlers, SignalHandlerOptions
 from rclpy.subscription import Subscription
 from rclpy.timer import Timer
 from rotation_node import messages
 from rotation_node.bag.cdr import fixed_layout_codec
 from rotation_node.bag.qos import AUTO, input_qos, qos_profile
+from rotation_node.bag.stop_signal import signal_name, StopSignal
 from rotation_node.errors import BagError, ParameterError
 from rotation_node.parameters import (
     mounting_frames_problem, NODE_NAME, NodeParameters, PARAMETERS, PARAMETERS_BY_NAME,
@@ -187,8 +197,23 @@ class _TopicInput:
         # (data, info) of the new subscription during a handoff
         self.pending: List[Tuple[Any, Dict[str, Any]]] = []
         self.pending_identities: Set[Identity] = set()
-        self.reception = Reception(memory)
+        self.reception = Reception(memory, on_new_publisher=self._publisher_started)
         self.lost_events = 0          # total_count_change of the rmw's message-lost events
+
+    def matched_publishers(self) -> int:
+        """Return how many publishers the topic's subscriptions (current, retiring) match."""
+        return max((subscription.get_publisher_count()
+                    for subscription in (self.subscription, self.retiring)
+                    if subscription is not None), default=0)
+
+    def forget_publishers_that_left(self) -> None:
+        """Keep the sequence numbers of the publishers still matched only (see Reception)."""
+        self.reception.retain(self.matched_publishers())
+
+    def _publisher_started(self) -> None:
+        # A publisher joined or restarted: whose message just came is matched (at least one),
+        # and one that left is no longer: a later gap must not be credited to it.
+        self.reception.retain(max(self.matched_publishers(), 1))
 
     def subscribed(self) -> Tuple[Subscription, QoSProfile]:
         """Return the subscription messages are taken from and its QoS (set on configuring)."""
@@ -260,6 +285,10 @@ class RotationNode(Node):
         self._handoff_timer: Optional[Timer] = None
         self._next_issue_log: Dict[str, float] = {}   # reason -> time of its next warning
         self._reported = (0, 0, 0)   # dropped, skipped and lost totals at the last diagnostics
+        # While a set_parameters request is applied: {ROS name: value} of the node's own
+        # parameters it set so far (their combination is checked once all are in).
+        self._request: Optional[Dict[str, Any]] = None
+        self._serve_set_parameters()
         # Registered before declaring, so the initial values pass the same checks.
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -289,20 +318,101 @@ class RotationNode(Node):
 
     # Parameters --------------------------------------------------------------------
 
+    def _serve_set_parameters(self) -> None:
+        """
+        Answer the ``set_parameters`` service here instead of in rclpy's parameter service.
+
+        rclpy applies a request's parameters one at a time, each checked on its own:
+        ``ros2 param load`` of a file setting ``input_type: tf`` and the frames it
+        needs in one request would have ``input_type`` refused for the order alone.
+        :meth:`_on_set_parameters` applies them as rclpy does, checks their
+        combination once all are in, and takes the request back if it is invalid.
+        """
+        name = f'{self.get_name()}/set_parameters'
+        resolved = self.resolve_service_name(name)
+        for service in list(self.services):
+            if service.service_name == resolved:
+                self.destroy_service(service)
+        self.create_service(SetParameters, name, self._on_set_parameters,
+                            qos_profile=qos_profile_parameters)
+
+    def _on_set_parameters(self, request: SetParameters.Request,
+                           response: SetParameters.Response) -> SetParameters.Response:
+        """
+        Apply a ``set_parameters`` request: each parameter, then their combination.
+
+        Each parameter is checked and set on its own, as rclpy's service does (one
+        may fail while others are set); the node's own parameters are then checked
+        together (``input_type: tf`` needs both frames, wherever they stand in the
+        request). An invalid combination sets every parameter of the request back:
+        each result says why, and the node is left as it was.
+        """
+        parameters = [Parameter.from_parameter_msg(message) for message in request.parameters]
+        before = {p.name: self.get_parameter(p.name) for p in parameters
+                  if self.has_parameter(p.name)}
+        results = []
+        self._request = {}
+        try:
+            for parameter in parameters:
+                try:
+                    results.append(self.set_parameters_atomically([parameter]))
+                except ParameterNotDeclaredException as exc:
+                    results.append(SetParametersResult(successful=False, reason=str(exc)))
+            changes = self._request
+        finally:
+            self._request = None
+        try:
+            params = self._combined(changes)
+        except ParameterError as exc:
+            applied = {p.name: before[p.name] for p, result in zip(parameters, results)
+                       if result.successful}
+            self._request = {}   # set back: the node's state does not change
+            try:
+                if applied:
+                    self.set_parameters_atomically(list(applied.values()))
+            finally:
+                self._request = None
+            reason = f'not applied: {exc}'
+            results = [SetParametersResult(successful=False, reason=reason)
+                       if result.successful else result for result in results]
+        else:
+            self._change_to(params)
+        response.results = results
+        return response
+
     def _check_parameters(self, parameters: List[Parameter]) -> SetParametersResult:
         """Validate a parameter change (all of it, or none of it, is applied)."""
         try:
-            changed = self.params.replaced(_own(parameters))
+            if self._request is None:
+                self._combined(_own(parameters))
+            else:   # part of a set_parameters request: the combination comes at its end
+                NodeParameters.check_each(_own(parameters))
         except ParameterError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
-        problem = mounting_frames_problem(changed) if self._configured else ''
-        if problem:   # (set both frames with set_parameters_atomically)
-            return SetParametersResult(successful=False, reason=problem)
         return SetParametersResult(successful=True)
+
+    def _combined(self, changes: Dict[str, Any]) -> NodeParameters:
+        """
+        Return the node's parameters with ``changes``, their combination checked.
+
+        Raises ParameterError for a value, or for a combination (``mounting.tf_*``: both
+        frames or neither; not while declaring, when the frames are set one by one).
+        """
+        params = self.params.replaced(changes)
+        problem = mounting_frames_problem(params) if self._configured else ''
+        if problem:
+            raise ParameterError(problem)
+        return params
 
     def _apply_parameters(self, parameters: List[Parameter]) -> None:
         """Apply a validated change; it takes effect on the next message."""
-        previous, self.params = self.params, self.params.replaced(_own(parameters))
+        if self._request is not None:
+            self._request.update(_own(parameters))
+            return
+        self._change_to(self.params.replaced(_own(parameters)))
+
+    def _change_to(self, params: NodeParameters) -> None:
+        previous, self.params = self.params, params
         # Not while declaring (__init__ configures once), nor for others' parameters.
         if self._configured and self.params != previous:
             self._configure(previous, self.params)
@@ -669,6 +779,7 @@ class RotationNode(Node):
         for state in self._inputs:
             for subscription in (state.subscription, state.retiring):
                 self._count_message_lost(state, subscription)
+            state.forget_publishers_that_left()
         stats = self._pipeline.stats
         gaps = sum(state.reception.lost for state in self._inputs)
         events = sum(state.lost_events for state in self._inputs)
@@ -758,17 +869,43 @@ def usage() -> str:
             + ', '.join(spec.name for spec in PARAMETERS) + '.\n')
 
 
-def main(args: Optional[List[str]] = None) -> int:
+def main(args: Optional[List[str]] = None, stop_signal: Optional[StopSignal] = None) -> int:
     """
-    Run the node until Ctrl-C (``--help``: print its usage).
+    Run the node until Ctrl-C or SIGTERM (``--help``: print its usage).
+
+    Parameters
+    ----------
+    args : list of str, optional
+        The command line (``sys.argv`` by default).
+    stop_signal : StopSignal, optional
+        The console script's, in force since the program started loading; a
+        new one otherwise.
 
     Returns
     -------
     int
-        0 after Ctrl-C or shutdown; 1 if a parameters file or an initial parameter
-        value is invalid (one line on stderr says which).
+        0 after Ctrl-C, SIGTERM or shutdown, at any moment (during start-up with
+        one line on stderr saying so); 1 if a parameters file or an initial
+        parameter value is invalid (one line on stderr says which).
+
+    Notes
+    -----
+    Start-up runs with SIGINT and SIGTERM only setting a flag (:class:`StopSignal`),
+    and rclpy initialised without its signal handlers: its handler shuts the
+    context down from another thread, which in the middle of the node's
+    construction surfaces as whatever rclpy call comes next
+    (``NotInitializedException``...). rclpy's handlers are installed once the node
+    exists (chained to the flag), so that a signal ends ``spin``.
 
     """
+    if stop_signal is None:
+        with StopSignal() as stop:
+            return _run(args, stop)
+    return _run(args, stop_signal)
+
+
+def _run(args: Optional[List[str]], stop: StopSignal) -> int:
+    """Run :func:`main` with ``stop`` in force."""
     argv = sys.argv if args is None else list(args)
     if {'-h', '--help'} & set(_non_ros_arguments(argv[1:])):
         print(usage(), end='')
@@ -782,24 +919,32 @@ def main(args: Optional[List[str]] = None) -> int:
         print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
         return 1
     node = None
+    spinning = False
     try:
-        try:
-            rclpy.init(args=args)
-        except _rclpy.RCLError as exc:   # e.g. a malformed --ros-args remapping
-            print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
-            return 1
-        node = RotationNode(parameters_files=files)
-        # The ~1e5 objects of rclpy, numpy and numba live as long as the process: keep
-        # them out of the cyclic collector, whose full passes over them stall a
-        # callback for ~50 ms (50 messages at 1 kHz).
-        gc.freeze()
-        rclpy.spin(node)
+        if not stop.is_set():
+            try:
+                rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+            except _rclpy.RCLError as exc:   # e.g. a malformed --ros-args remapping
+                print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
+                return 1
+        if not stop.is_set():
+            node = RotationNode(parameters_files=files)
+            # From here a signal also shuts the context down (rclpy's handler, chained to
+            # the flag's), which ends spin; one that came before is seen below.
+            install_signal_handlers(SignalHandlerOptions.ALL)
+        if not stop.is_set() and node is not None:
+            # The ~1e5 objects of rclpy, numpy and numba live as long as the process: keep
+            # them out of the cyclic collector, whose full passes over them stall a
+            # callback for ~50 ms (50 messages at 1 kHz).
+            gc.freeze()
+            spinning = True
+            rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except _rclpy.RCLError:
+    except (_rclpy.RCLError, NotInitializedException, InvalidHandle):
         if rclpy.ok():
             raise
-        # Ctrl-C during start-up: the context was shut down under a graph query.
+        # A stop request shut the context down under an rclpy call.
     except ParameterError as exc:
         print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
         return 1
@@ -807,6 +952,10 @@ def main(args: Optional[List[str]] = None) -> int:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+    interrupt = stop.interrupt()
+    if interrupt is not None and not spinning:
+        print(f'{NODE_NAME}: interrupted while starting ({signal_name(interrupt)})',
+              file=sys.stderr)
     return 0
 
 

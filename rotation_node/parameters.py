@@ -17,6 +17,7 @@ from dataclasses import dataclass, replace
 import math
 from pathlib import Path
 import re
+import tempfile
 from typing import Any, cast, Mapping, Optional, Tuple, TYPE_CHECKING
 
 from rotation_node import messages
@@ -300,6 +301,23 @@ class NodeParameters:
         return replace(self, **checked_values(type(self), values, _PARAMETER,
                                               unknown=unknown_parameter_error))
 
+    @classmethod
+    def check_each(cls, values: Mapping[str, Any]) -> None:
+        """
+        Check each value of ``{ROS name: value}`` on its own, not their combination.
+
+        What :meth:`replaced` checks, except the input type's own rule over several
+        parameters (``input_type: tf`` needs both frames): for the values of one
+        ``set_parameters`` request, whose combination is checked once all are in.
+
+        Raises
+        ------
+        ParameterError
+            A name is not a parameter of the node, or a value is invalid.
+
+        """
+        checked_values(cls, values, _PARAMETER, unknown=unknown_parameter_error)
+
     def to_ros(self) -> dict:
         """Return ``{ROS name: value}``, string arrays as lists (what rclpy expects)."""
         return {spec.name: list(value) if isinstance(value, tuple) else value
@@ -396,7 +414,8 @@ def parameters_from_yaml(path: StrPath, node_name: str = NODE_NAME) -> NodeParam
     if not matching:
         found = ', '.join(repr(key) for key, _ in sections) or 'none'
         raise ParameterError(
-            f"parameters file {path}: no section for node '{fq_name}' (its sections: {found}; "
+            f"{parameters_file_label(path)}: no section for node '{fq_name}' (its sections: "
+            f'{found}; '
             f"key it '{fq_name}:', '/**/{fq_name.rsplit('/', 1)[-1]}:' or '/**:')")
     values = {}
     for section in matching:
@@ -406,7 +425,28 @@ def parameters_from_yaml(path: StrPath, node_name: str = NODE_NAME) -> NodeParam
     try:
         return NodeParameters.from_ros(values)
     except ParameterError as exc:
-        raise ParameterError(f'parameters file {path}: {exc}') from None
+        raise ParameterError(f'{parameters_file_label(path)}: {exc}') from None
+
+
+#: The parameters files launch_ros writes for a launch file's ``parameters=[{...}]`` (and
+#: for a file it substitutes in): ``NamedTemporaryFile(prefix='launch_params_')``.
+_LAUNCH_PARAMETERS_FILE = re.compile(r'launch_params_[A-Za-z0-9_]+')
+LAUNCH_PARAMETERS = 'the parameters the launch file gives'
+
+
+def parameters_file_label(path: StrPath) -> str:
+    """
+    Return how messages name a parameters file: ``parameters file <path>``.
+
+    A temporary file launch_ros wrote from a launch file's parameters is named
+    :data:`LAUNCH_PARAMETERS` instead: the user never wrote it, and it is gone
+    when the message is read; the message names the parameter and its value.
+    """
+    path = Path(path)
+    if (_LAUNCH_PARAMETERS_FILE.fullmatch(path.name)
+            and path.parent == Path(tempfile.gettempdir())):
+        return LAUNCH_PARAMETERS
+    return f'parameters file {path}'
 
 
 def parameters_file_sections(path: StrPath) -> list[tuple[str, dict[str, Any]]]:
@@ -434,9 +474,10 @@ def parameters_file_sections(path: StrPath) -> list[tuple[str, dict[str, Any]]]:
         names, or a node key holds no ``ros__parameters`` mapping.
 
     """
-    document = load_ros_yaml(path, f'parameters file {path}', ParameterError, aliases=False)
+    label = parameters_file_label(path)
+    document = load_ros_yaml(path, label, ParameterError, aliases=False)
     if not isinstance(document, dict):
-        raise ParameterError(f'parameters file {path}: expected a mapping of node names')
+        raise ParameterError(f'{label}: expected a mapping of node names')
     sections = []
 
     def read(prefix, mapping):
@@ -447,14 +488,14 @@ def parameters_file_sections(path: StrPath) -> list[tuple[str, dict[str, Any]]]:
                     _value_problem(parameter, v)
                     for parameter, v in _flattened(value['ros__parameters']).items())), '')
                 if problem:
-                    raise ParameterError(f"parameters file {path}: section '{name}': {problem}")
+                    raise ParameterError(f"{label}: section '{name}': {problem}")
                 sections.append((name, _flattened(value['ros__parameters'])))
             elif (isinstance(value, dict) and value and 'ros__parameters' not in value
                     and all(isinstance(child, dict) for child in value.values())):
                 read(name, value)   # a namespace of node keys
             else:
                 raise ParameterError(
-                    f"parameters file {path}: section '{name}' needs a 'ros__parameters:' "
+                    f"{label}: section '{name}' needs a 'ros__parameters:' "
                     'mapping')
     read('', document)
     return sections

@@ -46,23 +46,31 @@ from rotation_node.stamps import header_stamp_ns, seconds_text
 
 # Reasons for dropping a whole message (counted in PipelineStats.dropped).
 NON_FINITE_ORIENTATION = 'non_finite_orientation'
-ZERO_QUATERNION = 'zero_quaternion'
 CONVERSION_ERROR = 'conversion_error'
 # Reasons for skipping some outputs of a message (counted in PipelineStats.skipped).
 ORIENTATION_UNKNOWN = 'orientation_unknown'
+ZERO_QUATERNION = 'zero_quaternion'   # the other form of "orientation not estimated"
 NON_FINITE_ANGULAR_VELOCITY = 'non_finite_angular_velocity'
 TIMESTAMP_NOT_INCREASING = 'timestamp_not_increasing'
 EULER_RATES_NEAR_SINGULAR = 'euler_rates_near_singular'
 COVARIANCE_UNKNOWN = 'covariance_unknown'
 NON_FINITE_COVARIANCE = 'non_finite_covariance'
+COVARIANCE_TOO_LARGE = 'covariance_too_large'
+INVALID_COVARIANCE = 'invalid_covariance'
 EULER_COVARIANCE_NEAR_SINGULAR = 'euler_covariance_near_singular'
 EULER_COVARIANCE_NOT_LINEAR = 'euler_covariance_not_linear'
 # A message whose quaternion was normalised (counted in PipelineStats.normalised).
 NON_UNIT_QUATERNION = 'non_unit_quaternion'
-DROP_REASONS = (NON_FINITE_ORIENTATION, ZERO_QUATERNION, CONVERSION_ERROR)
-SKIP_REASONS = (ORIENTATION_UNKNOWN, NON_FINITE_ANGULAR_VELOCITY, TIMESTAMP_NOT_INCREASING,
-                EULER_RATES_NEAR_SINGULAR, COVARIANCE_UNKNOWN, NON_FINITE_COVARIANCE,
+DROP_REASONS = (NON_FINITE_ORIENTATION, CONVERSION_ERROR)
+SKIP_REASONS = (ORIENTATION_UNKNOWN, ZERO_QUATERNION, NON_FINITE_ANGULAR_VELOCITY,
+                TIMESTAMP_NOT_INCREASING, EULER_RATES_NEAR_SINGULAR, COVARIANCE_UNKNOWN,
+                NON_FINITE_COVARIANCE, COVARIANCE_TOO_LARGE, INVALID_COVARIANCE,
                 EULER_COVARIANCE_NEAR_SINGULAR, EULER_COVARIANCE_NOT_LINEAR)
+# What the pipeline reports when a sample's orientation is unknown, by the form it took.
+ORIENTATION_UNKNOWN_DETAIL = ('orientation unknown (Imu orientation_covariance[0] == -1): '
+                              'outputs that need it skipped')
+ZERO_QUATERNION_DETAIL = ('zero quaternion (0, 0, 0, 0): orientation not estimated; outputs '
+                          'that need it skipped')
 
 SAMPLE_TRANSFORMS: List[Callable[[NodeParameters], Optional[Callable[[Sample], Sample]]]] = []
 """
@@ -110,12 +118,13 @@ class PipelineStats:
         Output messages returned (all outputs together).
     dropped : collections.Counter
         Input samples that produced no output because they were invalid, by reason
-        (``non_finite_orientation``, ``zero_quaternion``, ``conversion_error``).
+        (``non_finite_orientation``, ``conversion_error``).
     skipped : collections.Counter
         Input samples of which some outputs could not be computed, by reason
-        (``orientation_unknown``, ``non_finite_angular_velocity``,
-        ``timestamp_not_increasing``, ``euler_rates_near_singular``,
-        ``covariance_unknown``, ``non_finite_covariance``,
+        (:data:`SKIP_REASONS`: ``orientation_unknown``, ``zero_quaternion``,
+        ``non_finite_angular_velocity``, ``timestamp_not_increasing``,
+        ``euler_rates_near_singular``, ``covariance_unknown``,
+        ``non_finite_covariance``, ``covariance_too_large``, ``invalid_covariance``,
         ``euler_covariance_near_singular``, ``euler_covariance_not_linear``).
     normalised : int
         Input quaternions further than ``quaternion.norm_tolerance`` from unit length.
@@ -390,16 +399,22 @@ class ConversionPipeline:
             self._report(CONVERSION_ERROR, f'message dropped: {exc}')
             return []
         if values[ORIENTATION] is None and len(outputs) < len(self._outputs):
-            self._skip(ORIENTATION_UNKNOWN,
-                       'orientation unknown (Imu orientation_covariance[0] == -1): '
-                       'outputs that need it skipped')
+            if sample.orientation is None:
+                self._skip(ORIENTATION_UNKNOWN, ORIENTATION_UNKNOWN_DETAIL)
+            else:   # the quaternion was (0, 0, 0, 0)
+                self._skip(ZERO_QUATERNION, ZERO_QUATERNION_DETAIL)
         self.stats.published += len(outputs)
         return outputs
 
     # The per-message values, in the order of VALUES -----------------------------------
 
     def _orientation(self, sample, values):
-        """Return the input orientation as a quaternion array (any scale), or None if unknown."""
+        """
+        Return the input orientation as a quaternion array (any scale), or None if unknown.
+
+        Unknown: the message says so (Imu ``orientation_covariance[0] == -1``), or its
+        quaternion is (0, 0, 0, 0), the other common form of "not estimated".
+        """
         orientation = sample.orientation
         if orientation is None:
             return None
@@ -415,7 +430,7 @@ class ConversionPipeline:
         else:
             norm = math.hypot(*orientation)
             if norm == 0.0:
-                raise _Dropped(ZERO_QUATERNION, 'message dropped: zero quaternion')
+                return None   # counted once the outputs that need it are known
             if abs(norm - 1.0) > self.params.quaternion_norm_tolerance:
                 self.stats.normalised += 1
                 self._report(NON_UNIT_QUATERNION,
@@ -538,6 +553,18 @@ class ConversionPipeline:
                        f'orientation covariance {block} has a NaN or Inf element: '
                        'uncertainty outputs skipped')
             return None
+        if max(block[0], block[4], block[8]) > covariance.MAX_ROTATION_VECTOR_VARIANCE:
+            self._skip(COVARIANCE_TOO_LARGE,
+                       f'orientation covariance {block} has a variance above pi^2 rad^2 '
+                       '(a standard deviation beyond pi: no orientation information, as '
+                       'drivers mark "unknown"): uncertainty outputs skipped')
+            return None
+        defect = covariance.covariance_defect(block)
+        if defect is not None:
+            self._skip(INVALID_COVARIANCE,
+                       f'orientation covariance {block} is {defect}, not a covariance: '
+                       'uncertainty outputs skipped')
+            return None
         sigma = np.array(block).reshape(3, 3)
         fixed = self.params.covariance_frame == 'fixed'
         if self._frames is not None:
@@ -568,17 +595,24 @@ class ConversionPipeline:
         # sigma_max^2 <= trace: only above it can the ratio exceed the limit (saves eigvalsh)
         limit = params.covariance_max_linearisation_ratio * float(
             conversions.euler_singularity_margin(values[ORIENTATION], params.euler_sequence))
-        if np.trace(sigma) <= limit * limit:
-            return result
-        ratio = float(covariance.euler_linearisation_ratio(
-            angles, sigma, params.euler_sequence, degrees=params.euler_degrees))
-        if not ratio <= params.covariance_max_linearisation_ratio:
-            self._skip(EULER_COVARIANCE_NOT_LINEAR,
-                       f'orientation standard deviation is {ratio:.3g} x its distance from '
-                       f'gimbal lock of {params.euler_sequence!r}, more than '
-                       'covariance.max_linearisation_ratio = '
-                       f'{params.covariance_max_linearisation_ratio:g}: the first-order Euler '
-                       'covariance would be wrong; uncertainty outputs skipped')
+        if np.trace(sigma) > limit * limit:
+            ratio = float(covariance.euler_linearisation_ratio(
+                angles, sigma, params.euler_sequence, degrees=params.euler_degrees))
+            if not ratio <= params.covariance_max_linearisation_ratio:
+                self._skip(EULER_COVARIANCE_NOT_LINEAR,
+                           f'orientation standard deviation is {ratio:.3g} x its distance from '
+                           f'gimbal lock of {params.euler_sequence!r}, more than '
+                           'covariance.max_linearisation_ratio = '
+                           f'{params.covariance_max_linearisation_ratio:g}: the first-order '
+                           'Euler covariance would be wrong; uncertainty outputs skipped')
+                return None
+        # A valid input gives a finite, non-negative diagonal; rounding at the edge of
+        # positive semi-definiteness may not: never a NaN standard deviation.
+        if not (np.isfinite(result).all() and (np.diagonal(result) >= 0.0).all()):
+            self._skip(INVALID_COVARIANCE,
+                       f'the Euler covariance of orientation covariance {tuple(sigma.ravel())} '
+                       'is not positive semi-definite (rounding at its edge): uncertainty '
+                       'outputs skipped')
             return None
         return result
 

@@ -14,14 +14,20 @@ gave it (1, 2, 3, ... per publisher) and the publisher's source timestamp.
   and the new one both receive the same messages for a moment; a message
   already accepted is recognised by its (sequence number, source timestamp).
 
-Message info does not name the publisher, so with several publishers on one
-topic the sequence numbers are told apart by continuity: each number is
-assigned to the publisher whose last number is the closest below it. The loss
-count is exact for one publisher per topic, an estimate with several. This
-module does not import rclpy.
+Which publisher sent a message: newer rclpy releases put the publisher's GID in
+the message info (``publisher_gid``) and gaps are then counted per publisher,
+exactly. Jazzy's rclpy does not; the sequence numbers are then told apart by
+continuity: each number is assigned to the publisher whose last number is the
+closest below it, a number with none below starts a new publisher (one that
+restarted or joined), and the sequences of publishers that left are forgotten
+(:meth:`Reception.retain`, with the subscription's count of matched
+publishers): a publisher that comes back or a new one is never credited with
+the numbers of one that went. Exact for one publisher at a time, however often
+it restarts; an estimate with several at once. This module does not import
+rclpy.
 """
 import collections
-from typing import Any, Deque, List, Mapping, Optional, Set, Tuple
+from typing import Any, Callable, Deque, List, Mapping, Optional, Set, Tuple
 
 #: Publishers (sequences of publication numbers) followed per topic; a new one
 #: beyond this replaces the one heard from least recently.
@@ -35,6 +41,16 @@ def message_identity(info: Mapping[str, Any]) -> Identity:
     return info.get('publication_sequence_number'), info.get('source_timestamp')
 
 
+def publisher_key(info: Mapping[str, Any]) -> Optional[bytes]:
+    """Return the publisher's GID bytes of a message info, or None where rclpy gives none."""
+    gid = info.get('publisher_gid')
+    if gid is None:
+        return None
+    if isinstance(gid, Mapping):   # rclpy: {'implementation_identifier': ..., 'data': bytes}
+        gid = gid.get('data')
+    return None if gid is None else bytes(gid)
+
+
 class Reception:
     """
     Lost and duplicate messages of one input topic, from their message info.
@@ -45,6 +61,9 @@ class Reception:
         How many recent messages are remembered to recognise duplicates: at
         least the history depth of the subscriptions (a new subscription can be
         handed as many already-delivered messages as the publisher keeps).
+    on_new_publisher : callable, optional
+        Called (no arguments) when a message starts a new sequence: a publisher
+        joined or restarted, and one may have left (see :meth:`retain`).
 
     Attributes
     ----------
@@ -55,13 +74,20 @@ class Reception:
 
     """
 
-    def __init__(self, memory: int):
+    def __init__(self, memory: int, on_new_publisher: Optional[Callable[[], None]] = None):
         self.lost = 0
         self.duplicates = 0
         self._seen: Set[Identity] = set()
         self._order: Deque[Identity] = collections.deque()   # of _seen, oldest first
-        self._last_numbers: List[int] = []   # per publisher, the most recently heard first
+        # per publisher [GID or None, last number], the most recently heard first
+        self._sequences: List[list] = []
+        self._on_new_publisher = on_new_publisher
         self.resize(memory)
+
+    @property
+    def publishers(self) -> int:
+        """Count the sequences of publication numbers (publishers) followed now."""
+        return len(self._sequences)
 
     def seen(self, info: Mapping[str, Any]) -> bool:
         """Whether the message of ``info`` was accepted already (and is remembered)."""
@@ -75,7 +101,8 @@ class Reception:
         ----------
         info : mapping
             rclpy's message info (``publication_sequence_number``,
-            ``source_timestamp``); a missing or None sequence number counts no gap.
+            ``source_timestamp``, ``publisher_gid`` where rclpy gives it); a
+            missing or None sequence number counts no gap.
 
         """
         identity = message_identity(info)
@@ -90,25 +117,54 @@ class Reception:
             seen.discard(order.popleft())
         number = identity[0]
         if number is not None:
-            self.lost += self._gap(number)
+            self.lost += self._gap(number, publisher_key(info))
         return True
 
-    def _gap(self, number: int) -> int:
+    def _gap(self, number: int, key: Optional[bytes]) -> int:
         """Messages missing before ``number`` in the sequence it continues."""
-        last_numbers = self._last_numbers
-        if len(last_numbers) == 1 and last_numbers[0] < number:   # one publisher, in order
-            gap = number - last_numbers[0] - 1
-            last_numbers[0] = number
-            return gap
-        below = [(last, k) for k, last in enumerate(last_numbers) if last < number]
+        sequences = self._sequences
+        if sequences:
+            first = sequences[0]
+            # the one publisher heard last, in order: the common case, first
+            if first[0] == key and first[1] < number and (key is not None or len(sequences) == 1):
+                gap = number - first[1] - 1
+                first[1] = number
+                return gap
+        if key is not None:   # the publisher is known: its own sequence, exactly
+            for k, sequence in enumerate(sequences):
+                if sequence[0] == key:
+                    gap = max(number - sequence[1] - 1, 0)
+                    sequence[1] = max(number, sequence[1])
+                    sequences.insert(0, sequences.pop(k))
+                    return gap
+            return self._new_sequence(key, number)
+        below = [(sequence[1], k) for k, sequence in enumerate(sequences)
+                 if sequence[0] is None and sequence[1] < number]
         if not below:   # a new publisher (or one that restarted)
-            last_numbers.insert(0, number)
-            del last_numbers[MAX_PUBLISHERS:]
-            return 0
+            return self._new_sequence(None, number)
         last, k = max(below)
-        del last_numbers[k]
-        last_numbers.insert(0, number)
+        sequence = sequences.pop(k)
+        sequence[1] = number
+        sequences.insert(0, sequence)
         return number - last - 1
+
+    def _new_sequence(self, key: Optional[bytes], number: int) -> int:
+        """Follow a publisher from its message ``number``; nothing before it counts."""
+        self._sequences.insert(0, [key, number])
+        del self._sequences[MAX_PUBLISHERS:]
+        if self._on_new_publisher is not None:
+            self._on_new_publisher()
+        return 0
+
+    def retain(self, publishers: int) -> None:
+        """
+        Forget the sequences of publishers that left: keep the ``publishers`` heard last.
+
+        Call it with the number of publishers the subscription matches now (when
+        it changes, or from time to time): those that left are the ones not heard
+        from since, and a later publisher's gap is never credited to them.
+        """
+        del self._sequences[max(publishers, 0):]
 
     def resize(self, memory: int) -> None:
         """Remember ``memory`` recent messages from now on (see the class)."""
@@ -122,4 +178,4 @@ class Reception:
         """Forget the accepted messages (a new input stream accepts them again)."""
         self._seen.clear()
         self._order.clear()
-        self._last_numbers.clear()
+        self._sequences.clear()

@@ -389,11 +389,13 @@ class TfOrientationBuffer:
                              f'got {parent!r} twice.')
         if not isinstance(stamp_ns, int) or stamp_ns < 0:
             raise ValueError(f'Expected `stamp_ns` to be a non-negative int, got {stamp_ns!r}.')
-        unknown = [frame for frame in (parent, child) if frame not in self._frames]
+        unknown = [f'{frame!r} ({role})' for frame, role in ((parent, 'parent'), (child, 'child'))
+                   if frame not in self._frames]
         if unknown:
+            subject = ('frame {} does not exist (no transform names it)' if len(unknown) == 1
+                       else 'frames {} do not exist (no transform names them)')
             raise UnknownFrameError(
-                f'frame {" and ".join(map(repr, unknown))} does not exist (no transform names '
-                f'it), looking up {child!r} in {parent!r}')
+                f'{subject.format(" and ".join(unknown))}, looking up {child!r} in {parent!r}')
         if stamp_ns == 0:
             stamp_ns = self._latest_common_time(parent, child)
         quaternion = self._walk(parent, child, stamp_ns)

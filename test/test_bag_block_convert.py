@@ -92,7 +92,7 @@ _component = st.one_of(st.floats(-2.0, 2.0), st.sampled_from(_SPECIAL))
 
 @st.composite
 def _streams(draw, input_type):
-    """CDR records of one input type: repeated and decreasing stamps, flips, NaN, gimbal lock."""
+    """CDR records of one input type: repeated and decreasing stamps, flips, NaN, gimbal, zero."""
     entry = messages.INPUTS[input_type]
     n = draw(st.integers(1, 40))
     width = 4 if entry.orientation_form == messages.QUATERNION else 3
@@ -105,8 +105,10 @@ def _streams(draw, input_type):
         stamp_ns += draw(st.sampled_from([10_000_000, 10_000_000, 1, 0, -5_000_000]))
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
         msg.header.frame_id = frame_id
-        kind = draw(st.sampled_from(['random', 'random', 'flip', 'gimbal', 'special']))
-        if kind == 'flip' and previous is not None:
+        kind = draw(st.sampled_from(['random', 'random', 'flip', 'gimbal', 'special', 'zero']))
+        if kind == 'zero':   # a quaternion (0, 0, 0, 0): orientation not estimated
+            values = [draw(st.sampled_from([0.0, -0.0])) for _ in range(width)]
+        elif kind == 'flip' and previous is not None:
             values = [-v for v in previous]
         elif kind == 'gimbal':
             values = ([0.5, 0.5, 0.5, 0.5] if width == 4

@@ -6,6 +6,7 @@ message by message; the round trip records a live publisher, plays the bag
 into a running ``rotation_node``, records its outputs and checks that
 ``rotation_bag convert`` produced the same messages (values, stamps, count).
 """
+import operator
 import os
 import subprocess
 
@@ -104,9 +105,23 @@ def test_every_input_type_and_output_is_the_pipelines_byte_for_byte(tmp_path, rn
     if input_type == 'imu':
         messages[5].orientation_covariance[0] = -1.0
         messages[20].angular_velocity_covariance[0] = -1.0
+    entry = INPUTS[input_type]
+    reasons = set()
+    if entry.orientation_form == 'quaternion':   # "not estimated", the other form
+        q = operator.attrgetter(entry.orientation_field)(messages[8])
+        q.x = q.y = q.z = q.w = 0.0
+        reasons.add('zero_quaternion')
+    if entry.covariance_field is not None:   # DBL_MAX as "unknown", a negative variance
+        for k, block in ((15, (1e308, 0, 0, 0, 1e308, 0, 0, 0, 1e308)),
+                         (25, (-1e-6, 0, 0, 0, 1e-6, 0, 0, 0, 1e-6))):
+            cov = operator.attrgetter(entry.covariance_field)(messages[k])
+            for index, value in zip(entry.covariance_indices, block):
+                cov[index] = float(value)
+        reasons |= {'covariance_too_large', 'invalid_covariance'}
     source, output = tmp_path / 'in.mcap', tmp_path / 'out.mcap'
     _write_bag(source, {'/in': messages})
     stats = convert(source, output, params)
+    assert reasons <= set(stats['/in'].skipped) and not stats['/in'].dropped
     pipeline = ConversionPipeline(params)
     expected = {name: [] for name in ALL_OUTPUTS}
     for msg in messages:

@@ -11,7 +11,7 @@ class _Program:
     ran = False
 
     @classmethod
-    def main(cls):
+    def main(cls, **options):
         cls.ran = True
         return 0
 
@@ -27,7 +27,8 @@ def test_a_signal_while_loading_is_one_line_and_main_does_not_run(
     monkeypatch.setattr(importlib, 'import_module', interrupted_import)
     before = {n: signal.getsignal(n) for n in (signal.SIGINT, signal.SIGTERM)}
     _Program.ran = False
-    assert getattr(console, program)() == 128 + number
+    # A node asked to stop exits with 0, as ros2 launch expects; the tools with 128 + signal.
+    assert getattr(console, program)() == (0 if program == 'rotation_node' else 128 + number)
     assert not _Program.ran
     assert capsys.readouterr().err.splitlines() == [
         f'{program}: interrupted while starting ({number.name})']
@@ -39,7 +40,8 @@ def test_each_program_runs_its_main(monkeypatch):
 
     class Program:
         @staticmethod
-        def main():
+        def main(stop_signal=None):
+            assert stop_signal is None or stop_signal.event is not None
             return 7
 
     def fake_import(name):
@@ -53,3 +55,19 @@ def test_each_program_runs_its_main(monkeypatch):
                             'rotation_node.scene.cli'}
     monkeypatch.undo()
     assert all(callable(importlib.import_module(module).main) for module in modules)
+
+
+def test_the_node_runs_under_the_loading_stop_signal(monkeypatch):
+    """No moment between loading and the node's own start-up is left to the default handlers."""
+    active = []
+
+    class Program:
+        @staticmethod
+        def main(stop_signal=None):
+            active.append((stop_signal, signal.getsignal(signal.SIGTERM)))
+            return 0
+
+    monkeypatch.setattr(importlib, 'import_module', lambda name: Program)
+    assert console.rotation_node() == 0
+    (stop, handler), = active
+    assert stop is not None and handler == stop._handle

@@ -295,3 +295,24 @@ def test_linearisation_ratio_is_largest_std_over_margin(rng):
     in_degrees = cv.euler_linearisation_ratio(np.degrees(angles[0]), rotated, 'xyz', True)
     assert np.isclose(in_degrees, ratio[0], rtol=1e-12)
     assert cv.euler_linearisation_ratio([0, np.pi / 2, 0], np.zeros((3, 3)), 'xyz') == 0.0
+
+
+@pytest.mark.parametrize('matrix, defect', [
+    (np.diag([1e-6, 2e-6, 3e-6]), None),
+    (np.outer([1e-3, -2e-3, 5e-4], [1e-3, -2e-3, 5e-4]), None),    # rank 1: fully correlated
+    (np.diag([1e-6, 0.0, 1e-6]), None),                            # a zero variance
+    (np.diag([-1e-30, 1e-6, 1e-6]), 'a negative variance'),
+    ([[1e-6, 1e-7, 0], [-1e-7, 1e-6, 0], [0, 0, 1e-6]], 'not symmetric'),
+    ([[1e-6, 1e-7 * (1 + 1e-12), 0], [1e-7, 1e-6, 0], [0, 0, 1e-6]], None),   # rounding
+    ([[1e-6, 2e-6, 0], [2e-6, 1e-6, 0], [0, 0, 1e-6]], 'not positive semi-definite'),
+    ([[0, 1e-9, 0], [1e-9, 1e-6, 0], [0, 0, 1e-6]], 'not positive semi-definite'),
+    (np.full((3, 3), -0.9e-6) + np.diag([1.9e-6] * 3), 'not positive semi-definite'),
+])
+def test_covariance_defect_says_what_makes_a_matrix_no_covariance(matrix, defect):
+    """Eigenvalues (numpy) agree: a covariance is symmetric positive semi-definite."""
+    values = np.asarray(matrix, dtype=float)
+    assert cv.covariance_defect(values.ravel().tolist()) == defect
+    if defect is None:
+        assert np.linalg.eigvalsh(values).min() >= -1e-15 * np.abs(values).max()
+    elif defect == 'not positive semi-definite':
+        assert np.linalg.eigvalsh(values).min() < 0.0

@@ -7,7 +7,9 @@ so tests do not depend on each other's settings. Values are compared with scipy
 (``ros_harness.oracle_output``); test_pipeline.py covers the conversions in depth.
 """
 from pathlib import Path
+import signal
 import subprocess
+import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 import numpy as np
@@ -22,7 +24,8 @@ from ros_harness import (
 from rotation_node.errors import ParameterError
 from rotation_node.messages import OUTPUTS as OUTPUT_TYPES
 from rotation_node.node import check_parameter_names, ros_arguments
-from rotation_node.parameters import NodeParameters, OUTPUTS, PARAMETERS, parameters_from_yaml
+from rotation_node.parameters import (
+    NodeParameters, OUTPUTS, PARAMETERS, parameters_file_sections, parameters_from_yaml)
 from rotation_node.pipeline import input_message_type
 from scipy.spatial.transform import Rotation
 
@@ -310,6 +313,84 @@ def test_changing_reliability_recreates_the_subscription(node, rotation):
     assert_output(out, 'quaternion', rotation)
 
 
+CONFIG_FILES = sorted(CONFIG.parent.glob('*.yaml'))
+
+
+def load_request(path):
+    """Return a parameters file's values for the node in file order (ros2 param load's request)."""
+    values = {}
+    for key, section in parameters_file_sections(path):
+        assert key.endswith('rotation_node'), key   # the shipped files hold the node's only
+        values.update(section)
+    return values
+
+
+def get_all(node):
+    names = [spec.name for spec in PARAMETERS]
+    values = node.call(node.parameters.get_parameters(names)).values
+    return {name: parameter_value_to_python(value) for name, value in zip(names, values)}
+
+
+def tf_static_euler(node, rotation):
+    """Publish map -> base_link on /tf_static; return the node's next euler output."""
+    from geometry_msgs.msg import TransformStamped
+    from tf2_msgs.msg import TFMessage
+    latched = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    publisher = node.ros.node.create_publisher(TFMessage, '/tf_static', latched)
+    transform = TransformStamped()
+    transform.header.frame_id, transform.child_frame_id = 'map', 'base_link'
+    q = transform.transform.rotation
+    q.x, q.y, q.z, q.w = (float(v) for v in rotation.as_quat())
+    node.received['euler'].clear()
+    try:
+        publisher.publish(TFMessage(transforms=[transform]))
+        assert node.ros.spin_until(lambda: node.received['euler'], 20.0), 'no euler from /tf'
+    finally:
+        node.ros.node.destroy_publisher(publisher)
+    return node.received['euler'][-1]
+
+
+@pytest.mark.parametrize('path', CONFIG_FILES, ids=lambda path: path.name)
+def test_a_shipped_parameters_file_loads_in_one_request(node, path, rotation):
+    """ros2 param load sends a file's parameters in one set_parameters request: all apply."""
+    values = load_request(path)
+    expected = parameters_from_yaml(path, '/rotation_node')
+    # Start from another input type than the file's: its frames come after input_type.
+    node.configure({'input_type': 'tf', 'tf.parent_frame': 'odom', 'tf.child_frame': 'imu',
+                    'outputs': ['quaternion'], 'euler.sequence': 'ZYX'}
+                   if expected.input_type != 'tf' else {'euler.sequence': 'ZYX'})
+    results = node.set(values)
+    assert [(r.successful, r.reason) for r in results] == [(True, '')] * len(values)
+    assert get_all(node) == expected.to_ros()
+    if expected.input_type == 'tf':
+        assert_output(tf_static_euler(node, rotation), 'euler', rotation)
+    else:
+        msg = make_input_message(expected.input_type, rotation)
+        out, = node.exchange(expected.input_type, [msg], {'euler': 1})['euler']
+        assert_output(out, 'euler', rotation, sequence=expected.euler_sequence)
+
+
+def test_an_invalid_combination_in_one_request_changes_nothing(node, rotation):
+    node.configure({'outputs': ['euler']})
+    before = get_all(node)
+    values = {'input_type': 'tf', 'euler.sequence': 'ZYX', 'tf.parent_frame': 'map',
+              'outputs': ['quaternion']}   # no tf.child_frame
+    results = node.set(values)
+    assert all(not r.successful and r.reason.startswith('not applied: ') and
+               "'tf.child_frame': required with input_type tf" in r.reason for r in results)
+    assert get_all(node) == before
+    msg = make_input_message('imu', rotation)
+    out, = node.exchange('imu', [msg], {'euler': 1})['euler']
+    assert_output(out, 'euler', rotation)
+
+
+def test_one_invalid_value_of_a_request_fails_alone(node):
+    node.configure({})
+    results = node.set({'euler.sequence': 'xxy', 'euler.degrees': True})
+    assert [r.successful for r in results] == [False, True]
+    assert node.get('euler.sequence') == 'xyz' and node.get('euler.degrees') is True
+
+
 # Bad input -------------------------------------------------------------------------
 
 def set_quaternion(msg, values):
@@ -319,8 +400,7 @@ def set_quaternion(msg, values):
 @pytest.mark.parametrize('values, reason', [
     ((np.nan, 0.0, 0.0, 1.0), 'non_finite_orientation'),
     ((0.0, 0.0, np.inf, 1.0), 'non_finite_orientation'),
-    ((0.0, 0.0, 0.0, 0.0), 'zero_quaternion'),
-], ids=['nan', 'inf', 'zero'])
+], ids=['nan', 'inf'])
 def test_a_bad_quaternion_is_dropped_and_counted(node, values, reason, rotation):
     node.configure({'input_type': 'quaternion', 'outputs': ['quaternion']})
     before = node.next_diagnostics()
@@ -348,6 +428,46 @@ def test_imu_without_orientation_still_gives_angular_velocity(node, rotation):
     after = node.next_diagnostics(lambda v: int(v['received']) >= int(before['received']) + 2)
     key = 'skipped.orientation_unknown'
     assert int(after[key]) == int(before[key]) + 1
+
+
+def test_imu_with_a_zero_quaternion_still_gives_angular_velocity(node, rotation):
+    """(0, 0, 0, 0) without the -1 flag: the other form of "orientation not estimated"."""
+    node.configure({'input_type': 'imu', 'outputs': ['euler', 'angular_velocity']})
+    before = node.next_diagnostics()
+    unknown = make_input_message('imu', rotation, omega=OMEGA_BODY, stamp_ns=STAMP_NS)
+    unknown.orientation.w = 0.0
+    unknown.orientation.x = unknown.orientation.y = unknown.orientation.z = 0.0
+    good = make_input_message('imu', rotation, omega=OMEGA_BODY, stamp_ns=STAMP_NS + 1)
+    got = node.exchange('imu', [unknown, good], {'euler': 1, 'angular_velocity': 2})
+    assert [out.header for out in got['euler']] == [good.header]
+    assert [out.header for out in got['angular_velocity']] == [unknown.header, good.header]
+    assert_output(got['angular_velocity'][0], 'angular_velocity', rotation)
+    after = node.next_diagnostics(lambda v: int(v['received']) >= int(before['received']) + 2)
+    assert int(after['skipped.zero_quaternion']) == int(before['skipped.zero_quaternion']) + 1
+    assert after['dropped'] == before['dropped']
+
+
+@pytest.mark.parametrize('covariance, reason', [
+    ((1e308, 0, 0, 0, 1e308, 0, 0, 0, 1e308), 'covariance_too_large'),   # DBL_MAX: unknown
+    ((-1e-6, 0, 0, 0, 1e-6, 0, 0, 0, 1e-6), 'invalid_covariance'),       # negative variance
+], ids=['dbl_max', 'negative'])
+def test_a_covariance_edge_case_skips_only_the_uncertainty(node, rotation, covariance, reason):
+    node.configure({'input_type': 'imu',
+                    'outputs': ['euler', 'angular_velocity', 'euler_stddev']})
+    before = node.next_diagnostics()
+    odd = make_input_message('imu', rotation, omega=OMEGA_BODY, stamp_ns=STAMP_NS,
+                             covariance=covariance)
+    good = make_input_message('imu', rotation, omega=OMEGA_BODY, stamp_ns=STAMP_NS + 1)
+    got = node.exchange('imu', [odd, good], {'euler': 2, 'angular_velocity': 2,
+                                             'euler_stddev': 1})
+    assert [out.header for out in got['euler']] == [odd.header, good.header]
+    assert [out.header for out in got['angular_velocity']] == [odd.header, good.header]
+    stddev, = got['euler_stddev']
+    assert stddev.header == good.header and np.isfinite(output_values(stddev)).all()
+    key = f'skipped.{reason}'
+    after = node.next_diagnostics(lambda v: int(v[key]) > int(before[key]))
+    assert int(after[key]) == int(before[key]) + 1
+    assert after['dropped'] == before['dropped'] and after['level'] == DiagnosticStatus.WARN
 
 
 def test_a_non_unit_quaternion_is_normalised_with_a_warning(node, rotation):
@@ -395,7 +515,8 @@ def test_diagnostics_report_counters_and_conventions(node):
     assert after['input_topic'] == '/input'
     assert after['euler.degrees'] == 'true' and after['outputs'] == 'euler'
     assert {spec.name for spec in PARAMETERS} <= set(after)
-    assert {'dropped.zero_quaternion', 'skipped.timestamp_not_increasing',
+    assert {'skipped.zero_quaternion', 'skipped.timestamp_not_increasing',
+            'skipped.covariance_too_large', 'skipped.invalid_covariance',
             'normalised'} <= set(after)
 
 
@@ -535,6 +656,73 @@ def test_namespace_and_input_remapping(namespaced, rotation):
 def test_ctrl_c_exits_cleanly(namespaced):
     assert namespaced.stop() == 0, namespaced.process.output
     assert 'Traceback' not in namespaced.process.output
+
+
+START_UP_MOMENTS = {
+    # where the signal comes: (the name in rotation_node.node to wrap, before or after it)
+    'before rclpy.init': ('rclpy.init', 'before'),
+    'between rclpy.init and the node': ('warm_up_conversions', 'before'),
+    'while the node is configured': ('RotationNode._configure', 'before'),
+    'before rclpy handles signals': ('install_signal_handlers', 'before'),
+    'once rclpy handles signals': ('install_signal_handlers', 'after'),
+}
+
+
+@pytest.mark.parametrize('moment', START_UP_MOMENTS)
+@pytest.mark.parametrize('number', [signal.SIGINT, signal.SIGTERM], ids=lambda n: n.name)
+def test_a_signal_at_any_moment_of_start_up_is_one_line_and_exit_0(monkeypatch, capsys,
+                                                                   moment, number):
+    """In-process: the signal is raised in the main thread at that moment of main()."""
+    import rclpy
+    from rotation_node import node as node_module
+    path, when = START_UP_MOMENTS[moment]
+    owner_name, _, attribute = path.rpartition('.')
+    owner = {'': node_module, 'rclpy': rclpy,
+             'RotationNode': node_module.RotationNode}[owner_name]
+    original = getattr(owner, attribute)
+    raised = []
+
+    def wrapped(*args, **kwargs):
+        if when == 'before':
+            raised.append(number)
+            signal.raise_signal(number)
+        result = original(*args, **kwargs)
+        if when == 'after':
+            raised.append(number)
+            signal.raise_signal(number)
+        return result
+
+    monkeypatch.setattr(owner, attribute, wrapped)
+    handlers = {n: signal.getsignal(n) for n in (signal.SIGINT, signal.SIGTERM)}
+    assert node_module.main(['rotation_node']) == 0
+    assert raised == [number]
+    assert capsys.readouterr().err.splitlines() == [
+        f'rotation_node: interrupted while starting ({number.name})']
+    assert not rclpy.ok()
+    assert {n: signal.getsignal(n) for n in handlers} == handlers
+
+
+@pytest.mark.parametrize('number', [signal.SIGINT, signal.SIGTERM], ids=lambda n: n.name)
+def test_a_signal_while_the_node_loads_exits_0_with_one_line(number):
+    process = RosProcess([script('rotation_node')])
+    time.sleep(0.3)   # loading numpy, numba, rclpy: seconds
+    process.proc.send_signal(number)
+    process.output, _ = process.proc.communicate(timeout=START_TIMEOUT_S)
+    assert process.proc.returncode == 0, process.output
+    assert process.output.splitlines()[-1] == (
+        f'rotation_node: interrupted while starting ({number.name})')
+    assert 'Traceback' not in process.output
+
+
+def test_sigterm_while_spinning_exits_0(ros):
+    started = NodeUnderTest(ros, ['-r', '__ns:=/sigterm'], namespace='/sigterm')
+    for subscription in started.subscriptions.values():
+        ros.node.destroy_subscription(subscription)
+    started.process.proc.send_signal(signal.SIGTERM)
+    started.process.output, _ = started.process.proc.communicate(timeout=15.0)
+    assert started.process.proc.returncode == 0, started.process.output
+    assert 'Traceback' not in started.process.output
+    assert 'interrupted while starting' not in started.process.output
 
 
 def test_destroying_the_node_destroys_its_message_lost_event_handles_first():

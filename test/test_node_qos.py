@@ -9,6 +9,7 @@ the other; a burst of several kHz; a ``qos.depth`` change in the middle of a
 """
 import itertools
 import re
+import signal
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
@@ -17,7 +18,7 @@ from rcl_interfaces.msg import Log
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
-from rclpy.qos import qos_profile_sensor_data, QoSProfile
+from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from ros_harness import RosProcess, script, TestNode
 from rotation_node.messages import OUTPUTS
 from sensor_msgs.msg import Imu
@@ -40,12 +41,12 @@ def ros():
 class Node:
     """A ``rotation_node`` process on default parameters in its own namespace, and its outputs."""
 
-    def __init__(self, ros, namespace):
+    def __init__(self, ros, namespace, args=()):
         self.ros = ros
         self.namespace = namespace
         self.fq_name = f'/{namespace}/rotation_node'
         self.process = RosProcess([script('rotation_node'), '--ros-args',
-                                   '-r', f'__ns:=/{namespace}'])
+                                   '-r', f'__ns:=/{namespace}', *args])
         self.input_topic = f'/{namespace}/input'
         self.publishers = []
         self.euler = []
@@ -114,10 +115,22 @@ class Node:
         return self.process.stop()
 
 
+def _namespace(request):
+    name = re.sub(r'[\W_]+', '_', request.node.name.removeprefix('test_'))[:30].strip('_')
+    return f'{name}_{next(NAMESPACES)}'
+
+
 @pytest.fixture
 def node(ros, request):
-    name = re.sub(r'[\W_]+', '_', request.node.name.removeprefix('test_'))[:30].strip('_')
-    started = Node(ros, f'{name}_{next(NAMESPACES)}')
+    started = Node(ros, _namespace(request))
+    yield started
+    assert started.stop() == 0, started.process.output
+
+
+@pytest.fixture
+def shallow_node(ros, request):
+    """Start a node whose input history holds one message: a burst it cannot take is lost."""
+    started = Node(ros, _namespace(request), ['-p', 'qos.depth:=1'])
     yield started
     assert started.stop() == 0, started.process.output
 
@@ -230,6 +243,42 @@ def test_a_burst_is_received_or_its_loss_reported(ros, node):
     assert values['published'] == values['received'] and values['duplicates'] == '0'
     if values['lost'] != '0':
         assert node.warned_lost()
+
+
+def test_loss_is_counted_exactly_when_the_publisher_restarts(ros, shallow_node):
+    """
+    A sends 1..100 and leaves; B sends 1..50, 51..150 in a burst the node cannot take, 151..200.
+
+    The burst comes while the node is stopped (SIGSTOP) and its history holds one message:
+    most of it is lost, including B's 100, so B's next number above 100 would be credited
+    to A (whose last was 100) if A's numbers were still followed. received + lost = 300.
+    """
+    node = shallow_node
+    best_effort = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT)
+    first = node.publisher(best_effort)
+    matched(ros, first)
+    publish(ros, first, 0, 100, 1000.0)
+    node.diagnostics(lambda v: int(v['received']) + int(v['lost']) >= 100)
+    node.publishers.remove(first)
+    ros.node.destroy_publisher(first)
+    assert ros.spin_until(lambda: ros.node.count_publishers(node.input_topic) == 0, 10.0)
+    node.diagnostics()   # the node's once-a-second look at the matched publishers
+    second = node.publisher(best_effort)
+    matched(ros, second)
+    publish(ros, second, 100, 50, 1000.0)
+    node.diagnostics(lambda v: int(v['received']) + int(v['lost']) >= 150)
+    node.process.proc.send_signal(signal.SIGSTOP)
+    try:
+        for k in range(150, 250):
+            second.publish(imu(k))
+        ros.spin_for(0.3)
+    finally:
+        node.process.proc.send_signal(signal.SIGCONT)
+    publish(ros, second, 250, 50, 1000.0)
+    values = node.diagnostics(lambda v: int(v['received']) + int(v['lost']) >= 300, 15.0)
+    assert int(values['received']) + int(values['lost']) == 300, values
+    assert int(values['lost']) > 0 and values['lost.sequence_gaps'] == values['lost'], values
+    assert values['duplicates'] == '0'
 
 
 def test_a_depth_change_during_a_stream_loses_nothing(ros, node):

@@ -1,7 +1,9 @@
 """Tests of rotation_node.parameters: the parameter table, validation and YAML loading."""
 import math
+import os
 from pathlib import Path
 import re
+import tempfile
 
 import pytest
 from rotation_node.conversions import SEQUENCES
@@ -320,3 +322,24 @@ def test_bad_files_name_the_file_and_the_problem(tmp_path, text, message):
         parameters_from_yaml(path)
     assert str(error.value).startswith(f'parameters file {path}: ')
     assert message in str(error.value)
+
+
+def test_a_launch_files_parameters_are_not_reported_against_launch_ros_temporary_file(
+        tmp_path):
+    """launch_ros writes parameters=[{...}] to /tmp/launch_params_*: the user never wrote it."""
+    with tempfile.NamedTemporaryFile('w', prefix='launch_params_', suffix='', delete=False) as f:
+        f.write('/**:\n  ros__parameters:\n    input_type: twist\n')   # as launch_ros dumps it
+    try:
+        with pytest.raises(ParameterError) as error:
+            parameters_from_yaml(f.name)
+        message = str(error.value)
+        assert message.startswith("the parameters the launch file gives: parameter 'input_type': "
+                                  "'twist' is not allowed")
+        assert f.name not in message and 'launch_params_' not in message
+    finally:
+        os.unlink(f.name)
+    # A user's own file of that name elsewhere keeps its path.
+    path = write(tmp_path, '/**:\n  ros__parameters:\n    input_type: twist\n',
+                 name='launch_params_abc')
+    with pytest.raises(ParameterError, match=f'^parameters file {re.escape(str(path))}: '):
+        parameters_from_yaml(path)

@@ -16,10 +16,11 @@ from ros_harness import (
 from rotation_node.conversions import SEQUENCES
 from rotation_node.parameters import NodeParameters, OUTPUTS
 from rotation_node.pipeline import (
-    ConversionPipeline, COVARIANCE_UNKNOWN, EULER_COVARIANCE_NEAR_SINGULAR,
+    ConversionPipeline, COVARIANCE_TOO_LARGE, COVARIANCE_UNKNOWN, EULER_COVARIANCE_NEAR_SINGULAR,
     EULER_COVARIANCE_NOT_LINEAR, EULER_RATES_NEAR_SINGULAR, input_message_type,
-    NON_FINITE_ANGULAR_VELOCITY, NON_FINITE_COVARIANCE, NON_FINITE_ORIENTATION,
-    NON_UNIT_QUATERNION, ORIENTATION_UNKNOWN, TIMESTAMP_NOT_INCREASING, ZERO_QUATERNION)
+    INVALID_COVARIANCE, NON_FINITE_ANGULAR_VELOCITY, NON_FINITE_COVARIANCE,
+    NON_FINITE_ORIENTATION, NON_UNIT_QUATERNION, ORIENTATION_UNKNOWN, TIMESTAMP_NOT_INCREASING,
+    ZERO_QUATERNION)
 from scipy.spatial.transform import Rotation
 from std_msgs.msg import Float64MultiArray
 
@@ -305,6 +306,53 @@ def test_unknown_covariance_gives_no_uncertainty_and_is_counted(input_type, rota
     assert p.stats.skipped[NON_FINITE_COVARIANCE] == 1
 
 
+ALL_BUT_UNCERTAINTY = [name for name in OUTPUTS
+                       if name not in ('euler_stddev', 'euler_covariance')]
+
+
+@pytest.mark.parametrize('covariance, reason', [
+    ([1e308, 0, 0, 0, 1e308, 0, 0, 0, 1e308], COVARIANCE_TOO_LARGE),   # DBL_MAX-ish "unknown"
+    ([1e9, 0, 0, 0, 1e9, 0, 0, 0, 1e9], COVARIANCE_TOO_LARGE),
+    ([1e-6, 0, 0, 0, 1e-6, 0, 0, 0, 1e308], COVARIANCE_TOO_LARGE),
+    ([-1e-6, 0, 0, 0, 1e-6, 0, 0, 0, 1e-6], INVALID_COVARIANCE),        # negative variance
+    ([1e-6, 5e-7, 0, -5e-7, 1e-6, 0, 0, 0, 1e-6], INVALID_COVARIANCE),  # asymmetric
+    ([1e-6, 2e-6, 0, 2e-6, 1e-6, 0, 0, 0, 1e-6], INVALID_COVARIANCE),   # correlation 2
+    ([1e-6, 0, 1e308, 0, 1e-6, 0, 1e308, 0, 1e-6], INVALID_COVARIANCE),
+    ([1e-6, -9e-7, -9e-7, -9e-7, 1e-6, -9e-7, -9e-7, -9e-7, 1e-6],      # |c| < 1, det < 0
+     INVALID_COVARIANCE),
+    ([math.inf, 0, 0, 0, 1e-6, 0, 0, 0, 1e-6], NON_FINITE_COVARIANCE),
+], ids=['dbl_max', '1e9', 'one_axis_dbl_max', 'negative', 'asymmetric', 'correlation',
+        'huge_covariance', 'indefinite', 'inf'])
+@pytest.mark.parametrize('input_type', COVARIANCE_INPUTS)
+def test_a_covariance_edge_case_skips_only_the_uncertainty_outputs(input_type, covariance,
+                                                                   reason, rotation):
+    """Every other output is published; no NaN standard deviation; the reason is counted."""
+    p = pipeline(input_type=input_type, outputs=list(OUTPUTS))
+    reference = pipeline(input_type=input_type, outputs=ALL_BUT_UNCERTAINTY)
+    for k in range(2):   # the second gives the finite-difference outputs too
+        msg = make_input_message(input_type, rotation, omega=(0.1, 0.2, 0.3),
+                                 stamp_ns=STAMP_NS + k * 10**6, covariance=covariance)
+        out = p.process_values(msg)
+        expected = reference.process_values(msg)
+        assert [name for name, _, _ in out] == [name for name, _, _ in expected]
+        for (_, _, numbers), (_, _, numbers_expected) in zip(out, expected):
+            np.testing.assert_array_equal(numbers, numbers_expected)
+    assert [name for name, _, _ in out] == ALL_BUT_UNCERTAINTY
+    assert p.stats.dropped == {} and p.stats.skipped == {reason: 2}
+    assert all(r == reason and 'uncertainty outputs skipped' in detail
+               for r, detail in p.issues)
+
+
+def test_a_valid_covariance_at_the_edge_of_definiteness_is_published(rotation):
+    """Fully correlated axes (rank 1) and a zero variance are covariances: published."""
+    p = pipeline(input_type='imu', outputs=['euler_stddev', 'euler_covariance'])
+    for covariance in ([1e-6, 1e-6, 1e-6] * 3, [1e-6, 0, 0, 0, 1e-6, 0, 0, 0, 0.0],
+                       [1e-6, -1e-6, 0, -1e-6, 1e-6, 0, 0, 0, 4e-6]):
+        out = outputs_of(p, make_input_message('imu', rotation, covariance=covariance))
+        assert np.isfinite(output_values(out['euler_stddev'])).all()
+    assert p.stats.skipped == {}
+
+
 def test_imu_orientation_unknown_gives_no_uncertainty(rotation):
     p = pipeline(input_type='imu', outputs=UNCERTAINTY)
     msg = make_input_message('imu', rotation)
@@ -543,7 +591,6 @@ def test_near_singular_samples_are_counted(sequence, middle, near):
     ((math.nan, 0.0, 0.0, 1.0), NON_FINITE_ORIENTATION),
     ((0.0, math.inf, 0.0, 1.0), NON_FINITE_ORIENTATION),
     ((0.0, 0.0, 0.0, -math.inf), NON_FINITE_ORIENTATION),
-    ((0.0, 0.0, 0.0, 0.0), ZERO_QUATERNION),
 ])
 @pytest.mark.parametrize('input_type', ['quaternion', 'imu', 'odometry'])
 def test_bad_quaternions_are_dropped_with_a_reason(input_type, values, reason):
@@ -554,6 +601,29 @@ def test_bad_quaternions_are_dropped_with_a_reason(input_type, values, reason):
     assert p.stats.dropped == {reason: 1} and p.stats.published == 0
     assert [r for r, _ in p.issues] == [reason]
     assert 'dropped' in p.issues[0][1]
+
+
+@pytest.mark.parametrize('input_type', ['quaternion', 'imu', 'odometry'])
+def test_a_zero_quaternion_is_an_unknown_orientation_as_the_imu_flag(input_type):
+    """(0, 0, 0, 0) and orientation_covariance[0] == -1 both say "not estimated"."""
+    p = pipeline(input_type=input_type, outputs=list(OUTPUTS))
+    msg = make_input_message(input_type, Rotation.identity(), omega=(0.1, 0.2, 0.3),
+                             stamp_ns=STAMP_NS)
+    set_orientation(msg, input_type, (0.0, 0.0, 0.0, 0.0))
+    out = outputs_of(p, msg)
+    # The measured angular velocity needs no orientation; the quaternion input has none.
+    assert list(out) == ([] if input_type == 'quaternion' else ['angular_velocity'])
+    if out:
+        np.testing.assert_array_equal(output_values(out['angular_velocity']), [0.1, 0.2, 0.3])
+    assert p.stats.dropped == {} and p.stats.skipped == {ZERO_QUATERNION: 1}
+    assert [r for r, _ in p.issues] == [ZERO_QUATERNION]
+    if input_type == 'imu':   # the flag: the same outputs, its own reason
+        flagged = pipeline(input_type='imu', outputs=list(OUTPUTS))
+        msg = make_input_message('imu', Rotation.identity(), omega=(0.1, 0.2, 0.3),
+                                 stamp_ns=STAMP_NS)
+        msg.orientation_covariance[0] = -1.0
+        assert list(outputs_of(flagged, msg)) == list(out)
+        assert flagged.stats.skipped == {ORIENTATION_UNKNOWN: 1}
 
 
 @pytest.mark.parametrize('input_type', ['euler', 'rotation_vector'])
@@ -659,6 +729,8 @@ def test_process_never_raises_and_accounts_for_every_message(input_type, quatern
         set_orientation(msg, input_type, values)
         for _, out in p.process(msg):
             assert np.all(np.isfinite(output_values(out)))
-    valid = sum(1 for values in quaternions if all(map(math.isfinite, values)) and any(values))
+    finite = sum(1 for values in quaternions if all(map(math.isfinite, values)))
+    zero = sum(1 for values in quaternions if not any(values))
     assert p.stats.received == len(quaternions)
-    assert sum(p.stats.dropped.values()) == len(quaternions) - valid
+    assert sum(p.stats.dropped.values()) == len(quaternions) - finite
+    assert p.stats.skipped[ZERO_QUATERNION] == zero   # orientation not estimated

@@ -1,4 +1,5 @@
 """Tests of rotation_node.reception: lost and duplicate messages from their message info."""
+import itertools
 import random
 
 import pytest
@@ -6,11 +7,27 @@ import pytest
 from rotation_node.reception import MAX_PUBLISHERS, message_identity, Reception
 
 
-def info(number, stamp=None):
-    """Return rclpy's message info of the message ``number`` of a publisher."""
-    return {'publication_sequence_number': number,
-            'source_timestamp': 1_000 * number if stamp is None else stamp,
-            'received_timestamp': 0, 'reception_sequence_number': None}
+def info(number, stamp=None, gid=None):
+    """Return rclpy's message info of the message ``number`` of a publisher (GID: newer rclpy)."""
+    message_info = {'publication_sequence_number': number,
+                    'source_timestamp': 1_000 * number if stamp is None else stamp,
+                    'received_timestamp': 0, 'reception_sequence_number': None}
+    if gid is not None:
+        message_info['publisher_gid'] = {'implementation_identifier': 'rmw_fastrtps_cpp',
+                                         'data': gid.ljust(16, b'\0')}
+    return message_info
+
+
+def restarted_stream(gids=(None, None)):
+    """
+    Yield the issue's stream: A sends 1..100, leaves; B sends 1..50, loses 51..150, sends 151..200.
+
+    Yields ``(publisher, info)``: 200 messages received of 300, 100 lost.
+    """
+    for n in range(1, 101):
+        yield 'A', info(n, stamp=n, gid=gids[0])
+    for n in [*range(1, 51), *range(151, 201)]:
+        yield 'B', info(n, stamp=10**6 + n, gid=gids[1])
 
 
 def test_gaps_in_one_publishers_numbers_are_counted_exactly():
@@ -73,7 +90,65 @@ def test_publishers_followed_are_bounded():
     reception = Reception(1000)
     for publisher in range(MAX_PUBLISHERS + 3):
         reception.accept(info(1, stamp=publisher))
-    assert len(reception._last_numbers) == MAX_PUBLISHERS
+    assert reception.publishers == MAX_PUBLISHERS
+
+
+def test_with_publisher_gids_a_restarted_publishers_loss_is_exact():
+    reception = Reception(100)
+    assert all(reception.accept(i) for _, i in restarted_stream((b'A', b'B')))
+    assert (reception.lost, reception.duplicates) == (100, 0)
+
+
+def test_with_publisher_gids_interleaved_publishers_are_exact():
+    """Numbers close together, so that continuity alone would mix them up."""
+    reception = Reception(1000)
+    first = [n for n in range(1, 301) if n % 10 != 3]     # loses 30
+    second = [n for n in range(5, 305) if n % 50 != 0]    # loses 6
+    for a, b in itertools.zip_longest(first, second):
+        if a is not None:
+            reception.accept(info(a, stamp=2 * a, gid=b'first'))
+        reception.accept(info(b, stamp=2 * b + 1, gid=b'second'))
+    assert reception.lost == 30 + 6
+
+
+def test_without_gids_a_publisher_that_left_is_forgotten():
+    """A new sequence asks for the matched publishers (one: B), so A's numbers are not B's."""
+    matched = {'count': 1}
+    reception = Reception(100, on_new_publisher=lambda: reception.retain(matched['count']))
+    assert all(reception.accept(i) for _, i in restarted_stream())
+    assert reception.lost == 100 and reception.publishers == 1
+
+
+def test_without_gids_retain_from_time_to_time_forgets_publishers_that_left():
+    """Told late (B started while A was still matched): the next retain fixes it."""
+    reception = Reception(100)
+    for publisher, message_info in restarted_stream():
+        if publisher == 'B' and message_info['publication_sequence_number'] == 20:
+            reception.retain(1)   # the periodic check: A no longer matched
+        reception.accept(message_info)
+    assert reception.lost == 100
+
+
+def test_retain_keeps_the_publishers_heard_last():
+    reception = Reception(100)
+    for stamp, number in enumerate([500, 1, 501, 2, 3]):   # two sequences, 3 heard last
+        reception.accept(info(number, stamp=stamp))
+    assert (reception.lost, reception.publishers) == (0, 2)
+    reception.retain(1)
+    reception.accept(info(7, stamp=10))
+    assert reception.lost == 3 and reception.publishers == 1
+    reception.retain(0)
+    assert reception.publishers == 0
+    reception.accept(info(700, stamp=11))   # a sequence starts again: no gap
+    assert reception.lost == 3
+
+
+def test_a_new_sequence_is_reported():
+    started = []
+    reception = Reception(100, on_new_publisher=lambda: started.append(reception.publishers))
+    for stamp, number in enumerate([1, 2, 3, 1, 4, 2]):
+        reception.accept(info(number, stamp=stamp))
+    assert started == [1, 2]
 
 
 def test_without_sequence_numbers_nothing_is_counted_lost():

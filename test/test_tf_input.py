@@ -209,7 +209,7 @@ def test_failures_are_counted_by_reason_and_name_the_frames():
         'tf_unknown_frame': 1, 'tf_not_connected': 1, 'tf_cycle': 1, 'tf_extrapolation': 1,
         'tf_sample_ignored': 2}
     details = dict(issues)
-    assert "'base_link' does not exist" in details['tf_unknown_frame']
+    assert "frame 'base_link' (child) does not exist" in details['tf_unknown_frame']
     assert "'map' and 'base_link' are not connected" in details['tf_not_connected']
     assert 'loop: base_link -> odom -> base_link' in details['tf_cycle']
     assert 'odom -> base_link' in details['tf_extrapolation']
@@ -348,7 +348,8 @@ def test_missing_frame_and_cycle_keep_the_node_alive_and_show_on_diagnostics():
             assert values['input_qos'] == (
                 '/tf: reliable, volatile; /tf_static: reliable, transient_local'), values
             assert node.stop() == 0, node.output
-    assert "'base_link' does not exist" in node.output and '[tf_unknown_frame]' in node.output
+    assert "frame 'base_link' (child) does not exist" in node.output
+    assert '[tf_unknown_frame]' in node.output
     assert 'loop: base_link -> odom -> base_link' in node.output
 
 
