@@ -29,25 +29,18 @@ be decoded (encoding ``unknown``, a short type name, another serialization)
 are listed and read as stored, so that they can be copied unchanged: only
 decoding their messages fails.
 """
-import contextlib
 import dataclasses
 import heapq
 import operator
 import os
-from pathlib import Path
 import re
-import sqlite3
 import tempfile
 from typing import Dict, Iterable, Iterator, List, Optional, Union
-import urllib.parse
 
 from rotation_node.bag.compression import (
-    decompress_file, decompressed_message, LZ4_MAGIC, stored_name, ZSTD_MAGIC, zstd_prefix,
-    ZstdError)
+    decompress_file, LZ4_MAGIC, stored_name, ZSTD_MAGIC, zstd_prefix, ZstdError)
 from rotation_node.bag.mcap_io import BagMessage, BagReader, checked_topics, TopicMetadata
-from rotation_node.bag.message_types import message_definition
-from rotation_node.bag.qos import rosbags_qos_yaml
-from rotation_node.bag.rosbags_input import RosbagsInput
+from rotation_node.bag.rosbag2_sqlite3 import open_sqlite3_file
 from rotation_node.bag.topic_names import topic_renames
 from rotation_node.errors import BagError
 import yaml
@@ -60,7 +53,6 @@ _SQLITE_MAGIC = b'SQLite format 3\x00'
 _ROS1_MAGIC = re.compile(rb'#ROSBAG V(\d+\.\d+)\n')
 _SNIFF_SIZE = 64
 _STORAGE_SUFFIXES = ('.mcap', '.db3', '.mcap.zstd', '.db3.zstd')
-_ROSBAG2_TABLES = {'topics', 'messages'}
 
 
 def _file_kind(prefix: bytes) -> str:
@@ -83,79 +75,6 @@ def _file_kind(prefix: bytes) -> str:
     if all(c.isprintable() or c in '\t\r\n' for c in text):
         return 'text file'
     return 'binary file of unknown format'
-
-
-def _sqlite_tables(path: str) -> set:
-    """Return the table names of a SQLite database, read-only (the file is never changed)."""
-    uri = f'file:{urllib.parse.quote(os.path.abspath(path))}?mode=ro&immutable=1'
-    try:
-        with contextlib.closing(sqlite3.connect(uri, uri=True)) as database:
-            return {row[0] for row in database.execute(
-                "SELECT name FROM sqlite_master WHERE type = 'table'")}
-    except sqlite3.DatabaseError as error:
-        raise BagError(f'{path}: damaged sqlite3 database: {error}') from None
-
-
-def _with_rosbag2_extension(connections, path):
-    """Give ``(connection, its rosbag2 extension)``: what sqlite3 storage records per topic."""
-    from rosbags.interfaces import ConnectionExtRosbag2
-    for connection in connections:
-        if not isinstance(connection.ext, ConnectionExtRosbag2):   # never from sqlite3 storage
-            raise BagError(f'{path}: topic {connection.topic} has no rosbag2 metadata')
-        yield connection, connection.ext
-
-
-def _sqlite3_file(path):
-    """
-    Open one rosbag2 sqlite3 storage file with ``rosbags``.
-
-    Messages compressed by rosbag2 (``message`` mode) are decompressed.
-
-    Raises
-    ------
-    BagError
-        If the database has no rosbag2 tables or cannot be read.
-
-    """
-    from rosbags.rosbag2.errors import ReaderError
-    from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
-    if not _ROSBAG2_TABLES <= _sqlite_tables(path):
-        raise BagError(f'{path}: sqlite3 database without rosbag2 tables')
-    reader = Sqlite3Reader(Path(path))
-    try:
-        reader.open()
-    except ReaderError as error:
-        raise BagError(f'{path}: cannot read rosbag2 sqlite3 storage: {error}') from None
-    try:
-        return RosbagsInput(path, reader, (ReaderError, ZstdError), [
-            (connection, TopicMetadata(
-                name=connection.topic, type_name=connection.msgtype,
-                offered_qos_profiles=rosbags_qos_yaml(ext.offered_qos_profiles),
-                type_hash=connection.digest, serialization_format=ext.serialization_format,
-                **_definition(connection.msgtype, connection.msgdef)), decompressed_message)
-            for connection, ext in _with_rosbag2_extension(reader.connections, path)])
-    except BaseException:
-        reader.close()
-        raise
-
-
-def _definition(type_name, msgdef):
-    """
-    ``definition`` and ``definition_encoding`` of a topic from a rosbags definition.
-
-    A bag without definitions (sqlite3 before Iron) gets the installed one;
-    if the type is not installed either, the encoding ``unknown`` that rosbag2
-    records then.
-    """
-    from rosbags.interfaces import MessageDefinitionFormat
-    encodings = {MessageDefinitionFormat.MSG: 'ros2msg', MessageDefinitionFormat.IDL: 'ros2idl'}
-    if msgdef.format in encodings:
-        return {'definition': msgdef.data, 'definition_encoding': encodings[msgdef.format]}
-    try:
-        message_definition(type_name)
-    except BagError:
-        return {'definition': '', 'definition_encoding': 'unknown'}
-    return {'definition': None, 'definition_encoding': 'ros2msg'}
 
 
 def _natural_key(name):
@@ -365,7 +284,7 @@ class _Opener:
         if prefix.startswith(_MCAP_MAGIC):
             return self._add(BagReader(path, strict=self.strict)), 'mcap'
         if prefix.startswith(_SQLITE_MAGIC):
-            return self._add(_sqlite3_file(path)), 'sqlite3'
+            return self._add(open_sqlite3_file(path)), 'sqlite3'
         version = _ROS1_MAGIC.match(prefix)
         if version is not None:
             return self._open_ros1(path, shown, version[1].decode()), 'ROS 1'
@@ -489,7 +408,9 @@ def open_bag(path: Union[str, os.PathLike], *, strict: bool = False) -> InputBag
 
 def _chunk_compression(sources):
     """``['zstd chunks']`` (or lz4, bz2...) if the storage files compress their chunks."""
-    names = sorted({source.compression for source in sources} - {'none'})
+    # A ROS 1 bag says what it stores (bz2) apart from what its copy gets (zstd).
+    names = sorted({getattr(source, 'stored_compression', source.compression)
+                    for source in sources} - {'none'})
     return [f'{"/".join(names)} chunks'] if names else []
 
 

@@ -19,9 +19,11 @@ all, as rosbags does. The messages come in the order of rosbags'
 in the ``connections`` asked for; then in the order rosbags indexes them
 (chunk info records in file order, index entries in record order). A
 damaged bag raises :class:`rosbags.rosbag1.ReaderError` when the damage is
-reached.
+reached, naming the byte where it is; whatever a damaged length field says, a
+read never asks for more than the file holds (:class:`BoundedReads`).
 """
 from collections import Counter, OrderedDict
+import io
 from io import BytesIO
 import os
 from pathlib import Path
@@ -43,6 +45,45 @@ Message = Tuple[Connection, int, bytes]
 CHUNK_BYTES_HELD = 64 * 2**20
 # What the chunk decompressors (bz2, lz4) raise for data they cannot decompress.
 _DECOMPRESSION_ERRORS = (OSError, ValueError, EOFError, RuntimeError)
+
+
+class BoundedReads(io.BufferedReader):
+    """
+    A file whose reads never ask for more bytes than remain in it.
+
+    rosbags reads a record as ``read(length)`` with the record's own length
+    field: a damaged length (up to 4 GiB) would allocate that much before the
+    short read is noticed. Here it gets the rest of the file, and rosbags
+    reports the short read. ``read_at`` is where the last read started (for
+    the error line), also once the file is closed.
+    """
+
+    def __init__(self, path: 'os.PathLike[str] | str') -> None:
+        super().__init__(io.FileIO(path, 'rb'))
+        self._size = os.fstat(self.fileno()).st_size
+        self.read_at = 0
+
+    def read(self, size: Optional[int] = -1) -> bytes:
+        """Read at most ``size`` bytes, and never more than remain in the file."""
+        self.read_at = self.tell()
+        if size is not None and size > 0:
+            size = max(0, min(size, self._size - self.read_at))
+        return super().read(size)
+
+
+class _BoundedPath:
+    """What rosbags' ``Reader.open`` calls ``open('rb')`` on: gives a :class:`BoundedReads`."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.file: Optional[BoundedReads] = None
+
+    def open(self, mode: str = 'rb') -> BoundedReads:  # noqa: A003  (pathlib's name)
+        self.file = BoundedReads(self.path)
+        return self.file
+
+    def __str__(self) -> str:
+        return str(self.path)
 
 
 def overlapping_chunk_groups(chunk_infos: Sequence[ChunkInfo]) -> List[List[int]]:
@@ -88,8 +129,25 @@ class ChunkedReader(Reader):
     """
 
     def open(self) -> None:  # noqa: A003  (rosbags names it so)
-        """Open the bag and read its header, connections, chunk infos and chunk headers."""
-        super().open()   # read_index_data below skips every index data record
+        """
+        Open the bag and read its header, connections, chunk infos and chunk headers.
+
+        Raises
+        ------
+        rosbags.rosbag1.ReaderError
+            If they are damaged, naming the byte of the record that is.
+
+        """
+        path, bounded = self.path, _BoundedPath(self.path)
+        self.path = bounded   # rosbags opens self.path: its reads are bounded by the file
+        try:
+            super().open()   # read_index_data below skips every index data record
+        except (ReaderError, UnicodeDecodeError) as error:   # a record's field name not UTF-8
+            where = bounded.file.read_at if bounded.file is not None else 0
+            reason = error.args[0] if isinstance(error, ReaderError) and error.args else error
+            raise ReaderError(f'the record at byte {where} cannot be read: {reason}') from None
+        finally:
+            self.path = path
         counts: Counter = Counter()
         for info in self.chunk_infos:
             counts.update(info.connection_counts)
@@ -204,7 +262,7 @@ class ChunkedReader(Reader):
                     raise ReaderError(f'connection {connection}: a time outside the chunk '
                                       "info's time range.")
                 records.append((connection, times, entries['offset']))
-        except ReaderError as error:
+        except (ReaderError, UnicodeDecodeError) as error:
             raise ReaderError(f'The index data after the chunk at byte {info.pos} cannot be '
                               f'read: {error}') from None
         return records
@@ -229,7 +287,10 @@ class ChunkedReader(Reader):
         chunk = self.chunks[pos]
         bio = self._file()
         bio.seek(chunk.datapos)
-        data = read_bytes(bio, chunk.datasize)
+        try:
+            data = read_bytes(bio, chunk.datasize)
+        except ReaderError as error:
+            raise ReaderError(f'The chunk at byte {pos} is cut short: {error}') from None
         try:
             return chunk.decompressor(data)
         except _DECOMPRESSION_ERRORS as error:
@@ -272,7 +333,7 @@ class ChunkedReader(Reader):
                 header, data = _message_record(stream)
                 if header.get_uint32('conn') != connection or header.get_time('time') != time:
                     raise ReaderError('it is not the message its index names.')
-            except ReaderError as error:
+            except (ReaderError, UnicodeDecodeError) as error:
                 raise ReaderError(f'The message at offset {offset} of the chunk at byte '
                                   f'{self.chunk_infos[i].pos} cannot be read: {error}') from None
             unread[i] -= 1
