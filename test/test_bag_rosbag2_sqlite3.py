@@ -1,0 +1,114 @@
+"""
+Tests of rotation_node.bag.rosbag2_sqlite3: rosbag2 sqlite3 storage, damaged ones included.
+
+The bags are written by the rosbags writer from messages serialized by rclpy and
+damaged here with SQLite itself (a row whose ``data`` is TEXT, a topic name that
+is not UTF-8) or by zeroing bytes of a page, as a disk does. Every damage must
+end ``convert`` and ``plot`` with one line naming the file, the table and the
+row, exit status 1, and nothing written; rosbags' own reader is the oracle of
+what a good file holds.
+"""
+import os
+import sqlite3
+
+from bag_helpers import imu_messages, rosbags_rows, serialized_rows, write_rosbag2
+import pytest
+from rotation_node.bag.cli import main
+from rotation_node.bag.reader import open_bag
+
+PARAMS_YAML = """rotation_node:
+  ros__parameters:
+    input_type: imu
+    outputs: [euler]
+"""
+
+
+@pytest.fixture
+def bag(tmp_path, rng):
+    """A rosbag2 sqlite3 directory of 300 Imu messages on /imu, and its rows."""
+    rows = serialized_rows('/imu', imu_messages(rng, 300))
+    return write_rosbag2(tmp_path / 'run', rows, storage='sqlite3'), rows
+
+
+def _sql(path, statement, *arguments):
+    with sqlite3.connect(path) as database:
+        database.execute(statement, arguments)
+    database.close()
+
+
+def test_messages_are_what_rosbags_reads(bag):
+    path, rows = bag
+    with open_bag(path) as reader:
+        read = [(m.topic, m.data, m.log_time_ns) for m in reader.messages()]
+    assert read == rosbags_rows(path) == [(topic, data, time) for topic, _, data, time in rows]
+
+
+def _zeroed(path, data, *, page_header):
+    """Zero 512 bytes: the header of the page that holds ``data``, or from 100 bytes before it."""
+    content = bytearray(path.read_bytes())
+    position = content.index(data)
+    start = position - position % 4096 if page_header else position - 100
+    content[start:start + 512] = bytes(512)
+    path.write_bytes(bytes(content))
+
+
+DAMAGES = {
+    'TEXT data': (lambda path, rows: _sql(
+        path, "UPDATE messages SET data = 'not a message' WHERE id = 12"),
+        'run.db3 is corrupt: messages table, row id 12: data is TEXT, not a BLOB'),
+    'INTEGER data': (lambda path, rows: _sql(
+        path, 'UPDATE messages SET data = 42 WHERE id = 7'),
+        'run.db3 is corrupt: messages table, row id 7: data is INTEGER, not a BLOB'),
+    'REAL timestamp': (lambda path, rows: _sql(
+        path, 'UPDATE messages SET timestamp = 1.5 WHERE id = 3'),
+        'messages table, row id 3: timestamp 1.5 is not a time (an INTEGER >= 0 ns)'),
+    'negative timestamp': (lambda path, rows: _sql(
+        path, 'UPDATE messages SET timestamp = -5 WHERE id = 9'),
+        'messages table, row id 9: timestamp -5 is not a time'),
+    'topic name not UTF-8': (lambda path, rows: _sql(
+        path, "UPDATE topics SET name = CAST(X'2F696D75FF' AS TEXT)"),
+        'run.db3: cannot read rosbag2 sqlite3 storage: the topics or message_definitions '
+        "table is damaged: UnicodeDecodeError: 'utf-8' codec can't decode byte 0xff"),
+    'QoS profiles not a list': (lambda path, rows: _sql(
+        path, "UPDATE topics SET offered_qos_profiles = '- 3'"),
+        'the topics or message_definitions table is damaged'),
+    # SQLite meets the damage when it opens the file (a page of the table)...
+    'zeroed page header': (lambda path, rows: _zeroed(path, rows[200][2], page_header=True),
+                           'run.db3: cannot read rosbag2 sqlite3 storage: database disk image '
+                           'is malformed (messages table, after row id 19'),
+    # ... or only when the messages reach it (rows).
+    'zeroed rows': (lambda path, rows: _zeroed(path, rows[200][2], page_header=False),
+                    'run.db3 is corrupt: messages table, after row id 19'),
+}
+
+
+@pytest.mark.parametrize('damage', DAMAGES)
+def test_a_damaged_database_is_one_line_naming_the_row(tmp_path, capsys, bag, damage):
+    path, rows = bag
+    make, reason = DAMAGES[damage]
+    make(path / 'run.db3', rows)
+    (tmp_path / 'params.yaml').write_text(PARAMS_YAML)
+    before = _snapshot(tmp_path)
+    for command in (['convert', 'run', 'out.mcap', '--params', 'params.yaml'],
+                    ['plot', 'run', '--topic', '/imu', '-o', 'out.png']):
+        status = _in(tmp_path, command)
+        lines = capsys.readouterr().err.splitlines()
+        assert status == 1 and len(lines) == 1, lines
+        assert lines[0].startswith(f'rotation_bag {command[0]}: error: ') and reason in lines[0]
+        assert _snapshot(tmp_path) == before
+
+
+def _in(directory, argv):
+    cwd = os.getcwd()
+    os.chdir(directory)
+    try:
+        return main(argv)
+    finally:
+        os.chdir(cwd)
+
+
+def _snapshot(directory):
+    """Every file under ``directory`` with its bytes (an input must stay untouched)."""
+    return {os.path.relpath(os.path.join(root, name), directory):
+            open(os.path.join(root, name), 'rb').read()
+            for root, _, names in os.walk(directory) for name in names}
