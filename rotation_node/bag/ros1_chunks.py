@@ -135,7 +135,7 @@ class ChunkedReader(Reader):
         Raises
         ------
         rosbags.rosbag1.ReaderError
-            If they are damaged, naming the byte of the record that is.
+            If they are damaged, naming the byte where the read that failed started.
 
         """
         path, bounded = self.path, _BoundedPath(self.path)
@@ -145,7 +145,7 @@ class ChunkedReader(Reader):
         except (ReaderError, UnicodeDecodeError) as error:   # a record's field name not UTF-8
             where = bounded.file.read_at if bounded.file is not None else 0
             reason = error.args[0] if isinstance(error, ReaderError) and error.args else error
-            raise ReaderError(f'the record at byte {where} cannot be read: {reason}') from None
+            raise ReaderError(f'the read at byte {where} failed: {reason}') from None
         finally:
             self.path = path
         counts: Counter = Counter()
