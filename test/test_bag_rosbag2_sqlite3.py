@@ -72,6 +72,10 @@ DAMAGES = {
     'QoS profiles not a list': (lambda path, rows: _sql(
         path, "UPDATE topics SET offered_qos_profiles = '- 3'"),
         'the topics or message_definitions table is damaged'),
+    # Not CDR: a message that cannot be decoded names the bag too.
+    'truncated message': (lambda path, rows: _sql(
+        path, 'UPDATE messages SET data = substr(data, 1, 20) WHERE id = 5'),
+        f'error: run: message on /imu at {{}} ns is not a valid sensor_msgs/msg/Imu'),
     # SQLite meets the damage when it opens the file (a page of the table)...
     'zeroed page header': (lambda path, rows: _zeroed(path, rows[200][2], page_header=True),
                            'run.db3: cannot read rosbag2 sqlite3 storage: database disk image '
@@ -87,6 +91,7 @@ def test_a_damaged_database_is_one_line_naming_the_row(tmp_path, capsys, bag, da
     path, rows = bag
     make, reason = DAMAGES[damage]
     make(path / 'run.db3', rows)
+    reason = reason.format(rows[4][3])
     (tmp_path / 'params.yaml').write_text(PARAMS_YAML)
     before = _snapshot(tmp_path)
     for command in (['convert', 'run', 'out.mcap', '--params', 'params.yaml'],
@@ -96,6 +101,24 @@ def test_a_damaged_database_is_one_line_naming_the_row(tmp_path, capsys, bag, da
         assert status == 1 and len(lines) == 1, lines
         assert lines[0].startswith(f'rotation_bag {command[0]}: error: ') and reason in lines[0]
         assert _snapshot(tmp_path) == before
+
+
+def test_rows_of_no_topic_are_a_note_or_with_strict_an_error(tmp_path, capsys, bag):
+    """Rows whose topic_id is not a topic cannot be read: never lost without a word."""
+    path, rows = bag
+    _sql(path / 'run.db3', 'UPDATE messages SET topic_id = 99 WHERE id IN (18, 40)')
+    (tmp_path / 'params.yaml').write_text(PARAMS_YAML)
+    note = ('run/run.db3: 2 messages of the messages table name no topic (the first: row id 18, '
+            'topic_id 99)')
+    assert _in(tmp_path, ['convert', 'run', 'out.mcap', '--params', 'params.yaml']) == 0
+    lines = capsys.readouterr().err.splitlines()
+    assert f'{note}, not read' in lines
+    assert '/imu: 298 messages -> /imu/euler: 298 messages' in lines
+    status = _in(tmp_path, ['convert', 'run', 'strict.mcap', '--params', 'params.yaml',
+                            '--strict'])
+    assert status == 1 and capsys.readouterr().err.splitlines() == [
+        f'rotation_bag convert: error: {note}; refused (--strict)']
+    assert not (tmp_path / 'strict.mcap').exists()
 
 
 def _in(directory, argv):

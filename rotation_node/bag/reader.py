@@ -198,6 +198,7 @@ class InputBag:
         if self.recovered is not None:
             self.notes.append(f'{path}: unfinished recording, recovered {self.recovered} messages'
                               + (f' ({note})' if note else ''))
+        self.notes.extend(note for source in sources for note in getattr(source, 'notes', ()))
         self.notes.extend(f'{path}: topic {original!r} is not a valid ROS 2 name; using {new}'
                           for original, new in sorted(self.renames.items()))
 
@@ -213,6 +214,17 @@ class InputBag:
         """
         name, = checked_topics([self.renames.get(name, name)], self.topics, self.path)
         return name
+
+    def naming_this_bag(self, error: BagError) -> BagError:
+        """
+        Return ``error`` naming this bag: a message that cannot be decoded does not know it.
+
+        ``error`` itself if it names the bag (or one of its files) already,
+        else a BagError ``<path>: <error>``.
+        """
+        text = str(error)
+        named = re.search(rf'(^|\s){re.escape(self.path)}(\W|$)', text) is not None
+        return error if named else BagError(f'{self.path}: {text}')
 
     def messages(self, topics: Optional[Iterable[str]] = None) -> Iterator[BagMessage]:
         """
@@ -284,7 +296,7 @@ class _Opener:
         if prefix.startswith(_MCAP_MAGIC):
             return self._add(BagReader(path, strict=self.strict)), 'mcap'
         if prefix.startswith(_SQLITE_MAGIC):
-            return self._add(open_sqlite3_file(path)), 'sqlite3'
+            return self._add(open_sqlite3_file(path, shown=shown, strict=self.strict)), 'sqlite3'
         version = _ROS1_MAGIC.match(prefix)
         if version is not None:
             return self._open_ros1(path, shown, version[1].decode()), 'ROS 1'

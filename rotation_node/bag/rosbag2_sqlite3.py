@@ -39,9 +39,11 @@ _ROSBAG2_TABLES = {'topics', 'messages'}
 _DAMAGED_TABLE_ERRORS = (UnicodeDecodeError, KeyError, TypeError, AttributeError, ValueError)
 
 
-def sqlite_tables(path: str) -> set:
+def sqlite_tables(path: str, shown: Optional[str] = None) -> set:
     """
     Return the table names of a SQLite database, read-only (the file is never changed).
+
+    ``shown`` is the path named in errors (default ``path``).
 
     Raises
     ------
@@ -55,7 +57,7 @@ def sqlite_tables(path: str) -> set:
             return {row[0] for row in database.execute(
                 "SELECT name FROM sqlite_master WHERE type = 'table'")}
     except sqlite3.DatabaseError as error:
-        raise BagError(f'{path}: damaged sqlite3 database: {error}') from None
+        raise BagError(f'{shown or path}: damaged sqlite3 database: {error}') from None
 
 
 class Sqlite3Storage(Sqlite3Reader):
@@ -172,11 +174,31 @@ def _with_rosbag2_extension(connections, path):
         yield connection, connection.ext
 
 
-def open_sqlite3_file(path: str) -> RosbagsInput:
+def _rows_without_topic(reader: Sqlite3Storage, path: str) -> Optional[str]:
     """
-    Open one rosbag2 sqlite3 storage file.
+    Say which message rows name no topic of the ``topics`` table, or None if none does.
+
+    Such rows cannot be read as messages of any topic: rosbags counts every
+    row (``metadata.message_count``) but the topics only theirs.
+    """
+    lost = reader.metadata.message_count - sum(c.msgcount for c in reader.connections)
+    if lost <= 0 or reader.dbconn is None:
+        return None
+    row_id, topic_id = next(iter(reader.dbconn.execute(
+        'SELECT id, topic_id FROM messages WHERE topic_id NOT IN (SELECT id FROM topics) '
+        'ORDER BY id LIMIT 1')), (None, None))
+    return (f'{path}: {lost} message{"s" if lost != 1 else ""} of the messages table name no '
+            f'topic (the first: row id {row_id}, topic_id {topic_id!r})')
+
+
+def open_sqlite3_file(path: str, *, shown: Optional[str] = None,
+                      strict: bool = False) -> RosbagsInput:
+    """
+    Open one rosbag2 sqlite3 storage file (named ``shown`` in errors and notes, default ``path``).
 
     Messages compressed by rosbag2 (``message`` mode) are decompressed.
+    Messages whose ``topic_id`` is not a topic cannot be read: a note
+    (``notes``) says how many, or with ``strict`` an error.
 
     Raises
     ------
@@ -184,24 +206,35 @@ def open_sqlite3_file(path: str) -> RosbagsInput:
         If the database has no rosbag2 tables or cannot be read.
 
     """
-    if not _ROSBAG2_TABLES <= sqlite_tables(path):
-        raise BagError(f'{path}: sqlite3 database without rosbag2 tables')
+    shown = shown or path
+    if not _ROSBAG2_TABLES <= sqlite_tables(path, shown):
+        raise BagError(f'{shown}: sqlite3 database without rosbag2 tables')
     reader = Sqlite3Storage(Path(path))
     try:
         reader.open()
     except ReaderError as error:
-        raise BagError(f'{path}: cannot read rosbag2 sqlite3 storage: {error}') from None
+        raise BagError(f'{shown}: cannot read rosbag2 sqlite3 storage: '
+                       f'{str(error).replace(path, shown)}') from None
     try:
-        return RosbagsInput(path, reader, (ReaderError, ZstdError), [
+        lost = _rows_without_topic(reader, shown)
+        if lost is not None and strict:
+            raise BagError(f'{lost}; refused (--strict)')
+        source = RosbagsInput(shown, reader, (ReaderError, ZstdError), [
             (connection, TopicMetadata(
                 name=connection.topic, type_name=connection.msgtype,
                 offered_qos_profiles=rosbags_qos_yaml(ext.offered_qos_profiles),
                 type_hash=connection.digest, serialization_format=ext.serialization_format,
                 **_definition(connection.msgtype, connection.msgdef)), decompressed_message)
-            for connection, ext in _with_rosbag2_extension(reader.connections, path)])
+            for connection, ext in _with_rosbag2_extension(reader.connections, shown)])
+    except apsw.Error as error:   # met by the query for rows without topic
+        reader.close()
+        raise BagError(f'{shown}: cannot read rosbag2 sqlite3 storage: {error}') from None
     except BaseException:
         reader.close()
         raise
+    if lost is not None:
+        source.notes.append(f'{lost}, not read')
+    return source
 
 
 def _definition(type_name, msgdef):

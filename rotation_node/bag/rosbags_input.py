@@ -21,7 +21,7 @@ class RosbagsInput:
 
     The interface of :class:`rotation_node.bag.mcap_io.BagReader`:
     ``topics``, ``topic_metadata``, ``message_counts``, ``compression``,
-    ``recovered`` (always None) and ``messages``.
+    ``recovered`` (always None) and ``messages``; and ``notes``.
 
     Parameters
     ----------
@@ -56,6 +56,8 @@ class RosbagsInput:
         self.recovered: Optional[int] = None
         self.compression = compression
         self.stored_compression = stored_compression or compression
+        #: One line for each thing the user should know (messages that cannot be read).
+        self.notes: List[str] = []
         self._reader, self._errors = reader, errors
         self.topic_metadata: Dict[str, TopicMetadata] = {}
         self.message_counts: Dict[str, int] = {}
