@@ -70,6 +70,23 @@ class BoundedReads(io.BufferedReader):
             size = max(0, min(size, self._size - self.read_at))
         return super().read(size)
 
+    def seek(self, offset: int, whence: int = os.SEEK_SET) -> int:
+        """
+        Move to a position in the file, never past its end.
+
+        Raises
+        ------
+        rosbags.rosbag1.ReaderError
+            If the position (a damaged record position or size) is outside the file.
+
+        """
+        if whence in (os.SEEK_SET, os.SEEK_CUR):
+            target = offset + (self.tell() if whence == os.SEEK_CUR else 0)
+            if not 0 <= target <= self._size:
+                raise ReaderError(f'position {target} is outside the file ({self._size} '
+                                  'bytes)')
+        return super().seek(offset, whence)
+
 
 class _BoundedPath:
     """What rosbags' ``Reader.open`` calls ``open('rb')`` on: gives a :class:`BoundedReads`."""
@@ -238,9 +255,9 @@ class ChunkedReader(Reader):
         info = self.chunk_infos[i]
         chunk = self.chunks[info.pos]
         bio = self._file()
-        bio.seek(chunk.datapos + chunk.datasize)
         records = []
         try:
+            bio.seek(chunk.datapos + chunk.datasize)
             for _ in range(len(info.connection_counts)):
                 header = Header.read(bio, RecordType.IDXDATA)
                 version = header.get_uint32('ver')
@@ -286,8 +303,8 @@ class ChunkedReader(Reader):
         pos = self.chunk_infos[i].pos
         chunk = self.chunks[pos]
         bio = self._file()
-        bio.seek(chunk.datapos)
         try:
+            bio.seek(chunk.datapos)
             data = read_bytes(bio, chunk.datasize)
         except ReaderError as error:
             raise ReaderError(f'The chunk at byte {pos} is cut short: {error}') from None
