@@ -191,7 +191,7 @@ def _damage_field_name(name):
 
 
 def _huge_connection_header(path):
-    """The header length of the first connection record (the bag's index) set to 2**32 - 1."""
+    """Set the header length of the first connection record (the bag's index) to 2**32 - 1."""
     data, _, _ = _index_data_record(path)
     field = data.index(b'index_pos=') + len('index_pos=')
     index_pos, = struct.unpack_from('<Q', data, field)

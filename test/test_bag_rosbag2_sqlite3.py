@@ -25,7 +25,7 @@ PARAMS_YAML = """rotation_node:
 
 @pytest.fixture
 def bag(tmp_path, rng):
-    """A rosbag2 sqlite3 directory of 300 Imu messages on /imu, and its rows."""
+    """Return a rosbag2 sqlite3 directory of 300 Imu messages on /imu, and its rows."""
     rows = serialized_rows('/imu', imu_messages(rng, 300))
     return write_rosbag2(tmp_path / 'run', rows, storage='sqlite3'), rows
 
@@ -75,7 +75,7 @@ DAMAGES = {
     # Not CDR: a message that cannot be decoded names the bag too.
     'truncated message': (lambda path, rows: _sql(
         path, 'UPDATE messages SET data = substr(data, 1, 20) WHERE id = 5'),
-        f'error: run: message on /imu at {{}} ns is not a valid sensor_msgs/msg/Imu'),
+        'error: run: message on /imu at {} ns is not a valid sensor_msgs/msg/Imu'),
     # SQLite meets the damage when it opens the file (a page of the table)...
     'zeroed page header': (lambda path, rows: _zeroed(path, rows[200][2], page_header=True),
                            'run.db3: cannot read rosbag2 sqlite3 storage: database disk image '

@@ -72,5 +72,5 @@ def test_renames_are_distinct_from_every_other_topic():
 
 
 def test_relative_names_are_kept_as_relative_names():
-    """evo's example bag has ``groundtruth``, rosbag2's test bags ``AAA``: rclpy accepts both."""
+    """Keep ``groundtruth`` (evo's example bag), ``AAA`` (rosbag2's tests): rclpy accepts them."""
     assert topic_renames(['groundtruth', '/imu', 'AAA', 'a/b']) == {}

@@ -5,10 +5,11 @@ One bag is one task (:func:`convert_bag`): it opens its input, converts it
 into its own output and returns a :class:`BagResult`, a failure included, so
 that a bad bag never stops the others. Should a task raise all the same (an
 error in this package, not in a bag), the other bags are still converted, the
-bag gets its line, and the error is raised once every bag is done. :func:`convert_bags` runs the tasks in
-``jobs`` worker processes (``rotation_bag convert IN1 IN2 ... OUTDIR --jobs
-N``); :func:`convert_bags_on_dask` submits the same tasks to a Dask
-distributed cluster, for fleets that outgrow one machine. The outputs are
+bag gets its line, and the error is raised once every bag is done.
+:func:`convert_bags` runs the tasks in ``jobs`` worker processes
+(``rotation_bag convert IN1 IN2 ... OUTDIR --jobs N``);
+:func:`convert_bags_on_dask` submits the same tasks to a Dask distributed
+cluster, for fleets that outgrow one machine. The outputs are
 named after the inputs (:func:`batch_output_path`).
 """
 from __future__ import annotations

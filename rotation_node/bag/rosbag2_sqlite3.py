@@ -153,15 +153,15 @@ def _damaged_table(path: Path) -> str:
             except apsw.SQLError:   # no such table (older schema)
                 continue
             except (apsw.Error, UnicodeDecodeError):
-                return (f' ({table} table, ' + ('before its first row)' if row_id is None
-                                                  else f'after row id {row_id})'))
+                where = 'before its first row' if row_id is None else f'after row id {row_id}'
+                return f' ({table} table, {where})'
         return ''
     finally:
         database.close()
 
 
 def _sqlite_type(value: Any) -> str:
-    """The SQLite storage class of a value apsw read: ``'TEXT'``, ``'NULL'``..."""
+    """Return the SQLite storage class of a value apsw read: ``'TEXT'``, ``'NULL'``..."""
     return {str: 'TEXT', int: 'INTEGER', float: 'REAL', bytes: 'BLOB'}.get(type(value), 'NULL')
 
 

@@ -34,12 +34,12 @@ _VALID_NAME = re.compile(r'/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*')
 
 
 def is_valid_topic_name(name: str) -> bool:
-    """Whether ``name`` is a valid ROS 2 topic name, fully qualified or relative (no ``~``, ``{}``)."""
+    """Whether ``name`` is a valid ROS 2 topic name, fully qualified or relative (no ``~``)."""
     return _VALID_NAME.fullmatch(name) is not None
 
 
 def _resolved(name: str) -> str:
-    """A valid name resolved in the root namespace: ``imu`` -> ``/imu``."""
+    """Return a valid name resolved in the root namespace: ``imu`` -> ``/imu``."""
     return name if name.startswith('/') else '/' + name
 
 
