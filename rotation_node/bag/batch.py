@@ -225,10 +225,11 @@ def convert_bags(input_paths: Sequence[str], output_directory: str, params: Node
             for future in futures:
                 if future not in reported and future.done() and not future.cancelled():
                     reported.add(future)
-                    if future.exception() is None:
+                    error = future.exception()
+                    if error is None:
                         results.add(future.result())
                     else:   # an error of the package or a worker, not a bad bag
-                        results.failed(*paths[future], future.exception())
+                        results.failed(*paths[future], error)
 
         try:
             pending = set(futures)

@@ -196,10 +196,10 @@ def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *
                             label='converting ') as progress:
             for metadata in [*reader.topic_metadata.values(), *new_topics]:
                 writer.add_topic(metadata)
-            blocks = converted_blocks(reader.messages(), converters, routes)
+            converted_input = converted_blocks(reader.messages(), converters, routes)
             while True:
                 try:
-                    block = next(blocks, None)
+                    block = next(converted_input, None)
                 except BagError as error:   # a message that cannot be decoded names no file
                     raise reader.naming_this_bag(error) from None
                 if block is None:

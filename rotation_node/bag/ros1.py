@@ -77,7 +77,7 @@ def open_ros1_bag(path: Union[str, os.PathLike]) -> RosbagsInput:
     except _FORMAT_ERRORS as error:
         raise BagError(f'{path}: cannot read ROS 1 bag: {error}') from None
     try:
-        compressions = chunk_compressions(reader)
+        compressions = _chunk_compressions(reader)
         return RosbagsInput(path, reader, _FORMAT_ERRORS + (ValueError, IndexError),
                             _converted_topics(path, reader), _output_compression(compressions),
                             stored_compression='/'.join(sorted(compressions - {'none'})) or 'none')
@@ -116,7 +116,7 @@ def _converted_topics(path, reader):
             type_hash=None if installed else ros2.hash_rihs01(type_name)), converters[ros1_type]
 
 
-def chunk_compressions(reader: ChunkedAnyReader) -> set:
+def _chunk_compressions(reader):
     """Return the compressions of the bag's chunks as ROS 1 names them: ``{'bz2', 'none'}``..."""
     names = {decompress: name for name, decompress in ros1_decompressors.items()}
     return {names.get(chunk.decompressor, 'unknown')

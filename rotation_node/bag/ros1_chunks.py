@@ -91,7 +91,7 @@ class BoundedReads(io.BufferedReader):
 class _BoundedPath:
     """What rosbags' ``Reader.open`` calls ``open('rb')`` on: gives a :class:`BoundedReads`."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: 'os.PathLike[str]') -> None:
         self.path = path
         self.file: Optional[BoundedReads] = None
 
@@ -155,8 +155,10 @@ class ChunkedReader(Reader):
             If they are damaged, naming the byte where the read that failed started.
 
         """
-        path, bounded = self.path, _BoundedPath(self.path)
-        self.path = bounded   # rosbags opens self.path: its reads are bounded by the file
+        path = self.path
+        bounded = _BoundedPath(Path(str(path)))
+        # rosbags opens self.path: its reads are bounded by the file.
+        self.path = bounded  # type: ignore[assignment]
         try:
             super().open()   # read_index_data below skips every index data record
         except (ReaderError, UnicodeDecodeError) as error:   # a record's field name not UTF-8

@@ -17,7 +17,7 @@ import contextlib
 import os
 from pathlib import Path
 import sqlite3
-from typing import Any, Collection, Iterator, Optional, Tuple
+from typing import Any, Collection, Generator, Optional, Tuple
 import urllib.parse
 
 import apsw
@@ -90,7 +90,8 @@ class Sqlite3Storage(Sqlite3Reader):
                               f'{type(error).__name__}: {error}') from None
 
     def messages(self, connections: Collection[Connection], start: Optional[int] = None,
-                 stop: Optional[int] = None) -> Iterator[Tuple[Connection, int, bytes]]:
+                 stop: Optional[int] = None
+                 ) -> Generator[Tuple[Connection, int, bytes], None, None]:
         """
         Yield ``(connection, timestamp, data)`` of the messages of ``connections`` by time.
 
@@ -132,7 +133,7 @@ class Sqlite3Storage(Sqlite3Reader):
             raise ReaderError(f'messages table, {where}: {error}') from None
 
 
-def _damaged_table(path: Path) -> str:
+def _damaged_table(path: object) -> str:
     """
     Say where SQLite met damage: ``' (messages table, after row id 199)'``, or ``''``.
 
