@@ -10,9 +10,11 @@ what a good file holds.
 """
 import os
 import sqlite3
+import subprocess
 
 from bag_helpers import imu_messages, rosbags_rows, serialized_rows, write_rosbag2
 import pytest
+from ros_harness import script
 from rotation_node.bag.cli import main
 from rotation_node.bag.reader import open_bag
 
@@ -101,6 +103,17 @@ def test_a_damaged_database_is_one_line_naming_the_row(tmp_path, capsys, bag, da
         assert status == 1 and len(lines) == 1, lines
         assert lines[0].startswith(f'rotation_bag {command[0]}: error: ') and reason in lines[0]
         assert _snapshot(tmp_path) == before
+
+
+def test_play_stops_at_a_damaged_row_with_one_line(bag):
+    """The row is reached while playing: one line, exit status 1, no traceback."""
+    path, _ = bag
+    _sql(path / 'run.db3', "UPDATE messages SET data = 'not a message' WHERE id = 12")
+    result = subprocess.run([script('rotation_bag'), 'play', str(path), '--rate', '1000'],
+                            capture_output=True, text=True, timeout=120)
+    assert (result.returncode, result.stderr) == (1, (
+        f'rotation_bag play: error: {path}/run.db3 is corrupt: messages table, row id 12: '
+        'data is TEXT, not a BLOB\n'))
 
 
 def test_rows_of_no_topic_are_a_note_or_with_strict_an_error(tmp_path, capsys, bag):
