@@ -352,3 +352,7 @@ def test_relative_topic_names_stay_relative(tmp_path, rows, capsys):
     with open_bag(tmp_path / 'out.mcap') as bag:
         assert sorted(bag.topics) == ['/joints', 'groundtruth', 'groundtruth/euler',
                                       'groundtruth/matrix']
+    capsys.readouterr()
+    assert _in(tmp_path, ['plot', 'out.mcap', '--topic', 'groundtruth/euler']) == 0
+    assert capsys.readouterr().err.splitlines() == [
+        'plotted 120 messages of groundtruth/euler to out_groundtruth_euler.png']
