@@ -22,6 +22,7 @@ damaged bag raises :class:`rosbags.rosbag1.ReaderError` when the damage is
 reached, naming the byte where it is; whatever a damaged length field says, a
 read never asks for more than the file holds (:class:`BoundedReads`).
 """
+import ast
 from collections import Counter, OrderedDict
 import io
 from io import BytesIO
@@ -164,7 +165,7 @@ class ChunkedReader(Reader):
         except (ReaderError, UnicodeDecodeError) as error:   # a record's field name not UTF-8
             where = bounded.file.read_at if bounded.file is not None else 0
             reason = error.args[0] if isinstance(error, ReaderError) and error.args else error
-            raise ReaderError(f'the read at byte {where} failed: {reason}') from None
+            raise ReaderError(f'the read at byte {where} failed: {_unwrapped(reason)}') from None
         finally:
             self.path = path
         counts: Counter = Counter()
@@ -360,6 +361,20 @@ class ChunkedReader(Reader):
                 held_bytes -= held.pop(i)[1]
                 current, stream = -1, BytesIO()
             yield by_id[connection], time, data
+
+
+def _unwrapped(reason: object) -> object:
+    """Return rosbags' ``Bag index looks damaged: ('...',)`` without the tuple around it."""
+    prefix = 'Bag index looks damaged: '
+    text = str(reason)
+    if text.startswith(prefix):
+        try:
+            inner = ast.literal_eval(text[len(prefix):])
+        except (ValueError, SyntaxError):   # not the tuple rosbags writes: as it is
+            return reason
+        if isinstance(inner, tuple):
+            return prefix + ' '.join(map(str, inner))
+    return reason
 
 
 def _message_record(stream):
