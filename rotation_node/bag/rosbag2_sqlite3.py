@@ -188,8 +188,9 @@ def _rows_without_topic(reader: Sqlite3Storage, path: str) -> Optional[str]:
     row_id, topic_id = next(iter(reader.dbconn.execute(
         'SELECT id, topic_id FROM messages WHERE topic_id NOT IN (SELECT id FROM topics) '
         'ORDER BY id LIMIT 1')), (None, None))
-    return (f'{path}: {lost} message{"s" if lost != 1 else ""} of the messages table name no '
-            f'topic (the first: row id {row_id}, topic_id {topic_id!r})')
+    rows = f'{lost} messages of the messages table name' if lost != 1 else \
+        '1 message of the messages table names'
+    return f'{path}: {rows} no topic (the first: row id {row_id}, topic_id {topic_id!r})'
 
 
 def open_sqlite3_file(path: str, *, shown: Optional[str] = None,
