@@ -199,7 +199,17 @@ def _huge_connection_header(path):
     return data
 
 
+def _chunk_position_past_the_end(path):
+    """Set the last chunk info's chunk position to 2**63 + 5 (a seek Python cannot make)."""
+    data, _, _ = _index_data_record(path)
+    field = data.rindex(b'chunk_pos=') + len('chunk_pos=')
+    data[field:field + 8] = struct.pack('<Q', 2**63 + 5)
+    return data
+
+
 DAMAGES = {
+    'chunk position': (_chunk_position_past_the_end,
+                       f'position {2**63 + 5} is outside the file'),
     'chunk info field name': (_damage_field_name(b'chunk_pos'),
                               "failed: 'utf-8' codec can't decode byte 0xf5"),
     'connection header length': (_huge_connection_header,
