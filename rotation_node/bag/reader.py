@@ -8,7 +8,8 @@ What ``rotation_bag convert``, ``play`` and ``plot`` accept as input:
   outside one;
 - storage ``mcap`` (read with the mcap library, chunk by chunk, the CDR bytes
   passed on unchanged: :class:`rotation_node.bag.mcap_io.BagReader`) and
-  ``sqlite3`` (``.db3``, read with the ``rosbags`` package);
+  ``sqlite3`` (``.db3``, read with the ``rosbags`` package:
+  :mod:`rotation_node.bag.rosbag2_sqlite3`);
 - split bags (several storage files): read as one stream, merged in log-time
   order (ties in file order), so that one pipeline per topic runs across the
   splits and gives what the same messages in one file give;
