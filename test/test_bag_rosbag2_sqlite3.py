@@ -45,6 +45,22 @@ def test_messages_are_what_rosbags_reads(bag):
     assert read == rosbags_rows(path) == [(topic, data, time) for topic, _, data, time in rows]
 
 
+@pytest.mark.parametrize('mode', ['message', 'file'])
+def test_compression_is_described_also_without_metadata(tmp_path, rng, mode):
+    """rosbag2's message and file compression, said by the files themselves."""
+    rows = serialized_rows('/imu', imu_messages(rng, 20))
+    path = write_rosbag2(tmp_path / 'run', rows, storage='sqlite3', compression=mode)
+    storage_file, = [name for name in os.listdir(path) if name != 'metadata.yaml']
+    with open_bag(path / storage_file) as bag:
+        assert (bag.description, bag.compression) == (
+            f'sqlite3 file (zstd {mode} compression)', 'zstd')
+    (path / 'metadata.yaml').unlink()
+    with open_bag(path) as bag:
+        assert (bag.description, bag.compression) == (
+            f'rosbag2 directory (sqlite3, 1 file, zstd {mode} compression)', 'zstd')
+        assert [m.data for m in bag.messages()] == [data for _, _, data, _ in rows]
+
+
 def _zeroed(path, data, *, page_header):
     """Zero 512 bytes: the header of the page that holds ``data``, or from 100 bytes before it."""
     content = bytearray(path.read_bytes())

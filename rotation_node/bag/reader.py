@@ -394,10 +394,14 @@ def open_bag(path: Union[str, os.PathLike], *, strict: bool = False) -> InputBag
                 raise BagError(f'{path}: {METADATA_FILE} names storage {layout.storage!r}, '
                                f'but the files hold {", ".join(sorted(set(storages)))}')
             storage = layout.storage or storages[0]
-            compression = 'zstd' if layout.compression_mode else None
+            # Without metadata.yaml, the files say it.
+            mode = layout.compression_mode or (
+                'file' if any(_starts_with(file, ZSTD_MAGIC) for file in layout.files)
+                else _message_compression(opener.sources))
+            compression = 'zstd' if mode else None
             details = [storage, f'{len(layout.files)} file{"s" if len(layout.files) != 1 else ""}']
-            if layout.compression_mode:
-                details.append(f'zstd {layout.compression_mode} compression')
+            if mode:
+                details.append(f'zstd {mode} compression')
             details.extend(_chunk_compression(opener.sources))
             description = f'rosbag2 directory ({", ".join(details)})'
             bag = InputBag(path, description, opener.sources, compression=compression,
@@ -405,13 +409,13 @@ def open_bag(path: Union[str, os.PathLike], *, strict: bool = False) -> InputBag
         else:
             _, storage = opener.open_file(path)
             compressed = os.path.isfile(path) and _starts_with(path, ZSTD_MAGIC)
-            details = ['zstd file compression'] if compressed else []
+            mode = 'file' if compressed else _message_compression(opener.sources)
+            details = [f'zstd {mode} compression'] if mode else []
             details.extend(_chunk_compression(opener.sources))
             description = {'mcap': 'MCAP file', 'sqlite3': 'sqlite3 file',
                            'ROS 1': 'ROS 1 bag'}[storage] + (
                 f' ({", ".join(details)})' if details else '')
-            bag = InputBag(path, description, opener.sources,
-                           compression='zstd' if compressed else None)
+            bag = InputBag(path, description, opener.sources, compression='zstd' if mode else None)
     except BaseException:
         opener.close()
         raise
@@ -425,6 +429,12 @@ def _chunk_compression(sources):
     names = sorted({getattr(source, 'stored_compression', source.compression)
                     for source in sources} - {'none'})
     return [f'{"/".join(names)} chunks'] if names else []
+
+
+def _message_compression(sources):
+    """``'message'`` if a storage file's messages are compressed one by one, else ``''``."""
+    return 'message' if any(getattr(source, 'message_compression', None) for source in sources) \
+        else ''
 
 
 def _starts_with(path, magic):

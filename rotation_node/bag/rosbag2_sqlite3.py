@@ -24,7 +24,7 @@ import apsw
 from rosbags.interfaces import Connection
 from rosbags.rosbag2.errors import ReaderError
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
-from rotation_node.bag.compression import decompressed_message, ZstdError
+from rotation_node.bag.compression import decompressed_message, is_zstd, ZstdError
 from rotation_node.bag.mcap_io import TopicMetadata
 from rotation_node.bag.message_types import message_definition
 from rotation_node.bag.qos import rosbags_qos_yaml
@@ -193,12 +193,22 @@ def _rows_without_topic(reader: Sqlite3Storage, path: str) -> Optional[str]:
     return f'{path}: {rows} no topic (the first: row id {row_id}, topic_id {topic_id!r})'
 
 
+def _message_compression(reader: Sqlite3Storage) -> Optional[str]:
+    """Return ``'zstd'`` if the first message is a zstd frame (rosbag2's ``message`` mode)."""
+    if reader.dbconn is None:
+        return None
+    first, = next(iter(reader.dbconn.execute('SELECT data FROM messages ORDER BY id LIMIT 1')),
+                  (None,))
+    return 'zstd' if isinstance(first, bytes) and is_zstd(first) else None
+
+
 def open_sqlite3_file(path: str, *, shown: Optional[str] = None,
                       strict: bool = False) -> RosbagsInput:
     """
     Open one rosbag2 sqlite3 storage file (named ``shown`` in errors and notes, default ``path``).
 
-    Messages compressed by rosbag2 (``message`` mode) are decompressed.
+    Messages compressed by rosbag2 (``message`` mode) are decompressed (and
+    ``message_compression`` says so, also without ``metadata.yaml``).
     Messages whose ``topic_id`` is not a topic cannot be read: a note
     (``notes``) says how many, or with ``strict`` an error.
 
@@ -219,6 +229,7 @@ def open_sqlite3_file(path: str, *, shown: Optional[str] = None,
                        f'{str(error).replace(path, shown)}') from None
     try:
         lost = _rows_without_topic(reader, shown)
+        first_message_compression = _message_compression(reader)
         if lost is not None and strict:
             raise BagError(f'{lost}; refused (--strict)')
         source = RosbagsInput(shown, reader, (ReaderError, ZstdError), [
@@ -236,6 +247,7 @@ def open_sqlite3_file(path: str, *, shown: Optional[str] = None,
         raise
     if lost is not None:
         source.notes.append(f'{lost}, not read')
+    source.message_compression = first_message_compression
     return source
 
 

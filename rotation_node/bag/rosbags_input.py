@@ -58,6 +58,8 @@ class RosbagsInput:
         self.stored_compression = stored_compression or compression
         #: One line for each thing the user should know (messages that cannot be read).
         self.notes: List[str] = []
+        #: ``'zstd'`` if the messages are compressed one by one (rosbag2's ``message`` mode).
+        self.message_compression: Optional[str] = None
         self._reader, self._errors = reader, errors
         self.topic_metadata: Dict[str, TopicMetadata] = {}
         self.message_counts: Dict[str, int] = {}
