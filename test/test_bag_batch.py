@@ -6,12 +6,14 @@ messages and metadata); a bad bag fails on its own line without stopping the oth
 exit status says whether any failed.
 """
 import os
+import sqlite3
 
 from bag_helpers import imu_messages, serialized_rows, write_rosbag2
 from mcap.reader import make_reader
 import pytest
+from rotation_node.bag import batch
 from rotation_node.bag.batch import (
-    batch_output_path, batch_output_paths, convert_bags, convert_bags_on_dask)
+    batch_output_path, batch_output_paths, convert_bag, convert_bags, convert_bags_on_dask)
 from rotation_node.bag.cli import main
 from rotation_node.bag.convert import convert
 from rotation_node.bag.reader import open_bag
@@ -135,3 +137,65 @@ def test_local_processes_and_dask_give_the_same_results(tmp_path, inputs):
     assert [(r.input_path, r.ok) for r in local] == inputs
     with pytest.raises(BagError, match='jobs must be a positive integer'):
         convert_bags([inputs[0][0]], str(tmp_path / 'b'), PARAMS, jobs=0)
+
+
+@pytest.fixture
+def damaged_in_the_middle(tmp_path, rng):
+    """good1 good2 damaged good3: the damaged one a sqlite3 bag with a TEXT message row."""
+    directory = tmp_path / 'in'
+    directory.mkdir()
+    bags = [(write_rosbag2(directory / name, serialized_rows('/imu', imu_messages(rng, count)),
+                           storage=storage), True)
+            for name, count, storage in [('good1', 40, 'mcap'), ('good2', 50, 'sqlite3'),
+                                         ('damaged', 60, 'sqlite3'), ('good3', 70, 'mcap')]]
+    with sqlite3.connect(directory / 'damaged' / 'damaged.db3') as database:
+        database.execute("UPDATE messages SET data = 'lost' WHERE id = 30")
+    database.close()
+    bags[2] = (bags[2][0], False)
+    return [(str(path), good) for path, good in bags]
+
+
+@pytest.mark.parametrize('jobs', ['1', '2'])
+def test_a_damaged_bag_in_the_middle_stops_nothing(tmp_path, damaged_in_the_middle, capsys,
+                                                   jobs):
+    """Every input gets its line, good bags keep their outputs, the exit status is 1."""
+    inputs = damaged_in_the_middle
+    expected = _expected_outputs(tmp_path, inputs)
+    (tmp_path / 'params.yaml').write_text(PARAMS_YAML)
+    out = tmp_path / 'out'
+    status = main(['convert', *[path for path, _ in inputs], str(out),
+                   '--params', str(tmp_path / 'params.yaml'), '--jobs', jobs])
+    lines = capsys.readouterr().err.splitlines()
+    assert status == 1
+    assert lines[-1] == 'rotation_bag convert: error: 1 of 4 bags failed'
+    assert len(lines) == 5
+    for path, good in inputs:
+        line, = [line for line in lines[:-1] if line.startswith(path)]
+        if not good:
+            assert line == (f'{path}: error: {path}/damaged.db3 is corrupt: messages table, '
+                            'row id 30: data is TEXT, not a BLOB')
+    assert _outputs(out) == expected
+
+
+def test_convert_bag_reports_a_damaged_input(tmp_path, damaged_in_the_middle):
+    """The unit of work of processes and Dask returns a result, it does not raise."""
+    path, _ = damaged_in_the_middle[2]
+    result = convert_bag(path, str(tmp_path / 'damaged.mcap'), PARAMS)
+    assert not result.ok and 'row id 30: data is TEXT, not a BLOB' in result.line
+    assert not os.path.exists(tmp_path / 'damaged.mcap')
+
+
+def test_an_error_of_the_package_surfaces_after_the_other_bags(tmp_path, inputs, monkeypatch):
+    """Not a bad bag but a bug: raised as itself, once every other bag is converted."""
+    def convert_bag_with_a_bug(input_path, *args, **kwargs):
+        if input_path.endswith('day2'):
+            raise KeyError('a programming error')
+        return convert_bag(input_path, *args, **kwargs)
+
+    monkeypatch.setattr(batch, 'convert_bag', convert_bag_with_a_bug)
+    lines = []
+    with pytest.raises(KeyError, match='a programming error'):
+        convert_bags([path for path, _ in inputs], str(tmp_path / 'out'), PARAMS, jobs=1,
+                     on_result=lambda result: lines.append((result.input_path, result.ok)))
+    assert lines == [(path, good and not path.endswith('day2')) for path, good in inputs]
+    assert sorted(os.listdir(tmp_path / 'out')) == ['day1', 'day3']

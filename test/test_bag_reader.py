@@ -334,3 +334,25 @@ def test_play_maps_invalid_topic_names_and_does_not_die(tmp_path, rows):
     assert result.returncode == 0, result.stderr
     assert f"{path}: topic '/imu-raw' is not a valid ROS 2 name; using /imu_raw" in result.stderr
     assert 'Traceback' not in result.stderr and 'Exception' not in result.stderr
+
+
+def test_relative_topic_names_stay_relative(tmp_path, rows, capsys):
+    """``groundtruth`` (evo's example bag) is a name rclpy accepts: kept, outputs beside it."""
+    relative = [('groundtruth' if t == '/imu' else t, *rest) for t, *rest in rows]
+    path = write_rosbag2(tmp_path / 'bag', relative)
+    (tmp_path / 'params.yaml').write_text(PARAMS_YAML)
+    assert _in(tmp_path, ['convert', 'bag', 'out.mcap', '--params', 'params.yaml',
+                          '--topic', 'groundtruth']) == 0
+    lines = capsys.readouterr().err.splitlines()
+    assert not any('not a valid ROS 2 name' in line for line in lines), lines
+    assert 'groundtruth: 120 messages -> groundtruth/euler, groundtruth/matrix: 240 messages' \
+        in lines
+    with open_bag(path) as bag:
+        assert bag.renames == {} and bag.notes == []
+    with open_bag(tmp_path / 'out.mcap') as bag:
+        assert sorted(bag.topics) == ['/joints', 'groundtruth', 'groundtruth/euler',
+                                      'groundtruth/matrix']
+    capsys.readouterr()
+    assert _in(tmp_path, ['plot', 'out.mcap', '--topic', 'groundtruth/euler']) == 0
+    assert capsys.readouterr().err.splitlines() == [
+        'plotted 120 messages of groundtruth/euler to out_groundtruth_euler.png']

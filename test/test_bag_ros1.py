@@ -19,6 +19,7 @@ from rotation_node.bag.convert import convert
 from rotation_node.bag.qos import qos_profiles_from_yaml
 from rotation_node.bag.reader import open_bag
 from rotation_node.bag.ros1_chunks import ChunkedReader
+from rotation_node.errors import BagError
 from rotation_node.parameters import NodeParameters
 from scipy.spatial.transform import Rotation
 
@@ -179,7 +180,40 @@ def _truncate_chunk(path):
     return data
 
 
+def _damage_field_name(name):
+    """Make the name of the last field ``name`` (a chunk info's) not UTF-8."""
+    def damage(path):
+        data, _, _ = _index_data_record(path)
+        field = data.rindex(name + b'=')
+        data[field] = 0xf5
+        return data
+    return damage
+
+
+def _huge_connection_header(path):
+    """Set the header length of the first connection record (the bag's index) to 2**32 - 1."""
+    data, _, _ = _index_data_record(path)
+    field = data.index(b'index_pos=') + len('index_pos=')
+    index_pos, = struct.unpack_from('<Q', data, field)
+    data[index_pos:index_pos + 4] = b'\xff' * 4
+    return data
+
+
+def _chunk_position_past_the_end(path):
+    """Set the last chunk info's chunk position to 2**63 + 5 (a seek Python cannot make)."""
+    data, _, _ = _index_data_record(path)
+    field = data.rindex(b'chunk_pos=') + len('chunk_pos=')
+    data[field:field + 8] = struct.pack('<Q', 2**63 + 5)
+    return data
+
+
 DAMAGES = {
+    'chunk position': (_chunk_position_past_the_end,
+                       f'position {2**63 + 5} is outside the file'),
+    'chunk info field name': (_damage_field_name(b'chunk_pos'),
+                              "failed: 'utf-8' codec can't decode byte 0xf5"),
+    'connection header length': (_huge_connection_header,
+                                 'failed: Bag index looks damaged'),
     'index count': (_damage_index_field('count', 7), 'index data after the chunk at byte'),
     'index version': (_damage_index_field('ver', 2), 'IDXDATA version 2 is not supported'),
     'index offset': (_damage_first_offset, 'The message at offset 5 of the chunk'),
@@ -207,3 +241,46 @@ def test_a_damaged_bag_is_one_line_exit_1_nothing_written(tmp_path, capsys, ros1
     assert status == 1 and len(lines) == 1, lines
     assert lines[0].startswith('rotation_bag convert: error: ') and 'old.bag' in lines[0]
     assert reason in lines[0] and sorted(os.listdir(tmp_path)) == before
+
+
+def test_a_damaged_length_allocates_nothing(tmp_path, ros1_bag):
+    """A record length of 2**32 - 1 is read as the rest of the file, not allocated."""
+    import tracemalloc
+    path, _ = ros1_bag
+    data = _huge_connection_header(path)
+    field = data.index(b'index_pos=') + len('index_pos=')
+    index_pos, = struct.unpack_from('<Q', data, field)
+    path.write_bytes(bytes(data))
+    tracemalloc.start()
+    try:
+        # The failing read starts after the record's length field.
+        with pytest.raises(BagError, match=f'the read at byte {index_pos + 4} failed'):
+            open_bag(path)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 64 * 2**20
+
+
+@pytest.mark.parametrize('compression, description, copied', [
+    ('BZ2', 'ROS 1 bag (bz2 chunks)', 'zstd'),
+    ('LZ4', 'ROS 1 bag (lz4 chunks)', 'lz4'),
+    (None, 'ROS 1 bag', 'none'),
+])
+def test_a_bag_is_described_with_its_own_compression(tmp_path, compression, description,
+                                                     copied):
+    """bz2 is described as bz2 (robot_localization's test bags), its copy gets zstd."""
+    store = get_typestore(Stores.ROS1_NOETIC)
+    path = tmp_path / 'small.bag'
+    writer = Writer(path)
+    if compression:
+        writer.set_compression(Writer.CompressionFormat[compression])
+    with writer:
+        connection = writer.add_connection('/count', 'std_msgs/msg/Int32', typestore=store)
+        for i in range(5):
+            writer.write(connection, (T0 + i) * 10**9,
+                         store.serialize_ros1(store.types['std_msgs/msg/Int32'](i),
+                                              'std_msgs/msg/Int32'))
+    with open_bag(path) as bag:
+        assert (bag.description, bag.compression) == (description, copied)
+        assert len(list(bag.messages())) == 5

@@ -3,10 +3,13 @@ Convert many bags: in parallel processes on this machine, or as tasks on Dask.
 
 One bag is one task (:func:`convert_bag`): it opens its input, converts it
 into its own output and returns a :class:`BagResult`, a failure included, so
-that a bad bag never stops the others. :func:`convert_bags` runs the tasks in
-``jobs`` worker processes (``rotation_bag convert IN1 IN2 ... OUTDIR --jobs
-N``); :func:`convert_bags_on_dask` submits the same tasks to a Dask
-distributed cluster, for fleets that outgrow one machine. The outputs are
+that a bad bag never stops the others. Should a task raise all the same (an
+error in this package, not in a bag), the other bags are still converted, the
+bag gets its line, and the error is raised once every bag is done.
+:func:`convert_bags` runs the tasks in ``jobs`` worker processes
+(``rotation_bag convert IN1 IN2 ... OUTDIR --jobs N``);
+:func:`convert_bags_on_dask` submits the same tasks to a Dask distributed
+cluster, for fleets that outgrow one machine. The outputs are
 named after the inputs (:func:`batch_output_path`).
 """
 from __future__ import annotations
@@ -192,15 +195,18 @@ def convert_bags(input_paths: Sequence[str], output_directory: str, params: Node
         raise BagError(f'jobs must be a positive integer, got {jobs!r}')
     outputs = batch_output_paths(input_paths, output_directory)
     _make_directory(output_directory)
-    on_result = on_result or (lambda result: None)
-    results = []
+    results = _Results(on_result)
     if jobs == 1 or len(input_paths) == 1:
         for input_path, output_path in zip(input_paths, outputs):
-            results.append(convert_bag(input_path, output_path, params, topics=topics,
-                                       overwrite=overwrite, strict=strict,
-                                       compression=compression))
-            on_result(results[-1])
-        return results
+            try:
+                result = convert_bag(input_path, output_path, params, topics=topics,
+                                     overwrite=overwrite, strict=strict,
+                                     compression=compression)
+            except Exception as error:   # noqa: B902  (re-raised once the others are done)
+                results.failed(input_path, output_path, error)
+            else:
+                results.add(result)
+        return results.all()
     # Fresh interpreters ("spawn"): forking a process that runs threads (numba's,
     # the conversion thread pool) can deadlock the child.
     context = multiprocessing.get_context('spawn')
@@ -212,24 +218,25 @@ def convert_bags(input_paths: Sequence[str], output_directory: str, params: Node
                                compression=compression)
                    for input_path, output_path in zip(input_paths, outputs)]
         reported = set()
+        paths = dict(zip(futures, zip(input_paths, outputs)))
 
         def report_completed():
             """Report every bag completed since the last call, in input order."""
             for future in futures:
-                if (future not in reported and future.done() and not future.cancelled()
-                        and future.exception() is None):
+                if future not in reported and future.done() and not future.cancelled():
                     reported.add(future)
-                    results.append(future.result())
-                    on_result(results[-1])
+                    error = future.exception()
+                    if error is None:
+                        results.add(future.result())
+                    else:   # an error of the package or a worker, not a bad bag
+                        results.failed(*paths[future], error)
 
         try:
             pending = set(futures)
             while pending:
-                done, pending = concurrent.futures.wait(
+                _, pending = concurrent.futures.wait(
                     pending, timeout=_POLL_SECONDS,
                     return_when=concurrent.futures.FIRST_COMPLETED)
-                for future in done:
-                    future.result()   # a worker's error (not a bad bag: that is a result)
                 report_completed()
                 raise_if_stopped()
         except BaseException:   # Ctrl-C, SIGTERM, an error: stop the workers too
@@ -239,7 +246,38 @@ def convert_bags(input_paths: Sequence[str], output_directory: str, params: Node
             # A bag a worker completed before it saw SIGTERM is written: it gets its line.
             report_completed()
             raise
-    return results
+    return results.all()
+
+
+class _Results:
+    """
+    The results of a batch as they come, each passed to ``on_result``.
+
+    A task that raised (an error of this package, not a bad bag) gets a
+    failed result; :meth:`all` raises the first such error once every bag is
+    done, so that it surfaces as itself without costing the other bags.
+    """
+
+    def __init__(self, on_result: Optional[Callable[[BagResult], None]]) -> None:
+        self._on_result = on_result or (lambda result: None)
+        self._results: List[BagResult] = []
+        self._error: Optional[BaseException] = None
+
+    def add(self, result: BagResult) -> None:
+        self._results.append(result)
+        self._on_result(result)
+
+    def failed(self, input_path: str, output_path: str, error: BaseException) -> None:
+        self._error = self._error or error
+        self.add(BagResult(os.fspath(input_path), os.fspath(output_path), False,
+                           f'{input_path}: error: {type(error).__name__} in rotation_node '
+                           f'(a bug, raised after the other bags): {error}'))
+
+    def all(self) -> List[BagResult]:  # noqa: A003
+        """Return every result; raise the first error of a task, if one raised."""
+        if self._error is not None:
+            raise self._error
+        return self._results
 
 
 def _init_worker():
@@ -298,20 +336,23 @@ def convert_bags_on_dask(client: Any, input_paths: Sequence[str], output_directo
     from distributed import as_completed
     outputs = batch_output_paths(input_paths, output_directory)
     _make_directory(output_directory)
-    on_result = on_result or (lambda result: None)
     # pure=False: a task is a side effect (a file written), never to be deduplicated.
     futures = client.map(convert_bag, list(input_paths), outputs, params=params, topics=topics,
                          overwrite=overwrite, strict=strict, compression=compression,
                          pure=False)
-    results = []
+    paths = {future.key: (input_path, output_path)
+             for future, input_path, output_path in zip(futures, input_paths, outputs)}
+    results = _Results(on_result)
     try:
         for future in as_completed(futures, timeout=timeout):
-            results.append(future.result())
-            on_result(results[-1])
+            if future.status == 'error':   # an error of the package, not a bad bag
+                results.failed(*paths[future.key], future.exception())
+            else:
+                results.add(future.result())
     except BaseException:
         client.cancel(futures)
         raise
-    return results
+    return results.all()
 
 
 def _make_directory(path):

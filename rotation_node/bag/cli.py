@@ -105,7 +105,8 @@ def _plot(args, ros_args):
     from rotation_node.bag.plot import plot_topic
     from rotation_node.parameters import parameters_from_yaml
     bag_name = os.path.splitext(os.path.basename(os.path.normpath(args.input)))[0]
-    output = args.output or bag_name + args.topic.replace('/', '_') + '.png'
+    # /imu/euler -> <bag>_imu_euler.png; a relative name (groundtruth/euler) alike
+    output = args.output or f"{bag_name}_{args.topic.lstrip('/').replace('/', '_')}.png"
     params = None if args.params is None else parameters_from_yaml(args.params)
     notes: List[str] = []
     count = plot_topic(args.input, args.topic, output, params=params, overwrite=args.force,
@@ -212,7 +213,7 @@ def build_parser() -> argparse.ArgumentParser:
                                                   'ROS 1 .bag...)')
     plot.add_argument('--topic', required=True, metavar='T')
     plot.add_argument('-o', '--output', metavar='PNG',
-                      help='default: <bag name><topic with / as _>.png')
+                      help='default: <bag name>_<topic with / as _>.png')
     plot.add_argument('--params', metavar='FILE',
                       help='parameters the bag was converted with (Euler sequence and units '
                            'for the labels; default: the node defaults)')

@@ -198,7 +198,14 @@ def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *
                             label='converting ') as progress:
             for metadata in [*reader.topic_metadata.values(), *new_topics]:
                 writer.add_topic(metadata)
-            for block in converted_blocks(reader.messages(), converters, routes):
+            converted_input = converted_blocks(reader.messages(), converters, routes)
+            while True:
+                try:
+                    block = next(converted_input, None)
+                except BagError as error:   # a message that cannot be decoded names no file
+                    raise reader.naming_this_bag(error) from None
+                if block is None:
+                    break
                 raise_if_stopped()
                 written: List[tuple] = []
                 add = written.append

@@ -219,7 +219,10 @@ def plot_series(reader: Any, topic: str,
     times, rows = [], []
     for record in records:
         raise_if_stopped()
-        msg = record.message()
+        try:
+            msg = record.message()
+        except BagError as error:   # a message that cannot be decoded names no file
+            raise reader.naming_this_bag(error) from None
         times.append(_time_ns(record, msg))
         rows.append(numbers(msg))
     if not times:

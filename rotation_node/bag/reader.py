@@ -8,7 +8,8 @@ What ``rotation_bag convert``, ``play`` and ``plot`` accept as input:
   outside one;
 - storage ``mcap`` (read with the mcap library, chunk by chunk, the CDR bytes
   passed on unchanged: :class:`rotation_node.bag.mcap_io.BagReader`) and
-  ``sqlite3`` (``.db3``, read with the ``rosbags`` package);
+  ``sqlite3`` (``.db3``, read with the ``rosbags`` package:
+  :mod:`rotation_node.bag.rosbag2_sqlite3`);
 - split bags (several storage files): read as one stream, merged in log-time
   order (ties in file order), so that one pipeline per topic runs across the
   splits and gives what the same messages in one file give;
@@ -29,25 +30,18 @@ be decoded (encoding ``unknown``, a short type name, another serialization)
 are listed and read as stored, so that they can be copied unchanged: only
 decoding their messages fails.
 """
-import contextlib
 import dataclasses
 import heapq
 import operator
 import os
-from pathlib import Path
 import re
-import sqlite3
 import tempfile
 from typing import Dict, Iterable, Iterator, List, Optional, Union
-import urllib.parse
 
 from rotation_node.bag.compression import (
-    decompress_file, decompressed_message, LZ4_MAGIC, stored_name, ZSTD_MAGIC, zstd_prefix,
-    ZstdError)
+    decompress_file, LZ4_MAGIC, stored_name, ZSTD_MAGIC, zstd_prefix, ZstdError)
 from rotation_node.bag.mcap_io import BagMessage, BagReader, checked_topics, TopicMetadata
-from rotation_node.bag.message_types import message_definition
-from rotation_node.bag.qos import rosbags_qos_yaml
-from rotation_node.bag.rosbags_input import RosbagsInput
+from rotation_node.bag.rosbag2_sqlite3 import open_sqlite3_file
 from rotation_node.bag.topic_names import topic_renames
 from rotation_node.errors import BagError
 import yaml
@@ -60,7 +54,6 @@ _SQLITE_MAGIC = b'SQLite format 3\x00'
 _ROS1_MAGIC = re.compile(rb'#ROSBAG V(\d+\.\d+)\n')
 _SNIFF_SIZE = 64
 _STORAGE_SUFFIXES = ('.mcap', '.db3', '.mcap.zstd', '.db3.zstd')
-_ROSBAG2_TABLES = {'topics', 'messages'}
 
 
 def _file_kind(prefix: bytes) -> str:
@@ -83,79 +76,6 @@ def _file_kind(prefix: bytes) -> str:
     if all(c.isprintable() or c in '\t\r\n' for c in text):
         return 'text file'
     return 'binary file of unknown format'
-
-
-def _sqlite_tables(path: str) -> set:
-    """Return the table names of a SQLite database, read-only (the file is never changed)."""
-    uri = f'file:{urllib.parse.quote(os.path.abspath(path))}?mode=ro&immutable=1'
-    try:
-        with contextlib.closing(sqlite3.connect(uri, uri=True)) as database:
-            return {row[0] for row in database.execute(
-                "SELECT name FROM sqlite_master WHERE type = 'table'")}
-    except sqlite3.DatabaseError as error:
-        raise BagError(f'{path}: damaged sqlite3 database: {error}') from None
-
-
-def _with_rosbag2_extension(connections, path):
-    """Give ``(connection, its rosbag2 extension)``: what sqlite3 storage records per topic."""
-    from rosbags.interfaces import ConnectionExtRosbag2
-    for connection in connections:
-        if not isinstance(connection.ext, ConnectionExtRosbag2):   # never from sqlite3 storage
-            raise BagError(f'{path}: topic {connection.topic} has no rosbag2 metadata')
-        yield connection, connection.ext
-
-
-def _sqlite3_file(path):
-    """
-    Open one rosbag2 sqlite3 storage file with ``rosbags``.
-
-    Messages compressed by rosbag2 (``message`` mode) are decompressed.
-
-    Raises
-    ------
-    BagError
-        If the database has no rosbag2 tables or cannot be read.
-
-    """
-    from rosbags.rosbag2.errors import ReaderError
-    from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
-    if not _ROSBAG2_TABLES <= _sqlite_tables(path):
-        raise BagError(f'{path}: sqlite3 database without rosbag2 tables')
-    reader = Sqlite3Reader(Path(path))
-    try:
-        reader.open()
-    except ReaderError as error:
-        raise BagError(f'{path}: cannot read rosbag2 sqlite3 storage: {error}') from None
-    try:
-        return RosbagsInput(path, reader, (ReaderError, ZstdError), [
-            (connection, TopicMetadata(
-                name=connection.topic, type_name=connection.msgtype,
-                offered_qos_profiles=rosbags_qos_yaml(ext.offered_qos_profiles),
-                type_hash=connection.digest, serialization_format=ext.serialization_format,
-                **_definition(connection.msgtype, connection.msgdef)), decompressed_message)
-            for connection, ext in _with_rosbag2_extension(reader.connections, path)])
-    except BaseException:
-        reader.close()
-        raise
-
-
-def _definition(type_name, msgdef):
-    """
-    ``definition`` and ``definition_encoding`` of a topic from a rosbags definition.
-
-    A bag without definitions (sqlite3 before Iron) gets the installed one;
-    if the type is not installed either, the encoding ``unknown`` that rosbag2
-    records then.
-    """
-    from rosbags.interfaces import MessageDefinitionFormat
-    encodings = {MessageDefinitionFormat.MSG: 'ros2msg', MessageDefinitionFormat.IDL: 'ros2idl'}
-    if msgdef.format in encodings:
-        return {'definition': msgdef.data, 'definition_encoding': encodings[msgdef.format]}
-    try:
-        message_definition(type_name)
-    except BagError:
-        return {'definition': '', 'definition_encoding': 'unknown'}
-    return {'definition': None, 'definition_encoding': 'ros2msg'}
 
 
 def _natural_key(name):
@@ -279,6 +199,7 @@ class InputBag:
         if self.recovered is not None:
             self.notes.append(f'{path}: unfinished recording, recovered {self.recovered} messages'
                               + (f' ({note})' if note else ''))
+        self.notes.extend(note for source in sources for note in getattr(source, 'notes', ()))
         self.notes.extend(f'{path}: topic {original!r} is not a valid ROS 2 name; using {new}'
                           for original, new in sorted(self.renames.items()))
 
@@ -294,6 +215,17 @@ class InputBag:
         """
         name, = checked_topics([self.renames.get(name, name)], self.topics, self.path)
         return name
+
+    def naming_this_bag(self, error: BagError) -> BagError:
+        """
+        Return ``error`` naming this bag: a message that cannot be decoded does not know it.
+
+        ``error`` itself if it names the bag (or one of its files) already,
+        else a BagError ``<path>: <error>``.
+        """
+        text = str(error)
+        named = re.search(rf'(^|\s){re.escape(self.path)}(\W|$)', text) is not None
+        return error if named else BagError(f'{self.path}: {text}')
 
     def messages(self, topics: Optional[Iterable[str]] = None) -> Iterator[BagMessage]:
         """
@@ -365,7 +297,7 @@ class _Opener:
         if prefix.startswith(_MCAP_MAGIC):
             return self._add(BagReader(path, strict=self.strict)), 'mcap'
         if prefix.startswith(_SQLITE_MAGIC):
-            return self._add(_sqlite3_file(path)), 'sqlite3'
+            return self._add(open_sqlite3_file(path, shown=shown, strict=self.strict)), 'sqlite3'
         version = _ROS1_MAGIC.match(prefix)
         if version is not None:
             return self._open_ros1(path, shown, version[1].decode()), 'ROS 1'
@@ -462,10 +394,14 @@ def open_bag(path: Union[str, os.PathLike], *, strict: bool = False) -> InputBag
                 raise BagError(f'{path}: {METADATA_FILE} names storage {layout.storage!r}, '
                                f'but the files hold {", ".join(sorted(set(storages)))}')
             storage = layout.storage or storages[0]
-            compression = 'zstd' if layout.compression_mode else None
+            # Without metadata.yaml, the files say it.
+            mode = layout.compression_mode or (
+                'file' if any(_starts_with(file, ZSTD_MAGIC) for file in layout.files)
+                else _message_compression(opener.sources))
+            compression = 'zstd' if mode else None
             details = [storage, f'{len(layout.files)} file{"s" if len(layout.files) != 1 else ""}']
-            if layout.compression_mode:
-                details.append(f'zstd {layout.compression_mode} compression')
+            if mode:
+                details.append(f'zstd {mode} compression')
             details.extend(_chunk_compression(opener.sources))
             description = f'rosbag2 directory ({", ".join(details)})'
             bag = InputBag(path, description, opener.sources, compression=compression,
@@ -473,13 +409,13 @@ def open_bag(path: Union[str, os.PathLike], *, strict: bool = False) -> InputBag
         else:
             _, storage = opener.open_file(path)
             compressed = os.path.isfile(path) and _starts_with(path, ZSTD_MAGIC)
-            details = ['zstd file compression'] if compressed else []
+            mode = 'file' if compressed else _message_compression(opener.sources)
+            details = [f'zstd {mode} compression'] if mode else []
             details.extend(_chunk_compression(opener.sources))
             description = {'mcap': 'MCAP file', 'sqlite3': 'sqlite3 file',
                            'ROS 1': 'ROS 1 bag'}[storage] + (
                 f' ({", ".join(details)})' if details else '')
-            bag = InputBag(path, description, opener.sources,
-                           compression='zstd' if compressed else None)
+            bag = InputBag(path, description, opener.sources, compression='zstd' if mode else None)
     except BaseException:
         opener.close()
         raise
@@ -489,8 +425,16 @@ def open_bag(path: Union[str, os.PathLike], *, strict: bool = False) -> InputBag
 
 def _chunk_compression(sources):
     """``['zstd chunks']`` (or lz4, bz2...) if the storage files compress their chunks."""
-    names = sorted({source.compression for source in sources} - {'none'})
+    # A ROS 1 bag says what it stores (bz2) apart from what its copy gets (zstd).
+    names = sorted({getattr(source, 'stored_compression', source.compression)
+                    for source in sources} - {'none'})
     return [f'{"/".join(names)} chunks'] if names else []
+
+
+def _message_compression(sources):
+    """``'message'`` if a storage file's messages are compressed one by one, else ``''``."""
+    return 'message' if any(getattr(source, 'message_compression', None) for source in sources) \
+        else ''
 
 
 def _starts_with(path, magic):

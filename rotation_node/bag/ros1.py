@@ -77,8 +77,10 @@ def open_ros1_bag(path: Union[str, os.PathLike]) -> RosbagsInput:
     except _FORMAT_ERRORS as error:
         raise BagError(f'{path}: cannot read ROS 1 bag: {error}') from None
     try:
+        compressions = _chunk_compressions(reader)
         return RosbagsInput(path, reader, _FORMAT_ERRORS + (ValueError, IndexError),
-                            _converted_topics(path, reader), _compression(reader))
+                            _converted_topics(path, reader), _output_compression(compressions),
+                            stored_compression='/'.join(sorted(compressions - {'none'})) or 'none')
     except BaseException:
         reader.close()
         raise
@@ -114,9 +116,13 @@ def _converted_topics(path, reader):
             type_hash=None if installed else ros2.hash_rihs01(type_name)), converters[ros1_type]
 
 
-def _compression(reader):
-    """Return the output's chunk compression: lz4 stays lz4, bz2 (not in MCAP) is zstd."""
+def _chunk_compressions(reader):
+    """Return the compressions of the bag's chunks as ROS 1 names them: ``{'bz2', 'none'}``..."""
     names = {decompress: name for name, decompress in ros1_decompressors.items()}
-    compressions = {names.get(chunk.decompressor)
-                    for bag in reader.readers for chunk in bag.chunks.values()}
+    return {names.get(chunk.decompressor, 'unknown')
+            for bag in reader.readers for chunk in bag.chunks.values()}
+
+
+def _output_compression(compressions):
+    """Return the output's chunk compression: lz4 stays lz4, bz2 (not in MCAP) becomes zstd."""
     return 'lz4' if 'lz4' in compressions else 'zstd' if 'bz2' in compressions else 'none'

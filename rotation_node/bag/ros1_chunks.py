@@ -19,9 +19,12 @@ all, as rosbags does. The messages come in the order of rosbags'
 in the ``connections`` asked for; then in the order rosbags indexes them
 (chunk info records in file order, index entries in record order). A
 damaged bag raises :class:`rosbags.rosbag1.ReaderError` when the damage is
-reached.
+reached, naming the byte where it is; whatever a damaged length field says, a
+read never asks for more than the file holds (:class:`BoundedReads`).
 """
+import ast
 from collections import Counter, OrderedDict
+import io
 from io import BytesIO
 import os
 from pathlib import Path
@@ -43,6 +46,62 @@ Message = Tuple[Connection, int, bytes]
 CHUNK_BYTES_HELD = 64 * 2**20
 # What the chunk decompressors (bz2, lz4) raise for data they cannot decompress.
 _DECOMPRESSION_ERRORS = (OSError, ValueError, EOFError, RuntimeError)
+
+
+class BoundedReads(io.BufferedReader):
+    """
+    A file whose reads never ask for more bytes than remain in it.
+
+    rosbags reads a record as ``read(length)`` with the record's own length
+    field: a damaged length (up to 4 GiB) would allocate that much before the
+    short read is noticed. Here it gets the rest of the file, and rosbags
+    reports the short read. ``read_at`` is where the last read started (for
+    the error line), also once the file is closed.
+    """
+
+    def __init__(self, path: 'os.PathLike[str] | str') -> None:
+        super().__init__(io.FileIO(path, 'rb'))
+        self._size = os.fstat(self.fileno()).st_size
+        self.read_at = 0
+
+    def read(self, size: Optional[int] = -1) -> bytes:
+        """Read at most ``size`` bytes, and never more than remain in the file."""
+        self.read_at = self.tell()
+        if size is not None and size > 0:
+            size = max(0, min(size, self._size - self.read_at))
+        return super().read(size)
+
+    def seek(self, offset: int, whence: int = os.SEEK_SET) -> int:
+        """
+        Move to a position in the file, never past its end.
+
+        Raises
+        ------
+        rosbags.rosbag1.ReaderError
+            If the position (a damaged record position or size) is outside the file.
+
+        """
+        if whence in (os.SEEK_SET, os.SEEK_CUR):
+            target = offset + (self.tell() if whence == os.SEEK_CUR else 0)
+            if not 0 <= target <= self._size:
+                raise ReaderError(f'position {target} is outside the file ({self._size} '
+                                  'bytes)')
+        return super().seek(offset, whence)
+
+
+class _BoundedPath:
+    """What rosbags' ``Reader.open`` calls ``open('rb')`` on: gives a :class:`BoundedReads`."""
+
+    def __init__(self, path: 'os.PathLike[str]') -> None:
+        self.path = path
+        self.file: Optional[BoundedReads] = None
+
+    def open(self, mode: str = 'rb') -> BoundedReads:  # noqa: A003  (pathlib's name)
+        self.file = BoundedReads(self.path)
+        return self.file
+
+    def __str__(self) -> str:
+        return str(self.path)
 
 
 def overlapping_chunk_groups(chunk_infos: Sequence[ChunkInfo]) -> List[List[int]]:
@@ -88,8 +147,27 @@ class ChunkedReader(Reader):
     """
 
     def open(self) -> None:  # noqa: A003  (rosbags names it so)
-        """Open the bag and read its header, connections, chunk infos and chunk headers."""
-        super().open()   # read_index_data below skips every index data record
+        """
+        Open the bag and read its header, connections, chunk infos and chunk headers.
+
+        Raises
+        ------
+        rosbags.rosbag1.ReaderError
+            If they are damaged, naming the byte where the read that failed started.
+
+        """
+        path = self.path
+        bounded = _BoundedPath(Path(str(path)))
+        # rosbags opens self.path: its reads are bounded by the file.
+        self.path = bounded  # type: ignore[assignment]
+        try:
+            super().open()   # read_index_data below skips every index data record
+        except (ReaderError, UnicodeDecodeError) as error:   # a record's field name not UTF-8
+            where = bounded.file.read_at if bounded.file is not None else 0
+            reason = error.args[0] if isinstance(error, ReaderError) and error.args else error
+            raise ReaderError(f'the read at byte {where} failed: {_unwrapped(reason)}') from None
+        finally:
+            self.path = path
         counts: Counter = Counter()
         for info in self.chunk_infos:
             counts.update(info.connection_counts)
@@ -180,9 +258,9 @@ class ChunkedReader(Reader):
         info = self.chunk_infos[i]
         chunk = self.chunks[info.pos]
         bio = self._file()
-        bio.seek(chunk.datapos + chunk.datasize)
         records = []
         try:
+            bio.seek(chunk.datapos + chunk.datasize)
             for _ in range(len(info.connection_counts)):
                 header = Header.read(bio, RecordType.IDXDATA)
                 version = header.get_uint32('ver')
@@ -204,7 +282,7 @@ class ChunkedReader(Reader):
                     raise ReaderError(f'connection {connection}: a time outside the chunk '
                                       "info's time range.")
                 records.append((connection, times, entries['offset']))
-        except ReaderError as error:
+        except (ReaderError, UnicodeDecodeError) as error:
             raise ReaderError(f'The index data after the chunk at byte {info.pos} cannot be '
                               f'read: {error}') from None
         return records
@@ -228,8 +306,11 @@ class ChunkedReader(Reader):
         pos = self.chunk_infos[i].pos
         chunk = self.chunks[pos]
         bio = self._file()
-        bio.seek(chunk.datapos)
-        data = read_bytes(bio, chunk.datasize)
+        try:
+            bio.seek(chunk.datapos)
+            data = read_bytes(bio, chunk.datasize)
+        except ReaderError as error:
+            raise ReaderError(f'The chunk at byte {pos} is cut short: {error}') from None
         try:
             return chunk.decompressor(data)
         except _DECOMPRESSION_ERRORS as error:
@@ -272,7 +353,7 @@ class ChunkedReader(Reader):
                 header, data = _message_record(stream)
                 if header.get_uint32('conn') != connection or header.get_time('time') != time:
                     raise ReaderError('it is not the message its index names.')
-            except ReaderError as error:
+            except (ReaderError, UnicodeDecodeError) as error:
                 raise ReaderError(f'The message at offset {offset} of the chunk at byte '
                                   f'{self.chunk_infos[i].pos} cannot be read: {error}') from None
             unread[i] -= 1
@@ -280,6 +361,20 @@ class ChunkedReader(Reader):
                 held_bytes -= held.pop(i)[1]
                 current, stream = -1, BytesIO()
             yield by_id[connection], time, data
+
+
+def _unwrapped(reason: object) -> object:
+    """Return rosbags' ``Bag index looks damaged: ('...',)`` without the tuple around it."""
+    prefix = 'Bag index looks damaged: '
+    text = str(reason)
+    if text.startswith(prefix):
+        try:
+            inner = ast.literal_eval(text[len(prefix):])
+        except (ValueError, SyntaxError):   # not the tuple rosbags writes: as it is
+            return reason
+        if isinstance(inner, tuple):
+            return prefix + ' '.join(map(str, inner))
+    return reason
 
 
 def _message_record(stream):

@@ -21,7 +21,7 @@ class RosbagsInput:
 
     The interface of :class:`rotation_node.bag.mcap_io.BagReader`:
     ``topics``, ``topic_metadata``, ``message_counts``, ``compression``,
-    ``recovered`` (always None) and ``messages``.
+    ``recovered`` (always None) and ``messages``; and ``notes``.
 
     Parameters
     ----------
@@ -35,7 +35,11 @@ class RosbagsInput:
         Every connection of the bag with the metadata of its topic and the
         function that turns its stored data into CDR bytes.
     compression : str, optional
-        The bag's chunk compression as MCAP names it.
+        The chunk compression its copy gets, as MCAP names it (``'zstd'``,
+        ``'lz4'``, ``'none'``).
+    stored_compression : str, optional
+        The compression of the bag itself, as its format names it (a ROS 1
+        bag's ``'bz2'``); default ``compression``.
 
     Raises
     ------
@@ -46,10 +50,16 @@ class RosbagsInput:
 
     def __init__(self, path: str, reader: Any, errors: tuple,
                  topics: Iterable[Tuple[Any, TopicMetadata, Callable[[bytes], bytes]]],
-                 compression: str = 'none') -> None:
+                 compression: str = 'none', *,
+                 stored_compression: Optional[str] = None) -> None:
         self.path = path
         self.recovered: Optional[int] = None
         self.compression = compression
+        self.stored_compression = stored_compression or compression
+        #: One line for each thing the user should know (messages that cannot be read).
+        self.notes: List[str] = []
+        #: ``'zstd'`` if the messages are compressed one by one (rosbag2's ``message`` mode).
+        self.message_compression: Optional[str] = None
         self._reader, self._errors = reader, errors
         self.topic_metadata: Dict[str, TopicMetadata] = {}
         self.message_counts: Dict[str, int] = {}
@@ -78,13 +88,23 @@ class RosbagsInput:
         return self._messages(connections) if connections else iter(())
 
     def _messages(self, connections):
-        type_names, to_cdr = self.topics, self._to_cdr
-        try:
-            for connection, time_ns, data in self._reader.messages(connections):
-                yield BagMessage(connection.topic, type_names[connection.topic],
-                                 to_cdr[connection.id](data), time_ns, time_ns)
-        except self._errors as error:
-            raise BagError(f'{self.path} is corrupt: {type(error).__name__}: {error}') from None
+        type_names, to_cdr, errors = self.topics, self._to_cdr, self._errors
+        stored = self._reader.messages(connections)
+        while True:
+            try:
+                connection, time_ns, data = next(stored)
+            except StopIteration:
+                return
+            except errors as error:   # the reader names where
+                raise BagError(f'{self.path} is corrupt: {error}') from None
+            try:
+                cdr = to_cdr[connection.id](data)
+            except errors as error:
+                raise BagError(f'{self.path} is corrupt: the message of {connection.topic} at '
+                               f'log time {time_ns} ns cannot be read: '
+                               f'{type(error).__name__}: {error}') from None
+            yield BagMessage(connection.topic, type_names[connection.topic], cdr, time_ns,
+                             time_ns)
 
     def close(self) -> None:
         """Close the reader."""
