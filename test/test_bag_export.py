@@ -191,7 +191,7 @@ def test_parquet_without_pyarrow_is_one_line(imu_bag, tmp_path, capsys, monkeypa
 
 
 def test_parquet_holds_the_csvs_values(imu_bag, tmp_path):
-    pq = pytest.importorskip('pyarrow.parquet', reason='Parquet output needs pyarrow')
+    import pyarrow.parquet as pq   # in requirements.txt: the test suite has it
     path, _ = imu_bag
     params = params_file(tmp_path, input_type='imu', outputs=['quaternion', 'euler_stddev'])
     for name in ('imu.csv', 'imu.parquet'):
