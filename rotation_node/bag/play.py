@@ -182,7 +182,8 @@ def play(path: StrPath, *, rate: float = 1.0, topics: Optional[Sequence[str]] = 
         Refuse an unfinished recording instead of playing what it holds.
     report : callable, optional
         ``report(line)`` receives the input's notes (an unfinished recording,
-        a renamed topic, topics left out) before anything is published.
+        a renamed topic, topics left out) before anything is published, then
+        what reading found could not be read.
 
     Returns
     -------
@@ -207,6 +208,7 @@ def play(path: StrPath, *, rate: float = 1.0, topics: Optional[Sequence[str]] = 
             for note in reader.notes:
                 report(note)
         topics = _playable_topics(reader, topics, report)
+        noted = len(reader.notes)
         rclpy.init(args=ros_args, signal_handler_options=SignalHandlerOptions.NO)
         try:
             node = rclpy.create_node(NODE_NAME)
@@ -223,6 +225,9 @@ def play(path: StrPath, *, rate: float = 1.0, topics: Optional[Sequence[str]] = 
                         break
                 if not stop.is_set():
                     _wait_for_acks(publishers)
+            if report is not None:
+                for note in reader.notes[noted:]:   # what reading found could not be read
+                    report(note)
             node.get_logger().info(f'published {count} messages from {path}')
             node.destroy_node()
             return count
