@@ -510,7 +510,9 @@ class _LinearScan:
         pending = None   # [offset, {channel: read}, damage, {channel: indexed}] of the last chunk
         try:
             for offset, opcode, length in self._file.records(_MAGIC_SIZE, self._end):
-                if opcode == Opcode.MESSAGE_INDEX and pending is not None:
+                if opcode == Opcode.MESSAGE_INDEX:
+                    if pending is None:   # the chunk it indexes is not where it should be
+                        pending = [offset, {}, 'message index of a missing chunk', None]
                     self._count_index(pending, offset, length)
                     continue
                 if pending is not None:
