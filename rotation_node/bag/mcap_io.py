@@ -824,6 +824,9 @@ class BagReader:
             self.recovered = total
         self._scan_end = end
         self.compression = _compression_name(scan.compressions)
+        if summary is not None and summary.damage is None:   # channels without messages too
+            scan.schemas = {**summary.schemas, **scan.schemas}
+            scan.channels = {**summary.channels, **scan.channels}
         self._set_topics(scan.channels.values(), scan.schemas, counts)
         self._report(scan.losses, counts, None if summary is None
                      else _summary_counts(summary.statistics), None)
