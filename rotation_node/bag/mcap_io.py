@@ -827,9 +827,15 @@ class BagReader:
         if summary is not None and summary.damage is None:   # channels without messages too
             scan.schemas = {**summary.schemas, **scan.schemas}
             scan.channels = {**summary.channels, **scan.channels}
-        self._set_topics(scan.channels.values(), scan.schemas, counts)
-        self._report(scan.losses, counts, None if summary is None
+        read = dict(counts)
+        self._channel_topics = {channel.id: channel.topic for channel in scan.channels.values()}
+        self._report(scan.losses, read, None if summary is None
                      else _summary_counts(summary.statistics), None)
+        if not unfinished:   # counted as the file holds them, as through an index
+            for loss in scan.losses:
+                for channel_id, count in (loss.counts or {}).items():
+                    counts[channel_id] = counts.get(channel_id, 0) + count
+        self._set_topics(scan.channels.values(), scan.schemas, counts)
 
     def _report(self, losses, read, counted, wanted):
         """
