@@ -772,7 +772,8 @@ class BagReader:
             for counts in self._indexed.values():
                 for channel_id, count in counts.items():
                     totals[channel_id] = totals.get(channel_id, 0) + count
-            if counted is not None and counted != {c: n for c, n in totals.items() if n}:
+            if counted is not None and ({c: n for c, n in counted.items() if n}
+                                        != {c: n for c, n in totals.items() if n}):
                 return False   # messages outside the indexed chunks
             counted = totals
         self._counted = counted
