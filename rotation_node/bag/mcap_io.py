@@ -404,27 +404,29 @@ def chunk_records(data: bytes) -> ChunkRecords:
     definitions: List[Tuple[int, int, int]] = []
     add = offsets.append
     unpack = _RECORD_PREFIX.unpack_from
+    prefix, message, schema, channel = (
+        _RECORD_PREFIX.size, int(Opcode.MESSAGE), int(Opcode.SCHEMA), int(Opcode.CHANNEL))
     position, end, damage = 0, len(data), None
     while position < end:
-        if position + _RECORD_PREFIX.size > end:
+        if position + prefix > end:
             damage = f'record at {position} of a chunk of {end} bytes is cut short'
             break
         opcode, length = unpack(data, position)
-        if opcode == 0:
+        following = position + prefix + length
+        if opcode == message and length >= MESSAGE_FIELDS and following <= end:
+            add(position)
+        elif opcode == 0:
             damage = f'record of opcode 0 (zeroed bytes?) at {position} of the chunk'
             break
-        if length > end - position - _RECORD_PREFIX.size:
-            damage = (f'record at {position} of a chunk of {end} bytes ends at '
-                      f'{position + _RECORD_PREFIX.size + length}')
+        elif following > end:
+            damage = f'record at {position} of a chunk of {end} bytes ends at {following}'
             break
-        if opcode == Opcode.MESSAGE:
-            if length < MESSAGE_FIELDS:
-                damage = f'message record at {position} of the chunk is {length} bytes'
-                break
-            add(position)
-        elif opcode == Opcode.SCHEMA or opcode == Opcode.CHANNEL:
+        elif opcode == message:
+            damage = f'message record at {position} of the chunk is {length} bytes'
+            break
+        elif opcode == schema or opcode == channel:
             definitions.append((position, opcode, length))
-        position += _RECORD_PREFIX.size + length
+        position = following
     starts = np.array(offsets, np.int64)
     raw = np.frombuffer(data, np.uint8)
     headers = raw[starts[:, None] + _HEADER_BYTES].view(MESSAGE_HEADER)[:, 0]
@@ -967,11 +969,10 @@ class BagReader:
         chunk_indexes = self._summary_section.chunk_indexes
         chunks = _chunks_in_order(chunk_indexes)
         if chunks is None:
-            messages = self._merged(chunk_indexes, wanted_ids, losses, read)
+            yield from self._merged(chunk_indexes, wanted_ids, losses, read)
         else:
-            messages = (message for index in chunks
-                        for message in self._chunk_messages(index, wanted_ids, losses, read))
-        yield from messages
+            for index in chunks:
+                yield from self._chunk_messages(index, wanted_ids, losses, read)
         self._report(losses, read, {channel_id: count for channel_id, count
                                     in self._counted.items() if channel_id in wanted}, wanted)
 
