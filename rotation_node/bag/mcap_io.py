@@ -72,6 +72,9 @@ _MESSAGE_INDEX_ENTRY = 16                      # log time, offset
 _DECOMPRESS_PIECE = 1 << 24
 _SUMMARY_RECORDS = {Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channel,
                     Opcode.CHUNK_INDEX: ChunkIndex, Opcode.STATISTICS: Statistics}
+# Records that belong in the summary section only.
+_SUMMARY_ONLY = (Opcode.CHUNK_INDEX, Opcode.ATTACHMENT_INDEX, Opcode.METADATA_INDEX,
+                 Opcode.STATISTICS, Opcode.SUMMARY_OFFSET)
 _LOSSES_SHOWN = 3   # places named in the loss note
 _HEADER_BYTES = np.arange(MESSAGE_HEADER.itemsize)
 _ZSTD_MAGIC = np.frombuffer(ZSTD_MAGIC, np.uint8)
@@ -527,6 +530,9 @@ class _LinearScan:
                     yield from self._chunk(offset, length, pending)
                 elif opcode in (Opcode.MESSAGE, Opcode.SCHEMA, Opcode.CHANNEL):
                     yield from self._record(offset, opcode, length)
+                elif opcode in _SUMMARY_ONLY:   # what it replaced is lost
+                    self.losses.append(_Loss(offset, f'{Opcode(opcode).name.lower()} record '
+                                                     'out of place (in the data section)', None))
         except _Damage as damage:
             if not self._cut_ok:
                 self.losses.append(_Loss(None, f'{damage}; nothing after it could be read',
