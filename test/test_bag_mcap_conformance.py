@@ -88,7 +88,7 @@ def _write(rows, *, chunking='zstd', index_types=IndexType.ALL, crcs=True, chunk
 
 
 def _expected(rows):
-    """The rows as the reader must return them: log-time order, ties in write order."""
+    """Return the rows as the reader must return them: log-time order, ties in write order."""
     return sorted(rows, key=lambda row: row[1])
 
 
@@ -151,7 +151,7 @@ def _records(data, start=8):
 
 
 def _padded(data, extra=b'\xa5' * 5):
-    """The file with bytes added to the end of every record (not Message records)."""
+    """Return the file with bytes added to the end of every record (not Message records)."""
     out = bytearray(data[:8])
     for offset, opcode, length in _records(data):
         body = data[offset + 9:offset + 9 + length]
@@ -224,8 +224,8 @@ def _note_counts(note):
 @pytest.mark.parametrize('chunking, crcs', [('none', True), ('none', False), ('lz4', True),
                                             ('zstd', True)])
 @pytest.mark.parametrize('zeroed', [64, 4096])
-def test_zeroed_bytes_in_a_chunk_are_a_note_or_with_strict_an_error(tmp_path, chunking, crcs,
-                                                                     zeroed):
+def test_zeroed_bytes_in_a_chunk_are_a_note_or_with_strict_an_error(
+        tmp_path, chunking, crcs, zeroed):
     """The usual damage after a power loss: what is lost is counted, by topic, with its chunk."""
     rows = _rows(np.random.default_rng(6), 300)
     data = bytearray(_write(rows, chunking=chunking, crcs=crcs))

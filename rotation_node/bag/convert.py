@@ -134,7 +134,8 @@ def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *
     progress_stream : file, optional
         Where to draw the progress bar (only if it is a terminal); stderr by default.
     strict : bool, optional
-        Refuse an unfinished recording instead of converting what it holds.
+        Refuse an unfinished recording or a damaged MCAP file instead of
+        converting what it holds.
     report : callable, optional
         ``report(line)`` receives what the input is (``<path>: rosbag2
         directory (mcap, 3 files), 5000 messages``) and its notes (an

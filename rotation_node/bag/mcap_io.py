@@ -32,7 +32,7 @@ import os
 import struct
 from typing import (
     Any, Callable, Collection, Dict, Iterable, Iterator, List, NamedTuple, Optional, Tuple,
-    TYPE_CHECKING)
+    TYPE_CHECKING, Union)
 import zlib
 
 import lz4.frame
@@ -322,13 +322,13 @@ def _unlz4(stored, size, offset):
     return b''.join(pieces)
 
 
-def chunk_data(body: bytes, offset: int = 0) -> tuple:
+def chunk_data(body: Union[bytes, memoryview], offset: int = 0) -> tuple:
     """
     Return the compression and the uncompressed records of a Chunk record.
 
     Parameters
     ----------
-    body : bytes
+    body : bytes or memoryview
         The record after its opcode and length.
     offset : int
         Where the record is in its file (for the error).
@@ -837,7 +837,8 @@ class BagReader:
             scan.schemas = {**summary.schemas, **scan.schemas}
             scan.channels = {**summary.channels, **scan.channels}
         read = dict(counts)
-        self._channel_topics = {channel.id: channel.topic for channel in scan.channels.values()}
+        self._channel_topics: Dict[int, str] = {
+            channel.id: channel.topic for channel in scan.channels.values()}
         self._report(scan.losses, read, None if summary is None
                      else _summary_counts(summary.statistics), None)
         if not unfinished:   # counted as the file holds them, as through an index
@@ -890,7 +891,7 @@ class BagReader:
         self.topic_metadata: Dict[str, TopicMetadata] = {}
         self.message_counts: Dict[str, int] = {}
         self._type_names: Dict[int, str] = {}
-        self._channel_topics: Dict[int, str] = {}
+        self._channel_topics = {}
         self._channels: Dict[int, Channel] = {}
         for channel in channels:
             metadata = self._topic_metadata(channel, schemas.get(channel.schema_id))

@@ -179,7 +179,8 @@ def play(path: StrPath, *, rate: float = 1.0, topics: Optional[Sequence[str]] = 
     ros_args : list of str, optional
         Command line passed to ``rclpy.init`` (``--ros-args ...``).
     strict : bool, optional
-        Refuse an unfinished recording instead of playing what it holds.
+        Refuse an unfinished recording or a damaged MCAP file instead of
+        playing what it holds.
     report : callable, optional
         ``report(line)`` receives the input's notes (an unfinished recording,
         a renamed topic, topics left out) before anything is published, then

@@ -153,7 +153,8 @@ def plot_topic(bag_path: StrPath, topic: str, output_path: StrPath, *,
     overwrite : bool, optional
         Replace an existing ``output_path``.
     strict : bool, optional
-        Refuse an unfinished recording instead of plotting what it holds.
+        Refuse an unfinished recording or a damaged MCAP file instead of
+        plotting what it holds.
     report : callable, optional
         ``report(line)`` receives the input's notes (an unfinished recording,
         a renamed topic), then what reading found could not be read.
