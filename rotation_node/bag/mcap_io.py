@@ -65,6 +65,7 @@ _FOOTER = struct.Struct('<BQQQI')
 # Chunk fields before the compression name: message start and end time,
 # uncompressed size, uncompressed CRC, length of the compression name.
 _CHUNK_FIELDS = struct.Struct('<QQQII')
+_MESSAGE_FIELDS = struct.Struct('<HIQQ')       # channel id, sequence, log and publish time
 _MESSAGE_INDEX_FIELDS = struct.Struct('<HI')   # channel id, length of the entries
 _MESSAGE_INDEX_ENTRY = 16                      # log time, offset
 # Chunks are decompressed in pieces of at most this size, checked against the
@@ -510,6 +511,8 @@ class _LinearScan:
         self.channels: Dict[int, Channel] = {}
         self.losses: List[_Loss] = []
         self.compressions: set = set()
+        # {channel id: [offset of the first, number]} of messages on channels never defined
+        self._orphans: Dict[int, List[int]] = {}
 
     def __iter__(self):
         pending = None   # [offset, {channel: read}, damage, {channel: indexed}] of the last chunk
@@ -539,6 +542,10 @@ class _LinearScan:
                                          None))
         if pending is not None:
             self._settle(pending)
+        self.losses.extend(
+            _Loss(offset, f'messages on channel {channel_id}, which has no Channel record',
+                  {channel_id: count})
+            for channel_id, (offset, count) in sorted(self._orphans.items()))
 
     def _define(self, record):
         if isinstance(record, Schema):
@@ -548,21 +555,22 @@ class _LinearScan:
 
     def _record(self, offset, opcode, length):
         body = self._file.read(offset + _RECORD_PREFIX.size, length, 'record')
-        try:
-            record = _parsed({Opcode.MESSAGE: Message, Opcode.SCHEMA: Schema,
-                              Opcode.CHANNEL: Channel}[opcode], body, offset)
-        except _Damage as damage:
-            self.losses.append(_Loss(offset, damage.what, {} if opcode != Opcode.MESSAGE
-                                     else None))
+        if opcode != Opcode.MESSAGE:
+            try:
+                self._define(_parsed(Schema if opcode == Opcode.SCHEMA else Channel, body,
+                                     offset))
+            except _Damage as damage:   # its messages will be on an unknown channel
+                self.losses.append(_Loss(offset, damage.what, {}))
             return
-        if not isinstance(record, Message):
-            self._define(record)
-        elif record.channel_id in self.channels:
-            yield (self.channels[record.channel_id], record.log_time, record.publish_time,
-                   record.data)
+        if length < MESSAGE_FIELDS:
+            self.losses.append(_Loss(offset, f'message record of {length} bytes', None))
+            return
+        channel_id, _, log_time, publish_time = _MESSAGE_FIELDS.unpack_from(body)
+        channel = self.channels.get(channel_id)
+        if channel is None:
+            self._orphans.setdefault(channel_id, [offset, 0])[1] += 1
         else:
-            self.losses.append(_Loss(offset, f'message on channel {record.channel_id}, which '
-                                             'has no Channel record', {record.channel_id: 1}))
+            yield channel, log_time, publish_time, body[MESSAGE_FIELDS:]
 
     def _chunk(self, offset, length, pending):
         body = self._file.read(offset + _RECORD_PREFIX.size, length, 'chunk')
