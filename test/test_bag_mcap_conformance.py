@@ -338,3 +338,17 @@ def test_lengths_past_the_end_never_allocate_and_are_said(tmp_path):
         kind, line = strict[name]
         assert kind == 'BagError' and line.startswith(f'{path}: ') and '\n' not in line
         assert ' at offset ' in line and line.endswith('refused (--strict)'), (name, line)
+
+
+def test_a_recording_cut_inside_an_uncompressed_chunk_keeps_its_complete_messages(tmp_path):
+    """A writer that writes a chunk as it fills it, killed: the messages before the cut."""
+    rows = _rows(np.random.default_rng(9), 60)
+    data = _write(rows, chunking='none', chunk_size=10**6)   # one chunk
+    path = tmp_path / 'cut.mcap'
+    path.write_bytes(data[:data.index(rows[40][3]) + 2])   # inside the 41st message
+    with pytest.raises(BagError, match='unfinished recording'):
+        BagReader(path, strict=True)
+    with BagReader(path) as reader:
+        assert reader.recovered == 40 and reader.notes == []
+        assert [(m.topic, m.log_time_ns, m.publish_time_ns, m.data)
+                for m in reader.messages()] == _expected(rows[:40])

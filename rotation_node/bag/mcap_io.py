@@ -540,6 +540,8 @@ class _LinearScan:
             if not self._cut_ok:
                 self.losses.append(_Loss(None, f'{damage}; nothing after it could be read',
                                          None))
+            elif pending is None:   # where the writer stopped: perhaps inside a chunk
+                yield from self._cut_chunk(damage.offset)
         if pending is not None:
             self._settle(pending)
         self.losses.extend(
@@ -580,6 +582,21 @@ class _LinearScan:
             pending[2] = damage.what
             return
         self.compressions.add(compression or 'none')
+        yield from self._chunk_messages(data, offset, pending)
+
+    def _cut_chunk(self, offset):
+        """Yield the complete messages of an uncompressed chunk cut short by the file's end."""
+        if self._file.size - offset < _RECORD_PREFIX.size + _CHUNK_FIELDS.size:
+            return
+        body = self._file.read(offset, self._file.size - offset, 'chunk')
+        start = _RECORD_PREFIX.size + _CHUNK_FIELDS.size
+        if (body[0] != Opcode.CHUNK or _CHUNK_FIELDS.unpack_from(body, _RECORD_PREFIX.size)[-1]
+                or len(body) < start + 8):
+            return   # not a chunk, or a compressed one: nothing can be read of a part
+        yield from self._chunk_messages(body[start + 8:], offset, [offset, {}, None, None])
+
+    def _chunk_messages(self, data, offset, pending):
+        """Yield the messages of a chunk's records; note its schemas, channels and damage."""
         records = chunk_records(data)
         pending[2] = records.damage
         for position, opcode, record_length in records.definitions:
