@@ -293,9 +293,6 @@ def _unzstd(stored, size, offset):
                                           'bytes it states')
     except zstandard.ZstdError as error:
         raise _Damage(offset, f'chunk that does not decompress (zstd: {error})') from None
-    if total != size:
-        raise _Damage(offset, f'chunk that decompresses to {total} bytes, not the {size} it '
-                              'states')
     return pieces[0] if len(pieces) == 1 else b''.join(pieces)
 
 
@@ -317,9 +314,8 @@ def _unlz4(stored, size, offset):
                                       'bytes it states')
     except RuntimeError as error:   # lz4.frame's error for data that is not a valid frame
         raise _Damage(offset, f'chunk that does not decompress (lz4: {error})') from None
-    if total != size or not decompressor.eof:
-        raise _Damage(offset, f'chunk that decompresses to {total} bytes, not the {size} it '
-                              'states')
+    if not decompressor.eof:
+        raise _Damage(offset, 'chunk whose lz4 frame is cut short')
     return b''.join(pieces)
 
 
@@ -375,6 +371,9 @@ def chunk_data(body: Union[bytes, memoryview], offset: int = 0) -> tuple:
     if crc != 0 and zlib.crc32(data) != crc:
         raise _Damage(offset, f'chunk that fails its CRC (stored {crc:#010x}, computed '
                               f'{zlib.crc32(data):#010x})')
+    if compression and len(data) != size and crc == 0:   # (a CRC vouches for the data)
+        raise _Damage(offset, f'chunk that decompresses to {len(data)} bytes, not the {size} '
+                              'it states')
     return compression.decode(), data
 
 
@@ -444,6 +443,9 @@ class _Loss:
     offset: Optional[int]    # of the chunk or record; None: not in any chunk the index lists
     what: str
     counts: Optional[Dict[int, int]]   # {channel id: messages lost}; None if unknown
+    #: Only fewer messages than the message index that follows the chunk lists
+    #: (which a misplaced chunk also gives): no loss if the statistics agree.
+    index_only: bool = False
 
 
 def _summary_counts(statistics):
@@ -503,12 +505,15 @@ class _LinearScan:
     that is where the writer stopped; otherwise it is a loss too.
     """
 
-    def __init__(self, file, end, cut_ok):
+    def __init__(self, file, end, cut_ok, summary=None):
         self._file = file
         self._end = end
         self._cut_ok = cut_ok
-        self.schemas: Dict[int, Schema] = {}
-        self.channels: Dict[int, Channel] = {}
+        # A readable summary's schemas and channels are known from the start (a chunk
+        # moved before the one defining its channels is read too).
+        known = summary is not None and summary.damage is None
+        self.schemas: Dict[int, Schema] = dict(summary.schemas) if known else {}
+        self.channels: Dict[int, Channel] = dict(summary.channels) if known else {}
         self.losses: List[_Loss] = []
         self.compressions: set = set()
         # {channel id: [offset of the first, number]} of messages on channels never defined
@@ -561,8 +566,8 @@ class _LinearScan:
             try:
                 self._define(_parsed(Schema if opcode == Opcode.SCHEMA else Channel, body,
                                      offset))
-            except _Damage as damage:   # its messages will be on an unknown channel
-                self.losses.append(_Loss(offset, damage.what, {}))
+            except _Damage:   # its messages are on an unknown channel: lost, counted there
+                pass
             return
         if length < MESSAGE_FIELDS:
             self.losses.append(_Loss(offset, f'message record of {length} bytes', None))
@@ -640,7 +645,7 @@ class _LinearScan:
                 if count > read.get(channel, 0)}
         if damage is not None or lost:
             self.losses.append(_Loss(offset, damage or 'fewer messages than its message index '
-                                                       'lists', lost))
+                                                       'lists', lost, index_only=damage is None))
 
 
 def _message_index_count(body, offset):
@@ -794,6 +799,11 @@ class BagReader:
                or index.chunk_start_offset + index.chunk_length > summary.end
                for index in summary.chunk_indexes):
             return False
+        try:   # chunks moved or swapped in the data section: found by a scan, not the index
+            if any(self._moved(index, summary.end) for index in summary.chunk_indexes):
+                return False
+        except _Damage:
+            return False
         self._indexed = {index.chunk_start_offset: self._index_counts(index)
                          for index in summary.chunk_indexes}
         counted = _summary_counts(summary.statistics)
@@ -813,6 +823,13 @@ class BagReader:
         return all(channel_id in summary.channels
                    and summary.channels[channel_id].schema_id in (0, *summary.schemas)
                    for channel_id in counted)
+
+    def _moved(self, index, end):
+        """Whether a chunk index points at a whole chunk of another length (a chunk moved)."""
+        opcode, length = _RECORD_PREFIX.unpack(self._file.read(
+            index.chunk_start_offset, _RECORD_PREFIX.size, 'chunk'))
+        return (opcode == Opcode.CHUNK and length != index.chunk_length - _RECORD_PREFIX.size
+                and index.chunk_start_offset + _RECORD_PREFIX.size + length <= end)
 
     def _index_counts(self, index):
         """``{channel id: messages}`` of a chunk by its message indexes; None if it has none."""
@@ -843,7 +860,8 @@ class BagReader:
         """Index a file by reading it once; decide how much to recover, say what is lost."""
         unfinished = summary is None
         end = self._file.size if unfinished else summary.end
-        scan = _LinearScan(self._file, end, cut_ok=unfinished)
+        self._scan_summary = summary
+        scan = _LinearScan(self._file, end, cut_ok=unfinished, summary=summary)
         counts: Dict[int, int] = {}
         total, previous, self._scan_ordered = 0, -1, True
         for channel, log_time, _, _ in scan:
@@ -858,14 +876,15 @@ class BagReader:
             self.recovered = total
         self._scan_end = end
         self.compression = _compression_name(scan.compressions)
-        if summary is not None and summary.damage is None:   # channels without messages too
-            scan.schemas = {**summary.schemas, **scan.schemas}
-            scan.channels = {**summary.channels, **scan.channels}
         read = dict(counts)
         self._channel_topics: Dict[int, str] = {
             channel.id: channel.topic for channel in scan.channels.values()}
-        self._report(scan.losses, read, None if summary is None
-                     else _summary_counts(summary.statistics), None)
+        counted = None if summary is None else _summary_counts(summary.statistics)
+        if counted is not None and all(read.get(channel_id, 0) >= count
+                                       for channel_id, count in counted.items()):
+            # Every message the statistics count was read: chunks out of place, not lost.
+            scan.losses = [loss for loss in scan.losses if not loss.index_only]
+        self._report(scan.losses, read, counted, None)
         if not unfinished:   # counted as the file holds them, as through an index
             for loss in scan.losses:
                 for channel_id, count in (loss.counts or {}).items():
@@ -1034,10 +1053,9 @@ class BagReader:
         try:
             body = self._file.read(offset, index.chunk_length, 'chunk')
             opcode, length = _RECORD_PREFIX.unpack_from(body)
-            if opcode != Opcode.CHUNK or length != index.chunk_length - _RECORD_PREFIX.size:
-                raise _Damage(offset, f'no chunk of {index.chunk_length} bytes as the chunk '
-                                      f'index says (a record of opcode {opcode:#04x}, {length} '
-                                      'bytes)')
+            if opcode != Opcode.CHUNK:   # (a wrong length is the index's: its CRC checks it)
+                raise _Damage(offset, f'no chunk where the chunk index says (a record of '
+                                      f'opcode {opcode:#04x}, {length} bytes)')
             _, data = chunk_data(memoryview(body)[_RECORD_PREFIX.size:], offset)
         except _Damage as damage:
             self._lose(losses, _Loss(offset, damage.what, indexed))
@@ -1088,7 +1106,8 @@ class BagReader:
     def _scanned_messages(self, wanted):
         """Return the messages the opening scan read, no more (the file may still grow)."""
         assert self._scan_end is not None   # set by the opening scan
-        scan = _LinearScan(self._file, self._scan_end, cut_ok=self.recovered is not None)
+        scan = _LinearScan(self._file, self._scan_end, cut_ok=self.recovered is not None,
+                           summary=self._scan_summary)
         for channel, log_time, publish_time, data in scan:
             if channel.id in wanted:
                 yield self._message(channel, data, log_time, publish_time)
