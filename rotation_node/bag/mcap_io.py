@@ -377,6 +377,26 @@ def chunk_data(body: Union[bytes, memoryview], offset: int = 0) -> tuple:
     return compression.decode(), data
 
 
+def _chunk_data_by_index(body, index):
+    """
+    Return the records of a chunk whose own lengths are damaged, by its chunk index's.
+
+    Only where the chunk's CRC vouches for the result; None otherwise.
+    """
+    crc = _CHUNK_FIELDS.unpack_from(body)[3] if len(body) >= _CHUNK_FIELDS.size else 0
+    start = _CHUNK_FIELDS.size + len(index.compression.encode()) + 8
+    stored = body[start:start + index.compressed_size]
+    if crc == 0 or len(stored) != index.compressed_size:
+        return None
+    try:
+        data = {'zstd': _unzstd, 'lz4': _unlz4}.get(
+            index.compression, lambda stored, *_: bytes(stored))(
+                stored, index.uncompressed_size, index.chunk_start_offset)
+    except _Damage:
+        return None
+    return data if zlib.crc32(data) == crc else None
+
+
 class ChunkRecords(NamedTuple):
     """The records of an uncompressed chunk, as :func:`chunk_records` finds them."""
 
@@ -825,11 +845,17 @@ class BagReader:
                    for channel_id in counted)
 
     def _moved(self, index, end):
-        """Whether a chunk index points at a whole chunk of another length (a chunk moved)."""
+        """
+        Whether a chunk index points at no chunk or at a whole one of another length.
+
+        Records were moved: a scan finds them. A chunk whose own length field
+        runs past the data section is damaged in place: read through the index.
+        """
         opcode, length = _RECORD_PREFIX.unpack(self._file.read(
             index.chunk_start_offset, _RECORD_PREFIX.size, 'chunk'))
-        return (opcode == Opcode.CHUNK and length != index.chunk_length - _RECORD_PREFIX.size
-                and index.chunk_start_offset + _RECORD_PREFIX.size + length <= end)
+        return opcode != Opcode.CHUNK or (
+            length != index.chunk_length - _RECORD_PREFIX.size
+            and index.chunk_start_offset + _RECORD_PREFIX.size + length <= end)
 
     def _index_counts(self, index):
         """``{channel id: messages}`` of a chunk by its message indexes; None if it has none."""
@@ -1056,7 +1082,12 @@ class BagReader:
             if opcode != Opcode.CHUNK:   # (a wrong length is the index's: its CRC checks it)
                 raise _Damage(offset, f'no chunk where the chunk index says (a record of '
                                       f'opcode {opcode:#04x}, {length} bytes)')
-            _, data = chunk_data(memoryview(body)[_RECORD_PREFIX.size:], offset)
+            try:
+                _, data = chunk_data(memoryview(body)[_RECORD_PREFIX.size:], offset)
+            except _Damage:
+                data = _chunk_data_by_index(memoryview(body)[_RECORD_PREFIX.size:], index)
+                if data is None:
+                    raise
         except _Damage as damage:
             self._lose(losses, _Loss(offset, damage.what, indexed))
             return []
