@@ -73,6 +73,7 @@ _MESSAGE_INDEX_ENTRY = 16                      # log time, offset
 _DECOMPRESS_PIECE = 1 << 24
 _SUMMARY_RECORDS = {Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channel,
                     Opcode.CHUNK_INDEX: ChunkIndex, Opcode.STATISTICS: Statistics}
+_OPCODES = frozenset(Opcode)
 # Records that belong in the summary section only.
 _SUMMARY_ONLY = (Opcode.CHUNK_INDEX, Opcode.ATTACHMENT_INDEX, Opcode.METADATA_INDEX,
                  Opcode.STATISTICS, Opcode.SUMMARY_OFFSET)
@@ -846,16 +847,17 @@ class BagReader:
 
     def _moved(self, index, end):
         """
-        Whether a chunk index points at no chunk or at a whole one of another length.
+        Whether a chunk index points at another whole record than its chunk.
 
-        Records were moved: a scan finds them. A chunk whose own length field
-        runs past the data section is damaged in place: read through the index.
+        Records were moved: a scan finds them. A chunk damaged in place (zeroed
+        bytes, a length field that runs past the data section) is read
+        through the index, which skips it.
         """
         opcode, length = _RECORD_PREFIX.unpack(self._file.read(
             index.chunk_start_offset, _RECORD_PREFIX.size, 'chunk'))
-        return opcode != Opcode.CHUNK or (
-            length != index.chunk_length - _RECORD_PREFIX.size
-            and index.chunk_start_offset + _RECORD_PREFIX.size + length <= end)
+        return (opcode in _OPCODES
+                and (opcode, length) != (Opcode.CHUNK, index.chunk_length - _RECORD_PREFIX.size)
+                and index.chunk_start_offset + _RECORD_PREFIX.size + length <= end)
 
     def _index_counts(self, index):
         """``{channel id: messages}`` of a chunk by its message indexes; None if it has none."""
