@@ -364,3 +364,24 @@ def test_a_recording_cut_inside_an_uncompressed_chunk_keeps_its_complete_message
         assert reader.recovered == 40 and reader.notes == []
         assert [(m.topic, m.log_time_ns, m.publish_time_ns, m.data)
                 for m in reader.messages()] == _expected(rows[:40])
+
+
+@pytest.mark.parametrize('damage', ['zeroed_schema_name', 'unknown_channel_opcode'])
+def test_a_damaged_summary_without_crc_gives_way_to_the_data_section(tmp_path, damage):
+    """The summary's records were taken as they were: a topic of type 'std_msgs/m\\0\\0...'."""
+    rows = _rows(np.random.default_rng(10), 90)
+    data = bytearray(_write(rows))
+    struct.pack_into('<I', data, len(data) - 8 - 4, 0)   # a summary without CRC
+    last_chunk = _chunk_offsets(bytes(data))[-1]
+    kind = 0x03 if damage == 'zeroed_schema_name' else 0x04
+    record = next(offset for offset, opcode, _ in _records(bytes(data))
+                  if opcode == kind and offset > last_chunk)
+    if damage == 'zeroed_schema_name':
+        data[record + 9 + 2 + 4 + 10:record + 9 + 2 + 4 + 19] = bytes(9)
+    else:
+        data[record] = 0x84   # a bit flipped: a record of unknown kind, skipped
+    path = tmp_path / 'summary.mcap'
+    path.write_bytes(bytes(data))
+    assert _read(path) == (_expected(rows), _counts(rows), [])
+    with open_bag(path) as bag:
+        assert bag.topics['/a'] == 'std_msgs/msg/String'

@@ -27,6 +27,7 @@ import dataclasses
 import functools
 import heapq
 import io
+import itertools
 import operator
 import os
 import struct
@@ -816,6 +817,10 @@ class BagReader:
         """
         if summary.damage is not None or not summary.chunk_indexes:
             return False
+        if not all(text.isprintable() for text in itertools.chain(
+                (schema.name for schema in summary.schemas.values()),
+                (channel.topic for channel in summary.channels.values()))):
+            return False   # zeroed bytes in a summary without CRC: the data section's records
         if any(not _MAGIC_SIZE <= index.chunk_start_offset
                or index.chunk_start_offset + index.chunk_length > summary.end
                for index in summary.chunk_indexes):
