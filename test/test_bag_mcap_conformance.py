@@ -368,7 +368,7 @@ def test_a_recording_cut_inside_an_uncompressed_chunk_keeps_its_complete_message
 
 @pytest.mark.parametrize('damage', ['zeroed_schema_name', 'unknown_channel_opcode'])
 def test_a_damaged_summary_without_crc_gives_way_to_the_data_section(tmp_path, damage):
-    """The summary's records were taken as they were: a topic of type 'std_msgs/m\\0\\0...'."""
+    """The summary's records were taken as they were: a topic of type 'std_msgs/m' and zeros."""
     rows = _rows(np.random.default_rng(10), 90)
     data = bytearray(_write(rows))
     struct.pack_into('<I', data, len(data) - 8 - 4, 0)   # a summary without CRC
