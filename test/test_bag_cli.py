@@ -7,6 +7,7 @@ and plot run in-process through ``main``; play (which initialises rclpy) and
 the installed console script run as subprocesses.
 """
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -62,6 +63,9 @@ def _damage(workspace, how):
     elif how == 'corrupt':
         middle = len(data) // 2
         path.write_bytes(data[:middle] + b'\xff' * 64 + data[middle + 64:])
+    elif how == 'zeroed':   # as a power loss leaves it
+        middle = len(data) // 2
+        path.write_bytes(data[:middle] + bytes(4096) + data[middle + 4096:])
     elif how == 'bad_value':
         (workspace / 'params.yaml').write_text(PARAMS_YAML.replace('ZYX', 'ZZX'))
     elif how == 'bad_yaml':
@@ -81,7 +85,8 @@ def _run(capsys, *argv):
      'cannot open bag missing.mcap'),
     ('truncated', ['imu.mcap', 'out.mcap', '--params', 'params.yaml', '--strict'],
      'imu.mcap: unfinished recording (no MCAP summary or footer)'),
-    ('corrupt', ['imu.mcap', 'out.mcap', '--params', 'params.yaml'], 'imu.mcap is corrupt'),
+    ('corrupt', ['imu.mcap', 'out.mcap', '--params', 'params.yaml', '--strict'],
+     'could not be read'),
     (None, ['imu.mcap', 'out.mcap', '--params', 'params.yaml', '--topic', '/nope'],
      'topic /nope not in imu.mcap'),
     (None, ['imu.mcap', 'out.mcap', '--params', 'params.yaml', '--topic', '/foreign'],
@@ -117,6 +122,28 @@ def test_convert_writes_and_reports(workspace, capsys, monkeypatch):
     with BagReader(workspace / 'out.mcap') as reader:
         assert reader.message_counts == {'/imu': 8000, '/foreign': 1, '/imu/euler': 8000,
                                          '/imu/angular_velocity': 8000}
+
+
+def test_convert_notes_what_a_damaged_chunk_held(workspace, capsys, monkeypatch):
+    """Zeroed bytes were a silent loss: fewer messages, exit 0, no note (also with --strict)."""
+    monkeypatch.chdir(workspace)
+    _damage(workspace, 'zeroed')
+    status, stderr = _run(capsys, 'convert', 'imu.mcap', 'out.mcap', '--params', 'params.yaml')
+    assert status == 0, stderr
+    described, note, converted, wrote = stderr.splitlines()
+    assert described == 'imu.mcap: MCAP file (zstd chunks), 8001 messages'
+    lost = re.fullmatch(r'imu.mcap: (\d+) messages could not be read \(/imu (\d+)\): .* at '
+                        r'offset \d+', note)
+    received = int(re.match(r'/imu: (\d+) messages -> ', converted)[1])
+    assert int(lost[1]) == int(lost[2]) == 8000 - received > 0
+    with BagReader(workspace / 'out.mcap') as reader:
+        assert reader.message_counts['/imu'] == received
+    before = _snapshot(workspace)
+    status, stderr = _run(capsys, 'convert', 'imu.mcap', 'strict.mcap', '--params',
+                          'params.yaml', '--strict')
+    line, = stderr.splitlines()
+    assert status == 1 and line.endswith('; refused (--strict)') and 'at offset' in line
+    assert _snapshot(workspace) == before
 
 
 def test_plot_default_name_and_bad_topic(workspace, capsys, monkeypatch):

@@ -344,13 +344,28 @@ def _damaged(source, how):
 @pytest.mark.parametrize('how, reason', [
     ('empty', r'damaged.mcap: empty file \(0 bytes\)'),
     ('text', 'damaged.mcap is not a valid MCAP file: .*invalid magic'),
-    ('overwritten_chunk', 'damaged.mcap is corrupt: .*(crc|ZstdError)')])
+    ('overwritten_chunk', 'damaged.mcap: 40 messages could not be read .*chunk that '
+                          '(fails its CRC|does not decompress).*refused \\(--strict\\)')])
 def test_damaged_file_raises_bag_error(tmp_path, mixed_bag, how, reason):
     path = tmp_path / 'damaged.mcap'
     path.write_bytes(_damaged(mixed_bag[0], how))
     with pytest.raises(BagError, match=reason):
-        reader = BagReader(path)
+        reader = BagReader(path, strict=True)
         list(reader.messages())
+
+
+def test_damaged_chunk_is_skipped_with_a_note(tmp_path, mixed_bag):
+    """Without --strict the other chunks are read; the note counts what the damaged one held."""
+    path = tmp_path / 'damaged.mcap'
+    path.write_bytes(_damaged(mixed_bag[0], 'overwritten_chunk'))
+    with BagReader(path) as reader:
+        read = list(reader.messages())
+        note, = reader.notes
+    lost = len(mixed_bag[1]) - len(read)
+    assert lost > 0
+    assert f'damaged.mcap: {lost} message{"s" if lost > 1 else ""} could not be read' in note
+    assert ('chunk that fails its CRC' in note or 'does not decompress' in note) and (
+        ' at offset ' in note)
 
 
 @pytest.mark.parametrize('fraction', [0.1, 0.5, 0.999])
@@ -430,8 +445,11 @@ def test_reads_compressed_chunks_and_detects_their_damage(tmp_path, rng, compres
     data = bytearray(path.read_bytes())
     data[len(data) // 3:len(data) // 3 + 16] = b'\xff' * 16
     path.write_bytes(bytes(data))
-    with pytest.raises(BagError, match='compressed.mcap'):
-        list(BagReader(path).messages())
+    with pytest.raises(BagError, match='compressed.mcap: .* could not be read .*--strict'):
+        list(BagReader(path, strict=True).messages())
+    with BagReader(path) as reader:
+        assert len(rows) - len(list(reader.messages())) > 0
+        assert 'does not decompress' in reader.notes[0] or 'CRC' in reader.notes[0]
 
 
 @pytest.mark.parametrize('layout', ['in_order', 'overlapping', 'equal_boundaries'])
@@ -476,12 +494,12 @@ def _chunks_of(data):
 
 
 @pytest.mark.parametrize('compression', ['ZSTD', 'LZ4', 'NONE'])
-def test_chunk_message_records_are_the_mcap_librarys_messages(rng, compression):
+def test_chunk_records_are_the_mcap_librarys_messages(rng, compression):
     """Every Message of each chunk, in file order, as the library's breakup_chunk reads it."""
     from mcap.records import Message
     from mcap.stream_reader import breakup_chunk
     from mcap.writer import CompressionType, Writer
-    from rotation_node.bag.mcap_io import chunk_message_records
+    from rotation_node.bag.mcap_io import chunk_data, chunk_records
     stream = io.BytesIO()
     writer = Writer(stream, compression=CompressionType[compression], chunk_size=4096)
     writer.start()
@@ -495,46 +513,67 @@ def test_chunk_message_records_are_the_mcap_librarys_messages(rng, compression):
                            data=bytes(int(rng.integers(0, 100))), publish_time=2**64 - 1 - k,
                            sequence=k)
     writer.finish()
-    chunks = _chunks_of(stream.getvalue())
+    data = stream.getvalue()
+    chunks = _chunks_of(data)
     assert len(chunks) > 5
-    for chunk in chunks:
-        data, headers, starts = chunk_message_records(chunk)
+    bodies = [data[offset + 9:] for offset in _chunk_offsets(data)]
+    for chunk, body in zip(chunks, bodies):
+        compression_name, records = chunk_data(body)
+        assert compression_name == chunk.compression
+        headers, starts, definitions, damage = chunk_records(records)
+        assert damage is None
         expected = [r for r in breakup_chunk(chunk, validate_crc=True) if isinstance(r, Message)]
         assert [(int(h['channel_id']), int(h['sequence']), int(h['log_time']),
-                 int(h['publish_time']), data[start:start + int(h['length']) - 22])
+                 int(h['publish_time']), records[start:start + int(h['length']) - 22])
                 for h, start in zip(headers, starts)] == [
             (m.channel_id, m.sequence, m.log_time, m.publish_time, m.data) for m in expected]
 
 
-def test_chunk_message_records_skip_unknown_records_and_refuse_cut_ones():
+def _chunk_offsets(data):
+    """Offsets of the Chunk records of an MCAP file, by a walk of its records."""
+    import struct
+    position, offsets = 8, []
+    while position < len(data) - 8:
+        opcode, length = struct.unpack_from('<BQ', data, position)
+        if opcode == 0x06:
+            offsets.append(position)
+        position += 9 + length
+    return offsets
+
+
+def test_chunk_records_skip_unknown_records_and_stop_at_damage():
     import struct
     import zlib
 
-    from mcap.exceptions import McapError
-    from mcap.records import Chunk
-    from mcap.stream_reader import CRCValidationError
-    from rotation_node.bag.mcap_io import chunk_message_records
+    from rotation_node.bag.mcap_io import _Damage, chunk_data, chunk_records
 
     def message(channel_id, log_time, data):
         return struct.pack('<BQHIQQ', 0x05, 22 + len(data), channel_id, 0, log_time, 7) + data
 
-    def chunk(data, crc=None):
-        return Chunk(compression='', data=data, message_start_time=0, message_end_time=0,
-                     uncompressed_crc=zlib.crc32(data) if crc is None else crc,
-                     uncompressed_size=len(data))
+    def chunk(data, crc=None, size=None, compression=b''):
+        return struct.pack('<QQQII', 0, 0, len(data) if size is None else size,
+                           zlib.crc32(data) if crc is None else crc,
+                           len(compression)) + compression + struct.pack('<Q', len(data)) + data
 
     unknown = struct.pack('<BQ', 0x90, 3) + b'xyz'
     data = message(1, 5, b'first') + unknown + message(2, 3, b'') + message(1, 4, b'third')
-    stored, headers, starts = chunk_message_records(chunk(data))
+    _, stored = chunk_data(chunk(data))
+    headers, starts, _, damage = chunk_records(stored)
+    assert damage is None
     assert [(int(h['channel_id']), int(h['log_time']),
              stored[start:start + int(h['length']) - 22])
             for h, start in zip(headers, starts)] == [(1, 5, b'first'), (2, 3, b''),
                                                       (1, 4, b'third')]
-    with pytest.raises(McapError, match='ends at'):
-        chunk_message_records(chunk(data[:-2]))
-    with pytest.raises(McapError, match='cut short'):
-        chunk_message_records(chunk(data + b'\x05\0'))
-    with pytest.raises(McapError, match='is 21 bytes'):
-        chunk_message_records(chunk(struct.pack('<BQ', 0x05, 21) + bytes(21)))
-    with pytest.raises(CRCValidationError):
-        chunk_message_records(chunk(data, crc=zlib.crc32(data) ^ 1))
+    # The records before the damage are kept; what stopped the walk is said.
+    for damaged, reason in [(data[:-2], 'ends at'), (data + b'\x05\0', 'cut short'),
+                            (data[:30] + bytes(64) + data[30:], 'opcode 0'),
+                            (data + struct.pack('<BQ', 0x05, 21) + bytes(21), 'is 21 bytes')]:
+        headers, _, _, damage = chunk_records(damaged)
+        kept = {'opcode 0': 1, 'ends at': 2}.get(reason, 3)
+        assert reason in damage and len(headers) == kept
+    with pytest.raises(_Damage, match='fails its CRC'):
+        chunk_data(chunk(data, crc=zlib.crc32(data) ^ 1))
+    with pytest.raises(_Damage, match='unknown compression'):
+        chunk_data(chunk(data, compression=b'brotli'))
+    with pytest.raises(_Damage, match='runs past the chunk'):
+        chunk_data(chunk(data)[:-1])

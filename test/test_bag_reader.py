@@ -242,20 +242,14 @@ def test_odd_schemas_matter_only_for_converted_topics(tmp_path, rows, rng):
 
 def test_format_errors_are_bag_errors_and_bugs_are_not(tmp_path, rows, monkeypatch):
     """Only what the format libraries raise for bad data becomes a BagError."""
-    from mcap.reader import SeekingReader
     from rotation_node.bag import mcap_io
     path = tmp_path / 'bag.mcap'
     _mcap_file(path, rows)
 
-    def broken(*args, **kwargs):
-        raise KeyError('a programming error')
-        yield
-
     def broken_chunk(*args, **kwargs):
         raise KeyError('a programming error')
 
-    monkeypatch.setattr(SeekingReader, 'iter_messages', broken)   # chunks overlapping in time
-    monkeypatch.setattr(mcap_io, 'get_chunk_data_stream', broken_chunk)   # chunk after chunk
+    monkeypatch.setattr(mcap_io, 'chunk_records', broken_chunk)
     with open_bag(path) as bag, pytest.raises(KeyError, match='a programming error'):
         list(bag.messages())
 

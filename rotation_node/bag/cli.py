@@ -176,8 +176,8 @@ def build_parser() -> argparse.ArgumentParser:
     play.add_argument('--wait-for-subscribers', action='store_true',
                       help='start once every played topic has a subscriber (implied by --rate 0)')
     play.add_argument('--strict', action='store_true',
-                      help='refuse unfinished recordings instead of playing what a scan '
-                           'recovers')
+                      help='refuse unfinished recordings and damaged MCAP files instead of '
+                           'playing what can be read')
     play.set_defaults(run=_play)
 
     convert = commands.add_parser(
@@ -201,8 +201,8 @@ def build_parser() -> argparse.ArgumentParser:
                          help="MCAP chunk compression (default: the input's)")
     convert.add_argument('--force', action='store_true', help='replace existing outputs')
     convert.add_argument('--strict', action='store_true',
-                         help='refuse unfinished recordings instead of converting what a scan '
-                              'recovers')
+                         help='refuse unfinished recordings and damaged MCAP files instead of '
+                              'converting what can be read')
     convert.add_argument('--jobs', type=_positive_int, default=1, metavar='N',
                          help='with several inputs, convert N bags at a time in parallel '
                               'processes (default 1)')
@@ -219,8 +219,8 @@ def build_parser() -> argparse.ArgumentParser:
                            'for the labels; default: the node defaults)')
     plot.add_argument('--force', action='store_true', help='overwrite the PNG')
     plot.add_argument('--strict', action='store_true',
-                      help='refuse unfinished recordings instead of plotting what a scan '
-                           'recovers')
+                      help='refuse unfinished recordings and damaged MCAP files instead of '
+                           'plotting what can be read')
     plot.set_defaults(run=_plot)
 
     export = commands.add_parser(

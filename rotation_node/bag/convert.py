@@ -135,12 +135,13 @@ def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *
     progress_stream : file, optional
         Where to draw the progress bar (only if it is a terminal); stderr by default.
     strict : bool, optional
-        Refuse an unfinished recording instead of converting what it holds.
+        Refuse an unfinished recording or a damaged MCAP file instead of
+        converting what it holds.
     report : callable, optional
         ``report(line)`` receives what the input is (``<path>: rosbag2
         directory (mcap, 3 files), 5000 messages``) and its notes (an
         unfinished recording, a renamed topic) once it is opened, before
-        anything is written.
+        anything is written; then what reading found could not be read.
     blocks : bool, optional
         Convert in blocks where the parameters allow it (the default; see
         :mod:`rotation_node.bag.block_convert`); False converts message by
@@ -168,6 +169,7 @@ def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *
                    f'{sum(reader.message_counts.values())} messages')
             for note in reader.notes:
                 report(note)
+        noted = len(reader.notes)
         params = resolved_from_bag(reader, params)   # the mounting from /tf_static, if asked
         input_type = messages.INPUTS[params.input_type]
         streams = _input_streams(reader, input_type, topics)
@@ -219,4 +221,7 @@ def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *
                 writer.write_serialized_block(written)
                 progress.update(len(block))
             raise_if_stopped()   # the last chance before the output is committed
+        if report is not None:
+            for note in reader.notes[noted:]:   # what reading found could not be read
+                report(note)
     return {topic: converter.pipeline.stats for topic, converter in converters.items()}

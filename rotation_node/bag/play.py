@@ -179,10 +179,12 @@ def play(path: StrPath, *, rate: float = 1.0, topics: Optional[Sequence[str]] = 
     ros_args : list of str, optional
         Command line passed to ``rclpy.init`` (``--ros-args ...``).
     strict : bool, optional
-        Refuse an unfinished recording instead of playing what it holds.
+        Refuse an unfinished recording or a damaged MCAP file instead of
+        playing what it holds.
     report : callable, optional
         ``report(line)`` receives the input's notes (an unfinished recording,
-        a renamed topic, topics left out) before anything is published.
+        a renamed topic, topics left out) before anything is published, then
+        what reading found could not be read.
 
     Returns
     -------
@@ -207,6 +209,7 @@ def play(path: StrPath, *, rate: float = 1.0, topics: Optional[Sequence[str]] = 
             for note in reader.notes:
                 report(note)
         topics = _playable_topics(reader, topics, report)
+        noted = len(reader.notes)
         rclpy.init(args=ros_args, signal_handler_options=SignalHandlerOptions.NO)
         try:
             node = rclpy.create_node(NODE_NAME)
@@ -223,6 +226,9 @@ def play(path: StrPath, *, rate: float = 1.0, topics: Optional[Sequence[str]] = 
                         break
                 if not stop.is_set():
                     _wait_for_acks(publishers)
+            if report is not None:
+                for note in reader.notes[noted:]:   # what reading found could not be read
+                    report(note)
             node.get_logger().info(f'published {count} messages from {path}')
             node.destroy_node()
             return count

@@ -153,10 +153,11 @@ def plot_topic(bag_path: StrPath, topic: str, output_path: StrPath, *,
     overwrite : bool, optional
         Replace an existing ``output_path``.
     strict : bool, optional
-        Refuse an unfinished recording instead of plotting what it holds.
+        Refuse an unfinished recording or a damaged MCAP file instead of
+        plotting what it holds.
     report : callable, optional
         ``report(line)`` receives the input's notes (an unfinished recording,
-        a renamed topic).
+        a renamed topic), then what reading found could not be read.
 
     Returns
     -------
@@ -176,7 +177,11 @@ def plot_topic(bag_path: StrPath, topic: str, output_path: StrPath, *,
         if report is not None:
             for note in reader.notes:
                 report(note)
+        noted = len(reader.notes)
         times_ns, panels, values = plot_series(reader, topic, params)
+        if report is not None:
+            for note in reader.notes[noted:]:   # what reading found could not be read
+                report(note)
         _draw(reader.topic_name(topic), times_ns, values, panels).savefig(
             output.stream, format='png', dpi=110)
         raise_if_stopped()   # the last chance before the PNG is committed

@@ -160,7 +160,9 @@ class InputBag:
         ``{name in the bag: name used}`` for topic names not valid in ROS 2.
     notes : list of str
         One line for each thing the user should know: an unfinished
-        recording, a renamed topic.
+        recording, a renamed topic, messages that could not be read (an MCAP
+        file read through its index says so once ``messages`` has read it
+        to the end).
 
     """
 
@@ -202,6 +204,13 @@ class InputBag:
         self.notes.extend(note for source in sources for note in getattr(source, 'notes', ()))
         self.notes.extend(f'{path}: topic {original!r} is not a valid ROS 2 name; using {new}'
                           for original, new in sorted(self.renames.items()))
+        self._add_source_notes()
+
+    def _add_source_notes(self):
+        """Add the notes of the storage files (what an MCAP file could not read) not yet added."""
+        for source in self._sources:
+            self.notes.extend(note for note in getattr(source, 'notes', ())
+                              if note not in self.notes)
 
     def topic_name(self, name: str) -> str:
         """
@@ -250,13 +259,18 @@ class InputBag:
             merged = streams[0] if streams else iter(())
         else:
             merged = heapq.merge(*streams, key=operator.attrgetter('log_time_ns'))
-        return self._renamed(merged) if self.renames else merged
+        return self._noted(self._renamed(merged) if self.renames else merged)
 
     def _renamed(self, records):
         renames = self.renames
         for record in records:
             record.topic = renames.get(record.topic, record.topic)
             yield record
+
+    def _noted(self, records):
+        """Yield ``records``; then add to ``notes`` what reading them found could not be read."""
+        yield from records
+        self._add_source_notes()
 
     def close(self) -> None:
         """Close every storage file and remove decompressed temporary copies."""
