@@ -229,6 +229,7 @@ def export(input_path: StrPath, output_path: StrPath, params: NodeParameters, *,
                    f'{sum(reader.message_counts.values())} messages')
             for note in reader.notes:
                 report(note)
+        noted = len(reader.notes)
         params = resolved_from_bag(reader, params)   # the mounting from /tf_static, if asked
         streams = _input_streams(reader, messages.INPUTS[params.input_type],
                                  None if topic is None else [topic])
@@ -245,14 +246,20 @@ def export(input_path: StrPath, output_path: StrPath, params: NodeParameters, *,
         with AtomicFile(output_path, overwrite=overwrite) as output, collections_deferred():
             table = (_CsvTable if kind == 'csv' else _ParquetTable)(output.stream, columns)
             block: List[Any] = []
-            for record in reader.messages(list(routes)):
-                block.append(record)
-                if len(block) == BLOCK_MESSAGES:
-                    count += _write_block(table, converter, block, routes, widths, positions)
-                    block = []
-            count += _write_block(table, converter, block, routes, widths, positions)
+            try:
+                for record in reader.messages(list(routes)):
+                    block.append(record)
+                    if len(block) == BLOCK_MESSAGES:
+                        count += _write_block(table, converter, block, routes, widths, positions)
+                        block = []
+                count += _write_block(table, converter, block, routes, widths, positions)
+            except BagError as error:   # a message that cannot be decoded names no file
+                raise reader.naming_this_bag(error) from None
             table.close()
             raise_if_stopped()   # the last chance before the table is committed
+        if report is not None:
+            for note in reader.notes[noted:]:   # what reading found could not be read
+                report(note)
     return count, converter.pipeline.stats
 
 
