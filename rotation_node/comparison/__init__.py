@@ -19,14 +19,15 @@ Functions
     tolerance), :func:`orientation_errors`, :func:`error_statistics`,
     :func:`estimate_time_offset` (angular rate magnitudes),
     :func:`estimate_alignment` (``W``, ``M``, ``dt`` by least squares on SO(3),
-    with standard deviations), :func:`aligned_series` (the matched pairs after
+    with standard deviations), :func:`align_pairs` (``W``, ``M`` of matched
+    pairs), :func:`aligned_series` (the matched pairs after
     alignment, and their errors).
 
 Errors: :class:`~rotation_node.errors.ComparisonError` (bad arrays, no overlap),
 :class:`~rotation_node.errors.DegenerateMotionError` (the motion does not
 determine what was asked), both ``ValueError``.
 """
-from ._alignment import (aligned_series, AlignedSeries, Alignment, chordal_mean,
+from ._alignment import (align_pairs, aligned_series, AlignedSeries, Alignment, chordal_mean,
                          estimate_alignment, IDENTITY, kabsch)
 from ._series import (error_statistics, ErrorStatistics, interpolate_orientations,
                       orientation_errors, slerp)
@@ -35,7 +36,7 @@ from ..errors import ComparisonError, DegenerateMotionError
 
 __all__ = [
     'AlignedSeries', 'Alignment', 'ComparisonError', 'DegenerateMotionError', 'ErrorStatistics',
-    'IDENTITY', 'TimeOffset', 'aligned_series', 'chordal_mean', 'error_statistics',
+    'IDENTITY', 'TimeOffset', 'align_pairs', 'aligned_series', 'chordal_mean', 'error_statistics',
     'estimate_alignment', 'estimate_time_offset', 'interpolate_orientations', 'kabsch',
     'orientation_errors', 'slerp',
 ]

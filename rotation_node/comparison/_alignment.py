@@ -186,20 +186,13 @@ class _Problem:
             self.select(dt)
         estimate = self.estimate_at(dt)
         r = self.residuals(world, mounting, dt, estimate)
-        jr_inv = inverse_right_jacobian(r)
-        blocks = []
-        if 'world' in columns:
-            body = conversions.matrix_from_quaternion(
-                conversions.quaternion_product(estimate, mounting))
-            blocks.append(jr_inv @ np.swapaxes(body, -1, -2))
-        if 'mounting' in columns:
-            blocks.append(jr_inv)
+        blocks = [_rotation_jacobian(r, estimate, mounting, columns)]
         if 'time_offset' in columns:
             delta = 0.25 * self.bandwidth
             derivative = (self.residuals(world, mounting, dt + delta)
                           - self.residuals(world, mounting, dt - delta)) / (2.0 * delta)
             blocks.append(derivative[:, :, None])
-        jacobian = np.concatenate(blocks, axis=2) if blocks else np.zeros(r.shape + (0,))
+        jacobian = np.concatenate(blocks, axis=2)
         return r.reshape(-1), jacobian.reshape(-1, jacobian.shape[-1])
 
 
@@ -284,33 +277,109 @@ def estimate_alignment(t_ref: ArrayLike, q_ref: ArrayLike, t_est: ArrayLike, q_e
                        5.0 * step_est if max_gap is None else float(max_gap))
     problem.select(dt)
     w, m = _initial_rotations(problem, dt, world, mounting, rates_ref, rates_est)
-    first = True
-    for _ in range(_MAX_ITERATIONS):
-        r, jacobian = problem.linearised(w, m, dt, columns)
+    w, m, dt, std, r = _least_squares(problem.linearised, w, m, dt, columns)
+    return Alignment(
+        time_offset=float(dt), time_offset_std=float(std.get('time_offset', [0.0])[0]),
+        world=w, world_std=std.get('world', np.zeros(3)), mounting=m,
+        mounting_std=std.get('mounting', np.zeros(3)), matched=int(problem.index.size),
+        residual_rms=float(np.sqrt(np.mean(np.sum(r.reshape(-1, 3) ** 2, axis=1)))))
+
+
+def _least_squares(linearised, w, m, dt, columns):
+    """
+    Gauss-Newton from ``(w, m, dt)``: ``(W, M, dt, {block: std}, residuals)``.
+
+    ``linearised(w, m, dt, columns) -> (r, J)``. Checks ``J^T J`` for
+    degenerate motion at the start and at the solution.
+    """
+    count = None
+    for iteration in range(_MAX_ITERATIONS + 1):
+        r, jacobian = linearised(w, m, dt, columns)
+        count = r.size // 3
         if not columns:
             break
         information = jacobian.T @ jacobian
-        if first:
-            _check_determined(information, columns, problem.index.size)
-            first = False
+        if iteration == 0:
+            _check_determined(information, columns, count)
         step = -np.linalg.solve(information, jacobian.T @ r)
-        w, m, dt = _updated(w, m, dt, step, columns)
-        if np.max(np.abs(step)) < 1e-10:
+        if np.max(np.abs(step)) < 1e-10 or iteration == _MAX_ITERATIONS:
             break
-    r, jacobian = problem.linearised(w, m, dt, columns)
-    dof = max(r.size - jacobian.shape[1], 1)
-    std = np.zeros(jacobian.shape[1])
+        w, m, dt = _updated(w, m, dt, step, columns)
+    std = np.zeros(0)
     if columns:
-        information = jacobian.T @ jacobian
-        _check_determined(information, columns, problem.index.size)
+        _check_determined(information, columns, count)
+        dof = max(r.size - jacobian.shape[1], 1)
         std = np.sqrt(np.diag(np.linalg.inv(information)) * float(r @ r) / dof)
-    stds = _blocks(std, columns)
-    return Alignment(
-        time_offset=float(dt), time_offset_std=float(stds.get('time_offset', [0.0])[0]),
-        world=conversions.canonical_quaternion(w), world_std=stds.get('world', np.zeros(3)),
-        mounting=conversions.canonical_quaternion(m),
-        mounting_std=stds.get('mounting', np.zeros(3)), matched=int(problem.index.size),
-        residual_rms=float(np.sqrt(np.mean(np.sum(r.reshape(-1, 3) ** 2, axis=1)))))
+    return (conversions.canonical_quaternion(w), conversions.canonical_quaternion(m), float(dt),
+            _blocks(std, columns), r)
+
+
+def _pair_linearised(q_ref, q_est):
+    """``linearised(w, m, dt, columns)`` of matched pairs (``dt`` unused)."""
+    def linearised(w, m, dt, columns):
+        aligned = conversions.quaternion_product(conversions.quaternion_product(w, q_est), m)
+        r = orientation_errors(q_ref, aligned)
+        jacobian = _rotation_jacobian(r, q_est, m, columns)
+        return r.reshape(-1), jacobian.reshape(-1, jacobian.shape[-1])
+    return linearised
+
+
+def _rotation_jacobian(r, estimate, mounting, columns):
+    """Jacobian blocks ``(n, 3, p)`` of the residuals ``r`` in ``W exp(a)`` and ``M exp(b)``."""
+    jr_inv = inverse_right_jacobian(r)
+    blocks = []
+    if 'world' in columns:
+        body = conversions.matrix_from_quaternion(
+            conversions.quaternion_product(estimate, mounting))
+        blocks.append(jr_inv @ np.swapaxes(body, -1, -2))
+    if 'mounting' in columns:
+        blocks.append(jr_inv)
+    return np.concatenate(blocks, axis=2) if blocks else np.zeros(r.shape + (0,))
+
+
+def align_pairs(q_ref: ArrayLike, q_est: ArrayLike, *, world: bool = True,
+                mounting: bool = True) -> Alignment:
+    """
+    ``W`` and ``M`` minimising ``sum |log(R_ref_i^T W R_est_i M)|^2`` over matched pairs.
+
+    The least squares on SO(3) of :func:`estimate_alignment` without time:
+    the same start (``M`` by Kabsch on the relative rotations between
+    consecutive pairs where both are estimated) and Gauss-Newton steps.
+
+    Parameters
+    ----------
+    q_ref, q_est : array_like, shape (N, 4)
+        Matched orientations (x, y, z, w), body to world.
+    world, mounting : bool, optional
+        Estimate ``W`` (``M``); the identity when False.
+
+    Returns
+    -------
+    Alignment
+        With ``time_offset`` 0 and ``matched`` N.
+
+    Raises
+    ------
+    DegenerateMotionError
+        The pairs do not determine what was asked.
+
+    """
+    q_ref = conversions.canonical_quaternion(q_ref)
+    q_est = conversions.canonical_quaternion(q_est)
+    if q_ref.shape != q_est.shape or q_ref.ndim != 2 or q_ref.shape[0] < 2:
+        raise ComparisonError(f'expected two (N >= 2, 4) arrays of matched quaternions, got '
+                              f'{q_ref.shape} and {q_est.shape}')
+    columns = [name for name, wanted in (('world', world), ('mounting', mounting)) if wanted]
+    w = m = IDENTITY
+    if world and mounting:
+        # Relative rotations between consecutive pairs: log(R_ref_i^T R_ref_j) = M^T log(...est...).
+        m = kabsch(orientation_errors(q_ref[:-1], q_ref[1:]),
+                   orientation_errors(q_est[:-1], q_est[1:]))
+    w, m = _closed_form(q_ref, q_est, w, m, world, mounting)
+    w, m, _, std, r = _least_squares(_pair_linearised(q_ref, q_est), w, m, 0.0, columns)
+    return Alignment(0.0, 0.0, w, std.get('world', np.zeros(3)), m,
+                     std.get('mounting', np.zeros(3)), int(q_ref.shape[0]),
+                     float(np.sqrt(np.mean(np.sum(r.reshape(-1, 3) ** 2, axis=1)))))
 
 
 def _blocks(vector, columns):
@@ -349,12 +418,17 @@ def _initial_rotations(problem, dt, world, mounting, rates_ref, rates_est):
                                           bandwidth, 'estimate')
         both = valid_ref & valid_est
         m = kabsch(w_ref[both[valid_ref]], w_est[both[valid_est]])
+    return _closed_form(q_ref, estimate, w, m, world, mounting)
+
+
+def _closed_form(q_ref, q_est, w, m, world, mounting):
+    """``W`` given ``M`` (when estimated), else ``M`` given ``W``: chordal means."""
     if world:
         w = chordal_mean(conversions.quaternion_product(
-            q_ref, conversions.quaternion_conjugate(conversions.quaternion_product(estimate, m))))
+            q_ref, conversions.quaternion_conjugate(conversions.quaternion_product(q_est, m))))
     elif mounting:
         m = chordal_mean(conversions.quaternion_product(
-            conversions.quaternion_conjugate(estimate), q_ref))
+            conversions.quaternion_conjugate(conversions.quaternion_product(w, q_est)), q_ref))
     return w, m
 
 

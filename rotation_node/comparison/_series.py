@@ -7,7 +7,7 @@ formula here is made of.
 """
 from __future__ import annotations
 
-from typing import NamedTuple, Optional, Tuple, TYPE_CHECKING
+from typing import NamedTuple, Optional, TYPE_CHECKING, Tuple
 
 import numpy as np
 
@@ -146,9 +146,9 @@ class ErrorStatistics(NamedTuple):
     mean: float
     median: float
     p95: float
-    max: float
+    maximum: float
     axis_rmse: FloatArray
-    axis_max: FloatArray
+    axis_maximum: FloatArray
 
 
 def error_statistics(errors: ArrayLike) -> ErrorStatistics:
@@ -175,5 +175,5 @@ def error_statistics(errors: ArrayLike) -> ErrorStatistics:
     return ErrorStatistics(
         rmse=float(np.sqrt(np.mean(angle ** 2))), mean=float(np.mean(angle)),
         median=float(np.median(angle)), p95=float(np.percentile(angle, 95.0)),
-        max=float(np.max(angle)), axis_rmse=np.sqrt(np.mean(e ** 2, axis=0)),
-        axis_max=np.max(np.abs(e), axis=0))
+        maximum=float(np.max(angle)), axis_rmse=np.sqrt(np.mean(e ** 2, axis=0)),
+        axis_maximum=np.max(np.abs(e), axis=0))

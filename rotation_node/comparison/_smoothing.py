@@ -12,7 +12,7 @@ bandwidth), vectors (angular rates) directly.
 """
 from __future__ import annotations
 
-from typing import NamedTuple, Tuple, TYPE_CHECKING
+from typing import NamedTuple, TYPE_CHECKING, Tuple
 
 import numpy as np
 

@@ -151,14 +151,18 @@ def estimate_time_offset(t_ref: ArrayLike, q_ref: ArrayLike, t_est: ArrayLike, q
     lags, overlap, pearson = _correlations(a, ma, b, mb)
     allowed = overlap >= 0.5 * min(ma.sum(), mb.sum())
     if max_offset is not None:
-        allowed &= np.abs(lags * grid_step) <= max_offset
+        allowed &= np.abs(lags * grid_step) <= max_offset * (1.0 + 1e-9)
     pearson = np.where(allowed & np.isfinite(pearson), pearson, -np.inf)
     peak = int(np.argmax(pearson))
     if not np.isfinite(pearson[peak]) or pearson[peak] < MIN_CORRELATION:
+        searched = lags[allowed] * grid_step
+        where = (f'within +-{max_offset:g} s' if max_offset is not None else
+                 f'in [{searched.min():.3f}, {searched.max():.3f}] s')
         raise DegenerateMotionError(
-            'the angular rates of the two streams do not match at any time offset (peak '
-            f'correlation {max(pearson[peak], -1.0):.2f} < {MIN_CORRELATION}): different '
-            'motions, or too little motion')
+            f'the angular rates of the two streams do not match at any time offset {where} '
+            '(peak correlation '
+            f'{max(pearson[peak], -1.0):.2f} < {MIN_CORRELATION}): different motions, too '
+            'little motion, or a larger offset')
     if (peak == 0 or peak == pearson.size - 1 or not np.isfinite(pearson[peak - 1])
             or not np.isfinite(pearson[peak + 1])):
         raise DegenerateMotionError(
