@@ -1,5 +1,5 @@
 """
-Two orientation streams of one synthetic motion, with a known world alignment, mounting and time offset.
+Two orientation streams of one synthetic motion with a known alignment and time offset.
 
 Shared by the comparison tests, the ``rotation_bag compare`` tests and the
 accuracy study. The truth is built with scipy (an oracle independent of the
@@ -38,7 +38,7 @@ class TwoStreams:
 
 
 def random_rotation(rng: np.random.Generator) -> np.ndarray:
-    """A uniformly random rotation as a quaternion (x, y, z, w)."""
+    """Return a uniformly random rotation as a quaternion (x, y, z, w)."""
     return Rotation.random(random_state=rng).as_quat()
 
 

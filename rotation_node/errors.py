@@ -42,7 +42,7 @@ class ParameterError(RotationNodeError, ValueError):
 
 
 class ComparisonError(RotationNodeError, ValueError):
-    """Two orientation streams cannot be compared as asked (no overlap in time, too few samples)."""
+    """Two orientation streams cannot be compared as asked (no overlap, too few samples)."""
 
 
 class DegenerateMotionError(ComparisonError):

@@ -1,12 +1,11 @@
 """Tests of rotation_node.comparison._alignment: world alignment, mounting and time offset."""
 import numpy as np
 import pytest
-from scipy.optimize import minimize
-from scipy.spatial.transform import Rotation, Slerp
-
 from rotation_dev.two_streams import two_streams
 from rotation_node import comparison
 from rotation_node.errors import ComparisonError, DegenerateMotionError
+from scipy.optimize import minimize
+from scipy.spatial.transform import Rotation, Slerp
 
 IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
 
@@ -163,10 +162,9 @@ def test_pairs_with_both_rotations_against_a_general_minimiser(rng):
     found = comparison.align_pairs(q_ref, q_est)
 
     def cost(x):
-        return geodesic_cost(q_ref, q_est,
-                             (Rotation.from_quat(found.world) * Rotation.from_rotvec(x[:3])).as_quat(),
-                             (Rotation.from_quat(found.mounting)
-                              * Rotation.from_rotvec(x[3:])).as_quat())
+        world = Rotation.from_quat(found.world) * Rotation.from_rotvec(x[:3])
+        mounting = Rotation.from_quat(found.mounting) * Rotation.from_rotvec(x[3:])
+        return geodesic_cost(q_ref, q_est, world.as_quat(), mounting.as_quat())
     result = minimize(cost, np.full(6, 0.01), method='Nelder-Mead',
                       options={'xatol': 1e-10, 'fatol': 1e-16, 'maxiter': 20000})
     assert np.linalg.norm(result.x) < 1e-6
@@ -222,4 +220,4 @@ def test_aligned_errors_against_scipy():
     aligned = Rotation.from_quat(world) * estimate * Rotation.from_quat(mounting)
     errors = (Rotation.from_quat(streams.q_ref).inv() * aligned).as_rotvec()
     np.testing.assert_allclose(series.errors, errors, rtol=0, atol=1e-12)
-    np.testing.assert_array_equal(series.index, np.arange(streams.t_ref.size))
+    np.testing.assert_array_equal(series.reference_index, np.arange(streams.t_ref.size))

@@ -1,10 +1,9 @@
-"""Tests of rotation_node.comparison._series: slerp at other stamps, error rotations, statistics."""
+"""Tests of rotation_node.comparison._series: slerp at other stamps, errors, statistics."""
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation, Slerp
-
 from rotation_node import comparison, conversions
 from rotation_node.errors import ComparisonError
+from scipy.spatial.transform import Rotation, Slerp
 
 
 def test_slerp_matches_scipy(rng):

@@ -1,11 +1,10 @@
 """Tests of rotation_node.comparison._time_offset: the time offset from angular rate magnitudes."""
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
-
 from rotation_dev.two_streams import two_streams
 from rotation_node import comparison
 from rotation_node.errors import DegenerateMotionError
+from scipy.spatial.transform import Rotation
 
 
 @pytest.mark.parametrize('seed, offset, rate_ref, rate_est, noise_deg', [

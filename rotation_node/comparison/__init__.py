@@ -1,5 +1,5 @@
 """
-Two orientation streams compared: errors, time alignment, time offset, mounting and world alignment.
+Two orientation streams compared: errors, time alignment, time offset, mounting, world alignment.
 
 Pure numpy + numba, built on :mod:`rotation_node.conversions` (its exact
 product, conjugate, exponential and logarithm maps) and

@@ -91,7 +91,7 @@ class AlignedSeries(NamedTuple):
 
     Attributes
     ----------
-    index : ndarray of int
+    reference_index : ndarray of int
         Indices of the matched reference samples.
     times : ndarray
         Their times (s).
@@ -104,7 +104,7 @@ class AlignedSeries(NamedTuple):
 
     """
 
-    index: np.ndarray
+    reference_index: np.ndarray
     times: FloatArray
     reference: FloatArray
     estimate: FloatArray
@@ -112,13 +112,13 @@ class AlignedSeries(NamedTuple):
 
 
 def chordal_mean(q: FloatArray) -> FloatArray:
-    """Rotation minimising the sum of squared chordal distances: the top eigenvector of ``sum q q^T``."""
+    """Return the rotation nearest to ``q`` in chordal distance: top eigenvector of ``sum q q^T``."""
     _, vectors = np.linalg.eigh(q.T @ q)
     return conversions.canonical_quaternion(vectors[:, -1])
 
 
 def kabsch(a: FloatArray, b: FloatArray) -> FloatArray:
-    """Rotation ``R`` (a quaternion) minimising ``sum |b_i - R a_i|^2`` (SVD, proper rotation)."""
+    """Return the rotation ``R`` (a quaternion) minimising ``sum |b_i - R a_i|^2`` (SVD, proper rotation)."""
     u, _, vt = np.linalg.svd(b.T @ a)
     d = np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt)) or 1.0])
     return conversions.quaternion_from_matrix(u @ d @ vt)
@@ -149,7 +149,7 @@ class _Problem:
         self.bandwidth, self.max_gap = bandwidth, max_gap
         self.margin = 3.0 * bandwidth
         self.selected_at = None
-        self._cached = (None, None)
+        self._cached: tuple = (None, None)
 
     def select(self, dt):
         """Choose the reference samples usable for any offset within the margin of ``dt``."""
@@ -372,7 +372,7 @@ def align_pairs(q_ref: ArrayLike, q_est: ArrayLike, *, world: bool = True,
     columns = [name for name, wanted in (('world', world), ('mounting', mounting)) if wanted]
     w = m = IDENTITY
     if world and mounting:
-        # Relative rotations between consecutive pairs: log(R_ref_i^T R_ref_j) = M^T log(...est...).
+        # Relative rotations of consecutive pairs: log(R_ref_i^T R_ref_j) = M^T log(est ...).
         m = kabsch(orientation_errors(q_ref[:-1], q_ref[1:]),
                    orientation_errors(q_est[:-1], q_est[1:]))
     w, m = _closed_form(q_ref, q_est, w, m, world, mounting)
@@ -422,7 +422,7 @@ def _initial_rotations(problem, dt, world, mounting, rates_ref, rates_est):
 
 
 def _closed_form(q_ref, q_est, w, m, world, mounting):
-    """``W`` given ``M`` (when estimated), else ``M`` given ``W``: chordal means."""
+    """Return ``W`` given ``M`` (when estimated), else ``M`` given ``W``: chordal means."""
     if world:
         w = chordal_mean(conversions.quaternion_product(
             q_ref, conversions.quaternion_conjugate(conversions.quaternion_product(q_est, m))))

@@ -7,7 +7,7 @@ formula here is made of.
 """
 from __future__ import annotations
 
-from typing import NamedTuple, Optional, TYPE_CHECKING, Tuple
+from typing import NamedTuple, Optional, Tuple, TYPE_CHECKING
 
 import numpy as np
 

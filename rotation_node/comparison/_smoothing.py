@@ -12,7 +12,7 @@ bandwidth), vectors (angular rates) directly.
 """
 from __future__ import annotations
 
-from typing import NamedTuple, TYPE_CHECKING, Tuple
+from typing import NamedTuple, Tuple, TYPE_CHECKING
 
 import numpy as np
 
@@ -30,7 +30,7 @@ MIN_SAMPLES = 4
 class _Windows(NamedTuple):
     valid: np.ndarray      # (K,) queries with enough samples around them
     centre: np.ndarray     # (k,) index of the sample nearest to each valid query
-    index: np.ndarray      # (k, W) sample indices of each window
+    samples: np.ndarray    # (k, W) sample indices of each window
     weight: FloatArray     # (k, W) Gaussian weights, 0 outside the series
     offset: FloatArray     # (k, W) (t_sample - t_query) / bandwidth
 
@@ -54,13 +54,13 @@ def _windows(t: FloatArray, query: FloatArray, bandwidth: float) -> _Windows:
 
 def _fit(window: _Windows, values: FloatArray, degree: int) -> FloatArray:
     """Weighted least squares coefficients ``(k, degree + 1, m)`` of ``values (k, W, m)``."""
-    basis = [np.ones_like(window.offset)]
+    powers = [np.ones_like(window.offset)]
     for _ in range(degree):
-        basis.append(basis[-1] * window.offset)
-    basis = np.stack(basis, axis=1)                                     # (k, d, W)
+        powers.append(powers[-1] * window.offset)
+    basis = np.stack(powers, axis=1)                                    # (k, d, W)
     weighted = basis * window.weight[:, None, :]
     normal = weighted @ np.swapaxes(basis, 1, 2)                        # (k, d, d)
-    return np.linalg.solve(normal, weighted @ values)
+    return np.asarray(np.linalg.solve(normal, weighted @ values), dtype=np.float64)
 
 
 def smoothed_vectors(t: FloatArray, v: FloatArray, query: FloatArray,
@@ -71,7 +71,7 @@ def smoothed_vectors(t: FloatArray, v: FloatArray, query: FloatArray,
     Only queries with samples on both sides within two bandwidths are valid.
     """
     window = _windows(t, query, bandwidth)
-    return window.valid, _fit(window, v[window.index], 1)[:, 0, :]
+    return window.valid, _fit(window, v[window.samples], 1)[:, 0, :]
 
 
 def smoothed_orientations(t: FloatArray, q: FloatArray, query: FloatArray,
@@ -85,7 +85,7 @@ def smoothed_orientations(t: FloatArray, q: FloatArray, query: FloatArray,
     window = _windows(t, query, bandwidth)
     centre = q[window.centre]
     tangent = conversions.rotation_vector_from_quaternion(conversions.quaternion_product(
-        conversions.quaternion_conjugate(centre)[:, None, :], q[window.index]))
+        conversions.quaternion_conjugate(centre)[:, None, :], q[window.samples]))
     value = _fit(window, tangent, 2)[:, 0, :]
     return window.valid, conversions.canonical_quaternion(
         conversions.quaternion_product(centre, conversions.quaternion_from_rotation_vector(value)))

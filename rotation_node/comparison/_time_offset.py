@@ -13,7 +13,7 @@ continuous ``dt``, whose curvature gives the standard deviation.
 """
 from __future__ import annotations
 
-from typing import NamedTuple, Optional, TYPE_CHECKING
+from typing import NamedTuple, Optional, Tuple, TYPE_CHECKING
 
 import numpy as np
 
@@ -43,12 +43,12 @@ class TimeOffset(NamedTuple):
 
 
 def default_rate_bandwidth(step_ref: float, step_est: float) -> float:
-    """The Gaussian smoothing rate magnitudes: 20 ms, or 3 steps of the slower stream."""
+    """Return the Gaussian smoothing rate magnitudes: 20 ms, or 3 steps of the slower stream."""
     return max(0.02, 3.0 * max(step_ref, step_est))
 
 
 def smoothed_rates(t: FloatArray, q: FloatArray, rates: Optional[ArrayLike], query: FloatArray,
-                   bandwidth: float, name: str):
+                   bandwidth: float, name: str) -> Tuple[np.ndarray, FloatArray]:
     """
     Body angular rates of a stream smoothed at ``query``: ``(valid, rates (k, 3))``.
 
@@ -67,7 +67,7 @@ def smoothed_rates(t: FloatArray, q: FloatArray, rates: Optional[ArrayLike], que
 
 
 def _correlations(a, ma, b, mb):
-    """Sums over ``i`` of products of ``x[i]`` and ``y[i + L]`` for every lag ``L`` (FFT)."""
+    """Return the sums over ``i`` of products of ``x[i]`` and ``y[i + L]`` for every lag ``L`` (FFT)."""
     size = 1 << int(np.ceil(np.log2(2 * a.size)))
 
     def correlate(x, y):
