@@ -1,4 +1,4 @@
-"""Tests of rotation_node.bag.compare (``rotation_bag compare``): bags written from synthetic truth."""
+"""Tests of rotation_node.bag.compare (``rotation_bag compare``) on bags of synthetic truth."""
 import json
 import os
 

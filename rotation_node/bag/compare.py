@@ -6,7 +6,9 @@ estimate topic (an IMU's filter, an odometry) of any input type the node takes
 are read as the node reads them: the registry entry of their type
 (:data:`rotation_node.messages.INPUTS`) and its sample stream
 (``InputType.sample_stream``; for ``/tf`` the TF buffer's lookup of a child
-frame in a parent frame, with ``T_static`` beside ``T``). The samples' header
+frame in a parent frame, with ``T_static`` beside ``T``), fed the read-only
+views of :mod:`rotation_node.bag.cdr` where the type has a fixed layout (as
+``convert`` feeds its pipelines) and rclpy messages otherwise. The samples' header
 stamps put both on one clock; then :mod:`rotation_node.comparison` estimates
 what was asked of
 
@@ -31,6 +33,7 @@ from matplotlib.figure import Figure
 import numpy as np
 from rotation_node import comparison, conversions, messages
 from rotation_node.bag.atomic_file import AtomicFile
+from rotation_node.bag.cdr import fixed_layout_codec
 from rotation_node.bag.reader import open_bag
 from rotation_node.bag.stop_signal import raise_if_stopped
 from rotation_node.errors import BagError, ComparisonError
@@ -40,7 +43,7 @@ from rotation_node.stamps import header_stamp_ns
 if TYPE_CHECKING:
     from rotation_node.type_aliases import FloatArray, StrPath
 
-ALIGN_CHOICES = ('none', 'world', 'mounting', 'both')   # as rotation_node.bag.cli's (a test checks)
+ALIGN_CHOICES = ('none', 'world', 'mounting', 'both')   # as bag.cli's (a test checks)
 #: The Euler angles of the plot: ROS roll, pitch, yaw.
 PLOT_SEQUENCE = 'xyz'
 
@@ -156,6 +159,8 @@ def read_stream(source: StreamSource, params: Optional[NodeParameters] = None, *
                 if other.name.startswith(first) and companion in reader.topics:
                     topics[companion] = other.name
         stream = entry.sample_stream(params, angular_velocity=True)
+        codec = fixed_layout_codec(entry.type_name)   # read-only views, as convert reads them
+        decode = None if codec is None else codec.decode
         quaternion = _quaternion_of(entry, params)
         stamps: List[int] = []
         orientations: List[Sequence[float]] = []
@@ -164,7 +169,7 @@ def read_stream(source: StreamSource, params: Optional[NodeParameters] = None, *
         for record in reader.messages(list(topics)):
             raise_if_stopped()
             count += record.topic == topic
-            for sample in stream(topics[record.topic], record.message()):
+            for sample in stream(topics[record.topic], record.message(decode)):
                 orientation = sample.orientation
                 if (orientation is None or not all(map(math.isfinite, orientation))
                         or not any(orientation)):
@@ -328,7 +333,7 @@ def draw_comparison(result: ComparisonResult) -> Figure:
     then roll, pitch and yaw of the reference and of the aligned estimate.
     """
     series = result.series
-    seconds = series.times
+    seconds = series.times - series.times[0]
     errors = np.degrees(series.errors)
     figure = Figure(figsize=(10, 14.0), layout='constrained')
     axes = figure.subplots(5, 1, sharex=True)
@@ -341,10 +346,13 @@ def draw_comparison(result: ComparisonResult) -> Figure:
         ax.set_ylabel('deg')
     reference = np.unwrap(conversions.euler_from_quaternion(series.reference, PLOT_SEQUENCE),
                           axis=0)
-    estimate = np.unwrap(conversions.euler_from_quaternion(series.estimate, PLOT_SEQUENCE),
-                         axis=0)
+    estimate = conversions.euler_from_quaternion(series.estimate, PLOT_SEQUENCE)
+    # The turn of 2 pi that puts each estimate angle nearest the reference's: the two
+    # curves overlay wherever the reference is unwrapped to.
+    estimate += 2.0 * np.pi * np.round((reference - estimate) / (2.0 * np.pi))
     for ax, name, ref, est in zip(axes[2:], ('roll', 'pitch', 'yaw'), reference.T, estimate.T):
-        ax.plot(seconds, np.degrees(ref), linewidth=1.0, label=f'reference {result.reference.topic}')
+        ax.plot(seconds, np.degrees(ref), linewidth=1.0,
+                label=f'reference {result.reference.topic}')
         ax.plot(seconds, np.degrees(est), linewidth=1.0, linestyle='--',
                 label=f'estimate {result.estimate.topic}, aligned')
         ax.set_title(f'{name} (ROS roll-pitch-yaw)')
@@ -352,11 +360,10 @@ def draw_comparison(result: ComparisonResult) -> Figure:
     for ax in axes:
         ax.grid(True, alpha=0.3)
         ax.legend(loc='upper right', fontsize='small')
-    axes[-1].set_xlabel('time since the first sample [s] (reference clock)')
-    a = result.alignment
+    axes[-1].set_xlabel('time since the first matched reference sample [s]')
+    rmse = math.degrees(result.statistics.rmse)
     figure.suptitle(f'{result.estimate.topic} vs {result.reference.topic}: time offset '
-                    f'{a.time_offset:+.4f} s, error rmse {math.degrees(result.statistics.rmse):.3f}'
-                    ' deg')
+                    f'{result.alignment.time_offset:+.4f} s, error rmse {rmse:.3f} deg')
     return figure
 
 

@@ -112,13 +112,13 @@ class AlignedSeries(NamedTuple):
 
 
 def chordal_mean(q: FloatArray) -> FloatArray:
-    """Return the rotation nearest to ``q`` in chordal distance: top eigenvector of ``sum q q^T``."""
+    """Return the chordal mean of rotations ``q (N, 4)``: the top eigenvector of ``sum q q^T``."""
     _, vectors = np.linalg.eigh(q.T @ q)
     return conversions.canonical_quaternion(vectors[:, -1])
 
 
 def kabsch(a: FloatArray, b: FloatArray) -> FloatArray:
-    """Return the rotation ``R`` (a quaternion) minimising ``sum |b_i - R a_i|^2`` (SVD, proper rotation)."""
+    """Return the rotation (a quaternion) minimising ``sum |b_i - R a_i|^2`` (SVD, det +1)."""
     u, _, vt = np.linalg.svd(b.T @ a)
     d = np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt)) or 1.0])
     return conversions.quaternion_from_matrix(u @ d @ vt)
@@ -437,7 +437,7 @@ def aligned_series(t_ref: ArrayLike, q_ref: ArrayLike, t_est: ArrayLike, q_est: 
                    mounting: ArrayLike = IDENTITY,
                    max_gap: Optional[float] = None) -> AlignedSeries:
     """
-    The estimate slerped at the reference stamps ``t + dt``, aligned, and the errors.
+    Return the estimate slerped at the reference stamps ``t + dt``, aligned, and the errors.
 
     Parameters
     ----------

@@ -67,7 +67,7 @@ def smoothed_rates(t: FloatArray, q: FloatArray, rates: Optional[ArrayLike], que
 
 
 def _correlations(a, ma, b, mb):
-    """Return the sums over ``i`` of products of ``x[i]`` and ``y[i + L]`` for every lag ``L`` (FFT)."""
+    """Return ``(lags L, pair counts, Pearson correlation of a[i] and b[i + L])`` by FFT."""
     size = 1 << int(np.ceil(np.log2(2 * a.size)))
 
     def correlate(x, y):
