@@ -16,6 +16,7 @@ offset).
 """
 from dataclasses import dataclass
 import io
+import os
 import time
 from typing import List, Sequence
 
@@ -31,6 +32,7 @@ QUICK_NOISE_DEG = (0.3, 1.0)
 QUICK_DURATIONS_S = (10.0,)
 QUICK_SEEDS = (1,)
 TIME_OFFSET_S = 0.0373
+_MEASURED = ('', (0.0, 0.0, 0.0))
 
 
 @dataclass(frozen=True)
@@ -97,6 +99,8 @@ def _case(noise, duration, seed):
 
 def measure(quick: bool = False) -> List[ComparisonRow]:
     """Return one row per noise level and record length."""
+    global _MEASURED   # when and under what load, for the section's text
+    _MEASURED = (time.strftime('%Y-%m-%d %H:%M', time.gmtime()), os.getloadavg())
     _case(1.0, 5.0, 0)   # compiles what the library compiles on first use: not timed
     rows = []
     for duration in (QUICK_DURATIONS_S if quick else DURATIONS_S):
@@ -124,7 +128,10 @@ def comparison_markdown(rows: Sequence[ComparisonRow], *, heading: str = '##') -
         'worst error over them and the median time. `rmse ratio`: the root mean square error '
         'angle after the estimated alignment over that after the true one. Times are wall '
         'times of one call on this machine (`estimate_time_offset` alone, and '
-        '`estimate_alignment` of dt, W and M together).',
+        '`estimate_alignment` of dt, W and M together), measured on {} UTC at load average '
+        '{:.2f}, {:.2f}, {:.2f}.'.format(_MEASURED[0], *_MEASURED[1]),
+        '',
+        '![errors of dt, W and M against noise and record length](compare_accuracy.png)',
         '',
         '| noise (deg) | record (s) | dt error (ms) | dt std (ms) | W error (deg) '
         '| M error (deg) | rmse ratio | time: dt (s) | time: dt, W, M (s) |',

@@ -303,8 +303,8 @@ def summary(result: ComparisonResult) -> str:
             return f'{name:<16}identity (not estimated)'
         rpy = np.degrees(conversions.euler_from_quaternion(quaternion, PLOT_SEQUENCE))
         return (f'{name:<16}xyzw [{", ".join(f"{v:.6f}" for v in quaternion)}]  '
-                f'roll {rpy[0]:.3f} pitch {rpy[1]:.3f} yaw {rpy[2]:.3f} deg  '
-                f'+- [{", ".join(f"{v:.4f}" for v in np.degrees(std))}] deg')
+                f'+- [{", ".join(f"{v:.4f}" for v in np.degrees(std))}] deg\n'
+                f'{"":<16}roll {rpy[0]:.3f} pitch {rpy[1]:.3f} yaw {rpy[2]:.3f} deg')
 
     offset = f'{a.time_offset:+.6f} s'
     offset += (f' +- {a.time_offset_std:.6f} s (estimated)' if result.time_offset_estimated
