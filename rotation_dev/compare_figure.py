@@ -29,7 +29,8 @@ def _frames(axis):
              'reference body': (2.0, 1.5), 'reference world': (8.0, 1.5)}
     for name, (x, y) in boxes.items():
         axis.text(x, y, name, ha='center', va='center', fontsize=11,
-                  bbox={'boxstyle': 'round,pad=0.5', 'facecolor': '#eef3fb', 'edgecolor': '#4a6fa5'})
+                  bbox={'boxstyle': 'round,pad=0.5', 'facecolor': '#eef3fb',
+                        'edgecolor': '#4a6fa5'})
 
     def arrow(start, end, label, where, colour):
         axis.annotate('', xy=end, xytext=start,

@@ -25,6 +25,8 @@ if TYPE_CHECKING:
 WINDOW_BANDWIDTHS = 5.0
 #: A fit needs at least this many samples within 2 bandwidths of the query.
 MIN_SAMPLES = 4
+#: Queries fitted at a time (bounds the memory of long records).
+CHUNK = 8192
 
 
 class _Windows(NamedTuple):
@@ -63,6 +65,16 @@ def _fit(window: _Windows, values: FloatArray, degree: int) -> FloatArray:
     return np.asarray(np.linalg.solve(normal, weighted @ values), dtype=np.float64)
 
 
+def _in_chunks(fit, query):
+    """Apply ``fit(query_chunk) -> (valid, values)`` to bounded chunks: memory stays flat."""
+    valid, values = [], []
+    for start in range(0, max(query.size, 1), CHUNK):
+        chunk_valid, chunk_values = fit(query[start:start + CHUNK])
+        valid.append(chunk_valid)
+        values.append(chunk_values)
+    return np.concatenate(valid), np.concatenate(values)
+
+
 def smoothed_vectors(t: FloatArray, v: FloatArray, query: FloatArray,
                      bandwidth: float) -> Tuple[np.ndarray, FloatArray]:
     """
@@ -70,8 +82,10 @@ def smoothed_vectors(t: FloatArray, v: FloatArray, query: FloatArray,
 
     Only queries with samples on both sides within two bandwidths are valid.
     """
-    window = _windows(t, query, bandwidth)
-    return window.valid, _fit(window, v[window.samples], 1)[:, 0, :]
+    def fit(chunk):
+        window = _windows(t, chunk, bandwidth)
+        return window.valid, _fit(window, v[window.samples], 1)[:, 0, :]
+    return _in_chunks(fit, query)
 
 
 def smoothed_orientations(t: FloatArray, q: FloatArray, query: FloatArray,
@@ -82,10 +96,12 @@ def smoothed_orientations(t: FloatArray, q: FloatArray, query: FloatArray,
     In the tangent space of the sample nearest to each query: ``q_c exp(a)``
     with ``a`` the fitted value of ``log(q_c* q_j)`` over the window.
     """
-    window = _windows(t, query, bandwidth)
-    centre = q[window.centre]
-    tangent = conversions.rotation_vector_from_quaternion(conversions.quaternion_product(
-        conversions.quaternion_conjugate(centre)[:, None, :], q[window.samples]))
-    value = _fit(window, tangent, 2)[:, 0, :]
-    return window.valid, conversions.canonical_quaternion(
-        conversions.quaternion_product(centre, conversions.quaternion_from_rotation_vector(value)))
+    def fit(chunk):
+        window = _windows(t, chunk, bandwidth)
+        centre = q[window.centre]
+        tangent = conversions.rotation_vector_from_quaternion(conversions.quaternion_product(
+            conversions.quaternion_conjugate(centre)[:, None, :], q[window.samples]))
+        value = _fit(window, tangent, 2)[:, 0, :]
+        return window.valid, conversions.canonical_quaternion(conversions.quaternion_product(
+            centre, conversions.quaternion_from_rotation_vector(value)))
+    return _in_chunks(fit, query)
