@@ -197,3 +197,43 @@ def test_tf_needs_its_frames(tmp_path, streams, capsys):
 
 def test_alignment_choices_are_the_same_in_the_cli():
     assert cli.ALIGN_CHOICES == compare.ALIGN_CHOICES
+
+
+def test_unknown_and_zero_orientations_are_dropped(tmp_path, streams, capsys):
+    bag = tmp_path / 'gaps.mcap'
+    with BagWriter(bag) as writer:
+        write_topic(writer, '/ref', 'pose', streams.t_ref, streams.q_ref)
+        for i, (stamp, q) in enumerate(zip(stamps_ns(streams.t_est).tolist(), streams.q_est)):
+            msg = make_input_message('imu', Rotation.from_quat(q), stamp_ns=stamp)
+            if i % 10 == 5:
+                msg.orientation_covariance[0] = -1.0    # REP 145: no orientation
+            if i == 7:
+                msg.orientation.x = msg.orientation.y = msg.orientation.z = 0.0
+                msg.orientation.w = 0.0
+            writer.write('/imu', msg, stamp)
+    json_path = tmp_path / 'result.json'
+    assert cli.main(['compare', str(bag), '--reference', '/ref', '--estimate', '/imu',
+                     '--json', str(json_path)]) == 0
+    out = capsys.readouterr().out
+    dropped = streams.t_est.size // 10 + 1
+    assert (f'{streams.t_est.size} messages, {streams.t_est.size - dropped} samples, '
+            f'{dropped} dropped (angular velocity differentiated)') in out
+    check_against_truth(json.loads(json_path.read_text()), streams)
+
+
+def test_euler_angles_of_the_parameters_sequence(tmp_path, streams):
+    params = tmp_path / 'params.yaml'
+    params.write_text('rotation_node:\n  ros__parameters:\n'
+                      '    euler: {sequence: ZYX, degrees: true}\n')
+    bag = tmp_path / 'euler.mcap'
+    with BagWriter(bag) as writer:
+        write_topic(writer, '/ref', 'pose', streams.t_ref, streams.q_ref)
+        for stamp, q in zip(stamps_ns(streams.t_est).tolist(), streams.q_est):
+            writer.write('/angles', make_input_message('euler', Rotation.from_quat(q),
+                                                       stamp_ns=stamp, sequence='ZYX',
+                                                       degrees=True), stamp)
+    json_path = tmp_path / 'result.json'
+    assert cli.main(['compare', str(bag), '--reference', '/ref', '--estimate', '/angles',
+                     '--estimate-type', 'euler', '--params', str(params),
+                     '--json', str(json_path)]) == 0
+    check_against_truth(json.loads(json_path.read_text()), streams)

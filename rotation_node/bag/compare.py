@@ -3,12 +3,13 @@ Compare two orientation topics of one bag or two (``rotation_bag compare``).
 
 A reference topic (ground truth: motion capture, a reference INS) and an
 estimate topic (an IMU's filter, an odometry) of any input type the node takes
-are read as the node reads them: the registry entry of their type
-(:data:`rotation_node.messages.INPUTS`) and its sample stream
-(``InputType.sample_stream``; for ``/tf`` the TF buffer's lookup of a child
-frame in a parent frame, with ``T_static`` beside ``T``), fed the read-only
-views of :mod:`rotation_node.bag.cdr` where the type has a fixed layout (as
-``convert`` feeds its pipelines) and rclpy messages otherwise. The samples' header
+are read as the node reads them: a :class:`~rotation_node.pipeline.ConversionPipeline`
+with the ``quaternion`` output, so the registry entry of their type
+(:data:`rotation_node.messages.INPUTS`), its sample stream (for ``/tf`` the TF
+buffer's lookup of a child frame in a parent frame, with ``T_static`` beside
+``T``) and the pipeline's rules for unknown, non-finite and zero orientations,
+fed the read-only views of :mod:`rotation_node.bag.cdr` where the type has a
+fixed layout (as ``convert`` feeds its pipelines) and rclpy messages otherwise. The samples' header
 stamps put both on one clock; then :mod:`rotation_node.comparison` estimates
 what was asked of
 
@@ -38,6 +39,7 @@ from rotation_node.bag.reader import open_bag
 from rotation_node.bag.stop_signal import raise_if_stopped
 from rotation_node.errors import BagError, ComparisonError
 from rotation_node.parameters import NodeParameters
+from rotation_node.pipeline import ConversionPipeline, ORIENTATION_UNKNOWN
 from rotation_node.stamps import header_stamp_ns
 
 if TYPE_CHECKING:
@@ -107,16 +109,6 @@ def _input_type(source: StreamSource, type_name: str, params: NodeParameters):
     return (preferred or candidates)[0]
 
 
-def _quaternion_of(entry, params):
-    """``quaternion(orientation) -> (x, y, z, w)`` of the entry's orientation form (unit)."""
-    if entry.orientation_form == messages.EULER:
-        return lambda angles: conversions.quaternion_from_euler(
-            angles, params.euler_sequence, degrees=params.euler_degrees)
-    if entry.orientation_form == messages.ROTATION_VECTOR:
-        return conversions.quaternion_from_rotation_vector
-    return conversions.canonical_quaternion
-
-
 def read_stream(source: StreamSource, params: Optional[NodeParameters] = None, *,
                 strict: bool = False,
                 report: Optional[Callable[[str], None]] = None) -> Stream:
@@ -146,43 +138,47 @@ def read_stream(source: StreamSource, params: Optional[NodeParameters] = None, *
                 report(note)
         topic = reader.topic_name(source.topic)
         entry = _input_type(source, reader.topics[topic], params)
+        # The pipeline's quaternion output: the input type's sample stream, its orientation
+        # form (Euler angles of the parameters' sequence and unit), its drop rules; no frame
+        # conventions (the orientations as the messages hold them).
+        values = {'input_type': entry.name, 'outputs': ['quaternion'],
+                  'euler.sequence': params.euler_sequence, 'euler.degrees': params.euler_degrees}
         topics = {topic: entry.topics[0].name}
         if entry.stream is not None:
             if source.frames is None:
                 raise BagError(f'{topic} is {entry.type_name}: name the parent and child frames '
                                'to compare (--reference-frames / --estimate-frames PARENT CHILD)')
-            params = params.replaced({'tf.parent_frame': source.frames[0],
-                                      'tf.child_frame': source.frames[1]})
+            values.update({'tf.parent_frame': source.frames[0],
+                           'tf.child_frame': source.frames[1]})
             first = entry.topics[0].name
             for other in entry.topics[1:]:
                 companion = topic + other.name[len(first):]
                 if other.name.startswith(first) and companion in reader.topics:
                     topics[companion] = other.name
-        stream = entry.sample_stream(params, angular_velocity=True)
+        pipeline = ConversionPipeline(NodeParameters().replaced(values))
+        # The messages' own angular velocities (one sample per message of a plain type).
+        read_rate = (entry.sample_reader() if entry.stream is None
+                     and entry.angular_velocity_field is not None else None)
         codec = fixed_layout_codec(entry.type_name)   # read-only views, as convert reads them
         decode = None if codec is None else codec.decode
-        quaternion = _quaternion_of(entry, params)
         stamps: List[int] = []
-        orientations: List[Sequence[float]] = []
+        quaternions: List[Sequence[float]] = []
         rates: List[Optional[Sequence[float]]] = []
-        count = dropped = 0
+        count = 0
         for record in reader.messages(list(topics)):
             raise_if_stopped()
             count += record.topic == topic
-            for sample in stream(topics[record.topic], record.message(decode)):
-                orientation = sample.orientation
-                if (orientation is None or not all(map(math.isfinite, orientation))
-                        or not any(orientation)):
-                    dropped += 1
-                    continue
-                stamps.append(header_stamp_ns(sample.header))
-                orientations.append(orientation)
-                rates.append(sample.angular_velocity)
+            msg = record.message(decode)
+            for _, header, numbers in pipeline.process_values(msg, topics[record.topic]):
+                stamps.append(header_stamp_ns(header))
+                quaternions.append(numbers)
+                rates.append(None if read_rate is None else read_rate(msg).angular_velocity)
         path = str(reader.path)
-    return _sorted_stream(path, topic, count, stamps, orientations, rates, quaternion, dropped)
+    dropped = sum(pipeline.stats.dropped.values()) + pipeline.stats.skipped[ORIENTATION_UNKNOWN]
+    return _sorted_stream(path, topic, count, stamps, quaternions, rates, dropped)
 
 
-def _sorted_stream(path, topic, count, stamps, orientations, rates, quaternion, dropped):
+def _sorted_stream(path, topic, count, stamps, quaternions, rates, dropped):
     if count == 0:
         raise BagError(f'topic {topic} in {path} has no messages')
     stamps_ns = np.asarray(stamps, dtype=np.int64)
@@ -192,14 +188,13 @@ def _sorted_stream(path, topic, count, stamps, orientations, rates, quaternion, 
     if keep.size < 2:
         raise ComparisonError(f'topic {topic} in {path} has {keep.size} usable orientation '
                               'samples; at least 2 are needed')
-    width = len(orientations[0])
-    quaternions = quaternion(np.asarray(orientations, dtype=np.float64).reshape(-1, width)[keep])
+    unit = conversions.canonical_quaternion(np.asarray(quaternions, dtype=np.float64)[keep])
     given = None
     if all(rate is not None for rate in rates):
         given = np.asarray(rates, dtype=np.float64)[keep]
         if not np.any(given) or not np.all(np.isfinite(given)):
             given = None   # a field never filled in, or unusable: differentiate
-    return Stream(path, topic, count, stamps_ns[keep], quaternions, given, dropped)
+    return Stream(path, topic, count, stamps_ns[keep], unit, given, dropped)
 
 
 @dataclass

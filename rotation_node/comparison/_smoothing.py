@@ -23,7 +23,7 @@ if TYPE_CHECKING:
 
 #: Half width of the window, in bandwidths (weights below exp(-12.5) ~ 4e-6 are left out).
 WINDOW_BANDWIDTHS = 5.0
-#: A fit needs at least this many samples within 2 bandwidths of the query.
+#: A fit needs at least this many samples within 3 bandwidths of the query, on both sides.
 MIN_SAMPLES = 4
 #: Queries fitted at a time (bounds the memory of long records).
 CHUNK = 8192
@@ -48,7 +48,7 @@ def _windows(t: FloatArray, query: FloatArray, bandwidth: float) -> _Windows:
     offset = (t[index] - query[:, None]) / bandwidth
     near = inside & (np.abs(offset) <= WINDOW_BANDWIDTHS)
     weight = np.where(near, np.exp(-0.5 * offset ** 2), 0.0)
-    close = inside & (np.abs(offset) <= 2.0)
+    close = inside & (np.abs(offset) <= 3.0)
     valid = ((query >= t[0]) & (query <= t[-1]) & (np.sum(close, axis=1) >= MIN_SAMPLES)
              & np.any(close & (offset <= 0.0), axis=1) & np.any(close & (offset >= 0.0), axis=1))
     return _Windows(valid, centre[valid], index[valid], weight[valid], offset[valid])
@@ -80,7 +80,7 @@ def smoothed_vectors(t: FloatArray, v: FloatArray, query: FloatArray,
     """
     Local linear fit of vectors ``v (N, m)`` at ``query``: ``(valid (K,), values (k, m))``.
 
-    Only queries with samples on both sides within two bandwidths are valid.
+    Only queries with samples on both sides within three bandwidths (four at least) are valid.
     """
     def fit(chunk):
         window = _windows(t, chunk, bandwidth)
