@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from rotation_dev.two_streams import two_streams
 from rotation_node import comparison
-from rotation_node.errors import DegenerateMotionError
+from rotation_node.errors import ComparisonError, DegenerateMotionError
 from scipy.spatial.transform import Rotation
 
 
@@ -52,3 +52,10 @@ def test_different_motions_raise():
     one, other = two_streams(7, duration=20.0), two_streams(8, duration=20.0)
     with pytest.raises(DegenerateMotionError, match='do not match'):
         comparison.estimate_time_offset(one.t_ref, one.q_ref, other.t_est, other.q_est)
+
+
+def test_stamps_of_different_clocks_are_refused():
+    streams = two_streams(9, duration=10.0)
+    with pytest.raises(ComparisonError, match='span 1.7e'):
+        comparison.estimate_time_offset(streams.t_ref + 1.7e9, streams.q_ref, streams.t_est,
+                                        streams.q_est)

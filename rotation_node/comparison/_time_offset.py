@@ -32,6 +32,8 @@ if TYPE_CHECKING:
 MIN_RATE_VARIATION = 0.02
 #: Below this peak normalised cross-correlation the rate magnitudes do not match.
 MIN_CORRELATION = 0.5
+#: The rate magnitudes are searched on at most this many grid points (memory).
+MAX_GRID_POINTS = 20_000_000
 
 
 class TimeOffset(NamedTuple):
@@ -124,7 +126,8 @@ def estimate_time_offset(t_ref: ArrayLike, q_ref: ArrayLike, t_est: ArrayLike, q
         deviation: no motion, or a constant rate), or the two do not correlate
         (peak below 0.5), or the peak lies on the edge of the searched lags.
     ComparisonError
-        Bad arrays, or the streams are too short to smooth.
+        Bad arrays, or the streams together span more than 20 million grid steps
+        (stamps of different clocks).
 
     """
     t_ref, q_ref = checked_series(t_ref, q_ref, 'reference')
@@ -134,7 +137,13 @@ def estimate_time_offset(t_ref: ArrayLike, q_ref: ArrayLike, t_est: ArrayLike, q
                  else float(bandwidth))
     grid_step = min(step_ref, step_est, bandwidth / 8.0)
     start = min(t_ref[0], t_est[0])
-    grid = start + grid_step * np.arange(int((max(t_ref[-1], t_est[-1]) - start) / grid_step) + 1)
+    points = int((max(t_ref[-1], t_est[-1]) - start) / grid_step) + 1
+    if points > MAX_GRID_POINTS:
+        raise ComparisonError(
+            f'the two streams span {points * grid_step:.6g} s together: too long to search for '
+            f'the time offset at {grid_step * 1e3:.3g} ms steps (are their stamps on one clock? '
+            'give the time offset)')
+    grid = start + grid_step * np.arange(points)
 
     def magnitudes(t, q, rates, name):
         valid, values = smoothed_rates(t, q, rates, grid, bandwidth, name)
