@@ -6,8 +6,8 @@ Euler-covariance section's plot), ``DIR/compare_accuracy.png`` (the two-stream
 section's) and ``DIR/performance.md`` (default ``DIR``: ``docs``), each through
 a temporary file renamed into place.
 ``--quick`` (for CI) uses fewer inputs and runs only the library benchmark; it
-finishes in well under a minute; the full run takes about five. Progress goes
-to stderr.
+finishes in about a minute; the full run takes about seven (two of them the
+two-stream section). Progress goes to stderr.
 
 Run from the repository root with the development environment (``.venv``).
 

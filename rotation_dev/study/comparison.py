@@ -150,8 +150,10 @@ def comparison_markdown(rows: Sequence[ComparisonRow], *, heading: str = '##') -
                       f'{r.time_offset_error_s * 1e3:.3f} ms (target 1 ms), W and M within '
                       f'{max(r.world_error_deg, r.mounting_error_deg):.4f} deg (target 0.1), '
                       f'the error statistics within {abs(r.rmse_ratio - 1) * 100:.2f} % of '
-                      'those at the true alignment (target 5 %). The errors fall with the '
-                      'noise and with the square root of the record length.']
+                      'those at the true alignment (target 5 %). The errors grow with the '
+                      'noise; those of W and M fall with the record length. The rows share '
+                      'their seeds (the same motions, and noise draws scaled to each level), '
+                      'so their worst cases are not independent samples.']
     return '\n'.join(lines) + '\n'
 
 
