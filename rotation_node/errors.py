@@ -39,3 +39,11 @@ class SceneError(RotationNodeError, ValueError):
 
 class ParameterError(RotationNodeError, ValueError):
     """A node parameter (or parameters file entry) has an invalid value."""
+
+
+class ComparisonError(RotationNodeError, ValueError):
+    """Two orientation streams cannot be compared as asked (no overlap, too few samples)."""
+
+
+class DegenerateMotionError(ComparisonError):
+    """The motion does not determine what was asked (one rotation axis only, too little motion)."""

@@ -163,6 +163,38 @@ def test_plot_default_name_and_bad_topic(workspace, capsys, monkeypatch):
 
 
 @pytest.mark.parametrize('args, match', [
+    (['missing.mcap', '--reference', '/imu', '--estimate', '/imu'],
+     'cannot open bag missing.mcap'),
+    (['imu.mcap', 'imu.mcap', 'imu.mcap', '--reference', '/imu', '--estimate', '/imu'],
+     'compare takes one bag or two'),
+    (['imu.mcap', '--reference', '/nope', '--estimate', '/imu'], 'topic /nope not in imu.mcap'),
+    (['imu.mcap', '--reference', '/foreign', '--estimate', '/imu'],
+     'cannot compare /foreign: foreign_msgs/msg/Thing has no orientation the node reads'),
+    (['imu.mcap', '--reference', '/imu', '--estimate', '/imu', '--reference-type', 'pose'],
+     '/imu is sensor_msgs/msg/Imu, not geometry_msgs/msg/PoseStamped'),
+    (['imu.mcap', '--reference', '/imu', '--estimate', '/imu', '--json', 'params.yaml'],
+     'output params.yaml already exists'),
+], ids=['missing', 'three_bags', 'topic_not_in_bag', 'unknown_type', 'wrong_input_type',
+        'output_exists'])
+def test_compare_bad_input(workspace, capsys, monkeypatch, args, match):
+    monkeypatch.chdir(workspace)
+    before = _snapshot(workspace)
+    status, stderr = _run(capsys, 'compare', *args)
+    line, = stderr.splitlines()
+    assert status == 1 and line.startswith('rotation_bag compare: error: ') and match in line
+    assert _snapshot(workspace) == before
+
+
+@pytest.mark.parametrize('option', [['--time-offset', 'soon'], ['--time-offset', 'nan'],
+                                    ['--max-gap', '0'], ['--align', 'sideways']])
+def test_compare_usage_errors_exit_2(capsys, option):
+    with pytest.raises(SystemExit) as exit_:
+        main(['compare', 'in.mcap', '--reference', '/a', '--estimate', '/b', *option])
+    assert exit_.value.code == 2
+    assert f'argument {option[0]}' in capsys.readouterr().err
+
+
+@pytest.mark.parametrize('args, match', [
     (['missing.mcap'], 'cannot open bag missing.mcap'),
     (['imu.mcap', '--topics', '/nope'], 'topic /nope not in imu.mcap'),
     (['imu.mcap', '--topics', '/foreign'], "unknown message type 'foreign_msgs/msg/Thing'"),

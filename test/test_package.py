@@ -50,6 +50,8 @@ IMPORT_KEYS = {
     'pytest': 'python3-pytest', 'rosbags': 'python3-rosbags-pip',
     # mcap-ros2-support (pip) installs mcap, which requires zstandard and lz4.
     'mcap': 'mcap-ros2-support', 'mcap_ros2': 'mcap-ros2-support',
+    # rosbags (pip) installs apsw, the SQLite binding its sqlite3 storage reads with.
+    'apsw': 'python3-rosbags-pip',
     'zstandard': 'mcap-ros2-support', 'lz4': 'mcap-ros2-support',
     'mpmath': None,
     # Only rotation_node.bag.batch.convert_bags_on_dask imports it, for a caller who

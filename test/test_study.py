@@ -14,7 +14,7 @@ import time
 
 import pytest
 from rotation_dev.paths import REPOSITORY
-from rotation_dev.study import covariance, integration, measure, methods
+from rotation_dev.study import comparison, covariance, integration, measure, methods
 from rotation_node.kinematics import INTEGRATION_METHODS
 
 STUDY = (sys.executable, '-m', 'rotation_dev.study')
@@ -78,8 +78,8 @@ def _assert_finite(row, columns, what):
 def test_quick_run_succeeds_and_writes_the_three_documents(quick_run):
     out, process, _ = quick_run
     assert process.returncode == 0, process.stderr
-    assert sorted(os.listdir(out)) == ['accuracy.md', 'accuracy.png', 'covariance.png',
-                                       'performance.md']
+    assert sorted(os.listdir(out)) == ['accuracy.md', 'accuracy.png', 'compare_accuracy.png',
+                                       'covariance.png', 'performance.md']
 
 
 def test_accuracy_png_is_a_png(quick_run):
@@ -94,6 +94,16 @@ def test_accuracy_has_the_euler_covariance_section_and_its_plot(quick_run, accur
     assert {f'{math.degrees(sigma):.3g}' for sigma in covariance.SIGMA_SWEEP} <= set(section)
     assert all(row[-1].endswith('%') for key, row in section.items() if key != 'sigma (deg)')
     assert '](covariance.png)' in (quick_run[0] / 'accuracy.md').read_text()
+
+
+def test_accuracy_has_the_two_stream_section_and_its_plot(quick_run, accuracy):
+    assert (quick_run[0] / 'compare_accuracy.png').read_bytes().startswith(PNG_SIGNATURE)
+    section = accuracy['8. Two streams: time offset, world alignment and mounting']
+    assert {f'{noise:g}' for noise in comparison.QUICK_NOISE_DEG} <= set(section)
+    for key, row in section.items():
+        if key != 'noise (deg)':
+            _assert_finite(row, range(8), key)
+    assert '](compare_accuracy.png)' in (quick_run[0] / 'accuracy.md').read_text()
 
 
 @pytest.mark.parametrize('section, family', [

@@ -2,11 +2,12 @@
 ``python -m rotation_dev.study [--quick] [--out DIR]``: the accuracy study and performance summary.
 
 Writes ``DIR/accuracy.md``, ``DIR/accuracy.png``, ``DIR/covariance.png`` (the
-Euler-covariance section's plot) and ``DIR/performance.md`` (default ``DIR``:
-``docs``), each through a temporary file renamed into place.
+Euler-covariance section's plot), ``DIR/compare_accuracy.png`` (the two-stream
+section's) and ``DIR/performance.md`` (default ``DIR``: ``docs``), each through
+a temporary file renamed into place.
 ``--quick`` (for CI) uses fewer inputs and runs only the library benchmark; it
-finishes in well under a minute; the full run takes about five. Progress goes
-to stderr.
+finishes in about a minute; the full run takes about seven (two of them the
+two-stream section). Progress goes to stderr.
 
 Run from the repository root with the development environment (``.venv``).
 
@@ -26,7 +27,7 @@ import time
 from rotation_node.bag.atomic_file import AtomicFile
 from rotation_node.errors import BagError
 
-from . import covariance, integration, measure, performance, report
+from . import comparison, covariance, integration, measure, performance, report
 
 #: How the study is run, as its messages and documents name it.
 PROG = 'python -m rotation_dev.study'
@@ -92,6 +93,8 @@ def _measure_and_write(args):
     progress('integration')
     covariance_rows = covariance.measure(quick=args.quick)
     progress('Euler covariance against Monte Carlo')
+    comparison_rows = comparison.measure(quick=args.quick)
+    progress('two streams: time offset, world alignment and mounting')
     study_seconds = time.monotonic() - progress.start
     environment = report.environment()
 
@@ -104,9 +107,11 @@ def _measure_and_write(args):
         'accuracy.md': report.accuracy_markdown(
             families, float32, scenes, quick=args.quick, settings=settings, command=command,
             seconds=study_seconds).rstrip('\n') + '\n\n'
-        + covariance.covariance_markdown(covariance_rows, heading='## 7.'),
+        + covariance.covariance_markdown(covariance_rows, heading='## 7.')
+        + '\n' + comparison.comparison_markdown(comparison_rows, heading='## 8.'),
         'accuracy.png': report.accuracy_png(families, scenes),
         'covariance.png': covariance.covariance_png(covariance_rows),
+        'compare_accuracy.png': comparison.comparison_png(comparison_rows),
         'performance.md': performance.performance_markdown(
             runs, quick=args.quick, command=command, environment=environment),
     }

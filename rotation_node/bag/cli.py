@@ -1,5 +1,5 @@
 """
-Command line ``rotation_bag``: record, play, convert and plot bags.
+Command line ``rotation_bag``: record, play, convert, plot bags and compare two topics.
 
 Usage::
 
@@ -11,6 +11,8 @@ Usage::
     rotation_bag convert IN1 IN2 ... OUTDIR --params FILE [--jobs N] [...]
     rotation_bag plot IN --topic /imu/euler [-o plot.png] [--params FILE] [--force] [--strict]
     rotation_bag export IN OUT.csv|OUT.parquet --params FILE [--topic T] [--force] [--strict]
+    rotation_bag compare REF [EST] --reference T --estimate T [--time-offset estimate|S]
+                         [--align none|world|mounting|both] [--json FILE] [--plot PNG] [...]
 
 ``IN`` is any bag :func:`rotation_node.bag.reader.open_bag` reads (a rosbag2
 directory, MCAP, sqlite3, split, compressed, ROS 1, an unfinished recording;
@@ -29,6 +31,7 @@ and the exit status is 1 if any failed.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from typing import List, Optional, Sequence
@@ -40,6 +43,7 @@ from rotation_node.errors import BagError, RotationNodeError
 PROG = 'rotation_bag'
 EXIT_ERROR = 1
 COMPRESSION_CHOICES = ('zstd', 'lz4', 'none')
+ALIGN_CHOICES = ('none', 'world', 'mounting', 'both')   # as bag.compare's (a test checks)
 
 
 def _record(args, ros_args):
@@ -131,6 +135,55 @@ def _export(args, ros_args):
          f'{args.output}' + ''.join(f'; {note}' for note in skipped))
 
 
+def _compare(args, ros_args):
+    from rotation_node.bag.compare import compare_bags, StreamSource, summary
+    from rotation_node.parameters import parameters_from_yaml
+    if len(args.bags) > 2:
+        raise BagError(f'compare takes one bag or two (reference, estimate), got {len(args.bags)}')
+    params = None if args.params is None else parameters_from_yaml(args.params)
+    reference = StreamSource(args.bags[0], args.reference, args.reference_type,
+                             _frames(args.reference_frames))
+    estimate = StreamSource(args.bags[-1], args.estimate, args.estimate_type,
+                            _frames(args.estimate_frames))
+    notes: List[str] = []
+    result = compare_bags(reference, estimate, time_offset=args.time_offset, align=args.align,
+                          json_path=args.json, plot_path=args.plot, params=params,
+                          max_gap=args.max_gap, max_offset=args.max_offset,
+                          overwrite=args.force, strict=args.strict, report=notes.append)
+    for note in notes:
+        _say(note)
+    print(summary(result))
+    for what, path in (('JSON', args.json), ('plot', args.plot)):
+        if path is not None:
+            _say(f'wrote the {what} to {path}')
+
+
+def _frames(frames):
+    return None if frames is None else tuple(frames)
+
+
+def _time_offset(text):
+    if text == 'estimate':
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected 'estimate' or seconds, got {text!r}")
+    return value
+
+
+def _positive_seconds(text):
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(f'expected a positive number of seconds, got {text!r}')
+    return value
+
+
 def _say(text):
     print(text, file=sys.stderr)
 
@@ -148,7 +201,8 @@ def _positive_int(text):
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser of ``rotation_bag``."""
     parser = argparse.ArgumentParser(
-        prog=PROG, description='Record, play, convert, plot and export ROS 2 bags.')
+        prog=PROG, description='Record, play, convert, plot and export ROS 2 bags; compare '
+                               'two orientation topics.')
     commands = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
 
     record = commands.add_parser('record', help='record live topics to an MCAP bag')
@@ -241,6 +295,50 @@ def build_parser() -> argparse.ArgumentParser:
                         help='refuse unfinished recordings instead of exporting what a scan '
                              'recovers')
     export.set_defaults(run=_export)
+
+    compare = commands.add_parser(
+        'compare', help='compare an orientation topic with a reference: time offset, '
+                        'alignment, errors',
+        description='Compare an estimate topic with a reference topic, of one bag or two, '
+                    'of any input type the node reads (Imu, Pose, PoseWithCovariance, '
+                    'Odometry, Quaternion, Transform, their Stamped forms, /tf between two '
+                    'frames). Estimates the time offset dt, the world alignment W and the '
+                    'mounting M of R_ref(t) = W R_est(t + dt) M (docs/compare.md), and the '
+                    'errors of the aligned estimate at the reference stamps.')
+    compare.add_argument('bags', nargs='+', metavar='BAG',
+                         help='the bag of both topics, or the reference bag then the '
+                              "estimate's")
+    compare.add_argument('--reference', required=True, metavar='T', help='reference topic')
+    compare.add_argument('--estimate', required=True, metavar='T', help='estimate topic')
+    for role in ('reference', 'estimate'):
+        compare.add_argument(f'--{role}-frames', nargs=2, metavar=('PARENT', 'CHILD'),
+                             help=f'for a /tf {role}: the orientation of CHILD in PARENT')
+        compare.add_argument(f'--{role}-type', metavar='INPUT_TYPE',
+                             help=f'input type of the {role} topic where its message type '
+                                  'is shared (euler, rotation_vector); default from the type')
+    compare.add_argument('--time-offset', type=_time_offset, default=None,
+                         metavar='estimate|S',
+                         help='dt in seconds, or estimate it from the angular rates (default)')
+    compare.add_argument('--align', choices=ALIGN_CHOICES, default='both',
+                         help='estimate the world alignment W, the mounting M, both (default) '
+                              'or none (identity)')
+    compare.add_argument('--json', metavar='FILE', help='write the results as JSON')
+    compare.add_argument('--plot', metavar='PNG',
+                         help='write errors over time and the aligned Euler angles as a PNG')
+    compare.add_argument('--max-gap', type=_positive_seconds, metavar='S',
+                         help='leave out reference samples whose estimate neighbours are more '
+                              'than S apart (default 5 median estimate steps)')
+    compare.add_argument('--max-offset', type=_positive_seconds, metavar='S',
+                         help='search time offsets within +-S (default: where the streams '
+                              'overlap by half)')
+    compare.add_argument('--params', metavar='FILE',
+                         help="the node's parameters file: Euler sequence and unit of Euler "
+                              'inputs, input_type among shared message types')
+    compare.add_argument('--force', action='store_true', help='overwrite the JSON and PNG')
+    compare.add_argument('--strict', action='store_true',
+                         help='refuse unfinished recordings instead of reading what a scan '
+                              'recovers')
+    compare.set_defaults(run=_compare)
     return parser
 
 
