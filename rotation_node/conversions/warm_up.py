@@ -7,9 +7,17 @@ call then costs a cache load, not seconds of compilation. ``./run.sh`` runs
 this after installing.
 """
 import argparse
+from contextlib import contextmanager
 import sys
 import time
-from typing import List, Optional
+from typing import Callable, Iterator, List, Optional
+
+from ._runtime import KernelCompilation
+
+#: What a start that compiles kernels says once it has compiled for a second (measured
+#: after `colcon build`: docs/node.md).
+COMPILING = ('compiling the numerical kernels, once after installation (15-50 s, longer on '
+             'a busy machine); later starts load them from the cache')
 
 
 def warm_up() -> int:
@@ -25,6 +33,29 @@ def warm_up() -> int:
     from .. import kinematics  # noqa: F401  (declares its kernels)
     from ._runtime import compile_kernels
     return compile_kernels()
+
+
+@contextmanager
+def announcing_compilation(say: Callable[[str], None],
+                           after: float = 1.0) -> Iterator[KernelCompilation]:
+    """
+    Say on one line when kernels compile for longer than ``after`` seconds, and when they are done.
+
+    For a program's start-up (the first after installation compiles the
+    kernels it uses): ``say(COMPILING)`` while they compile, from a timer
+    thread, and ``say('kernels compiled in ... s')`` at the end of the block.
+    Nothing is said when every kernel is loaded from the disk cache.
+    """
+    said = []
+
+    def slow():
+        said.append(True)
+        say(COMPILING)
+
+    with KernelCompilation(slow, after) as compilation:
+        yield compilation
+    if said:
+        say(f'{compilation.compiled} kernels compiled in {compilation.seconds:.1f} s and cached')
 
 
 def main(argv: Optional[List[str]] = None) -> int:
