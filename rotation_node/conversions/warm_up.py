@@ -16,8 +16,8 @@ from ._runtime import KernelCompilation
 
 #: What a start that compiles kernels says once it has compiled for a second (measured
 #: after `colcon build`: docs/node.md).
-COMPILING = ('compiling the numerical kernels, once after installation (15-50 s, longer on '
-             'a busy machine); later starts load them from the cache')
+COMPILING = ('compiling the numerical kernels, once after installation (about 15 s on an idle '
+             'machine, a minute or more on a busy one); later starts load them from the cache')
 
 
 def warm_up() -> int:
