@@ -86,7 +86,7 @@ def _pythonpath(*directories):
 
 
 def _colcon(workspace, verb, *args, timeout=300):
-    """Run ``colcon VERB`` in ``workspace`` (sources in src/) as a user would; return the result."""
+    """Run ``colcon VERB`` in ``workspace`` (sources in src/); return the result."""
     colcon = os.path.join(os.path.dirname(sys.executable), 'colcon')
     if verb == 'test-result':
         bases = ['--test-result-base', 'build']
