@@ -8,7 +8,7 @@ package_name = 'rotation_node'
 # The versions supported, from ROS 2 Jazzy's platform (Ubuntu 24.04's packages, the pins of
 # tools/jazzy_platform.txt, tested by tools/test_jazzy_platform.sh) up to the series of the
 # pins of requirements.txt (the development venv, tested by ./run.sh test). package.xml
-# names the same lower ends for rosdep (test/test_package.py checks that all of these agree).
+# names the same bounds for rosdep (test/test_package.py checks that all of these agree).
 install_requires = [
     'setuptools',
     'numpy >= 1.26.4, < 2.5',

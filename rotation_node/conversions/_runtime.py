@@ -10,6 +10,7 @@ kernel shares:
   each kernel is compiled for exactly one signature, on its first call or by
   :func:`compile_kernels`, and cached on disk, so no later call compiles,
   whatever the caller's leading shape, dtype, memory layout or writability;
+  :class:`KernelCompilation` tells compilations from cache loads;
 - the canonical layout (:func:`kernel_layout`) and the compiled views of it
   (:func:`samples`, :func:`matrix_samples`);
 - status packing (:func:`status`, :func:`first_status`);

@@ -4,7 +4,8 @@ Compile and cache every kernel once: ``python -m rotation_node.conversions.warm_
 Each kernel (conversions and kinematics) is compiled for its one signature
 and written to numba's disk cache, so that no later process compiles: a first
 call then costs a cache load, not seconds of compilation. ``./run.sh`` runs
-this after installing.
+this after installing. :func:`announcing_compilation` is how a program's
+start-up (the node's) says that it is compiling, when it is.
 """
 import argparse
 from contextlib import contextmanager
