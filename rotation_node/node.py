@@ -62,6 +62,7 @@ from rclpy.exceptions import (
     NotInitializedException, ParameterNotDeclaredException)
 from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.logging import get_logger
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
@@ -75,6 +76,7 @@ from rotation_node import messages
 from rotation_node.bag.cdr import fixed_layout_codec
 from rotation_node.bag.qos import AUTO, input_qos, qos_profile
 from rotation_node.bag.stop_signal import signal_name, StopSignal
+from rotation_node.conversions.warm_up import announcing_compilation
 from rotation_node.errors import BagError, ParameterError
 from rotation_node.parameters import (
     mounting_frames_problem, NODE_NAME, NodeParameters, PARAMETERS, PARAMETERS_BY_NAME,
@@ -251,8 +253,10 @@ class RotationNode(Node):
 
     def __init__(self, parameters_files: Sequence[str] = (), **kwargs: Any):
         # Before the node exists: its parameter services answer as soon as they appear,
-        # not after the conversions have been compiled or loaded (seconds on a first run).
-        warm_up_conversions()
+        # not after the conversions have been compiled or loaded (seconds on a first run,
+        # which says so on one line).
+        with announcing_compilation(get_logger(NODE_NAME).info):
+            warm_up_conversions()
         # input subscription -> its message-lost event (None: the rmw has none); first,
         # as destroy_node reads it, also when a parameters file is refused below
         self._message_lost: Dict[Subscription, Any] = {}

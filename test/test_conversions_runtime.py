@@ -4,6 +4,7 @@ import importlib.util
 import inspect
 import math
 import os
+import re
 import subprocess
 import sys
 
@@ -14,7 +15,7 @@ import numpy as np
 import pytest
 from rotation_node import conversions as rc
 from rotation_node import kinematics as rk
-from rotation_node.conversions import _quaternion, _runtime
+from rotation_node.conversions import _quaternion, _runtime, warm_up
 from rotation_node.conversions._runtime import KERNELS, matrix_samples, samples
 
 _MODULES = ['rotation_node.conversions._quaternion', 'rotation_node.conversions._matrix',
@@ -337,7 +338,10 @@ def test_kernels_are_cached_in_the_user_cache_where_the_package_is_read_only(tmp
     env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path))
     env.pop('NUMBA_CACHE_DIR', None)
     code = ('from numba.core import caching\n'
-            'caching.InTreeCacheLocator.from_function = classmethod(lambda cls, f, p: None)\n'
+            # _InTreeCacheLocator in older numba releases (0.59, Ubuntu 24.04's, among them)
+            'in_tree = getattr(caching, "InTreeCacheLocator", None)'
+            ' or caching._InTreeCacheLocator\n'
+            'in_tree.from_function = classmethod(lambda cls, f, p: None)\n'
             'from rotation_node import conversions, kinematics\n'
             'conversions.quaternion_conjugate([0.0, 0.0, 0.0, 1.0])\n'
             'kinematics.quaternion_derivative([0.0, 0.0, 0.0, 1.0], [1.0, 2.0, 3.0])\n')
@@ -352,3 +356,36 @@ def test_warm_up_entry_point():
     assert out.startswith(f'rotation_node: {len(KERNELS)} kernels compiled or loaded')
     assert _python('from rotation_node.conversions import warm_up; '
                    'warm_up.main(["--quiet"])') == ''
+
+
+ANNOUNCING = """
+import numba
+from rotation_node import conversions
+from rotation_node.conversions import warm_up
+lines = []
+with warm_up.announcing_compilation(lines.append, after={after}) as compilation:
+    numba.njit(lambda x: x + 1.0)(1.0)   # not a kernel: neither counted nor announced
+    conversions.quaternion_conjugate([0.0, 0.0, 0.0, 1.0])
+    conversions.quaternion_product([0.0, 0.0, 0.0, 1.0], [0.0, 0.0, 0.0, 1.0])
+print(compilation.compiled)
+for line in lines:
+    print(line)
+"""
+
+
+def _announced(cache, after):
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
+    compiled, *lines = _python(ANNOUNCING.format(after=after), env).splitlines()
+    return int(compiled), lines
+
+
+def test_a_start_that_compiles_kernels_says_so_once_and_a_cached_start_says_nothing(tmp_path):
+    compiled, lines = _announced(tmp_path, after=0.0)   # an empty cache: both compile
+    assert compiled == 2
+    assert lines[0] == warm_up.COMPILING and len(lines) == 2, lines
+    assert re.fullmatch(r'2 kernels compiled in [0-9.]+ s and cached', lines[1]), lines
+    assert _announced(tmp_path, after=0.0) == (0, [])   # loaded from the cache
+
+
+def test_a_compilation_shorter_than_the_delay_is_not_announced(tmp_path):
+    assert _announced(tmp_path, after=600.0) == (2, [])

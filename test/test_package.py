@@ -10,8 +10,10 @@ runtime package must not need them. package.xml is checked against what the runt
 package and the launch files import, and against the rosdep keys that exist.
 """
 import ast
+import json
 import os
 from pathlib import Path
+import re
 import shutil
 import subprocess
 import sys
@@ -21,6 +23,7 @@ from launch_stubs import launch_description, launched_nodes
 import numpy as np
 import pytest
 from ros_harness import RosProcess, TestNode
+from rotation_node.conversions.warm_up import COMPILING
 from scipy.spatial.transform import Rotation
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -66,7 +69,7 @@ IMPORT_KEYS = {
 def _copy_sources(destination):
     """Copy the package's sources (no venv, builds, caches or outputs) to ``destination``."""
     shutil.copytree(ROOT, destination, ignore=shutil.ignore_patterns(
-        '.git', '.venv', 'build', 'install', 'log', '__pycache__', '*.egg-info',
+        '.git', '.venv', '.venv-jazzy', 'build', 'install', 'log', '__pycache__', '*.egg-info',
         '.pytest_cache', '.hypothesis', '*.mcap', '*.png', 'out'))
     return destination
 
@@ -87,20 +90,33 @@ def _pythonpath(*directories):
     return os.pathsep.join(str(d) for d in directories)
 
 
+def _colcon(workspace, verb, *args, timeout=300):
+    """Run ``colcon VERB`` in ``workspace`` (sources in src/); return the result."""
+    colcon = os.path.join(os.path.dirname(sys.executable), 'colcon')
+    if verb == 'test-result':
+        bases = ['--test-result-base', 'build']
+    else:
+        bases = ['--base-paths', 'src', '--build-base', 'build', '--install-base', 'install']
+    return subprocess.run([colcon, verb, *bases, *args], cwd=workspace, capture_output=True,
+                          text=True, timeout=timeout)
+
+
 @pytest.fixture(scope='module')
-def colcon_install(tmp_path_factory):
-    """Build a copy of the package with colcon; return its install prefix."""
+def colcon_workspace(tmp_path_factory):
+    """Build a copy of the package with colcon; return the workspace (sources in src/)."""
     workspace = tmp_path_factory.mktemp('colcon_ws')
     _copy_sources(workspace / 'src' / 'rotation_node')
-    colcon = os.path.join(os.path.dirname(sys.executable), 'colcon')
-    result = subprocess.run(
-        [colcon, 'build', '--base-paths', 'src', '--build-base', 'build',
-         '--install-base', 'install', '--event-handlers', 'console_direct-'],
-        cwd=workspace, capture_output=True, text=True, timeout=300)
+    result = _colcon(workspace, 'build', '--event-handlers', 'console_direct-')
     assert result.returncode == 0, result.stdout + result.stderr
     assert sorted(p.name for p in (workspace / 'install').iterdir() if p.is_dir()) == [
         'rotation_node'], 'colcon built more than the package (a nested package.xml?)'
-    return workspace / 'install' / 'rotation_node'
+    return workspace
+
+
+@pytest.fixture(scope='module')
+def colcon_install(colcon_workspace):
+    """Return the install prefix of the package built by ``colcon build``."""
+    return colcon_workspace / 'install' / 'rotation_node'
 
 
 @pytest.fixture(scope='module')
@@ -141,6 +157,34 @@ def test_colcon_build_installs_what_ros2_run_and_ros2_launch_need(colcon_install
     assert not (colcon_install / SITE / 'rotation_dev').exists()
 
 
+#: A test module that colcon test must run with pytest and report: one pass, one failure.
+PROBE_TESTS = """
+def test_passing():
+    assert 1 + 1 == 2
+
+
+def test_deliberately_failing():
+    assert 1 + 1 == 3
+"""
+
+
+def test_colcon_test_runs_pytest_and_test_result_reports_a_failing_test(colcon_workspace):
+    probe = colcon_workspace / 'src' / 'rotation_node' / 'test' / 'test_colcon_probe.py'
+    probe.write_text(PROBE_TESTS)
+    try:
+        # Only the probe (colcon passes --pytest-args on to pytest), not the whole suite again.
+        tested = _colcon(colcon_workspace, 'test', '--return-code-on-test-failure',
+                         '--pytest-args', str(probe.relative_to(probe.parents[1])))
+    finally:
+        probe.unlink()
+    assert tested.returncode == 1, tested.stdout + tested.stderr
+    assert 'Ran 0 tests' not in tested.stdout   # unittest, the fallback without pytest
+    result = _colcon(colcon_workspace, 'test-result', '--verbose')
+    assert result.returncode == 1, result.stdout + result.stderr
+    assert 'Summary: 2 tests, 0 errors, 1 failure, 0 skipped' in result.stdout, result.stdout
+    assert 'test_deliberately_failing' in result.stdout, result.stdout
+
+
 def test_installed_launch_files_find_their_parameters_files(colcon_install):
     share = colcon_install / 'share' / 'rotation_node'
     for launch_file in sorted((share / 'launch').glob('*.launch.py')):
@@ -150,8 +194,8 @@ def test_installed_launch_files_find_their_parameters_files(colcon_install):
         assert params_file.is_file() and params_file.is_relative_to(share), launch_file.name
 
 
-def test_installed_node_starts_without_oracles_and_stops_on_ctrl_c(
-        colcon_install, oracle_blocker):
+def _start_and_stop_installed_node(colcon_install, oracle_blocker):
+    """Start the installed node, wait until it is in the graph, Ctrl-C it; return its output."""
     env = {'PYTHONPATH': _pythonpath(oracle_blocker, colcon_install / SITE,
                                      *filter(None, [os.environ.get('PYTHONPATH')]))}
     exe = colcon_install / 'lib' / 'rotation_node' / 'rotation_node'
@@ -159,14 +203,29 @@ def test_installed_node_starts_without_oracles_and_stops_on_ctrl_c(
         # Ready once it subscribes to its input, after compiling its kernels (a Ctrl-C
         # while numba compiles can be lost in a ctypes callback).
         ready = client.spin_until(lambda: client.node.count_subscribers('/input') > 0,
-                                  timeout=120)
+                                  timeout=180)
         if not ready:
             node.stop()
-            pytest.fail(f'no subscription to /input within 120 s; the node said:\n{node.output}')
+            pytest.fail(f'no subscription to /input within 180 s; the node said:\n{node.output}')
         # Node names travel on their own discovery topic, after the endpoints.
         assert client.spin_until(
             lambda: 'rotation_node' in client.node.get_node_names(), timeout=30)
         assert node.stop() == 0, node.output
+    return node.output
+
+
+def test_installed_node_starts_without_oracles_and_stops_on_ctrl_c(
+        colcon_install, oracle_blocker):
+    # The first start after colcon build compiles the kernels, and says so while it does.
+    first = _start_and_stop_installed_node(colcon_install, oracle_blocker)
+    assert COMPILING in first, first
+    assert re.search(r'\] \[rotation_node\]: \d+ kernels compiled in [0-9.]+ s and cached\n',
+                     first), first
+    if 'NUMBA_CACHE_DIR' not in os.environ:   # else numba caches there
+        assert list((colcon_install / SITE / 'rotation_node').rglob('__pycache__/*.nbi'))
+    # Every later start loads them from the cache.
+    second = _start_and_stop_installed_node(colcon_install, oracle_blocker)
+    assert 'compil' not in second, second
 
 
 def test_pip_install_holds_the_runtime_package_only(pip_install, oracle_blocker, tmp_path):
@@ -289,6 +348,82 @@ def test_package_xml_declares_every_test_import():
              *(p.stem for p in (ROOT / 'test').glob('*.py'))}
     declared = _package_xml_keys('exec_depend', 'test_depend')
     assert _missing_keys(imports, declared, local) == {}
+
+
+#: What setup.py passes to ``setuptools.setup`` (colcon reads its test requirements the same way).
+SETUP_REQUIREMENTS = """
+import json
+import runpy
+import setuptools
+setuptools.setup = lambda **arguments: print(json.dumps(
+    [arguments.get('install_requires', []), arguments.get('extras_require', {})]))
+runpy.run_path('setup.py')
+"""
+#: The rosdep key of each Python distribution whose versions setup.py bounds.
+VERSION_KEYS = {'numpy': 'python3-numpy', 'numba': 'python3-numba', 'PyYAML': 'python3-yaml',
+                'matplotlib': 'python3-matplotlib', 'scipy': 'python3-scipy'}
+
+
+def _setup_requirements():
+    """Return setup.py's ``(install_requires, extras_require)``."""
+    result = subprocess.run([sys.executable, '-c', SETUP_REQUIREMENTS], cwd=ROOT,
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    return tuple(json.loads(result.stdout))
+
+
+def _version(text):
+    return tuple(int(part) for part in text.strip().split('.'))
+
+
+def _bounds(requirement):
+    """``'numpy >= 1.26.4, < 2.5'`` -> ``('numpy', {'>=': (1, 26, 4), '<': (2, 5)})``."""
+    name, specifiers = re.fullmatch(r'([A-Za-z0-9_.-]+)\s*(.*)', requirement).groups()
+    bounds = {}
+    for specifier in filter(None, (s.strip() for s in specifiers.split(','))):
+        operator, version = re.fullmatch(r'(>=|<)\s*([0-9.]+)', specifier).groups()
+        bounds[operator] = _version(version)
+    return name, bounds
+
+
+def _pins(path):
+    """Return ``{distribution: version}`` of the ``name==version`` lines of ``path``."""
+    pins = {}
+    for line in path.read_text().splitlines():
+        match = re.fullmatch(r'([A-Za-z0-9_.-]+)(\[[^]]*\])?==([0-9.]+)', line.strip())
+        if match:
+            pins[match.group(1).lower()] = _version(match.group(3))
+    return pins
+
+
+def test_setup_py_declares_pytest_as_the_test_requirement_colcon_test_looks_for():
+    # colcon test runs pytest for a package whose tests_require or extras_require['test']
+    # names it, and `python -m unittest` (no test found, success) for any other.
+    _, extras = _setup_requirements()
+    assert 'pytest' in [_bounds(r)[0] for r in extras['test']]
+
+
+def test_supported_versions_run_from_the_jazzy_platform_to_the_pins():
+    install, extras = _setup_requirements()
+    ranges = dict(_bounds(r) for r in install + extras['test'])
+    jazzy = _pins(ROOT / 'tools' / 'jazzy_platform.txt')
+    pinned = _pins(ROOT / 'requirements.txt')
+    assert set(jazzy) - {'llvmlite'} == {name.lower() for name in VERSION_KEYS}  # numba's own
+    for name in VERSION_KEYS:
+        bounds = ranges[name]
+        assert bounds['>='] == jazzy[name.lower()], (name, bounds)   # the lower end is Jazzy's
+        assert bounds['>='] <= pinned[name.lower()] < bounds['<'], (name, bounds)
+
+
+def test_package_xml_bounds_the_versions_as_setup_py_does():
+    install, extras = _setup_requirements()
+    ranges = dict(_bounds(r) for r in install + extras['test'])
+    root = ElementTree.parse(ROOT / 'package.xml').getroot()
+    declared = {e.text: e for e in root if e.tag.endswith('depend')}
+    for name, key in VERSION_KEYS.items():
+        attributes = {operator: _version(declared[key].get(attribute, '0'))
+                      for operator, attribute in (('>=', 'version_gte'), ('<', 'version_lt'))}
+        assert attributes == ranges[name], key
 
 
 IMPORT_EVERY_MODULE = """

@@ -6,7 +6,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 #: Not sources of the package: the environment, colcon's and the demo's outputs.
-EXCLUDE = ('.venv', 'build', 'install', 'log', 'out')
+EXCLUDE = ('.venv', '.venv-jazzy', 'build', 'install', 'log', 'out')
 
 
 @pytest.mark.linter

@@ -10,6 +10,7 @@ kernel shares:
   each kernel is compiled for exactly one signature, on its first call or by
   :func:`compile_kernels`, and cached on disk, so no later call compiles,
   whatever the caller's leading shape, dtype, memory layout or writability;
+  :class:`KernelCompilation` tells compilations from cache loads;
 - the canonical layout (:func:`kernel_layout`) and the compiled views of it
   (:func:`samples`, :func:`matrix_samples`);
 - status packing (:func:`status`, :func:`first_status`);
@@ -38,9 +39,11 @@ import math
 import os
 import sys
 import threading
+import time
 from typing import Any, Callable, Optional, Sequence, TYPE_CHECKING, TypeGuard
 
 from numba import njit, types
+from numba.core import event
 from numba.core.errors import RequireLiteralValue, TypingError
 from numba.extending import intrinsic, overload
 import numpy as np
@@ -214,6 +217,86 @@ def compile_kernels(kernels: Optional[Sequence[Any]] = None) -> int:
     for dispatcher in kernels:
         _compile(dispatcher)
     return len(kernels)
+
+
+class KernelCompilation(event.Listener):
+    """
+    Kernels compiled, not loaded from the disk cache, within a ``with`` block.
+
+    A start after installation compiles each kernel it uses (seconds to
+    minutes); every later one loads them from the cache. ``on_slow()`` is
+    called once, from a timer thread, when a kernel is compiling ``after``
+    seconds after the first compilation in the block started (or at the next
+    start, if none is compiling then), so that a long compilation can be
+    announced while it runs; never after the block. Afterwards ``compiled`` says
+    how many kernels were compiled and ``seconds`` how long the compilations
+    took in all (from the start of the first to the end of the last).
+    Compilations of functions that are not kernels (:func:`kernel`) are not
+    counted. It listens to numba's ``numba:compile`` event, which numba
+    broadcasts only for a compilation, never for a cache load.
+    """
+
+    def __init__(self, on_slow: Callable[[], None], after: float = 1.0):
+        self.on_slow, self.after = on_slow, after
+        self.compiled = 0
+        self.seconds = 0.0
+        self._lock = threading.Lock()
+        self._compiling = 0                    # kernel compilations in progress
+        self._first: Optional[float] = None    # monotonic start of the first
+        self._due = False                      # on_slow is to be called at the next start
+        self._closed = False                   # the block has ended
+        self._timer: Optional[threading.Timer] = None
+        self._installed: Any = None
+
+    @staticmethod
+    def _is_kernel(ev: Any) -> bool:
+        return hasattr(ev.data.get('dispatcher'), 'kernel_signature')
+
+    def on_start(self, ev: Any) -> None:
+        """Count a kernel compilation starting; start the timer at the first."""
+        if not self._is_kernel(ev):
+            return
+        with self._lock:
+            self._compiling += 1
+            if self._first is None:
+                self._first = time.monotonic()
+                self._timer = threading.Timer(self.after, self._elapsed)
+                self._timer.daemon = True
+                self._timer.start()
+            if self._due:
+                self._due = False
+                self.on_slow()
+
+    def on_end(self, ev: Any) -> None:
+        """Count a kernel compilation done."""
+        if not self._is_kernel(ev):
+            return
+        with self._lock:
+            self._compiling -= 1
+            self.compiled += 1
+            assert self._first is not None
+            self.seconds = time.monotonic() - self._first
+
+    def _elapsed(self) -> None:
+        with self._lock:   # on_slow is called under the lock: never after __exit__
+            if self._closed:
+                return
+            if self._compiling > 0:
+                self.on_slow()
+            else:   # between two compilations: announce when the next one starts
+                self._due = True
+
+    def __enter__(self) -> KernelCompilation:
+        self._installed = event.install_listener('numba:compile', self)
+        self._installed.__enter__()
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self._installed.__exit__(*exc)
+        with self._lock:
+            self._closed, self._due = True, False
+            if self._timer is not None:
+                self._timer.cancel()
 
 
 # ------------------------------------------------------------ sample views
