@@ -39,7 +39,7 @@ from rotation_node.bag.reader import open_bag
 from rotation_node.bag.stop_signal import raise_if_stopped
 from rotation_node.errors import BagError, ComparisonError
 from rotation_node.parameters import NodeParameters
-from rotation_node.pipeline import ConversionPipeline, ORIENTATION_UNKNOWN
+from rotation_node.pipeline import ConversionPipeline, ORIENTATION_UNKNOWN, ZERO_QUATERNION
 from rotation_node.stamps import header_stamp_ns
 
 if TYPE_CHECKING:
@@ -136,6 +136,7 @@ def read_stream(source: StreamSource, params: Optional[NodeParameters] = None, *
         if report is not None:
             for note in reader.notes:
                 report(note)
+        noted = len(reader.notes)
         topic = reader.topic_name(source.topic)
         entry = _input_type(source, reader.topics[topic], params)
         # The pipeline's quaternion output: the input type's sample stream, its orientation
@@ -165,16 +166,24 @@ def read_stream(source: StreamSource, params: Optional[NodeParameters] = None, *
         quaternions: List[Sequence[float]] = []
         rates: List[Optional[Sequence[float]]] = []
         count = 0
-        for record in reader.messages(list(topics)):
-            raise_if_stopped()
-            count += record.topic == topic
-            msg = record.message(decode)
-            for _, header, numbers in pipeline.process_values(msg, topics[record.topic]):
-                stamps.append(header_stamp_ns(header))
-                quaternions.append(numbers)
-                rates.append(None if read_rate is None else read_rate(msg).angular_velocity)
+        try:
+            for record in reader.messages(list(topics)):
+                raise_if_stopped()
+                count += record.topic == topic
+                msg = record.message(decode)
+                for _, header, numbers in pipeline.process_values(msg, topics[record.topic]):
+                    stamps.append(header_stamp_ns(header))
+                    quaternions.append(numbers)
+                    rates.append(None if read_rate is None else read_rate(msg).angular_velocity)
+        except BagError as error:   # a message that cannot be decoded names no file
+            raise reader.naming_this_bag(error) from None
+        if report is not None:
+            for note in reader.notes[noted:]:   # what reading found could not be read
+                report(note)
         path = str(reader.path)
-    dropped = sum(pipeline.stats.dropped.values()) + pipeline.stats.skipped[ORIENTATION_UNKNOWN]
+    skipped = pipeline.stats.skipped   # no orientation: unknown (REP 145) or all zero
+    dropped = (sum(pipeline.stats.dropped.values()) + skipped[ORIENTATION_UNKNOWN]
+               + skipped[ZERO_QUATERNION])
     return _sorted_stream(path, topic, count, stamps, quaternions, rates, dropped)
 
 
