@@ -136,50 +136,50 @@ def read_stream(source: StreamSource, params: Optional[NodeParameters] = None, *
         if report is not None:
             for note in reader.notes:
                 report(note)
-        noted = len(reader.notes)
-        topic = reader.topic_name(source.topic)
-        entry = _input_type(source, reader.topics[topic], params)
-        # The pipeline's quaternion output: the input type's sample stream, its orientation
-        # form (Euler angles of the parameters' sequence and unit), its drop rules; no frame
-        # conventions (the orientations as the messages hold them).
-        values = {'input_type': entry.name, 'outputs': ['quaternion'],
-                  'euler.sequence': params.euler_sequence, 'euler.degrees': params.euler_degrees}
-        topics = {topic: entry.topics[0].name}
-        if entry.stream is not None:
-            if source.frames is None:
-                raise BagError(f'{topic} is {entry.type_name}: name the parent and child frames '
-                               'to compare (--reference-frames / --estimate-frames PARENT CHILD)')
-            values.update({'tf.parent_frame': source.frames[0],
-                           'tf.child_frame': source.frames[1]})
-            first = entry.topics[0].name
-            for other in entry.topics[1:]:
-                companion = topic + other.name[len(first):]
-                if other.name.startswith(first) and companion in reader.topics:
-                    topics[companion] = other.name
-        pipeline = ConversionPipeline(NodeParameters().replaced(values))
-        # The messages' own angular velocities (one sample per message of a plain type).
-        read_rate = (entry.sample_reader() if entry.stream is None
-                     and entry.angular_velocity_field is not None else None)
-        codec = fixed_layout_codec(entry.type_name)   # read-only views, as convert reads them
-        decode = None if codec is None else codec.decode
-        stamps: List[int] = []
-        quaternions: List[Sequence[float]] = []
-        rates: List[Optional[Sequence[float]]] = []
-        count = 0
-        try:
-            for record in reader.messages(list(topics)):
-                raise_if_stopped()
-                count += record.topic == topic
-                msg = record.message(decode)
-                for _, header, numbers in pipeline.process_values(msg, topics[record.topic]):
-                    stamps.append(header_stamp_ns(header))
-                    quaternions.append(numbers)
-                    rates.append(None if read_rate is None else read_rate(msg).angular_velocity)
-        except BagError as error:   # a message that cannot be decoded names no file
-            raise reader.naming_this_bag(error) from None
-        if report is not None:
-            for note in reader.notes[noted:]:   # what reading found could not be read
-                report(note)
+        with reader.reporting_new_notes(report):
+            topic = reader.topic_name(source.topic)
+            entry = _input_type(source, reader.topics[topic], params)
+            # The pipeline's quaternion output: the input type's sample stream, its orientation
+            # form (Euler angles of the parameters' sequence and unit), its drop rules; no frame
+            # conventions (the orientations as the messages hold them).
+            values = {'input_type': entry.name, 'outputs': ['quaternion'],
+                      'euler.sequence': params.euler_sequence,
+                      'euler.degrees': params.euler_degrees}
+            topics = {topic: entry.topics[0].name}
+            if entry.stream is not None:
+                if source.frames is None:
+                    raise BagError(f'{topic} is {entry.type_name}: name the parent and child '
+                                   'frames to compare (--reference-frames / --estimate-frames '
+                                   'PARENT CHILD)')
+                values.update({'tf.parent_frame': source.frames[0],
+                               'tf.child_frame': source.frames[1]})
+                first = entry.topics[0].name
+                for other in entry.topics[1:]:
+                    companion = topic + other.name[len(first):]
+                    if other.name.startswith(first) and companion in reader.topics:
+                        topics[companion] = other.name
+            pipeline = ConversionPipeline(NodeParameters().replaced(values))
+            # The messages' own angular velocities (one sample per message of a plain type).
+            read_rate = (entry.sample_reader() if entry.stream is None
+                         and entry.angular_velocity_field is not None else None)
+            codec = fixed_layout_codec(entry.type_name)   # read-only views, as convert reads them
+            decode = None if codec is None else codec.decode
+            stamps: List[int] = []
+            quaternions: List[Sequence[float]] = []
+            rates: List[Optional[Sequence[float]]] = []
+            count = 0
+            try:
+                for record in reader.messages(list(topics)):
+                    raise_if_stopped()
+                    count += record.topic == topic
+                    msg = record.message(decode)
+                    for _, header, numbers in pipeline.process_values(msg, topics[record.topic]):
+                        stamps.append(header_stamp_ns(header))
+                        quaternions.append(numbers)
+                        rates.append(None if read_rate is None
+                                     else read_rate(msg).angular_velocity)
+            except BagError as error:   # a message that cannot be decoded names no file
+                raise reader.naming_this_bag(error) from None
         path = str(reader.path)
     skipped = pipeline.stats.skipped   # no orientation: unknown (REP 145) or all zero
     dropped = (sum(pipeline.stats.dropped.values()) + skipped[ORIENTATION_UNKNOWN]

@@ -169,59 +169,56 @@ def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *
                    f'{sum(reader.message_counts.values())} messages')
             for note in reader.notes:
                 report(note)
-        noted = len(reader.notes)
-        params = resolved_from_bag(reader, params)   # the mounting from /tf_static, if asked
-        input_type = messages.INPUTS[params.input_type]
-        streams = _input_streams(reader, input_type, topics)
-        # {bag topic: (its stream's first topic, the input type's name for it)}
-        routes = {bag_topic: (topic, name) for topic, stream in streams.items()
-                  for bag_topic, name in stream.items()}
-        encoders = {name: (messages.OUTPUTS[name].type_name,
-                           messages.OUTPUTS[name].message.encoder())
-                    for name in params.outputs}
-        # {input topic: {output name: (output topic, type name, encode)}}
-        outputs = {topic: {name: (output_topic(topic, name), *encoder)
-                           for name, encoder in encoders.items()}
-                   for topic in streams}
-        converters = {topic: TopicConverter(params, outputs[topic], blocks=blocks)
-                      for topic in streams}
-        offered_qos = qos_profiles_yaml([qos_profile(params)])
-        new_topics = [TopicMetadata(output_topic_name, type_name, offered_qos)
-                      for topic_outputs in outputs.values()
-                      for output_topic_name, type_name, _ in topic_outputs.values()]
-        clashes = [t.name for t in new_topics if t.name in reader.topics]
-        if clashes:
-            raise BagError(f'output topic {", ".join(clashes)} is already in {reader.path}')
+        with reader.reporting_new_notes(report):
+            params = resolved_from_bag(reader, params)   # the mounting from /tf_static, if asked
+            input_type = messages.INPUTS[params.input_type]
+            streams = _input_streams(reader, input_type, topics)
+            # {bag topic: (its stream's first topic, the input type's name for it)}
+            routes = {bag_topic: (topic, name) for topic, stream in streams.items()
+                      for bag_topic, name in stream.items()}
+            encoders = {name: (messages.OUTPUTS[name].type_name,
+                               messages.OUTPUTS[name].message.encoder())
+                        for name in params.outputs}
+            # {input topic: {output name: (output topic, type name, encode)}}
+            outputs = {topic: {name: (output_topic(topic, name), *encoder)
+                               for name, encoder in encoders.items()}
+                       for topic in streams}
+            converters = {topic: TopicConverter(params, outputs[topic], blocks=blocks)
+                          for topic in streams}
+            offered_qos = qos_profiles_yaml([qos_profile(params)])
+            new_topics = [TopicMetadata(output_topic_name, type_name, offered_qos)
+                          for topic_outputs in outputs.values()
+                          for output_topic_name, type_name, _ in topic_outputs.values()]
+            clashes = [t.name for t in new_topics if t.name in reader.topics]
+            if clashes:
+                raise BagError(f'output topic {", ".join(clashes)} is already in {reader.path}')
 
-        compression = reader.compression if compression is None else compression
-        with collections_deferred(), \
-                BagWriter(output_path, overwrite=overwrite, compression=compression) as writer, \
-                ProgressBar(sum(reader.message_counts.values()), stream=progress_stream,
-                            label='converting ') as progress:
-            for metadata in [*reader.topic_metadata.values(), *new_topics]:
-                writer.add_topic(metadata)
-            converted_input = converted_blocks(reader.messages(), converters, routes)
-            while True:
-                try:
-                    block = next(converted_input, None)
-                except BagError as error:   # a message that cannot be decoded names no file
-                    raise reader.naming_this_bag(error) from None
-                if block is None:
-                    break
-                raise_if_stopped()
-                written: List[tuple] = []
-                add = written.append
-                for record, converted in block:
-                    log_time_ns, publish_time_ns = record.log_time_ns, record.publish_time_ns
-                    add((record.topic, record.type_name, record.data, log_time_ns,
-                         publish_time_ns))
-                    if converted:
-                        for topic, type_name, data in converted:
-                            add((topic, type_name, data, log_time_ns, publish_time_ns))
-                writer.write_serialized_block(written)
-                progress.update(len(block))
-            raise_if_stopped()   # the last chance before the output is committed
-        if report is not None:
-            for note in reader.notes[noted:]:   # what reading found could not be read
-                report(note)
+            compression = reader.compression if compression is None else compression
+            writing = BagWriter(output_path, overwrite=overwrite, compression=compression)
+            with collections_deferred(), writing as writer, \
+                    ProgressBar(sum(reader.message_counts.values()), stream=progress_stream,
+                                label='converting ') as progress:
+                for metadata in [*reader.topic_metadata.values(), *new_topics]:
+                    writer.add_topic(metadata)
+                converted_input = converted_blocks(reader.messages(), converters, routes)
+                while True:
+                    try:
+                        block = next(converted_input, None)
+                    except BagError as error:   # a message that cannot be decoded names no file
+                        raise reader.naming_this_bag(error) from None
+                    if block is None:
+                        break
+                    raise_if_stopped()
+                    written: List[tuple] = []
+                    add = written.append
+                    for record, converted in block:
+                        log_time_ns, publish_time_ns = record.log_time_ns, record.publish_time_ns
+                        add((record.topic, record.type_name, record.data, log_time_ns,
+                             publish_time_ns))
+                        if converted:
+                            for topic, type_name, data in converted:
+                                add((topic, type_name, data, log_time_ns, publish_time_ns))
+                    writer.write_serialized_block(written)
+                    progress.update(len(block))
+                raise_if_stopped()   # the last chance before the output is committed
     return {topic: converter.pipeline.stats for topic, converter in converters.items()}

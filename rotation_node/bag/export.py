@@ -229,37 +229,35 @@ def export(input_path: StrPath, output_path: StrPath, params: NodeParameters, *,
                    f'{sum(reader.message_counts.values())} messages')
             for note in reader.notes:
                 report(note)
-        noted = len(reader.notes)
-        params = resolved_from_bag(reader, params)   # the mounting from /tf_static, if asked
-        streams = _input_streams(reader, messages.INPUTS[params.input_type],
-                                 None if topic is None else [topic])
-        if len(streams) > 1:
-            raise BagError(f'{reader.path} has {len(streams)} {params.input_type} topics '
-                           f'({", ".join(streams)}); choose one with --topic')
-        (stream, routes), = streams.items()
-        converter = TopicConverter(params, {name: (name, '', None) for name in params.outputs})
-        widths = {name: len(output_columns(name, params)) for name in params.outputs}
-        positions, start = {}, 0
-        for name in params.outputs:
-            positions[name], start = start, start + widths[name]
-        count = 0
-        with AtomicFile(output_path, overwrite=overwrite) as output, collections_deferred():
-            table = (_CsvTable if kind == 'csv' else _ParquetTable)(output.stream, columns)
-            block: List[Any] = []
-            try:
-                for record in reader.messages(list(routes)):
-                    block.append(record)
-                    if len(block) == BLOCK_MESSAGES:
-                        count += _write_block(table, converter, block, routes, widths, positions)
-                        block = []
-                count += _write_block(table, converter, block, routes, widths, positions)
-            except BagError as error:   # a message that cannot be decoded names no file
-                raise reader.naming_this_bag(error) from None
-            table.close()
-            raise_if_stopped()   # the last chance before the table is committed
-        if report is not None:
-            for note in reader.notes[noted:]:   # what reading found could not be read
-                report(note)
+        with reader.reporting_new_notes(report):
+            params = resolved_from_bag(reader, params)   # the mounting from /tf_static, if asked
+            streams = _input_streams(reader, messages.INPUTS[params.input_type],
+                                     None if topic is None else [topic])
+            if len(streams) > 1:
+                raise BagError(f'{reader.path} has {len(streams)} {params.input_type} topics '
+                               f'({", ".join(streams)}); choose one with --topic')
+            (stream, routes), = streams.items()
+            converter = TopicConverter(params, {name: (name, '', None) for name in params.outputs})
+            widths = {name: len(output_columns(name, params)) for name in params.outputs}
+            positions, start = {}, 0
+            for name in params.outputs:
+                positions[name], start = start, start + widths[name]
+            count = 0
+            with AtomicFile(output_path, overwrite=overwrite) as output, collections_deferred():
+                table = (_CsvTable if kind == 'csv' else _ParquetTable)(output.stream, columns)
+                block: List[Any] = []
+                try:
+                    for record in reader.messages(list(routes)):
+                        block.append(record)
+                        if len(block) == BLOCK_MESSAGES:
+                            count += _write_block(table, converter, block, routes, widths,
+                                                  positions)
+                            block = []
+                    count += _write_block(table, converter, block, routes, widths, positions)
+                except BagError as error:   # a message that cannot be decoded names no file
+                    raise reader.naming_this_bag(error) from None
+                table.close()
+                raise_if_stopped()   # the last chance before the table is committed
     return count, converter.pipeline.stats
 
 

@@ -209,7 +209,6 @@ def play(path: StrPath, *, rate: float = 1.0, topics: Optional[Sequence[str]] = 
             for note in reader.notes:
                 report(note)
         topics = _playable_topics(reader, topics, report)
-        noted = len(reader.notes)
         rclpy.init(args=ros_args, signal_handler_options=SignalHandlerOptions.NO)
         try:
             node = rclpy.create_node(NODE_NAME)
@@ -219,16 +218,14 @@ def play(path: StrPath, *, rate: float = 1.0, topics: Optional[Sequence[str]] = 
                     _wait_for_subscribers(node, publishers, stop)
                 _wait(stop, delay)
                 count = 0
-                while True:
-                    published = _play_once(reader, topics, publishers, rate, stop)
-                    count += published
-                    if not loop or published == 0 or stop.is_set():
-                        break
+                with reader.reporting_new_notes(report):
+                    while True:
+                        published = _play_once(reader, topics, publishers, rate, stop)
+                        count += published
+                        if not loop or published == 0 or stop.is_set():
+                            break
                 if not stop.is_set():
                     _wait_for_acks(publishers)
-            if report is not None:
-                for note in reader.notes[noted:]:   # what reading found could not be read
-                    report(note)
             node.get_logger().info(f'published {count} messages from {path}')
             node.destroy_node()
             return count

@@ -177,11 +177,8 @@ def plot_topic(bag_path: StrPath, topic: str, output_path: StrPath, *,
         if report is not None:
             for note in reader.notes:
                 report(note)
-        noted = len(reader.notes)
-        times_ns, panels, values = plot_series(reader, topic, params)
-        if report is not None:
-            for note in reader.notes[noted:]:   # what reading found could not be read
-                report(note)
+        with reader.reporting_new_notes(report):
+            times_ns, panels, values = plot_series(reader, topic, params)
         _draw(reader.topic_name(topic), times_ns, values, panels).savefig(
             output.stream, format='png', dpi=110)
         raise_if_stopped()   # the last chance before the PNG is committed

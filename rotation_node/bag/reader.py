@@ -30,13 +30,14 @@ be decoded (encoding ``unknown``, a short type name, another serialization)
 are listed and read as stored, so that they can be copied unchanged: only
 decoding their messages fails.
 """
+import contextlib
 import dataclasses
 import heapq
 import operator
 import os
 import re
 import tempfile
-from typing import Dict, Iterable, Iterator, List, Optional, Union
+from typing import Callable, Dict, Iterable, Iterator, List, Optional, Union
 
 from rotation_node.bag.compression import (
     decompress_file, LZ4_MAGIC, stored_name, ZSTD_MAGIC, zstd_prefix, ZstdError)
@@ -224,6 +225,20 @@ class InputBag:
         """
         name, = checked_topics([self.renames.get(name, name)], self.topics, self.path)
         return name
+
+    @contextlib.contextmanager
+    def reporting_new_notes(self, report: Optional[Callable[[str], None]]) -> Iterator[None]:
+        """
+        Pass to ``report`` the notes that reading adds within (what could not be read).
+
+        The notes are passed when the block completes, after the messages read in it;
+        none if it raises (the error is then the one line).
+        """
+        noted = len(self.notes)
+        yield
+        if report is not None:
+            for note in self.notes[noted:]:
+                report(note)
 
     def naming_this_bag(self, error: BagError) -> BagError:
         """
