@@ -1,6 +1,7 @@
 """Tests of rotation_node.bag.compare (``rotation_bag compare``) on bags of synthetic truth."""
 import json
 import os
+import re
 
 import matplotlib.image
 import numpy as np
@@ -237,3 +238,48 @@ def test_euler_angles_of_the_parameters_sequence(tmp_path, streams):
                      '--estimate-type', 'euler', '--params', str(params),
                      '--json', str(json_path)]) == 0
     check_against_truth(json.loads(json_path.read_text()), streams)
+
+
+SCENE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                     'config', 'scenes', 'mocap_reference.yaml')
+
+
+@pytest.fixture(scope='module')
+def scene_bag(tmp_path_factory):
+    """Simulate the shipped mocap scene (60 s of a free body, two streams) with its truth."""
+    from rotation_node.scene import cli as scene_cli
+    directory = tmp_path_factory.mktemp('scene')
+    bag = directory / 'mocap.mcap'
+    assert scene_cli.main([SCENE, str(bag)]) == 0
+    return bag, json.loads((directory / 'mocap.mcap.truth.json').read_text())
+
+
+def test_scene_truth_is_recovered_within_a_bounded_search(tmp_path, scene_bag, capsys):
+    bag, truth = scene_bag
+    result = tmp_path / 'result.json'
+    assert cli.main(['compare', str(bag), '--reference', truth['reference']['topic'],
+                     '--estimate', truth['estimate']['topic'], '--max-offset', '1',
+                     '--json', str(result)]) == 0
+    document = json.loads(result.read_text())
+    assert document['matched'] == truth['reference']['messages']
+    assert abs(document['time_offset_s'] - truth['time_offset_s']) < 1e-3
+    assert angle_deg(document['world_alignment']['quaternion'],
+                     truth['world_alignment']['quaternion']) < 0.1
+    assert angle_deg(document['mounting']['quaternion'], truth['mounting']['quaternion']) < 0.1
+    # Errors of the aligned streams: both streams' noise, sqrt(3) sigma per stream in angle.
+    noise = truth['noise']
+    expected_rms = np.degrees(np.sqrt(3 * (noise['reference_orientation_std_rad'] ** 2
+                                           + noise['estimate_orientation_std_rad'] ** 2)))
+    assert abs(document['error_deg']['rmse'] - expected_rms) < 0.1 * expected_rms
+
+
+def test_a_motion_that_repeats_makes_the_offset_ambiguous(scene_bag, capsys):
+    """A free body's motion repeats up to a world rotation: W absorbs a shift by a period."""
+    bag, truth = scene_bag
+    status = cli.main(['compare', str(bag), '--reference', truth['reference']['topic'],
+                       '--estimate', truth['estimate']['topic']])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 1
+    assert len(err) == 1 and 'the time offset is ambiguous' in err[0]
+    candidates = [float(text) for text in re.findall(r'[-+]\d+\.\d+', err[0])]
+    assert min(abs(c - truth['time_offset_s']) for c in candidates) < 0.01   # the true one too

@@ -36,7 +36,7 @@ import numpy as np
 
 from ._series import checked_series, interpolate_orientations, median_step, orientation_errors
 from ._smoothing import smoothed_orientations
-from ._time_offset import default_rate_bandwidth, estimate_time_offset, smoothed_rates
+from ._time_offset import default_rate_bandwidth, smoothed_rates, time_offset_candidates
 from .. import conversions
 from ..errors import ComparisonError, DegenerateMotionError
 
@@ -56,6 +56,9 @@ _MAX_ITERATIONS = 50
 #: Bandwidth of the estimate's local fit, in its median steps: wider averages more noise
 #: (its derivative enters the time offset); 3 steps measured best on 60 s at 1 deg.
 FIT_STEPS = 3.0
+#: Another correlation peak whose orientations agree within this factor of the best
+#: residual makes the time offset ambiguous (noise alone moves it by about 1/sqrt(n)).
+AMBIGUOUS_RESIDUAL = 1.1
 
 
 class Alignment(NamedTuple):
@@ -269,23 +272,59 @@ def estimate_alignment(t_ref: ArrayLike, q_ref: ArrayLike, t_est: ArrayLike, q_e
     t_ref, q_ref = checked_series(t_ref, q_ref, 'reference')
     t_est, q_est = checked_series(t_est, q_est, 'estimate')
     step_est = median_step(t_est)
-    if time_offset is None:
-        dt = estimate_time_offset(t_ref, q_ref, t_est, q_est, rates_ref=rates_ref,
-                                  rates_est=rates_est, max_offset=max_offset).seconds
+    if time_offset is None:   # the correlation peak at which the orientations agree best
+        starts = [candidate.seconds for candidate in time_offset_candidates(
+            t_ref, q_ref, t_est, q_est, rates_ref=rates_ref, rates_est=rates_est,
+            max_offset=max_offset)]
     else:
-        dt = float(time_offset)
+        starts = [float(time_offset)]
     columns = [name for name, wanted in (('world', world), ('mounting', mounting),
                                          ('time_offset', time_offset is None)) if wanted]
     problem = _Problem(t_ref, q_ref, t_est, q_est, FIT_STEPS * step_est,
                        5.0 * step_est if max_gap is None else float(max_gap))
-    problem.select(dt)
+    dt, residual_rms = _best_start(problem, starts, world, mounting, rates_ref, rates_est)
     w, m = _initial_rotations(problem, dt, world, mounting, rates_ref, rates_est)
     w, m, dt, std, r = _least_squares(problem.linearised, w, m, dt, columns)
+    residual_rms = float(np.sqrt(np.mean(np.sum(r.reshape(-1, 3) ** 2, axis=1))))
     return Alignment(
         time_offset=float(dt), time_offset_std=float(std.get('time_offset', [0.0])[0]),
         world=w, world_std=std.get('world', np.zeros(3)), mounting=m,
-        mounting_std=std.get('mounting', np.zeros(3)), matched=int(problem.index.size),
-        residual_rms=float(np.sqrt(np.mean(np.sum(r.reshape(-1, 3) ** 2, axis=1)))))
+        mounting_std=std.get('mounting', np.zeros(3)), matched=r.size // 3,
+        residual_rms=residual_rms)
+
+
+def _best_start(problem, starts, world, mounting, rates_ref, rates_est):
+    """
+    Return the start ``dt`` (of the correlation peaks) at which the orientations agree best.
+
+    Each is scored by the residual of its closed-form ``W``, ``M``. A motion that
+    repeats itself up to a rotation (a free body after a period of its rate) agrees
+    as well at another peak: then the offset is ambiguous and DegenerateMotionError
+    names the candidates.
+    """
+    scored, refused = [], []
+    for start in starts:
+        try:
+            problem.select(start)
+        except ComparisonError as error:   # (at a wrong peak the streams may hardly overlap)
+            refused.append(error)
+            continue
+        w, m = _initial_rotations(problem, start, world, mounting, rates_ref, rates_est)
+        residuals = problem.residuals(w, m, start)
+        scored.append((float(np.sqrt(np.mean(np.sum(residuals ** 2, axis=1)))), start))
+    if not scored:
+        raise refused[0]
+    scored.sort()
+    best, dt = scored[0]
+    alike = [start for residual, start in scored[1:]
+             if residual <= AMBIGUOUS_RESIDUAL * best and abs(start - dt) > problem.margin]
+    if alike:
+        offsets = ', '.join(sorted({f'{start:+.4f}' for start in [dt, *alike]}, key=float))
+        raise DegenerateMotionError(
+            f'the time offset is ambiguous: the motion repeats itself, and the orientations '
+            f'agree as well at {offsets} s; give the offset, or bound the search (max_offset, '
+            '--max-offset)')
+    return dt, best
 
 
 def _least_squares(linearised, w, m, dt, columns):

@@ -10,10 +10,15 @@ highest normalised cross-correlation (over lags where the two overlap by at
 least half of the shorter) is refined to a fraction of a grid step with a
 parabola, then by least squares of ``|w_ref(t)| - a |w_est(t + dt)| - b`` in
 continuous ``dt``, whose curvature gives the standard deviation.
+
+A motion whose rate magnitude repeats (a free body's rate is periodic in its
+body frame) correlates almost as well one period away: :func:`time_offset_candidates`
+returns the best few peaks, and :func:`rotation_node.comparison.estimate_alignment`
+keeps the one at which the orientations themselves agree best.
 """
 from __future__ import annotations
 
-from typing import NamedTuple, Optional, Tuple, TYPE_CHECKING
+from typing import List, NamedTuple, Optional, Tuple, TYPE_CHECKING
 
 import numpy as np
 
@@ -34,6 +39,8 @@ MIN_RATE_VARIATION = 0.02
 MIN_CORRELATION = 0.5
 #: The rate magnitudes are searched on at most this many grid points (memory).
 MAX_GRID_POINTS = 20_000_000
+#: Correlation peaks tried by estimate_alignment (a periodic motion has one a period).
+MAX_CANDIDATES = 8
 
 
 class TimeOffset(NamedTuple):
@@ -97,6 +104,10 @@ def estimate_time_offset(t_ref: ArrayLike, q_ref: ArrayLike, t_est: ArrayLike, q
     """
     Estimate ``dt`` with ``|w_ref(t)| = |w_est(t + dt)|`` from the two streams' angular rates.
 
+    The highest peak of the rate magnitudes' correlation: for a motion whose rate
+    magnitude repeats, :func:`estimate_alignment` (which also compares the
+    orientations) decides between the peaks.
+
     Parameters
     ----------
     t_ref, t_est : array_like, shape (N,), (M,)
@@ -129,6 +140,24 @@ def estimate_time_offset(t_ref: ArrayLike, q_ref: ArrayLike, t_est: ArrayLike, q
         Bad arrays, or the streams together span more than 20 million grid steps
         (stamps of different clocks).
 
+    """
+    return time_offset_candidates(t_ref, q_ref, t_est, q_est, rates_ref=rates_ref,
+                                  rates_est=rates_est, max_offset=max_offset,
+                                  bandwidth=bandwidth, count=1)[0]
+
+
+def time_offset_candidates(t_ref: ArrayLike, q_ref: ArrayLike, t_est: ArrayLike,
+                           q_est: ArrayLike, *, rates_ref: Optional[ArrayLike] = None,
+                           rates_est: Optional[ArrayLike] = None,
+                           max_offset: Optional[float] = None,
+                           bandwidth: Optional[float] = None,
+                           count: int = MAX_CANDIDATES) -> List[TimeOffset]:
+    """
+    Return up to ``count`` offsets at the highest correlation peaks, the highest first.
+
+    Arguments, errors and each offset's refinement as in :func:`estimate_time_offset`
+    (whose answer is the first); the others are the next local maxima of the
+    correlation above its threshold, inside the searched range.
     """
     t_ref, q_ref = checked_series(t_ref, q_ref, 'reference')
     t_est, q_est = checked_series(t_est, q_est, 'estimate')
@@ -177,12 +206,20 @@ def estimate_time_offset(t_ref: ArrayLike, q_ref: ArrayLike, t_est: ArrayLike, q
         raise DegenerateMotionError(
             'the time offset lies at the edge of the searched range (the streams overlap by '
             'less than half, or |offset| > max_offset)')
-    left, centre, right = pearson[peak - 1:peak + 2]
-    curvature = left - 2.0 * centre + right
-    fraction = 0.5 * (left - right) / curvature if curvature < 0.0 else 0.0
-    seconds = (lags[peak] + fraction) * grid_step
-    seconds, std = _refined(grid, a, ma, b, mb, seconds, grid_step, bandwidth)
-    return TimeOffset(seconds, std, float(centre))
+    inner = pearson[1:-1]
+    maxima = 1 + np.flatnonzero((inner >= pearson[:-2]) & (inner > pearson[2:])
+                                & (inner >= MIN_CORRELATION))
+    others = maxima[maxima != peak]
+    others = others[np.argsort(-pearson[others], kind='stable')][:max(count - 1, 0)]
+    candidates = []
+    for index in [peak, *others.tolist()]:
+        left, centre, right = pearson[index - 1:index + 2]
+        curvature = left - 2.0 * centre + right
+        fraction = 0.5 * (left - right) / curvature if curvature < 0.0 else 0.0
+        seconds = (lags[index] + fraction) * grid_step
+        seconds, std = _refined(grid, a, ma, b, mb, seconds, grid_step, bandwidth)
+        candidates.append(TimeOffset(seconds, std, float(centre)))
+    return candidates
 
 
 def _refined(grid, a, ma, b, mb, seconds, grid_step, bandwidth):
