@@ -164,11 +164,7 @@ def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *
     """
     with open_bag(input_path, strict=strict) as reader:
         _check_output(input_path, output_path)
-        if report is not None:
-            report(f'{reader.path}: {reader.description}, '
-                   f'{sum(reader.message_counts.values())} messages')
-            for note in reader.notes:
-                report(note)
+        reader.report_contents(report)
         with reader.reporting_new_notes(report):
             params = resolved_from_bag(reader, params)   # the mounting from /tf_static, if asked
             input_type = messages.INPUTS[params.input_type]

@@ -224,11 +224,7 @@ def export(input_path: StrPath, output_path: StrPath, params: NodeParameters, *,
     with open_bag(input_path, strict=strict) as reader:
         if os.path.exists(output_path) and os.path.samefile(input_path, output_path):
             raise BagError(f'output {output_path} is the input bag')
-        if report is not None:
-            report(f'{reader.path}: {reader.description}, '
-                   f'{sum(reader.message_counts.values())} messages')
-            for note in reader.notes:
-                report(note)
+        reader.report_contents(report)
         with reader.reporting_new_notes(report):
             params = resolved_from_bag(reader, params)   # the mounting from /tf_static, if asked
             streams = _input_streams(reader, messages.INPUTS[params.input_type],

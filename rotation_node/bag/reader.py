@@ -226,6 +226,14 @@ class InputBag:
         name, = checked_topics([self.renames.get(name, name)], self.topics, self.path)
         return name
 
+    def report_contents(self, report: Optional[Callable[[str], None]]) -> None:
+        """Pass to ``report`` what this bag is (its description, how many messages), its notes."""
+        if report is not None:
+            report(f'{self.path}: {self.description}, '
+                   f'{sum(self.message_counts.values())} messages')
+            for note in self.notes:
+                report(note)
+
     @contextlib.contextmanager
     def reporting_new_notes(self, report: Optional[Callable[[str], None]]) -> Iterator[None]:
         """
