@@ -220,15 +220,21 @@ def convert_bags(input_paths: Sequence[str], output_directory: str, params: Node
         reported = set()
         paths = dict(zip(futures, zip(input_paths, outputs)))
 
-        def report_completed():
-            """Report every bag completed since the last call, in input order."""
+        def report_completed(failed=True):
+            """
+            Report every bag completed since the last call, in input order.
+
+            ``failed=False`` (the batch is being stopped): only the bags whose output
+            is written; a worker stopped on the way (SIGTERM, or terminated) gets no line.
+            """
             for future in futures:
                 if future not in reported and future.done() and not future.cancelled():
-                    reported.add(future)
                     error = future.exception()
                     if error is None:
+                        reported.add(future)
                         results.add(future.result())
-                    else:   # an error of the package or a worker, not a bad bag
+                    elif failed:   # an error of the package or a worker, not a bad bag
+                        reported.add(future)
                         results.failed(*paths[future], error)
 
         try:
@@ -244,7 +250,7 @@ def convert_bags(input_paths: Sequence[str], output_directory: str, params: Node
                 process.terminate()
             pool.shutdown(wait=True, cancel_futures=True)
             # A bag a worker completed before it saw SIGTERM is written: it gets its line.
-            report_completed()
+            report_completed(failed=False)
             raise
     return results.all()
 
