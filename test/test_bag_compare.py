@@ -250,7 +250,9 @@ def scene_bag(tmp_path_factory):
     from rotation_node.scene import cli as scene_cli
     directory = tmp_path_factory.mktemp('scene')
     bag = directory / 'mocap.mcap'
-    assert scene_cli.main([SCENE, str(bag)]) == 0
+    # (Seed 1: its time offset was 1.15 ms = 5 reported std off while the time offset's
+    # Jacobian was a finite difference of the noisy estimate.)
+    assert scene_cli.main([SCENE, str(bag), '--seed', '1']) == 0
     return bag, json.loads((directory / 'mocap.mcap.truth.json').read_text())
 
 
@@ -263,6 +265,8 @@ def test_scene_truth_is_recovered_within_a_bounded_search(tmp_path, scene_bag, c
     document = json.loads(result.read_text())
     assert document['matched'] == truth['reference']['messages']
     assert abs(document['time_offset_s'] - truth['time_offset_s']) < 1e-3
+    assert abs(document['time_offset_s'] - truth['time_offset_s']) < (
+        3.0 * document['time_offset_std_s'])
     assert angle_deg(document['world_alignment']['quaternion'],
                      truth['world_alignment']['quaternion']) < 0.1
     assert angle_deg(document['mounting']['quaternion'], truth['mounting']['quaternion']) < 0.1

@@ -16,11 +16,15 @@ the errors about the reference body axes, over the reference samples:
    (``w_est = M w_ref``, Kabsch/Wahba by SVD), then ``W`` as the chordal mean
    of ``R_ref M^T R_est^T``; with one, the chordal mean of what it must be;
 3. Gauss-Newton on the manifold (``W exp(a)``, ``M exp(b)``, ``dt + c``) with
-   the exact Jacobians ``J_r^-1(r) (R_est M)^T`` and ``J_r^-1(r)`` and a central
-   difference in ``dt``, the estimate evaluated by a Gaussian local quadratic
-   fit of bandwidth 3 estimate steps (:mod:`._smoothing`) so that the noise of
-   the interpolated stream does not bias ``dt``;
-4. the covariance ``s^2 (J^T J)^-1``, ``s^2`` the residual variance.
+   the exact Jacobians ``J_r^-1(r) (R_est M)^T`` and ``J_r^-1(r)`` and, in
+   ``dt``, ``J_r^-1(r) M^T w_est(t + dt)`` with the estimate's smoothed body
+   rate (not a difference of the noisy fit, whose noise derivative would
+   decorrelate ``dt`` from ``W``), the estimate evaluated by a Gaussian local
+   quadratic fit of bandwidth 3 estimate steps (:mod:`._smoothing`) so that the
+   noise of the interpolated stream does not bias ``dt``;
+4. the covariance ``(J^T J)^-1 S (J^T J)^-1``, ``S`` summing the products of
+   the samples' terms of ``J^T r`` within the reach of the estimate's fit (their
+   residuals share its noise).
 
 Degenerate motion is found in ``J^T J`` before any step is taken: its
 smallest eigenvalue once normalised to a unit diagonal is below 1e-3 when
@@ -35,7 +39,7 @@ from typing import NamedTuple, Optional, TYPE_CHECKING
 import numpy as np
 
 from ._series import checked_series, interpolate_orientations, median_step, orientation_errors
-from ._smoothing import smoothed_orientations
+from ._smoothing import smoothed_orientations, WINDOW_BANDWIDTHS
 from ._time_offset import default_rate_bandwidth, smoothed_rates, time_offset_candidates
 from .. import conversions
 from ..errors import ComparisonError, DegenerateMotionError
@@ -150,8 +154,10 @@ def inverse_right_jacobian(r: FloatArray) -> FloatArray:
 class _Problem:
     """The residuals of the reference samples ``selected`` and their Jacobian."""
 
-    def __init__(self, t_ref, q_ref, t_est, q_est, bandwidth, max_gap):
+    def __init__(self, t_ref, q_ref, t_est, q_est, bandwidth, max_gap, rates_est=None):
         self.t_ref, self.q_ref, self.t_est, self.q_est = t_ref, q_ref, t_est, q_est
+        self.rates_est = rates_est
+        self.rate_bandwidth = default_rate_bandwidth(median_step(t_ref), bandwidth)
         self.bandwidth, self.max_gap = bandwidth, max_gap
         self.margin = 3.0 * bandwidth
         self.selected_at = None
@@ -164,6 +170,7 @@ class _Problem:
         for shift in (-self.margin, 0.0, self.margin):
             valid, _ = smoothed_orientations(self.t_est, self.q_est, query + shift, self.bandwidth)
             usable &= valid
+            usable &= self._rates_at(query + shift)[0]
         self.index = np.flatnonzero(usable)
         if self.index.size < MIN_MATCHED:
             raise ComparisonError(
@@ -180,11 +187,22 @@ class _Problem:
             self._cached = (key, q)
         return self._cached[1]
 
+    def _rates_at(self, query):
+        """Return the estimate's body rates at ``query``, smoothed: ``(valid, rates)``."""
+        return smoothed_rates(self.t_est, self.q_est, self.rates_est, query,
+                              self.rate_bandwidth, 'estimate')
+
     def residuals(self, world, mounting, dt, estimate=None):
         estimate = self.estimate_at(dt) if estimate is None else estimate
         aligned = conversions.quaternion_product(
             conversions.quaternion_product(world, estimate), mounting)
         return orientation_errors(self.q_ref[self.index], aligned)
+
+    def solved(self, world, mounting, dt, columns):
+        """Return :func:`_least_squares`, residuals correlated within the estimate fit's reach."""
+        return _least_squares(self.linearised, world, mounting, dt, columns,
+                              lambda: self.t_ref[self.index],
+                              2.0 * WINDOW_BANDWIDTHS * self.bandwidth)
 
     def linearised(self, world, mounting, dt, columns):
         """``(r (3n,), J (3n, p))`` for the parameter blocks ``columns``."""
@@ -194,10 +212,11 @@ class _Problem:
         r = self.residuals(world, mounting, dt, estimate)
         blocks = [_rotation_jacobian(r, estimate, mounting, columns)]
         if 'time_offset' in columns:
-            delta = 0.25 * self.bandwidth
-            derivative = (self.residuals(world, mounting, dt + delta)
-                          - self.residuals(world, mounting, dt - delta)) / (2.0 * delta)
-            blocks.append(derivative[:, :, None])
+            # R_est(t + dt + c) = R_est(t + dt) exp(w_est c): dr/dc = J_r^-1(r) M^T w_est.
+            _, rates = self._rates_at(self.t_ref[self.index] + dt)
+            body = conversions.rotate_vector(conversions.quaternion_conjugate(mounting), rates)
+            derivative = inverse_right_jacobian(r) @ body[:, :, None]
+            blocks.append(derivative)
         jacobian = np.concatenate(blocks, axis=2)
         return r.reshape(-1), jacobian.reshape(-1, jacobian.shape[-1])
 
@@ -281,10 +300,11 @@ def estimate_alignment(t_ref: ArrayLike, q_ref: ArrayLike, t_est: ArrayLike, q_e
     columns = [name for name, wanted in (('world', world), ('mounting', mounting),
                                          ('time_offset', time_offset is None)) if wanted]
     problem = _Problem(t_ref, q_ref, t_est, q_est, FIT_STEPS * step_est,
-                       5.0 * step_est if max_gap is None else float(max_gap))
+                       5.0 * step_est if max_gap is None else float(max_gap), rates_est)
     dt, residual_rms = _best_start(problem, starts, world, mounting, rates_ref, rates_est)
+    problem.select(dt)   # (the last start scored may have chosen other samples)
     w, m = _initial_rotations(problem, dt, world, mounting, rates_ref, rates_est)
-    w, m, dt, std, r = _least_squares(problem.linearised, w, m, dt, columns)
+    w, m, dt, std, r = problem.solved(w, m, dt, columns)
     residual_rms = float(np.sqrt(np.mean(np.sum(r.reshape(-1, 3) ** 2, axis=1))))
     return Alignment(
         time_offset=float(dt), time_offset_std=float(std.get('time_offset', [0.0])[0]),
@@ -327,12 +347,15 @@ def _best_start(problem, starts, world, mounting, rates_ref, rates_est):
     return dt, best
 
 
-def _least_squares(linearised, w, m, dt, columns):
+def _least_squares(linearised, w, m, dt, columns, times=None, span=0.0):
     """
     Gauss-Newton from ``(w, m, dt)``: ``(W, M, dt, {block: std}, residuals)``.
 
     ``linearised(w, m, dt, columns) -> (r, J)``. Checks ``J^T J`` for
-    degenerate motion at the start and at the solution.
+    degenerate motion at the start and at the solution. The variances are those
+    of ``s^2 (J^T J)^-1``; given ``times() ->`` the times of the samples of the
+    last ``linearised``, their residuals correlated within ``span`` (s) of each
+    other, those of :func:`_correlated_covariance` where larger.
     """
     count = None
     for iteration in range(_MAX_ITERATIONS + 1):
@@ -351,9 +374,35 @@ def _least_squares(linearised, w, m, dt, columns):
     if columns:
         _check_determined(information, columns, count)
         dof = max(r.size - jacobian.shape[1], 1)
-        std = np.sqrt(np.diag(np.linalg.inv(information)) * float(r @ r) / dof)
+        variance = np.diag(np.linalg.inv(information)) * float(r @ r) / dof
+        if times is not None:   # (never below the independent one: S sums lags, may be < 0)
+            variance = np.maximum(variance, np.diag(_correlated_covariance(
+                information, jacobian, r, times(), span, r.size / dof)))
+        std = np.sqrt(variance)
     return (conversions.canonical_quaternion(w), conversions.canonical_quaternion(m), float(dt),
             _blocks(std, columns), r)
+
+
+def _correlated_covariance(information, jacobian, r, times, span, scale):
+    """
+    ``(J^T J)^-1 S (J^T J)^-1``: ``S`` the sum of ``g_i g_j^T`` over ``|t_i - t_j| <= span``.
+
+    ``g_i = J_i^T r_i`` is what sample ``i`` adds to the normal equations
+    (its three rows). Residuals of samples closer than ``span`` share noise
+    (the estimate's local fit reaches ``WINDOW_BANDWIDTHS`` bandwidths either side):
+    ``s^2 (J^T J)^-1`` counts them as independent, and the smoothing shrinks
+    ``s^2`` while the time offset still sees every estimate sample's noise.
+    """
+    p = jacobian.shape[1]
+    score = np.einsum('ikp,ik->ip', jacobian.reshape(-1, 3, p), r.reshape(-1, 3))
+    total = np.concatenate([np.zeros((1, p)), np.cumsum(score, axis=0)])
+    low = np.searchsorted(times, times - span, side='left')
+    high = np.searchsorted(times, times + span, side='right')
+    nearby = total[high] - total[low]
+    middle = score.T @ nearby
+    middle = 0.5 * (middle + middle.T) * scale
+    inverse = np.linalg.inv(information)
+    return inverse @ middle @ inverse
 
 
 def _pair_linearised(q_ref, q_est):
@@ -453,7 +502,7 @@ def _initial_rotations(problem, dt, world, mounting, rates_ref, rates_est):
     w = m = IDENTITY
     if world and mounting:
         times = problem.t_ref[problem.index]
-        bandwidth = default_rate_bandwidth(median_step(problem.t_ref), problem.bandwidth)
+        bandwidth = problem.rate_bandwidth
         valid_ref, w_ref = smoothed_rates(problem.t_ref, problem.q_ref, rates_ref, times,
                                           bandwidth, 'reference')
         valid_est, w_est = smoothed_rates(problem.t_est, problem.q_est, rates_est, times + dt,
