@@ -190,6 +190,32 @@ def test_parquet_without_pyarrow_is_one_line(imu_bag, tmp_path, capsys, monkeypa
     assert _listing(tmp_path) == before
 
 
+class _PyarrowForAnotherNumpy:
+    """A meta path finder: ``import pyarrow`` fails as pyarrow >= 22 does under numpy 1."""
+
+    def find_spec(self, name, path=None, target=None):
+        if name == 'pyarrow' or name.startswith('pyarrow.'):
+            raise ImportError('pyarrow requires NumPy 2.0 or newer, found 1.26.4')
+        return None
+
+
+def test_parquet_with_a_pyarrow_that_does_not_load_is_one_line(
+        imu_bag, tmp_path, capsys, monkeypatch):
+    path, _ = imu_bag
+    for name in [name for name in sys.modules if name.split('.')[0] == 'pyarrow']:
+        monkeypatch.delitem(sys.modules, name)
+    monkeypatch.setattr(sys, 'meta_path', [_PyarrowForAnotherNumpy(), *sys.meta_path])
+    params = params_file(tmp_path, input_type='imu', outputs=['euler'])
+    before = _listing(tmp_path)
+    assert main(['export', str(path), str(tmp_path / 'imu.parquet'), '--params',
+                 str(params)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ['rotation_bag export: error: writing Parquet needs pyarrow, which does not '
+                   'load here (pyarrow requires NumPy 2.0 or newer, found 1.26.4); install one '
+                   'that does, or write a .csv file']
+    assert _listing(tmp_path) == before
+
+
 def test_parquet_holds_the_csvs_values(imu_bag, tmp_path):
     import pyarrow.parquet as pq   # in requirements.txt: the test suite has it
     path, _ = imu_bag

@@ -149,9 +149,12 @@ def _parquet_available() -> None:
     try:
         import pyarrow  # noqa: F401
         import pyarrow.parquet  # noqa: F401
-    except ImportError:
+    except ModuleNotFoundError:
         raise BagError('writing Parquet needs pyarrow, which is not installed '
                        '(pip install pyarrow), or write a .csv file') from None
+    except ImportError as error:   # installed, but not for this numpy (pyarrow >= 22: numpy 2)
+        raise BagError(f'writing Parquet needs pyarrow, which does not load here ({error}); '
+                       'install one that does, or write a .csv file') from None
 
 
 def _rows(values_per_record, widths, positions):
