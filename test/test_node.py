@@ -66,7 +66,10 @@ class NodeUnderTest:
             pytest.fail(f'rotation_node did not start:\n{self.process.output}')
 
     def call(self, future):
-        assert self.ros.spin_until(future.done, timeout=10.0), 'parameter service timed out'
+        # The parameter services answer once the node spins: after it has loaded its kernels,
+        # which takes a while on a loaded machine (the node's start-up bound).
+        assert self.ros.spin_until(future.done, timeout=START_TIMEOUT_S), \
+            'parameter service timed out'
         return future.result()
 
     def set(self, values):  # noqa: A003
