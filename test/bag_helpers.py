@@ -9,6 +9,7 @@ Python lists/dicts so that two independent decoders can be compared with ``==``.
 """
 import array
 import dataclasses
+import os
 import shutil
 import string
 import types
@@ -214,3 +215,21 @@ def rosbags_rows(path):
     with Reader(path) as reader:
         return [(connection.topic, bytes(data), time_ns)
                 for connection, time_ns, data in reader.messages()]
+
+
+def main_in(directory, argv):
+    """Run ``rotation_bag`` with ``argv`` in ``directory`` (relative paths); its exit status."""
+    from rotation_node.bag.cli import main
+    cwd = os.getcwd()
+    os.chdir(directory)
+    try:
+        return main(argv)
+    finally:
+        os.chdir(cwd)
+
+
+def file_snapshot(directory):
+    """Return every file under ``directory`` with its bytes (an input must stay untouched)."""
+    return {os.path.relpath(os.path.join(root, name), directory):
+            open(os.path.join(root, name), 'rb').read()
+            for root, _, names in os.walk(directory) for name in names}

@@ -13,8 +13,8 @@ import sqlite3
 import subprocess
 
 from bag_helpers import (
-    imu_messages, interleaved, random_message, rosbags_rows, serialized_rows, write_rosbag2,
-    write_split_rosbag2)
+    file_snapshot, imu_messages, interleaved, main_in, random_message, rosbags_rows,
+    serialized_rows, write_rosbag2, write_split_rosbag2)
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 import numpy as np
@@ -293,30 +293,14 @@ def test_bad_input_is_one_line_exit_1_nothing_written(tmp_path, capsys, rows, na
     else:
         make(path)
     (tmp_path / 'params.yaml').write_text(PARAMS_YAML)
-    before = _snapshot(tmp_path)
+    before = file_snapshot(tmp_path)
     for command in (['convert', name, 'out.mcap', '--params', 'params.yaml', '--strict'],
                     ['plot', name, '--topic', '/imu', '-o', 'out.png', '--strict']):
-        status = _in(tmp_path, command)
+        status = main_in(tmp_path, command)
         lines = capsys.readouterr().err.splitlines()
         assert status == 1 and len(lines) == 1, lines
         assert lines[0].startswith(f'rotation_bag {command[0]}: error: ') and reason in lines[0]
-        assert _snapshot(tmp_path) == before
-
-
-def _in(directory, argv):
-    cwd = os.getcwd()
-    os.chdir(directory)
-    try:
-        return main(argv)
-    finally:
-        os.chdir(cwd)
-
-
-def _snapshot(directory):
-    """Every file under ``directory`` with its bytes (an input must stay untouched)."""
-    return {os.path.relpath(os.path.join(root, name), directory):
-            open(os.path.join(root, name), 'rb').read()
-            for root, _, names in os.walk(directory) for name in names}
+        assert file_snapshot(tmp_path) == before
 
 
 def test_play_maps_invalid_topic_names_and_does_not_die(tmp_path, rows):
@@ -335,8 +319,8 @@ def test_relative_topic_names_stay_relative(tmp_path, rows, capsys):
     relative = [('groundtruth' if t == '/imu' else t, *rest) for t, *rest in rows]
     path = write_rosbag2(tmp_path / 'bag', relative)
     (tmp_path / 'params.yaml').write_text(PARAMS_YAML)
-    assert _in(tmp_path, ['convert', 'bag', 'out.mcap', '--params', 'params.yaml',
-                          '--topic', 'groundtruth']) == 0
+    assert main_in(tmp_path, ['convert', 'bag', 'out.mcap', '--params', 'params.yaml',
+                              '--topic', 'groundtruth']) == 0
     lines = capsys.readouterr().err.splitlines()
     assert not any('not a valid ROS 2 name' in line for line in lines), lines
     assert 'groundtruth: 120 messages -> groundtruth/euler, groundtruth/matrix: 240 messages' \
@@ -347,6 +331,6 @@ def test_relative_topic_names_stay_relative(tmp_path, rows, capsys):
         assert sorted(bag.topics) == ['/joints', 'groundtruth', 'groundtruth/euler',
                                       'groundtruth/matrix']
     capsys.readouterr()
-    assert _in(tmp_path, ['plot', 'out.mcap', '--topic', 'groundtruth/euler']) == 0
+    assert main_in(tmp_path, ['plot', 'out.mcap', '--topic', 'groundtruth/euler']) == 0
     assert capsys.readouterr().err.splitlines() == [
         'plotted 120 messages of groundtruth/euler to out_groundtruth_euler.png']

@@ -12,10 +12,10 @@ import os
 import sqlite3
 import subprocess
 
-from bag_helpers import imu_messages, rosbags_rows, serialized_rows, write_rosbag2
+from bag_helpers import (
+    file_snapshot, imu_messages, main_in, rosbags_rows, serialized_rows, write_rosbag2)
 import pytest
 from ros_harness import script
-from rotation_node.bag.cli import main
 from rotation_node.bag.reader import open_bag
 
 PARAMS_YAML = """rotation_node:
@@ -111,14 +111,14 @@ def test_a_damaged_database_is_one_line_naming_the_row(tmp_path, capsys, bag, da
     make(path / 'run.db3', rows)
     reason = reason.format(rows[4][3])
     (tmp_path / 'params.yaml').write_text(PARAMS_YAML)
-    before = _snapshot(tmp_path)
+    before = file_snapshot(tmp_path)
     for command in (['convert', 'run', 'out.mcap', '--params', 'params.yaml'],
                     ['plot', 'run', '--topic', '/imu', '-o', 'out.png']):
-        status = _in(tmp_path, command)
+        status = main_in(tmp_path, command)
         lines = capsys.readouterr().err.splitlines()
         assert status == 1 and len(lines) == 1, lines
         assert lines[0].startswith(f'rotation_bag {command[0]}: error: ') and reason in lines[0]
-        assert _snapshot(tmp_path) == before
+        assert file_snapshot(tmp_path) == before
 
 
 def test_play_stops_at_a_damaged_row_with_one_line(bag):
@@ -139,28 +139,12 @@ def test_rows_of_no_topic_are_a_note_or_with_strict_an_error(tmp_path, capsys, b
     (tmp_path / 'params.yaml').write_text(PARAMS_YAML)
     note = ('run/run.db3: 2 messages of the messages table name no topic (the first: row id 18, '
             'topic_id 99)')
-    assert _in(tmp_path, ['convert', 'run', 'out.mcap', '--params', 'params.yaml']) == 0
+    assert main_in(tmp_path, ['convert', 'run', 'out.mcap', '--params', 'params.yaml']) == 0
     lines = capsys.readouterr().err.splitlines()
     assert f'{note}, not read' in lines
     assert '/imu: 298 messages -> /imu/euler: 298 messages' in lines
-    status = _in(tmp_path, ['convert', 'run', 'strict.mcap', '--params', 'params.yaml',
-                            '--strict'])
+    status = main_in(tmp_path, ['convert', 'run', 'strict.mcap', '--params', 'params.yaml',
+                                '--strict'])
     assert status == 1 and capsys.readouterr().err.splitlines() == [
         f'rotation_bag convert: error: {note}; refused (--strict)']
     assert not (tmp_path / 'strict.mcap').exists()
-
-
-def _in(directory, argv):
-    cwd = os.getcwd()
-    os.chdir(directory)
-    try:
-        return main(argv)
-    finally:
-        os.chdir(cwd)
-
-
-def _snapshot(directory):
-    """Every file under ``directory`` with its bytes (an input must stay untouched)."""
-    return {os.path.relpath(os.path.join(root, name), directory):
-            open(os.path.join(root, name), 'rb').read()
-            for root, _, names in os.walk(directory) for name in names}

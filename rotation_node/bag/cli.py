@@ -184,6 +184,13 @@ def _positive_seconds(text):
     return value
 
 
+def _add_strict(command, doing):
+    """Add ``--strict``: what reading could not read (a note otherwise) is an error."""
+    command.add_argument('--strict', action='store_true',
+                         help='refuse unfinished recordings and damaged bags instead of '
+                              f'{doing} what can be read')
+
+
 def _say(text):
     print(text, file=sys.stderr)
 
@@ -229,9 +236,7 @@ def build_parser() -> argparse.ArgumentParser:
                            'match the new publishers (default 0)')
     play.add_argument('--wait-for-subscribers', action='store_true',
                       help='start once every played topic has a subscriber (implied by --rate 0)')
-    play.add_argument('--strict', action='store_true',
-                      help='refuse unfinished recordings and damaged MCAP files instead of '
-                           'playing what can be read')
+    _add_strict(play, 'playing')
     play.set_defaults(run=_play)
 
     convert = commands.add_parser(
@@ -254,9 +259,7 @@ def build_parser() -> argparse.ArgumentParser:
     convert.add_argument('--compression', choices=COMPRESSION_CHOICES,
                          help="MCAP chunk compression (default: the input's)")
     convert.add_argument('--force', action='store_true', help='replace existing outputs')
-    convert.add_argument('--strict', action='store_true',
-                         help='refuse unfinished recordings and damaged MCAP files instead of '
-                              'converting what can be read')
+    _add_strict(convert, 'converting')
     convert.add_argument('--jobs', type=_positive_int, default=1, metavar='N',
                          help='with several inputs, convert N bags at a time in parallel '
                               'processes (default 1)')
@@ -272,9 +275,7 @@ def build_parser() -> argparse.ArgumentParser:
                       help='parameters the bag was converted with (Euler sequence and units '
                            'for the labels; default: the node defaults)')
     plot.add_argument('--force', action='store_true', help='overwrite the PNG')
-    plot.add_argument('--strict', action='store_true',
-                      help='refuse unfinished recordings and damaged MCAP files instead of '
-                           'plotting what can be read')
+    _add_strict(plot, 'plotting')
     plot.set_defaults(run=_plot)
 
     export = commands.add_parser(
@@ -291,9 +292,7 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument('--topic', metavar='T',
                         help='input topic (default: the one topic of the input_type)')
     export.add_argument('--force', action='store_true', help='replace OUT')
-    export.add_argument('--strict', action='store_true',
-                        help='refuse unfinished recordings instead of exporting what a scan '
-                             'recovers')
+    _add_strict(export, 'exporting')
     export.set_defaults(run=_export)
 
     compare = commands.add_parser(
@@ -335,9 +334,7 @@ def build_parser() -> argparse.ArgumentParser:
                          help="the node's parameters file: Euler sequence and unit of Euler "
                               'inputs, input_type among shared message types')
     compare.add_argument('--force', action='store_true', help='overwrite the JSON and PNG')
-    compare.add_argument('--strict', action='store_true',
-                         help='refuse unfinished recordings instead of reading what a scan '
-                              'recovers')
+    _add_strict(compare, 'reading')
     compare.set_defaults(run=_compare)
     return parser
 
