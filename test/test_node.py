@@ -721,6 +721,8 @@ def test_sigterm_while_spinning_exits_0(ros):
     started = NodeUnderTest(ros, ['-r', '__ns:=/sigterm'], namespace='/sigterm')
     for subscription in started.subscriptions.values():
         ros.node.destroy_subscription(subscription)
+    # The parameter services exist before the node is constructed; an answer means it spins.
+    assert started.get('input_type') == 'imu'
     started.process.proc.send_signal(signal.SIGTERM)
     started.process.output, _ = started.process.proc.communicate(timeout=15.0)
     assert started.process.proc.returncode == 0, started.process.output
