@@ -382,10 +382,8 @@ class BlockPipeline:
             measured_ok = measured & finite
             if self._mounting is not None and measured_ok.any():
                 raw = raw.copy()
-                raw[measured_ok] = (
-                    self._mounting.world_vector(raw[measured_ok])
-                    if params.angular_velocity_input_frame == 'world'
-                    else self._mounting.body_vector(raw[measured_ok]))
+                raw[measured_ok] = self._mounting.vector(raw[measured_ok],
+                                                         params.angular_velocity_input_frame)
             frame = params.angular_velocity_output_frame
             if params.angular_velocity_input_frame == frame:
                 omega[measured_ok] = raw[measured_ok]

@@ -210,6 +210,10 @@ class Mounting:
         v = finite_array(vector, 'vector', (3,))
         return _apply(self.world_matrix(), v) if self.changes_world else v.copy()
 
+    def vector(self, vector: ArrayLike, frame: str) -> np.ndarray:
+        """Return ``vector`` of ``frame`` (``'world'`` or ``'body'``) rotated as that frame is."""
+        return self.world_vector(vector) if frame == 'world' else self.body_vector(vector)
+
     def body_covariance(self, covariance: ArrayLike) -> np.ndarray:
         """Return ``M^T Sigma M`` for a body-axes rotation-vector covariance, (..., 3, 3)."""
         c = finite_array(covariance, 'covariance', (3, 3))

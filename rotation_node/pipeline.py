@@ -461,8 +461,7 @@ class ConversionPipeline:
                 omega = (self._frames.world_vector(omega) if input_frame == 'world'
                          else self._frames.body_vector(omega))
             if self._mounting is not None:
-                omega = (self._mounting.world_vector(omega) if input_frame == 'world'
-                         else self._mounting.body_vector(omega))
+                omega = self._mounting.vector(omega, input_frame)
             if input_frame == frame:
                 return np.array(omega)
             if q is None:

@@ -279,46 +279,52 @@ class _File:
             position += _RECORD_PREFIX.size + length
 
 
+def _bounded(read, size, offset):
+    """
+    Join the pieces ``read(max_length)`` returns until it returns none: at most ``size`` bytes.
+
+    A decompressor that gives more than the ``size`` its chunk states is damage: it is
+    never asked for more than one byte past it.
+    """
+    pieces, total = [], 0
+    while True:
+        piece = read(min(_DECOMPRESS_PIECE, size + 1 - total))
+        if not piece:
+            break
+        pieces.append(piece)
+        total += len(piece)
+        if total > size:
+            raise _Damage(offset, f'chunk that decompresses to more than the {size} '
+                                  'bytes it states')
+    return pieces[0] if len(pieces) == 1 else b''.join(pieces)
+
+
 def _unzstd(stored, size, offset):
     """Decompress a zstd chunk that says it holds ``size`` bytes, never holding more than that."""
-    pieces, total = [], 0
     try:
         with zstandard.ZstdDecompressor().stream_reader(stored) as reader:
-            while True:
-                piece = reader.read(min(_DECOMPRESS_PIECE, size + 1 - total))
-                if not piece:
-                    break
-                pieces.append(piece)
-                total += len(piece)
-                if total > size:
-                    raise _Damage(offset, f'chunk that decompresses to more than the {size} '
-                                          'bytes it states')
+            return _bounded(reader.read, size, offset)
     except zstandard.ZstdError as error:
         raise _Damage(offset, f'chunk that does not decompress (zstd: {error})') from None
-    return pieces[0] if len(pieces) == 1 else b''.join(pieces)
 
 
 def _unlz4(stored, size, offset):
     """Decompress an lz4 chunk that says it holds ``size`` bytes, never holding more than that."""
     decompressor = lz4.frame.LZ4FrameDecompressor()
-    pieces, total = [], 0
+    pending = [stored]   # the frame, given to the decompressor once
+
+    def read(max_length):
+        if decompressor.eof:
+            return b''
+        return decompressor.decompress(pending.pop() if pending else b'', max_length=max_length)
+
     try:
-        while not decompressor.eof:
-            piece = decompressor.decompress(
-                stored, max_length=min(_DECOMPRESS_PIECE, size + 1 - total))
-            stored = b''
-            if not piece:
-                break
-            pieces.append(piece)
-            total += len(piece)
-            if total > size:
-                raise _Damage(offset, f'chunk that decompresses to more than the {size} '
-                                      'bytes it states')
+        data = _bounded(read, size, offset)
     except RuntimeError as error:   # lz4.frame's error for data that is not a valid frame
         raise _Damage(offset, f'chunk that does not decompress (lz4: {error})') from None
     if not decompressor.eof:
         raise _Damage(offset, 'chunk whose lz4 frame is cut short')
-    return b''.join(pieces)
+    return data
 
 
 def chunk_data(body: Union[bytes, memoryview], offset: int = 0) -> tuple:
