@@ -267,3 +267,14 @@ def test_tf_input_exports_one_row_per_lookup(tmp_path):
     assert {row[1] for row in rows} == {'map'}
     yaw = numbers(rows, header, ['yaw'])[:, 0]
     assert np.abs(yaw - (np.array(yaws) + np.radians(30.0))).max() < 1e-12
+
+
+def test_a_table_inside_the_input_bag_is_refused(imu_bag, tmp_path, capsys):
+    """The outputs convert refuses (the input, inside it) export refuses too: the same check."""
+    path, _ = imu_bag
+    params = params_file(tmp_path, input_type='imu', outputs=['euler'])
+    before = sorted(os.listdir(path))
+    assert main(['export', str(path), str(path / 'imu.csv'), '--params', str(params)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and 'is inside the input bag' in err[0]
+    assert sorted(os.listdir(path)) == before

@@ -27,7 +27,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, TYPE_CH
 from rotation_node import messages
 from rotation_node.bag.atomic_file import AtomicFile
 from rotation_node.bag.block_convert import BLOCK_MESSAGES, collections_deferred, TopicConverter
-from rotation_node.bag.convert import _input_streams
+from rotation_node.bag.convert import _check_output, _input_streams
 from rotation_node.bag.reader import open_bag
 from rotation_node.bag.stop_signal import raise_if_stopped
 from rotation_node.errors import BagError
@@ -225,8 +225,7 @@ def export(input_path: StrPath, output_path: StrPath, params: NodeParameters, *,
         _parquet_available()
     columns = table_columns(params)
     with open_bag(input_path, strict=strict) as reader:
-        if os.path.exists(output_path) and os.path.samefile(input_path, output_path):
-            raise BagError(f'output {output_path} is the input bag')
+        _check_output(input_path, output_path)
         reader.report_contents(report)
         with reader.reporting_new_notes(report):
             params = resolved_from_bag(reader, params)   # the mounting from /tf_static, if asked
