@@ -46,9 +46,9 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'rotation_node = rotation_node.console:rotation_node',
-            'rotation_bag = rotation_node.console:rotation_bag',
-            'rotation_scene = rotation_node.console:rotation_scene',
+            'rotation_node = rotation_node.command_line.console:rotation_node',
+            'rotation_bag = rotation_node.command_line.console:rotation_bag',
+            'rotation_scene = rotation_node.command_line.console:rotation_scene',
         ],
     },
 )

@@ -11,7 +11,7 @@ from the parameters file ``config/params.yaml`` (``input_type: imu``,
   whole block (``rotation_node.bag.block_convert``), results identical to the
   live node's ``ConversionPipeline``;
 - per message: the same with ``blocks=False``: the node's pipeline message by
-  message on ``rotation_node.bag.cdr`` views (the path before blocks);
+  message on ``rotation_node.wire.cdr`` views (the path before blocks);
 - naive: mcap-ros2-support decoding, ``scipy.spatial.transform.Rotation`` per
   message, mcap-ros2-support encoding (``read_ros2_messages`` + ``Writer``);
 - floor: the ``mcap`` library alone reading the input (``iter_messages``, log-time
@@ -68,7 +68,7 @@ T0_NS = 1_700_000_000_000_000_000
 def write_imu_bag(path, count, seed=0):
     """Return an Imu bag: random orientations and angular velocities at 100 Hz."""
     from rclpy.serialization import serialize_message
-    from rotation_node.bag.writer import BagWriter
+    from rotation_node.bag.writing.writer import BagWriter
     from sensor_msgs.msg import Imu
     rng = np.random.default_rng(seed)
     msg = Imu()
@@ -101,7 +101,7 @@ def write_format_bag(directory, fmt, count, seed=0):
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
     from rosbags.typesys import get_typestore, Stores
-    from rotation_node.bag.mcap_io import BagReader
+    from rotation_node.bag.reading.mcap_reader import BagReader
     name = fmt.replace(' ', '_')
     mcap_path = os.path.join(directory, f'{name}.mcap')
     write_imu_bag(mcap_path, count, seed)
@@ -138,7 +138,7 @@ def convert_naive_rosbags(source, output):
     from mcap.writer import Writer
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import get_typestore, Stores
-    from rotation_node.bag.message_types import message_definition
+    from rotation_node.wire.message_types import message_definition
     from scipy.spatial.transform import Rotation
     ros2 = get_typestore(Stores.ROS2_JAZZY)
     Vector3Stamped = ros2.types['geometry_msgs/msg/Vector3Stamped']
@@ -231,7 +231,7 @@ def convert_naive(source, output):
     """Return the same output bag with mcap-ros2-support and scipy, message by message."""
     from mcap_ros2.reader import read_ros2_messages
     from mcap_ros2.writer import Writer
-    from rotation_node.bag.message_types import message_definition
+    from rotation_node.wire.message_types import message_definition
     from scipy.spatial.transform import Rotation
     with open(output, 'wb') as stream:
         writer = Writer(stream)
@@ -255,7 +255,7 @@ def convert_naive(source, output):
 
 def output_datas(path):
     """Return the CDR data of the ``/imu/euler`` messages of a converted bag (for the floors)."""
-    from rotation_node.bag.mcap_io import BagReader
+    from rotation_node.bag.reading.mcap_reader import BagReader
     with BagReader(path) as reader:
         return [record.data for record in reader.messages([TOPIC + '/euler'])]
 
@@ -264,7 +264,7 @@ def _floor_writer(stream):
     """Return an ``mcap`` writer of the output's two channels, as the converters write them."""
     from mcap.writer import CompressionType, Writer
 
-    from rotation_node.bag.message_types import message_definition
+    from rotation_node.wire.message_types import message_definition
     writer = Writer(stream, compression=CompressionType.NONE)
     writer.start(profile='ros2', library='floor')
     channels = []
@@ -323,7 +323,7 @@ def _timed(function, *args):
 
 def _same_messages(path, other):
     """Whether two bags hold the same messages (topic, bytes, times) in the same order."""
-    from rotation_node.bag.mcap_io import BagReader
+    from rotation_node.bag.reading.mcap_reader import BagReader
     with BagReader(path) as a, BagReader(other) as b:
         return all((x.topic, x.data, x.log_time_ns, x.publish_time_ns)
                    == (y.topic, y.data, y.log_time_ns, y.publish_time_ns)
@@ -331,7 +331,7 @@ def _same_messages(path, other):
 
 
 def _euler_values(path):
-    from rotation_node.bag.mcap_io import BagReader
+    from rotation_node.bag.reading.mcap_reader import BagReader
     with BagReader(path) as reader:
         return np.array([(m.vector.x, m.vector.y, m.vector.z) for m in
                          (r.message() for r in reader.messages([TOPIC + '/euler']))])
@@ -380,9 +380,9 @@ def breakdown(directory, count=20_000):
     from rclpy.serialization import serialize_message
     from rotation_node import messages
     from rotation_node.bag.block_convert import BLOCK_MESSAGES
-    from rotation_node.bag.cdr_block import InputBlockDecoder, OutputBlockEncoder
-    from rotation_node.bag.mcap_io import BagReader
-    from rotation_node.bag.writer import BagWriter
+    from rotation_node.wire.cdr_block import InputBlockDecoder, OutputBlockEncoder
+    from rotation_node.bag.reading.mcap_reader import BagReader
+    from rotation_node.bag.writing.writer import BagWriter
     from rotation_node.block_pipeline import BlockPipeline
     from rotation_node.parameters import parameters_from_yaml
     from rotation_node.pipeline import ConversionPipeline

@@ -68,7 +68,7 @@ def relay_main(name, depth):
 
 def qos_profile(depth):
     """Return the node's QoS for ``qos.depth: depth`` and a reliable publisher (keep last)."""
-    from rotation_node.bag.qos import qos_profile as node_qos_profile
+    from rotation_node.wire.qos import qos_profile as node_qos_profile
     from rotation_node.parameters import NodeParameters
     return node_qos_profile(NodeParameters(qos_depth=depth, qos_reliability='reliable'))
 

@@ -16,7 +16,7 @@ import numpy as np
 from rotation_dev.paths import REPOSITORY
 from rotation_dev.two_streams import two_streams
 from rotation_node import comparison, kinematics
-from rotation_node.bag.atomic_file import AtomicFile
+from rotation_node.bag.writing.atomic_file import AtomicFile
 
 TIME_OFFSET_S = 0.25
 

@@ -67,7 +67,7 @@ def _run_live(scene_bag, live_bag, params, topic, expected, log):
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
     from rotation_node import messages
-    from rotation_node.bag.qos import recording_qos
+    from rotation_node.wire.qos import recording_qos
     context = Context()
     rclpy.init(context=context)
     watcher = rclpy.create_node('rotation_demo_watcher', context=context)
@@ -132,8 +132,8 @@ def _run_live(scene_bag, live_bag, params, topic, expected, log):
 
 def _read(bag, topics):
     """{topic: (stamps_ns, values)} of the converted outputs in a bag."""
-    from rotation_node.bag.mcap_io import BagReader
-    from rotation_node.stamps import header_stamp_ns
+    from rotation_node.bag.reading.mcap_reader import BagReader
+    from rotation_node.wire.stamps import header_stamp_ns
     columns = {t: ([], []) for t in topics}
     for record in BagReader(bag).messages(topics=list(topics)):
         msg = record.message()

@@ -47,7 +47,7 @@ from rotation_node.pipeline import (
     NON_FINITE_ANGULAR_VELOCITY, NON_FINITE_ORIENTATION, NON_UNIT_QUATERNION, ORIENTATION_UNKNOWN,
     ORIENTATION_UNKNOWN_DETAIL, SAMPLE_TRANSFORMS, TIMESTAMP_NOT_INCREASING, ZERO_QUATERNION,
     ZERO_QUATERNION_DETAIL)
-from rotation_node.stamps import seconds_text
+from rotation_node.wire.stamps import seconds_text
 
 if TYPE_CHECKING:
     from rotation_node.parameters import NodeParameters

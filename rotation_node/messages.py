@@ -368,7 +368,7 @@ class OutputMessage:
         (works on rclpy messages and CDR views).
     stamped_numbers : bool
         The type is a std_msgs/Header followed by the numbers only, which
-        :mod:`rotation_node.bag.cdr` encodes without building a message.
+        :mod:`rotation_node.wire.cdr` encodes without building a message.
     layout : object, optional
         std_msgs/MultiArrayLayout of a Float64MultiArray type.
 
@@ -390,7 +390,7 @@ class OutputMessage:
         Return ``encode(header, numbers) -> bytes``: the CDR of the built message.
 
         Without building an rclpy message where the type allows it; the bytes
-        are those of ``rotation_node.bag.cdr.message_encoder`` for the built
+        are those of ``rotation_node.wire.cdr.message_encoder`` for the built
         message, or rclpy's serialisation for types that module cannot encode.
 
         Raises
@@ -399,7 +399,7 @@ class OutputMessage:
             If :attr:`stamped_numbers` is set on a type without a fixed CDR layout.
 
         """
-        from rotation_node.bag import cdr
+        from rotation_node.wire import cdr
         if self.stamped_numbers:
             codec = cdr.fixed_layout_codec(self.type_name)
             if codec is None:
@@ -418,7 +418,7 @@ class OutputMessage:
 
 @functools.lru_cache(maxsize=None)
 def _message_class(type_name):
-    from rotation_node.bag.message_types import message_class
+    from rotation_node.wire.message_types import message_class
     return message_class(type_name)
 
 

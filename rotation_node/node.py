@@ -33,7 +33,7 @@ repeating a message, and messages the publishers sent but the node never got
 are counted from their publication sequence numbers (:mod:`rotation_node.reception`;
 the numbers of a publisher that left are forgotten, so that a publisher restarting
 is counted exactly) and reported as ``lost``. Input types with a fixed CDR layout are taken as
-serialized messages and decoded by :mod:`rotation_node.bag.cdr`; outputs are
+serialized messages and decoded by :mod:`rotation_node.wire.cdr`; outputs are
 published as the bytes their encoders give, as ``rotation_bag convert`` writes
 them. See docs/node.md.
 
@@ -67,15 +67,13 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
 from rclpy.qos import (
-    DurabilityPolicy, qos_policy_name_from_kind, qos_profile_parameters, QoSPolicyKind,
-    QoSProfile, ReliabilityPolicy)
+    DurabilityPolicy, qos_policy_name_from_kind, qos_profile_parameters, QoSPolicyKind, QoSProfile,
+    ReliabilityPolicy)
 from rclpy.signals import install_signal_handlers, SignalHandlerOptions
 from rclpy.subscription import Subscription
 from rclpy.timer import Timer
 from rotation_node import messages
-from rotation_node.bag.cdr import fixed_layout_codec
-from rotation_node.bag.qos import AUTO, input_qos, qos_profile
-from rotation_node.bag.stop_signal import signal_name, StopSignal
+from rotation_node.command_line.stop_signal import signal_name, StopSignal
 from rotation_node.conversions.warm_up import announcing_compilation
 from rotation_node.errors import BagError, ParameterError
 from rotation_node.parameters import (
@@ -88,6 +86,8 @@ from rotation_node.reception import Identity, message_identity, Reception
 from rotation_node.static_mounting import (
     MOUNTING_UNKNOWN, needs_static_mounting, placeholder, resolved, StaticMountingLookup,
     TF_STATIC_TOPIC)
+from rotation_node.wire.cdr import fixed_layout_codec
+from rotation_node.wire.qos import AUTO, input_qos, qos_profile
 
 DIAGNOSTICS_PERIOD_S = 1.0
 ISSUE_LOG_PERIOD_S = 5.0
@@ -493,7 +493,7 @@ class RotationNode(Node):
             return resolved(params, self._mounting_found[1])
         self._static_mounting = StaticMountingLookup(params)
         if self._tf_static is None:
-            from rotation_node.bag.message_types import message_class
+            from rotation_node.wire.message_types import message_class
             self._tf_static = self.create_subscription(
                 message_class('tf2_msgs/msg/TFMessage'), TF_STATIC_TOPIC, self._on_tf_static,
                 QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,

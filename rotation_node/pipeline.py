@@ -42,7 +42,7 @@ from rotation_node.messages import (
     ORIENTATION_COVARIANCE, OUTPUT_QUATERNION, PUBLISHED_EULER, Sample)
 from rotation_node.mounting import Mounting
 from rotation_node.parameters import INPUT_TYPES, NodeParameters, OUTPUTS
-from rotation_node.stamps import header_stamp_ns, seconds_text
+from rotation_node.wire.stamps import header_stamp_ns, seconds_text
 
 # Reasons for dropping a whole message (counted in PipelineStats.dropped).
 NON_FINITE_ORIENTATION = 'non_finite_orientation'
@@ -321,7 +321,7 @@ class ConversionPipeline:
             A message of class :attr:`input_type`, or any object with the
             fields the input type is read from (``header`` and the orientation
             and angular velocity fields, e.g. a view from
-            :mod:`rotation_node.bag.cdr`).
+            :mod:`rotation_node.wire.cdr`).
         topic : str, optional
             As for :meth:`process`.
 

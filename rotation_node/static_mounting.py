@@ -113,7 +113,7 @@ def resolved_from_bag(reader: Any, params: NodeParameters) -> NodeParameters:
 
     Parameters
     ----------
-    reader : rotation_node.bag.reader.InputBag
+    reader : rotation_node.bag.reading.reader.InputBag
         The open bag.
     params : NodeParameters
         The node's parameters; returned as they are unless they name the frames.

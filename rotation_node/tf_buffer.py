@@ -47,7 +47,7 @@ import numpy as np
 
 from rotation_node import conversions
 from rotation_node.errors import RotationNodeError
-from rotation_node.stamps import seconds_text
+from rotation_node.wire.stamps import seconds_text
 
 DEFAULT_CACHE_TIME_NS = 10_000_000_000
 """How long a dynamic edge keeps its samples behind the newest one (tf2's default, 10 s)."""

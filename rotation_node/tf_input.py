@@ -19,12 +19,11 @@ does not import rclpy: the header class is looked up when a stream is created.
 from typing import Any, Callable, Optional, Tuple
 
 import numpy as np
-
 from rotation_node.errors import ParameterError
-from rotation_node.stamps import split_ns, stamp_ns
 from rotation_node.tf_buffer import (
     CycleError, ExtrapolationError, NotConnectedError, RejectedTransformError, TfLookupError,
     TfOrientation, TfOrientationBuffer, UnknownFrameError)
+from rotation_node.wire.stamps import split_ns, stamp_ns
 
 TF_UNKNOWN_FRAME = 'tf_unknown_frame'
 TF_NOT_CONNECTED = 'tf_not_connected'
@@ -79,8 +78,8 @@ class TfSampleStream:
     """
 
     def __init__(self, params: Any, report: Callable[[str, str], None]):
-        from rotation_node.bag.message_types import message_class
-        from rotation_node.messages import TF_STATIC_TOPIC, Sample
+        from rotation_node.messages import Sample, TF_STATIC_TOPIC
+        from rotation_node.wire.message_types import message_class
         self.parent, self.child = params.tf_parent_frame, params.tf_child_frame
         self.buffer = TfOrientationBuffer()
         self._report = report

@@ -19,7 +19,7 @@ from rosidl_parser.definition import (
     AbstractGenericString, AbstractNestedType, AbstractSequence, Array, BasicType,
     BoundedSequence, BoundedString, NamespacedType)
 
-from rotation_node.bag.message_types import message_class
+from rotation_node.wire.message_types import message_class
 
 _INTEGER_RANGES = {
     'int8': (-2**7, 2**7), 'uint8': (0, 2**8), 'int16': (-2**15, 2**15), 'uint16': (0, 2**16),
@@ -132,7 +132,7 @@ def serialized_rows(topic, messages, *, log_offset_ns=1_000_000):
     """``[(topic, type name, rclpy CDR bytes, log time)]``; log time = stamp + offset."""
     from rclpy.serialization import serialize_message
 
-    from rotation_node.bag.message_types import type_name_of
+    from rotation_node.wire.message_types import type_name_of
     return [(topic, type_name_of(type(msg)), serialize_message(msg),
              stamp_ns(msg) + log_offset_ns) for msg in messages]
 

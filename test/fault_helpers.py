@@ -59,7 +59,7 @@ def small_filesystem(directory, size_bytes):
 
 def limited_allocation(monkeypatch, limit_bytes):
     """Make the writer's space reservation fail with ENOSPC beyond ``limit_bytes`` of a file."""
-    from rotation_node.bag import output
+    from rotation_node.bag.writing import part_output as output
 
     def allocate(descriptor, offset, length):
         if offset + length > limit_bytes:

@@ -144,7 +144,7 @@ def _write_mcap_file(path, rows, compression, chunked):
     """Write a ``.mcap`` with the mcap library: ros2 profile, ros2msg schemas, 2 kB chunks."""
     from mcap.writer import CompressionType, Writer
 
-    from rotation_node.bag.message_types import message_definition
+    from rotation_node.wire.message_types import message_definition
     with open(path, 'wb') as stream:
         writer = Writer(stream, chunk_size=2048, compression=CompressionType[compression],
                         use_chunking=chunked)

@@ -134,7 +134,7 @@ def make_input_message(input_type, rotation, *, omega=(0.0, 0.0, 0.0), stamp_ns=
     """
     import operator
     from rotation_node import messages
-    from rotation_node.stamps import split_ns
+    from rotation_node.wire.stamps import split_ns
     entry = messages.INPUTS[input_type]
     msg = entry.message_class()
     msg.header.stamp.sec, msg.header.stamp.nanosec = split_ns(stamp_ns)
@@ -217,6 +217,6 @@ def output_values(msg):
     """Return the numbers of an output message as a flat array (as its output builds it)."""
     import numpy as np
     from rotation_node import messages
-    from rotation_node.bag.message_types import type_name_of
+    from rotation_node.wire.message_types import type_name_of
     numbers = {o.type_name: o.message.numbers for o in messages.OUTPUTS.values()}
     return np.array(numbers[type_name_of(type(msg))](msg), dtype=float)

@@ -16,7 +16,7 @@ from rotation_node.bag.batch import (
     batch_output_path, batch_output_paths, convert_bag, convert_bags, convert_bags_on_dask)
 from rotation_node.bag.cli import main
 from rotation_node.bag.convert import convert
-from rotation_node.bag.reader import open_bag
+from rotation_node.bag.reading.reader import open_bag
 from rotation_node.errors import BagError
 from rotation_node.parameters import NodeParameters
 

@@ -18,13 +18,14 @@ import pytest
 from rotation_node import messages
 from rotation_node.bag.block_convert import (
     block_form_missing, BLOCK_MESSAGES, converted_blocks, TopicConverter)
-from rotation_node.bag.cdr import fixed_layout_codec
 from rotation_node.bag.convert import convert, output_topic
-from rotation_node.bag.mcap_io import BagMessage, BagReader
+from rotation_node.bag.reading.mcap_reader import BagReader
+from rotation_node.bag.records import BagMessage
 from rotation_node.block_pipeline import BLOCK_OUTPUTS
 from rotation_node.errors import BagError
 from rotation_node.parameters import NodeParameters
 from rotation_node.scene import load_scene, simulate, write_bag
+from rotation_node.wire.cdr import fixed_layout_codec
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 EVERY_EFFECT = os.path.join(HERE, os.pardir, 'config', 'scenes', 'every_effect.yaml')

@@ -17,7 +17,9 @@ import numpy as np
 import pytest
 from ros_harness import script
 from rotation_node.bag.cli import main
-from rotation_node.bag.mcap_io import BagReader, BagWriter, TopicMetadata
+from rotation_node.bag.reading.mcap_reader import BagReader
+from rotation_node.bag.records import TopicMetadata
+from rotation_node.bag.writing.writer import BagWriter
 
 PARAMS_YAML = """rotation_node:
   ros__parameters:

@@ -9,7 +9,7 @@ import pytest
 from ros_harness import make_input_message
 from rotation_dev.two_streams import two_streams
 from rotation_node.bag import cli, compare
-from rotation_node.bag.mcap_io import BagWriter
+from rotation_node.bag.writing.writer import BagWriter
 from scipy.spatial.transform import Rotation, Slerp
 
 T0 = 1_700_000_000_000_000_000
@@ -32,7 +32,7 @@ def write_tf(writer, topic, times, quaternions, static):
     """``map -> room`` static (``static``), ``room -> body`` dynamic: body in map is ``q``."""
     from geometry_msgs.msg import TransformStamped
     from tf2_msgs.msg import TFMessage
-    from rotation_node.stamps import split_ns
+    from rotation_node.wire.stamps import split_ns
 
     def transform(parent, child, stamp, q):
         t = TransformStamped()

@@ -15,16 +15,17 @@ import pytest
 from rclpy.duration import Duration
 from rclpy.qos import QoSProfile
 from ros_harness import make_input_message, PLAIN_INPUT_TYPES, RosProcess, script, TestNode
-from rotation_node.bag.cdr import message_encoder
 from rotation_node.bag.convert import convert, output_topic
-from rotation_node.bag.mcap_io import BagReader, BagWriter
-from rotation_node.bag.message_types import type_name_of
-from rotation_node.bag.qos import qos_profile, qos_profiles_from_yaml
+from rotation_node.bag.reading.mcap_reader import BagReader
+from rotation_node.bag.writing.writer import BagWriter
 from rotation_node.errors import BagError
 from rotation_node.messages import INPUTS
 from rotation_node.messages import OUTPUTS as OUTPUT_TYPES
 from rotation_node.parameters import NodeParameters, parameters_from_yaml
 from rotation_node.pipeline import ConversionPipeline
+from rotation_node.wire.cdr import message_encoder
+from rotation_node.wire.message_types import type_name_of
+from rotation_node.wire.qos import qos_profile, qos_profiles_from_yaml
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import Imu
 import yaml

@@ -10,7 +10,7 @@ from ros_harness import make_input_message
 from rotation_node.bag.cli import main
 from rotation_node.bag.convert import convert
 from rotation_node.bag.export import output_columns, table_columns
-from rotation_node.bag.mcap_io import BagReader
+from rotation_node.bag.reading.mcap_reader import BagReader
 from rotation_node.messages import OUTPUTS
 from rotation_node.parameters import NodeParameters
 from scipy.spatial.transform import Rotation
@@ -235,7 +235,7 @@ def test_parquet_holds_the_csvs_values(imu_bag, tmp_path):
 def test_tf_input_exports_one_row_per_lookup(tmp_path):
     """The tf input type: /tf and /tf_static together, one row per sample the lookup gives."""
     from geometry_msgs.msg import TransformStamped
-    from rotation_node.bag.mcap_io import BagWriter
+    from rotation_node.bag.writing.writer import BagWriter
     from tf2_msgs.msg import TFMessage
 
     def edge(parent, child, rotation, stamp_ns):

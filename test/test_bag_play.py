@@ -6,8 +6,10 @@ import numpy as np
 import pytest
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from ros_harness import RosProcess, script, TestNode
-from rotation_node.bag.mcap_io import BagReader, BagWriter, TopicMetadata
-from rotation_node.bag.qos import qos_profiles_yaml
+from rotation_node.bag.reading.mcap_reader import BagReader
+from rotation_node.bag.records import TopicMetadata
+from rotation_node.bag.writing.writer import BagWriter
+from rotation_node.wire.qos import qos_profiles_yaml
 from sensor_msgs.msg import Imu
 from std_msgs.msg import String
 

@@ -10,9 +10,9 @@ import pytest
 from ros_harness import make_input_message
 from rotation_node import messages
 from rotation_node.bag.convert import convert
-from rotation_node.bag.mcap_io import BagWriter
 from rotation_node.bag.plot import plot_series, plot_topic
-from rotation_node.bag.reader import open_bag
+from rotation_node.bag.reading.reader import open_bag
+from rotation_node.bag.writing.writer import BagWriter
 from rotation_node.errors import BagError
 from rotation_node.parameters import NodeParameters, OUTPUTS
 from scipy.spatial.transform import Rotation

@@ -12,8 +12,8 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from ros_harness import RosProcess, script, TestNode
 from rosbags.highlevel import AnyReader
-from rotation_node.bag.mcap_io import BagReader
-from rotation_node.bag.qos import qos_profiles_from_yaml
+from rotation_node.bag.reading.mcap_reader import BagReader
+from rotation_node.wire.qos import qos_profiles_from_yaml
 from sensor_msgs.msg import Imu
 from std_msgs.msg import String
 

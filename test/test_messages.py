@@ -18,11 +18,11 @@ from rclpy.serialization import deserialize_message, serialize_message
 from ros_harness import oracle_output
 from rosbags.typesys import get_typestore, Stores
 from rotation_node import messages, parameters, pipeline
-from rotation_node.bag.cdr import fixed_layout_codec
-from rotation_node.bag.message_types import message_class
 from rotation_node.messages import INPUTS, OutputMessage, OUTPUTS, Sample
 from rotation_node.parameters import NodeParameters
-from rotation_node.stamps import split_ns
+from rotation_node.wire.cdr import fixed_layout_codec
+from rotation_node.wire.message_types import message_class
+from rotation_node.wire.stamps import split_ns
 from scipy.spatial.transform import Rotation
 
 # Written from the message definitions, not from the registry.

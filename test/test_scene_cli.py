@@ -7,7 +7,7 @@ from fault_helpers import FULL_DISKS, linear_scan, small_disk, wait_for
 import numpy as np
 import pytest
 from ros_harness import script
-from rotation_node.bag.mcap_io import BagReader
+from rotation_node.bag.reading.mcap_reader import BagReader
 from rotation_node.scene.cli import main
 
 SCENES_DIR = os.path.join(os.path.dirname(__file__), '..', 'config', 'scenes')

@@ -4,7 +4,7 @@ import os
 
 import numpy as np
 import pytest
-from rotation_node.bag.mcap_io import BagReader
+from rotation_node.bag.reading.mcap_reader import BagReader
 from rotation_node.errors import BagError
 from rotation_node.scene import cli, spec
 from rotation_node.scene.reference import (

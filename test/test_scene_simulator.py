@@ -5,7 +5,7 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from rotation_node.bag.mcap_io import BagReader
+from rotation_node.bag.reading.mcap_reader import BagReader
 from rotation_node.errors import BagError
 from rotation_node.scene import spec
 from rotation_node.scene.simulator import (sample_stamps_ns, simulate, simulate_blocks,

@@ -4,7 +4,8 @@ from geometry_msgs.msg import TransformStamped
 import numpy as np
 import pytest
 from rotation_node.bag.cli import main
-from rotation_node.bag.mcap_io import BagReader, BagWriter
+from rotation_node.bag.reading.mcap_reader import BagReader
+from rotation_node.bag.writing.writer import BagWriter
 from rotation_node.errors import ParameterError
 from rotation_node.parameters import NodeParameters
 from rotation_node.static_mounting import (

@@ -25,13 +25,14 @@ from rclpy.qos import DurabilityPolicy, QoSProfile
 from rclpy.serialization import serialize_message
 from ros_harness import RosProcess, script, TestNode
 from rotation_node.bag.convert import convert, output_topic
-from rotation_node.bag.mcap_io import BagReader, BagWriter
 from rotation_node.bag.plot import plot_series, plot_topic
-from rotation_node.bag.reader import open_bag
+from rotation_node.bag.reading.mcap_reader import BagReader
+from rotation_node.bag.reading.reader import open_bag
+from rotation_node.bag.writing.writer import BagWriter
 from rotation_node.errors import BagError, ParameterError
 from rotation_node.parameters import NodeParameters
 from rotation_node.pipeline import ConversionPipeline
-from rotation_node.stamps import header_stamp_ns, split_ns
+from rotation_node.wire.stamps import header_stamp_ns, split_ns
 from scipy.spatial.transform import Rotation, Slerp
 from tf2_msgs.msg import TFMessage
 import yaml

@@ -24,7 +24,7 @@ import sys
 import tempfile
 import time
 
-from rotation_node.bag.atomic_file import AtomicFile
+from rotation_node.bag.writing.atomic_file import AtomicFile
 from rotation_node.errors import BagError
 
 from . import comparison, covariance, integration, measure, performance, report

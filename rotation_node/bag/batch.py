@@ -21,7 +21,7 @@ import os
 import signal
 from typing import Any, Callable, Dict, List, Optional, Sequence, TYPE_CHECKING
 
-from rotation_node.bag.stop_signal import raise_if_stopped, stop_at_checkpoints
+from rotation_node.command_line.stop_signal import raise_if_stopped, stop_at_checkpoints
 from rotation_node.errors import BagError, RotationNodeError
 
 if TYPE_CHECKING:
@@ -111,7 +111,7 @@ def convert_bag(input_path: str, output_path: str, params: NodeParameters, *,
     Parameters
     ----------
     input_path : str
-        Any bag :func:`rotation_node.bag.reader.open_bag` reads.
+        Any bag :func:`rotation_node.bag.reading.reader.open_bag` reads.
     output_path : str
         The output bag (must not exist unless ``overwrite``): a rosbag2
         directory, or a single MCAP file if it ends in ``.mcap``.
@@ -165,7 +165,7 @@ def convert_bags(input_paths: Sequence[str], output_directory: str, params: Node
     Parameters
     ----------
     input_paths : sequence of str
-        The bags, any :func:`rotation_node.bag.reader.open_bag` reads.
+        The bags, any :func:`rotation_node.bag.reading.reader.open_bag` reads.
     output_directory : str
         Created if missing; outputs are named by :func:`batch_output_path`.
     params : rotation_node.parameters.NodeParameters

@@ -4,7 +4,7 @@
 A :class:`TopicConverter` turns the messages of one converted topic into
 the CDR data of their outputs. Where the parameters, the input type and every
 output have a block form (:func:`block_form_missing`), it decodes a block of
-messages into arrays (:mod:`rotation_node.bag.cdr_block`), converts them with
+messages into arrays (:mod:`rotation_node.wire.cdr_block`), converts them with
 one library call per conversion (:class:`rotation_node.block_pipeline.BlockPipeline`)
 and encodes each output for the whole block; otherwise, and for any block the
 block form cannot read exactly as the per-message path does, it runs the
@@ -22,14 +22,13 @@ from __future__ import annotations
 import contextlib
 import gc
 import itertools
-from typing import (
-    Any, Dict, Iterable, Iterator, List, NamedTuple, Optional, Tuple, TYPE_CHECKING)
+from typing import Any, Dict, Iterable, Iterator, List, NamedTuple, Optional, Tuple, TYPE_CHECKING
 
 from rotation_node import messages
-from rotation_node.bag.cdr import fixed_layout_codec
-from rotation_node.bag.cdr_block import block_encoder, InputBlockDecoder, OutputBlockEncoder
 from rotation_node.block_pipeline import BLOCK_SAMPLES, block_support, BlockPipeline
 from rotation_node.pipeline import ConversionPipeline
+from rotation_node.wire.cdr import fixed_layout_codec
+from rotation_node.wire.cdr_block import block_encoder, InputBlockDecoder, OutputBlockEncoder
 
 if TYPE_CHECKING:
     from rotation_node.parameters import NodeParameters
@@ -138,7 +137,7 @@ class TopicConverter:
     def convert(self, records: List, input_topics: Optional[List[str]] = None
                 ) -> List[List[Output]]:
         """
-        Return the outputs of each record (a :class:`~rotation_node.bag.mcap_io.BagMessage`).
+        Return the outputs of each record (a :class:`~rotation_node.bag.records.BagMessage`).
 
         ``input_topics`` names, for each record, the input type's topic it came
         on (for input types with several topics); ``input`` by default.

@@ -14,7 +14,7 @@ Usage::
     rotation_bag compare REF [EST] --reference T --estimate T [--time-offset estimate|S]
                          [--align none|world|mounting|both] [--json FILE] [--plot PNG] [...]
 
-``IN`` is any bag :func:`rotation_node.bag.reader.open_bag` reads (a rosbag2
+``IN`` is any bag :func:`rotation_node.bag.reading.reader.open_bag` reads (a rosbag2
 directory, MCAP, sqlite3, split, compressed, ROS 1, an unfinished recording;
 see docs/bags.md). An output ``OUT`` is a rosbag2 directory, or a single MCAP
 file if it ends in ``.mcap``; it is written as ``OUT.part`` and renamed when
@@ -37,7 +37,7 @@ import sys
 from typing import List, Optional, Sequence
 
 from rclpy.utilities import remove_ros_args
-from rotation_node.bag.stop_signal import exit_status, signal_name, StopSignal
+from rotation_node.command_line.stop_signal import exit_status, signal_name, StopSignal
 from rotation_node.errors import BagError, RotationNodeError
 
 PROG = 'rotation_bag'
@@ -89,7 +89,7 @@ def _convert(args, ros_args):
 
 def _is_output_directory(path):
     """Return an existing directory that is not a rosbag2 bag (``convert IN... OUTDIR``)."""
-    from rotation_node.bag.reader import METADATA_FILE
+    from rotation_node.bag.reading.reader import METADATA_FILE
     return os.path.isdir(path) and not os.path.exists(os.path.join(path, METADATA_FILE))
 
 

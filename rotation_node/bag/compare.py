@@ -8,7 +8,7 @@ with the ``quaternion`` output, so the registry entry of their type
 (:data:`rotation_node.messages.INPUTS`), its sample stream (for ``/tf`` the TF
 buffer's lookup of a child frame in a parent frame, with ``T_static`` beside
 ``T``) and the pipeline's rules for unknown, non-finite and zero orientations,
-fed the read-only views of :mod:`rotation_node.bag.cdr` where the type has a
+fed the read-only views of :mod:`rotation_node.wire.cdr` where the type has a
 fixed layout (as ``convert`` feeds its pipelines) and rclpy messages otherwise. The samples' header
 stamps put both on one clock; then :mod:`rotation_node.comparison` estimates
 what was asked of
@@ -33,14 +33,14 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, TYPE_CH
 from matplotlib.figure import Figure
 import numpy as np
 from rotation_node import comparison, conversions, messages
-from rotation_node.bag.atomic_file import AtomicFile
-from rotation_node.bag.cdr import fixed_layout_codec
-from rotation_node.bag.reader import open_bag
-from rotation_node.bag.stop_signal import raise_if_stopped
+from rotation_node.bag.reading.reader import open_bag
+from rotation_node.bag.writing.atomic_file import AtomicFile
+from rotation_node.command_line.stop_signal import raise_if_stopped
 from rotation_node.errors import BagError, ComparisonError
 from rotation_node.parameters import NodeParameters
 from rotation_node.pipeline import ConversionPipeline, ORIENTATION_UNKNOWN, ZERO_QUATERNION
-from rotation_node.stamps import header_stamp_ns
+from rotation_node.wire.cdr import fixed_layout_codec
+from rotation_node.wire.stamps import header_stamp_ns
 
 if TYPE_CHECKING:
     from rotation_node.type_aliases import FloatArray, StrPath

@@ -10,11 +10,11 @@ input message they come from. An input type with several topics is one stream
 per first topic: ``input_type: tf`` converts ``/tf`` together with
 ``/tf_static`` (``T`` with ``T_static``), and writes ``/tf/euler``...
 The bag is streamed, never loaded: memory does not grow with its length.
-The input is any bag :func:`rotation_node.bag.reader.open_bag` reads (a
+The input is any bag :func:`rotation_node.bag.reading.reader.open_bag` reads (a
 rosbag2 directory, MCAP, sqlite3, split, compressed, ROS 1, an unfinished
 recording); topics that are not converted are copied unchanged, with their
 schema and metadata as stored, under their ROS 2 names
-(:mod:`rotation_node.bag.topic_names`).
+(:mod:`rotation_node.bag.reading.topic_names`).
 
 The conversion runs in blocks (:mod:`rotation_node.bag.block_convert`): a
 block of messages of a topic is decoded into arrays, converted with one
@@ -23,7 +23,7 @@ node's results bit for bit (the per-message ``ConversionPipeline``'s state,
 counters and output bytes). What has no block form (some outputs, frame
 conversions, input types with several topics, a block the fast decoder
 cannot read exactly) goes message by message: input messages decoded by
-:mod:`rotation_node.bag.cdr` into read-only views where their type has a
+:mod:`rotation_node.wire.cdr` into read-only views where their type has a
 fixed layout, which
 :meth:`~rotation_node.pipeline.ConversionPipeline.process_values` reads as it
 reads rclpy messages, and the numbers it returns encoded by each output's
@@ -36,14 +36,14 @@ from typing import Callable, Dict, List, Optional, Sequence, TextIO, TYPE_CHECKI
 
 from rotation_node import messages
 from rotation_node.bag.block_convert import collections_deferred, converted_blocks, TopicConverter
-from rotation_node.bag.mcap_io import TopicMetadata
-from rotation_node.bag.progress import ProgressBar
-from rotation_node.bag.qos import qos_profile, qos_profiles_yaml
-from rotation_node.bag.reader import open_bag
-from rotation_node.bag.stop_signal import raise_if_stopped
-from rotation_node.bag.writer import BagWriter
+from rotation_node.bag.reading.reader import open_bag
+from rotation_node.bag.records import TopicMetadata
+from rotation_node.bag.writing.writer import BagWriter
+from rotation_node.command_line.progress import ProgressBar
+from rotation_node.command_line.stop_signal import raise_if_stopped
 from rotation_node.errors import BagError
 from rotation_node.static_mounting import resolved_from_bag
+from rotation_node.wire.qos import qos_profile, qos_profiles_yaml
 
 if TYPE_CHECKING:
     from rotation_node.parameters import NodeParameters
@@ -116,7 +116,7 @@ def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *
     Parameters
     ----------
     input_path : str or os.PathLike
-        Any bag :func:`rotation_node.bag.reader.open_bag` reads; only read.
+        Any bag :func:`rotation_node.bag.reading.reader.open_bag` reads; only read.
     output_path : str or os.PathLike
         The output bag, a rosbag2 directory or a single MCAP file if it ends
         in ``.mcap``. It is written as ``<output>.part`` and renamed when

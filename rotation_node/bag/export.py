@@ -15,7 +15,7 @@ CSV numbers are written with Python's ``repr`` (the shortest text that reads
 back as the same float64). Parquet needs ``pyarrow``. The input is streamed
 (memory holds one block of messages) and the table is written to a temporary
 file renamed to the output only when complete
-(:class:`~rotation_node.bag.atomic_file.AtomicFile`): a failure leaves nothing.
+(:class:`~rotation_node.bag.writing.atomic_file.AtomicFile`): a failure leaves nothing.
 """
 from __future__ import annotations
 
@@ -25,14 +25,14 @@ import os
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, TYPE_CHECKING
 
 from rotation_node import messages
-from rotation_node.bag.atomic_file import AtomicFile
 from rotation_node.bag.block_convert import BLOCK_MESSAGES, collections_deferred, TopicConverter
 from rotation_node.bag.convert import _check_output, _input_streams
-from rotation_node.bag.reader import open_bag
-from rotation_node.bag.stop_signal import raise_if_stopped
+from rotation_node.bag.reading.reader import open_bag
+from rotation_node.bag.writing.atomic_file import AtomicFile
+from rotation_node.command_line.stop_signal import raise_if_stopped
 from rotation_node.errors import BagError
-from rotation_node.stamps import header_stamp_ns
 from rotation_node.static_mounting import resolved_from_bag
+from rotation_node.wire.stamps import header_stamp_ns
 
 if TYPE_CHECKING:
     from rotation_node.parameters import NodeParameters
@@ -189,7 +189,7 @@ def export(input_path: StrPath, output_path: StrPath, params: NodeParameters, *,
     Parameters
     ----------
     input_path : str or os.PathLike
-        Any bag :func:`rotation_node.bag.reader.open_bag` reads; only read.
+        Any bag :func:`rotation_node.bag.reading.reader.open_bag` reads; only read.
     output_path : str or os.PathLike
         ``*.csv`` or ``*.parquet``; appears only once complete.
     params : rotation_node.parameters.NodeParameters

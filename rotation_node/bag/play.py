@@ -1,9 +1,9 @@
 """
 Publish the messages of a bag on their topics (``rotation_bag play``).
 
-Any bag :func:`rotation_node.bag.reader.open_bag` reads; topics whose names
+Any bag :func:`rotation_node.bag.reading.reader.open_bag` reads; topics whose names
 are not valid in ROS 2 are published under their mapped names
-(:mod:`rotation_node.bag.topic_names`), and topics whose type is not
+(:mod:`rotation_node.bag.reading.topic_names`), and topics whose type is not
 installed (or not CDR) are left out, with a note, unless asked for by name.
 
 Messages go out as stored (CDR bytes, never deserialised) in log-time order,
@@ -32,13 +32,13 @@ import rclpy
 from rclpy.duration import Duration
 from rclpy.qos import ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
-from rotation_node.bag.mcap_io import MESSAGE_ENCODING
-from rotation_node.bag.message_types import message_class
-from rotation_node.bag.qos import DEEP_QUEUE_DEPTH, playback_qos, qos_profiles_from_yaml
-from rotation_node.bag.reader import open_bag
-from rotation_node.bag.stop_signal import StopSignal
-from rotation_node.bag.topic_arguments import checked_topic_names
+from rotation_node.bag.reading.reader import open_bag
+from rotation_node.bag.records import MESSAGE_ENCODING
+from rotation_node.command_line.stop_signal import StopSignal
+from rotation_node.command_line.topic_arguments import checked_topic_names
 from rotation_node.errors import BagError
+from rotation_node.wire.message_types import message_class
+from rotation_node.wire.qos import DEEP_QUEUE_DEPTH, playback_qos, qos_profiles_from_yaml
 
 if TYPE_CHECKING:
     from rotation_node.type_aliases import StrPath
@@ -162,7 +162,7 @@ def play(path: StrPath, *, rate: float = 1.0, topics: Optional[Sequence[str]] = 
     Parameters
     ----------
     path : str or os.PathLike
-        The bag: anything :func:`rotation_node.bag.reader.open_bag` reads.
+        The bag: anything :func:`rotation_node.bag.reading.reader.open_bag` reads.
     rate : float, optional
         Speed factor on the recorded timing; 0 publishes as fast as the
         subscribers acknowledge, after waiting for a subscriber on every topic.

@@ -24,13 +24,13 @@ from typing import Any, Callable, Optional, Tuple, TYPE_CHECKING
 from matplotlib.figure import Figure
 import numpy as np
 from rotation_node import conversions, messages
-from rotation_node.bag.atomic_file import AtomicFile
 from rotation_node.bag.convert import output_topic
-from rotation_node.bag.reader import open_bag
-from rotation_node.bag.stop_signal import raise_if_stopped
+from rotation_node.bag.reading.reader import open_bag
+from rotation_node.bag.writing.atomic_file import AtomicFile
+from rotation_node.command_line.stop_signal import raise_if_stopped
 from rotation_node.errors import BagError
 from rotation_node.parameters import NodeParameters
-from rotation_node.stamps import header_stamp_ns
+from rotation_node.wire.stamps import header_stamp_ns
 
 if TYPE_CHECKING:
     from rotation_node.type_aliases import StrPath
@@ -192,7 +192,7 @@ def plot_series(reader: Any, topic: str,
 
     Parameters
     ----------
-    reader : rotation_node.bag.reader.InputBag
+    reader : rotation_node.bag.reading.reader.InputBag
         The open bag.
     topic : str
         Its name in the bag or its ROS 2 name.

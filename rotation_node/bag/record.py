@@ -7,7 +7,7 @@ messages are stored as received (``raw=True``: CDR bytes, never deserialised).
 Log time is the node clock at reception, publish time the DDS source
 timestamp, as rosbag2 records them.
 
-The bag is crash-safe (see :mod:`rotation_node.bag.writer`): it is written to
+The bag is crash-safe (see :mod:`rotation_node.bag.writing.writer`): it is written to
 ``<output>.part``, flushed to disk at least once a second, and renamed to the
 output when recording stops; after a SIGKILL or a power loss the ``.part``
 holds everything up to the last flush. When the disk fills, recording stops
@@ -24,13 +24,13 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
-from rotation_node.bag.mcap_io import TopicMetadata
-from rotation_node.bag.message_types import message_class
-from rotation_node.bag.qos import qos_profiles_yaml, recording_qos
-from rotation_node.bag.stop_signal import StopSignal
-from rotation_node.bag.topic_arguments import checked_topic_names
-from rotation_node.bag.writer import BagWriter, CHUNK_PERIOD_S, DEFAULT_COMPRESSION
+from rotation_node.bag.records import TopicMetadata
+from rotation_node.bag.writing.writer import BagWriter, CHUNK_PERIOD_S, DEFAULT_COMPRESSION
+from rotation_node.command_line.stop_signal import StopSignal
+from rotation_node.command_line.topic_arguments import checked_topic_names
 from rotation_node.errors import BagError, DiskFullError
+from rotation_node.wire.message_types import message_class
+from rotation_node.wire.qos import qos_profiles_yaml, recording_qos
 
 if TYPE_CHECKING:
     from rotation_node.type_aliases import StrPath

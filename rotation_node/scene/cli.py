@@ -11,7 +11,7 @@ import argparse
 import sys
 from typing import Optional, Sequence
 
-from rotation_node.bag.stop_signal import exit_status, signal_name, StopSignal
+from rotation_node.command_line.stop_signal import exit_status, signal_name, StopSignal
 from rotation_node.errors import RotationNodeError
 
 
@@ -49,7 +49,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     with StopSignal():   # a signal stops the simulation where it checks
         try:
             # Imported here, where a signal only sets the stop flag (see bag.stop_signal).
-            from rotation_node.bag.output import BagOutput
+            from rotation_node.bag.writing.part_output import BagOutput
 
             from .simulator import write_scene_bag
             from .spec import load_scene

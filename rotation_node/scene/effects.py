@@ -39,7 +39,7 @@ from typing import Any, Callable, Mapping, TYPE_CHECKING
 
 import numpy as np
 from rotation_node.conversions import quaternion_from_rotation_vector, quaternion_product
-from rotation_node.stamps import NS_PER_S as _NS_PER_S
+from rotation_node.wire.stamps import NS_PER_S as _NS_PER_S
 
 from .spec import (
     DroppedMessages, GyroBias, GyroNoise, NanBursts, NonUnitQuaternions, OrientationNoise,

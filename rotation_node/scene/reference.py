@@ -31,7 +31,7 @@ from typing import Any, TYPE_CHECKING
 import numpy as np
 from rotation_node.conversions import (
     quaternion_conjugate, quaternion_from_rotation_vector, quaternion_product, rotate_vector)
-from rotation_node.stamps import NS_PER_S as _NS_PER_S
+from rotation_node.wire.stamps import NS_PER_S as _NS_PER_S
 
 from .effects import effect_rng
 from .motions import MotionStream

@@ -20,7 +20,7 @@ The bag holds, for every sample ``k`` at the nominal stamp
 Every message has ``header.frame_id`` = the scene's ``frame_id`` and log time
 = the nominal stamp, so a bag replays in sample order; the same scene and
 seed give a byte-identical bag (``BagWriter.write`` encodes these types with
-zero padding, see :mod:`rotation_node.bag.cdr`).
+zero padding, see :mod:`rotation_node.wire.cdr`).
 
 A scene with a ``reference`` also gets its second stream
 (:mod:`rotation_node.scene.reference`) on the reference's topic, with the
@@ -36,11 +36,11 @@ from typing import Iterator, Mapping, Optional, TYPE_CHECKING
 
 from geometry_msgs.msg import PoseStamped, QuaternionStamped, Vector3Stamped
 import numpy as np
-from rotation_node.bag.atomic_file import AtomicFile
-from rotation_node.bag.stop_signal import raise_if_stopped
-from rotation_node.bag.writer import BagWriter
-from rotation_node.stamps import NS_PER_S as _NS_PER_S
-from rotation_node.stamps import time_message as _time_message
+from rotation_node.bag.writing.atomic_file import AtomicFile
+from rotation_node.bag.writing.writer import BagWriter
+from rotation_node.command_line.stop_signal import raise_if_stopped
+from rotation_node.wire.stamps import NS_PER_S as _NS_PER_S
+from rotation_node.wire.stamps import time_message as _time_message
 from sensor_msgs.msg import Imu
 
 from .effects import EffectsStream, SensorStream, UNKNOWN_COVARIANCE

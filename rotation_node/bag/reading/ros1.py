@@ -1,0 +1,128 @@
+"""
+ROS 1 bags (format version 2.0) read as ROS 2 messages.
+
+The ``rosbags`` package reads the bag (every chunk compression of ROS 1:
+none, bz2, lz4), one chunk at a time (:mod:`rotation_node.bag.reading.ros1_chunks`),
+and builds the bag's message types from the definitions stored in it
+(``AnyReader``); each message is then converted, as
+``rosbags-convert`` converts a ROS 1 bag to ROS 2, to the ROS 2 type of the
+same name (``sensor_msgs/Imu`` -> ``sensor_msgs/msg/Imu``, ``tf/tfMessage``
+-> ``tf2_msgs/msg/TFMessage``) and serialized as CDR: ``std_msgs/Header``
+loses its ``seq``, times keep their seconds and nanoseconds, everything else
+keeps its value. A type that ROS 2 (Jazzy) does not have keeps the bag's own
+definition. A latched topic is given the QoS rosbags gives it (reliable,
+transient local); the log time is the time the ROS 1 recorder received the
+message, also used as the publish time.
+"""
+import contextlib
+import io
+import os
+from pathlib import Path
+import struct
+from typing import Union
+
+from rosbags.convert.converter import generate_message_converter, LATCH, STATIC_MSGTYPE_RENAMES
+from rosbags.highlevel import AnyReaderError
+from rosbags.rosbag1 import ReaderError
+from rosbags.rosbag1.reader import decompressors as ros1_decompressors
+from rosbags.serde import SerdeError
+from rosbags.typesys import get_types_from_msg, get_typestore, Stores
+from rosbags.typesys.base import TypesysError
+from rotation_node.bag.reading.ros1_chunks import ChunkedAnyReader
+from rotation_node.bag.reading.rosbags_input import RosbagsInput
+from rotation_node.bag.records import TopicMetadata
+from rotation_node.errors import BagError
+from rotation_node.wire.message_types import message_class
+from rotation_node.wire.qos import rosbags_qos_yaml
+
+#: The one ROS 1 bag format version there is a reader for.
+SUPPORTED_VERSION = '2.0'
+# What rosbags raises for a bag it cannot read or a message it cannot convert.
+_FORMAT_ERRORS = (AnyReaderError, ReaderError, SerdeError, TypesysError, struct.error)
+
+
+def _installed(type_name):
+    """Whether the ROS 2 Python message package of ``type_name`` is installed."""
+    try:
+        message_class(type_name)
+    except BagError:
+        return False
+    return True
+
+
+def open_ros1_bag(path: Union[str, os.PathLike]) -> RosbagsInput:
+    """
+    Open a ROS 1 bag to read it as ROS 2 CDR messages.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A ROS 1 bag, format version 2.0.
+
+    Returns
+    -------
+    rotation_node.bag.reading.rosbags_input.RosbagsInput
+        With ROS 2 type names, each message converted when it is read.
+
+    Raises
+    ------
+    BagError
+        If the bag cannot be read or its types cannot be converted.
+
+    """
+    path = str(path)
+    reader = ChunkedAnyReader(Path(path))
+    try:
+        reader.open()
+    except _FORMAT_ERRORS as error:
+        raise BagError(f'{path}: cannot read ROS 1 bag: {error}') from None
+    try:
+        compressions = _chunk_compressions(reader)
+        return RosbagsInput(path, reader, _FORMAT_ERRORS + (ValueError, IndexError),
+                            _converted_topics(path, reader), _output_compression(compressions),
+                            stored_compression='/'.join(sorted(compressions - {'none'})) or 'none')
+    except BaseException:
+        reader.close()
+        raise
+
+
+def _converted_topics(path, reader):
+    """Yield ``(connection, ROS 2 TopicMetadata, ROS 1 data -> CDR)`` of every connection."""
+    ros2 = get_typestore(Stores.ROS2_JAZZY)
+    converters = {}
+    for connection in reader.connections:
+        ros1_type = connection.msgtype
+        type_name = STATIC_MSGTYPE_RENAMES.get(ros1_type, ros1_type)
+        try:
+            if type_name not in ros2.fielddefs:   # as rosbags-convert: the bag's definition
+                types = get_types_from_msg(
+                    reader.typestore.generate_msgdef(ros1_type, ros_version=2)[0], type_name)
+                types.pop('std_msgs/msg/Header', None)
+                ros2.register(types)
+            if ros1_type not in converters:
+                with contextlib.redirect_stdout(io.StringIO()):   # it prints its plans
+                    convert = generate_message_converter(
+                        reader.typestore, ros2, ros1_type, type_name, {},
+                        src_is2=False, dst_is2=True)
+                converters[ros1_type] = lambda data, convert=convert: bytes(convert(data))
+        except _FORMAT_ERRORS + (KeyError,) as error:   # KeyError: a type left undefined
+            raise BagError(f'{path}: cannot convert ROS 1 type {ros1_type} to ROS 2: '
+                           f'{error}') from None
+        installed = _installed(type_name)
+        yield connection, TopicMetadata(
+            name=connection.topic, type_name=type_name,
+            offered_qos_profiles=rosbags_qos_yaml(LATCH if connection.ext.latching else []),
+            definition=None if installed else ros2.generate_msgdef(type_name, ros_version=2)[0],
+            type_hash=None if installed else ros2.hash_rihs01(type_name)), converters[ros1_type]
+
+
+def _chunk_compressions(reader):
+    """Return the compressions of the bag's chunks as ROS 1 names them: ``{'bz2', 'none'}``..."""
+    names = {decompress: name for name, decompress in ros1_decompressors.items()}
+    return {names.get(chunk.decompressor, 'unknown')
+            for bag in reader.readers for chunk in bag.chunks.values()}
+
+
+def _output_compression(compressions):
+    """Return the output's chunk compression: lz4 stays lz4, bz2 (not in MCAP) becomes zstd."""
+    return 'lz4' if 'lz4' in compressions else 'zstd' if 'bz2' in compressions else 'none'
