@@ -378,7 +378,7 @@ def compare(directory, count, repeat):
 def breakdown(directory, count=20_000):
     """Microseconds per input message spent in each stage of ``convert``, and in rclpy's."""
     from rclpy.serialization import serialize_message
-    from rotation_node import messages
+    from rotation_node import registry
     from rotation_node.bag.block_convert import BLOCK_MESSAGES
     from rotation_node.wire.cdr_block import InputBlockDecoder, OutputBlockEncoder
     from rotation_node.bag.reading.mcap_reader import BagReader
@@ -390,7 +390,7 @@ def breakdown(directory, count=20_000):
     source = os.path.join(directory, 'sample.mcap')
     write_imu_bag(source, count, seed=1)
     params = parameters_from_yaml(PARAMS_FILE)
-    encoder = OutputBlockEncoder(messages.OUTPUTS['euler'].message)
+    encoder = OutputBlockEncoder(registry.OUTPUTS['euler'].message)
 
     def write(records, encoded):
         with BagWriter(os.path.join(directory, 'sample_out.mcap'), overwrite=True,
@@ -416,7 +416,7 @@ def breakdown(directory, count=20_000):
         read, records = _timed(lambda: list(reader.messages()))
     blocks = [records[i:i + BLOCK_MESSAGES] for i in range(0, count, BLOCK_MESSAGES)]
     pipeline = BlockPipeline(ConversionPipeline(params))
-    decoder = InputBlockDecoder(messages.INPUTS['imu'], pipeline.reads_angular_velocity)
+    decoder = InputBlockDecoder(registry.INPUTS['imu'], pipeline.reads_angular_velocity)
     decode, decoded = _timed(lambda: [decoder.decode([r.data for r in b]) for b in blocks])
     process, outputs = _timed(lambda: [pipeline.process_block(sample) for sample, _ in decoded])
     encoding, encoded = _timed(lambda: [

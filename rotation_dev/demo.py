@@ -66,7 +66,7 @@ def _run_live(scene_bag, live_bag, params, topic, expected, log):
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
-    from rotation_node import messages
+    from rotation_node import registry
     from rotation_node.wire.qos import recording_qos
     context = Context()
     rclpy.init(context=context)
@@ -100,7 +100,7 @@ def _run_live(scene_bag, live_bag, params, topic, expected, log):
                    120, 'rotation_node to advertise its outputs')
         for t, name in zip(out_topics, OUTPUTS):
             offered = [i.qos_profile for i in watcher.get_publishers_info_by_topic(t)]
-            watcher.create_subscription(messages.OUTPUTS[name].message_class, t, count(t),
+            watcher.create_subscription(registry.OUTPUTS[name].message_class, t, count(t),
                                         recording_qos(offered))
         recorder = start([_script('rotation_bag'), 'record', live_bag, '--force',
                           '--topics', *out_topics])

@@ -38,15 +38,15 @@ import warnings
 
 import numba
 import numpy as np
-from rotation_node import conversions, kinematics, messages
+from rotation_node import conversions, kinematics, registry
 from rotation_node.conversions.kernels import BATCH_SAMPLES
-from rotation_node.messages import (
-    ANGULAR_VELOCITY, EULER_ANGLES, EULER_RATES, ORIENTATION, OUTPUT_QUATERNION, PUBLISHED_EULER)
 from rotation_node.pipeline import (
     _needed_values, ConversionPipeline, EULER_RATES_NEAR_SINGULAR, mounting_of,
     NON_FINITE_ANGULAR_VELOCITY, NON_FINITE_ORIENTATION, NON_UNIT_QUATERNION, ORIENTATION_UNKNOWN,
     ORIENTATION_UNKNOWN_DETAIL, SAMPLE_TRANSFORMS, TIMESTAMP_NOT_INCREASING, ZERO_QUATERNION,
     ZERO_QUATERNION_DETAIL)
+from rotation_node.registry import (
+    ANGULAR_VELOCITY, EULER_ANGLES, EULER_RATES, ORIENTATION, OUTPUT_QUATERNION, PUBLISHED_EULER)
 from rotation_node.wire.stamps import seconds_text
 
 if TYPE_CHECKING:
@@ -62,7 +62,7 @@ BLOCK_OUTPUTS: FrozenSet[str] = frozenset((
 """
 The outputs with a block form: those whose registry ``compute`` also works on blocks.
 
-Each one's :class:`~rotation_node.messages.OutputType` ``compute(params,
+Each one's :class:`~rotation_node.registry.OutputType` ``compute(params,
 *values)`` is given the values it ``needs`` as arrays of the samples that
 have them all (one row per sample) and returns an ``(n, k)`` array, each row
 bit for bit what the same ``compute`` gives for that sample alone (tested);
@@ -92,7 +92,7 @@ def block_support(params: NodeParameters) -> Optional[str]:
         :class:`BlockPipeline` converts every block of such a stream.
 
     """
-    input_type = messages.INPUTS[params.input_type]
+    input_type = registry.INPUTS[params.input_type]
     if input_type.stream is not None:
         return f'input type {params.input_type} reads samples from a stream of its own'
     if any(factory(params) is not None for factory in SAMPLE_TRANSFORMS):
@@ -209,9 +209,9 @@ class BlockPipeline:
         self.pipeline = pipeline
         params = pipeline.params
         self.params = params
-        self.input_type = messages.INPUTS[params.input_type]
+        self.input_type = registry.INPUTS[params.input_type]
         self._plan = {value.name for value in _needed_values(params.outputs)}
-        self._outputs = [messages.OUTPUTS[name] for name in params.outputs]
+        self._outputs = [registry.OUTPUTS[name] for name in params.outputs]
         self._angle_period = 360.0 if params.euler_degrees else 2.0 * math.pi
         self._mounting = mounting_of(params)   # the pipeline's own rule, on arrays
 
@@ -339,12 +339,12 @@ class BlockPipeline:
         use = known & finite
         q = np.zeros((n, 4))
         zero = np.zeros(n, dtype=bool)
-        if form == messages.EULER:
+        if form == registry.EULER:
             if use.any():
                 q[use] = conversions.quaternion_from_euler(
                     orientation[use], params.euler_sequence, degrees=params.euler_degrees)
             return kept, zero, q
-        if form == messages.ROTATION_VECTOR:
+        if form == registry.ROTATION_VECTOR:
             if use.any():
                 q[use] = conversions.quaternion_from_rotation_vector(orientation[use])
             return kept, zero, q

@@ -7,7 +7,7 @@ and publishes each output listed in ``outputs`` on the relative topic of the
 same name; the conversion itself is
 :class:`rotation_node.pipeline.ConversionPipeline`, the same code that
 ``rotation_bag convert`` runs on bags. The subscribed topics and the message
-types come from :mod:`rotation_node.messages`.
+types come from :mod:`rotation_node.registry`.
 
 Parameters are declared from the table in :mod:`rotation_node.parameters`. At
 start-up the node reads its ``--params-file`` files itself with the loader
@@ -72,7 +72,7 @@ from rclpy.qos import (
 from rclpy.signals import install_signal_handlers, SignalHandlerOptions
 from rclpy.subscription import Subscription
 from rclpy.timer import Timer
-from rotation_node import messages
+from rotation_node import registry
 from rotation_node.command_line.stop_signal import signal_name, StopSignal
 from rotation_node.conversions.warm_up import announcing_compilation
 from rotation_node.errors import BagError, ParameterError
@@ -187,7 +187,7 @@ class _TopicInput:
     until the new one has delivered a message the old one delivered too.
     """
 
-    def __init__(self, topic: messages.InputTopic, memory: int):
+    def __init__(self, topic: registry.InputTopic, memory: int):
         self.topic = topic
         self.name = topic.name
         self.subscription: Optional[Subscription] = None   # set when the node subscribes
@@ -430,7 +430,7 @@ class RotationNode(Node):
         stats = None if previous is None else self._pipeline.stats
         self._pipeline = ConversionPipeline(self._mounted(params), on_issue=self._log_issue,
                                             stats=stats)
-        input_type = messages.INPUTS[params.input_type]
+        input_type = registry.INPUTS[params.input_type]
         if previous is None or params.input_type != previous.input_type:
             for state in self._inputs:
                 self._finish_handoff(state)
@@ -468,7 +468,7 @@ class RotationNode(Node):
                 publisher = self._create_output_publisher(name, output_qos)
                 self._output_publishers[name] = publisher
                 self._publish[name] = publisher.publish
-                self._encoders[name] = messages.OUTPUTS[name].message.encoder()
+                self._encoders[name] = registry.OUTPUTS[name].message.encoder()
         self.get_logger().info(
             f'converting {params.input_type} messages on {self._input_topic_names()} '
             f'to {", ".join(params.outputs)} (euler.sequence {params.euler_sequence}, '
@@ -520,7 +520,7 @@ class RotationNode(Node):
         # Without QoS event handlers (as the diagnostics publisher): a subscriber
         # that cannot match reports it itself.
         return self.create_publisher(
-            messages.OUTPUTS[name].message_class, name, qos,
+            registry.OUTPUTS[name].message_class, name, qos,
             event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
 
     def _check_publisher_handoffs(self, now: float) -> None:

@@ -20,7 +20,7 @@ import re
 import tempfile
 from typing import Any, cast, Mapping, Optional, Tuple, TYPE_CHECKING
 
-from rotation_node import messages
+from rotation_node import registry
 from rotation_node.conversions import parse_sequence
 from rotation_node.errors import ParameterError
 from rotation_node.frames import BODY_FRAMES, WORLD_FRAMES
@@ -35,11 +35,11 @@ if TYPE_CHECKING:
 
 NODE_NAME = 'rotation_node'
 
-INPUT_TYPES = tuple(messages.INPUTS)
-"""Values of ``input_type``: the input types of :data:`rotation_node.messages.INPUTS`."""
+INPUT_TYPES = tuple(registry.INPUTS)
+"""Values of ``input_type``: the input types of :data:`rotation_node.registry.INPUTS`."""
 
-OUTPUTS = tuple(messages.OUTPUTS)
-"""Values allowed in ``outputs``: the outputs of :data:`rotation_node.messages.OUTPUTS`."""
+OUTPUTS = tuple(registry.OUTPUTS)
+"""Values allowed in ``outputs``: the outputs of :data:`rotation_node.registry.OUTPUTS`."""
 
 FRAMES = ('body', 'world')
 COVARIANCE_FRAMES = ('fixed', 'body')
@@ -279,9 +279,8 @@ class NodeParameters:
         """Check every value, then the input type's own parameters; string arrays as tuples."""
         check_fields(self, _PARAMETER)
         _check_mounting_frames(self)
-        check = messages.INPUTS[self.input_type].check_parameters
-        if check is not None:
-            check(self)
+        if self.input_type == 'tf':
+            _check_tf_frames(self)
 
     @classmethod
     def from_ros(cls, values: Mapping[str, Any]) -> 'NodeParameters':
@@ -352,6 +351,18 @@ def _check_mounting_frames(params: NodeParameters) -> None:
     if quaternion_from_rotation_values(params.mounting_body_rotation) != IDENTITY:
         raise ParameterError("parameter 'mounting.body_rotation': set it or the "
                              'mounting.tf_* frames, not both')
+
+
+def _check_tf_frames(params: NodeParameters) -> None:
+    """Check the parameters of ``input_type: tf``: both frames named, and different."""
+    for name, value, example in (('tf.parent_frame', params.tf_parent_frame, 'map'),
+                                 ('tf.child_frame', params.tf_child_frame, 'base_link')):
+        if not value:
+            raise ParameterError(f"parameter '{name}': required with input_type tf "
+                                 f'(a frame name such as {example})')
+    if params.tf_parent_frame == params.tf_child_frame:
+        raise ParameterError(f"parameters 'tf.parent_frame' and 'tf.child_frame' are both "
+                             f'{params.tf_parent_frame!r}; name two different frames')
 
 
 PARAMETERS = cast(Tuple[ParameterSpec, ...], declarations(NodeParameters))

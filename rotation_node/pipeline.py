@@ -11,11 +11,11 @@ counted in :attr:`ConversionPipeline.stats` by reason, and reported to an
 optional ``on_issue`` callback. All rotation math is done by
 :mod:`rotation_node.conversions` and :mod:`rotation_node.kinematics`.
 
-The input and output types are declared in :mod:`rotation_node.messages`: an
+The input and output types are declared in :mod:`rotation_node.registry`: an
 input message is read into samples (header, orientation, optional angular
 velocity and covariance), each sample passes the input-stage transforms of
 :data:`SAMPLE_TRANSFORMS`, and then the named per-message values an output
-needs (:data:`rotation_node.messages.PIPELINE_VALUES`) are computed once each,
+needs (:data:`rotation_node.registry.PIPELINE_VALUES`) are computed once each,
 in the order of :data:`VALUES`, each from the values it depends on; a value is
 unavailable (None) when one it requires is. Each configured output is then
 computed from its values, or skipped when one is unavailable.
@@ -34,14 +34,14 @@ from typing import Any, Callable, Dict, List, NamedTuple, Optional, Tuple
 import warnings
 
 import numpy as np
-from rotation_node import conversions, covariance, kinematics, messages
+from rotation_node import conversions, covariance, kinematics, registry
 from rotation_node.errors import ParameterError
 from rotation_node.frames import FrameConversion
-from rotation_node.messages import (
-    ANGULAR_VELOCITY, EULER_ANGLES, EULER_COVARIANCE, EULER_RATES, ORIENTATION,
-    ORIENTATION_COVARIANCE, OUTPUT_QUATERNION, PUBLISHED_EULER, Sample)
 from rotation_node.mounting import Mounting
 from rotation_node.parameters import INPUT_TYPES, NodeParameters, OUTPUTS
+from rotation_node.registry import (
+    ANGULAR_VELOCITY, EULER_ANGLES, EULER_COVARIANCE, EULER_RATES, ORIENTATION,
+    ORIENTATION_COVARIANCE, OUTPUT_QUATERNION, PUBLISHED_EULER, Sample)
 from rotation_node.wire.stamps import header_stamp_ns, seconds_text
 
 # Reasons for dropping a whole message (counted in PipelineStats.dropped).
@@ -102,7 +102,7 @@ def mounting_of(params: NodeParameters) -> Optional[Mounting]:
 
 def input_message_type(input_type: str) -> type:
     """Return the message class subscribed for an ``input_type`` value."""
-    return messages.INPUTS[input_type].message_class
+    return registry.INPUTS[input_type].message_class
 
 
 @dataclass
@@ -157,7 +157,7 @@ class Value(NamedTuple):
     Attributes
     ----------
     name : str
-        One of :data:`rotation_node.messages.PIPELINE_VALUES`.
+        One of :data:`rotation_node.registry.PIPELINE_VALUES`.
     requires : tuple of str
         Values that must be available; without one, this value is unavailable.
     uses : tuple of str
@@ -166,7 +166,7 @@ class Value(NamedTuple):
         Name of the :class:`ConversionPipeline` method
         ``method(sample, values) -> value or None`` that computes it.
     reads : tuple of str
-        The optional :class:`~rotation_node.messages.Sample` fields it reads
+        The optional :class:`~rotation_node.registry.Sample` fields it reads
         (``'angular_velocity'``, ``'covariance'``): input messages are read into
         them only when a value computed reads them.
 
@@ -197,7 +197,7 @@ _VALUES_BY_NAME = {value.name: value for value in VALUES}
 def _needed_values(outputs):
     """Return the values the outputs need, with what they depend on, in :data:`VALUES` order."""
     needed = {ORIENTATION}   # always read: an invalid orientation drops the message
-    pending = [need for name in outputs for need in messages.OUTPUTS[name].needs]
+    pending = [need for name in outputs for need in registry.OUTPUTS[name].needs]
     while pending:
         name = pending.pop()
         if name not in needed:
@@ -239,8 +239,8 @@ class ConversionPipeline:
         self.params = params
         self.stats = PipelineStats() if stats is None else stats
         self._on_issue = on_issue
-        self._input = messages.INPUTS[params.input_type]
-        self._outputs = [messages.OUTPUTS[name] for name in params.outputs]
+        self._input = registry.INPUTS[params.input_type]
+        self._outputs = [registry.OUTPUTS[name] for name in params.outputs]
         self._builders = {output.name: output.message.build for output in self._outputs}
         plan = _needed_values(params.outputs)
         reads = {field for value in plan for field in value.reads}
@@ -284,7 +284,7 @@ class ConversionPipeline:
         """``{output name: message class}`` for the configured outputs, in order."""
         return {output.name: output.message_class for output in self._outputs}
 
-    def process(self, msg: Any, topic: str = messages.INPUT_TOPIC.name) -> list:
+    def process(self, msg: Any, topic: str = registry.INPUT_TOPIC.name) -> list:
         """
         Convert one input message.
 
@@ -308,7 +308,7 @@ class ConversionPipeline:
         return [(name, builders[name](header, numbers))
                 for name, header, numbers in self.process_values(msg, topic)]
 
-    def process_values(self, msg: Any, topic: str = messages.INPUT_TOPIC.name) -> list:
+    def process_values(self, msg: Any, topic: str = registry.INPUT_TOPIC.name) -> list:
         """
         Convert one input message into the numbers of the output messages.
 
@@ -331,7 +331,7 @@ class ConversionPipeline:
             ``(output name, header, numbers)`` for each output that could be
             computed, in the order of ``outputs`` (for each sample the message
             gave); empty when the message was dropped. ``numbers`` are what the
-            output's :class:`~rotation_node.messages.OutputMessage` builds the
+            output's :class:`~rotation_node.registry.OutputMessage` builds the
             message from: ``(x, y, z[, w])`` of the stamped outputs, ``data`` of
             the Float64MultiArray ones. Never raises on bad data.
 
@@ -422,10 +422,10 @@ class ConversionPipeline:
         if not all(map(math.isfinite, orientation)):
             raise _Dropped(NON_FINITE_ORIENTATION,
                            f'message dropped: {form} {orientation} has a NaN or Inf component')
-        if form == messages.EULER:
+        if form == registry.EULER:
             q = conversions.quaternion_from_euler(
                 orientation, self.params.euler_sequence, degrees=self.params.euler_degrees)
-        elif form == messages.ROTATION_VECTOR:
+        elif form == registry.ROTATION_VECTOR:
             q = conversions.quaternion_from_rotation_vector(orientation)
         else:
             norm = math.hypot(*orientation)
@@ -624,7 +624,7 @@ def warm_up_conversions() -> None:
     moves that one-off compilation out of the first real message's latency.
     """
     for input_type in INPUT_TYPES:
-        if messages.INPUTS[input_type].stream is not None:
+        if registry.INPUTS[input_type].stream is not None:
             continue   # its samples come from its own topics; the forms it uses are warmed up
         for frame in ('body', 'world'):
             params = NodeParameters(

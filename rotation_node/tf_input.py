@@ -12,14 +12,14 @@ rotation changes), with a header whose ``frame_id`` is the parent frame and
 whose stamp is the lookup time; otherwise none. A failed lookup, and each
 transform tf2 would ignore, is reported with its reason and gives nothing.
 
-The registry entry (:data:`rotation_node.messages.INPUTS` ``['tf']``) names
-this stream, :func:`check_parameters` and :data:`DROP_REASONS`. This module
+The registry entry (:data:`rotation_node.registry.INPUTS` ``['tf']``) names
+this module: :func:`sample_stream` and :data:`DROP_REASONS`. This module
 does not import rclpy: the header class is looked up when a stream is created.
 """
 from typing import Any, Callable, Optional, Tuple
 
 import numpy as np
-from rotation_node.errors import ParameterError
+from rotation_node.registry import Sample, TF_STATIC_TOPIC
 from rotation_node.tf_buffer import (
     CycleError, ExtrapolationError, NotConnectedError, RejectedTransformError, TfLookupError,
     TfOrientation, TfOrientationBuffer, UnknownFrameError)
@@ -42,24 +42,9 @@ _LOOKUP_REASONS = {
 }
 
 
-def check_parameters(params: Any) -> None:
-    """
-    Check the parameters of ``input_type: tf``: both frames named, and different.
-
-    Raises
-    ------
-    ParameterError
-        A frame is missing, or both are the same; the message names the parameters.
-
-    """
-    for name, value, example in (('tf.parent_frame', params.tf_parent_frame, 'map'),
-                                 ('tf.child_frame', params.tf_child_frame, 'base_link')):
-        if not value:
-            raise ParameterError(f"parameter '{name}': required with input_type tf "
-                                 f'(a frame name such as {example})')
-    if params.tf_parent_frame == params.tf_child_frame:
-        raise ParameterError(f"parameters 'tf.parent_frame' and 'tf.child_frame' are both "
-                             f'{params.tf_parent_frame!r}; name two different frames')
+def sample_stream(params: Any, report: Callable[[str, str], None]) -> 'TfSampleStream':
+    """Return the sample stream of one ``tf`` input (the registry's ``stream`` contract)."""
+    return TfSampleStream(params, report)
 
 
 class TfSampleStream:
@@ -78,7 +63,6 @@ class TfSampleStream:
     """
 
     def __init__(self, params: Any, report: Callable[[str, str], None]):
-        from rotation_node.messages import Sample, TF_STATIC_TOPIC
         from rotation_node.wire.message_types import message_class
         self.parent, self.child = params.tf_parent_frame, params.tf_child_frame
         self.buffer = TfOrientationBuffer()
@@ -102,7 +86,7 @@ class TfSampleStream:
 
         Returns
         -------
-        tuple of rotation_node.messages.Sample
+        tuple of rotation_node.registry.Sample
             One sample (quaternion ``(x, y, z, w)``; header with the parent frame
             and the lookup time), or none.
 

@@ -12,11 +12,11 @@ import subprocess
 import sys
 import time
 
-from rotation_node import messages
+from rotation_node import registry
 
 BIN = os.path.dirname(sys.executable)
 
-PLAIN_INPUT_TYPES = tuple(name for name, entry in messages.INPUTS.items() if entry.stream is None)
+PLAIN_INPUT_TYPES = tuple(name for name, entry in registry.INPUTS.items() if entry.stream is None)
 """Input types read one sample from each message on ``input`` (:func:`make_input_message`)."""
 
 
@@ -130,21 +130,21 @@ def make_input_message(input_type, rotation, *, omega=(0.0, 0.0, 0.0), stamp_ns=
     ``degrees`` give the Euler convention of an Euler-angle input; ``covariance``
     (9 numbers, row-major) goes into the orientation covariance block of the
     types that carry one. The fields written are those the input type's entry
-    in rotation_node.messages names.
+    in rotation_node.registry names.
     """
     import operator
-    from rotation_node import messages
+    from rotation_node import registry
     from rotation_node.wire.stamps import split_ns
-    entry = messages.INPUTS[input_type]
+    entry = registry.INPUTS[input_type]
     msg = entry.message_class()
     msg.header.stamp.sec, msg.header.stamp.nanosec = split_ns(stamp_ns)
     msg.header.frame_id = frame_id
     target = operator.attrgetter(entry.orientation_field)(msg)
-    if entry.orientation_form == messages.QUATERNION:
+    if entry.orientation_form == registry.QUATERNION:
         target.x, target.y, target.z, target.w = (float(v) for v in rotation.as_quat())
     else:
         values = (rotation.as_euler(sequence, degrees=degrees)
-                  if entry.orientation_form == messages.EULER else rotation.as_rotvec())
+                  if entry.orientation_form == registry.EULER else rotation.as_rotvec())
         target.x, target.y, target.z = (float(v) for v in values)
     if entry.angular_velocity_field is not None:
         w = operator.attrgetter(entry.angular_velocity_field)(msg)
@@ -216,7 +216,7 @@ def oracle_output(name, rotation, omega_body=(0.0, 0.0, 0.0), *, sequence='xyz',
 def output_values(msg):
     """Return the numbers of an output message as a flat array (as its output builds it)."""
     import numpy as np
-    from rotation_node import messages
+    from rotation_node import registry
     from rotation_node.wire.message_types import type_name_of
-    numbers = {o.type_name: o.message.numbers for o in messages.OUTPUTS.values()}
+    numbers = {o.type_name: o.message.numbers for o in registry.OUTPUTS.values()}
     return np.array(numbers[type_name_of(type(msg))](msg), dtype=float)

@@ -15,7 +15,7 @@ from hypothesis import given, HealthCheck, settings
 from hypothesis import strategies as st
 import numpy as np
 import pytest
-from rotation_node import messages
+from rotation_node import registry
 from rotation_node.bag.block_convert import (
     block_form_missing, BLOCK_MESSAGES, converted_blocks, TopicConverter)
 from rotation_node.bag.convert import convert, output_topic
@@ -29,17 +29,17 @@ from rotation_node.wire.cdr import fixed_layout_codec
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 EVERY_EFFECT = os.path.join(HERE, os.pardir, 'config', 'scenes', 'every_effect.yaml')
-PLAIN_INPUTS = [name for name, entry in messages.INPUTS.items() if entry.stream is None]
+PLAIN_INPUTS = [name for name, entry in registry.INPUTS.items() if entry.stream is None]
 
 
 def _outputs_for(input_type):
     """Every output with a block form (all of them need only what every input gives)."""
-    return tuple(name for name in messages.OUTPUTS if name in BLOCK_OUTPUTS)
+    return tuple(name for name in registry.OUTPUTS if name in BLOCK_OUTPUTS)
 
 
 def _converter_outputs(params, topic='/in'):
-    return {name: (output_topic(topic, name), messages.OUTPUTS[name].type_name,
-                   messages.OUTPUTS[name].message.encoder()) for name in params.outputs}
+    return {name: (output_topic(topic, name), registry.OUTPUTS[name].type_name,
+                   registry.OUTPUTS[name].message.encoder()) for name in params.outputs}
 
 
 def _run(params, records, splits, *, blocks):
@@ -94,9 +94,9 @@ _component = st.one_of(st.floats(-2.0, 2.0), st.sampled_from(_SPECIAL))
 @st.composite
 def _streams(draw, input_type):
     """CDR records of one input type: repeated and decreasing stamps, flips, NaN, gimbal, zero."""
-    entry = messages.INPUTS[input_type]
+    entry = registry.INPUTS[input_type]
     n = draw(st.integers(1, 40))
-    width = 4 if entry.orientation_form == messages.QUATERNION else 3
+    width = 4 if entry.orientation_form == registry.QUATERNION else 3
     codec = fixed_layout_codec(entry.type_name)
     stamp_ns = 1_700_000_000_000_000_000
     frame_id = draw(st.sampled_from(['imu_link', 'x', 'base_link_é', '']))
@@ -239,7 +239,7 @@ def test_frame_conversion_goes_message_by_message():
 
 
 def _imu_record(stamp_ns, data=None):
-    entry = messages.INPUTS['imu']
+    entry = registry.INPUTS['imu']
     msg = entry.message_class()
     msg.header.frame_id = 'imu'
     msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)

@@ -19,10 +19,10 @@ from rotation_node.bag.convert import convert, output_topic
 from rotation_node.bag.reading.mcap_reader import BagReader
 from rotation_node.bag.writing.writer import BagWriter
 from rotation_node.errors import BagError
-from rotation_node.messages import INPUTS
-from rotation_node.messages import OUTPUTS as OUTPUT_TYPES
 from rotation_node.parameters import NodeParameters, parameters_from_yaml
 from rotation_node.pipeline import ConversionPipeline
+from rotation_node.registry import INPUTS
+from rotation_node.registry import OUTPUTS as OUTPUT_TYPES
 from rotation_node.wire.cdr import message_encoder
 from rotation_node.wire.message_types import type_name_of
 from rotation_node.wire.qos import qos_profile, qos_profiles_from_yaml

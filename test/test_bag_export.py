@@ -10,9 +10,10 @@ from ros_harness import make_input_message
 from rotation_node.bag.cli import main
 from rotation_node.bag.convert import convert
 from rotation_node.bag.export import output_columns, table_columns
+from rotation_node.bag.plot import output_panels
 from rotation_node.bag.reading.mcap_reader import BagReader
-from rotation_node.messages import OUTPUTS
 from rotation_node.parameters import NodeParameters
+from rotation_node.registry import OUTPUTS
 from scipy.spatial.transform import Rotation
 import yaml
 
@@ -128,8 +129,8 @@ def test_every_output_has_as_many_columns_as_numbers():
         params = NodeParameters(outputs=tuple(OUTPUTS), euler_sequence=sequence)
         columns = table_columns(params)
         assert len(columns) == len(set(columns))
-        for name, output in OUTPUTS.items():
-            width = max(panel.start + len(panel.labels) for panel in output.panels(params))
+        for name in OUTPUTS:
+            width = max(panel.start + len(panel.labels) for panel in output_panels(name, params))
             assert len(output_columns(name, params)) == width, name
 
 
@@ -217,7 +218,7 @@ def test_parquet_with_a_pyarrow_that_does_not_load_is_one_line(
 
 
 def test_parquet_holds_the_csvs_values(imu_bag, tmp_path):
-    import pyarrow.parquet as pq   # in requirements.txt: the test suite has it
+    import pyarrow.parquet as pq  # in requirements.txt: the test suite has it
     path, _ = imu_bag
     params = params_file(tmp_path, input_type='imu', outputs=['quaternion', 'euler_stddev'])
     for name in ('imu.csv', 'imu.parquet'):

@@ -8,9 +8,9 @@ import matplotlib.image
 import numpy as np
 import pytest
 from ros_harness import make_input_message
-from rotation_node import messages
+from rotation_node import registry
 from rotation_node.bag.convert import convert
-from rotation_node.bag.plot import plot_series, plot_topic
+from rotation_node.bag.plot import output_panels, plot_series, plot_topic
 from rotation_node.bag.reading.reader import open_bag
 from rotation_node.bag.writing.writer import BagWriter
 from rotation_node.errors import BagError
@@ -70,7 +70,7 @@ def test_refuses_to_overwrite(tmp_path, converted):
     assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
 
 
-PLAIN_INPUTS = [name for name, entry in messages.INPUTS.items() if entry.stream is None]
+PLAIN_INPUTS = [name for name, entry in registry.INPUTS.items() if entry.stream is None]
 
 
 @pytest.mark.parametrize('input_type', PLAIN_INPUTS)
@@ -82,11 +82,11 @@ def test_every_input_type_is_drawn_as_euler_angles_with_gaps(tmp_path, rng, inpu
     msgs = [make_input_message(input_type, rotation, omega=omega, stamp_ns=T0 + i * 10**7,
                                sequence='ZYX', degrees=True)
             for i, (rotation, omega) in enumerate(zip(rotations, omegas))]
-    entry = messages.INPUTS[input_type]
+    entry = registry.INPUTS[input_type]
     orientation = operator.attrgetter(entry.orientation_field)
     orientation(msgs[3]).x = math.nan   # invalid
     gaps = {3}
-    if entry.orientation_form == messages.QUATERNION:
+    if entry.orientation_form == registry.QUATERNION:
         target = orientation(msgs[7])
         target.x = target.y = target.z = target.w = 0.0   # a zero quaternion
         gaps.add(7)
@@ -117,3 +117,18 @@ def test_every_input_type_is_drawn_as_euler_angles_with_gaps(tmp_path, rng, inpu
     png = tmp_path / 'plot.png'
     assert plot_topic(path, '/in', png, params=params) == 40
     assert matplotlib.image.imread(png)[..., :3].std() > 0.05
+
+
+def _numbers_count(output):
+    if output.message.layout is not None:
+        return output.message.layout.dim[0].stride
+    return len(output.message.numbers(output.message_class()))
+
+
+@pytest.mark.parametrize('name', OUTPUTS)
+def test_each_output_plots_every_number_once(name):
+    output = registry.OUTPUTS[name]
+    params = NodeParameters(euler_sequence='ZXZ', euler_degrees=True)
+    drawn = [index for panel in output_panels(name, params)
+             for index in range(panel.start, panel.start + len(panel.labels))]
+    assert drawn == list(range(_numbers_count(output)))

@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 import numpy as np
 import pytest
-from rotation_node import block_pipeline, conversions, messages
+from rotation_node import block_pipeline, conversions, registry
 from rotation_node.block_pipeline import (
     BLOCK_OUTPUTS, BLOCK_SAMPLES, block_support, BlockPipeline, SampleBlock)
 from rotation_node.conversions.kernels import BATCH_SAMPLES
@@ -37,24 +37,24 @@ def test_blocks_stay_below_the_batch_schedules():
 
 
 def test_every_block_output_is_a_registry_output():
-    assert set(BLOCK_OUTPUTS) <= set(messages.OUTPUTS)
+    assert set(BLOCK_OUTPUTS) <= set(registry.OUTPUTS)
 
 
 def _values_of(need, n, rng):
     """Arrays of ``n`` samples of a pipeline value: random, then the identity and a half turn."""
-    if need == messages.ANGULAR_VELOCITY:
+    if need == registry.ANGULAR_VELOCITY:
         return rng.normal(size=(n, 3))
     q = rng.normal(size=(n, 4))
     q[-2:] = [[0.0, 0.0, 0.0, 1.0], [0.0, 0.0, 1.0, 0.0]]
-    if need == messages.OUTPUT_QUATERNION:   # unit, w >= 0
+    if need == registry.OUTPUT_QUATERNION:   # unit, w >= 0
         q = conversions.canonical_quaternion(q)
     return q
 
 
 @pytest.mark.parametrize('name', [name for name in sorted(BLOCK_OUTPUTS)
-                                  if messages.OUTPUTS[name].compute is not None])
+                                  if registry.OUTPUTS[name].compute is not None])
 def test_each_block_output_computes_a_block_as_each_sample_alone(name):
-    output = messages.OUTPUTS[name]
+    output = registry.OUTPUTS[name]
     params = NodeParameters(input_type='imu', outputs=(name,))
     rng = np.random.default_rng(7)
     values = [_values_of(need, 40, rng) for need in output.needs]
@@ -79,8 +79,8 @@ def test_block_support_names_what_has_no_block_form(values, reason):
 
 
 def test_an_output_added_without_a_block_form_is_left_to_the_pipeline(monkeypatch):
-    added = dataclasses.replace(messages.OUTPUTS['euler'], name='euler_again')
-    monkeypatch.setitem(messages.OUTPUTS, 'euler_again', added)
+    added = dataclasses.replace(registry.OUTPUTS['euler'], name='euler_again')
+    monkeypatch.setitem(registry.OUTPUTS, 'euler_again', added)
     # As the parameters will be once the output is in their choices.
     params = types.SimpleNamespace(**dataclasses.asdict(NodeParameters(input_type='imu')))
     params.outputs = ('euler', 'euler_again')

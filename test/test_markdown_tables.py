@@ -11,7 +11,7 @@ import re
 from xml.etree import ElementTree
 
 import pytest
-from rotation_node import markdown_tables, messages
+from rotation_node import markdown_tables, registry
 from rotation_node.parameters import PARAMETERS
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -29,9 +29,9 @@ def test_tables_have_a_row_per_entry():
         markdown_tables.input_types_table, markdown_tables.outputs_table,
         markdown_tables.parameters_table)}
     assert [row.split(' | ')[0] for row in rows[markdown_tables.input_types_table]] == [
-        f'| `{name}`' for name in messages.INPUTS]
+        f'| `{name}`' for name in registry.INPUTS]
     assert [row.split(' | ')[0] for row in rows[markdown_tables.outputs_table]] == [
-        f'| `{name}`' for name in messages.OUTPUTS]
+        f'| `{name}`' for name in registry.OUTPUTS]
     assert [row.split(' | ')[0] for row in rows[markdown_tables.parameters_table]] == [
         f'| `{spec.name}`' for spec in PARAMETERS]
     for table in rows.values():   # a '|' inside a cell is escaped
@@ -54,9 +54,9 @@ def test_parameters_file_comments_name_every_input_type_and_output():
     text = (ROOT / 'config' / 'params.yaml').read_text()
     input_comment = _comment_before(text, 'input_type')
     output_comment = _comment_before(text, 'outputs')
-    for name in messages.INPUTS:
+    for name in registry.INPUTS:
         assert re.search(rf'\b{name}\b', input_comment), name
-    for name in messages.OUTPUTS:
+    for name in registry.OUTPUTS:
         assert re.search(rf'\b{name}\b', output_comment), name
 
 
@@ -64,5 +64,5 @@ def test_package_xml_depends_on_every_message_package():
     root = ElementTree.parse(ROOT / 'package.xml').getroot()
     depends = {element.text for element in root.findall('exec_depend')}
     used = {entry.type_name.split('/')[0]
-            for entry in [*messages.INPUTS.values(), *messages.OUTPUTS.values()]}
+            for entry in [*registry.INPUTS.values(), *registry.OUTPUTS.values()]}
     assert used <= depends

@@ -22,11 +22,11 @@ from ros_harness import (
     make_input_message, oracle_output, output_values, PLAIN_INPUT_TYPES, RosProcess, script,
     TestNode)
 from rotation_node.errors import ParameterError
-from rotation_node.messages import OUTPUTS as OUTPUT_TYPES
 from rotation_node.node import check_parameter_names, ros_arguments
 from rotation_node.parameters import (
     NodeParameters, OUTPUTS, PARAMETERS, parameters_file_sections, parameters_from_yaml)
 from rotation_node.pipeline import input_message_type
+from rotation_node.registry import OUTPUTS as OUTPUT_TYPES
 from scipy.spatial.transform import Rotation
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'params.yaml'

@@ -20,7 +20,7 @@ from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from ros_harness import RosProcess, script, TestNode
-from rotation_node.messages import OUTPUTS
+from rotation_node.registry import OUTPUTS
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Header
 

@@ -9,7 +9,9 @@ publisher must deliver what it keeps again, while the other topic's messages are
 converted once each.
 """
 import dataclasses
+import sys
 import time
+import types
 
 from geometry_msgs.msg import QuaternionStamped
 import pytest
@@ -19,8 +21,8 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile
 
-from rotation_node import messages
-from rotation_node.messages import InputTopic, Sample
+from rotation_node import registry
+from rotation_node.registry import InputTopic, Sample
 
 LATCHED = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
@@ -35,10 +37,13 @@ def _stream(params, report):
 
 @pytest.fixture
 def stateful_quaternion(monkeypatch):
+    module = types.ModuleType('latched_stream')   # what InputType.stream names
+    module.sample_stream, module.DROP_REASONS = _stream, ()
+    monkeypatch.setitem(sys.modules, module.__name__, module)
     entry = dataclasses.replace(
-        messages.INPUTS['quaternion'], stream=_stream,
-        topics=(messages.INPUT_TOPIC, InputTopic('latched', transient_local=True)))
-    monkeypatch.setitem(messages.INPUTS, 'quaternion', entry)
+        registry.INPUTS['quaternion'], stream=module.__name__,
+        topics=(registry.INPUT_TOPIC, InputTopic('latched', transient_local=True)))
+    monkeypatch.setitem(registry.INPUTS, 'quaternion', entry)
 
 
 class Side:

@@ -17,7 +17,7 @@ import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.typesys import get_typestore, Stores
 from rotation_node.errors import BagError
-from rotation_node.messages import OUTPUTS
+from rotation_node.registry import OUTPUTS
 from rotation_node.wire.cdr import (
     CDR_LE, fixed_layout_codec, float64_multi_array_encoder, message_encoder)
 from rotation_node.wire.message_types import message_class

@@ -24,7 +24,7 @@ import gc
 import itertools
 from typing import Any, Dict, Iterable, Iterator, List, NamedTuple, Optional, Tuple, TYPE_CHECKING
 
-from rotation_node import messages
+from rotation_node import registry
 from rotation_node.block_pipeline import BLOCK_SAMPLES, block_support, BlockPipeline
 from rotation_node.pipeline import ConversionPipeline
 from rotation_node.wire.cdr import fixed_layout_codec
@@ -83,12 +83,12 @@ def block_form_missing(params: NodeParameters) -> Optional[str]:
     reason = block_support(params)
     if reason is not None:
         return reason
-    input_type = messages.INPUTS[params.input_type]
+    input_type = registry.INPUTS[params.input_type]
     if fixed_layout_codec(input_type.type_name) is None:
         return f'{input_type.type_name} has no fixed CDR layout'
     for name in params.outputs:
-        if block_encoder(messages.OUTPUTS[name].message) is None:
-            return f'output {name} ({messages.OUTPUTS[name].type_name}) has no block encoding'
+        if block_encoder(registry.OUTPUTS[name].message) is None:
+            return f'output {name} ({registry.OUTPUTS[name].type_name}) has no block encoding'
     return None
 
 
@@ -122,7 +122,7 @@ class TopicConverter:
         self.pipeline = ConversionPipeline(params)
         self._outputs = [(name, *outputs[name]) for name in params.outputs]
         self._by_name = {name: output for name, *output in self._outputs}
-        input_type = messages.INPUTS[params.input_type]
+        input_type = registry.INPUTS[params.input_type]
         codec = fixed_layout_codec(input_type.type_name)
         self._decode = None if codec is None else codec.decode
         self.block_form_missing = block_form_missing(params) if blocks else 'blocks disabled'
@@ -132,7 +132,7 @@ class TopicConverter:
             self._blocks = _BlockForm(
                 block_pipeline,
                 InputBlockDecoder(input_type, block_pipeline.reads_angular_velocity),
-                [OutputBlockEncoder(messages.OUTPUTS[name].message) for name in params.outputs])
+                [OutputBlockEncoder(registry.OUTPUTS[name].message) for name in params.outputs])
 
     def convert(self, records: List, input_topics: Optional[List[str]] = None
                 ) -> List[List[Output]]:
@@ -154,7 +154,7 @@ class TopicConverter:
             if converted is not None:
                 return converted
         if input_topics is None:
-            input_topics = [messages.INPUT_TOPIC.name] * len(records)
+            input_topics = [registry.INPUT_TOPIC.name] * len(records)
         return [self._converted_message(record, topic)
                 for record, topic in zip(records, input_topics)]
 
@@ -172,7 +172,7 @@ class TopicConverter:
             if converted is not None:
                 return converted
         if input_topics is None:
-            input_topics = [messages.INPUT_TOPIC.name] * len(records)
+            input_topics = [registry.INPUT_TOPIC.name] * len(records)
         return [self.pipeline.process_values(record.message(self._decode), topic)
                 for record, topic in zip(records, input_topics)]
 
@@ -246,7 +246,7 @@ def converted_blocks(records: Iterable, converters: Dict[str, TopicConverter],
 
     """
     if routes is None:
-        routes = {topic: (topic, messages.INPUT_TOPIC.name) for topic in converters}
+        routes = {topic: (topic, registry.INPUT_TOPIC.name) for topic in converters}
     records = iter(records)
     while True:
         block = list(itertools.islice(records, BLOCK_MESSAGES))

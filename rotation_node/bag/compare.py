@@ -5,7 +5,7 @@ A reference topic (ground truth: motion capture, a reference INS) and an
 estimate topic (an IMU's filter, an odometry) of any input type the node takes
 are read as the node reads them: a :class:`~rotation_node.pipeline.ConversionPipeline`
 with the ``quaternion`` output, so the registry entry of their type
-(:data:`rotation_node.messages.INPUTS`), its sample stream (for ``/tf`` the TF
+(:data:`rotation_node.registry.INPUTS`), its sample stream (for ``/tf`` the TF
 buffer's lookup of a child frame in a parent frame, with ``T_static`` beside
 ``T``) and the pipeline's rules for unknown, non-finite and zero orientations,
 fed the read-only views of :mod:`rotation_node.wire.cdr` where the type has a
@@ -32,7 +32,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, TYPE_CH
 
 from matplotlib.figure import Figure
 import numpy as np
-from rotation_node import comparison, conversions, messages
+from rotation_node import comparison, conversions, registry
 from rotation_node.bag.reading.reader import open_bag
 from rotation_node.bag.writing.atomic_file import AtomicFile
 from rotation_node.command_line.stop_signal import raise_if_stopped
@@ -62,7 +62,7 @@ class StreamSource:
     topic : str
         The topic (its name in the bag or its ROS 2 name).
     input_type : str, optional
-        A key of :data:`rotation_node.messages.INPUTS`; default the plain type
+        A key of :data:`rotation_node.registry.INPUTS`; default the plain type
         of the topic's message type (``tf`` for ``tf2_msgs/msg/TFMessage``).
         Needed where types share a message (``euler``, ``rotation_vector``).
     frames : tuple of str, optional
@@ -90,20 +90,20 @@ class Stream:
 
 
 def _input_type(source: StreamSource, type_name: str, params: NodeParameters):
-    """Return the :class:`~rotation_node.messages.InputType` a topic is read as."""
+    """Return the :class:`~rotation_node.registry.InputType` a topic is read as."""
     if source.input_type is not None:
-        entry = messages.INPUTS.get(source.input_type)
+        entry = registry.INPUTS.get(source.input_type)
         if entry is None:
             raise BagError(f'unknown input type {source.input_type!r} (one of '
-                           f'{", ".join(messages.INPUTS)})')
+                           f'{", ".join(registry.INPUTS)})')
         if entry.type_name != type_name:
             raise BagError(f'{source.topic} is {type_name}, not {entry.type_name} '
                            f'(input type {entry.name})')
         return entry
-    candidates = [entry for entry in messages.INPUTS.values() if entry.type_name == type_name]
+    candidates = [entry for entry in registry.INPUTS.values() if entry.type_name == type_name]
     preferred = [entry for entry in candidates if entry.name == params.input_type]
     if not candidates:
-        readable = sorted({entry.type_name for entry in messages.INPUTS.values()})
+        readable = sorted({entry.type_name for entry in registry.INPUTS.values()})
         raise BagError(f'cannot compare {source.topic}: {type_name} has no orientation the '
                        f'node reads (readable: {", ".join(readable)})')
     return (preferred or candidates)[0]

@@ -27,14 +27,14 @@ cannot read exactly) goes message by message: input messages decoded by
 fixed layout, which
 :meth:`~rotation_node.pipeline.ConversionPipeline.process_values` reads as it
 reads rclpy messages, and the numbers it returns encoded by each output's
-encoder (:meth:`rotation_node.messages.OutputMessage.encoder`).
+encoder (:meth:`rotation_node.registry.OutputMessage.encoder`).
 """
 from __future__ import annotations
 
 import os
 from typing import Callable, Dict, List, Optional, Sequence, TextIO, TYPE_CHECKING
 
-from rotation_node import messages
+from rotation_node import registry
 from rotation_node.bag.block_convert import collections_deferred, converted_blocks, TopicConverter
 from rotation_node.bag.reading.reader import open_bag
 from rotation_node.bag.records import TopicMetadata
@@ -167,13 +167,13 @@ def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *
         reader.report_contents(report)
         with reader.reporting_new_notes(report):
             params = resolved_from_bag(reader, params)   # the mounting from /tf_static, if asked
-            input_type = messages.INPUTS[params.input_type]
+            input_type = registry.INPUTS[params.input_type]
             streams = _input_streams(reader, input_type, topics)
             # {bag topic: (its stream's first topic, the input type's name for it)}
             routes = {bag_topic: (topic, name) for topic, stream in streams.items()
                       for bag_topic, name in stream.items()}
-            encoders = {name: (messages.OUTPUTS[name].type_name,
-                               messages.OUTPUTS[name].message.encoder())
+            encoders = {name: (registry.OUTPUTS[name].type_name,
+                               registry.OUTPUTS[name].message.encoder())
                         for name in params.outputs}
             # {input topic: {output name: (output topic, type name, encode)}}
             outputs = {topic: {name: (output_topic(topic, name), *encoder)

@@ -24,7 +24,7 @@ import io
 import os
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, TYPE_CHECKING
 
-from rotation_node import messages
+from rotation_node import registry
 from rotation_node.bag.block_convert import BLOCK_MESSAGES, collections_deferred, TopicConverter
 from rotation_node.bag.convert import _check_output, _input_streams
 from rotation_node.bag.reading.reader import open_bag
@@ -229,7 +229,7 @@ def export(input_path: StrPath, output_path: StrPath, params: NodeParameters, *,
         reader.report_contents(report)
         with reader.reporting_new_notes(report):
             params = resolved_from_bag(reader, params)   # the mounting from /tf_static, if asked
-            streams = _input_streams(reader, messages.INPUTS[params.input_type],
+            streams = _input_streams(reader, registry.INPUTS[params.input_type],
                                      None if topic is None else [topic])
             if len(streams) > 1:
                 raise BagError(f'{reader.path} has {len(streams)} {params.input_type} topics '

@@ -3,8 +3,8 @@ Plot a topic of a bag over time as a PNG (``rotation_bag plot``).
 
 Meant for converted topics: a topic that ``rotation_bag convert`` wrote for
 the output ``NAME`` of an input topic ``T`` (``T/NAME``, ``T`` in the bag,
-the type the output's) is drawn as that output of
-:data:`rotation_node.messages.OUTPUTS` declares (Euler angles in the units and
+the type the output's) is drawn as :func:`output_panels` draws that output
+of :data:`rotation_node.registry.OUTPUTS` (Euler angles in the units and
 sequence of the parameters the bag was converted with). A topic of any input
 type (Imu, Odometry, the Pose and Transform types, QuaternionStamped...) is
 drawn as its orientation, as Euler angles of the parameters' sequence, and its
@@ -17,13 +17,13 @@ message has one, else the log time, in seconds since the first message.
 from __future__ import annotations
 
 import math
-from typing import Any, Callable, Optional, Tuple, TYPE_CHECKING
+from typing import Any, Callable, NamedTuple, Optional, Tuple, TYPE_CHECKING
 
 # A bare Figure renders PNG with the Agg backend and never touches pyplot's
 # global state or a display.
 from matplotlib.figure import Figure
 import numpy as np
-from rotation_node import conversions, messages
+from rotation_node import conversions, registry
 from rotation_node.bag.convert import output_topic
 from rotation_node.bag.reading.reader import open_bag
 from rotation_node.bag.writing.atomic_file import AtomicFile
@@ -36,10 +36,83 @@ if TYPE_CHECKING:
     from rotation_node.type_aliases import StrPath
 
 
+class Panel(NamedTuple):
+    """
+    One panel of a ``rotation_bag plot`` figure.
+
+    Attributes
+    ----------
+    title, unit : str
+    labels : tuple of str
+        One per line drawn.
+    start : int
+        Index of the first number drawn in the message's numbers; ``len(labels)`` follow.
+
+    """
+
+    title: str
+    unit: str
+    labels: Tuple[str, ...]
+    start: int = 0
+
+
+_XYZ = ('x', 'y', 'z')
+_XYZW = ('x', 'y', 'z', 'w')
+_MATRIX = tuple(f'R{row}{col}' for row in (1, 2, 3) for col in (1, 2, 3))
+
+
+def _angle_unit(params):
+    return 'deg' if params.euler_degrees else 'rad'
+
+
+def _euler_panels(title, unit_suffix):
+    def panels(params):
+        kind = 'intrinsic' if conversions.parse_sequence(params.euler_sequence).intrinsic \
+            else 'extrinsic'
+        labels = tuple(f'{ordinal} ({letter})' for ordinal, letter
+                       in zip(('1st', '2nd', '3rd'), params.euler_sequence))
+        return [Panel(f'{title}, sequence {params.euler_sequence} ({kind})',
+                      _angle_unit(params) + unit_suffix, labels)]
+    return panels
+
+
+def _euler_covariance_panels(params):
+    return [*_euler_panels('Euler angles', '')(params),
+            Panel(f'Euler angle covariance, sequence {params.euler_sequence}',
+                  _angle_unit(params) + '^2',
+                  tuple(f'C{row}{col}' for row in (1, 2, 3) for col in (1, 2, 3)), 3)]
+
+
+_OUTPUT_PANELS = {
+    'quaternion': lambda params: [Panel('Quaternion', '', _XYZW)],
+    'euler': _euler_panels('Euler angles', ''),
+    'rotation_vector': lambda params: [Panel('Rotation vector', 'rad', _XYZ)],
+    'axis_angle': lambda params: [Panel('Rotation axis', '', _XYZ),
+                                  Panel('Rotation angle', 'rad', ('angle',), 3)],
+    'matrix': lambda params: [Panel('Rotation matrix (body to world)', '', _MATRIX)],
+    'angular_velocity': lambda params: [Panel(
+        f'Angular velocity ({params.angular_velocity_output_frame} frame)', 'rad/s', _XYZ)],
+    'euler_rates': _euler_panels('Euler angle rates', '/s'),
+    'quaternion_rate': lambda params: [Panel('Quaternion rate', '1/s', _XYZW)],
+    'euler_stddev': _euler_panels('Euler angle standard deviations', ''),
+    'euler_covariance': _euler_covariance_panels,
+}
+
+
+def output_panels(name: str, params: NodeParameters) -> list:
+    """
+    Return how ``plot`` draws the output ``name`` of :data:`rotation_node.registry.OUTPUTS`.
+
+    Each :class:`Panel` indexes the numbers of the output's message
+    (``OutputMessage.numbers``), in the sequence, units and frame of ``params``.
+    """
+    return _OUTPUT_PANELS[name](params)
+
+
 def _converted_output(topics, topic):
     """Return the output whose ``convert`` topic ``topic`` is (checked in the bag), or None."""
     parent, _, name = topic.rpartition('/')
-    output = messages.OUTPUTS.get(name)
+    output = registry.OUTPUTS.get(name)
     if (output is None or parent not in topics or topics[topic] != output.type_name
             or output_topic(parent, name) != topic):
         return None
@@ -48,7 +121,7 @@ def _converted_output(topics, topic):
 
 def _input_type(type_name, params):
     """Return the plain input type of a topic of ``type_name`` (``input_type`` if it is one)."""
-    candidates = [entry for entry in messages.INPUTS.values()
+    candidates = [entry for entry in registry.INPUTS.values()
                   if entry.type_name == type_name and entry.stream is None]
     preferred = [entry for entry in candidates if entry.name == params.input_type]
     return next(iter(preferred or candidates), None)
@@ -64,10 +137,10 @@ def _input_orientation(entry, params):
     """
     sequence, degrees = params.euler_sequence, params.euler_degrees
     unknown = (math.nan,) * 3
-    if entry.orientation_form == messages.EULER:
+    if entry.orientation_form == registry.EULER:
         def quaternion(angles):
             return conversions.quaternion_from_euler(angles, sequence, degrees=degrees)
-    elif entry.orientation_form == messages.ROTATION_VECTOR:
+    elif entry.orientation_form == registry.ROTATION_VECTOR:
         quaternion = conversions.quaternion_from_rotation_vector
     else:
         def quaternion(q):
@@ -92,10 +165,10 @@ def _input_panels(entry, params):
     """
     euler, read = _input_orientation(entry, params), entry.sample_reader()
     panels = [panel._replace(title=f'Orientation as {panel.title}')
-              for panel in messages.OUTPUTS['euler'].panels(params)]
+              for panel in output_panels('euler', params)]
     if entry.angular_velocity_field is None:
         return panels, lambda msg: euler(read(msg).orientation)
-    panels.append(messages.Panel('Angular velocity', 'rad/s', ('x', 'y', 'z'), 3))
+    panels.append(Panel('Angular velocity', 'rad/s', _XYZ, 3))
     unknown = (math.nan,) * 3
 
     def numbers(msg):
@@ -108,17 +181,17 @@ def _panels(topics, topic, params):
     """
     Return what to draw for a topic: ``(panels, numbers)``.
 
-    ``panels`` are :class:`rotation_node.messages.Panel`; ``numbers(msg)`` gives the
+    ``panels`` are :class:`Panel`; ``numbers(msg)`` gives the
     numbers of one message that they index.
     """
     output = _converted_output(topics, topic)
     if output is not None:
-        return output.panels(params), output.message.numbers
+        return output_panels(output.name, params), output.message.numbers
     entry = _input_type(topics[topic], params)
     if entry is not None:
         return _input_panels(entry, params)
-    plottable = sorted({e.type_name for e in messages.INPUTS.values() if e.stream is None})
-    streams = [e.name for e in messages.INPUTS.values()
+    plottable = sorted({e.type_name for e in registry.INPUTS.values() if e.stream is None})
+    streams = [e.name for e in registry.INPUTS.values()
                if e.type_name == topics[topic] and e.stream is not None]
     hint = (f' (convert it with input_type {streams[0]} first, then plot an output)'
             if streams else '')
@@ -204,7 +277,7 @@ def plot_series(reader: Any, topic: str,
     -------
     times_ns : numpy.ndarray of int64
         Header stamp (log time for messages without header) of each message.
-    panels : list of rotation_node.messages.Panel
+    panels : list of Panel
     values : list of numpy.ndarray
         Per panel, shape ``(messages, len(panel.labels))``; NaN where a value
         is unknown or invalid (left as a gap in the plot).

@@ -21,7 +21,7 @@ from __future__ import annotations
 from typing import List, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
-from rotation_node import messages
+from rotation_node import registry
 from rotation_node.block_pipeline import SampleBlock
 from rotation_node.wire.cdr import CDR_LE, fixed_layout_codec
 
@@ -64,7 +64,7 @@ class InputBlockDecoder:
 
     Parameters
     ----------
-    input_type : rotation_node.messages.InputType
+    input_type : rotation_node.registry.InputType
     angular_velocity : bool
         Read the angular velocity (and its unknown flag) too.
 
@@ -75,7 +75,7 @@ class InputBlockDecoder:
 
     """
 
-    def __init__(self, input_type: messages.InputType, angular_velocity: bool):
+    def __init__(self, input_type: registry.InputType, angular_velocity: bool):
         codec = fixed_layout_codec(input_type.type_name)
         if codec is None:
             raise ValueError(f'input_type: {input_type.type_name} has no fixed CDR layout')
@@ -84,7 +84,7 @@ class InputBlockDecoder:
         self._codec = codec
         self._input_type = input_type
         components = ('x', 'y', 'z', 'w') if (
-            input_type.orientation_form == messages.QUATERNION) else ('x', 'y', 'z')
+            input_type.orientation_form == registry.QUATERNION) else ('x', 'y', 'z')
         self._orientation = [f'{input_type.orientation_field}.{c}' for c in components]
         # Paths of the angular velocity read: none when it is not read.
         self._rate: List[str] = (
@@ -196,7 +196,7 @@ class OutputBlockEncoder:
 
     Parameters
     ----------
-    message : rotation_node.messages.OutputMessage
+    message : rotation_node.registry.OutputMessage
 
     Raises
     ------
@@ -205,7 +205,7 @@ class OutputBlockEncoder:
 
     """
 
-    def __init__(self, message: messages.OutputMessage):
+    def __init__(self, message: registry.OutputMessage):
         self.type_name = message.type_name
         self._prefix: Optional[bytes] = None   # the data's prefix of a Float64MultiArray
         self._width: int   # numbers per message
@@ -283,7 +283,7 @@ def _rows(prefix, rows):
     return [blob[start:start + width] for start in range(0, len(blob), width)]
 
 
-def block_encoder(message: messages.OutputMessage) -> Optional[OutputBlockEncoder]:
+def block_encoder(message: registry.OutputMessage) -> Optional[OutputBlockEncoder]:
     """Return the block encoder of an output message type, or None if it has none."""
     try:
         return OutputBlockEncoder(message)

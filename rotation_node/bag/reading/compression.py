@@ -20,8 +20,6 @@ import zstandard
 ZSTD_MAGIC = b'\x28\xb5\x2f\xfd'
 #: The first four bytes of an lz4 frame.
 LZ4_MAGIC = b'\x04\x22\x4d\x18'
-#: Compression of MCAP chunks, as the mcap library and ``--compression`` name it.
-CHUNK_COMPRESSIONS = ('zstd', 'lz4', 'none')
 _COPY_BUFFER = 1 << 20
 
 #: What zstandard raises for data that is not a valid zstd frame.
@@ -53,7 +51,7 @@ def decompressed_message(data: bytes) -> bytes:
         If ``data`` starts like a zstd frame but is not a valid one.
 
     """
-    if data[:4] != ZSTD_MAGIC:
+    if not is_zstd(data):
         return data
     # A streaming decompressor: rosbag2 does not always record the content size.
     return zstandard.ZstdDecompressor().decompressobj().decompress(data)

@@ -49,7 +49,6 @@ import zstandard
 if TYPE_CHECKING:
     from rotation_node.type_aliases import StrPath
 
-SCHEMA_ENCODINGS = ('ros2msg', 'ros2idl')
 _MAGIC_SIZE = len(MCAP_MAGIC)
 _RECORD_PREFIX = struct.Struct('<BQ')   # opcode, length of what follows
 # Footer record: opcode, length, summary start, summary offset start, summary CRC.

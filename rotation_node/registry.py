@@ -1,22 +1,21 @@
 """
-The message types the node reads and writes, each declared once.
+The registry: what each message type the node reads and writes is, declared once.
 
 :data:`INPUTS` has one :class:`InputType` per value of the ``input_type``
 parameter: the ROS message type, the topics it is subscribed on, and where
 its header, orientation, angular velocity and orientation covariance are read.
 :data:`OUTPUTS` has one :class:`OutputType` per value allowed in ``outputs``:
-the ROS message type, the named pipeline values it is computed from, how it is
-built as an rclpy message and CDR-encoded, and how ``rotation_bag plot`` draws
-it. The parameter table, the pipeline, the node, ``rotation_bag convert`` and
-``plot``, the test harness and the documentation tables are derived from these
-two tables, so a new input or output type is one entry here (and, for an output
-that needs a new intermediate value, that value in the pipeline).
+the ROS message type, the named pipeline values it is computed from, and how
+it is built as an rclpy message and CDR-encoded. The parameter table, the
+pipeline, the node, ``rotation_bag convert``, the test harness, the plot panels
+(:mod:`rotation_node.bag.plot`) and the documentation tables
+(:mod:`rotation_node.markdown_tables`) read these two tables.
 
 An input message becomes zero or more :class:`Sample` objects (header,
 orientation, optional angular velocity and covariance). A plain input type
 reads one sample from each message through the fields it names; an input type
-that needs per-stream state (several topics, a buffer) gives a ``stream``
-factory instead, which returns a function ``(topic, message) -> samples``.
+that needs per-stream state (several topics, a buffer) names the module of its
+stream instead (:attr:`InputType.stream`).
 
 This module does not import rclpy: message classes and the CDR encoders are
 looked up when first used.
@@ -26,12 +25,12 @@ from __future__ import annotations
 import array
 from dataclasses import dataclass
 import functools
-import math
+import importlib
 import operator
 from typing import Any, Callable, Iterable, NamedTuple, Optional, Sequence, Tuple, TYPE_CHECKING
 
 import numpy as np
-from rotation_node import conversions, kinematics, tf_input
+from rotation_node import conversions, kinematics
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
@@ -40,7 +39,6 @@ if TYPE_CHECKING:
 QUATERNION = 'quaternion'
 EULER = 'euler'
 ROTATION_VECTOR = 'rotation_vector'
-ORIENTATION_FORMS = (QUATERNION, EULER, ROTATION_VECTOR)
 
 # Named per-message values of the pipeline that outputs are computed from
 # (rotation_node.pipeline computes them; an output lists those it needs).
@@ -165,22 +163,15 @@ class InputType:
         Dotted path of an array whose first element is -1 when the message holds
         no orientation (angular velocity), as sensor_msgs/Imu marks it in its
         covariances (REP 145).
-    notes : str
-        What else a user needs to know, for the documentation tables.
     topics : tuple of InputTopic
         Topics subscribed; one topic ``input`` for a plain type.
-    stream : callable, optional
-        ``stream(params, report) -> SampleStream`` for a type whose samples need
-        per-stream state (several topics, a buffer): called once per input
-        stream; ``report`` is a :data:`Report`. None for a plain type, which
-        reads one sample per message from the fields above.
-    parameters : tuple of str
-        ROS names of the parameters used only by this input type.
-    check_parameters : callable, optional
-        ``check(params)``: raises ParameterError when this type's parameters are
-        missing or inconsistent (called on every parameter change with this type).
-    drop_reasons : tuple of str
-        Reasons its stream reports, counted with the pipeline's dropped messages.
+    stream : str, optional
+        For a type whose samples need per-stream state (several topics, a
+        buffer): the name of the module of its stream, which defines
+        ``sample_stream(params, report) -> SampleStream`` (called once per input
+        stream; ``report`` is a :data:`Report`) and ``DROP_REASONS`` (the reasons
+        it reports). Named, not imported: that module imports this one. None for
+        a plain type, which reads one sample per message from the fields above.
 
     """
 
@@ -193,12 +184,8 @@ class InputType:
     covariance_indices: Tuple[int, ...] = tuple(range(9))
     orientation_unknown_field: Optional[str] = None
     angular_velocity_unknown_field: Optional[str] = None
-    notes: str = ''
     topics: Tuple[InputTopic, ...] = (INPUT_TOPIC,)
-    stream: Optional[Callable[[Any, Report], SampleStream]] = None
-    parameters: Tuple[str, ...] = ()
-    check_parameters: Optional[Callable[[Any], None]] = None
-    drop_reasons: Tuple[str, ...] = ()
+    stream: Optional[str] = None
 
     @property
     def message_class(self) -> type:
@@ -206,11 +193,9 @@ class InputType:
         return _message_class(self.type_name)
 
     @property
-    def angular_velocity_source(self) -> str:
-        """Where the angular velocity comes from, in words (for the documentation)."""
-        if self.angular_velocity_field is None:
-            return 'finite difference'
-        return f'`{self.angular_velocity_field}`'
+    def drop_reasons(self) -> Tuple[str, ...]:
+        """Return the reasons a stateful type's stream reports (counted as dropped messages)."""
+        return () if self.stream is None else importlib.import_module(self.stream).DROP_REASONS
 
     def sample_reader(self, *, angular_velocity: bool = True,
                       covariance: bool = False) -> Callable[[Any], Sample]:
@@ -270,7 +255,8 @@ class InputType:
 
         """
         if self.stream is not None:
-            return self.stream(params, report or _report_nothing)
+            return importlib.import_module(self.stream).sample_stream(
+                params, report or _report_nothing)
         read = self.sample_reader(angular_velocity=angular_velocity, covariance=covariance)
         return lambda topic, msg: (read(msg),)
 
@@ -301,28 +287,16 @@ _INPUT_LIST = (
               angular_velocity_field='angular_velocity',
               covariance_field='orientation_covariance',
               orientation_unknown_field='orientation_covariance',
-              angular_velocity_unknown_field='angular_velocity_covariance',
-              notes='orientation unknown when `orientation_covariance[0] == -1` or the '
-                    'quaternion is (0, 0, 0, 0); angular velocity by finite difference when '
-                    '`angular_velocity_covariance[0] == -1`'),
+              angular_velocity_unknown_field='angular_velocity_covariance'),
     InputType('odometry', 'nav_msgs/msg/Odometry', QUATERNION, 'pose.pose.orientation',
               angular_velocity_field='twist.twist.angular', covariance_field='pose.covariance',
               covariance_indices=_POSE_ROTATION_BLOCK),
     InputType('transform', 'geometry_msgs/msg/TransformStamped', QUATERNION,
               'transform.rotation'),
-    InputType('euler', 'geometry_msgs/msg/Vector3Stamped', EULER, 'vector',
-              notes='x, y, z = first, second, third angle of `euler.sequence` '
-                    '(degrees with `euler.degrees`)'),
-    InputType('rotation_vector', 'geometry_msgs/msg/Vector3Stamped', ROTATION_VECTOR, 'vector',
-              notes='axis times angle (rad)'),
+    InputType('euler', 'geometry_msgs/msg/Vector3Stamped', EULER, 'vector'),
+    InputType('rotation_vector', 'geometry_msgs/msg/Vector3Stamped', ROTATION_VECTOR, 'vector'),
     InputType('tf', 'tf2_msgs/msg/TFMessage', QUATERNION, 'transforms',
-              notes='subscribes `/tf` and `/tf_static`; the orientation of `tf.child_frame` in '
-                    '`tf.parent_frame` composed along the TF tree, as tf2 '
-                    '`lookupTransform(parent, child, Time(0))` gives it, stamped with that '
-                    'time ([docs/tf.md](docs/tf.md))',
-              topics=(TF_TOPIC, TF_STATIC_TOPIC), stream=tf_input.TfSampleStream,
-              parameters=('tf.parent_frame', 'tf.child_frame'),
-              check_parameters=tf_input.check_parameters, drop_reasons=tf_input.DROP_REASONS),
+              topics=(TF_TOPIC, TF_STATIC_TOPIC), stream='rotation_node.tf_input'),
 )
 
 INPUTS = {entry.name: entry for entry in _INPUT_LIST}
@@ -330,26 +304,6 @@ INPUTS = {entry.name: entry for entry in _INPUT_LIST}
 
 
 # Output messages -------------------------------------------------------------------
-
-
-class Panel(NamedTuple):
-    """
-    One panel of a ``rotation_bag plot`` figure.
-
-    Attributes
-    ----------
-    title, unit : str
-    labels : tuple of str
-        One per line drawn.
-    start : int
-        Index of the first number drawn in the message's numbers; ``len(labels)`` follow.
-
-    """
-
-    title: str
-    unit: str
-    labels: Tuple[str, ...]
-    start: int = 0
 
 
 @dataclass(frozen=True)
@@ -518,10 +472,6 @@ class OutputType:
         None to publish the one value needed as it is. Those of the outputs in
         :data:`rotation_node.block_pipeline.BLOCK_OUTPUTS` also take arrays of
         samples, one row each, and return one row of numbers per sample.
-    description : str
-        The published numbers in words, for the documentation tables.
-    panels : callable
-        ``panels(params) -> list of Panel``: how ``rotation_bag plot`` draws it.
 
     """
 
@@ -529,8 +479,6 @@ class OutputType:
     message: OutputMessage
     needs: Tuple[str, ...]
     compute: Optional[Callable[..., ArrayLike]]
-    description: str
-    panels: Callable[[Any], list]
 
     @property
     def type_name(self) -> str:
@@ -541,21 +489,6 @@ class OutputType:
     def message_class(self) -> type:
         """Return the rclpy message class of the output."""
         return self.message.message_class
-
-
-def _angle_unit(params):
-    return 'deg' if params.euler_degrees else 'rad'
-
-
-def _euler_panels(title, unit_suffix):
-    def panels(params):
-        from rotation_node.conversions import parse_sequence
-        kind = 'intrinsic' if parse_sequence(params.euler_sequence).intrinsic else 'extrinsic'
-        labels = tuple(f'{ordinal} ({letter})' for ordinal, letter
-                       in zip(('1st', '2nd', '3rd'), params.euler_sequence))
-        return [Panel(f'{title}, sequence {params.euler_sequence} ({kind})',
-                      _angle_unit(params) + unit_suffix, labels)]
-    return panels
 
 
 def _axis_angle(params, q):
@@ -581,100 +514,27 @@ def _euler_with_covariance(params, angles, covariance):
     return (*angles, *covariance.ravel().tolist())
 
 
-def _euler_covariance_panels(params):
-    unit = _angle_unit(params)
-    return [*_euler_panels('Euler angles', '')(params),
-            Panel(f'Euler angle covariance, sequence {params.euler_sequence}', unit + '^2',
-                  tuple(f'C{row}{col}' for row in (1, 2, 3) for col in (1, 2, 3)), 3)]
-
-
 def _quaternion_rate(params, q, omega):
     return kinematics.quaternion_derivative(q, omega, frame=params.angular_velocity_output_frame)
 
 
 _OUTPUT_LIST = (
-    OutputType(
-        'quaternion', QUATERNION_STAMPED, (OUTPUT_QUATERNION,), None,
-        'unit quaternion, w >= 0 (or sign-continuous over time with `quaternion.continuity`)',
-        lambda params: [Panel('Quaternion', '', _XYZW)]),
-    OutputType(
-        'euler', VECTOR3_STAMPED, (PUBLISHED_EULER,), None,
-        'x, y, z = first, second, third angle of `euler.sequence`; first and third in '
-        '(-pi, pi] (or unwrapped with `euler.unwrap`), the middle in [-pi/2, pi/2] '
-        '(Tait-Bryan) or [0, pi] (proper Euler); degrees with `euler.degrees`',
-        _euler_panels('Euler angles', '')),
-    OutputType(
-        'rotation_vector', VECTOR3_STAMPED, (ORIENTATION,),
-        lambda params, q: conversions.rotation_vector_from_quaternion(q),
-        'unit axis times angle in [0, pi] (rad)',
-        lambda params: [Panel('Rotation vector', 'rad', _XYZ)]),
-    OutputType(
-        'axis_angle', float64_multi_array([('axis_angle', 4, 4)]), (ORIENTATION,), _axis_angle,
-        '`[x, y, z, angle]`: unit axis and angle in [0, pi] (rad), axis (1, 0, 0) for the '
-        'identity; one layout dimension `axis_angle` (size 4); no header',
-        lambda params: [Panel('Rotation axis', '', _XYZ),
-                        Panel('Rotation angle', 'rad', ('angle',), 3)]),
-    OutputType(
-        'matrix', float64_multi_array([('rows', 3, 9), ('cols', 3, 3)]), (ORIENTATION,),
-        _matrix,
-        'the rotation matrix (body to world) row-major; layout dimensions `rows` (size 3, '
-        'stride 9) and `cols` (size 3, stride 3); no header',
-        lambda params: [Panel('Rotation matrix (body to world)', '',
-                              tuple(f'R{row}{col}' for row in (1, 2, 3) for col in (1, 2, 3)))]),
-    OutputType(
-        'angular_velocity', VECTOR3_STAMPED, (ANGULAR_VELOCITY,), None,
-        'rad/s in `angular_velocity.output_frame`',
-        lambda params: [Panel(f'Angular velocity ({params.angular_velocity_output_frame} '
-                              'frame)', 'rad/s', _XYZ)]),
-    OutputType(
-        'euler_rates', VECTOR3_STAMPED, (EULER_RATES,), None,
-        'time derivatives of the three Euler angles (rad/s, or deg/s with `euler.degrees`)',
-        _euler_panels('Euler angle rates', '/s')),
-    OutputType(
-        'quaternion_rate', QUATERNION_STAMPED, (OUTPUT_QUATERNION, ANGULAR_VELOCITY),
-        _quaternion_rate, 'dq/dt (1/s) of the published quaternion',
-        lambda params: [Panel('Quaternion rate', '1/s', _XYZW)]),
-    OutputType(
-        'euler_stddev', VECTOR3_STAMPED, (EULER_COVARIANCE,), _euler_stddev,
-        'one standard deviation of each angle of `euler.sequence` (first order, from the '
-        "input's orientation covariance about `covariance.frame` axes; degrees with "
-        '`euler.degrees`); inputs with a covariance only',
-        _euler_panels('Euler angle standard deviations', '')),
-    OutputType(
-        'euler_covariance', VECTOR3_WITH_COVARIANCE, (PUBLISHED_EULER, EULER_COVARIANCE),
-        _euler_with_covariance,
-        '`sensor_msgs/MagneticField` used as a stamped vector with covariance: '
-        '`magnetic_field` = the Euler angles (as `euler`), `magnetic_field_covariance` = their '
-        '3 x 3 covariance, row-major (rad^2, or deg^2 with `euler.degrees`); inputs with a '
-        'covariance only',
-        _euler_covariance_panels),
+    OutputType('quaternion', QUATERNION_STAMPED, (OUTPUT_QUATERNION,), None),
+    OutputType('euler', VECTOR3_STAMPED, (PUBLISHED_EULER,), None),
+    OutputType('rotation_vector', VECTOR3_STAMPED, (ORIENTATION,),
+               lambda params, q: conversions.rotation_vector_from_quaternion(q)),
+    OutputType('axis_angle', float64_multi_array([('axis_angle', 4, 4)]), (ORIENTATION,),
+               _axis_angle),
+    OutputType('matrix', float64_multi_array([('rows', 3, 9), ('cols', 3, 3)]), (ORIENTATION,),
+               _matrix),
+    OutputType('angular_velocity', VECTOR3_STAMPED, (ANGULAR_VELOCITY,), None),
+    OutputType('euler_rates', VECTOR3_STAMPED, (EULER_RATES,), None),
+    OutputType('quaternion_rate', QUATERNION_STAMPED, (OUTPUT_QUATERNION, ANGULAR_VELOCITY),
+               _quaternion_rate),
+    OutputType('euler_stddev', VECTOR3_STAMPED, (EULER_COVARIANCE,), _euler_stddev),
+    OutputType('euler_covariance', VECTOR3_WITH_COVARIANCE, (PUBLISHED_EULER, EULER_COVARIANCE),
+               _euler_with_covariance),
 )
 
 OUTPUTS = {entry.name: entry for entry in _OUTPUT_LIST}
 """The output types by name, in documentation order."""
-
-
-def input_panels(input_type: InputType, params: Any) -> list:
-    """
-    Return how ``rotation_bag plot`` draws a topic of a plain input type.
-
-    The numbers drawn are :func:`sample_numbers` of each message's sample.
-    """
-    if input_type.orientation_form == QUATERNION:
-        panels = [Panel('Orientation quaternion', '', _XYZW)]
-    elif input_type.orientation_form == EULER:
-        panels = _euler_panels('Euler angles', '')(params)
-    else:
-        panels = [Panel('Rotation vector', 'rad', _XYZ)]
-    if input_type.angular_velocity_field is not None:
-        panels.append(Panel('Angular velocity', 'rad/s', _XYZ, len(panels[0].labels)))
-    return panels
-
-
-def sample_numbers(input_type: InputType, sample: Sample) -> Tuple[float, ...]:
-    """Return the orientation, then any angular velocity, of a sample (NaN where unknown)."""
-    width = 4 if input_type.orientation_form == QUATERNION else 3
-    numbers = sample.orientation or (math.nan,) * width
-    if input_type.angular_velocity_field is not None:
-        numbers = (*numbers, *(sample.angular_velocity or (math.nan,) * 3))
-    return numbers
