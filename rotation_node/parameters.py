@@ -4,12 +4,51 @@ Parameters of the orientation-conversion node, in one table.
 Every parameter is a field of :class:`NodeParameters`; its ROS name, default,
 description and allowed values live in that field's :class:`ParameterSpec`, and
 :data:`PARAMETERS` lists them in declaration order. The node declares its ROS
-parameters from this table, and :func:`parameters_from_yaml` reads the same
-parameters from a ROS parameters file for ``rotation_bag convert``, so the live
-node and the offline conversion accept exactly the same values.
+parameters from this table (``declare_parameters`` with a ``ParameterDescriptor``
+each: description, constraints, ranges; on-set and post-set callbacks check and
+apply a change), and :func:`parameters_from_yaml` reads the same parameters from
+a ROS parameters file for ``rotation_bag convert``, so the live node and the
+offline conversion accept exactly the same values. This module does not import
+rclpy.
 
 Values are typed as ROS types them: a double parameter needs a float (``0.0``,
-not ``0``), a string array a list of strings. This module does not import rclpy.
+not ``0``), a string array a list of strings.
+
+Where rcl and rclpy differ
+--------------------------
+A node reads its ``--params-file`` through rcl (``rcl_yaml_param_parser``);
+rclpy's ``rclpy.parameter.parameter_dict_from_yaml_file`` reads the same file
+otherwise. The files are read here as rcl reads them, so that ``convert`` and
+the node accept the same files; these are the differences, each kept here and
+in :mod:`rotation_node.ros_yaml` for that reason alone:
+
+1. Plain scalars are typed by rcl's ``get_value`` (``rcl_yaml_param_parser/src/
+   parse.c``: the yes/no/on/off booleans, ``strtol`` base 0, then ``strtod``),
+   not by PyYAML's YAML 1.1 resolvers that rclpy's ``yaml.safe_load`` uses: ``1e3``,
+   ``1.0e3`` and ``0x1p-3`` are doubles (rclpy: strings), ``1_000`` is a string
+   (rclpy: 1000); a number beyond the double range is a string
+   (:func:`rotation_node.ros_yaml.ros_scalar`).
+2. Aliases are refused (rcl ``parser.c``: an alias event is an error; rclpy
+   expands them), and a key given twice is an error (rclpy keeps the last).
+3. Node keys: rcl nests namespace keys (``robot: {rotation_node: {ros__parameters:
+   ...}}`` is ``/robot/rotation_node``, ``parser.c``/``namespace.c``) and checks
+   the names; the node applies sections whose key matches it with the wildcards
+   ``*`` (one token) and ``**`` (any tokens), in file order (rclcpp
+   ``parameter_map.cpp``; rclpy's ``node.cpp`` likewise). rclpy's function matches
+   keys exactly and ``/**`` only (:func:`parameters_file_sections`,
+   :func:`_node_key_matches`).
+4. Values: rcl refuses a parameter without a value (``null``) and a list mixing
+   types or holding mappings (``parse.c``); rclpy turns either into a string
+   (:func:`_value_problem`).
+5. Naming: errors name the file (or, for the temporary file launch_ros writes,
+   :data:`LAUNCH_PARAMETERS`), the section and the parameter; rcl names none
+   (:func:`parameters_file_label`).
+
+At run time rclpy checks each declared parameter of a ``set_parameters`` request
+on its own; the rules between parameters (``input_type: tf`` needs both
+``tf.*`` frames, ``mounting.tf_*`` both or neither) are checked by the node once
+a whole request is in (:meth:`NodeParameters.check_each`,
+:func:`mounting_frames_problem`).
 """
 from __future__ import annotations
 
@@ -27,8 +66,8 @@ from rotation_node.frames import BODY_FRAMES, WORLD_FRAMES
 from rotation_node.mounting import IDENTITY, quaternion_from_rotation_values
 from rotation_node.ros_yaml import load_ros_yaml
 from rotation_node.validation import (
-    Boolean, check_fields, checked_values, Choice, ChoiceList, Declaration, declarations,
-    did_you_mean, Integer, Real, Reals, Text, Where)
+    Boolean, check_fields_in_place, checked_arguments, Choice, ChoiceList, did_you_mean,
+    field_specs, FieldSpec, Integer, KeyPath, Real, Reals, Text)
 
 if TYPE_CHECKING:
     from rotation_node.type_aliases import StrPath
@@ -50,11 +89,11 @@ ROS_BUILTIN_PARAMETERS = frozenset({'use_sim_time', 'start_type_description_serv
 
 
 @dataclass(frozen=True, kw_only=True)
-class ParameterSpec(Declaration):
+class ParameterSpec(FieldSpec):
     """
     One node parameter: ROS name, default, description and allowed values.
 
-    A :class:`~rotation_node.validation.Declaration` whose ``name`` is the ROS
+    A :class:`~rotation_node.validation.FieldSpec` whose ``name`` is the ROS
     name and whose ``kind`` gives the type and allowed values.
 
     Attributes
@@ -65,8 +104,8 @@ class ParameterSpec(Declaration):
         Default value; its Python type is the parameter's type (a tuple of str
         is a ROS string array).
     description : str
-        One-line description, shown by ``ros2 param describe``.
-    kind : rotation_node.validation.Kind
+        One-line description, short_repr by ``ros2 param describe``.
+    kind : rotation_node.validation.ValueKind
         Type and allowed values (choices, bounds).
     check : callable, optional
         Further check ``check(value, where)`` of a value of the right kind.
@@ -102,18 +141,18 @@ class ParameterSpec(Declaration):
         return self.kind.constraints or self.rule
 
 
-_PARAMETER = Where(error_type=ParameterError, template="parameter '{}'")
+_PARAMETER = KeyPath(error_type=ParameterError, template="parameter '{}'")
 """How errors name a parameter: ``parameter 'qos.depth': ...``."""
 
 
-def _frame_name(value: str, where: Where) -> str:
+def _frame_name(value: str, where: KeyPath) -> str:
     if value.startswith('/'):
         raise where.error(f"{value!r} starts with '/'; TF frame names do not "
                           f'(write {value.lstrip("/")!r})')
     return value
 
 
-def _rotation(value: tuple, where: Where) -> tuple:
+def _rotation(value: tuple, where: KeyPath) -> tuple:
     """Check: [x, y, z, w] of unit norm, or [roll, pitch, yaw] in degrees."""
     try:
         quaternion_from_rotation_values(value)
@@ -225,11 +264,11 @@ class NodeParameters:
         'mounting.body_rotation', IDENTITY,
         "M in R' = W R M: the output body frame's orientation in the input's body frame "
         '(e.g. base_link in imu_link); applied to orientation, angular velocity and covariance',
-        Reals((3, 4), integers=False), check=_rotation, rule=_ROTATION_RULE)
+        Reals((3, 4)), check=_rotation, rule=_ROTATION_RULE)
     mounting_world_rotation: tuple = _parameter(
         'mounting.world_rotation', IDENTITY,
         "W in R' = W R M: the input world frame's orientation in the output world frame",
-        Reals((3, 4), integers=False), check=_rotation, rule=_ROTATION_RULE)
+        Reals((3, 4)), check=_rotation, rule=_ROTATION_RULE)
     mounting_yaw_offset: float = _parameter(
         'mounting.yaw_offset', 0.0,
         "Added to the yaw (rad), as robot_localization's yaw_offset: W = Rz(yaw_offset + "
@@ -277,7 +316,7 @@ class NodeParameters:
 
     def __post_init__(self) -> None:
         """Check every value, then the input type's own parameters; string arrays as tuples."""
-        check_fields(self, _PARAMETER)
+        check_fields_in_place(self, _PARAMETER)
         _check_mounting_frames(self)
         if self.input_type == 'tf':
             _check_tf_frames(self)
@@ -297,7 +336,7 @@ class NodeParameters:
             A name is not a parameter of the node, or a value is invalid.
 
         """
-        return replace(self, **checked_values(type(self), values, _PARAMETER,
+        return replace(self, **checked_arguments(type(self), values, _PARAMETER,
                                               unknown=unknown_parameter_error))
 
     @classmethod
@@ -315,7 +354,7 @@ class NodeParameters:
             A name is not a parameter of the node, or a value is invalid.
 
         """
-        checked_values(cls, values, _PARAMETER, unknown=unknown_parameter_error)
+        checked_arguments(cls, values, _PARAMETER, unknown=unknown_parameter_error)
 
     def to_ros(self) -> dict:
         """Return ``{ROS name: value}``, string arrays as lists (what rclpy expects)."""
@@ -365,7 +404,7 @@ def _check_tf_frames(params: NodeParameters) -> None:
                              f'{params.tf_parent_frame!r}; name two different frames')
 
 
-PARAMETERS = cast(Tuple[ParameterSpec, ...], declarations(NodeParameters))
+PARAMETERS = cast(Tuple[ParameterSpec, ...], field_specs(NodeParameters))
 """The parameter table: one :class:`ParameterSpec` per :class:`NodeParameters` field."""
 
 PARAMETERS_BY_NAME = {spec.name: spec for spec in PARAMETERS}

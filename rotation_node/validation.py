@@ -1,20 +1,21 @@
 """
-The one validation helper of node parameters and scene files.
+The checks of node parameters and scene files: dataclass fields of a kind of value.
 
-A dataclass declares each field with :func:`declare`: the field's :class:`Kind`
-(a boolean, an integer or a real number within bounds, a string, one of some
-choices, a list of choices, a fixed-size vector, one of several dataclasses
-chosen by a tag, named sections...) and, where the domain asks for more (a
-unit quaternion, a frame name without a leading /), a further check. :func:`checked_values`
-then checks a mapping (a parsed YAML file, ROS parameters) against those
-declarations: unknown keys first, with the nearest valid name (``difflib``),
-then missing required keys, then each value by its kind, so a misspelt key
-reads as what it is.
+A dataclass made of :func:`checked_field` fields says, per field, its kind of
+value (:class:`Boolean`, :class:`Integer`, :class:`Real`, :class:`Text`,
+:class:`Choice`, :class:`ChoiceList`, :class:`Vector`, :class:`Reals`; for
+scenes also a dataclass: :class:`DataclassByTag`, :class:`DataclassesByName`,
+:class:`NestedDataclass`) and, where the domain asks for more (a unit
+quaternion, a frame name without a leading /), a further check.
+:func:`checked_arguments` checks a mapping (a parsed YAML file, ROS parameters)
+against those fields: unknown keys first, with the nearest valid name
+(``difflib``), then missing required keys, then each value by its kind, so a
+misspelt key reads as what it is.
 
-Each problem raises the error type of a :class:`Where`, and its message starts
-with the value's path as the :class:`Where` names it (``motion.half_angle``,
-``parameter 'qos.depth'``). Values are described by type and a bounded repr: a
-megabyte-long string is not copied into a log line.
+Each problem raises the error type of a :class:`KeyPath`, and its message
+starts with the value's path as the :class:`KeyPath` names it
+(``motion.half_angle``, ``parameter 'qos.depth'``). Values are shown by type
+and a bounded repr: a megabyte-long string is not copied into a log line.
 """
 from __future__ import annotations
 
@@ -23,20 +24,21 @@ import dataclasses
 import difflib
 import math
 import re
-from typing import Any, Callable, ClassVar, Iterable, Optional
+from typing import Any, Callable, Iterable, Optional
 
 _MAX_REPR = 80
+_FIELD_SPEC = 'rotation_node.validation'   # the dataclass field metadata key
 
 
 # --- wording ------------------------------------------------------------------
 
-def shown(value: Any) -> str:
+def short_repr(value: Any) -> str:
     """
     Return the repr of a value, cut to a readable length.
 
     Examples
     --------
-    >>> shown('x' * 100)[:10]
+    >>> short_repr('x' * 100)[:10]
     "'xxxxxxxxx"
 
     """
@@ -47,17 +49,17 @@ def shown(value: Any) -> str:
     return text
 
 
-def describe_value(value: Any) -> str:
+def type_and_repr(value: Any) -> str:
     """
     Return ``'<type> <repr>'`` of a value, the repr cut to a readable length.
 
     Examples
     --------
-    >>> describe_value('x' * 100)[:12]
+    >>> type_and_repr('x' * 100)[:12]
     "str 'xxxxxxx"
 
     """
-    return f'{type(value).__name__} {shown(value)}'
+    return f'{type(value).__name__} {short_repr(value)}'
 
 
 def nearest_name(name: Any, names: Iterable[str]) -> str:
@@ -73,15 +75,15 @@ def did_you_mean(name: Any, names: Iterable[str]) -> str:
 
 
 @dataclasses.dataclass(frozen=True)
-class Where:
+class KeyPath:
     """
-    Where a value sits: how error messages name it, and the error they raise.
+    The path of a value in its document, and the errors that name it.
 
     Attributes
     ----------
     path : str
-        Key path from the top of the document: ``'motion.orientation[2]'``;
-        ``''`` is the top.
+        Keys from the top of the document: ``'motion.orientation[2]'``; ``''``
+        is the top.
     error_type : type of ValueError
         The error :meth:`error` returns.
     template : str
@@ -94,147 +96,113 @@ class Where:
     error_type: type[ValueError] = ValueError
     template: str = '{}'
 
-    @property
-    def label(self) -> str:
-        """Return the name of the value in messages."""
-        return self.template.format(self.path)
-
-    def key(self, key: Any) -> 'Where':
-        """Return where the value of ``key`` of this mapping sits."""
+    def key(self, key: Any) -> 'KeyPath':
+        """Return the path of the value of ``key`` of this mapping."""
         return dataclasses.replace(self, path=f'{self.path}.{key}' if self.path else str(key))
 
-    def index(self, index: int) -> 'Where':
-        """Return where the item ``index`` of this list sits."""
+    def index(self, index: int) -> 'KeyPath':
+        """Return the path of the item ``index`` of this list."""
         return dataclasses.replace(self, path=f'{self.path}[{index}]')
 
     def error(self, problem: str) -> ValueError:
-        """Return the error ``'<label>: <problem>'`` (to raise)."""
-        return self.error_type(f'{self.label}: {problem}')
+        """Return the error ``'<path as the template names it>: <problem>'`` (to raise)."""
+        return self.error_type(f'{self.template.format(self.path)}: {problem}')
 
     def type_error(self, expected: str, value: Any) -> ValueError:
-        """Return the error ``'<label>: expected <expected>, got <type> <repr>'``."""
-        return self.error(f'expected {expected}, got {describe_value(value)}')
+        """Return the error ``'<path>: expected <expected>, got <type> <repr>'``."""
+        return self.error(f'expected {expected}, got {type_and_repr(value)}')
 
 
 # --- kinds of value -----------------------------------------------------------
 
-class Kind:
+class ValueKind:
     """
-    A kind of value: how a value of it is checked, and its constraints in words.
+    A kind of value: :meth:`checked` returns a value of it in its stored form.
 
-    Subclasses define :meth:`checked`. A kind with a range has ``bounds``,
-    one of strings ``choices`` (what a ROS parameter descriptor can carry).
+    ``constraints`` says the allowed values in words (for the parameter table);
+    a number kind has ``bounds``, a string kind ``choices`` (what a ROS
+    parameter descriptor carries).
     """
 
-    def checked(self, value: Any, where: Where) -> Any:
+    constraints = ''
+
+    def checked(self, value: Any, where: KeyPath) -> Any:
         """Return ``value`` in its stored form, or raise ``where``'s error naming the problem."""
         raise NotImplementedError
 
-    @property
-    def constraints(self) -> str:
-        """Return the allowed values in words beyond the type ('' if the type says all)."""
-        return ''
-
 
 @dataclasses.dataclass(frozen=True)
-class Boolean(Kind):
+class Boolean(ValueKind):
     """``true`` or ``false``; no number or string stands for one."""
 
-    def checked(self, value: Any, where: Where) -> bool:
+    def checked(self, value: Any, where: KeyPath) -> bool:
         """Return ``value`` if it is a bool."""
         if not isinstance(value, bool):
             raise where.type_error('a boolean', value)
         return value
 
 
-def _range_words(minimum: Optional[float], maximum: Optional[float], positive: bool) -> str:
-    if positive:
-        return '> 0'
-    if minimum is not None and maximum is not None:
-        return f'from {minimum:g} to {maximum:g}'
-    if minimum is not None:
-        return f'>= {minimum:g}'
-    return '' if maximum is None else f'<= {maximum:g}'
-
-
-def _in_range(number: Any, minimum: Any, maximum: Any, positive: bool, where: Where) -> Any:
-    """Return ``number`` if it is within the bounds, else raise ``where``'s error."""
-    if (positive and not number > 0 or minimum is not None and number < minimum
-            or maximum is not None and number > maximum):
-        raise where.error(f'must be {_range_words(minimum, maximum, positive)}, '
-                          f'got {shown(number)}')
-    return number
-
-
-def _bounds(minimum: Any, maximum: Any) -> Optional[tuple]:
-    return None if minimum is None or maximum is None else (minimum, maximum)
-
-
 @dataclasses.dataclass(frozen=True)
-class Integer(Kind):
-    """
-    An integer in ``[minimum, maximum]`` (either bound optional).
-
-    ``3.0`` and ``true`` are not integers.
-    """
-
-    minimum: Optional[int] = None
-    maximum: Optional[int] = None
-
-    @property
-    def bounds(self) -> Optional[tuple]:
-        """Return ``(minimum, maximum)`` when both are set, else None."""
-        return _bounds(self.minimum, self.maximum)
-
-    @property
-    def constraints(self) -> str:
-        """Return the range in words."""
-        return _range_words(self.minimum, self.maximum, False)
-
-    def checked(self, value: Any, where: Where) -> int:
-        """Return ``value`` if it is an int within the bounds."""
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise where.type_error('an integer', value)
-        return _in_range(value, self.minimum, self.maximum, False, where)
-
-
-@dataclasses.dataclass(frozen=True)
-class Real(Kind):
-    """
-    A finite real number in ``[minimum, maximum]`` (either bound optional), stored as float.
-
-    Attributes
-    ----------
-    minimum, maximum : float, optional
-        Inclusive bounds.
-    positive : bool
-        The number must be > 0 (then without ``minimum``).
-    integers : bool
-        An integer stands for the real number (``rate: 100``), as in scene
-        files. A ROS double parameter takes no integer (``0`` is refused where
-        ``0.0`` is meant): ``integers=False``. A bool is never a number.
-
-    """
+class _Range(ValueKind):
+    """A number in ``[minimum, maximum]`` (either bound optional), or > 0 with ``positive``."""
 
     minimum: Optional[float] = None
     maximum: Optional[float] = None
-    positive: bool = False
-    integers: bool = True
+    positive: bool = dataclasses.field(default=False, kw_only=True)
 
     @property
     def bounds(self) -> Optional[tuple]:
         """Return ``(minimum, maximum)`` when both are set, else None."""
-        return _bounds(self.minimum, self.maximum)
+        return None if self.minimum is None or self.maximum is None \
+            else (self.minimum, self.maximum)
 
     @property
-    def constraints(self) -> str:
+    def constraints(self) -> str:  # type: ignore[override]
         """Return the range in words."""
-        return _range_words(self.minimum, self.maximum, self.positive)
+        low, high = self.minimum, self.maximum
+        if self.positive:
+            return '> 0'
+        if low is not None and high is not None:
+            return f'from {low:g} to {high:g}'
+        if low is not None:
+            return f'>= {low:g}'
+        return '' if high is None else f'<= {high:g}'
 
-    def checked(self, value: Any, where: Where) -> float:
+    def _in_range(self, number: Any, where: KeyPath) -> Any:
+        if (self.positive and not number > 0
+                or self.minimum is not None and number < self.minimum
+                or self.maximum is not None and number > self.maximum):
+            raise where.error(f'must be {self.constraints}, got {short_repr(number)}')
+        return number
+
+
+@dataclasses.dataclass(frozen=True)
+class Integer(_Range):
+    """An integer in ``[minimum, maximum]``; ``3.0`` and ``true`` are not integers."""
+
+    def checked(self, value: Any, where: KeyPath) -> int:
+        """Return ``value`` if it is an int within the bounds."""
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise where.type_error('an integer', value)
+        return self._in_range(value, where)
+
+
+@dataclasses.dataclass(frozen=True)
+class Real(_Range):
+    """
+    A finite real number in ``[minimum, maximum]``, stored as float.
+
+    ``integers``: an integer stands for the real number (``rate: 100``), as in
+    scene files. A ROS double parameter takes no integer (``0`` is refused
+    where ``0.0`` is meant): ``integers=False``. A bool is never a number.
+    """
+
+    integers: bool = dataclasses.field(default=True, kw_only=True)
+
+    def checked(self, value: Any, where: KeyPath) -> float:
         """Return ``value`` as a float if it is a finite number within the bounds."""
-        if isinstance(value, bool) or not isinstance(value, (int, float) if self.integers
-                                                     else float):
+        if isinstance(value, bool) or not isinstance(
+                value, (int, float) if self.integers else float):
             raise where.type_error('a number' if self.integers else
                                    'a floating-point number (write 0.0, not 0)', value)
         try:
@@ -242,32 +210,25 @@ class Real(Kind):
         except OverflowError:   # an integer beyond the float range
             number = math.inf
         if not math.isfinite(number):
-            raise where.error(f'must be finite, got {shown(value)}')
-        return _in_range(number, self.minimum, self.maximum, self.positive, where)
+            raise where.error(f'must be finite, got {short_repr(value)}')
+        return self._in_range(number, where)
 
 
 @dataclasses.dataclass(frozen=True)
-class Text(Kind):
+class Text(ValueKind):
     """
     A string: any, one matching ``pattern``, or one ``parser`` accepts.
 
-    Attributes
-    ----------
-    noun : str
-        What the string is, in messages: ``'an absolute topic name such as /imu'``.
-    pattern : re.Pattern, optional
-        The whole string must match it.
-    parser : callable, optional
-        ``parser(value)`` raises ValueError, saying why, for a string that is
-        not valid (e.g. :func:`rotation_node.conversions.parse_sequence`).
-
+    ``noun`` says what the string is in messages (``'an absolute topic name
+    such as /imu'``); ``parser(value)`` raises ValueError, saying why, for a
+    string that is not valid (e.g. :func:`rotation_node.conversions.parse_sequence`).
     """
 
     noun: str = 'a string'
     pattern: Optional[re.Pattern] = None
     parser: Optional[Callable[[str], Any]] = None
 
-    def checked(self, value: Any, where: Where) -> str:
+    def checked(self, value: Any, where: KeyPath) -> str:
         """Return ``value`` if it is a string that matches and parses."""
         if not isinstance(value, str) or self.pattern and not self.pattern.fullmatch(value):
             raise where.type_error(self.noun, value)
@@ -275,26 +236,26 @@ class Text(Kind):
             try:
                 self.parser(value)
             except ValueError as exc:
-                raise where.error(f'{shown(value)} is not {self.noun} ({exc})') from None
+                raise where.error(f'{short_repr(value)} is not {self.noun} ({exc})') from None
         return value
 
 
-def _not_allowed(item: Any, choices: tuple, words: str, where: Where) -> ValueError:
-    return where.error(f'{shown(item)} is not allowed{did_you_mean(item, choices)}; {words}')
+def _not_allowed(item: Any, choices: tuple, words: str, where: KeyPath) -> ValueError:
+    return where.error(f'{short_repr(item)} is not allowed{did_you_mean(item, choices)}; {words}')
 
 
 @dataclasses.dataclass(frozen=True)
-class Choice(Kind):
+class Choice(ValueKind):
     """One string of ``choices``."""
 
     choices: tuple = ()
 
     @property
-    def constraints(self) -> str:
+    def constraints(self) -> str:  # type: ignore[override]
         """Return ``'one of: a, b'``."""
         return f'one of: {", ".join(self.choices)}'
 
-    def checked(self, value: Any, where: Where) -> str:
+    def checked(self, value: Any, where: KeyPath) -> str:
         """Return ``value`` if it is one of the choices."""
         if not isinstance(value, str):
             raise where.type_error('a string', value)
@@ -304,7 +265,7 @@ class Choice(Kind):
 
 
 @dataclasses.dataclass(frozen=True)
-class ChoiceList(Kind):
+class ChoiceList(ValueKind):
     """
     A non-empty list of distinct strings of ``choices``, stored as a tuple in the given order.
 
@@ -317,11 +278,11 @@ class ChoiceList(Kind):
     item: str = 'entry'
 
     @property
-    def constraints(self) -> str:
+    def constraints(self) -> str:  # type: ignore[override]
         """Return ``'each one of: a, b'``."""
         return f'each one of: {", ".join(self.choices)}'
 
-    def checked(self, value: Any, where: Where) -> tuple:
+    def checked(self, value: Any, where: KeyPath) -> tuple:
         """Return ``value`` as a tuple if it is a list of distinct choices."""
         if value is None:
             value = ()
@@ -343,12 +304,12 @@ _NUMBER = Real()
 
 
 @dataclasses.dataclass(frozen=True)
-class Vector(Kind):
-    """A list of ``size`` finite numbers, stored as a tuple of float."""
+class Vector(ValueKind):
+    """A list of ``size`` finite numbers (integers allowed), stored as a tuple of float."""
 
     size: int
 
-    def checked(self, value: Any, where: Where) -> tuple:
+    def checked(self, value: Any, where: KeyPath) -> tuple:
         """Return ``value`` as a tuple of float if it is a list of ``size`` finite numbers."""
         if not isinstance(value, (list, tuple)) or len(value) != self.size:
             raise where.type_error(f'a list of {self.size} numbers', value)
@@ -356,19 +317,18 @@ class Vector(Kind):
 
 
 @dataclasses.dataclass(frozen=True)
-class Reals(Kind):
+class Reals(ValueKind):
     """
-    A list of finite real numbers, as many as one of ``sizes``, stored as a tuple of float.
+    A ROS double array: floats, as many as one of ``sizes``, stored as a tuple.
 
-    ``integers=False``: each must be a float, as in a ROS double array.
+    Any sequence but a string or a mapping (rclpy gives an ``array.array``).
     """
 
     sizes: tuple = (3,)
-    integers: bool = True
 
-    def checked(self, value: Any, where: Where) -> tuple:
-        """Return ``value`` as a tuple of float if it is a list of finite numbers of a size."""
-        number = Real(integers=self.integers)
+    def checked(self, value: Any, where: KeyPath) -> tuple:
+        """Return ``value`` as a tuple of float if it is a list of finite floats of a size."""
+        number = Real(integers=False)
         expected = f'a list of {" or ".join(map(str, self.sizes))} numbers'
         if isinstance(value, (str, bytes, dict)) or not isinstance(value, Iterable):
             raise where.type_error(expected, value)
@@ -379,46 +339,45 @@ class Reals(Kind):
 
 
 @dataclasses.dataclass(frozen=True)
-class Tagged(Kind):
+class DataclassByTag(ValueKind):
     """
-    A mapping that is one of several dataclasses, chosen by the value of its key ``tag``.
+    A mapping that is one of several dataclasses, chosen by the value of its key ``type``.
 
-    ``classes`` maps each tag value to its dataclass; ``noun`` names them in
-    messages (``unknown motion 'wobble'``).
+    ``classes`` maps each ``type`` value to its dataclass; ``noun`` names them
+    in messages (``unknown motion 'wobble'``).
     """
 
     classes: Mapping[str, type]
     noun: str
-    tag: str = 'type'
 
-    def checked(self, value: Any, where: Where) -> Any:
+    def checked(self, value: Any, where: KeyPath) -> Any:
         """Return the dataclass the mapping ``value`` describes."""
         if not isinstance(value, dict):
-            raise where.type_error(f'a mapping with a {self.tag}', value)
+            raise where.type_error('a mapping with a type', value)
         expected = f'expected one of {", ".join(self.classes)}'
-        if self.tag not in value:
-            raise where.key(self.tag).error(f'missing; {expected}')
-        name = value[self.tag]
+        if 'type' not in value:
+            raise where.key('type').error(f'missing; {expected}')
+        name = value['type']
         if not isinstance(name, str) or name not in self.classes:
-            raise where.key(self.tag).error(
-                f'unknown {self.noun} {shown(name)}{did_you_mean(name, self.classes)}; '
+            raise where.key('type').error(
+                f'unknown {self.noun} {short_repr(name)}{did_you_mean(name, self.classes)}; '
                 f'{expected}')
-        return built(self.classes[name], value, where, skip=(self.tag,))
+        return dataclass_from_mapping(self.classes[name], value, where, skip=('type',))
 
 
 @dataclasses.dataclass(frozen=True)
-class Sections(Kind):
+class DataclassesByName(ValueKind):
     """
     A mapping of names of ``classes`` to mappings of their dataclass; stored as a dict.
 
-    A missing value (``None``) is no section; ``noun`` names a section in
+    A missing value (``None``) is no entry; ``noun`` names an entry in
     messages (``unknown effect``).
     """
 
     classes: Mapping[str, type]
     noun: str
 
-    def checked(self, value: Any, where: Where) -> dict:
+    def checked(self, value: Any, where: KeyPath) -> dict:
         """Return ``{name: dataclass}`` for the mapping ``value``."""
         if value is None:
             return {}
@@ -429,33 +388,33 @@ class Sections(Kind):
                 raise where.key(name).error(
                     f'unknown {self.noun}{did_you_mean(name, self.classes)}; '
                     f'expected one of {", ".join(self.classes)}')
-        return {name: built(self.classes[name], fields, where.key(name))
+        return {name: dataclass_from_mapping(self.classes[name], fields, where.key(name))
                 for name, fields in value.items()}
 
 
 @dataclasses.dataclass(frozen=True)
-class Section(Kind):
-    """A mapping that is one dataclass ``cls``, its keys checked as :func:`built` checks them."""
+class NestedDataclass(ValueKind):
+    """A mapping that is the dataclass ``cls`` (:func:`dataclass_from_mapping`)."""
 
     cls: type
 
-    def checked(self, value: Any, where: Where) -> Any:
+    def checked(self, value: Any, where: KeyPath) -> Any:
         """Return the dataclass the mapping ``value`` describes."""
         if not isinstance(value, dict):
             raise where.type_error('a mapping', value)
-        return built(self.cls, value, where)
+        return dataclass_from_mapping(self.cls, value, where)
 
 
-# --- declared fields ----------------------------------------------------------
+# --- checked fields -----------------------------------------------------------
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
-class Declaration:
+class FieldSpec:
     """
-    What a dataclass field accepts: its kind and a further check.
+    What a dataclass field accepts: its kind of value and a further check.
 
     Attributes
     ----------
-    kind : Kind
+    kind : ValueKind
         The kind of value.
     check : callable, optional
         ``check(value, where)`` of a value of the right kind: returns the value
@@ -464,35 +423,33 @@ class Declaration:
     name : str
         The field's key in a mapping; the attribute name unless set.
     attribute : str
-        The dataclass attribute (set by :func:`declarations`).
+        The dataclass attribute (set by :func:`field_specs`).
     required : bool
-        The field has no default (set by :func:`declarations`).
+        The field has no default (set by :func:`field_specs`).
 
     """
 
-    _METADATA: ClassVar[str] = 'rotation_node.validation'
-
-    kind: Kind
-    check: Optional[Callable[[Any, Where], Any]] = None
+    kind: ValueKind
+    check: Optional[Callable[[Any, KeyPath], Any]] = None
     name: str = ''
     attribute: str = ''
     required: bool = False
 
-    def checked(self, value: Any, where: Where) -> Any:
+    def checked(self, value: Any, where: KeyPath) -> Any:
         """Return the value to store, checked by the kind and then by ``check``."""
         value = self.kind.checked(value, where)
         return value if self.check is None else self.check(value, where)
 
     def field(self, default: Any = dataclasses.MISSING,
               default_factory: Any = dataclasses.MISSING) -> Any:
-        """Return the ``dataclasses.field`` that carries this declaration."""
+        """Return the ``dataclasses.field`` that carries this spec."""
         return dataclasses.field(default=default, default_factory=default_factory,
-                                 metadata={self._METADATA: self})
+                                 metadata={_FIELD_SPEC: self})
 
 
-def declare(kind: Kind, default: Any = dataclasses.MISSING, *,
-            check: Optional[Callable[[Any, Where], Any]] = None,
-            default_factory: Any = dataclasses.MISSING) -> Any:
+def checked_field(kind: ValueKind, default: Any = dataclasses.MISSING, *,
+                  check: Optional[Callable[[Any, KeyPath], Any]] = None,
+                  default_factory: Any = dataclasses.MISSING) -> Any:
     """
     Return a dataclass field of ``kind``; required unless it has a default.
 
@@ -500,49 +457,49 @@ def declare(kind: Kind, default: Any = dataclasses.MISSING, *,
     --------
     >>> @dataclasses.dataclass(frozen=True)
     ... class Noise:
-    ...     std: float = declare(Real(0.0))
-    >>> built(Noise, {'std': 1}, Where())
+    ...     std: float = checked_field(Real(0.0))
+    >>> dataclass_from_mapping(Noise, {'std': 1}, KeyPath())
     Noise(std=1.0)
 
     """
-    return Declaration(kind=kind, check=check).field(default, default_factory)
+    return FieldSpec(kind=kind, check=check).field(default, default_factory)
 
 
-_DECLARATIONS: dict[type, tuple[Declaration, ...]] = {}
+_FIELD_SPECS: dict[type, tuple[FieldSpec, ...]] = {}
 
 
-def declarations(cls: type) -> tuple[Declaration, ...]:
-    """Return the declarations of the dataclass ``cls``'s declared fields, in field order."""
-    found = _DECLARATIONS.get(cls)
+def field_specs(cls: type) -> tuple[FieldSpec, ...]:
+    """Return the specs of the dataclass ``cls``'s checked fields, in field order."""
+    found = _FIELD_SPECS.get(cls)
     if found is None:
-        found = _DECLARATIONS[cls] = tuple(
+        found = _FIELD_SPECS[cls] = tuple(
             dataclasses.replace(
-                f.metadata[Declaration._METADATA], attribute=f.name,
-                name=f.metadata[Declaration._METADATA].name or f.name,
+                f.metadata[_FIELD_SPEC], attribute=f.name,
+                name=f.metadata[_FIELD_SPEC].name or f.name,
                 required=f.default is dataclasses.MISSING
                 and f.default_factory is dataclasses.MISSING)
-            for f in dataclasses.fields(cls) if Declaration._METADATA in f.metadata)
+            for f in dataclasses.fields(cls) if _FIELD_SPEC in f.metadata)
     return found
 
 
-def checked_values(cls: type, data: Any, where: Where, *, skip: Iterable[str] = (),
-                   unknown: Optional[Callable[[str], Exception]] = None) -> dict[str, Any]:
+def checked_arguments(cls: type, data: Any, where: KeyPath, *, skip: Iterable[str] = (),
+                      unknown: Optional[Callable[[str], Exception]] = None) -> dict[str, Any]:
     """
-    Return ``{attribute: value}`` of the declared fields of ``cls`` found in the mapping ``data``.
+    Return ``{attribute: value}`` of the checked fields of ``cls`` found in the mapping ``data``.
 
     Parameters
     ----------
     cls : type
-        A dataclass with fields made by :func:`declare`.
+        A dataclass with fields made by :func:`checked_field`.
     data : Mapping or None
         The mapping (None: an empty one).
-    where : Where
+    where : KeyPath
         Where ``data`` sits.
     skip : iterable of str, optional
         Keys of ``data`` that are the caller's (a tag), neither checked nor unknown.
     unknown : callable, optional
-        ``unknown(key)`` returns the error for a key no field declares; by
-        default ``'<path>.<key>: unknown key (did you mean ...); expected ...'``.
+        ``unknown(key)`` returns the error for a key no field has; by default
+        ``'<path>.<key>: unknown key (did you mean ...); expected ...'``.
 
     Raises
     ------
@@ -557,7 +514,7 @@ def checked_values(cls: type, data: Any, where: Where, *, skip: Iterable[str] = 
     if not isinstance(data, Mapping):
         raise where.type_error('a mapping', data)
     skip = tuple(skip)
-    fields = {declaration.name: declaration for declaration in declarations(cls)}
+    fields = {spec.name: spec for spec in field_specs(cls)}
     for key in data:
         if key not in fields and key not in skip:
             if unknown is not None:
@@ -565,25 +522,25 @@ def checked_values(cls: type, data: Any, where: Where, *, skip: Iterable[str] = 
             expected = [*skip, *fields]
             raise where.key(key).error(f'unknown key{did_you_mean(key, expected)}; '
                                        f'expected {", ".join(expected) or "no keys"}')
-    for name, declaration in fields.items():
-        if declaration.required and name not in data:
+    for name, spec in fields.items():
+        if spec.required and name not in data:
             raise where.key(name).error('missing')
-    return {declaration.attribute: declaration.checked(data[name], where.key(name))
-            for name, declaration in fields.items() if name in data}
+    return {spec.attribute: spec.checked(data[name], where.key(name))
+            for name, spec in fields.items() if name in data}
 
 
-def built(cls: type, data: Any, where: Where, *, skip: Iterable[str] = ()) -> Any:
-    """Return the dataclass ``cls`` built from the mapping ``data`` (:func:`checked_values`)."""
-    return cls(**checked_values(cls, data, where, skip=skip))
+def dataclass_from_mapping(cls: type, data: Any, where: KeyPath, *,
+                           skip: Iterable[str] = ()) -> Any:
+    """Return the dataclass ``cls`` made from the mapping ``data`` (:func:`checked_arguments`)."""
+    return cls(**checked_arguments(cls, data, where, skip=skip))
 
 
-def check_fields(instance: Any, where: Where) -> None:
+def check_fields_in_place(instance: Any, where: KeyPath) -> None:
     """
-    Check every declared field of a frozen dataclass, storing the value in its stored form.
+    Check every checked field of a frozen dataclass, storing the value in its stored form.
 
     For ``__post_init__`` of a dataclass that is valid by construction.
     """
-    for declaration in declarations(type(instance)):
-        value = getattr(instance, declaration.attribute)
-        object.__setattr__(instance, declaration.attribute,
-                           declaration.checked(value, where.key(declaration.name)))
+    for spec in field_specs(type(instance)):
+        value = getattr(instance, spec.attribute)
+        object.__setattr__(instance, spec.attribute, spec.checked(value, where.key(spec.name)))

@@ -6,16 +6,16 @@ from typing import Tuple
 
 import pytest
 from rotation_node.validation import (
-    Boolean, built, check_fields, checked_values, Choice, ChoiceList, declarations, declare,
-    describe_value, did_you_mean, Integer, nearest_name, Real, Sections, shown, Tagged, Text,
-    Vector, Where)
+    Boolean, check_fields_in_place, checked_arguments, checked_field, Choice, ChoiceList,
+    dataclass_from_mapping, DataclassByTag, DataclassesByName, did_you_mean, field_specs, Integer,
+    KeyPath, nearest_name, Real, short_repr, Text, type_and_repr, Vector)
 
 
 class Problem(ValueError):
     """The error type of the tests' documents."""
 
 
-TOP = Where(error_type=Problem)
+TOP = KeyPath(error_type=Problem)
 
 
 def problem(kind, value, where=TOP.key('x')):
@@ -28,10 +28,10 @@ def problem(kind, value, where=TOP.key('x')):
 # Wording --------------------------------------------------------------------------
 
 def test_a_long_value_is_shown_briefly_with_its_length():
-    text = shown('x' * 1_000_000)
+    text = short_repr('x' * 1_000_000)
     assert len(text) < 100 and text.endswith('(1000002 characters)')
-    assert describe_value([1] * 500) == 'list <500 items>'
-    assert describe_value(3) == 'int 3'
+    assert type_and_repr([1] * 500) == 'list <500 items>'
+    assert type_and_repr(3) == 'int 3'
 
 
 def test_the_nearest_name_is_offered_only_when_near():
@@ -41,7 +41,7 @@ def test_the_nearest_name_is_offered_only_when_near():
 
 
 def test_where_names_paths_with_its_template_and_raises_its_type():
-    where = Where(error_type=Problem, template="parameter '{}'")
+    where = KeyPath(error_type=Problem, template="parameter '{}'")
     error = where.key('qos').key('depth').error('too deep')
     assert type(error) is Problem and str(error) == "parameter 'qos.depth': too deep"
     assert str(TOP.key('motion').key('orientation').index(2).error('no')) == \
@@ -52,7 +52,7 @@ def test_where_names_paths_with_its_template_and_raises_its_type():
 
 @pytest.mark.parametrize('value', [1, 0, 'true', None, 1.0])
 def test_a_boolean_is_only_a_bool(value):
-    assert problem(Boolean(), value) == f'x: expected a boolean, got {describe_value(value)}'
+    assert problem(Boolean(), value) == f'x: expected a boolean, got {type_and_repr(value)}'
 
 
 def test_a_boolean_is_stored_as_given():
@@ -168,20 +168,20 @@ def _positive_pair(pair, where):
 
 @dataclasses.dataclass(frozen=True)
 class Noise:
-    std: float = declare(Real(0.0))
+    std: float = checked_field(Real(0.0))
 
 
 @dataclasses.dataclass(frozen=True)
 class Bias:
-    constant: Tuple[float, ...] = declare(Vector(3), (0.0, 0.0, 0.0))
-    band: Tuple[float, ...] = declare(Vector(2), (0.0, 1.0), check=_positive_pair)
+    constant: Tuple[float, ...] = checked_field(Vector(3), (0.0, 0.0, 0.0))
+    band: Tuple[float, ...] = checked_field(Vector(2), (0.0, 1.0), check=_positive_pair)
 
 
 @dataclasses.dataclass(frozen=True)
 class Spin:
     kind = 'spin'
-    rate: float = declare(Real())
-    axis: Tuple[float, ...] = declare(Vector(3))
+    rate: float = checked_field(Real())
+    axis: Tuple[float, ...] = checked_field(Vector(3))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -191,27 +191,27 @@ class Rest:
 
 @dataclasses.dataclass(frozen=True)
 class Document:
-    duration: float = declare(Real(positive=True))
-    motion: object = declare(Tagged({'spin': Spin, 'rest': Rest}, 'motion'))
-    effects: dict = declare(Sections({'noise': Noise, 'bias': Bias}, 'effect'),
+    duration: float = checked_field(Real(positive=True))
+    motion: object = checked_field(DataclassByTag({'spin': Spin, 'rest': Rest}, 'motion'))
+    effects: dict = checked_field(DataclassesByName({'noise': Noise, 'bias': Bias}, 'effect'),
                             default_factory=dict)
-    frame: str = declare(Choice(('enu', 'ned')), 'enu')
+    frame: str = checked_field(Choice(('enu', 'ned')), 'enu')
 
 
 def test_declarations_list_the_fields_in_order_with_their_names():
-    found = declarations(Document)
+    found = field_specs(Document)
     assert [d.attribute for d in found] == ['duration', 'motion', 'effects', 'frame']
     assert [d.name for d in found] == ['duration', 'motion', 'effects', 'frame']
     assert [d.required for d in found] == [True, True, False, False]
 
 
 def test_a_document_is_built_with_defaults_and_stored_forms():
-    document = built(Document, {'duration': 2, 'motion': {'type': 'spin', 'rate': 1,
+    document = dataclass_from_mapping(Document, {'duration': 2, 'motion': {'type': 'spin', 'rate': 1,
                                                           'axis': [0, 0, 1]},
                                 'effects': {'noise': {'std': 0}, 'bias': None}}, TOP)
     assert document == Document(duration=2.0, motion=Spin(rate=1.0, axis=(0.0, 0.0, 1.0)),
                                 effects={'noise': Noise(std=0.0), 'bias': Bias()}, frame='enu')
-    assert built(Document, {'duration': 1.0, 'motion': {'type': 'rest'}}, TOP).effects == {}
+    assert dataclass_from_mapping(Document, {'duration': 1.0, 'motion': {'type': 'rest'}}, TOP).effects == {}
 
 
 GOOD = {'duration': 1.0, 'motion': {'type': 'spin', 'rate': 1.0, 'axis': [0, 0, 1]}}
@@ -247,36 +247,36 @@ def changed(**changes):
 ])
 def test_errors_name_the_path_of_the_value(data, message):
     with pytest.raises(Problem) as info:
-        built(Document, data, TOP)
+        dataclass_from_mapping(Document, data, TOP)
     assert str(info.value).startswith(message), str(info.value)
 
 
 def test_unknown_keys_come_before_missing_ones_and_those_before_bad_values():
     with pytest.raises(Problem, match='^speed: unknown key'):
-        built(Document, {'duration': -1.0, 'speed': 1}, TOP)
+        dataclass_from_mapping(Document, {'duration': -1.0, 'speed': 1}, TOP)
     with pytest.raises(Problem, match='^motion: missing'):
-        built(Document, {'duration': -1.0}, TOP)
+        dataclass_from_mapping(Document, {'duration': -1.0}, TOP)
 
 
 def test_only_the_values_present_are_returned_and_skipped_keys_are_the_callers():
-    assert checked_values(Bias, {'constant': [1, 2, 3], 'id': 7}, TOP, skip=('id',)) == {
+    assert checked_arguments(Bias, {'constant': [1, 2, 3], 'id': 7}, TOP, skip=('id',)) == {
         'constant': (1.0, 2.0, 3.0)}
-    assert checked_values(Bias, None, TOP) == {}
+    assert checked_arguments(Bias, None, TOP) == {}
 
 
 def test_the_caller_may_word_an_unknown_key():
     with pytest.raises(KeyError, match='no such thing: std2'):
-        checked_values(Noise, {'std2': 1.0}, TOP,
+        checked_arguments(Noise, {'std2': 1.0}, TOP,
                        unknown=lambda key: KeyError(f'no such thing: {key}'))
 
 
 @dataclasses.dataclass(frozen=True)
 class Settings:
-    depth: int = declare(Integer(1, 100), 10)
-    names: tuple = declare(ChoiceList(('a', 'b')), ('a',))
+    depth: int = checked_field(Integer(1, 100), 10)
+    names: tuple = checked_field(ChoiceList(('a', 'b')), ('a',))
 
     def __post_init__(self):
-        check_fields(self, Where(error_type=Problem, template="setting '{}'"))
+        check_fields_in_place(self, KeyPath(error_type=Problem, template="setting '{}'"))
 
 
 def test_check_fields_validates_on_construction_and_stores_the_stored_form():

@@ -27,8 +27,8 @@ from rotation_node.conversions import parse_sequence
 from rotation_node.errors import SceneError
 from rotation_node.ros_yaml import load_ros_yaml
 from rotation_node.validation import (
-    built, Choice, ChoiceList, declare, describe_value, Integer, Real, Section, Sections, Tagged,
-    Text, Vector, Where)
+    checked_field, Choice, ChoiceList, dataclass_from_mapping, DataclassByTag, DataclassesByName,
+    Integer, KeyPath, NestedDataclass, Real, Text, type_and_repr, Vector)
 
 if TYPE_CHECKING:
     from rotation_node.type_aliases import StrPath
@@ -85,7 +85,7 @@ def _not_truth_topic(topic, where):
     return topic
 
 
-_SCENE = Where(error_type=SceneError)
+_SCENE = KeyPath(error_type=SceneError)
 _EULER_SEQUENCE = Text('an Euler sequence', parser=parse_sequence)
 _TOPIC = Text('an absolute ROS topic name such as /imu',
               re.compile(r'(/[A-Za-z_][A-Za-z0-9_]*)+'))
@@ -112,8 +112,8 @@ class ConstantRate:
     """
 
     type: ClassVar[str] = 'constant_rate'  # noqa: A003
-    orientation: Tuple[float, ...] = declare(Vector(4), check=_unit_quaternion)
-    angular_velocity: Tuple[float, ...] = declare(_VECTOR)
+    orientation: Tuple[float, ...] = checked_field(Vector(4), check=_unit_quaternion)
+    angular_velocity: Tuple[float, ...] = checked_field(_VECTOR)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -134,8 +134,8 @@ class Coning:
     """
 
     type: ClassVar[str] = 'coning'  # noqa: A003
-    half_angle: float = declare(Real(0.0, math.pi))
-    frequency: float = declare(Real())
+    half_angle: float = checked_field(Real(0.0, math.pi))
+    frequency: float = checked_field(Real())
 
 
 @dataclasses.dataclass(frozen=True)
@@ -156,9 +156,9 @@ class TorqueFree:
     """
 
     type: ClassVar[str] = 'torque_free'  # noqa: A003
-    inertia: Tuple[float, ...] = declare(_VECTOR, check=_principal_moments)
-    orientation: Tuple[float, ...] = declare(Vector(4), check=_unit_quaternion)
-    angular_velocity: Tuple[float, ...] = declare(_VECTOR)
+    inertia: Tuple[float, ...] = checked_field(_VECTOR, check=_principal_moments)
+    orientation: Tuple[float, ...] = checked_field(Vector(4), check=_unit_quaternion)
+    angular_velocity: Tuple[float, ...] = checked_field(_VECTOR)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -178,9 +178,9 @@ class EulerSweep:
     """
 
     type: ClassVar[str] = 'euler_sweep'  # noqa: A003
-    sequence: str = declare(_EULER_SEQUENCE)
-    start: Tuple[float, ...] = declare(_VECTOR)
-    end: Tuple[float, ...] = declare(_VECTOR)
+    sequence: str = checked_field(_EULER_SEQUENCE)
+    start: Tuple[float, ...] = checked_field(_VECTOR)
+    end: Tuple[float, ...] = checked_field(_VECTOR)
 
 
 #: Motion classes by their scene ``type``.
@@ -197,7 +197,7 @@ class GyroNoise:
     """White noise on the angular velocity, each axis N(0, std^2), rad/s."""
 
     name: ClassVar[str] = 'gyro_noise'
-    std: float = declare(Real(0.0))
+    std: float = checked_field(Real(0.0))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -216,8 +216,8 @@ class GyroBias:
     """
 
     name: ClassVar[str] = 'gyro_bias'
-    constant: Tuple[float, ...] = declare(_VECTOR, (0.0, 0.0, 0.0))
-    random_walk: float = declare(Real(0.0), 0.0)
+    constant: Tuple[float, ...] = checked_field(_VECTOR, (0.0, 0.0, 0.0))
+    random_walk: float = checked_field(Real(0.0), 0.0)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -225,7 +225,7 @@ class OrientationNoise:
     """Orientation error ``q (x) exp(v)``, body rotation vector v ~ N(0, std^2 I), rad."""
 
     name: ClassVar[str] = 'orientation_noise'
-    std: float = declare(Real(0.0))
+    std: float = checked_field(Real(0.0))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -233,7 +233,7 @@ class QuaternionSignFlips:
     """Each orientation replaced by ``-q`` (the same rotation) with ``probability``."""
 
     name: ClassVar[str] = 'quaternion_sign_flips'
-    probability: float = declare(_PROBABILITY)
+    probability: float = checked_field(_PROBABILITY)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -241,7 +241,7 @@ class NonUnitQuaternions:
     """Each orientation multiplied by a factor uniform in ``scale`` = [low, high]."""
 
     name: ClassVar[str] = 'non_unit_quaternions'
-    scale: Tuple[float, float] = declare(Vector(2), check=_scale_range)
+    scale: Tuple[float, float] = checked_field(Vector(2), check=_scale_range)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -249,7 +249,7 @@ class DroppedMessages:
     """Each sensor message left out of the bag with ``probability`` (the truth stays)."""
 
     name: ClassVar[str] = 'dropped_messages'
-    probability: float = declare(_PROBABILITY)
+    probability: float = checked_field(_PROBABILITY)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -257,7 +257,7 @@ class TimestampJitter:
     """Sensor ``header.stamp`` offset by N(0, std^2) s, independently per sample."""
 
     name: ClassVar[str] = 'timestamp_jitter'
-    std: float = declare(Real(0.0))
+    std: float = checked_field(Real(0.0))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -265,7 +265,7 @@ class OrientationUnknown:
     """With ``probability`` (default 1: always), no orientation: covariance[0] = -1, zeros."""
 
     name: ClassVar[str] = 'orientation_unknown'
-    probability: float = declare(_PROBABILITY, 1.0)
+    probability: float = checked_field(_PROBABILITY, 1.0)
 
 
 NAN_BURST_FIELDS = ('orientation', 'angular_velocity')
@@ -288,9 +288,9 @@ class NanBursts:
     """
 
     name: ClassVar[str] = 'nan_bursts'
-    probability: float = declare(_PROBABILITY)
-    length: int = declare(Integer(1))
-    fields: Tuple[str, ...] = declare(ChoiceList(NAN_BURST_FIELDS, item='field'),
+    probability: float = checked_field(_PROBABILITY)
+    length: int = checked_field(Integer(1))
+    fields: Tuple[str, ...] = checked_field(ChoiceList(NAN_BURST_FIELDS, item='field'),
                                       NAN_BURST_FIELDS)
 
 
@@ -345,16 +345,16 @@ class Reference:
 
     """
 
-    rate: float = declare(Real(positive=True))
-    topic: str = declare(_TOPIC, '/reference/pose')
-    frame_id: str = declare(_FRAME_ID, 'mocap')
-    message: str = declare(Choice(REFERENCE_MESSAGES), 'pose')
-    time_offset: float = declare(Real(), 0.0)
-    mounting: Tuple[float, ...] = declare(Vector(4), _IDENTITY_QUATERNION,
+    rate: float = checked_field(Real(positive=True))
+    topic: str = checked_field(_TOPIC, '/reference/pose')
+    frame_id: str = checked_field(_FRAME_ID, 'mocap')
+    message: str = checked_field(Choice(REFERENCE_MESSAGES), 'pose')
+    time_offset: float = checked_field(Real(), 0.0)
+    mounting: Tuple[float, ...] = checked_field(Vector(4), _IDENTITY_QUATERNION,
                                           check=_unit_quaternion)
-    world_alignment: Tuple[float, ...] = declare(Vector(4), _IDENTITY_QUATERNION,
+    world_alignment: Tuple[float, ...] = checked_field(Vector(4), _IDENTITY_QUATERNION,
                                                  check=_unit_quaternion)
-    orientation_noise: float = declare(Real(0.0), 0.0)
+    orientation_noise: float = checked_field(Real(0.0), 0.0)
 
 
 # --- the scene ----------------------------------------------------------------
@@ -385,15 +385,15 @@ class Scene:
 
     """
 
-    duration: float = declare(Real(positive=True))
-    rate: float = declare(Real(positive=True))
-    motion: Motion = declare(Tagged(MOTIONS, 'motion'))
-    effects: Mapping[str, object] = declare(Sections(EFFECT_PARAMETERS, 'effect'),
+    duration: float = checked_field(Real(positive=True))
+    rate: float = checked_field(Real(positive=True))
+    motion: Motion = checked_field(DataclassByTag(MOTIONS, 'motion'))
+    effects: Mapping[str, object] = checked_field(DataclassesByName(EFFECT_PARAMETERS, 'effect'),
                                             default_factory=dict)
-    topic: str = declare(_TOPIC, '/imu', check=_not_truth_topic)
-    frame_id: str = declare(_FRAME_ID, 'imu_link')
-    start_time: float = declare(Real(0.0), DEFAULT_START_TIME)
-    reference: Optional[Reference] = declare(Section(Reference), None)
+    topic: str = checked_field(_TOPIC, '/imu', check=_not_truth_topic)
+    frame_id: str = checked_field(_FRAME_ID, 'imu_link')
+    start_time: float = checked_field(Real(0.0), DEFAULT_START_TIME)
+    reference: Optional[Reference] = checked_field(NestedDataclass(Reference), None)
 
     @property
     def sample_count(self) -> int:
@@ -432,8 +432,8 @@ def scene_from_dict(data: object) -> Scene:
 
     """
     if not isinstance(data, dict):
-        raise SceneError(f'scene: expected a mapping of keys, got {describe_value(data)}')
-    scene = built(Scene, data, _SCENE)
+        raise SceneError(f'scene: expected a mapping of keys, got {type_and_repr(data)}')
+    scene = dataclass_from_mapping(Scene, data, _SCENE)
     n = scene.sample_count
     if n > MAX_SAMPLES:
         raise SceneError(f'duration: duration * rate gives {n} samples, more than {MAX_SAMPLES}')
