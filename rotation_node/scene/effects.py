@@ -8,7 +8,7 @@ fields that effect owns differ, and the ``(n,)`` mask of the samples it
 changed. ``state`` is a dict the effect keeps between calls on consecutive
 blocks of one stream (a random walk's position, a burst running into the next
 block): :class:`EffectsStream` applies the effects block by block with the
-same result, bit for bit, as :func:`apply_effects` on the whole stream.
+same result, bit for bit, as on the whole stream at once.
 
 =========================  =============================================================
 effect                     fields it changes
@@ -280,8 +280,8 @@ class EffectsStream:
     The scene's effects, applied to consecutive blocks of one sensor stream.
 
     ``apply(block)`` on consecutive pieces of a stream returns, piece by
-    piece, exactly what :func:`apply_effects` returns for the whole stream:
-    each effect keeps its generator and its state across blocks.
+    piece, exactly what ``apply`` of a new ``EffectsStream`` returns for the
+    whole stream: each effect keeps its generator and its state across blocks.
 
     Parameters
     ----------
@@ -305,26 +305,3 @@ class EffectsStream:
             stream, changed[name] = effect(stream, params, rng, state)
         return stream, changed
 
-
-def apply_effects(stream: SensorStream, effects: Mapping[str, object],
-                  seed: int) -> tuple[SensorStream, dict[str, BoolArray]]:
-    """
-    Return the stream with the scene's effects applied, and what each changed.
-
-    Parameters
-    ----------
-    stream : SensorStream
-        The perfect sensor.
-    effects : Mapping[str, object]
-        Effect parameters by name (``Scene.effects``); order does not matter.
-    seed : int
-        Scene seed, >= 0.
-
-    Returns
-    -------
-    stream : SensorStream
-    changed : dict of str to ndarray of bool, shape (n,)
-        For each applied effect, the samples it changed.
-
-    """
-    return EffectsStream(effects, seed).apply(stream)
