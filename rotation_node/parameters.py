@@ -104,7 +104,7 @@ class ParameterSpec(FieldSpec):
         Default value; its Python type is the parameter's type (a tuple of str
         is a ROS string array).
     description : str
-        One-line description, short_repr by ``ros2 param describe``.
+        One-line description, shown by ``ros2 param describe``.
     kind : rotation_node.validation.ValueKind
         Type and allowed values (choices, bounds).
     check : callable, optional
@@ -337,7 +337,7 @@ class NodeParameters:
 
         """
         return replace(self, **checked_arguments(type(self), values, _PARAMETER,
-                                              unknown=unknown_parameter_error))
+                                                 unknown=unknown_parameter_error))
 
     @classmethod
     def check_each(cls, values: Mapping[str, Any]) -> None:

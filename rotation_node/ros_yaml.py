@@ -18,7 +18,9 @@ Plain (unquoted) scalars are typed as ROS 2 types them in parameters files
   None.
 
 A key given twice in one mapping is an error; parameters files may hold no
-alias (rcl refuses them). Input is bounded: a file larger
+alias (rcl refuses them). Why parameters files are read here and not with
+rclpy's ``parameter_dict_from_yaml_file``: the list of where rcl and rclpy
+differ, in :mod:`rotation_node.parameters`. Input is bounded: a file larger
 than :data:`MAX_FILE_BYTES`, a document whose aliases expand it beyond
 :data:`MAX_NODES` nodes (a "billion laughs" alias bomb), or one nested deeper
 than :data:`MAX_DEPTH` is refused before it is built.

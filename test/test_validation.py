@@ -1,4 +1,4 @@
-"""Tests of rotation_node.validation: value kinds, declared fields, the wording of errors."""
+"""Tests of rotation_node.validation: kinds of value, checked fields, the wording of errors."""
 import dataclasses
 import math
 import re
@@ -194,7 +194,7 @@ class Document:
     duration: float = checked_field(Real(positive=True))
     motion: object = checked_field(DataclassByTag({'spin': Spin, 'rest': Rest}, 'motion'))
     effects: dict = checked_field(DataclassesByName({'noise': Noise, 'bias': Bias}, 'effect'),
-                            default_factory=dict)
+                                  default_factory=dict)
     frame: str = checked_field(Choice(('enu', 'ned')), 'enu')
 
 
@@ -206,12 +206,13 @@ def test_declarations_list_the_fields_in_order_with_their_names():
 
 
 def test_a_document_is_built_with_defaults_and_stored_forms():
-    document = dataclass_from_mapping(Document, {'duration': 2, 'motion': {'type': 'spin', 'rate': 1,
-                                                          'axis': [0, 0, 1]},
-                                'effects': {'noise': {'std': 0}, 'bias': None}}, TOP)
+    document = dataclass_from_mapping(
+        Document, {'duration': 2, 'motion': {'type': 'spin', 'rate': 1, 'axis': [0, 0, 1]},
+                   'effects': {'noise': {'std': 0}, 'bias': None}}, TOP)
     assert document == Document(duration=2.0, motion=Spin(rate=1.0, axis=(0.0, 0.0, 1.0)),
                                 effects={'noise': Noise(std=0.0), 'bias': Bias()}, frame='enu')
-    assert dataclass_from_mapping(Document, {'duration': 1.0, 'motion': {'type': 'rest'}}, TOP).effects == {}
+    rest = {'duration': 1.0, 'motion': {'type': 'rest'}}
+    assert dataclass_from_mapping(Document, rest, TOP).effects == {}
 
 
 GOOD = {'duration': 1.0, 'motion': {'type': 'spin', 'rate': 1.0, 'axis': [0, 0, 1]}}
@@ -267,7 +268,7 @@ def test_only_the_values_present_are_returned_and_skipped_keys_are_the_callers()
 def test_the_caller_may_word_an_unknown_key():
     with pytest.raises(KeyError, match='no such thing: std2'):
         checked_arguments(Noise, {'std2': 1.0}, TOP,
-                       unknown=lambda key: KeyError(f'no such thing: {key}'))
+                          unknown=lambda key: KeyError(f'no such thing: {key}'))
 
 
 @dataclasses.dataclass(frozen=True)

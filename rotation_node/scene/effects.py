@@ -304,4 +304,3 @@ class EffectsStream:
         for name, effect, params, rng, state in self._effects:
             stream, changed[name] = effect(stream, params, rng, state)
         return stream, changed
-

@@ -291,7 +291,7 @@ class NanBursts:
     probability: float = checked_field(_PROBABILITY)
     length: int = checked_field(Integer(1))
     fields: Tuple[str, ...] = checked_field(ChoiceList(NAN_BURST_FIELDS, item='field'),
-                                      NAN_BURST_FIELDS)
+                                            NAN_BURST_FIELDS)
 
 
 #: Effect parameter classes by their scene name.
@@ -351,9 +351,9 @@ class Reference:
     message: str = checked_field(Choice(REFERENCE_MESSAGES), 'pose')
     time_offset: float = checked_field(Real(), 0.0)
     mounting: Tuple[float, ...] = checked_field(Vector(4), _IDENTITY_QUATERNION,
-                                          check=_unit_quaternion)
+                                                check=_unit_quaternion)
     world_alignment: Tuple[float, ...] = checked_field(Vector(4), _IDENTITY_QUATERNION,
-                                                 check=_unit_quaternion)
+                                                       check=_unit_quaternion)
     orientation_noise: float = checked_field(Real(0.0), 0.0)
 
 
@@ -388,8 +388,8 @@ class Scene:
     duration: float = checked_field(Real(positive=True))
     rate: float = checked_field(Real(positive=True))
     motion: Motion = checked_field(DataclassByTag(MOTIONS, 'motion'))
-    effects: Mapping[str, object] = checked_field(DataclassesByName(EFFECT_PARAMETERS, 'effect'),
-                                            default_factory=dict)
+    effects: Mapping[str, object] = checked_field(
+        DataclassesByName(EFFECT_PARAMETERS, 'effect'), default_factory=dict)
     topic: str = checked_field(_TOPIC, '/imu', check=_not_truth_topic)
     frame_id: str = checked_field(_FRAME_ID, 'imu_link')
     start_time: float = checked_field(Real(0.0), DEFAULT_START_TIME)
