@@ -39,6 +39,11 @@ def test_tables_have_a_row_per_entry():
             assert len(re.split(r'(?<!\\)\|', row)) == len(re.split(r'(?<!\\)\|', table[0]))
 
 
+def test_the_words_of_the_tables_name_only_registry_entries():
+    assert set(markdown_tables.INPUT_NOTES) <= set(registry.INPUTS)
+    assert set(markdown_tables.OUTPUT_CONTENTS) == set(registry.OUTPUTS)
+
+
 def _comment_before(text, key):
     """Return the comment lines just above ``key:`` in a YAML text."""
     lines = text.splitlines()
