@@ -16,7 +16,7 @@ runs while a replacement is under way.
 """
 import functools
 import time
-from typing import Any, Callable, Dict, List, Optional, Sequence, Set, Tuple
+from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Set, Tuple
 
 from rclpy.duration import Duration
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
@@ -169,7 +169,7 @@ class InputTopic:
         if self.retiring is None:
             self._drain(self)
 
-    def waiting(self, limit: int) -> Sequence[Tuple[Any, MessageInfo]]:
+    def waiting(self, limit: int) -> Iterator[Tuple[Any, MessageInfo]]:
         """Take what else waits on the current subscription (``limit`` messages at most)."""
         return take_waiting(self.subscribed()[0], limit)
 
@@ -234,8 +234,9 @@ class _PublisherReplacement:
 
     def __init__(self, publisher: Publisher, created_at: float):
         self.publisher = publisher
-        self.created_at = created_at                    # monotonic
-        self.matched_since: Optional[float] = None      # since when it matched the old one's subscribers
+        self.created_at = created_at   # monotonic
+        # since when it has matched the old one's subscribers
+        self.matched_since: Optional[float] = None
 
 
 class OutputPublishers:
@@ -299,7 +300,8 @@ class OutputPublishers:
             event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
 
     def check_handoffs(self, now: float) -> bool:
-        """Let new publishers take over once matched; destroy acknowledged old ones.
+        """
+        Let new publishers take over once matched; destroy acknowledged old ones.
 
         Returns whether a handoff is still under way.
         """

@@ -4,10 +4,10 @@ The ``rotation_node`` program: its command line, start-up and shut-down.
 :func:`main` checks the command line the node's own way first (its
 ``--params-file`` files with the loader ``rotation_bag convert`` uses, and the
 names given with ``-p``), so that a mistake is one line on stderr and exit
-status 1, not rcl's many lines; then it initialises rclpy, says on one line
-that the node is starting, and only then loads the conversions and creates
-the node (:class:`rotation_node.node.conversion_node.RotationNode`), which
-spins until Ctrl-C or SIGTERM.
+status 1, not rcl's many lines; then it initialises rclpy and creates the node
+(:class:`rotation_node.node.conversion_node.RotationNode`, imported only then),
+which says that it is starting before it loads the conversions, and spins it
+until Ctrl-C or SIGTERM.
 
 rclpy reads the ROS arguments itself (``rclpy.init``; the program's own
 arguments are what ``rclpy.utilities.remove_ros_args`` leaves). The
@@ -26,7 +26,6 @@ from typing import List, Optional, Sequence, Tuple
 import rclpy
 from rclpy.exceptions import InvalidHandle, NotInitializedException
 from rclpy.executors import ExternalShutdownException
-from rclpy.logging import get_logger
 from rclpy.signals import install_signal_handlers, SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 from rotation_node.command_line.stop_signal import signal_name, StopSignal
@@ -40,9 +39,6 @@ from rotation_node.rclpy_private import RCLError
 _ROS_FLAGS_WITH_VALUE = frozenset((
     '-r', '--remap', '-p', '--param', '--params-file', '-e', '--enclave', '--log-level',
     '--log-file-name', '--log-config-file'))
-
-#: What the node says first, once rclpy is initialised: it is loading what converts.
-STARTING = 'starting: loading the conversions'
 
 
 def ros_arguments(args: Sequence[str]) -> List[Tuple[str, Optional[str]]]:
@@ -175,8 +171,6 @@ def _run(args: Optional[List[str]], stop: StopSignal) -> int:
             except RCLError as exc:   # e.g. a malformed --ros-args remapping
                 print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
                 return 1
-            # The first line, before the conversions load (seconds on a loaded machine).
-            get_logger(NODE_NAME).info(STARTING)
         if not stop.is_set():
             from rotation_node.node.conversion_node import RotationNode
             node = RotationNode(parameters_files=files)
