@@ -80,6 +80,6 @@ def adapted_input_qos(params: NodeParameters, offered: Sequence[QoSProfile],
 
 
 def policies_text(profiles: Sequence[QoSProfile]) -> str:
-    """Return ``'reliable, volatile'`` of each distinct profile, joined by ``/``; or ``'nothing'``."""
+    """Return each distinct profile's ``'reliable, volatile'``, joined by ``/``; ``'nothing'``."""
     return ' / '.join(sorted({f'{p.reliability.short_key}, {p.durability.short_key}'
                               for p in profiles})) or 'nothing'
