@@ -7,13 +7,14 @@ Everything else uses rclpy's public API (``Subscription`` with ``raw=True``,
 change in any rclpy release; test/test_rclpy_private.py checks that each name
 exists and behaves as used here, and fails when one changes.
 
-Checked against rclpy 7.1.5 and 7.1.6 (ROS 2 Jazzy: the wheels of the venv and
-the ``jazzy`` branch of ros2/rclpy), :data:`CHECKED_RCLPY_VERSIONS`.
+Checked against rclpy 7.1.5 and 7.1.6 (ROS 2 Jazzy, the wheels of the venv:
+:data:`CHECKED_RCLPY_VERSIONS`); the sources of ros2/rclpy's ``jazzy`` branch
+(7.1.3) and of ``rolling`` (8.0.0) define the same names and signatures.
 
 - :data:`RCLError`: what ``rclpy.init`` and ``remove_ros_args`` raise for a
   malformed ``--ros-args`` (``RCLInvalidROSArgsError`` derives from it), and
   rclpy calls on a context shut down under them. rclpy exports no public name
-  for it (``rclpy.exceptions`` has none).
+  for it (``rclpy.exceptions`` has none, in rolling neither).
 - :data:`RMWError`: what ``rclpy.serialization.deserialize_message`` raises for
   bytes that are not a message of the type; no public name either.
 - :func:`message_lost_event` / :func:`message_lost_count`: the message-lost
@@ -23,8 +24,10 @@ the ``jazzy`` branch of ros2/rclpy), :data:`CHECKED_RCLPY_VERSIONS`.
   ``EventHandler.take_data`` only returns data once the executor saw it ready.
 - :func:`take_waiting`: take what else waits in a subscription's queue, in the
   callback of one message. rclpy's executor costs more per wake-up than the
-  node's conversion of a message; rclpy has no public "take" (its executor and
-  ``wait_for_message`` call the same handle method).
+  node's conversion of a message (2000 queued Imu messages: 170-350 us CPU per
+  message with one wake-up each, 6-12 us taken this way; 2-core machine, load
+  14); rclpy has no public "take" (its executor and ``wait_for_message`` call
+  the same handle method).
 """
 from typing import Any, Iterator, Optional, Tuple, TYPE_CHECKING
 
