@@ -3,7 +3,7 @@ import pytest
 from rclpy.duration import Duration
 from rclpy.qos import (
     DurabilityPolicy, HistoryPolicy, QoSPolicyKind, QoSProfile, ReliabilityPolicy)
-from rotation_node.node.qos_adaptation import adapted_input_qos, input_qos, policies_text
+from rotation_node.node.qos_adaptation import input_qos, policies_text
 from rotation_node.parameters import NodeParameters
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
@@ -43,10 +43,10 @@ def test_volatile_input_keeps_last_depth(reliability, offered, expected):
 def test_without_publishers_an_adapted_subscription_keeps_its_policies():
     current = QoSProfile(depth=3, reliability=ReliabilityPolicy.BEST_EFFORT,
                          durability=DurabilityPolicy.VOLATILE)
-    qos = adapted_input_qos(AUTO, [], current)
+    qos = input_qos(AUTO, [], current)
     assert (qos.reliability, qos.durability) == (
         ReliabilityPolicy.BEST_EFFORT, DurabilityPolicy.VOLATILE)
-    first = adapted_input_qos(AUTO, [], None)   # the first subscription: reliable
+    first = input_qos(AUTO, [], None)   # the first subscription: reliable
     assert first.reliability == ReliabilityPolicy.RELIABLE
 
 
@@ -56,14 +56,13 @@ def test_without_publishers_an_adapted_subscription_keeps_its_policies():
     (QoSPolicyKind.DEADLINE, (ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL)),
 ])
 def test_an_incompatible_publisher_lowers_its_policy_before_the_graph_shows_it(policy, expected):
-    qos = adapted_input_qos(AUTO, [], LATCHED, transient_local=True, incompatible_policy=policy)
+    qos = input_qos(AUTO, [], LATCHED, transient_local=True, incompatible_policy=policy)
     assert (qos.reliability, qos.durability) == expected
 
 
 def test_an_explicit_reliability_is_not_adapted():
     params = AUTO.replaced({'qos.reliability': 'reliable'})
-    qos = adapted_input_qos(params, [SENSOR], RELIABLE,
-                            incompatible_policy=QoSPolicyKind.RELIABILITY)
+    qos = input_qos(params, [SENSOR], RELIABLE, incompatible_policy=QoSPolicyKind.RELIABILITY)
     assert qos.reliability == ReliabilityPolicy.RELIABLE
 
 

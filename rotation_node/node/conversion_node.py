@@ -61,7 +61,7 @@ from rotation_node.errors import BagError, ParameterError
 from rotation_node.node.diagnostics import (
     ConversionDiagnostics, DIAGNOSTICS_PERIOD_S, input_topic_names)
 from rotation_node.node.handoff import InputTopic, OutputPublishers
-from rotation_node.node.qos_adaptation import adapted_input_qos, AUTO, policies_text
+from rotation_node.node.qos_adaptation import AUTO, input_qos, policies_text
 from rotation_node.parameters import (
     mounting_frames_problem, NODE_NAME, NodeParameters, PARAMETERS, PARAMETERS_BY_NAME,
     parameters_from_yaml, ParameterSpec)
@@ -355,10 +355,10 @@ class RotationNode(Node):
 
     def _input_qos(self, state: InputTopic, offered: List[QoSProfile],
                    incompatible_policy: Optional[QoSPolicyKind] = None) -> QoSProfile:
-        """Return the QoS to subscribe ``state``'s topic with (see :func:`adapted_input_qos`)."""
-        return adapted_input_qos(self.params, offered, state.qos,
-                                 transient_local=state.topic.transient_local,
-                                 incompatible_policy=incompatible_policy)
+        """Return the QoS to subscribe ``state``'s topic with (see :func:`input_qos`)."""
+        return input_qos(self.params, offered, state.qos,
+                         transient_local=state.topic.transient_local,
+                         incompatible_policy=incompatible_policy)
 
     def _offered(self, state: InputTopic) -> List[QoSProfile]:
         """Return the QoS profiles the publishers of ``state``'s topic offer (auto mode only)."""

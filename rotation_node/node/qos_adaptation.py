@@ -22,17 +22,20 @@ if TYPE_CHECKING:
 AUTO = 'auto'
 
 
-def input_qos(params: NodeParameters, offered: Sequence[QoSProfile], *,
-              transient_local: bool = False) -> QoSProfile:
+def input_qos(params: NodeParameters, offered: Sequence[QoSProfile],
+              current: Optional[QoSProfile] = None, *, transient_local: bool = False,
+              incompatible_policy: Optional[QoSPolicyKind] = None) -> QoSProfile:
     """
     Return the QoS of one input subscription of the node.
 
     With ``qos.reliability: auto`` the reliability and durability are those
     every publisher on the topic is compatible with (:func:`matching_policies`,
-    as ``ros2 bag record`` adapts to what is offered); otherwise, or while
-    there is no publisher, those of :func:`qos_profile` (reliable when auto):
-    a reliable publisher then matches at once, and a best-effort one is
-    reported by an incompatible-QoS event. The history is that of
+    as ``ros2 bag record`` adapts to what is offered); while no publisher is
+    known, those of the ``current`` subscription, or of :func:`qos_profile`
+    (reliable) for the first one: a reliable publisher then matches at once,
+    and a best-effort one is reported by an incompatible-QoS event, whose
+    ``incompatible_policy`` lowers that policy even before the graph shows the
+    publisher. Otherwise :func:`qos_profile`. The history is that of
     :func:`qos_profile` either way.
 
     Parameters
@@ -41,9 +44,13 @@ def input_qos(params: NodeParameters, offered: Sequence[QoSProfile], *,
         The node's parameters (``qos.reliability``, ``qos.depth``).
     offered : list of rclpy.qos.QoSProfile
         The profiles the topic's publishers offer (may be empty).
+    current : rclpy.qos.QoSProfile, optional
+        The QoS of the topic's subscription, if it has one.
     transient_local : bool, optional
         The topic holds latched data: keep all, and reliable and transient
         local unless adapted to the publishers.
+    incompatible_policy : rclpy.qos.QoSPolicyKind, optional
+        The policy of an incompatible-QoS event of the current subscription.
 
     Returns
     -------
@@ -51,32 +58,17 @@ def input_qos(params: NodeParameters, offered: Sequence[QoSProfile], *,
 
     """
     profile = qos_profile(params, transient_local=transient_local)
-    if params.qos_reliability == AUTO and offered:
+    if params.qos_reliability != AUTO:
+        return profile
+    if offered:
         profile.reliability, profile.durability = matching_policies(offered)
+    elif current is not None:
+        profile.reliability, profile.durability = current.reliability, current.durability
+    if current is not None and incompatible_policy == QoSPolicyKind.RELIABILITY:
+        profile.reliability = ReliabilityPolicy.BEST_EFFORT
+    elif current is not None and incompatible_policy == QoSPolicyKind.DURABILITY:
+        profile.durability = DurabilityPolicy.VOLATILE
     return profile
-
-
-def adapted_input_qos(params: NodeParameters, offered: Sequence[QoSProfile],
-                      current: Optional[QoSProfile], *, transient_local: bool = False,
-                      incompatible_policy: Optional[QoSPolicyKind] = None) -> QoSProfile:
-    """
-    Return the QoS to subscribe an input topic with, given the ``offered`` profiles.
-
-    :func:`input_qos`; with ``qos.reliability: auto`` and a subscription
-    already there (its QoS ``current``), its reliability and durability are
-    kept while no publisher is known, and ``incompatible_policy`` (a publisher
-    the current subscription cannot match offers less of it) lowers that
-    policy even before the graph shows the publisher.
-    """
-    qos = input_qos(params, offered, transient_local=transient_local)
-    if params.qos_reliability == AUTO and current is not None:
-        if not offered:
-            qos.reliability, qos.durability = current.reliability, current.durability
-        if incompatible_policy == QoSPolicyKind.RELIABILITY:
-            qos.reliability = ReliabilityPolicy.BEST_EFFORT
-        elif incompatible_policy == QoSPolicyKind.DURABILITY:
-            qos.durability = DurabilityPolicy.VOLATILE
-    return qos
 
 
 def policies_text(profiles: Sequence[QoSProfile]) -> str:
