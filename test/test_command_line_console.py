@@ -51,7 +51,7 @@ def test_each_program_runs_its_main(monkeypatch):
     monkeypatch.setattr(importlib, 'import_module', fake_import)
     assert [getattr(console, program)() for program in sorted(console._PROGRAMS)] == [7] * 3
     assert modules == [console._PROGRAMS[program] for program in sorted(console._PROGRAMS)]
-    assert set(modules) == {'rotation_node.node', 'rotation_node.bag.cli',
+    assert set(modules) == {'rotation_node.node.program', 'rotation_node.bag.cli',
                             'rotation_node.scene.cli'}
     monkeypatch.undo()
     assert all(callable(importlib.import_module(module).main) for module in modules)

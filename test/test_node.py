@@ -22,7 +22,6 @@ from ros_harness import (
     make_input_message, oracle_output, output_values, PLAIN_INPUT_TYPES, RosProcess, script,
     TestNode)
 from rotation_node.errors import ParameterError
-from rotation_node.node import check_parameter_names, ros_arguments
 from rotation_node.parameters import (
     NodeParameters, OUTPUTS, PARAMETERS, parameters_file_sections, parameters_from_yaml)
 from rotation_node.pipeline import input_message_type
@@ -621,23 +620,6 @@ def test_a_params_file_flag_without_a_file_is_one_error_line():
     assert last.startswith('rotation_node: error: ') and 'No file path provided' in last
 
 
-def test_node_prefixed_parameters_are_checked_for_this_node_only():
-    check_parameter_names(['x', '--ros-args', '-p', 'other:zzz:=1', '-p',
-                           'rotation_node:qos.depth:=5', '-p', 'use_sim_time:=true'])
-    with pytest.raises(ParameterError, match="unknown parameter 'qos.dept' in --param "
-                                             r'rotation_node:qos.dept:=5 \(did you mean'):
-        check_parameter_names(['x', '--ros-args', '--param', 'rotation_node:qos.dept:=5'])
-
-
-def test_ros_arguments_are_read_as_rcl_reads_them():
-    args = ['rotation_node', '--params-file', 'not-ros.yaml', '--ros-args', '-r', '__ns:=/a',
-            '--params-file', 'a.yaml', '--disable-stdout-logs', '-p', 'x:=--params-file', '--',
-            'app', '--ros-args', '--params-file', 'b.yaml']
-    assert ros_arguments(args) == [
-        ('-r', '__ns:=/a'), ('--params-file', 'a.yaml'), ('--disable-stdout-logs', None),
-        ('-p', 'x:=--params-file'), ('--params-file', 'b.yaml')]
-
-
 @pytest.fixture(scope='module')
 def namespaced(ros):
     under_test = NodeUnderTest(ros, ['-r', '__ns:=/robot', '-r', 'input:=/imu'],
@@ -662,12 +644,13 @@ def test_ctrl_c_exits_cleanly(namespaced):
 
 
 START_UP_MOMENTS = {
-    # where the signal comes: (the name in rotation_node.node to wrap, before or after it)
+    # where the signal comes: (the name in rotation_node.node's modules to wrap, before or
+    # after it)
     'before rclpy.init': ('rclpy.init', 'before'),
-    'between rclpy.init and the node': ('warm_up_conversions', 'before'),
+    'between rclpy.init and the node': ('conversion_node.warm_up_conversions', 'before'),
     'while the node is configured': ('RotationNode._configure', 'before'),
-    'before rclpy handles signals': ('install_signal_handlers', 'before'),
-    'once rclpy handles signals': ('install_signal_handlers', 'after'),
+    'before rclpy handles signals': ('program.install_signal_handlers', 'before'),
+    'once rclpy handles signals': ('program.install_signal_handlers', 'after'),
 }
 
 
@@ -677,11 +660,11 @@ def test_a_signal_at_any_moment_of_start_up_is_one_line_and_exit_0(monkeypatch, 
                                                                    moment, number):
     """In-process: the signal is raised in the main thread at that moment of main()."""
     import rclpy
-    from rotation_node import node as node_module
+    from rotation_node.node import conversion_node, program
     path, when = START_UP_MOMENTS[moment]
     owner_name, _, attribute = path.rpartition('.')
-    owner = {'': node_module, 'rclpy': rclpy,
-             'RotationNode': node_module.RotationNode}[owner_name]
+    owner = {'program': program, 'conversion_node': conversion_node, 'rclpy': rclpy,
+             'RotationNode': conversion_node.RotationNode}[owner_name]
     original = getattr(owner, attribute)
     raised = []
 
@@ -697,7 +680,7 @@ def test_a_signal_at_any_moment_of_start_up_is_one_line_and_exit_0(monkeypatch, 
 
     monkeypatch.setattr(owner, attribute, wrapped)
     handlers = {n: signal.getsignal(n) for n in (signal.SIGINT, signal.SIGTERM)}
-    assert node_module.main(['rotation_node']) == 0
+    assert program.main(['rotation_node']) == 0
     assert raised == [number]
     assert capsys.readouterr().err.splitlines() == [
         f'rotation_node: interrupted while starting ({number.name})']
@@ -735,18 +718,19 @@ def test_destroying_the_node_destroys_its_message_lost_event_handles_first():
     import rclpy
     from rclpy.context import Context
     from rclpy.impl.implementation_singleton import rclpy_implementation
-    from rotation_node.node import RotationNode
+    from rotation_node.node.conversion_node import RotationNode
     context = Context()
     rclpy.init(context=context)
     try:
         node = RotationNode(context=context)
-        events = [e for e in node._message_lost.values() if e is not None]
+        events = [e for state in node._inputs for e in state.message_lost.values()
+                  if e is not None]
         assert events, 'Fast DDS reports message-lost events'
         for event in events:
             with event:
                 pass
         node.destroy_node()
-        assert not node._message_lost
+        assert not any(state.message_lost for state in node._inputs)
         for event in events:
             with pytest.raises(rclpy_implementation.InvalidHandle):
                 with event:
@@ -759,7 +743,7 @@ def test_issue_warnings_are_throttled_per_reason():
     """A flood of one problem logs it once per period and cannot hide another problem."""
     import rclpy
     from rclpy.context import Context
-    from rotation_node.node import RotationNode
+    from rotation_node.node.conversion_node import RotationNode
     context = Context()
     rclpy.init(context=context)
     try:

@@ -78,7 +78,7 @@ def message(stamp_sec):
 
 
 def test_each_topic_with_its_qos_and_latched_data_again_for_a_new_stream(stateful_quaternion):
-    from rotation_node.node import RotationNode
+    from rotation_node.node.conversion_node import RotationNode
     node = Side(lambda context: RotationNode(
         context=context, parameter_overrides=[
             Parameter('input_type', value='quaternion'),

@@ -5,9 +5,8 @@ from rclpy.qos import (
     DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy)
 from rosbags.rosbag2.metadata import parse_qos
 from rotation_node.errors import BagError
-from rotation_node.parameters import NodeParameters
 from rotation_node.wire.qos import (
-    DEEP_QUEUE_DEPTH, input_qos, playback_qos, qos_profiles_from_yaml, qos_profiles_yaml,
+    DEEP_QUEUE_DEPTH, playback_qos, qos_profiles_from_yaml, qos_profiles_yaml,
     recording_qos)
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
@@ -80,27 +79,3 @@ def test_recording_qos_matches_every_publisher(offered, reliability, durability)
 def test_playback_qos(offered, lossless, expected):
     qos = playback_qos(offered, lossless=lossless)
     assert (qos.reliability, qos.durability, qos.depth) == expected
-
-
-@pytest.mark.parametrize('reliability, offered, expected', [
-    ('auto', [], (ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL)),
-    ('auto', [LATCHED], (ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL)),
-    ('auto', [LATCHED, SENSOR], (ReliabilityPolicy.BEST_EFFORT, DurabilityPolicy.VOLATILE)),
-    ('best_effort', [SENSOR], (ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL)),
-])
-def test_latched_input_keeps_all_and_adapts_only_with_auto(reliability, offered, expected):
-    params = NodeParameters().replaced({'qos.reliability': reliability, 'qos.depth': 3})
-    qos = input_qos(params, offered, transient_local=True)
-    assert (qos.history, qos.reliability, qos.durability) == (HistoryPolicy.KEEP_ALL, *expected)
-
-
-@pytest.mark.parametrize('reliability, offered, expected', [
-    ('auto', [SENSOR], ReliabilityPolicy.BEST_EFFORT),
-    ('auto', [], ReliabilityPolicy.RELIABLE),
-    ('best_effort', [RELIABLE], ReliabilityPolicy.BEST_EFFORT),
-])
-def test_volatile_input_keeps_last_depth(reliability, offered, expected):
-    params = NodeParameters().replaced({'qos.reliability': reliability, 'qos.depth': 3})
-    qos = input_qos(params, offered)
-    assert (qos.history, qos.depth, qos.reliability, qos.durability) == (
-        HistoryPolicy.KEEP_LAST, 3, expected, DurabilityPolicy.VOLATILE)

@@ -12,15 +12,13 @@ import dataclasses
 import functools
 from typing import Any, Callable, Optional
 
-from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.serialization import deserialize_message
 from rotation_node.errors import BagError
+from rotation_node.rclpy_private import RMWError
 from rotation_node.wire.message_types import message_class
 
 #: How ROS 2 messages are serialized in a bag.
 MESSAGE_ENCODING = 'cdr'
-#: What rclpy's deserialize_message raises for data that is not a valid message.
-_RMWError = rclpy_implementation.RMWError
 
 
 @dataclasses.dataclass(frozen=True)
@@ -112,7 +110,7 @@ class BagMessage:
                                        message_type=message_class(self.type_name))
         try:
             return decode(self.data)
-        except (_RMWError, BagError) as error:   # rclpy's error for bad CDR; cdr's own
+        except (RMWError, BagError) as error:   # rclpy's error for bad CDR; cdr's own
             raise BagError(
                 f'message on {self.topic} at {self.log_time_ns} ns is not a valid '
                 f'{self.type_name}: {error}') from None

@@ -17,7 +17,7 @@ import sys
 from rotation_node.command_line.stop_signal import exit_status, signal_name, StopSignal
 
 _PROGRAMS = {
-    'rotation_node': 'rotation_node.node',
+    'rotation_node': 'rotation_node.node.program',
     'rotation_bag': 'rotation_node.bag.cli',
     'rotation_scene': 'rotation_node.scene.cli',
 }
@@ -41,7 +41,7 @@ def _run(program):
 
 
 def rotation_node() -> int:
-    """Run ``rotation_node`` (:func:`rotation_node.node.main`)."""
+    """Run ``rotation_node`` (:func:`rotation_node.node.program.main`)."""
     return _run('rotation_node')
 
 

@@ -1,6 +1,9 @@
 """
 QoS profiles as rosbag2 stores them, and the profiles the node, record and play use.
 
+The node's adaptation of its input subscriptions to the publishers (``qos.reliability:
+auto``) is the node's own: :mod:`rotation_node.node.qos_adaptation`.
+
 rosbag2 (metadata version 9, Jazzy) stores the QoS profiles offered by a
 topic's publishers in the MCAP channel metadata ``offered_qos_profiles`` as a
 YAML list; each entry holds history, depth, reliability, durability, deadline,
@@ -34,8 +37,6 @@ _RELIABILITY = {
     'reliable': ReliabilityPolicy.RELIABLE,
     'best_effort': ReliabilityPolicy.BEST_EFFORT,
 }
-#: ``qos.reliability`` value that adapts the input subscriptions to the publishers.
-AUTO = 'auto'
 
 #: Depth of the reliable queue ``play`` offers at ``--rate 0``, and that
 #: ``record`` requests: deep enough that a burst never overwrites unread samples.
@@ -49,7 +50,7 @@ def _duration_yaml(duration):
 
 def qos_profile(params: NodeParameters, *, transient_local: bool = False) -> QoSProfile:
     """
-    Return the QoS of the node's output publishers (and of explicitly configured inputs).
+    Return the QoS of the node's output publishers (and of its inputs unless adapted).
 
     ``rotation_bag convert`` stores it as the offered QoS of the topics it adds.
     ``qos.reliability: auto`` gives reliable, which every subscriber matches.
@@ -76,40 +77,6 @@ def qos_profile(params: NodeParameters, *, transient_local: bool = False) -> QoS
         history=HistoryPolicy.KEEP_LAST, depth=params.qos_depth,
         reliability=_RELIABILITY.get(params.qos_reliability, ReliabilityPolicy.RELIABLE),
         durability=DurabilityPolicy.VOLATILE)
-
-
-def input_qos(params: NodeParameters, offered: Sequence[QoSProfile], *,
-              transient_local: bool = False) -> QoSProfile:
-    """
-    Return the QoS of one input subscription of the node.
-
-    With ``qos.reliability: auto`` the reliability and durability are those
-    every publisher on the topic is compatible with (:func:`matching_policies`,
-    as ``ros2 bag record`` adapts to what is offered); otherwise, or while
-    there is no publisher, those of :func:`qos_profile` (reliable when auto):
-    a reliable publisher then matches at once, and a best-effort one is
-    reported by an incompatible-QoS event. The history is that of
-    :func:`qos_profile` either way.
-
-    Parameters
-    ----------
-    params : rotation_node.parameters.NodeParameters
-        The node's parameters (``qos.reliability``, ``qos.depth``).
-    offered : list of rclpy.qos.QoSProfile
-        The profiles the topic's publishers offer (may be empty).
-    transient_local : bool, optional
-        The topic holds latched data: keep all, and reliable and transient
-        local unless adapted to the publishers.
-
-    Returns
-    -------
-    rclpy.qos.QoSProfile
-
-    """
-    profile = qos_profile(params, transient_local=transient_local)
-    if params.qos_reliability == AUTO and offered:
-        profile.reliability, profile.durability = matching_policies(offered)
-    return profile
 
 
 def qos_profiles_yaml(profiles: Iterable[QoSProfile]) -> str:

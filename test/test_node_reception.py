@@ -1,10 +1,10 @@
-"""Tests of rotation_node.reception: lost and duplicate messages from their message info."""
+"""Tests of rotation_node.node.reception: lost and duplicate messages from their message info."""
 import itertools
 import random
 
 import pytest
 
-from rotation_node.reception import MAX_PUBLISHERS, message_identity, Reception
+from rotation_node.node.reception import MAX_PUBLISHERS, message_identity, Reception
 
 
 def info(number, stamp=None, gid=None):

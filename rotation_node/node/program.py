@@ -1,0 +1,208 @@
+"""
+The ``rotation_node`` program: its command line, start-up and shut-down.
+
+:func:`main` checks the command line the node's own way first (its
+``--params-file`` files with the loader ``rotation_bag convert`` uses, and the
+names given with ``-p``), so that a mistake is one line on stderr and exit
+status 1, not rcl's many lines; then it initialises rclpy and creates the node
+(:class:`rotation_node.node.conversion_node.RotationNode`, imported only then),
+which says that it is starting before it loads the conversions, and spins it
+until Ctrl-C or SIGTERM.
+
+rclpy reads the ROS arguments itself (``rclpy.init``; the program's own
+arguments are what ``rclpy.utilities.remove_ros_args`` leaves). The
+``--params-file`` and ``-p`` arguments are also read here, by
+:func:`ros_arguments`: rclpy gives no access to them before it reads the
+files (a file it refuses is a multi-line rcl error).
+
+Run it with, for example::
+
+    rotation_node --ros-args -r input:=/imu/data -p outputs:='[euler, angular_velocity]'
+"""
+import gc
+import sys
+from typing import List, Optional, Sequence, Tuple
+
+import rclpy
+from rclpy.exceptions import InvalidHandle, NotInitializedException
+from rclpy.executors import ExternalShutdownException
+from rclpy.signals import install_signal_handlers, SignalHandlerOptions
+from rclpy.utilities import remove_ros_args
+from rotation_node.command_line.stop_signal import signal_name, StopSignal
+from rotation_node.errors import ParameterError
+from rotation_node.parameters import (
+    NODE_NAME, PARAMETERS, PARAMETERS_BY_NAME, parameters_file_sections, ROS_BUILTIN_PARAMETERS,
+    unknown_parameter_error)
+from rotation_node.rclpy_private import RCLError
+
+# ROS arguments (after --ros-args, up to --) that take a value, and those that do not.
+_ROS_FLAGS_WITH_VALUE = frozenset((
+    '-r', '--remap', '-p', '--param', '--params-file', '-e', '--enclave', '--log-level',
+    '--log-file-name', '--log-config-file'))
+
+
+def ros_arguments(args: Sequence[str]) -> List[Tuple[str, Optional[str]]]:
+    """
+    Return the ``(flag, value)`` pairs of the ROS arguments in a command line.
+
+    Parameters
+    ----------
+    args : sequence of str
+        The command line (``sys.argv``); ROS arguments are those after each
+        ``--ros-args``, up to the next ``--``.
+
+    Returns
+    -------
+    list of (str, str or None)
+        E.g. ``[('--params-file', 'a.yaml'), ('-p', 'qos.depth:=5')]``; flags
+        without a value (``--disable-stdout-logs``) with None.
+
+    """
+    pairs: List[Tuple[str, Optional[str]]] = []
+    in_ros_args, index = False, 0
+    while index < len(args):
+        token = args[index]
+        if token == '--ros-args':
+            in_ros_args = True
+        elif token == '--':
+            in_ros_args = False
+        elif in_ros_args:
+            if token in _ROS_FLAGS_WITH_VALUE and index + 1 < len(args):
+                pairs.append((token, args[index + 1]))
+                index += 1
+            else:
+                pairs.append((token, None))
+        index += 1
+    return pairs
+
+
+def parameters_files(args: Sequence[str]) -> List[str]:
+    """Return the files of the ``--params-file`` arguments of a command line."""
+    # A --params-file without a file is rclpy's to report (as its other malformed arguments).
+    return [value for flag, value in ros_arguments(args)
+            if flag == '--params-file' and value is not None]
+
+
+def check_parameter_names(args: Sequence[str]) -> None:
+    """Raise ParameterError for a ``-p [NODE:]NAME:=VALUE`` naming no parameter of the node."""
+    known = {*PARAMETERS_BY_NAME, *ROS_BUILTIN_PARAMETERS}
+    for flag, value in ros_arguments(args):
+        if flag in ('-p', '--param') and value is not None:
+            node, _, name = value.split(':=', 1)[0].rpartition(':')   # [node:]name:=value
+            if node not in ('', NODE_NAME):
+                continue   # a parameter of another node of the process
+            if name not in known:
+                raise unknown_parameter_error(name, f' in {flag} {value}')
+
+
+def usage() -> str:
+    """Return the text ``rotation_node --help`` prints: how to run it, its parameters."""
+    return ('usage: rotation_node [--ros-args [-r input:=TOPIC] [-p NAME:=VALUE]... '
+            '[--params-file FILE]]\n\n'
+            'Convert the orientations on the topic "input" and publish the outputs listed in '
+            'the parameter "outputs".\nParameters: '
+            + ', '.join(spec.name for spec in PARAMETERS) + '.\n')
+
+
+def _asks_for_help(argv: Sequence[str]) -> bool:
+    """Whether the program's own arguments (not the ROS ones) hold ``-h`` or ``--help``."""
+    try:
+        own = remove_ros_args(argv)[1:]
+    except RCLError:   # malformed ROS arguments: reported by the checks or by rclpy.init
+        return False
+    return bool({'-h', '--help'} & set(own))
+
+
+def main(args: Optional[List[str]] = None, stop_signal: Optional[StopSignal] = None) -> int:
+    """
+    Run the node until Ctrl-C or SIGTERM (``--help``: print its usage).
+
+    Parameters
+    ----------
+    args : list of str, optional
+        The command line (``sys.argv`` by default).
+    stop_signal : StopSignal, optional
+        The console script's, in force since the program started loading; a
+        new one otherwise.
+
+    Returns
+    -------
+    int
+        0 after Ctrl-C, SIGTERM or shutdown, at any moment (during start-up with
+        one line on stderr saying so); 1 if a parameters file or an initial
+        parameter value is invalid (one line on stderr says which).
+
+    Notes
+    -----
+    Start-up runs with SIGINT and SIGTERM only setting a flag (:class:`StopSignal`),
+    and rclpy initialised without its signal handlers: its handler shuts the
+    context down from another thread, which in the middle of the node's
+    construction surfaces as whatever rclpy call comes next
+    (``NotInitializedException``...). rclpy's handlers are installed once the node
+    exists (chained to the flag), so that a signal ends ``spin``.
+
+    """
+    if stop_signal is None:
+        with StopSignal() as stop:
+            return _run(args, stop)
+    return _run(args, stop_signal)
+
+
+def _run(args: Optional[List[str]], stop: StopSignal) -> int:
+    """Run :func:`main` with ``stop`` in force."""
+    argv = sys.argv if args is None else list(args)
+    if _asks_for_help(argv):
+        print(usage(), end='')
+        return 0
+    files = parameters_files(argv)
+    try:   # before rclpy reads the files, whose own errors are many lines long
+        for path in files:
+            parameters_file_sections(path)
+        check_parameter_names(argv)
+    except ParameterError as exc:
+        print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
+        return 1
+    node = None
+    spinning = False
+    try:
+        if not stop.is_set():
+            try:
+                rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+            except RCLError as exc:   # e.g. a malformed --ros-args remapping
+                print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
+                return 1
+        if not stop.is_set():
+            from rotation_node.node.conversion_node import RotationNode
+            node = RotationNode(parameters_files=files)
+            # From here a signal also shuts the context down (rclpy's handler, chained to
+            # the flag's), which ends spin; one that came before is seen below.
+            install_signal_handlers(SignalHandlerOptions.ALL)
+        if not stop.is_set() and node is not None:
+            # The ~1e5 objects of rclpy, numpy and numba live as long as the process: keep
+            # them out of the cyclic collector, whose full passes over them stall a
+            # callback for ~50 ms (50 messages at 1 kHz).
+            gc.freeze()
+            spinning = True
+            rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (RCLError, NotInitializedException, InvalidHandle):
+        if rclpy.ok():
+            raise
+        # A stop request shut the context down under an rclpy call.
+    except ParameterError as exc:
+        print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
+        return 1
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    interrupt = stop.interrupt()
+    if interrupt is not None and not spinning:
+        print(f'{NODE_NAME}: interrupted while starting ({signal_name(interrupt)})',
+              file=sys.stderr)
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
