@@ -298,8 +298,9 @@ def test_message_encoder_covers_fixed_layouts_and_float64_multi_array_only():
 def test_float64_multi_array_blocks_are_the_per_message_bytes(rng):
     layout = LAYOUTS['labels 0..4 characters']
     data = rng.normal(size=(5, 7))
-    assert float64_multi_array_block_encoder(layout, 7)(data) == [
-        float64_multi_array_encoder(layout)(row) for row in data]
+    for rows in (data, data[:1], data[:0]):
+        assert float64_multi_array_block_encoder(layout, 7)(rows) == [
+            float64_multi_array_encoder(layout)(row) for row in rows]
 
 
 # ------------------------------------------------------------------ the block form

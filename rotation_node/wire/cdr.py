@@ -460,10 +460,11 @@ class FixedLayoutCodec:
         keys = np.empty((n, len(self._to_string_lengths)), dtype=np.int64)
         offset = np.zeros(n, dtype=np.int64)
         for column, to_length in enumerate(self._to_string_lengths):
-            offset += np.asarray(to_length)[offset & 7]   # as decode walks it, every message at once
+            offset += np.asarray(to_length)[offset & 7]   # decode's walk, all messages at once
             if (offset > sizes).any():
                 return None
-            keys[:, column] = buffer[(payloads + offset - 4)[:, None] + np.arange(4)].view('<u4')[:, 0]
+            at = payloads + offset - 4   # the string's uint32 length
+            keys[:, column] = buffer[at[:, None] + np.arange(4)].view('<u4')[:, 0]
             offset += keys[:, column]
             if (offset > sizes).any():
                 return None
@@ -595,9 +596,17 @@ def _canonical_strings(strings):
 
 
 def _rows(rows, width):
-    """The first ``width`` bytes of each row of a C-contiguous uint8 array, as bytes."""
-    blob = rows.tobytes()
-    return [blob[start:start + width] for start in range(0, len(blob), rows.shape[1])]
+    """Return the first ``width`` bytes of each row of a C-contiguous uint8 array, as bytes."""
+    if len(rows) < 2:
+        return [row.tobytes()[:width] for row in rows]
+    return list(_row_slicer(len(rows), width, rows.shape[1])(rows.tobytes()))
+
+
+@functools.lru_cache(maxsize=16)
+def _row_slicer(count, width, stride):
+    """Return a function giving the rows of bytes of ``count`` rows ``stride`` apart, in C."""
+    return operator.itemgetter(*(slice(start, start + width)
+                                 for start in range(0, count * stride, stride)))
 
 
 @functools.lru_cache(maxsize=None)
@@ -628,7 +637,7 @@ def fixed_layout_codec(type_name: str) -> Optional[FixedLayoutCodec]:
 
 
 def _float64_multi_array_head(layout):
-    """Return the CDR of a Float64MultiArray with ``layout`` up to its data's count, and the padding after it."""
+    """Return a Float64MultiArray's CDR up to its data's count, and the padding after that."""
     payload = bytearray(_UINT32.pack(len(layout.dim)))
     for dim in layout.dim:
         label = dim.label.encode()

@@ -1,5 +1,5 @@
 """
-Blocks of conversion samples through the CDR codec: input messages into sample arrays, output numbers into messages.
+The conversion's blocks through the CDR codec: messages into samples, numbers into messages.
 
 For ``rotation_bag convert``: :class:`InputBlockDecoder` reads the samples of
 a block of messages of a plain input type into a
@@ -16,39 +16,15 @@ by message.
 """
 from __future__ import annotations
 
-from typing import Any, Dict, List, NamedTuple, Optional, Sequence, Tuple
+from typing import Any, List, Optional, Sequence, Tuple
 
 import numpy as np
 from rotation_node import messages
 from rotation_node.block_pipeline import SampleBlock
 from rotation_node.wire.cdr import (
-    fixed_layout_codec, float64_multi_array_block_encoder, HEADER_PATHS)
+    DecodedBlock, fixed_layout_codec, float64_multi_array_block_encoder, HEADER_PATHS)
 
 _NS_PER_S = 1_000_000_000
-
-
-def _first_values(values):
-    """The first element of each row of a field (itself for a value, element 0 for an array)."""
-    return values.reshape(len(values), -1)[:, 0]
-
-
-class BlockHeaders(NamedTuple):
-    """
-    The headers of a decoded block, grouped by the length of their ``frame_id``.
-
-    Attributes
-    ----------
-    group : ndarray of int, shape (n,)
-        Each message's group.
-    fields : list of dict
-        Per group, ``{header leaf path: values}`` of its messages in message
-        order (:data:`rotation_node.wire.cdr.HEADER_PATHS`; the ``frame_id``
-        as its bytes with the NUL).
-
-    """
-
-    group: np.ndarray
-    fields: List[Dict[str, np.ndarray]]
 
 
 class InputBlockDecoder:
@@ -85,7 +61,7 @@ class InputBlockDecoder:
         self._orientation_unknown = input_type.orientation_unknown_field
         self._rate_unknown = input_type.angular_velocity_unknown_field if self._rate else None
 
-    def decode(self, datas: Sequence[bytes]) -> Optional[Tuple[SampleBlock, BlockHeaders]]:
+    def decode(self, datas: Sequence[bytes]) -> Optional[Tuple[SampleBlock, DecodedBlock]]:
         """
         Decode a block of messages.
 
@@ -96,9 +72,11 @@ class InputBlockDecoder:
 
         Returns
         -------
-        (SampleBlock, BlockHeaders) or None
-            None if a message is not one the block form reads exactly as the
-            per-message decoder does (then decode the block message by message).
+        (SampleBlock, DecodedBlock) or None
+            The samples, and every field (the headers for
+            :meth:`OutputBlockEncoder.encode`); None if a message is not one
+            the block form reads exactly as the per-message decoder does (then
+            decode the block message by message).
 
         """
         decoded = self._codec.decode_block(datas)
@@ -110,24 +88,22 @@ class InputBlockDecoder:
         stamp_ns = np.empty(n, dtype=np.int64)
         rate = np.empty((n, len(self._rate)))
         rate_known = np.ones(n, dtype=bool)
-        headers = []
         for g, fields in enumerate(decoded.records):
             members: Any = slice(None) if len(decoded.records) == 1 else decoded.group == g
-            headers.append({path: fields[path] for path in HEADER_PATHS})
             stamp_ns[members] = (fields['header.stamp.sec'].astype(np.int64) * _NS_PER_S
                                  + fields['header.stamp.nanosec'])
             for column, path in enumerate(self._orientation):
                 orientation[members, column] = fields[path]
-            if self._orientation_unknown is not None:
-                orientation_known[members] = _first_values(
-                    fields[self._orientation_unknown]) != -1.0
             for column, path in enumerate(self._rate):
                 rate[members, column] = fields[path]
-            if self._rate_unknown is not None:
-                rate_known[members] = _first_values(fields[self._rate_unknown]) != -1.0
+            # The first element of the flag's field (a covariance) -1: unknown.
+            for known, path in ((orientation_known, self._orientation_unknown),
+                                (rate_known, self._rate_unknown)):
+                if path is not None:
+                    known[members] = fields[path].reshape(len(fields), -1)[:, 0] != -1.0
         return (SampleBlock(stamp_ns, orientation, orientation_known,
                             rate if self._rate else None, rate_known if self._rate else None),
-                BlockHeaders(decoded.group, headers))
+                decoded)
 
 
 class OutputBlockEncoder:
@@ -166,14 +142,15 @@ class OutputBlockEncoder:
             self._numbers.append((leaf.path, columns))
             self._width += leaf.count or 1
 
-    def encode(self, headers: BlockHeaders, present: np.ndarray, numbers: np.ndarray) -> list:
+    def encode(self, decoded: DecodedBlock, present: np.ndarray, numbers: np.ndarray) -> list:
         """
         Return the CDR data of the messages of a block that have this output.
 
         Parameters
         ----------
-        headers : BlockHeaders
-            Of the whole block (as :meth:`InputBlockDecoder.decode` gave them).
+        decoded : DecodedBlock
+            The whole input block (as :meth:`InputBlockDecoder.decode` gave
+            it): the output messages get its headers.
         present : ndarray of bool, shape (n,)
             Which messages have the output.
         numbers : ndarray, shape (present.sum(), k)
@@ -191,25 +168,24 @@ class OutputBlockEncoder:
         values = np.asarray(numbers, dtype=np.float64).reshape(count, self._width)
         if self._codec is None:
             return self._encode_rows(values)
-        if len(headers.fields) == 1:
-            return self._stamped(headers.fields[0], present, values)
+        if len(decoded.records) == 1:
+            return self._stamped(decoded.records[0], present, values)
         result = [None] * len(present)
         rows = np.cumsum(present) - 1
-        for g, header in enumerate(headers.fields):
-            members = headers.group == g
+        for g, records in enumerate(decoded.records):
+            members = decoded.group == g
             which = np.flatnonzero(present & members)
-            encoded = self._stamped(header, present[members], values[rows[which]])
+            encoded = self._stamped(records, present[members], values[rows[which]])
             for index, data in zip(which.tolist(), encoded):
                 result[index] = data
         return [data for data in result if data is not None]
 
-    def _stamped(self, header, selected, values):
-        """The selected messages of one ``frame_id`` length under their headers, with ``values``."""
-        layout = self._codec.layout(header['header.frame_id'].shape[1:])
-        if selected.all():
-            fields = dict(header)
-        else:
-            fields = {path: values[selected] for path, values in header.items()}
+    def _stamped(self, records, selected, values):
+        """Encode the selected messages of one ``frame_id`` length: headers and ``values``."""
+        layout = self._codec.layout(records.dtype['header.frame_id'].shape)
+        every = selected.all()
+        fields = {path: records[path] if every else records[path][selected]
+                  for path in HEADER_PATHS}
         for path, columns in self._numbers:
             fields[path] = values[:, columns]
         return layout.encode_block(len(values), fields)
