@@ -108,26 +108,25 @@ class _Leaf(NamedTuple):
 
 def _placed(leaves, string_lengths, offset=0):
     """
-    Return the payload offset of each leaf from ``offset``, and the offset after the last.
+    Return where each leaf starts and ends in the payload, ``[(start, end)]``, from ``offset``.
 
     The alignment rules of CDR, applied here only: a primitive (or a fixed
     array's first element) at a multiple of its size; a string's uint32
     length at a multiple of 4, then its bytes, ``string_lengths`` of them in
-    the order of the strings (the NUL included). A string's offset is that
-    of its length.
+    the order of the strings (the NUL included). A string starts at its length.
     """
-    offsets, strings = [], iter(string_lengths)
+    places, strings = [], iter(string_lengths)
     for leaf in leaves:
         if leaf.code == _STRING:
             offset += _padding(offset, 4)
-            offsets.append(offset)
-            offset += 4 + next(strings)
+            end = offset + 4 + next(strings)
         else:
             size = struct.calcsize(leaf.code)
             offset += _padding(offset, size)
-            offsets.append(offset)
-            offset += size * (leaf.count or 1)
-    return offsets, offset
+            end = offset + size * (leaf.count or 1)
+        places.append((offset, end))
+        offset = end
+    return places
 
 
 class PayloadLayout:
@@ -156,20 +155,18 @@ class PayloadLayout:
     """
 
     def __init__(self, leaves: Sequence[_Leaf], string_lengths: Tuple[int, ...]) -> None:
-        offsets, self.size = _placed(leaves, string_lengths)
+        places = _placed(leaves, string_lengths)
         self._leaves = leaves
         self.string_lengths = string_lengths
-        self.offsets = {leaf.path: offset for leaf, offset in zip(leaves, offsets)}
+        self.offsets = {leaf.path: start for leaf, (start, _) in zip(leaves, places)}
+        self.size = places[-1][1]
         self.end_padding = 0 if string_lengths else _padding(self.size, 4)
-        parts, end, strings = ['<'], 0, iter(string_lengths)
-        for leaf, offset in zip(leaves, offsets):
-            if leaf.code == _STRING:
-                length = next(strings)
-                parts.append(f'{offset - end}xI{length}{_STRING}')
-                end = offset + 4 + length
-            else:
-                parts.append(f'{offset - end}x{leaf.count or 1}{leaf.code}')
-                end = offset + struct.calcsize(leaf.code) * (leaf.count or 1)
+        parts, previous_end = ['<'], 0
+        for leaf, (start, end) in zip(leaves, places):
+            items = f'I{end - start - 4}{_STRING}' if leaf.code == _STRING else (
+                f'{leaf.count or 1}{leaf.code}')   # a string: its length, its bytes
+            parts.append(f'{start - previous_end}x{items}')
+            previous_end = end
         self.struct = struct.Struct(''.join(parts))
 
     @functools.cached_property
@@ -354,7 +351,7 @@ class FixedLayoutCodec:
         for leaf in leaves:
             if leaf.code == _STRING:
                 self._to_string_lengths.append(tuple(
-                    _placed([*run, leaf], (0,), start)[1] - start for start in range(8)))
+                    _placed([*run, leaf], (0,), start)[-1][1] - start for start in range(8)))
                 run = []
             else:
                 run.append(leaf)
