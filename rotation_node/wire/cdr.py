@@ -178,7 +178,10 @@ class PayloadLayout:
         its bytes (the NUL included) as a uint8 subarray; its uint32 length is
         not a field (it is in :attr:`string_lengths`).
         """
-        names, formats, offsets, strings = [], [], [], iter(self.string_lengths)
+        names: List[str] = []
+        formats: List[Any] = []
+        offsets: List[int] = []
+        strings = iter(self.string_lengths)
         for leaf in self._leaves:
             names.append(leaf.path)
             if leaf.code == _STRING:
@@ -356,8 +359,7 @@ class FixedLayoutCodec:
             else:
                 run.append(leaf)
         self._layouts: Dict[Tuple[int, ...], PayloadLayout] = {}
-        self._end_padding = bytes(self.layout(()).end_padding) if not self._to_string_lengths \
-            else b''
+        self._end_padding = b'' if self._to_string_lengths else bytes(self.layout(()).end_padding)
 
     @property
     def leaves(self) -> Tuple[_Leaf, ...]:

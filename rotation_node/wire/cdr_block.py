@@ -16,13 +16,14 @@ by message.
 """
 from __future__ import annotations
 
-from typing import Any, List, Optional, Sequence, Tuple
+from typing import Any, Callable, List, Optional, Sequence, Tuple
 
 import numpy as np
 from rotation_node import messages
 from rotation_node.block_pipeline import SampleBlock
 from rotation_node.wire.cdr import (
-    DecodedBlock, fixed_layout_codec, float64_multi_array_block_encoder, HEADER_PATHS)
+    DecodedBlock, fixed_layout_codec, FixedLayoutCodec, float64_multi_array_block_encoder,
+    HEADER_PATHS)
 
 _NS_PER_S = 1_000_000_000
 
@@ -97,10 +98,10 @@ class InputBlockDecoder:
             for column, path in enumerate(self._rate):
                 rate[members, column] = fields[path]
             # The first element of the flag's field (a covariance) -1: unknown.
-            for known, path in ((orientation_known, self._orientation_unknown),
+            for known, flag in ((orientation_known, self._orientation_unknown),
                                 (rate_known, self._rate_unknown)):
-                if path is not None:
-                    known[members] = fields[path].reshape(len(fields), -1)[:, 0] != -1.0
+                if flag is not None:
+                    known[members] = fields[flag].reshape(len(fields), -1)[:, 0] != -1.0
         return (SampleBlock(stamp_ns, orientation, orientation_known,
                             rate if self._rate else None, rate_known if self._rate else None),
                 decoded)
@@ -121,12 +122,14 @@ class OutputBlockEncoder:
 
     """
 
+    _codec: FixedLayoutCodec   # of a stamped type
+
     def __init__(self, message: messages.OutputMessage):
         self.type_name = message.type_name
+        self._encode_rows: Optional[Callable[[np.ndarray], List[bytes]]] = None
         if message.layout is not None:   # std_msgs/Float64MultiArray of a fixed size
             self._width = message.layout.dim[0].stride   # the outermost stride: every element
             self._encode_rows = float64_multi_array_block_encoder(message.layout, self._width)
-            self._codec = None
             return
         codec = fixed_layout_codec(message.type_name) if message.stamped_numbers else None
         if codec is None or not codec.starts_with_header or any(
@@ -166,7 +169,7 @@ class OutputBlockEncoder:
         if count == 0:
             return []
         values = np.asarray(numbers, dtype=np.float64).reshape(count, self._width)
-        if self._codec is None:
+        if self._encode_rows is not None:
             return self._encode_rows(values)
         if len(decoded.records) == 1:
             return self._stamped(decoded.records[0], present, values)
