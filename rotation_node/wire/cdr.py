@@ -1,19 +1,26 @@
 """
-Fast CDR encoding and decoding of fixed-layout ROS 2 messages.
+Fast CDR encoding and decoding of fixed-layout ROS 2 messages, one message or a block of them.
 
 rclpy's ``serialize_message`` and ``deserialize_message`` spend tens of
 microseconds per message, mostly building or reading the Python message
 object (an empty ``sensor_msgs/Imu()`` alone takes ~15 us). For the types
-that ``rotation_bag convert`` and the scene simulator read and write, this
-module does the same work with one precompiled ``struct.Struct`` call.
+that ``rotation_bag convert``, the node and the scene simulator read and
+write, this module does the same work with one precompiled ``struct.Struct``
+call per message, or with numpy for a whole block of messages at once.
 
 A type has a *fixed layout* when its fields, recursively, are booleans,
 integers, floats, fixed-size arrays of those, and unbounded strings: no
 sequences, bounded or wide strings. std_msgs/Header, sensor_msgs/Imu,
 nav_msgs/Odometry and the geometry_msgs ``*Stamped`` types are. Once the
-lengths of its strings are known, such a message is one fixed ``struct``
-format; the formats are derived from the type's rosidl definition
-(``SLOT_TYPES``) and compiled once per set of string lengths.
+lengths of its strings are known, every field of such a message is at a
+fixed offset: a :class:`PayloadLayout`, computed once per set of string
+lengths from the type's rosidl definition (``SLOT_TYPES``), and given in the
+two forms the codec uses: a ``struct.Struct`` that packs or unpacks one
+message in one call (:meth:`FixedLayoutCodec.decode`, :meth:`~FixedLayoutCodec.encode`),
+and a numpy structured dtype that reads or writes the fields of a block of
+messages as arrays (:meth:`FixedLayoutCodec.decode_block`,
+:meth:`PayloadLayout.encode_block`). Both come from the one layout, so the
+two forms agree by construction.
 
 The CDR written by rmw_fastrtps in Jazzy (plain CDR, XCDR version 1):
 
@@ -34,7 +41,10 @@ rclpy message wherever fields are only read, as in
 :meth:`rotation_node.pipeline.ConversionPipeline.process_values`. Data that is
 not little-endian CDR is left to rclpy. Encoding gives rclpy's bytes, except
 that the padding is zero where rclpy leaves it uninitialised, so that equal
-messages give equal bytes and bags are reproducible.
+messages give equal bytes and bags are reproducible. The block form reads
+exactly what the per-message decoder reads, and declines (returns None for)
+a block it cannot: data that is not little-endian CDR, a truncated message,
+a string the per-message decoder would rewrite (not NUL-terminated UTF-8).
 """
 from __future__ import annotations
 
@@ -42,7 +52,7 @@ import collections
 import functools
 import operator
 import struct
-from typing import Any, Callable, Dict, List, NamedTuple, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Mapping, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 from rclpy.serialization import deserialize_message
@@ -52,17 +62,20 @@ from rotation_node.wire.message_types import message_class
 
 #: Encapsulation header of little-endian plain CDR (the options bytes zero).
 CDR_LE = b'\x00\x01\x00\x00'
+#: Leaf paths of a std_msgs/Header that starts a message, in CDR order.
+HEADER_PATHS = ('header.stamp.sec', 'header.stamp.nanosec', 'header.frame_id')
 _CDR_LE_ID = CDR_LE[:2]   # the representation identifier; the options are ignored
 _ENCAPSULATION_SIZE = len(CDR_LE)
 _UINT32 = struct.Struct('<I')
 _STRING = 's'   # the struct code of a string's bytes (after its uint32 length)
-# struct codes of the rosidl basic types with a fixed size, which is also their alignment.
+# struct codes of the rosidl basic types with a fixed size, which is also their
+# alignment; numpy reads the same codes with '<' as the same types.
 _STRUCT_CODES = {
     'boolean': '?', 'int8': 'b', 'uint8': 'B', 'int16': 'h', 'uint16': 'H', 'int32': 'i',
     'uint32': 'I', 'int64': 'q', 'uint64': 'Q', 'float': 'f', 'double': 'd'}
-# Structs kept per type, one per distinct set of string lengths; a bag with more
-# distinct frame_id lengths than this recompiles (correct, only slower).
-_MAX_CACHED_STRUCTS = 64
+# Layouts kept per type, one per distinct set of string lengths; a bag with more
+# distinct frame_id lengths than this recomputes them (correct, only slower).
+_MAX_CACHED_LAYOUTS = 64
 
 
 def _padding(offset, alignment):
@@ -93,7 +106,148 @@ class _Leaf(NamedTuple):
     count: int  # type: ignore[assignment]  # elements of a fixed array; 0: a value or string
 
 
-_STRING_LENGTH = _Leaf('<string length>', 'I', 0)
+def _placed(leaves, string_lengths, offset=0):
+    """
+    Return where each leaf starts and ends in the payload, ``[(start, end)]``, from ``offset``.
+
+    The alignment rules of CDR, applied here only: a primitive (or a fixed
+    array's first element) at a multiple of its size; a string's uint32
+    length at a multiple of 4, then its bytes, ``string_lengths`` of them in
+    the order of the strings (the NUL included). A string starts at its length.
+    """
+    places, strings = [], iter(string_lengths)
+    for leaf in leaves:
+        if leaf.code == _STRING:
+            offset += _padding(offset, 4)
+            end = offset + 4 + next(strings)
+        else:
+            size = struct.calcsize(leaf.code)
+            offset += _padding(offset, size)
+            end = offset + size * (leaf.count or 1)
+        places.append((offset, end))
+        offset = end
+    return places
+
+
+class PayloadLayout:
+    """
+    Where each field of a fixed-layout type is when its strings have given lengths.
+
+    Get one from :meth:`FixedLayoutCodec.layout`.
+
+    Attributes
+    ----------
+    string_lengths : tuple of int
+        Bytes of each string, in CDR order, its NUL included.
+    offsets : dict
+        ``{leaf path: payload offset}``, from the payload start (after the
+        4-byte encapsulation header): a string's is that of its uint32
+        length, a fixed array's that of its first element.
+    size : int
+        Bytes of the payload, without the end padding.
+    end_padding : int
+        Zero bytes after the payload: up to a multiple of 4 for a type
+        without strings ("plain"), none otherwise.
+    struct : struct.Struct
+        Packs and unpacks one payload: one item per value, ``count`` per
+        fixed array, two per string (its uint32 length, its bytes with the NUL).
+
+    """
+
+    def __init__(self, leaves: Sequence[_Leaf], string_lengths: Tuple[int, ...]) -> None:
+        places = _placed(leaves, string_lengths)
+        self._leaves = leaves
+        self.string_lengths = string_lengths
+        self.offsets = {leaf.path: start for leaf, (start, _) in zip(leaves, places)}
+        self.size = places[-1][1]
+        self.end_padding = 0 if string_lengths else _padding(self.size, 4)
+        parts, previous_end = ['<'], 0
+        for leaf, (start, end) in zip(leaves, places):
+            items = f'I{end - start - 4}{_STRING}' if leaf.code == _STRING else (
+                f'{leaf.count or 1}{leaf.code}')   # a string: its length, its bytes
+            parts.append(f'{start - previous_end}x{items}')
+            previous_end = end
+        self.struct = struct.Struct(''.join(parts))
+
+    @functools.cached_property
+    def dtype(self) -> np.dtype:
+        """
+        Return the numpy structured dtype of one payload, a field per leaf path.
+
+        A value is a scalar field, a fixed array a subarray field, a string
+        its bytes (the NUL included) as a uint8 subarray; its uint32 length is
+        not a field (it is in :attr:`string_lengths`).
+        """
+        names: List[str] = []
+        formats: List[Any] = []
+        offsets: List[int] = []
+        strings = iter(self.string_lengths)
+        for leaf in self._leaves:
+            names.append(leaf.path)
+            if leaf.code == _STRING:
+                formats.append((np.uint8, (next(strings),)))
+                offsets.append(self.offsets[leaf.path] + 4)
+            else:
+                formats.append((f'<{leaf.code}', (leaf.count,)) if leaf.count else f'<{leaf.code}')
+                offsets.append(self.offsets[leaf.path])
+        return np.dtype({'names': names, 'formats': formats, 'offsets': offsets,
+                         'itemsize': self.size})
+
+    def encode_block(self, count: int, fields: Mapping[str, Any]) -> List[bytes]:
+        """
+        Return the CDR data of ``count`` messages from arrays of their fields.
+
+        Parameters
+        ----------
+        count : int
+            Messages.
+        fields : mapping
+            ``{leaf path: array}`` with a row per message (as :meth:`FixedLayoutCodec.decode_block`
+            gives them): a string as its bytes with the NUL, ``string_lengths``
+            of them. Fields left out are zero.
+
+        Returns
+        -------
+        list of bytes
+            Little-endian CDR with its encapsulation header and zero padding,
+            the bytes :meth:`FixedLayoutCodec.encode` gives for each message.
+
+        """
+        width = _ENCAPSULATION_SIZE + self.size + self.end_padding
+        # Rows 8 bytes apart, each payload at a multiple of 8: the fields aligned
+        # as in the payload, which numpy writes fastest.
+        stride = width + _padding(width, 8)
+        out = np.zeros(count * stride + 8, np.uint8)
+        out = out[8 - _ENCAPSULATION_SIZE:][:count * stride].reshape(count, stride)
+        out[:, :_ENCAPSULATION_SIZE] = np.frombuffer(CDR_LE, np.uint8)
+        payload = out[:, _ENCAPSULATION_SIZE:_ENCAPSULATION_SIZE + self.size]
+        strings = iter(self.string_lengths)
+        for leaf in self._leaves:
+            if leaf.code == _STRING:
+                at = self.offsets[leaf.path]
+                payload[:, at:at + 4] = np.frombuffer(_UINT32.pack(next(strings)), np.uint8)
+        records = payload.view(self.dtype)[:, 0]
+        for path, values in fields.items():
+            records[path] = values
+        return _rows(out, width)
+
+
+class DecodedBlock(NamedTuple):
+    """
+    The messages of a block decoded into arrays, grouped by the lengths of their strings.
+
+    Attributes
+    ----------
+    group : ndarray of int, shape (n,)
+        Each message's group.
+    records : list of ndarray
+        Per group, its messages in block order as a structured array of its
+        :attr:`PayloadLayout.dtype`: ``records[g]['orientation.x']``. Read-only.
+
+    """
+
+    group: np.ndarray
+    records: List[np.ndarray]
 
 
 @functools.lru_cache(maxsize=None)
@@ -184,73 +338,47 @@ class FixedLayoutCodec:
     def __init__(self, type_name: str) -> None:
         self.type_name = type_name
         self.message_class = message_class(type_name)
-        self._leaves: List[_Leaf] = []
+        leaves: List[_Leaf] = []
         try:
-            self._build, _ = _compile(self.message_class, '', self._leaves, 0)
+            self._build, _ = _compile(self.message_class, '', leaves, 0)
         except _NotFixedLayout as error:
             raise BagError(f'{type_name} has no fixed CDR layout: {error}') from None
+        self._leaves = tuple(leaves)
         self.view_class = _view_class(self.message_class)
-        self._getters = [operator.attrgetter(leaf.path) for leaf in self._leaves]
+        self._getters = [operator.attrgetter(leaf.path) for leaf in leaves]
         # For each string, the bytes from the end of the previous one (or the
-        # payload start) to the end of its uint32 length, by that offset % 8.
-        self._to_string_lengths = [
-            tuple(_fixed_format([*run, _STRING_LENGTH], start)[1] - start for start in range(8))
-            for run in _runs_before_strings(self._leaves)[0]]
-        self._structs: Dict[Any, Any] = {}
-        # rmw_fastrtps pads types without strings ("plain" types) to 4 bytes;
-        # readers do not need it, the decoder does not expect it.
-        self._end_padding = (bytes(_padding(self._struct(()).size, 4))
-                             if not self._to_string_lengths else b'')
+        # payload start) to the end of its uint32 length, by that offset % 8:
+        # the table decode and decode_block walk to find the strings' lengths.
+        self._to_string_lengths: List[Tuple[int, ...]] = []
+        run: List[_Leaf] = []
+        for leaf in leaves:
+            if leaf.code == _STRING:
+                self._to_string_lengths.append(tuple(
+                    _placed([*run, leaf], (0,), start)[-1][1] - start for start in range(8)))
+                run = []
+            else:
+                run.append(leaf)
+        self._layouts: Dict[Tuple[int, ...], PayloadLayout] = {}
+        self._end_padding = b'' if self._to_string_lengths else bytes(self.layout(()).end_padding)
 
     @property
     def leaves(self) -> Tuple[_Leaf, ...]:
         """Return the primitive fields in CDR order: ``path``, struct ``code``, ``count``."""
-        return tuple(self._leaves)
+        return self._leaves
 
     @property
-    def to_string_lengths(self) -> List[Tuple[int, ...]]:
-        """
-        Per string, the bytes from the previous string's end to the end of this one's length.
+    def starts_with_header(self) -> bool:
+        """Whether the type's first field is a std_msgs/Header (:data:`HEADER_PATHS`)."""
+        return tuple(leaf.path for leaf in self._leaves[:3]) == HEADER_PATHS
 
-        Indexed by that start offset modulo 8 (the padding depends on it): the
-        table :meth:`decode` walks to find the strings' lengths.
-        """
-        return self._to_string_lengths
-
-    def leaf_offsets(self, string_lengths: Sequence[int]) -> Dict[str, int]:
-        """
-        Return ``{path: payload offset}`` of every field when the strings have these lengths.
-
-        Offsets count from the payload start (after the 4-byte encapsulation
-        header); a string's offset is that of its uint32 length, an array's
-        that of its first element. ``string_lengths`` include the NUL.
-        """
-        offsets, offset, strings = {}, 0, iter(string_lengths)
-        for leaf in self._leaves:
-            if leaf.code == _STRING:
-                offset += _padding(offset, 4)
-                offsets[leaf.path] = offset
-                offset += 4 + next(strings)
-            else:
-                size = struct.calcsize(leaf.code)
-                offset += _padding(offset, size)
-                offsets[leaf.path] = offset
-                offset += size * (leaf.count or 1)
-        return offsets
-
-    def payload_size(self, string_lengths: Sequence[int]) -> int:
-        """Bytes of the payload :meth:`decode` reads when the strings have these lengths."""
-        return self._struct(tuple(string_lengths)).size
-
-    def _struct(self, string_lengths):
-        """Return the struct of the payload when the strings have these lengths (NUL included)."""
-        compiled = self._structs.get(string_lengths)
-        if compiled is None:
-            if len(self._structs) >= _MAX_CACHED_STRUCTS:
-                self._structs.clear()
-            compiled = self._structs[string_lengths] = struct.Struct(
-                _payload_format(self._leaves, string_lengths))
-        return compiled
+    def layout(self, string_lengths: Tuple[int, ...]) -> PayloadLayout:
+        """Return the layout of the payload when the strings have these lengths (NUL included)."""
+        found = self._layouts.get(string_lengths)
+        if found is None:
+            if len(self._layouts) >= _MAX_CACHED_LAYOUTS:
+                self._layouts.clear()
+            found = self._layouts[string_lengths] = PayloadLayout(self._leaves, string_lengths)
+        return found
 
     def decode(self, data: bytes) -> Any:
         """
@@ -291,7 +419,8 @@ class FixedLayoutCodec:
             if offset > size:
                 raise self._truncated(data, offset)
             lengths.append(length)
-        payload = self._struct(tuple(lengths))
+        key = tuple(lengths)
+        payload = (self._layouts.get(key) or self.layout(key)).struct
         if payload.size > size:
             raise self._truncated(data, payload.size)
         return self._build(payload.unpack_from(data, _ENCAPSULATION_SIZE))
@@ -299,6 +428,64 @@ class FixedLayoutCodec:
     def _truncated(self, data, payload_size):
         return BagError(f'{self.type_name}: CDR data of {len(data)} bytes is truncated '
                         f'(needs at least {_ENCAPSULATION_SIZE + payload_size})')
+
+    def decode_block(self, datas: Sequence[bytes]) -> Optional[DecodedBlock]:
+        """
+        Decode a block of messages into arrays: :meth:`decode`'s values, as :class:`DecodedBlock`.
+
+        Parameters
+        ----------
+        datas : sequence of bytes
+            The CDR data of each message (with the encapsulation header).
+
+        Returns
+        -------
+        DecodedBlock or None
+            None if the block is empty or a message is not one the block form
+            reads exactly as :meth:`decode` does (not little-endian CDR,
+            truncated, a string :meth:`decode` rewrites): then decode the block
+            message by message (which raises where a message is bad).
+
+        """
+        n = len(datas)
+        lengths = np.fromiter(map(len, datas), dtype=np.int64, count=n)
+        if n == 0 or lengths.min() < _ENCAPSULATION_SIZE:
+            return None
+        buffer = np.frombuffer(b''.join(datas), dtype=np.uint8)
+        starts = np.cumsum(lengths) - lengths
+        if not ((buffer[starts] == _CDR_LE_ID[0]) & (buffer[starts + 1] == _CDR_LE_ID[1])).all():
+            return None
+        payloads, sizes = starts + _ENCAPSULATION_SIZE, lengths - _ENCAPSULATION_SIZE
+        keys = np.empty((n, len(self._to_string_lengths)), dtype=np.int64)
+        offset = np.zeros(n, dtype=np.int64)
+        for column, to_length in enumerate(self._to_string_lengths):
+            offset += np.asarray(to_length)[offset & 7]   # decode's walk, all messages at once
+            if (offset > sizes).any():
+                return None
+            at = payloads + offset - 4   # the string's uint32 length
+            keys[:, column] = buffer[at[:, None] + np.arange(4)].view('<u4')[:, 0]
+            offset += keys[:, column]
+            if (offset > sizes).any():
+                return None
+        if (keys == keys[0]).all():   # the common case, much faster than np.unique
+            unique, group = keys[:1], np.zeros(n, dtype=np.intp)
+        else:
+            unique, group = np.unique(keys, axis=0, return_inverse=True)
+            group = group.reshape(-1)
+        records = []
+        for g, key in enumerate(unique.tolist()):
+            layout = self.layout(tuple(key))
+            members = group == g
+            if (layout.size > sizes[members]).any():
+                return None
+            rows = np.lib.stride_tricks.sliding_window_view(buffer, layout.size)[payloads[members]]
+            fields = rows.view(layout.dtype)[:, 0]
+            fields.flags.writeable = False
+            if not all(_canonical_strings(fields[leaf.path])
+                       for leaf in self._leaves if leaf.code == _STRING):
+                return None
+            records.append(fields)
+        return DecodedBlock(group, records)
 
     def encode(self, msg: Any) -> bytes:
         """
@@ -334,8 +521,10 @@ class FixedLayoutCodec:
                 values.extend(value.tolist() if isinstance(value, np.ndarray) else value)
             else:
                 values.append(value)
+        key = tuple(lengths)
         try:
-            return CDR_LE + self._struct(tuple(lengths)).pack(*values) + self._end_padding
+            return (CDR_LE + (self._layouts.get(key) or self.layout(key)).struct.pack(*values)
+                    + self._end_padding)
         except struct.error:
             raise BagError(f'cannot encode {self.type_name}: {self._bad_field(msg)}') from None
 
@@ -372,11 +561,9 @@ class FixedLayoutCodec:
             If the type does not have that form.
 
         """
-        paths = [leaf.path for leaf in self._leaves]
-        if (paths[:3] != ['header.stamp.sec', 'header.stamp.nanosec', 'header.frame_id']
-                or any(leaf.code == _STRING for leaf in self._leaves[3:])):
+        if not self.starts_with_header or any(leaf.code == _STRING for leaf in self._leaves[3:]):
             raise BagError(f'{self.type_name} is not a std_msgs/Header followed by numbers')
-        structs = self._struct
+        layouts, layout = self._layouts, self.layout
 
         def encode(header, numbers):
             if isinstance(numbers, np.ndarray):
@@ -384,7 +571,7 @@ class FixedLayoutCodec:
             stamp, raw = header.stamp, header.frame_id.encode()
             length = len(raw) + 1
             try:
-                return CDR_LE + structs((length,)).pack(
+                return CDR_LE + (layouts.get((length,)) or layout((length,))).struct.pack(
                     stamp.sec, stamp.nanosec, length, raw, *numbers)
             except struct.error as error:
                 raise BagError(f'cannot encode {self.type_name} from stamp {stamp} and '
@@ -392,43 +579,33 @@ class FixedLayoutCodec:
         return encode
 
 
-def _fixed_format(leaves, offset):
+def _canonical_strings(strings):
     """
-    ``struct`` format of string-free ``leaves`` from payload ``offset``, and the offset after them.
+    Whether each row of string bytes (its NUL included) reads back as the same bytes.
 
-    Each leaf is preceded by the padding that aligns it to its size. A
-    string's uint32 length is included when ``leaves`` are followed by one.
+    That is, whether :meth:`FixedLayoutCodec.encode` writes these bytes for
+    the text :meth:`FixedLayoutCodec.decode` reads from them (the text and a
+    NUL): not so without a final NUL, or with bytes that are not UTF-8.
     """
-    parts = []
-    for leaf in leaves:
-        size, count = struct.calcsize(leaf.code), leaf.count or 1
-        padding = _padding(offset, size)
-        parts.append(f'{padding}x{count}{leaf.code}')
-        offset += padding + size * count
-    return ''.join(parts), offset
+    if strings.shape[1] and (strings[:, -1] == 0).all() and (strings < 0x80).all():
+        return True   # ASCII and a final NUL, the common case
+    rows = np.unique(strings, axis=0) if strings.shape[1] else strings[:1]
+    return all(_string_at(0, (row,)).encode() + b'\0' == row
+               for row in map(bytes, rows))
 
 
-def _runs_before_strings(leaves):
-    """Return the leaves between strings: the runs before each string, then after the last."""
-    runs: List[List[_Leaf]] = [[]]
-    for leaf in leaves:
-        if leaf.code == _STRING:
-            runs.append([])
-        else:
-            runs[-1].append(leaf)
-    return runs[:-1], runs[-1]
+def _rows(rows, width):
+    """Return the first ``width`` bytes of each row of a C-contiguous uint8 array, as bytes."""
+    if len(rows) < 2:
+        return [row.tobytes()[:width] for row in rows]
+    return list(_row_slicer(len(rows), width, rows.shape[1])(rows.tobytes()))
 
 
-def _payload_format(leaves, string_lengths):
-    """``struct`` format of a whole payload, given the lengths of its strings (NUL included)."""
-    parts, offset = ['<'], 0
-    before_strings, last = _runs_before_strings(leaves)
-    for run, length in zip(before_strings, string_lengths, strict=True):
-        fixed, offset = _fixed_format([*run, _STRING_LENGTH], offset)
-        parts += (fixed, f'{length}{_STRING}')
-        offset += length
-    parts.append(_fixed_format(last, offset)[0])
-    return ''.join(parts)
+@functools.lru_cache(maxsize=16)
+def _row_slicer(count, width, stride):
+    """Return a function giving the rows of bytes of ``count`` rows ``stride`` apart, in C."""
+    return operator.itemgetter(*(slice(start, start + width)
+                                 for start in range(0, count * stride, stride)))
 
 
 @functools.lru_cache(maxsize=None)
@@ -458,6 +635,18 @@ def fixed_layout_codec(type_name: str) -> Optional[FixedLayoutCodec]:
         return None
 
 
+def _float64_multi_array_head(layout):
+    """Return a Float64MultiArray's CDR up to its data's count, and the padding after that."""
+    payload = bytearray(_UINT32.pack(len(layout.dim)))
+    for dim in layout.dim:
+        label = dim.label.encode()
+        payload += struct.pack(f'<I{len(label) + 1}s', len(label) + 1, label)
+        payload += bytes(_padding(len(payload), 4))
+        payload += struct.pack('<II', dim.size, dim.stride)
+    payload += _UINT32.pack(layout.data_offset)
+    return CDR_LE + bytes(payload), _padding(len(payload) + 4, 8)   # after the data's uint32 count
+
+
 def float64_multi_array_encoder(layout: Any) -> Callable[[Sequence[float]], bytes]:
     """
     Return an encoder of std_msgs/Float64MultiArray messages with a given layout.
@@ -474,20 +663,31 @@ def float64_multi_array_encoder(layout: Any) -> Callable[[Sequence[float]], byte
         header and zero padding, ``data`` a sequence of floats.
 
     """
-    payload = bytearray(_UINT32.pack(len(layout.dim)))
-    for dim in layout.dim:
-        label = dim.label.encode()
-        payload += struct.pack(f'<I{len(label) + 1}s', len(label) + 1, label)
-        payload += bytes(_padding(len(payload), 4))
-        payload += struct.pack('<II', dim.size, dim.stride)
-    payload += _UINT32.pack(layout.data_offset)
-    head = CDR_LE + bytes(payload)
-    padding = _padding(len(payload) + 4, 8)   # after the data's uint32 count
+    head, padding = _float64_multi_array_head(layout)
 
     def encode(data):
         if isinstance(data, np.ndarray):
             data = data.tolist()   # Python floats: packed faster than numpy's
         return head + struct.pack(f'<I{padding}x{len(data)}d', len(data), *data)
+    return encode
+
+
+def float64_multi_array_block_encoder(layout: Any, width: int
+                                      ) -> Callable[[np.ndarray], List[bytes]]:
+    """
+    Return an encoder of blocks of std_msgs/Float64MultiArray messages of ``width`` numbers.
+
+    ``encode(data) -> list of bytes``, ``data`` of shape ``(messages, width)``:
+    the bytes of :func:`float64_multi_array_encoder` for each row.
+    """
+    head, padding = _float64_multi_array_head(layout)
+    prefix = np.frombuffer(head + struct.pack(f'<I{padding}x', width), np.uint8)
+
+    def encode(data):
+        out = np.empty((len(data), len(prefix) + 8 * width), np.uint8)
+        out[:, :len(prefix)] = prefix
+        out[:, len(prefix):].view('<f8')[...] = data
+        return _rows(out, out.shape[1])
     return encode
 
 

@@ -1,61 +1,31 @@
 """
-CDR of many messages at once: a block of input messages into arrays, output numbers into bytes.
+The conversion's blocks through the CDR codec: messages into samples, numbers into messages.
 
-The block form of :mod:`rotation_node.wire.cdr` for ``rotation_bag convert``:
-:class:`InputBlockDecoder` reads the samples of a block of messages of a
-plain input type into a :class:`rotation_node.block_pipeline.SampleBlock`
-(each field gathered for the whole block with numpy from the joined bytes:
-a fixed-layout type is at fixed offsets once the lengths of its strings are
-known), and :class:`OutputBlockEncoder` writes the numbers of a block of
-output messages under their input messages' headers.
-
-The bytes are those of the per-message path (``FixedLayoutCodec.decode``,
-the pipeline, ``OutputMessage.encoder``) exactly. Where that path would do
-something the block form does not (data that is not little-endian CDR, a
-truncated message, a ``frame_id`` that is not NUL-terminated UTF-8, which
-the per-message path rewrites), :meth:`InputBlockDecoder.decode` returns
-None and the caller converts that block message by message.
+For ``rotation_bag convert``: :class:`InputBlockDecoder` reads the samples of
+a block of messages of a plain input type into a
+:class:`rotation_node.block_pipeline.SampleBlock` from the arrays of
+:meth:`rotation_node.wire.cdr.FixedLayoutCodec.decode_block`, and
+:class:`OutputBlockEncoder` writes the numbers of a block of output messages
+under their input messages' headers with
+:meth:`rotation_node.wire.cdr.PayloadLayout.encode_block`. The layouts and
+the rules of CDR are the codec's alone, so the bytes are those of the
+per-message path (``FixedLayoutCodec.decode``, the pipeline,
+``OutputMessage.encoder``) exactly; a block the codec's block form declines
+(:meth:`InputBlockDecoder.decode` returns None) the caller converts message
+by message.
 """
 from __future__ import annotations
 
-from typing import List, NamedTuple, Optional, Sequence, Tuple
+from typing import Any, Callable, List, Optional, Sequence, Tuple
 
 import numpy as np
 from rotation_node import registry
 from rotation_node.block_pipeline import SampleBlock
-from rotation_node.wire.cdr import CDR_LE, fixed_layout_codec
+from rotation_node.wire.cdr import (
+    DecodedBlock, fixed_layout_codec, FixedLayoutCodec, float64_multi_array_block_encoder,
+    HEADER_PATHS)
 
-_HEADER_PATHS = ['header.stamp.sec', 'header.stamp.nanosec', 'header.frame_id']
-_HEADER_FIXED = 12   # stamp (8 bytes) and the frame_id's uint32 length, before its bytes
 _NS_PER_S = 1_000_000_000
-
-
-def _gathered(buffer, positions, width):
-    """Return the ``width`` bytes at each of ``positions`` in ``buffer``: (n, width) uint8."""
-    return buffer[positions[:, None] + np.arange(width)]
-
-
-def _float64s(buffer, positions, count):
-    """Return the ``count`` little-endian float64 at each position: an (n, count) array."""
-    return _gathered(buffer, positions, 8 * count).view('<f8')
-
-
-class BlockHeaders(NamedTuple):
-    """
-    The headers of a decoded block, grouped by the length of their payload bytes.
-
-    Attributes
-    ----------
-    group : ndarray of int, shape (n,)
-        Each message's group.
-    payloads : list of ndarray
-        Per group, the header's payload bytes of its messages ``(count, length)``
-        in message order: stamp, frame_id length and frame_id with its NUL.
-
-    """
-
-    group: np.ndarray
-    payloads: List[np.ndarray]
 
 
 class InputBlockDecoder:
@@ -79,10 +49,9 @@ class InputBlockDecoder:
         codec = fixed_layout_codec(input_type.type_name)
         if codec is None:
             raise ValueError(f'input_type: {input_type.type_name} has no fixed CDR layout')
-        if [leaf.path for leaf in codec.leaves[:3]] != _HEADER_PATHS:
+        if not codec.starts_with_header:
             raise ValueError(f'input_type: {input_type.type_name} does not start with a header')
         self._codec = codec
-        self._input_type = input_type
         components = ('x', 'y', 'z', 'w') if (
             input_type.orientation_form == registry.QUATERNION) else ('x', 'y', 'z')
         self._orientation = [f'{input_type.orientation_field}.{c}' for c in components]
@@ -93,7 +62,7 @@ class InputBlockDecoder:
         self._orientation_unknown = input_type.orientation_unknown_field
         self._rate_unknown = input_type.angular_velocity_unknown_field if self._rate else None
 
-    def decode(self, datas: Sequence[bytes]) -> Optional[Tuple[SampleBlock, BlockHeaders]]:
+    def decode(self, datas: Sequence[bytes]) -> Optional[Tuple[SampleBlock, DecodedBlock]]:
         """
         Decode a block of messages.
 
@@ -104,90 +73,38 @@ class InputBlockDecoder:
 
         Returns
         -------
-        (SampleBlock, BlockHeaders) or None
-            None if a message is not one the block form reads exactly as the
-            per-message decoder does (then decode the block message by message).
+        (SampleBlock, DecodedBlock) or None
+            The samples, and every field (the headers for
+            :meth:`OutputBlockEncoder.encode`); None if a message is not one
+            the block form reads exactly as the per-message decoder does (then
+            decode the block message by message).
 
         """
+        decoded = self._codec.decode_block(datas)
+        if decoded is None:
+            return None
         n = len(datas)
-        lengths = np.fromiter(map(len, datas), dtype=np.int64, count=n)
-        if n == 0 or lengths.min() < 4 + _HEADER_FIXED:
-            return None
-        buffer = np.frombuffer(b''.join(datas), dtype=np.uint8)
-        starts = np.cumsum(lengths) - lengths
-        if not ((buffer[starts] == CDR_LE[0]) & (buffer[starts + 1] == CDR_LE[1])).all():
-            return None
-        sizes = lengths - 4
-        payload = starts + 4
-        string_lengths = []
-        offset = np.zeros(n, dtype=np.int64)
-        for to_length in self._codec.to_string_lengths:
-            offset += np.asarray(to_length)[offset & 7]
-            if (offset > sizes).any():
-                return None
-            length = _gathered(buffer, payload + offset - 4, 4).view('<u4')[:, 0].astype(np.int64)
-            offset += length
-            if (offset > sizes).any():
-                return None
-            string_lengths.append(length)
-        keys = np.stack(string_lengths, axis=1)
-        unique, group = np.unique(keys, axis=0, return_inverse=True)
-        group = group.reshape(-1)
         orientation = np.empty((n, len(self._orientation)))
         orientation_known = np.ones(n, dtype=bool)
         stamp_ns = np.empty(n, dtype=np.int64)
         rate = np.empty((n, len(self._rate)))
         rate_known = np.ones(n, dtype=bool)
-        headers = []
-        for g, key in enumerate(unique.tolist()):
-            members = np.flatnonzero(group == g)
-            offsets = self._codec.leaf_offsets(tuple(key))
-            if (self._codec.payload_size(tuple(key)) > sizes[members]).any():
-                return None
-            base = payload[members]
-            frame_length = key[0]
-            header_length = _HEADER_FIXED + frame_length
-            header = _gathered(buffer, base, header_length)
-            if not _canonical_strings(header[:, _HEADER_FIXED:]):
-                return None
-            headers.append(header)
-            seconds = header[:, :4].copy().view('<i4')[:, 0].astype(np.int64)
-            nanoseconds = header[:, 4:8].copy().view('<u4')[:, 0].astype(np.int64)
-            stamp_ns[members] = seconds * _NS_PER_S + nanoseconds
+        for g, fields in enumerate(decoded.records):
+            members: Any = slice(None) if len(decoded.records) == 1 else decoded.group == g
+            stamp_ns[members] = (fields['header.stamp.sec'].astype(np.int64) * _NS_PER_S
+                                 + fields['header.stamp.nanosec'])
             for column, path in enumerate(self._orientation):
-                orientation[members, column] = _float64s(buffer, base + offsets[path], 1)[:, 0]
-            if self._orientation_unknown is not None:
-                flag = _float64s(buffer, base + offsets[self._orientation_unknown], 1)[:, 0]
-                orientation_known[members] = flag != -1.0
+                orientation[members, column] = fields[path]
             for column, path in enumerate(self._rate):
-                rate[members, column] = _float64s(buffer, base + offsets[path], 1)[:, 0]
-            if self._rate_unknown is not None:
-                flag = _float64s(buffer, base + offsets[self._rate_unknown], 1)[:, 0]
-                rate_known[members] = flag != -1.0
+                rate[members, column] = fields[path]
+            # The first element of the flag's field (a covariance) -1: unknown.
+            for known, flag in ((orientation_known, self._orientation_unknown),
+                                (rate_known, self._rate_unknown)):
+                if flag is not None:
+                    known[members] = fields[flag].reshape(len(fields), -1)[:, 0] != -1.0
         return (SampleBlock(stamp_ns, orientation, orientation_known,
                             rate if self._rate else None, rate_known if self._rate else None),
-                BlockHeaders(group, headers))
-
-
-def _canonical_strings(strings):
-    """
-    Whether every row (a frame_id's bytes with its NUL) reads back as the same bytes.
-
-    The per-message decoder drops a final NUL and replaces bytes that are not
-    UTF-8; the encoder writes the text and a NUL. Equal bytes need a final NUL
-    and valid UTF-8 before it.
-    """
-    if strings.shape[1] == 0 or (strings[:, -1] != 0).any():
-        return False
-    text = strings[:, :-1]
-    if not (text >= 0x80).any():
-        return True
-    for row in np.unique(text, axis=0):
-        try:
-            row.tobytes().decode('utf-8')
-        except UnicodeDecodeError:
-            return False
-    return True
+                decoded)
 
 
 class OutputBlockEncoder:
@@ -205,30 +122,38 @@ class OutputBlockEncoder:
 
     """
 
+    _codec: FixedLayoutCodec   # of a stamped type
+
     def __init__(self, message: registry.OutputMessage):
         self.type_name = message.type_name
-        self._prefix: Optional[bytes] = None   # the data's prefix of a Float64MultiArray
-        self._width: int   # numbers per message
+        self._encode_rows: Optional[Callable[[np.ndarray], List[bytes]]] = None
         if message.layout is not None:   # std_msgs/Float64MultiArray of a fixed size
             self._width = message.layout.dim[0].stride   # the outermost stride: every element
-            encode = message.encoder()
-            zero = encode(None, [0.0] * self._width)
-            self._prefix = zero[:len(zero) - 8 * self._width]
+            self._encode_rows = float64_multi_array_block_encoder(message.layout, self._width)
             return
         codec = fixed_layout_codec(message.type_name) if message.stamped_numbers else None
-        if codec is None or [leaf.path for leaf in codec.leaves[:3]] != _HEADER_PATHS or any(
-                leaf.code != 'd' for leaf in codec.leaves[3:]):
+        if codec is None or not codec.starts_with_header or any(
+                leaf.code != 'd' for leaf in codec.leaves[len(HEADER_PATHS):]):
             raise ValueError(f'message: {message.type_name} has no block encoding')
-        self._width = sum(leaf.count or 1 for leaf in codec.leaves[3:])
+        self._codec = codec
+        # (path, the numbers' columns) of each field after the header.
+        self._numbers: List[Tuple[str, Any]] = []
+        self._width = 0   # numbers per message
+        for leaf in codec.leaves[len(HEADER_PATHS):]:
+            columns = (slice(self._width, self._width + leaf.count) if leaf.count
+                       else self._width)
+            self._numbers.append((leaf.path, columns))
+            self._width += leaf.count or 1
 
-    def encode(self, headers: BlockHeaders, present: np.ndarray, numbers: np.ndarray) -> list:
+    def encode(self, decoded: DecodedBlock, present: np.ndarray, numbers: np.ndarray) -> list:
         """
         Return the CDR data of the messages of a block that have this output.
 
         Parameters
         ----------
-        headers : BlockHeaders
-            Of the whole block (as :meth:`InputBlockDecoder.decode` gave them).
+        decoded : DecodedBlock
+            The whole input block (as :meth:`InputBlockDecoder.decode` gave
+            it): the output messages get its headers.
         present : ndarray of bool, shape (n,)
             Which messages have the output.
         numbers : ndarray, shape (present.sum(), k)
@@ -243,44 +168,30 @@ class OutputBlockEncoder:
         count = int(np.count_nonzero(present))
         if count == 0:
             return []
-        values = np.ascontiguousarray(numbers, dtype='<f8').reshape(count, self._width)
-        if self._prefix is not None:
-            return _rows(self._prefix, values.view(np.uint8))
-        if len(headers.payloads) == 1:
-            return self._stamped(headers.payloads[0][present], values)
+        values = np.asarray(numbers, dtype=np.float64).reshape(count, self._width)
+        if self._encode_rows is not None:
+            return self._encode_rows(values)
+        if len(decoded.records) == 1:
+            return self._stamped(decoded.records[0], present, values)
         result = [None] * len(present)
-        group = headers.group
         rows = np.cumsum(present) - 1
-        for g, payload in enumerate(headers.payloads):
-            members = group == g
-            selected = present[members]
+        for g, records in enumerate(decoded.records):
+            members = decoded.group == g
             which = np.flatnonzero(present & members)
-            encoded = self._stamped(payload[selected], values[rows[which]])
+            encoded = self._stamped(records, present[members], values[rows[which]])
             for index, data in zip(which.tolist(), encoded):
                 result[index] = data
         return [data for data in result if data is not None]
 
-    def _stamped(self, header, values):
-        """Header payloads and numbers of messages of one header length into CDR."""
-        length = header.shape[1]
-        padding = -length % 8
-        out = np.zeros((len(header), 4 + length + padding + 8 * self._width), dtype=np.uint8)
-        out[:, :4] = np.frombuffer(CDR_LE, dtype=np.uint8)
-        out[:, 4:4 + length] = header
-        out[:, 4 + length + padding:] = values.view(np.uint8)
-        return _rows(b'', out)
-
-
-def _rows(prefix, rows):
-    """Each row of a uint8 array as bytes, after ``prefix``."""
-    width = rows.shape[1]
-    if prefix:
-        out = np.empty((len(rows), len(prefix) + width), dtype=np.uint8)
-        out[:, :len(prefix)] = np.frombuffer(prefix, dtype=np.uint8)
-        out[:, len(prefix):] = rows
-        rows, width = out, out.shape[1]
-    blob = rows.tobytes()
-    return [blob[start:start + width] for start in range(0, len(blob), width)]
+    def _stamped(self, records, selected, values):
+        """Encode the selected messages of one ``frame_id`` length: headers and ``values``."""
+        layout = self._codec.layout(records.dtype['header.frame_id'].shape)
+        every = selected.all()
+        fields = {path: records[path] if every else records[path][selected]
+                  for path in HEADER_PATHS}
+        for path, columns in self._numbers:
+            fields[path] = values[:, columns]
+        return layout.encode_block(len(values), fields)
 
 
 def block_encoder(message: registry.OutputMessage) -> Optional[OutputBlockEncoder]:
