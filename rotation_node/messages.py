@@ -515,13 +515,16 @@ class OutputType:
     compute : callable or None
         ``compute(params, *values) -> numbers``, ``values`` those of ``needs`` in
         order, ``numbers`` in the order :attr:`OutputMessage.build` takes them;
-        None to publish the one value needed as it is. Those of the outputs in
-        :data:`rotation_node.block_pipeline.BLOCK_OUTPUTS` also take arrays of
-        samples, one row each, and return one row of numbers per sample.
+        None to publish the one value needed as it is.
     description : str
         The published numbers in words, for the documentation tables.
     panels : callable
         ``panels(params) -> list of Panel``: how ``rotation_bag plot`` draws it.
+    compute_takes_blocks : bool
+        Whether ``compute`` also takes arrays of samples, one row each, and
+        returns one row of numbers per sample, each bit for bit that sample's
+        alone (tested): the output then has a block form where its values do
+        (:func:`rotation_node.pipeline.output_has_block_form`).
 
     """
 
@@ -531,6 +534,7 @@ class OutputType:
     compute: Optional[Callable[..., ArrayLike]]
     description: str
     panels: Callable[[Any], list]
+    compute_takes_blocks: bool = False
 
     @property
     def type_name(self) -> str:
@@ -607,20 +611,23 @@ _OUTPUT_LIST = (
         'rotation_vector', VECTOR3_STAMPED, (ORIENTATION,),
         lambda params, q: conversions.rotation_vector_from_quaternion(q),
         'unit axis times angle in [0, pi] (rad)',
-        lambda params: [Panel('Rotation vector', 'rad', _XYZ)]),
+        lambda params: [Panel('Rotation vector', 'rad', _XYZ)],
+        compute_takes_blocks=True),
     OutputType(
         'axis_angle', float64_multi_array([('axis_angle', 4, 4)]), (ORIENTATION,), _axis_angle,
         '`[x, y, z, angle]`: unit axis and angle in [0, pi] (rad), axis (1, 0, 0) for the '
         'identity; one layout dimension `axis_angle` (size 4); no header',
         lambda params: [Panel('Rotation axis', '', _XYZ),
-                        Panel('Rotation angle', 'rad', ('angle',), 3)]),
+                        Panel('Rotation angle', 'rad', ('angle',), 3)],
+        compute_takes_blocks=True),
     OutputType(
         'matrix', float64_multi_array([('rows', 3, 9), ('cols', 3, 3)]), (ORIENTATION,),
         _matrix,
         'the rotation matrix (body to world) row-major; layout dimensions `rows` (size 3, '
         'stride 9) and `cols` (size 3, stride 3); no header',
         lambda params: [Panel('Rotation matrix (body to world)', '',
-                              tuple(f'R{row}{col}' for row in (1, 2, 3) for col in (1, 2, 3)))]),
+                              tuple(f'R{row}{col}' for row in (1, 2, 3) for col in (1, 2, 3)))],
+        compute_takes_blocks=True),
     OutputType(
         'angular_velocity', VECTOR3_STAMPED, (ANGULAR_VELOCITY,), None,
         'rad/s in `angular_velocity.output_frame`',
@@ -633,7 +640,8 @@ _OUTPUT_LIST = (
     OutputType(
         'quaternion_rate', QUATERNION_STAMPED, (OUTPUT_QUATERNION, ANGULAR_VELOCITY),
         _quaternion_rate, 'dq/dt (1/s) of the published quaternion',
-        lambda params: [Panel('Quaternion rate', '1/s', _XYZW)]),
+        lambda params: [Panel('Quaternion rate', '1/s', _XYZW)],
+        compute_takes_blocks=True),
     OutputType(
         'euler_stddev', VECTOR3_STAMPED, (EULER_COVARIANCE,), _euler_stddev,
         'one standard deviation of each angle of `euler.sequence` (first order, from the '

@@ -22,7 +22,7 @@ from typing import List, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 from rotation_node import messages
-from rotation_node.block_pipeline import SampleBlock
+from rotation_node.sample_block import SampleBlock
 from rotation_node.wire.cdr import CDR_LE, fixed_layout_codec
 
 _HEADER_PATHS = ['header.stamp.sec', 'header.stamp.nanosec', 'header.frame_id']
