@@ -649,6 +649,16 @@ class ConversionPipeline:
             self._issue(reason, **fields)
         return outputs
 
+    def drop_message(self, reason: str, **fields: Any) -> None:
+        """
+        Count a message the caller could not give the pipeline (e.g. undecodable) as dropped.
+
+        ``reason`` is one of :data:`REASONS` and ``fields`` its text's: counted
+        as received and dropped, and reported, as the pipeline's own drops.
+        """
+        self.stats.received += 1
+        self._issue(reason, **fields)
+
     # Counting and reporting --------------------------------------------------------
 
     def _issue(self, reason, **fields):

@@ -1,6 +1,7 @@
 """
-Tests of rotation_node.pipeline: message-level conversions, per-stream state, bad input;
-the block form's own contract at the end.
+Tests of rotation_node.pipeline: conversions, per-stream state, bad input, block form.
+
+The block form's own contract is at the end.
 
 Fast, no processes: the node and ``rotation_bag convert`` both run this code, so
 the values are checked here against scipy, and test_node.py checks the wiring.
@@ -21,7 +22,7 @@ from rotation_node.conversions import SEQUENCES
 from rotation_node.conversions.kernels import BATCH_SAMPLES
 from rotation_node.parameters import NodeParameters, OUTPUTS
 from rotation_node.pipeline import (
-    _sign_chain, _unwrap_chain, _unwrapped, BLOCK_SAMPLES, block_form_missing,
+    _sign_chain, _unwrap_chain, _unwrapped, block_form_missing, BLOCK_SAMPLES,
     ConversionPipeline, COVARIANCE_TOO_LARGE, COVARIANCE_UNKNOWN, EULER_COVARIANCE_NEAR_SINGULAR,
     EULER_COVARIANCE_NOT_LINEAR, EULER_RATES_NEAR_SINGULAR, input_message_type,
     INVALID_COVARIANCE, NON_FINITE_ANGULAR_VELOCITY, NON_FINITE_COVARIANCE,
