@@ -772,11 +772,8 @@ class ConversionPipeline:
         form = self._input.orientation_form
         if not all(map(math.isfinite, orientation)):
             raise _Dropped(NON_FINITE_ORIENTATION, form=form, values=orientation)
-        if form == messages.EULER:
-            q = conversions.quaternion_from_euler(
-                orientation, self.params.euler_sequence, degrees=self.params.euler_degrees)
-        elif form == messages.ROTATION_VECTOR:
-            q = conversions.quaternion_from_rotation_vector(orientation)
+        if form != messages.QUATERNION:
+            q = self._quaternion_from_input_form(orientation)
         else:
             norm = math.hypot(*orientation)
             if norm == 0.0:
@@ -800,13 +797,9 @@ class ConversionPipeline:
                                {'form': form, 'values': tuple(orientation[s].tolist())}))
         use = known & finite
         q = np.zeros((len(orientation), 4))
-        if form == messages.EULER:
+        if form != messages.QUATERNION:
             if use.any():
-                q[use] = conversions.quaternion_from_euler(
-                    orientation[use], params.euler_sequence, degrees=params.euler_degrees)
-        elif form == messages.ROTATION_VECTOR:
-            if use.any():
-                q[use] = conversions.quaternion_from_rotation_vector(orientation[use])
+                q[use] = self._quaternion_from_input_form(orientation[use])
         else:
             run.zero = use & (orientation == 0.0).all(axis=1)
             use &= ~run.zero
@@ -824,6 +817,13 @@ class ConversionPipeline:
         if self._mounting is not None and use.any():
             q[use] = self._mounting.quaternion(q[use])
         return use, q
+
+    def _quaternion_from_input_form(self, orientation):
+        """Return the quaternions of Euler angles or rotation vectors: one (3,) or rows (n, 3)."""
+        if self._input.orientation_form == messages.EULER:
+            return conversions.quaternion_from_euler(
+                orientation, self.params.euler_sequence, degrees=self.params.euler_degrees)
+        return conversions.quaternion_from_rotation_vector(orientation)
 
     def _angular_velocity(self, sample, values):
         """
@@ -849,9 +849,7 @@ class ConversionPipeline:
                 return np.array(omega)
             if q is None:
                 return None   # the frame change needs the orientation
-            if frame == 'world':
-                return conversions.rotate_vector(q, omega)
-            return conversions.rotate_vector(conversions.quaternion_conjugate(q), omega)
+            return self._measured_in_output_frame(q, omega)
         if q is None:
             return None
         stamp_ns = header_stamp_ns(sample.header)
@@ -885,15 +883,11 @@ class ConversionPipeline:
                 raw = raw.copy()
                 raw[measured] = self._mounting.vector(raw[measured],
                                                       params.angular_velocity_input_frame)
-            frame = params.angular_velocity_output_frame
-            if params.angular_velocity_input_frame != frame:
+            if params.angular_velocity_input_frame != params.angular_velocity_output_frame:
                 measured &= known   # the frame change needs the orientation
                 if measured.any():
-                    rotation = q[measured]
-                    if frame != 'world':
-                        rotation = conversions.quaternion_conjugate(rotation)
                     raw = raw.copy()
-                    raw[measured] = conversions.rotate_vector(rotation, raw[measured])
+                    raw[measured] = self._measured_in_output_frame(q[measured], raw[measured])
             omega[measured] = raw[measured]
             available |= measured
             differenced &= ~(rows & block.angular_velocity_known)
@@ -928,6 +922,12 @@ class ConversionPipeline:
                                            params.angular_velocity_output_frame)
             available[target] = True
         return available, omega
+
+    def _measured_in_output_frame(self, q, omega):
+        """Return measured rates of ``angular_velocity.input_frame`` in the output frame."""
+        if self.params.angular_velocity_output_frame != 'world':
+            q = conversions.quaternion_conjugate(q)
+        return conversions.rotate_vector(q, omega)
 
     def _output_quaternion(self, sample, values):
         """Return the unit output quaternion: w >= 0, or with continuity nearer the previous."""
@@ -964,22 +964,23 @@ class ConversionPipeline:
 
     def _euler_angles(self, sample, values):
         """Return the Euler angles of the orientation; counts a near-singular sample."""
-        params, q = self.params, values[ORIENTATION]
-        angles = conversions.euler_from_quaternion(
-            q, params.euler_sequence, degrees=params.euler_degrees)
-        margin = conversions.euler_singularity_margin(q, params.euler_sequence)
-        self.stats.near_singular += bool(margin < params.euler_singularity_threshold)
+        angles, near_singular = self._euler_angles_of(values[ORIENTATION])
+        self.stats.near_singular += near_singular
         return angles
 
     def _euler_angles_block(self, block, rows, values, run):
-        params, q = self.params, values[ORIENTATION][1]
         angles = np.zeros((len(rows), 3))
         if rows.any():
-            angles[rows] = conversions.euler_from_quaternion(
-                q[rows], params.euler_sequence, degrees=params.euler_degrees)
-            margin = conversions.euler_singularity_margin(q[rows], params.euler_sequence)
-            run.near_singular = int(np.count_nonzero(margin < params.euler_singularity_threshold))
+            angles[rows], run.near_singular = self._euler_angles_of(values[ORIENTATION][1][rows])
         return rows, angles
+
+    def _euler_angles_of(self, q):
+        """Return the Euler angles of one quaternion or rows, and how many are near-singular."""
+        params = self.params
+        angles = conversions.euler_from_quaternion(
+            q, params.euler_sequence, degrees=params.euler_degrees)
+        margin = conversions.euler_singularity_margin(q, params.euler_sequence)
+        return angles, int(np.count_nonzero(margin < params.euler_singularity_threshold))
 
     def _published_euler(self, sample, values):
         """Return the Euler angles, first and third unwrapped against the previous published."""
