@@ -31,15 +31,17 @@ reason table, so that a stream can go block by block and message by message
 in any mix, and give the same numbers bit for bit, the same counters and the
 same reports in the same order (per sample in stream order; within a sample,
 in the order of :data:`VALUES`). :func:`block_form_missing` says when the
-parameters leave a stream to the per-message form.
+parameters leave a stream to the per-message form. The per-message form is
+not a block of one: numpy's cost per call on arrays of one sample (about
+150 us a message through :meth:`~ConversionPipeline.process_block`, against
+about 10 us through :meth:`~ConversionPipeline.process_values`) is more than
+the node can spend per message.
 
-Exactness of the block form: blocks are kept below the size at which the
-conversions switch to their batch schedules (:data:`BLOCK_SAMPLES`), whose
-vectorised ``atan2`` may differ from the single-sample path in the last bit;
-below it a block call runs the single-sample code once per sample. Decisions
-that a last-bit difference could flip (the norm tolerance, the sign of a dot
-product) are made with the per-message expression wherever the block's
-estimate is not clearly on one side.
+Exactness of the block form: blocks stay below the conversions' batch
+schedules (:data:`BLOCK_SAMPLES`), whose vectorised ``atan2`` may differ in the
+last bit, so that a block call runs the single-sample code once per sample; a
+decision a last-bit difference could flip (the norm tolerance, the sign of a
+dot product) is made with the per-message expression where in doubt.
 
 The finite-difference angular velocity is the constant rate that carries the
 previous orientation into the current one over the interval between their
@@ -93,21 +95,9 @@ NORMALISED = 'normalised'   # the quaternion was normalised; every output comput
 
 
 class Reason(NamedTuple):
-    """
-    Why a sample was dropped, partly converted or normalised, and what the report says.
+    """A reason's counter in :class:`PipelineStats` and its report (a :meth:`str.format` text)."""
 
-    Attributes
-    ----------
-    kind : str
-        :data:`DROPPED`, :data:`SKIPPED` or :data:`NORMALISED`: the counter of
-        :class:`PipelineStats` it is counted in.
-    text : str
-        The report's ``detail``, a :meth:`str.format` template of the fields
-        the pipeline gives with the reason.
-
-    """
-
-    kind: str
+    kind: str   # DROPPED, SKIPPED or NORMALISED
     text: str
 
 
@@ -229,28 +219,12 @@ class PipelineStats:
 
 @dataclass
 class StreamState:
-    """
-    What the conversions over time carry from one sample of a stream to the next.
+    """What the conversions over time carry from one sample to the next, in either form."""
 
-    Each field changes only when its value is computed, in either form.
-
-    Attributes
-    ----------
-    previous_quaternion : ndarray (4,) or None
-        The last orientation differenced (finite-difference angular velocity).
-    previous_stamp_ns : int or None
-        Its stamp.
-    previous_output_quaternion : ndarray (4,) or None
-        The last output quaternion (``quaternion.continuity``).
-    previous_euler : tuple of 3 float or None
-        The last published Euler angles (``euler.unwrap``).
-
-    """
-
-    previous_quaternion: Optional[np.ndarray] = None
-    previous_stamp_ns: Optional[int] = None
-    previous_output_quaternion: Optional[np.ndarray] = None
-    previous_euler: Optional[Tuple[float, float, float]] = None
+    previous_quaternion: Optional[np.ndarray] = None   # the last one differenced
+    previous_stamp_ns: Optional[int] = None            # its stamp
+    previous_output_quaternion: Optional[np.ndarray] = None   # quaternion.continuity
+    previous_euler: Optional[Tuple[float, float, float]] = None   # euler.unwrap
 
 
 @dataclass
@@ -439,7 +413,8 @@ def _rates_between(previous_q, q, steps_ns, frame):
     Return the constant rates carrying each ``previous_q`` into ``q`` in ``steps_ns``: (m, 3).
 
     Over unit steps, then divided by each step (a difference of integer
-    nanoseconds: exact, unlike a difference of float seconds).
+    nanoseconds: exact, unlike a difference of float seconds), the very
+    division the kernel makes for one pair over its step (the per-message form).
     """
     rates = kinematics.angular_velocity_from_quaternions(
         np.stack((previous_q, q), axis=1), (0.0, 1.0), frame=frame)[:, 0]
@@ -862,7 +837,9 @@ class ConversionPipeline:
             self._issue(TIMESTAMP_NOT_INCREASING, stamp=seconds_text(stamp_ns),
                         previous=seconds_text(previous_ns))
             return None
-        return _rates_between(previous_q[None], q[None], [stamp_ns - previous_ns], frame)[0]
+        # The same rate as _rates_between's over unit steps (the kernel divides by the step).
+        return kinematics.angular_velocity_from_quaternions(
+            np.stack((previous_q, q)), (0.0, (stamp_ns - previous_ns) * 1e-9), frame=frame)[0]
 
     def _angular_velocity_block(self, block, rows, values, run):
         """Return where the angular velocity is available and its values (as one sample's)."""
@@ -965,22 +942,23 @@ class ConversionPipeline:
     def _euler_angles(self, sample, values):
         """Return the Euler angles of the orientation; counts a near-singular sample."""
         angles, near_singular = self._euler_angles_of(values[ORIENTATION])
-        self.stats.near_singular += near_singular
+        self.stats.near_singular += bool(near_singular)
         return angles
 
     def _euler_angles_block(self, block, rows, values, run):
         angles = np.zeros((len(rows), 3))
         if rows.any():
-            angles[rows], run.near_singular = self._euler_angles_of(values[ORIENTATION][1][rows])
+            angles[rows], near_singular = self._euler_angles_of(values[ORIENTATION][1][rows])
+            run.near_singular = int(np.count_nonzero(near_singular))
         return rows, angles
 
     def _euler_angles_of(self, q):
-        """Return the Euler angles of one quaternion or rows, and how many are near-singular."""
+        """Return the Euler angles of one quaternion or rows, and whether each is near-singular."""
         params = self.params
         angles = conversions.euler_from_quaternion(
             q, params.euler_sequence, degrees=params.euler_degrees)
         margin = conversions.euler_singularity_margin(q, params.euler_sequence)
-        return angles, int(np.count_nonzero(margin < params.euler_singularity_threshold))
+        return angles, margin < params.euler_singularity_threshold
 
     def _published_euler(self, sample, values):
         """Return the Euler angles, first and third unwrapped against the previous published."""
