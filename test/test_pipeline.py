@@ -23,8 +23,9 @@ from rotation_node.conversions.kernels import BATCH_SAMPLES
 from rotation_node.parameters import NodeParameters, OUTPUTS
 from rotation_node.pipeline import (
     _sign_chain, _unwrap_chain, _unwrapped, block_form_missing, BLOCK_SAMPLES,
-    ConversionPipeline, COVARIANCE_TOO_LARGE, COVARIANCE_UNKNOWN, EULER_COVARIANCE_NEAR_SINGULAR,
-    EULER_COVARIANCE_NOT_LINEAR, EULER_RATES_NEAR_SINGULAR, input_message_type,
+    CONVERSION_ERROR, ConversionPipeline, COVARIANCE_TOO_LARGE, COVARIANCE_UNKNOWN,
+    EULER_COVARIANCE_NEAR_SINGULAR, EULER_COVARIANCE_NOT_LINEAR, EULER_RATES_NEAR_SINGULAR,
+    input_message_type,
     INVALID_COVARIANCE, NON_FINITE_ANGULAR_VELOCITY, NON_FINITE_COVARIANCE,
     NON_FINITE_ORIENTATION, NON_UNIT_QUATERNION, ORIENTATION_UNKNOWN, output_has_block_form,
     TIMESTAMP_NOT_INCREASING, ZERO_QUATERNION)
@@ -742,6 +743,13 @@ def test_process_never_raises_and_accounts_for_every_message(input_type, quatern
     assert p.stats.received == len(quaternions)
     assert sum(p.stats.dropped.values()) == len(quaternions) - finite
     assert p.stats.skipped[ZERO_QUATERNION] == zero   # orientation not estimated
+
+
+def test_a_message_the_caller_could_not_read_is_counted_and_reported_as_dropped():
+    p = pipeline(input_type='imu')
+    p.drop_message(CONVERSION_ERROR, error=ValueError('truncated CDR'))
+    assert (p.stats.received, p.stats.dropped[CONVERSION_ERROR], p.stats.published) == (1, 1, 0)
+    assert p.issues == [(CONVERSION_ERROR, 'message dropped: truncated CDR')]
 
 
 # The block form (process_block): its own contract. Its exactness against the per-message
