@@ -380,10 +380,9 @@ def breakdown(directory, count=20_000):
     from rclpy.serialization import serialize_message
     from rotation_node import registry
     from rotation_node.bag.block_convert import BLOCK_MESSAGES
-    from rotation_node.wire.cdr_block import InputBlockDecoder, OutputBlockEncoder
+    from rotation_node.bag.block_codec import InputBlockDecoder, OutputBlockEncoder
     from rotation_node.bag.reading.mcap_reader import BagReader
     from rotation_node.bag.writing.writer import BagWriter
-    from rotation_node.block_pipeline import BlockPipeline
     from rotation_node.parameters import parameters_from_yaml
     from rotation_node.pipeline import ConversionPipeline
 
@@ -415,7 +414,7 @@ def breakdown(directory, count=20_000):
     with BagReader(source) as reader:
         read, records = _timed(lambda: list(reader.messages()))
     blocks = [records[i:i + BLOCK_MESSAGES] for i in range(0, count, BLOCK_MESSAGES)]
-    pipeline = BlockPipeline(ConversionPipeline(params))
+    pipeline = ConversionPipeline(params)
     decoder = InputBlockDecoder(registry.INPUTS['imu'], pipeline.reads_angular_velocity)
     decode, decoded = _timed(lambda: [decoder.decode([r.data for r in b]) for b in blocks])
     process, outputs = _timed(lambda: [pipeline.process_block(sample) for sample, _ in decoded])
@@ -434,7 +433,7 @@ def breakdown(directory, count=20_000):
     stages = [
         ('read (BagReader, log-time order)', read),
         (f'decode Imu blocks of {BLOCK_MESSAGES}', decode),
-        ('BlockPipeline.process_block', process),
+        ('ConversionPipeline.process_block', process),
         ('encode Vector3Stamped blocks', encoding),
         ('write input + output (BagWriter)', written),
     ]

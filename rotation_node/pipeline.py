@@ -1,24 +1,47 @@
 """
-Message-level conversion pipeline shared by the live node and ``rotation_bag convert``.
+Conversion pipeline shared by the live node and ``rotation_bag convert``.
 
-:class:`ConversionPipeline` turns one input message (the type named by the
-``input_type`` parameter) into the output messages listed by ``outputs``. It
-holds the per-stream state that conversions over time need (the previous
-orientation and stamp for the finite-difference angular velocity, the previous
-Euler angles for unwrapping, the previous quaternion for sign continuity), and
-it never raises on bad data: a bad message is dropped or partly converted,
-counted in :attr:`ConversionPipeline.stats` by reason, and reported to an
-optional ``on_issue`` callback. All rotation math is done by
+:class:`ConversionPipeline` turns the messages of one input stream (the type
+named by the ``input_type`` parameter) into the output messages listed by
+``outputs``. It holds the per-stream state that conversions over time need
+(:class:`StreamState`: the previous orientation and stamp for the
+finite-difference angular velocity, the previous Euler angles for unwrapping,
+the previous quaternion for sign continuity), and it never raises on bad data:
+a bad message is dropped or partly converted, counted in
+:attr:`ConversionPipeline.stats` by reason (:data:`REASONS`), and reported to
+an optional ``on_issue`` callback. All rotation math is done by
 :mod:`rotation_node.conversions` and :mod:`rotation_node.kinematics`.
 
 The input and output types are declared in :mod:`rotation_node.registry`: an
 input message is read into samples (header, orientation, optional angular
 velocity and covariance), each sample passes the input-stage transforms of
-:data:`SAMPLE_TRANSFORMS`, and then the named per-message values an output
-needs (:data:`rotation_node.registry.PIPELINE_VALUES`) are computed once each,
-in the order of :data:`VALUES`, each from the values it depends on; a value is
+:data:`SAMPLE_TRANSFORMS`, and then the named values an output needs
+(:data:`rotation_node.registry.PIPELINE_VALUES`) are computed once each, in
+the order of :data:`VALUES`, each from the values it depends on; a value is
 unavailable (None) when one it requires is. Each configured output is then
 computed from its values, or skipped when one is unavailable.
+
+Each :class:`Value` has a per-message form (:meth:`ConversionPipeline.process`,
+:meth:`~ConversionPipeline.process_values`: one message, the node) and, where
+it has one, a block form beside it (:meth:`ConversionPipeline.process_block`:
+a :class:`~rotation_node.sample_block.SampleBlock` of samples as arrays, one
+library call per conversion, ``rotation_bag convert``). Both forms read and
+write the same :class:`StreamState` and counters and report through the same
+reason table, so that a stream can go block by block and message by message
+in any mix, and give the same numbers bit for bit, the same counters and the
+same reports in the same order (per sample in stream order; within a sample,
+in the order of :data:`VALUES`). :func:`block_form_missing` says when the
+parameters leave a stream to the per-message form. The per-message form is
+not a block of one: numpy's cost per call on arrays of one sample (about
+150 us a message through :meth:`~ConversionPipeline.process_block`, against
+about 10 us through :meth:`~ConversionPipeline.process_values`) is more than
+the node can spend per message.
+
+Exactness of the block form: blocks stay below the conversions' batch
+schedules (:data:`BLOCK_SAMPLES`), whose vectorised ``atan2`` may differ in the
+last bit, so that a block call runs the single-sample code once per sample; a
+decision a last-bit difference could flip (the norm tolerance, the sign of a
+dot product) is made with the per-message expression where in doubt.
 
 The finite-difference angular velocity is the constant rate that carries the
 previous orientation into the current one over the interval between their
@@ -28,13 +51,17 @@ It needs increasing stamps: the first message, and a message whose stamp is
 not after the previous one, produce no finite-difference outputs.
 """
 from collections import Counter
+import dataclasses
 from dataclasses import dataclass, field
 import math
+from operator import itemgetter
 from typing import Any, Callable, Dict, List, NamedTuple, Optional, Tuple
 import warnings
 
+import numba
 import numpy as np
 from rotation_node import conversions, covariance, kinematics, registry
+from rotation_node.conversions.kernels import BATCH_SAMPLES
 from rotation_node.errors import ParameterError
 from rotation_node.frames import FrameConversion
 from rotation_node.mounting import Mounting
@@ -42,12 +69,12 @@ from rotation_node.parameters import INPUT_TYPES, NodeParameters, OUTPUTS
 from rotation_node.registry import (
     ANGULAR_VELOCITY, EULER_ANGLES, EULER_COVARIANCE, EULER_RATES, ORIENTATION,
     ORIENTATION_COVARIANCE, OUTPUT_QUATERNION, PUBLISHED_EULER, Sample)
+from rotation_node.sample_block import SampleBlock
 from rotation_node.wire.stamps import header_stamp_ns, seconds_text
 
-# Reasons for dropping a whole message (counted in PipelineStats.dropped).
+# The reasons of the reports, each declared once in REASONS with its kind and text.
 NON_FINITE_ORIENTATION = 'non_finite_orientation'
 CONVERSION_ERROR = 'conversion_error'
-# Reasons for skipping some outputs of a message (counted in PipelineStats.skipped).
 ORIENTATION_UNKNOWN = 'orientation_unknown'
 ZERO_QUATERNION = 'zero_quaternion'   # the other form of "orientation not estimated"
 NON_FINITE_ANGULAR_VELOCITY = 'non_finite_angular_velocity'
@@ -59,18 +86,70 @@ COVARIANCE_TOO_LARGE = 'covariance_too_large'
 INVALID_COVARIANCE = 'invalid_covariance'
 EULER_COVARIANCE_NEAR_SINGULAR = 'euler_covariance_near_singular'
 EULER_COVARIANCE_NOT_LINEAR = 'euler_covariance_not_linear'
-# A message whose quaternion was normalised (counted in PipelineStats.normalised).
 NON_UNIT_QUATERNION = 'non_unit_quaternion'
-DROP_REASONS = (NON_FINITE_ORIENTATION, CONVERSION_ERROR)
-SKIP_REASONS = (ORIENTATION_UNKNOWN, ZERO_QUATERNION, NON_FINITE_ANGULAR_VELOCITY,
-                TIMESTAMP_NOT_INCREASING, EULER_RATES_NEAR_SINGULAR, COVARIANCE_UNKNOWN,
-                NON_FINITE_COVARIANCE, COVARIANCE_TOO_LARGE, INVALID_COVARIANCE,
-                EULER_COVARIANCE_NEAR_SINGULAR, EULER_COVARIANCE_NOT_LINEAR)
-# What the pipeline reports when a sample's orientation is unknown, by the form it took.
-ORIENTATION_UNKNOWN_DETAIL = ('orientation unknown (Imu orientation_covariance[0] == -1): '
-                              'outputs that need it skipped')
-ZERO_QUATERNION_DETAIL = ('zero quaternion (0, 0, 0, 0): orientation not estimated; outputs '
-                          'that need it skipped')
+
+# What a reason counts (the PipelineStats field).
+DROPPED = 'dropped'         # the sample gave no output
+SKIPPED = 'skipped'         # some outputs of the sample could not be computed
+NORMALISED = 'normalised'   # the quaternion was normalised; every output computed
+
+
+class Reason(NamedTuple):
+    """A reason's counter in :class:`PipelineStats` and its report (a :meth:`str.format` text)."""
+
+    kind: str   # DROPPED, SKIPPED or NORMALISED
+    text: str
+
+
+_UNCERTAINTY_SKIPPED = 'uncertainty outputs skipped'
+REASONS: Dict[str, Reason] = {
+    NON_FINITE_ORIENTATION: Reason(
+        DROPPED, 'message dropped: {form} {values} has a NaN or Inf component'),
+    CONVERSION_ERROR: Reason(DROPPED, 'message dropped: {error}'),
+    ORIENTATION_UNKNOWN: Reason(
+        SKIPPED, 'orientation unknown (Imu orientation_covariance[0] == -1): outputs that '
+        'need it skipped'),
+    ZERO_QUATERNION: Reason(
+        SKIPPED, 'zero quaternion (0, 0, 0, 0): orientation not estimated; outputs that need '
+        'it skipped'),
+    NON_FINITE_ANGULAR_VELOCITY: Reason(
+        SKIPPED, 'angular velocity {values} has a NaN or Inf component: angular-velocity '
+        'outputs skipped'),
+    TIMESTAMP_NOT_INCREASING: Reason(
+        SKIPPED, 'stamp {stamp} s is not after the previous {previous} s: finite-difference '
+        'outputs skipped'),
+    EULER_RATES_NEAR_SINGULAR: Reason(
+        SKIPPED, 'within {threshold:g} rad of gimbal lock of {sequence!r}: euler_rates '
+        'skipped (unbounded there)'),
+    COVARIANCE_UNKNOWN: Reason(
+        SKIPPED, 'orientation covariance unknown (all zeros, or none in this input type): '
+        + _UNCERTAINTY_SKIPPED),
+    NON_FINITE_COVARIANCE: Reason(
+        SKIPPED, 'orientation covariance {covariance} has a NaN or Inf element: '
+        + _UNCERTAINTY_SKIPPED),
+    COVARIANCE_TOO_LARGE: Reason(
+        SKIPPED, 'orientation covariance {covariance} has a variance above pi^2 rad^2 (a '
+        'standard deviation beyond pi: no orientation information, as drivers mark '
+        '"unknown"): ' + _UNCERTAINTY_SKIPPED),
+    INVALID_COVARIANCE: Reason(SKIPPED, '{covariance} is {problem}: ' + _UNCERTAINTY_SKIPPED),
+    EULER_COVARIANCE_NEAR_SINGULAR: Reason(
+        SKIPPED, 'within {threshold:g} rad of gimbal lock of {sequence!r}: '
+        + _UNCERTAINTY_SKIPPED + ' (unbounded there)'),
+    EULER_COVARIANCE_NOT_LINEAR: Reason(
+        SKIPPED, 'orientation standard deviation is {ratio:.3g} x its distance from gimbal '
+        'lock of {sequence!r}, more than covariance.max_linearisation_ratio = {limit:g}: the '
+        'first-order Euler covariance would be wrong; ' + _UNCERTAINTY_SKIPPED),
+    NON_UNIT_QUATERNION: Reason(NORMALISED, 'quaternion {values} has norm {norm:.9g}; normalised'),
+}
+"""Every reason the pipeline reports, in the order the node's diagnostics list them."""
+
+DROP_REASONS = tuple(name for name, reason in REASONS.items() if reason.kind == DROPPED)
+"""The reasons counted in ``PipelineStats.dropped`` (an input type adds its own)."""
+SKIP_REASONS = tuple(name for name, reason in REASONS.items() if reason.kind == SKIPPED)
+"""The reasons counted in ``PipelineStats.skipped``."""
+
+#: Most samples in one block: below the conversions' batch schedules (see the module notes).
+BLOCK_SAMPLES = BATCH_SAMPLES - 1
 
 SAMPLE_TRANSFORMS: List[Callable[[NodeParameters], Optional[Callable[[Sample], Sample]]]] = []
 """
@@ -79,7 +158,7 @@ Input-stage transforms: ``factory(params) -> transform(sample) -> sample``, or N
 Each factory is called once per pipeline; the transforms it returns are applied,
 in this order, to every sample before any value is computed from it (e.g. a
 change of the input's world or body frame convention). None means the parameters
-need no transform.
+need no transform. A transform leaves the stream to the per-message form.
 """
 
 
@@ -118,14 +197,10 @@ class PipelineStats:
         Output messages returned (all outputs together).
     dropped : collections.Counter
         Input samples that produced no output because they were invalid, by reason
-        (``non_finite_orientation``, ``conversion_error``).
+        (:data:`DROP_REASONS` and the input type's own).
     skipped : collections.Counter
         Input samples of which some outputs could not be computed, by reason
-        (:data:`SKIP_REASONS`: ``orientation_unknown``, ``zero_quaternion``,
-        ``non_finite_angular_velocity``, ``timestamp_not_increasing``,
-        ``euler_rates_near_singular``, ``covariance_unknown``,
-        ``non_finite_covariance``, ``covariance_too_large``, ``invalid_covariance``,
-        ``euler_covariance_near_singular``, ``euler_covariance_not_linear``).
+        (:data:`SKIP_REASONS`).
     normalised : int
         Input quaternions further than ``quaternion.norm_tolerance`` from unit length.
     near_singular : int
@@ -142,17 +217,48 @@ class PipelineStats:
     near_singular: int = 0
 
 
+@dataclass
+class StreamState:
+    """What the conversions over time carry from one sample to the next, in either form."""
+
+    previous_quaternion: Optional[np.ndarray] = None   # the last one differenced
+    previous_stamp_ns: Optional[int] = None            # its stamp
+    previous_output_quaternion: Optional[np.ndarray] = None   # quaternion.continuity
+    previous_euler: Optional[Tuple[float, float, float]] = None   # euler.unwrap
+
+
+@dataclass
+class BlockOutputs:
+    """
+    What a block gave: for each output, which messages have it and its numbers.
+
+    Attributes
+    ----------
+    present : dict
+        ``{output name: bool array (n,)}`` in the order of ``outputs``.
+    numbers : dict
+        ``{output name: float64 array (count, k)}``, one row per message that
+        has the output, in message order: what the per-message form returns
+        as the output's numbers.
+
+    """
+
+    present: Dict[str, np.ndarray]
+    numbers: Dict[str, np.ndarray]
+
+
 class _Dropped(Exception):
     """Internal: the current sample is invalid and produces no output."""
 
-    def __init__(self, reason, detail):
-        super().__init__(detail)
+    def __init__(self, reason, **fields):
+        super().__init__(reason)
         self.reason = reason
+        self.fields = fields
 
 
 class Value(NamedTuple):
     """
-    How the pipeline computes one named per-message value.
+    How the pipeline computes one named value, per message and (where it can) per block.
 
     Attributes
     ----------
@@ -164,7 +270,13 @@ class Value(NamedTuple):
         Values read when available (computed before this one, not required).
     method : str
         Name of the :class:`ConversionPipeline` method
-        ``method(sample, values) -> value or None`` that computes it.
+        ``method(sample, values) -> value or None`` that computes it for one sample.
+    block_method : str or None
+        Name of the :class:`ConversionPipeline` method
+        ``block_method(block, rows, values, run) -> (available, array)`` that
+        computes it for the ``rows`` of a block (those where every value it
+        requires is available): the same numbers, state changes and reports;
+        None when the value has no block form.
     reads : tuple of str
         The optional :class:`~rotation_node.registry.Sample` fields it reads
         (``'angular_velocity'``, ``'covariance'``): input messages are read into
@@ -176,20 +288,26 @@ class Value(NamedTuple):
     requires: Tuple[str, ...]
     uses: Tuple[str, ...]
     method: str
+    block_method: Optional[str]
     reads: Tuple[str, ...] = ()
 
 
 VALUES = (
-    Value(ORIENTATION, (), (), '_orientation'),
-    Value(ANGULAR_VELOCITY, (), (ORIENTATION,), '_angular_velocity', ('angular_velocity',)),
-    Value(OUTPUT_QUATERNION, (ORIENTATION,), (), '_output_quaternion'),
-    Value(EULER_ANGLES, (ORIENTATION,), (), '_euler_angles'),
-    Value(PUBLISHED_EULER, (EULER_ANGLES,), (), '_published_euler'),
-    Value(EULER_RATES, (EULER_ANGLES, ANGULAR_VELOCITY), (), '_euler_rates'),
-    Value(ORIENTATION_COVARIANCE, (ORIENTATION,), (), '_orientation_covariance', ('covariance',)),
-    Value(EULER_COVARIANCE, (EULER_ANGLES, ORIENTATION_COVARIANCE), (), '_euler_covariance'),
+    Value(ORIENTATION, (), (), '_orientation', '_orientation_block'),
+    Value(ANGULAR_VELOCITY, (), (ORIENTATION,), '_angular_velocity', '_angular_velocity_block',
+          ('angular_velocity',)),
+    Value(OUTPUT_QUATERNION, (ORIENTATION,), (), '_output_quaternion',
+          '_output_quaternion_block'),
+    Value(EULER_ANGLES, (ORIENTATION,), (), '_euler_angles', '_euler_angles_block'),
+    Value(PUBLISHED_EULER, (EULER_ANGLES,), (), '_published_euler', '_published_euler_block'),
+    Value(EULER_RATES, (EULER_ANGLES, ANGULAR_VELOCITY), (), '_euler_rates',
+          '_euler_rates_block'),
+    Value(ORIENTATION_COVARIANCE, (ORIENTATION,), (), '_orientation_covariance', None,
+          ('covariance',)),
+    Value(EULER_COVARIANCE, (EULER_ANGLES, ORIENTATION_COVARIANCE), (), '_euler_covariance',
+          None),
 )
-"""The per-message values, each after those it requires or uses."""
+"""The named values, each after those it requires or uses."""
 
 _VALUES_BY_NAME = {value.name: value for value in VALUES}
 
@@ -206,9 +324,112 @@ def _needed_values(outputs):
     return [value for value in VALUES if value.name in needed]
 
 
+def output_has_block_form(name: str) -> bool:
+    """
+    Return whether the output ``name`` has a block form.
+
+    It has one when every value it needs (with what those require) has a block
+    form, and its registry ``compute`` is None (the value as it is) or declared
+    to take arrays of samples
+    (:attr:`~rotation_node.registry.OutputType.compute_takes_blocks`).
+    """
+    output = registry.OUTPUTS[name]
+    return ((output.compute is None or output.compute_takes_blocks)
+            and all(value.block_method is not None for value in _needed_values((name,))))
+
+
+def block_form_missing(params: NodeParameters) -> Optional[str]:
+    """
+    Return why the parameters' streams are converted message by message, or None.
+
+    Parameters
+    ----------
+    params : rotation_node.parameters.NodeParameters
+        The node's parameters (input type, outputs, frames).
+
+    Returns
+    -------
+    str or None
+        E.g. ``'output euler_stddev has no block form'``; None when
+        :meth:`ConversionPipeline.process_block` converts blocks of such a stream.
+
+    """
+    input_type = registry.INPUTS[params.input_type]
+    if input_type.stream is not None:
+        return f'input type {params.input_type} reads samples from a stream of its own'
+    if any(factory(params) is not None for factory in SAMPLE_TRANSFORMS):
+        return 'an input-stage transform is configured'
+    if not (params.frames_input_world == params.frames_output_world
+            and params.frames_input_body == params.frames_output_body):
+        return 'a frame conversion is configured'
+    for name in params.outputs:
+        if not output_has_block_form(name):
+            return f'output {name} has no block form'
+    return None
+
+
 def _unwrapped(angle, previous, period):
     """Return ``angle`` shifted by the multiple of ``period`` nearest to ``previous``."""
     return angle + period * round((previous - angle) / period)
+
+
+@numba.njit(cache=True, nogil=True)
+def _unwrap_chain(first, third, previous_first, previous_third, period):   # pragma: no cover
+    """
+    Unwrap ``first`` and ``third`` in place, each against the one before, as ``_unwrapped``.
+
+    ``rint`` rounds half to even as Python's ``round``; ``+ 0.0`` makes a zero
+    correction +0, as ``_unwrapped``'s ``period * 0`` (an int) is.
+    """
+    for s in range(first.shape[0]):
+        first[s] = first[s] + (period * np.rint((previous_first - first[s]) / period) + 0.0)
+        third[s] = third[s] + (period * np.rint((previous_third - third[s]) / period) + 0.0)
+        previous_first, previous_third = first[s], third[s]
+
+
+def _sign_chain(dots):
+    """
+    Signs of sign-continuous quaternions from the dot products of consecutive canonical ones.
+
+    ``dots[k]`` is the dot product of the canonical quaternions ``k - 1`` and
+    ``k`` (the first with the previous output); quaternion ``k`` flips when
+    its dot product with the previous (flipped) one is negative.
+    """
+    negative = dots < 0.0
+    reset = dots == 0.0   # a zero dot product flips nothing: the sign restarts at +1
+    flips = np.cumsum(negative)
+    at_reset = np.where(reset, flips, 0)
+    base = np.maximum.accumulate(at_reset) if at_reset.size else at_reset
+    return np.where((flips - base) % 2 == 1, -1.0, 1.0)
+
+
+def _is_not_unit(norm, tolerance):
+    """Return whether a quaternion of ``norm`` (``math.hypot``) is normalised and reported."""
+    return abs(norm - 1.0) > tolerance
+
+
+def _rates_between(previous_q, q, steps_ns, frame):
+    """
+    Return the constant rates carrying each ``previous_q`` into ``q`` in ``steps_ns``: (m, 3).
+
+    Over unit steps, then divided by each step (a difference of integer
+    nanoseconds: exact, unlike a difference of float seconds), the very
+    division the kernel makes for one pair over its step (the per-message form).
+    """
+    rates = kinematics.angular_velocity_from_quaternions(
+        np.stack((previous_q, q), axis=1), (0.0, 1.0), frame=frame)[:, 0]
+    return rates / (np.asarray(steps_ns, dtype=np.float64) * 1e-9)[:, None]
+
+
+class _BlockRun:
+    """What a block changes: committed when the whole block is converted, else forgotten."""
+
+    def __init__(self, state, n):
+        self.state = dataclasses.replace(state)
+        self.events: List[Tuple[int, str, Dict[str, Any]]] = []   # (sample, reason, fields)
+        self.kept = np.ones(n, dtype=bool)     # not dropped
+        self.zero = np.zeros(n, dtype=bool)    # a (0, 0, 0, 0) quaternion
+        self.near_singular = 0
 
 
 class ConversionPipeline:
@@ -225,12 +446,28 @@ class ConversionPipeline:
     stats : PipelineStats, optional
         Counters to continue (e.g. across a parameter change); new ones by default.
 
+    Attributes
+    ----------
+    params : NodeParameters
+    stats : PipelineStats
+        The counters, of both forms.
+    state : StreamState
+        The per-stream state, of both forms.
+    on_issue : callable or None
+        As the parameter.
+    block_form_missing : str or None
+        Why :meth:`process_block` cannot convert this stream
+        (:func:`block_form_missing`); None when it can.
+    reads_angular_velocity : bool
+        Whether samples (and blocks) must carry the input's angular velocity:
+        it has one and a value computed reads it.
+
     Notes
     -----
-    The per-stream state (previous orientation and stamp, previous Euler angles,
-    previous quaternion, and any state of the input type's sample stream) starts
-    empty: create a new pipeline per input stream. Outputs share the header
-    object of the sample they come from (the input message's ``header``).
+    The per-stream state (:attr:`state`, and any state of the input type's
+    sample stream) starts empty: create a new pipeline per input stream.
+    Outputs share the header object of the sample they come from (the input
+    message's ``header``).
 
     """
 
@@ -238,7 +475,8 @@ class ConversionPipeline:
                  stats: Optional[PipelineStats] = None):
         self.params = params
         self.stats = PipelineStats() if stats is None else stats
-        self._on_issue = on_issue
+        self.state = StreamState()
+        self.on_issue = on_issue
         self._input = registry.INPUTS[params.input_type]
         self._outputs = [registry.OUTPUTS[name] for name in params.outputs]
         self._builders = {output.name: output.message.build for output in self._outputs}
@@ -258,16 +496,17 @@ class ConversionPipeline:
                       for value in plan]
         self._output_plan = [(output.name, output.needs, output.compute)
                              for output in self._outputs]
+        self.block_form_missing = block_form_missing(params)
+        self._block_plan = (None if self.block_form_missing is not None else
+                            [(value.name, value.requires, getattr(self, value.block_method))
+                             for value in plan])
+        self.reads_angular_velocity = (sample_fields['angular_velocity']
+                                       and self._input.angular_velocity_field is not None)
         frames = FrameConversion(params.frames_input_world, params.frames_input_body,
                                  params.frames_output_world, params.frames_output_body)
         self._frames = None if frames.is_identity else frames
         self._mounting = mounting_of(params)
         self._angle_period = 360.0 if params.euler_degrees else 2.0 * math.pi
-        # Per-stream state.
-        self._previous_quaternion = None     # last orientation, for the finite difference
-        self._previous_stamp_ns = None
-        self._previous_output_quaternion: Optional[np.ndarray] = None   # quaternion.continuity
-        self._previous_euler: Optional[Tuple[float, float, float]] = None   # euler.unwrap
 
     @property
     def input_type(self) -> type:
@@ -313,7 +552,7 @@ class ConversionPipeline:
         Convert one input message into the numbers of the output messages.
 
         :meth:`process` without building the messages, for callers that encode
-        them themselves (``rotation_bag convert``); same outputs, same counts.
+        them themselves (the node, ``rotation_bag convert``); same outputs, same counts.
 
         Parameters
         ----------
@@ -347,18 +586,77 @@ class ConversionPipeline:
             results += self._outputs_of(sample)
         return results
 
+    def process_block(self, block: SampleBlock) -> Optional[BlockOutputs]:
+        """
+        Convert a block of at most :data:`BLOCK_SAMPLES` samples: :meth:`process_values` of each.
+
+        Returns
+        -------
+        BlockOutputs or None
+            None when the block must be converted message by message (a
+            conversion rejected a value): nothing was counted or changed then.
+
+        Raises
+        ------
+        ValueError
+            If the parameters have no block form (:attr:`block_form_missing`),
+            or the block is longer than :data:`BLOCK_SAMPLES`.
+
+        """
+        if self._block_plan is None:
+            raise ValueError(f'pipeline: no block form ({self.block_form_missing})')
+        n = len(block.stamp_ns)
+        if n > BLOCK_SAMPLES:
+            raise ValueError(f'block: at most {BLOCK_SAMPLES} samples, got {n}')
+        run = _BlockRun(self.state, n)
+        try:
+            with np.errstate(all='ignore'):
+                outputs, published = self._block_outputs(block, run)
+        except ValueError:   # a conversion rejected a value: the per-message form says which
+            return None
+        self.state = run.state
+        stats = self.stats
+        stats.received += n
+        stats.published += published
+        stats.near_singular += run.near_singular
+        run.events.sort(key=itemgetter(0))   # stable: in each sample, in the order of VALUES
+        for _, reason, fields in run.events:
+            self._issue(reason, **fields)
+        return outputs
+
+    def drop_message(self, reason: str, **fields: Any) -> None:
+        """
+        Count a message the caller could not give the pipeline (e.g. undecodable) as dropped.
+
+        ``reason`` is one of :data:`REASONS` and ``fields`` its text's: counted
+        as received and dropped, and reported, as the pipeline's own drops.
+        """
+        self.stats.received += 1
+        self._issue(reason, **fields)
+
+    # Counting and reporting --------------------------------------------------------
+
+    def _issue(self, reason, **fields):
+        """Count ``reason`` where :data:`REASONS` says, and report it with its text."""
+        kind, text = REASONS[reason]
+        if kind == NORMALISED:
+            self.stats.normalised += 1
+        else:
+            getattr(self.stats, kind)[reason] += 1
+        if self.on_issue is not None:
+            self.on_issue(reason, text.format(**fields))
+
     def _stream_dropped(self, reason, detail):
         """Count what the input type's stream could not use (its own reasons)."""
         self.stats.dropped[reason] += 1
-        self._report(reason, detail)
+        if self.on_issue is not None:
+            self.on_issue(reason, detail)
 
-    def _report(self, reason, detail):
-        if self._on_issue is not None:
-            self._on_issue(reason, detail)
+    def _unknown_orientation(self, zero):
+        """Return the reason an unknown orientation skipped outputs: Imu's flag or all zeros."""
+        return ZERO_QUATERNION if zero else ORIENTATION_UNKNOWN
 
-    def _skip(self, reason, detail):
-        self.stats.skipped[reason] += 1
-        self._report(reason, detail)
+    # One sample ---------------------------------------------------------------------
 
     def _outputs_of(self, sample):
         """
@@ -391,22 +689,50 @@ class ConversionPipeline:
                 else:
                     outputs.append((name, header, compute(params, *needed)))
         except _Dropped as drop:
-            self.stats.dropped[drop.reason] += 1
-            self._report(drop.reason, str(drop))
+            self._issue(drop.reason, **drop.fields)
             return []
         except ValueError as exc:   # a conversion rejected a value the checks let through
-            self.stats.dropped[CONVERSION_ERROR] += 1
-            self._report(CONVERSION_ERROR, f'message dropped: {exc}')
+            self._issue(CONVERSION_ERROR, error=exc)
             return []
         if values[ORIENTATION] is None and len(outputs) < len(self._outputs):
-            if sample.orientation is None:
-                self._skip(ORIENTATION_UNKNOWN, ORIENTATION_UNKNOWN_DETAIL)
-            else:   # the quaternion was (0, 0, 0, 0)
-                self._skip(ZERO_QUATERNION, ZERO_QUATERNION_DETAIL)
+            # None with an orientation: the quaternion was (0, 0, 0, 0)
+            self._issue(self._unknown_orientation(sample.orientation is not None))
         self.stats.published += len(outputs)
         return outputs
 
-    # The per-message values, in the order of VALUES -----------------------------------
+    # A block ------------------------------------------------------------------------
+
+    def _block_outputs(self, block, run):
+        """Return the block's outputs and their count: every needed value once, then outputs."""
+        params, n = self.params, len(block.stamp_ns)
+        values: Dict[str, Tuple[np.ndarray, np.ndarray]] = {}
+        for name, requires, compute in self._block_plan:
+            rows = run.kept
+            for required in requires:
+                rows = rows & values[required][0]
+            values[name] = compute(block, rows, values, run)
+        outputs = BlockOutputs({}, {})
+        published = np.zeros(n, dtype=np.int64)
+        for name, needs, compute in self._output_plan:
+            present = run.kept.copy()
+            for need in needs:
+                present &= values[need][0]
+            needed = [values[need][1][present] for need in needs]
+            if compute is None:
+                numbers = needed[0]
+            elif present.any():
+                numbers = compute(params, *needed)
+            else:
+                numbers = np.zeros((0, 1))
+            outputs.present[name] = present
+            outputs.numbers[name] = np.ascontiguousarray(numbers, dtype=np.float64)
+            published += present
+        unknown = run.kept & ~values[ORIENTATION][0] & (published < len(self._outputs))
+        for s in np.flatnonzero(unknown).tolist():
+            run.events.append((s, self._unknown_orientation(run.zero[s]), {}))
+        return outputs, int(published.sum())
+
+    # The values, in the order of VALUES: each one's per-message form, then its block form.
 
     def _orientation(self, sample, values):
         """
@@ -420,25 +746,59 @@ class ConversionPipeline:
             return None
         form = self._input.orientation_form
         if not all(map(math.isfinite, orientation)):
-            raise _Dropped(NON_FINITE_ORIENTATION,
-                           f'message dropped: {form} {orientation} has a NaN or Inf component')
-        if form == registry.EULER:
-            q = conversions.quaternion_from_euler(
-                orientation, self.params.euler_sequence, degrees=self.params.euler_degrees)
-        elif form == registry.ROTATION_VECTOR:
-            q = conversions.quaternion_from_rotation_vector(orientation)
+            raise _Dropped(NON_FINITE_ORIENTATION, form=form, values=orientation)
+        if form != registry.QUATERNION:
+            q = self._quaternion_from_input_form(orientation)
         else:
             norm = math.hypot(*orientation)
             if norm == 0.0:
                 return None   # counted once the outputs that need it are known
-            if abs(norm - 1.0) > self.params.quaternion_norm_tolerance:
-                self.stats.normalised += 1
-                self._report(NON_UNIT_QUATERNION,
-                             f'quaternion {orientation} has norm {norm:.9g}; normalised')
+            if _is_not_unit(norm, self.params.quaternion_norm_tolerance):
+                self._issue(NON_UNIT_QUATERNION, values=orientation, norm=norm)
             q = np.array(orientation)
         if self._frames is not None:
             q = self._frames.quaternion(q)
         return q if self._mounting is None else self._mounting.quaternion(q)
+
+    def _orientation_block(self, block, rows, values, run):
+        """Return where the orientation is known and the quaternions (any norm); marks drops."""
+        params, form = self.params, self._input.orientation_form
+        orientation = block.orientation
+        known = block.orientation_known
+        finite = np.isfinite(orientation).all(axis=1)
+        run.kept = ~known | finite
+        for s in np.flatnonzero(~run.kept).tolist():
+            run.events.append((s, NON_FINITE_ORIENTATION,
+                               {'form': form, 'values': tuple(orientation[s].tolist())}))
+        use = known & finite
+        q = np.zeros((len(orientation), 4))
+        if form != registry.QUATERNION:
+            if use.any():
+                q[use] = self._quaternion_from_input_form(orientation[use])
+        else:
+            run.zero = use & (orientation == 0.0).all(axis=1)
+            use &= ~run.zero
+            q[use] = orientation[use]
+            # Where this estimate is not clearly within the tolerance, math.hypot decides
+            # (and gives the reported norm), as for one sample.
+            tolerance = params.quaternion_norm_tolerance
+            estimate = np.sqrt(np.einsum('ij,ij->i', q, q))
+            unclear = use & ~(np.abs(estimate - 1.0) <= tolerance - 1e-12)
+            for s in np.flatnonzero(unclear).tolist():
+                sample = tuple(orientation[s].tolist())
+                norm = math.hypot(*sample)
+                if _is_not_unit(norm, tolerance):
+                    run.events.append((s, NON_UNIT_QUATERNION, {'values': sample, 'norm': norm}))
+        if self._mounting is not None and use.any():
+            q[use] = self._mounting.quaternion(q[use])
+        return use, q
+
+    def _quaternion_from_input_form(self, orientation):
+        """Return the quaternions of Euler angles or rotation vectors: one (3,) or rows (n, 3)."""
+        if self._input.orientation_form == registry.EULER:
+            return conversions.quaternion_from_euler(
+                orientation, self.params.euler_sequence, degrees=self.params.euler_degrees)
+        return conversions.quaternion_from_rotation_vector(orientation)
 
     def _angular_velocity(self, sample, values):
         """
@@ -452,9 +812,7 @@ class ConversionPipeline:
         omega = sample.angular_velocity
         if omega is not None:
             if not all(map(math.isfinite, omega)):
-                self._skip(NON_FINITE_ANGULAR_VELOCITY,
-                           f'angular velocity {omega} has a NaN or Inf component: '
-                           'angular-velocity outputs skipped')
+                self._issue(NON_FINITE_ANGULAR_VELOCITY, values=omega)
                 return None
             input_frame = self.params.angular_velocity_input_frame
             if self._frames is not None:
@@ -466,74 +824,203 @@ class ConversionPipeline:
                 return np.array(omega)
             if q is None:
                 return None   # the frame change needs the orientation
-            if frame == 'world':
-                return conversions.rotate_vector(q, omega)
-            return conversions.rotate_vector(conversions.quaternion_conjugate(q), omega)
+            return self._measured_in_output_frame(q, omega)
         if q is None:
             return None
-        return self._finite_difference(q, header_stamp_ns(sample.header))
-
-    def _finite_difference(self, q, stamp_ns):
-        """Return the rate from the previous orientation to ``q``, which becomes the previous."""
-        previous_q, previous_ns = self._previous_quaternion, self._previous_stamp_ns
-        self._previous_quaternion, self._previous_stamp_ns = q, stamp_ns
+        stamp_ns = header_stamp_ns(sample.header)
+        state = self.state
+        previous_q, previous_ns = state.previous_quaternion, state.previous_stamp_ns
+        state.previous_quaternion, state.previous_stamp_ns = q, stamp_ns
         if previous_q is None:
             return None
         if stamp_ns <= previous_ns:
-            self._skip(TIMESTAMP_NOT_INCREASING,
-                       f'stamp {seconds_text(stamp_ns)} s is not after the previous '
-                       f'{seconds_text(previous_ns)} s: finite-difference outputs skipped')
+            self._issue(TIMESTAMP_NOT_INCREASING, stamp=seconds_text(stamp_ns),
+                        previous=seconds_text(previous_ns))
             return None
-        # Difference of integer nanoseconds: exact, unlike a difference of float seconds.
-        times = (0.0, (stamp_ns - previous_ns) * 1e-9)
+        # The same rate as _rates_between's over unit steps (the kernel divides by the step).
         return kinematics.angular_velocity_from_quaternions(
-            np.stack((previous_q, q)), times, frame=self.params.angular_velocity_output_frame)[0]
+            np.stack((previous_q, q)), (0.0, (stamp_ns - previous_ns) * 1e-9), frame=frame)[0]
+
+    def _angular_velocity_block(self, block, rows, values, run):
+        """Return where the angular velocity is available and its values (as one sample's)."""
+        params = self.params
+        known, q = values[ORIENTATION]
+        omega = np.zeros((len(rows), 3))
+        available = np.zeros(len(rows), dtype=bool)
+        differenced = rows & known
+        if block.angular_velocity is not None:
+            measured = rows & block.angular_velocity_known
+            raw = block.angular_velocity
+            finite = np.isfinite(raw).all(axis=1)
+            for s in np.flatnonzero(measured & ~finite).tolist():
+                run.events.append((s, NON_FINITE_ANGULAR_VELOCITY,
+                                   {'values': tuple(raw[s].tolist())}))
+            measured &= finite
+            if self._mounting is not None and measured.any():
+                raw = raw.copy()
+                raw[measured] = self._mounting.vector(raw[measured],
+                                                      params.angular_velocity_input_frame)
+            if params.angular_velocity_input_frame != params.angular_velocity_output_frame:
+                measured &= known   # the frame change needs the orientation
+                if measured.any():
+                    raw = raw.copy()
+                    raw[measured] = self._measured_in_output_frame(q[measured], raw[measured])
+            omega[measured] = raw[measured]
+            available |= measured
+            differenced &= ~(rows & block.angular_velocity_known)
+        indices = np.flatnonzero(differenced)
+        if not indices.size:
+            return available, omega
+        # The finite differences, each from the sample before (the first from the state).
+        state = run.state
+        stamps = block.stamp_ns[indices]
+        previous_q = np.empty((len(indices), 4))
+        previous_q[1:] = q[indices[:-1]]
+        previous_ns = np.empty(len(indices), dtype=np.int64)
+        previous_ns[1:] = stamps[:-1]
+        has_previous = np.ones(len(indices), dtype=bool)
+        if state.previous_quaternion is None:
+            has_previous[0] = False
+            previous_q[0], previous_ns[0] = 0.0, 0
+        else:
+            previous_q[0], previous_ns[0] = state.previous_quaternion, state.previous_stamp_ns
+        state.previous_quaternion = q[indices[-1]].copy()
+        state.previous_stamp_ns = int(stamps[-1])
+        increasing = stamps > previous_ns
+        for j in np.flatnonzero(has_previous & ~increasing).tolist():
+            run.events.append((int(indices[j]), TIMESTAMP_NOT_INCREASING,
+                               {'stamp': seconds_text(int(stamps[j])),
+                                'previous': seconds_text(int(previous_ns[j]))}))
+        valid = has_previous & increasing
+        if valid.any():
+            target = indices[valid]
+            omega[target] = _rates_between(previous_q[valid], q[target],
+                                           stamps[valid] - previous_ns[valid],
+                                           params.angular_velocity_output_frame)
+            available[target] = True
+        return available, omega
+
+    def _measured_in_output_frame(self, q, omega):
+        """Return measured rates of ``angular_velocity.input_frame`` in the output frame."""
+        if self.params.angular_velocity_output_frame != 'world':
+            q = conversions.quaternion_conjugate(q)
+        return conversions.rotate_vector(q, omega)
 
     def _output_quaternion(self, sample, values):
         """Return the unit output quaternion: w >= 0, or with continuity nearer the previous."""
         q = conversions.canonical_quaternion(values[ORIENTATION])
         if not self.params.quaternion_continuity:
             return q
-        previous = self._previous_output_quaternion
+        previous = self.state.previous_output_quaternion
         if previous is not None and np.dot(previous, q) < 0.0:
             q = -q
-        self._previous_output_quaternion = q
+        self.state.previous_output_quaternion = q
         return q
+
+    def _output_quaternion_block(self, block, rows, values, run):
+        """Return the output quaternions of ``rows``, sign-continuous as one sample's."""
+        q = values[ORIENTATION][1]
+        out = np.zeros_like(q)
+        indices = np.flatnonzero(rows)
+        if not indices.size:
+            return rows, out
+        canonical = conversions.canonical_quaternion(q[indices])
+        if self.params.quaternion_continuity:
+            previous = run.state.previous_output_quaternion
+            before = np.empty_like(canonical)
+            before[1:] = canonical[:-1]
+            before[0] = 0.0 if previous is None else previous
+            dots = np.einsum('ij,ij->i', before, canonical)
+            # The per-sample np.dot decides signs this estimate leaves in doubt.
+            for k in np.flatnonzero(np.abs(dots) < 1e-9).tolist():
+                dots[k] = 0.0 if k == 0 and previous is None else np.dot(before[k], canonical[k])
+            canonical = canonical * _sign_chain(dots)[:, None]
+            run.state.previous_output_quaternion = canonical[-1].copy()
+        out[indices] = canonical
+        return rows, out
 
     def _euler_angles(self, sample, values):
         """Return the Euler angles of the orientation; counts a near-singular sample."""
-        params, q = self.params, values[ORIENTATION]
+        angles, near_singular = self._euler_angles_of(values[ORIENTATION])
+        self.stats.near_singular += bool(near_singular)
+        return angles
+
+    def _euler_angles_block(self, block, rows, values, run):
+        angles = np.zeros((len(rows), 3))
+        if rows.any():
+            angles[rows], near_singular = self._euler_angles_of(values[ORIENTATION][1][rows])
+            run.near_singular = int(np.count_nonzero(near_singular))
+        return rows, angles
+
+    def _euler_angles_of(self, q):
+        """Return the Euler angles of one quaternion or rows, and whether each is near-singular."""
+        params = self.params
         angles = conversions.euler_from_quaternion(
             q, params.euler_sequence, degrees=params.euler_degrees)
         margin = conversions.euler_singularity_margin(q, params.euler_sequence)
-        self.stats.near_singular += bool(margin < params.euler_singularity_threshold)
-        return angles
+        return angles, margin < params.euler_singularity_threshold
 
     def _published_euler(self, sample, values):
         """Return the Euler angles, first and third unwrapped against the previous published."""
         first, second, third = values[EULER_ANGLES].tolist()
-        previous = self._previous_euler
+        previous = self.state.previous_euler
         if self.params.euler_unwrap and previous is not None:
             first = _unwrapped(first, previous[0], self._angle_period)
             third = _unwrapped(third, previous[2], self._angle_period)
-        self._previous_euler = (first, second, third)
-        return self._previous_euler
+        self.state.previous_euler = (first, second, third)
+        return self.state.previous_euler
+
+    def _published_euler_block(self, block, rows, values, run):
+        published = values[EULER_ANGLES][1].copy()
+        indices = np.flatnonzero(rows)
+        if not indices.size:
+            return rows, published
+        angles = published[indices]
+        previous = run.state.previous_euler
+        if self.params.euler_unwrap:
+            # The stream's first sample is published as it is, and the next unwrapped on it.
+            start = 0 if previous is not None else 1
+            if previous is None:
+                previous = angles[0]
+            first, third = angles[start:, 0].copy(), angles[start:, 2].copy()
+            _unwrap_chain(first, third, float(previous[0]), float(previous[2]),
+                          self._angle_period)
+            angles[start:, 0], angles[start:, 2] = first, third
+        published[indices] = angles
+        run.state.previous_euler = tuple(angles[-1].tolist())
+        return rows, published
 
     def _euler_rates(self, sample, values):
         """Return the Euler-angle rates, or None within the singularity threshold."""
-        params = self.params
-        with warnings.catch_warnings():   # counted and reported below instead
-            warnings.simplefilter('ignore', kinematics.EulerSingularityWarning)
-            rates = kinematics.euler_rates_from_angular_velocity(
-                values[EULER_ANGLES], values[ANGULAR_VELOCITY], params.euler_sequence,
-                frame=params.angular_velocity_output_frame, degrees=params.euler_degrees,
-                singularity_threshold=params.euler_singularity_threshold)
+        rates = self._euler_rates_of(values[EULER_ANGLES], values[ANGULAR_VELOCITY])
         if math.isnan(rates[0]):
-            self._skip(EULER_RATES_NEAR_SINGULAR,
-                       f'within {params.euler_singularity_threshold:g} rad of gimbal lock '
-                       f'of {params.euler_sequence!r}: euler_rates skipped (unbounded there)')
+            self._issue(EULER_RATES_NEAR_SINGULAR, **self._singularity_fields())
             return None
         return rates
+
+    def _euler_rates_block(self, block, rows, values, run):
+        rates = np.zeros((len(rows), 3))
+        if rows.any():
+            rates[rows] = self._euler_rates_of(values[EULER_ANGLES][1][rows],
+                                               values[ANGULAR_VELOCITY][1][rows])
+        singular = rows & np.isnan(rates[:, 0])
+        for s in np.flatnonzero(singular).tolist():
+            run.events.append((s, EULER_RATES_NEAR_SINGULAR, self._singularity_fields()))
+        return rows & ~singular, rates
+
+    def _euler_rates_of(self, angles, omega):
+        """Return the Euler-angle rates: NaN within the singularity threshold."""
+        params = self.params
+        with warnings.catch_warnings():   # counted and reported instead
+            warnings.simplefilter('ignore', kinematics.EulerSingularityWarning)
+            return kinematics.euler_rates_from_angular_velocity(
+                angles, omega, params.euler_sequence,
+                frame=params.angular_velocity_output_frame, degrees=params.euler_degrees,
+                singularity_threshold=params.euler_singularity_threshold)
+
+    def _singularity_fields(self):
+        return {'threshold': self.params.euler_singularity_threshold,
+                'sequence': self.params.euler_sequence}
 
     def _orientation_covariance(self, sample, values):
         """
@@ -543,26 +1030,18 @@ class ConversionPipeline:
         """
         block = sample.covariance
         if block is None or not any(block):
-            self._skip(COVARIANCE_UNKNOWN,
-                       'orientation covariance unknown (all zeros, or none in this input '
-                       'type): uncertainty outputs skipped')
+            self._issue(COVARIANCE_UNKNOWN)
             return None
         if not all(map(math.isfinite, block)):
-            self._skip(NON_FINITE_COVARIANCE,
-                       f'orientation covariance {block} has a NaN or Inf element: '
-                       'uncertainty outputs skipped')
+            self._issue(NON_FINITE_COVARIANCE, covariance=block)
             return None
         if max(block[0], block[4], block[8]) > covariance.MAX_ROTATION_VECTOR_VARIANCE:
-            self._skip(COVARIANCE_TOO_LARGE,
-                       f'orientation covariance {block} has a variance above pi^2 rad^2 '
-                       '(a standard deviation beyond pi: no orientation information, as '
-                       'drivers mark "unknown"): uncertainty outputs skipped')
+            self._issue(COVARIANCE_TOO_LARGE, covariance=block)
             return None
         defect = covariance.covariance_defect(block)
         if defect is not None:
-            self._skip(INVALID_COVARIANCE,
-                       f'orientation covariance {block} is {defect}, not a covariance: '
-                       'uncertainty outputs skipped')
+            self._issue(INVALID_COVARIANCE, covariance=f'orientation covariance {block}',
+                        problem=f'{defect}, not a covariance')
             return None
         sigma = np.array(block).reshape(3, 3)
         fixed = self.params.covariance_frame == 'fixed'
@@ -586,10 +1065,7 @@ class ConversionPipeline:
                 degrees=params.euler_degrees,
                 singularity_threshold=params.euler_singularity_threshold)
         if math.isnan(result[0, 0]):
-            self._skip(EULER_COVARIANCE_NEAR_SINGULAR,
-                       f'within {params.euler_singularity_threshold:g} rad of gimbal lock '
-                       f'of {params.euler_sequence!r}: uncertainty outputs skipped (unbounded '
-                       'there)')
+            self._issue(EULER_COVARIANCE_NEAR_SINGULAR, **self._singularity_fields())
             return None
         # sigma_max^2 <= trace: only above it can the ratio exceed the limit (saves eigvalsh)
         limit = params.covariance_max_linearisation_ratio * float(
@@ -598,20 +1074,16 @@ class ConversionPipeline:
             ratio = float(covariance.euler_linearisation_ratio(
                 angles, sigma, params.euler_sequence, degrees=params.euler_degrees))
             if not ratio <= params.covariance_max_linearisation_ratio:
-                self._skip(EULER_COVARIANCE_NOT_LINEAR,
-                           f'orientation standard deviation is {ratio:.3g} x its distance from '
-                           f'gimbal lock of {params.euler_sequence!r}, more than '
-                           'covariance.max_linearisation_ratio = '
-                           f'{params.covariance_max_linearisation_ratio:g}: the first-order '
-                           'Euler covariance would be wrong; uncertainty outputs skipped')
+                self._issue(EULER_COVARIANCE_NOT_LINEAR, ratio=ratio,
+                            sequence=params.euler_sequence,
+                            limit=params.covariance_max_linearisation_ratio)
                 return None
         # A valid input gives a finite, non-negative diagonal; rounding at the edge of
         # positive semi-definiteness may not: never a NaN standard deviation.
         if not (np.isfinite(result).all() and (np.diagonal(result) >= 0.0).all()):
-            self._skip(INVALID_COVARIANCE,
-                       f'the Euler covariance of orientation covariance {tuple(sigma.ravel())} '
-                       'is not positive semi-definite (rounding at its edge): uncertainty '
-                       'outputs skipped')
+            self._issue(INVALID_COVARIANCE, covariance='the Euler covariance of orientation '
+                        f'covariance {tuple(sigma.ravel())}',
+                        problem='not positive semi-definite (rounding at its edge)')
             return None
         return result
 

@@ -469,9 +469,12 @@ class OutputType:
     compute : callable or None
         ``compute(params, *values) -> numbers``, ``values`` those of ``needs`` in
         order, ``numbers`` in the order :attr:`OutputMessage.build` takes them;
-        None to publish the one value needed as it is. Those of the outputs in
-        :data:`rotation_node.block_pipeline.BLOCK_OUTPUTS` also take arrays of
-        samples, one row each, and return one row of numbers per sample.
+        None to publish the one value needed as it is.
+    compute_takes_blocks : bool
+        Whether ``compute`` also takes arrays of samples, one row each, and
+        returns one row of numbers per sample, each bit for bit that sample's
+        alone (tested): the output then has a block form where its values do
+        (:func:`rotation_node.pipeline.output_has_block_form`).
 
     """
 
@@ -479,6 +482,7 @@ class OutputType:
     message: OutputMessage
     needs: Tuple[str, ...]
     compute: Optional[Callable[..., ArrayLike]]
+    compute_takes_blocks: bool = False
 
     @property
     def type_name(self) -> str:
@@ -522,15 +526,16 @@ _OUTPUT_LIST = (
     OutputType('quaternion', QUATERNION_STAMPED, (OUTPUT_QUATERNION,), None),
     OutputType('euler', VECTOR3_STAMPED, (PUBLISHED_EULER,), None),
     OutputType('rotation_vector', VECTOR3_STAMPED, (ORIENTATION,),
-               lambda params, q: conversions.rotation_vector_from_quaternion(q)),
+               lambda params, q: conversions.rotation_vector_from_quaternion(q),
+               compute_takes_blocks=True),
     OutputType('axis_angle', float64_multi_array([('axis_angle', 4, 4)]), (ORIENTATION,),
-               _axis_angle),
+               _axis_angle, compute_takes_blocks=True),
     OutputType('matrix', float64_multi_array([('rows', 3, 9), ('cols', 3, 3)]), (ORIENTATION,),
-               _matrix),
+               _matrix, compute_takes_blocks=True),
     OutputType('angular_velocity', VECTOR3_STAMPED, (ANGULAR_VELOCITY,), None),
     OutputType('euler_rates', VECTOR3_STAMPED, (EULER_RATES,), None),
     OutputType('quaternion_rate', QUATERNION_STAMPED, (OUTPUT_QUATERNION, ANGULAR_VELOCITY),
-               _quaternion_rate),
+               _quaternion_rate, compute_takes_blocks=True),
     OutputType('euler_stddev', VECTOR3_STAMPED, (EULER_COVARIANCE,), _euler_stddev),
     OutputType('euler_covariance', VECTOR3_WITH_COVARIANCE, (PUBLISHED_EULER, EULER_COVARIANCE),
                _euler_with_covariance),

@@ -21,9 +21,9 @@ from rotation_node.bag.block_convert import (
 from rotation_node.bag.convert import convert, output_topic
 from rotation_node.bag.reading.mcap_reader import BagReader
 from rotation_node.bag.records import BagMessage
-from rotation_node.block_pipeline import BLOCK_OUTPUTS
 from rotation_node.errors import BagError
 from rotation_node.parameters import NodeParameters
+from rotation_node.pipeline import output_has_block_form
 from rotation_node.scene import load_scene, simulate, write_bag
 from rotation_node.wire.cdr import fixed_layout_codec
 
@@ -34,7 +34,7 @@ PLAIN_INPUTS = [name for name, entry in registry.INPUTS.items() if entry.stream 
 
 def _outputs_for(input_type):
     """Every output with a block form (all of them need only what every input gives)."""
-    return tuple(name for name in registry.OUTPUTS if name in BLOCK_OUTPUTS)
+    return tuple(name for name in registry.OUTPUTS if output_has_block_form(name))
 
 
 def _converter_outputs(params, topic='/in'):
@@ -46,15 +46,15 @@ def _run(params, records, splits, *, blocks):
     """Convert ``records`` cut into blocks at ``splits``; outputs, stats, reports and state."""
     reports = []
     converter = TopicConverter(params, _converter_outputs(params), blocks=blocks)
-    converter.pipeline._on_issue = lambda reason, detail: reports.append((reason, detail))
+    converter.pipeline.on_issue = lambda reason, detail: reports.append((reason, detail))
     outputs = []
     bounds = [0, *sorted(set(splits)), len(records)]
     for start, stop in zip(bounds[:-1], bounds[1:]):
         if stop > start:
             outputs += converter.convert(records[start:stop])
     pipeline = converter.pipeline
-    state = (pipeline._previous_quaternion, pipeline._previous_stamp_ns,
-             pipeline._previous_output_quaternion, pipeline._previous_euler)
+    state = (pipeline.state.previous_quaternion, pipeline.state.previous_stamp_ns,
+             pipeline.state.previous_output_quaternion, pipeline.state.previous_euler)
     return outputs, pipeline.stats, reports, state, converter.block_form_missing
 
 

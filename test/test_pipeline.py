@@ -1,10 +1,14 @@
 """
-Tests of rotation_node.pipeline: message-level conversions, per-stream state, bad input.
+Tests of rotation_node.pipeline: conversions, per-stream state, bad input, block form.
+
+The block form's own contract is at the end.
 
 Fast, no processes: the node and ``rotation_bag convert`` both run this code, so
 the values are checked here against scipy, and test_node.py checks the wiring.
 """
+import dataclasses
 import math
+import types
 
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
 from hypothesis import given, settings
@@ -13,14 +17,19 @@ import numpy as np
 import pytest
 from ros_harness import (
     INPUT_COVARIANCE, make_input_message, oracle_output, output_values, PLAIN_INPUT_TYPES)
+from rotation_node import conversions, registry
 from rotation_node.conversions import SEQUENCES
+from rotation_node.conversions.kernels import BATCH_SAMPLES
 from rotation_node.parameters import NodeParameters, OUTPUTS
 from rotation_node.pipeline import (
-    ConversionPipeline, COVARIANCE_TOO_LARGE, COVARIANCE_UNKNOWN, EULER_COVARIANCE_NEAR_SINGULAR,
-    EULER_COVARIANCE_NOT_LINEAR, EULER_RATES_NEAR_SINGULAR, input_message_type,
+    _sign_chain, _unwrap_chain, _unwrapped, block_form_missing, BLOCK_SAMPLES,
+    CONVERSION_ERROR, ConversionPipeline, COVARIANCE_TOO_LARGE, COVARIANCE_UNKNOWN,
+    EULER_COVARIANCE_NEAR_SINGULAR, EULER_COVARIANCE_NOT_LINEAR, EULER_RATES_NEAR_SINGULAR,
+    input_message_type,
     INVALID_COVARIANCE, NON_FINITE_ANGULAR_VELOCITY, NON_FINITE_COVARIANCE,
-    NON_FINITE_ORIENTATION, NON_UNIT_QUATERNION, ORIENTATION_UNKNOWN, TIMESTAMP_NOT_INCREASING,
-    ZERO_QUATERNION)
+    NON_FINITE_ORIENTATION, NON_UNIT_QUATERNION, ORIENTATION_UNKNOWN, output_has_block_form,
+    TIMESTAMP_NOT_INCREASING, ZERO_QUATERNION)
+from rotation_node.sample_block import SampleBlock
 from scipy.spatial.transform import Rotation
 from std_msgs.msg import Float64MultiArray
 
@@ -734,3 +743,126 @@ def test_process_never_raises_and_accounts_for_every_message(input_type, quatern
     assert p.stats.received == len(quaternions)
     assert sum(p.stats.dropped.values()) == len(quaternions) - finite
     assert p.stats.skipped[ZERO_QUATERNION] == zero   # orientation not estimated
+
+
+def test_a_message_the_caller_could_not_read_is_counted_and_reported_as_dropped():
+    p = pipeline(input_type='imu')
+    p.drop_message(CONVERSION_ERROR, error=ValueError('truncated CDR'))
+    assert (p.stats.received, p.stats.dropped[CONVERSION_ERROR], p.stats.published) == (1, 1, 0)
+    assert p.issues == [(CONVERSION_ERROR, 'message dropped: truncated CDR')]
+
+
+# The block form (process_block): its own contract. Its exactness against the per-message
+# form is checked end to end in test_bag_block_convert.py.
+def _block(n, seed=0):
+    rng = np.random.default_rng(seed)
+    q = rng.normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    stamps = 1_000_000_000 + 10_000_000 * np.arange(n, dtype=np.int64)
+    return SampleBlock(stamps, q, np.ones(n, dtype=bool), rng.normal(size=(n, 3)),
+                       np.ones(n, dtype=bool))
+
+
+def test_blocks_stay_below_the_batch_schedules():
+    assert BLOCK_SAMPLES < BATCH_SAMPLES
+    p = ConversionPipeline(NodeParameters(input_type='imu'))
+    with pytest.raises(ValueError, match='block'):
+        p.process_block(_block(BLOCK_SAMPLES + 1))
+
+
+def test_the_outputs_with_a_block_form():
+    assert {name for name in registry.OUTPUTS if output_has_block_form(name)} == {
+        'quaternion', 'euler', 'rotation_vector', 'axis_angle', 'matrix', 'angular_velocity',
+        'euler_rates', 'quaternion_rate'}
+
+
+def _values_of(need, n, rng):
+    """Arrays of ``n`` samples of a pipeline value: random, then the identity and a half turn."""
+    if need == registry.ANGULAR_VELOCITY:
+        return rng.normal(size=(n, 3))
+    q = rng.normal(size=(n, 4))
+    q[-2:] = [[0.0, 0.0, 0.0, 1.0], [0.0, 0.0, 1.0, 0.0]]
+    if need == registry.OUTPUT_QUATERNION:   # unit, w >= 0
+        q = conversions.canonical_quaternion(q)
+    return q
+
+
+@pytest.mark.parametrize('name', [name for name in sorted(registry.OUTPUTS)
+                                  if registry.OUTPUTS[name].compute_takes_blocks])
+def test_each_block_output_computes_a_block_as_each_sample_alone(name):
+    output = registry.OUTPUTS[name]
+    params = NodeParameters(input_type='imu', outputs=(name,))
+    rng = np.random.default_rng(7)
+    values = [_values_of(need, 40, rng) for need in output.needs]
+    block = np.asarray(output.compute(params, *values), dtype=np.float64)
+    assert block.shape[0] == 40 and block.ndim == 2
+    for s in range(40):
+        alone = np.asarray(output.compute(params, *(value[s] for value in values)),
+                           dtype=np.float64)
+        assert alone.shape == block[s].shape and alone.tobytes() == block[s].tobytes(), (
+            s, alone, block[s])
+
+
+@pytest.mark.parametrize('values, reason', [
+    ({'outputs': ('euler_stddev',)}, 'output euler_stddev'),
+    ({'frames_input_body': 'frd'}, 'frame conversion'),
+])
+def test_block_form_missing_names_what_has_no_block_form(values, reason):
+    params = NodeParameters(input_type='pose_with_covariance', **values)
+    assert reason in block_form_missing(params)
+    with pytest.raises(ValueError, match='no block form'):
+        ConversionPipeline(params).process_block(_block(2))
+
+
+def test_an_output_added_without_a_block_form_is_left_to_the_pipeline(monkeypatch):
+    # A compute not declared to take blocks (compute_takes_blocks defaults to False).
+    added = dataclasses.replace(registry.OUTPUTS['euler'], name='euler_again',
+                                compute=lambda params, angles: angles)
+    monkeypatch.setitem(registry.OUTPUTS, 'euler_again', added)
+    # As the parameters will be once the output is in their choices.
+    params = types.SimpleNamespace(**dataclasses.asdict(NodeParameters(input_type='imu')))
+    params.outputs = ('euler', 'euler_again')
+    assert block_form_missing(params) == 'output euler_again has no block form'
+
+
+def test_a_block_a_conversion_rejects_changes_nothing(monkeypatch):
+    params = NodeParameters(input_type='imu', outputs=('euler', 'angular_velocity'),
+                            angular_velocity_input_frame='world')
+    p = ConversionPipeline(params)
+    assert p.process_block(_block(10)) is not None
+    state = (p.state.previous_euler, p.stats.received)
+
+    def rejects(*args, **kwargs):
+        raise ValueError('q: rejected')
+
+    monkeypatch.setattr(conversions, 'rotate_vector', rejects)
+    assert p.process_block(_block(10, seed=1)) is None
+    assert (p.state.previous_euler, p.stats.received) == state
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.one_of(st.floats(-10.0, 10.0), st.sampled_from(
+    [0.0, -0.0, math.pi, -math.pi, 3 * math.pi, 180.0, -180.0, 540.0])), min_size=1,
+    max_size=30), st.sampled_from([2.0 * math.pi, 360.0]), st.sampled_from([0.0, -0.0, 1.0]))
+def test_the_block_forms_unwrap_chain_is_the_unwrapping_of_one_sample(angles, period, start):
+    first = np.array(angles)
+    third = -first
+    _unwrap_chain(first, third, start, -start, period)
+    previous_first, previous_third = start, -start
+    for k, angle in enumerate(angles):
+        previous_first = _unwrapped(angle, previous_first, period)
+        previous_third = _unwrapped(-angle, previous_third, period)
+        assert np.float64(previous_first).tobytes() == first[k].tobytes()
+        assert np.float64(previous_third).tobytes() == third[k].tobytes()
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.sampled_from([-1.0, -0.0, 0.0, 0.5, 2.0]), max_size=30))
+def test_the_block_forms_sign_chain_flips_as_one_sample_does(dots):
+    """A quaternion flips when its dot product with the previous, flipped, one is negative."""
+    signs = _sign_chain(np.array(dots, dtype=float))
+    previous_sign = 1.0
+    for k, dot in enumerate(dots):
+        sign = -1.0 if previous_sign * dot < 0.0 else 1.0
+        assert signs[k] == sign
+        previous_sign = sign

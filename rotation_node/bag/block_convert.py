@@ -4,13 +4,13 @@
 A :class:`TopicConverter` turns the messages of one converted topic into
 the CDR data of their outputs. Where the parameters, the input type and every
 output have a block form (:func:`block_form_missing`), it decodes a block of
-messages into arrays (:mod:`rotation_node.wire.cdr_block`), converts them with
-one library call per conversion (:class:`rotation_node.block_pipeline.BlockPipeline`)
-and encodes each output for the whole block; otherwise, and for any block the
-block form cannot read exactly as the per-message path does, it runs the
-live node's :class:`~rotation_node.pipeline.ConversionPipeline` message by
-message. Either way the output bytes, the counters and the per-stream state
-are the per-message pipeline's (the block pipeline runs on its state).
+messages into arrays (:mod:`rotation_node.bag.block_codec`), converts them with
+one library call per conversion
+(:meth:`rotation_node.pipeline.ConversionPipeline.process_block`) and encodes
+each output for the whole block; otherwise, and for any block the block form
+cannot read exactly as the per-message path does, it runs the same pipeline
+message by message, as the live node does. Either way the output bytes, the
+counters and the per-stream state are the per-message form's.
 
 :func:`converted_blocks` reads the input in blocks of :data:`BLOCK_MESSAGES`
 messages (all topics, log-time order) and gives each message with its
@@ -24,11 +24,10 @@ import gc
 import itertools
 from typing import Any, Dict, Iterable, Iterator, List, NamedTuple, Optional, Tuple, TYPE_CHECKING
 
-from rotation_node import registry
-from rotation_node.block_pipeline import BLOCK_SAMPLES, block_support, BlockPipeline
-from rotation_node.pipeline import ConversionPipeline
+from rotation_node import pipeline, registry
+from rotation_node.bag.block_codec import block_encoder, InputBlockDecoder, OutputBlockEncoder
+from rotation_node.pipeline import BLOCK_SAMPLES, ConversionPipeline
 from rotation_node.wire.cdr import fixed_layout_codec
-from rotation_node.wire.cdr_block import block_encoder, InputBlockDecoder, OutputBlockEncoder
 
 if TYPE_CHECKING:
     from rotation_node.parameters import NodeParameters
@@ -44,9 +43,8 @@ Output = Tuple[str, str, bytes]
 
 
 class _BlockForm(NamedTuple):
-    """What a topic converted in blocks uses: the pipeline, the decoder, the output encoders."""
+    """What a topic converted in blocks uses: the decoder, the output encoders."""
 
-    pipeline: BlockPipeline
     decoder: InputBlockDecoder
     encoders: List[OutputBlockEncoder]   # one per output, in the order of ``outputs``
 
@@ -75,12 +73,12 @@ def block_form_missing(params: NodeParameters) -> Optional[str]:
     """
     Return why a topic of the parameters' input type is converted message by message, or None.
 
-    The one place that decides it: the block pipeline's support
-    (:func:`rotation_node.block_pipeline.block_support`: input type, frames,
+    The one place that decides it: the pipeline's block form
+    (:func:`rotation_node.pipeline.block_form_missing`: input type, frames,
     values, outputs), a fixed CDR layout of the input type, and a block
     encoder for every output message type.
     """
-    reason = block_support(params)
+    reason = pipeline.block_form_missing(params)
     if reason is not None:
         return reason
     input_type = registry.INPUTS[params.input_type]
@@ -128,10 +126,8 @@ class TopicConverter:
         self.block_form_missing = block_form_missing(params) if blocks else 'blocks disabled'
         self._blocks: Optional[_BlockForm] = None
         if self.block_form_missing is None:
-            block_pipeline = BlockPipeline(self.pipeline)
             self._blocks = _BlockForm(
-                block_pipeline,
-                InputBlockDecoder(input_type, block_pipeline.reads_angular_velocity),
+                InputBlockDecoder(input_type, self.pipeline.reads_angular_velocity),
                 [OutputBlockEncoder(registry.OUTPUTS[name].message) for name in params.outputs])
 
     def convert(self, records: List, input_topics: Optional[List[str]] = None
@@ -181,7 +177,7 @@ class TopicConverter:
         decoded = blocks.decoder.decode([record.data for record in records])
         if decoded is None:
             return None
-        converted = blocks.pipeline.process_block(decoded[0])
+        converted = self.pipeline.process_block(decoded[0])
         if converted is None:
             return None
         result: List[List[Tuple[str, Any, Any]]] = [[] for _ in records]
@@ -209,7 +205,7 @@ class TopicConverter:
         if decoded is None:
             return None
         block, headers = decoded
-        converted = blocks.pipeline.process_block(block)
+        converted = self.pipeline.process_block(block)
         if converted is None:
             return None
         result: List[List[Output]] = [[] for _ in records]

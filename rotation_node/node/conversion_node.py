@@ -437,9 +437,7 @@ class RotationNode(Node):
             try:
                 data = self._decode(data)
             except BagError as exc:
-                self._pipeline.stats.received += 1
-                self._pipeline.stats.dropped[CONVERSION_ERROR] += 1
-                self._log_issue(CONVERSION_ERROR, f'message dropped: {exc}')
+                self._pipeline.drop_message(CONVERSION_ERROR, error=exc)
                 return
         publish, encoders = self._outputs.publish, self._outputs.encoders
         for name, header, numbers in self._pipeline.process_values(data, state.name):

@@ -3,7 +3,7 @@ The conversion's blocks through the CDR codec: messages into samples, numbers in
 
 For ``rotation_bag convert``: :class:`InputBlockDecoder` reads the samples of
 a block of messages of a plain input type into a
-:class:`rotation_node.block_pipeline.SampleBlock` from the arrays of
+:class:`rotation_node.sample_block.SampleBlock` from the arrays of
 :meth:`rotation_node.wire.cdr.FixedLayoutCodec.decode_block`, and
 :class:`OutputBlockEncoder` writes the numbers of a block of output messages
 under their input messages' headers with
@@ -20,7 +20,7 @@ from typing import Any, Callable, List, Optional, Sequence, Tuple
 
 import numpy as np
 from rotation_node import registry
-from rotation_node.block_pipeline import SampleBlock
+from rotation_node.sample_block import SampleBlock
 from rotation_node.wire.cdr import (
     DecodedBlock, fixed_layout_codec, FixedLayoutCodec, float64_multi_array_block_encoder,
     HEADER_PATHS)
