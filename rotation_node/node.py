@@ -76,14 +76,14 @@ from rotation_node import messages
 from rotation_node.bag.cdr import fixed_layout_codec
 from rotation_node.bag.qos import AUTO, input_qos, qos_profile
 from rotation_node.bag.stop_signal import signal_name, StopSignal
-from rotation_node.conversions.warm_up import announcing_compilation
+from rotation_node.conversions.warm_up import load_in_background
 from rotation_node.errors import BagError, ParameterError
 from rotation_node.parameters import (
     mounting_frames_problem, NODE_NAME, NodeParameters, PARAMETERS, PARAMETERS_BY_NAME,
     parameters_file_sections, parameters_from_yaml, ParameterSpec, ROS_BUILTIN_PARAMETERS,
     unknown_parameter_error)
 from rotation_node.pipeline import (
-    CONVERSION_ERROR, ConversionPipeline, SKIP_REASONS, warm_up_conversions)
+    CONVERSION_ERROR, ConversionPipeline, SKIP_REASONS)
 from rotation_node.reception import Identity, message_identity, Reception
 from rotation_node.static_mounting import (
     MOUNTING_UNKNOWN, needs_static_mounting, placeholder, resolved, StaticMountingLookup,
@@ -252,11 +252,10 @@ class RotationNode(Node):
     """
 
     def __init__(self, parameters_files: Sequence[str] = (), **kwargs: Any):
-        # Before the node exists: its parameter services answer as soon as they appear,
-        # not after the conversions have been compiled or loaded (seconds on a first run,
-        # which says so on one line).
-        with announcing_compilation(get_logger(NODE_NAME).info):
-            warm_up_conversions()
+        # The conversions run interpreted until their compiled kernels, loaded in the
+        # background as each is first used, take over (a first run compiles them, and
+        # says so on one line): the node converts from its first message.
+        load_in_background(get_logger(NODE_NAME).info)
         # input subscription -> its message-lost event (None: the rmw has none); first,
         # as destroy_node reads it, also when a parameters file is refused below
         self._message_lost: Dict[Subscription, Any] = {}

@@ -664,7 +664,7 @@ def test_ctrl_c_exits_cleanly(namespaced):
 START_UP_MOMENTS = {
     # where the signal comes: (the name in rotation_node.node to wrap, before or after it)
     'before rclpy.init': ('rclpy.init', 'before'),
-    'between rclpy.init and the node': ('warm_up_conversions', 'before'),
+    'between rclpy.init and the node': ('load_in_background', 'before'),
     'while the node is configured': ('RotationNode._configure', 'before'),
     'before rclpy handles signals': ('install_signal_handlers', 'before'),
     'once rclpy handles signals': ('install_signal_handlers', 'after'),

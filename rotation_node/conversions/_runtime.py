@@ -70,7 +70,6 @@ or wherever ``NUMBA_CACHE_DIR`` says.
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
-from fractions import Fraction
 import importlib.util
 import math
 import os
@@ -172,7 +171,7 @@ def compiled_form(py_func: Callable[..., Any]) -> Callable[[Callable[[], Any]], 
 
 def _compiled_namespace(module_globals: dict[str, Any]) -> dict[str, Any]:
     """
-    The globals that compiled copies of a module's functions see: helpers replaced by compiled ones.
+    Return the globals of the compiled copies of a module's functions (helpers compiled).
 
     numba resolves a function's globals when it compiles it: a copy of each
     declared function with these globals calls the compiled form of every
@@ -192,7 +191,7 @@ def _compiled_namespace(module_globals: dict[str, Any]) -> dict[str, Any]:
 
 
 def _compiled_of(value: Any) -> Any:
-    """The compiled stand-in of a declared helper or compiled form (made once), else None."""
+    """Return the compiled stand-in of a helper or compiled form (made once), else None."""
     compiled = _COMPILED.get(id(value))
     if compiled is not None:
         return compiled
@@ -206,7 +205,7 @@ def _compiled_of(value: Any) -> Any:
 
 
 def _compiled_copy(py_func: Callable[..., Any]) -> Callable[..., Any]:
-    """``py_func`` with the globals of :func:`_compiled_namespace`: the same code, compiled callees."""
+    """Return ``py_func`` with the globals of :func:`_compiled_namespace` (compiled callees)."""
     import types as python_types
     copy = python_types.FunctionType(py_func.__code__, _compiled_namespace(py_func.__globals__),
                                      py_func.__name__, py_func.__defaults__, py_func.__closure__)
@@ -378,6 +377,14 @@ class Kernel:
 
 # Called with a kernel at its first call (warm_up.load_in_background's queue), or None.
 _on_first_use: Optional[Callable[[Kernel], None]] = None
+
+
+def set_first_use_hook(hook: Optional[Callable[[Kernel], None]]) -> None:
+    """Have ``hook(kernel)`` called at each kernel's first call from now on (None: no hook)."""
+    global _on_first_use
+    _on_first_use = hook
+
+
 # Every kernel loads at its first call (ROTATION_NODE_COMPILED=1: no interpreted runs).
 _loading_forced = os.environ.get('ROTATION_NODE_COMPILED', '') not in ('', '0')
 
@@ -412,7 +419,7 @@ def kernel(*argument_types: ArgumentType,
 
 def compile_kernels(kernels: Optional[Sequence[Kernel]] = None) -> int:
     """
-    Load every kernel (or those given): compile it for its one signature, or load it from the cache.
+    Load every kernel (or those given): compiled for its one signature, or from the cache.
 
     Returns
     -------
@@ -542,7 +549,9 @@ def samples(a: FloatArray, width: int) -> Any:
     below) the view costs nothing: no copy and no call; ``width`` must be a
     constant there, and any C-contiguous array of ``n width`` values is viewed.
     Interpreted, the view is a ``memoryview``, whose items are Python floats
-    (an ndarray's are numpy scalars, 3-5x slower in arithmetic); an empty
+    (an ndarray's are numpy scalars, 3-5x slower in arithmetic): a kernel
+    reads and writes it by ``[s]`` or ``[s, j]`` and reads its ``shape``, no
+    more (sub-views, ``.T``, ``.flat``: :func:`array_samples`). An empty
     array stays an array.
     """
     if a.size == 0:
@@ -554,14 +563,27 @@ def samples(a: FloatArray, width: int) -> Any:
 
 
 def matrix_samples(a: FloatArray) -> Any:
-    """Return the matrices ``a`` (3 n, 3), or any C-contiguous 9 n values, as (n, 3, 3)."""
+    """Return the matrices ``a`` (3 n, 3), or any C-contiguous 9 n values, as (n, 3, 3).
+
+    Interpreted, a ``memoryview`` indexed by ``[s, i, j]`` (see :func:`samples`).
+    """
     if a.size == 0:
         return a.reshape(-1, 3, 3)
     return memoryview(a).cast('B').cast(a.dtype.char, (a.size // 9, 3, 3))
 
 
+def array_samples(a: FloatArray, width: int) -> FloatArray:
+    """:func:`samples` as an ndarray view when interpreted too: every numpy operation on it."""
+    return a.reshape(-1, width) if width else a.reshape(-1)
+
+
+def array_matrix_samples(a: FloatArray) -> FloatArray:
+    """:func:`matrix_samples` as an ndarray view when interpreted too."""
+    return a.reshape(-1, 3, 3)
+
+
 def _stack_view_intrinsic() -> Any:
-    """numba's ``_stack_view(a, rows, columns)``: ``a`` viewed as a stack of samples, no copy."""
+    """Return numba's ``_stack_view(a, rows, columns)``: ``a`` as a stack of samples, no copy."""
     from numba import types
     from numba.core.errors import RequireLiteralValue, TypingError
     from numba.extending import intrinsic
@@ -598,7 +620,7 @@ def _stack_view_intrinsic() -> Any:
 
 
 def _register_views() -> None:
-    """Register the compiled forms of :func:`samples` and :func:`matrix_samples`."""
+    """Register the compiled forms of the sample views (:func:`samples` and the others)."""
     from numba import types
     from numba.core.errors import RequireLiteralValue
     from numba.extending import overload
@@ -610,8 +632,10 @@ def _register_views() -> None:
         k = width.literal_value
         return lambda a, width: view(a, k, 0)
 
-    overload(samples, inline='always', prefer_literal=True)(compiled_samples)
-    overload(matrix_samples, inline='always')(lambda a: (lambda a: view(a, 3, 3)))
+    for function in (samples, array_samples):
+        overload(function, inline='always', prefer_literal=True)(compiled_samples)
+    for function in (matrix_samples, array_matrix_samples):
+        overload(function, inline='always')(lambda a: (lambda a: view(a, 3, 3)))
 
 
 # ------------------------------------------------------------ status packing

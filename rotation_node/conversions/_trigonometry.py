@@ -50,8 +50,8 @@ arguments must be finite.
 """
 from __future__ import annotations
 
-import math
 from fractions import Fraction
+import math
 from typing import Any, Callable, TYPE_CHECKING
 
 from ._runtime import compiled_form, jit
