@@ -654,3 +654,20 @@ def test_kernels_load_in_the_background_as_they_are_first_used(tmp_path):
     assert re.fullmatch(r'1 kernels compiled in [0-9.]+ s and cached', out[3]), out
     out = _python(BACKGROUND.format(after=0.0), env).splitlines()   # from the cache: silent
     assert out == ['True', "True True ['_euler_from_quaternion_kernel']"]
+
+
+# ------------------------------------------------------------ threads
+
+def test_large_batches_use_threads_only_while_a_cpu_is_idle_unless_chosen(monkeypatch):
+    monkeypatch.setattr(_runtime, '_usable_cpus', 2)
+    monkeypatch.setattr(_runtime, '_threads', 2)
+    monkeypatch.setattr(_runtime, '_threads_chosen', False)
+    large = _runtime.THREADED_SAMPLES
+    monkeypatch.setattr(os, 'getloadavg', lambda: (11.9, 11.0, 11.5))   # a busy machine
+    assert _runtime.batch_threads(large) == 1
+    monkeypatch.setattr(os, 'getloadavg', lambda: (1.2, 1.0, 0.9))   # one CPU idle
+    assert _runtime.batch_threads(large) == 2
+    assert _runtime.batch_threads(large - 1) == 1
+    monkeypatch.setattr(os, 'getloadavg', lambda: (11.9, 11.0, 11.5))
+    monkeypatch.setattr(_runtime, '_threads_chosen', True)   # set_threads or the variable
+    assert _runtime.batch_threads(large) == 2

@@ -669,32 +669,50 @@ def is_batch(a: FloatArray, trailing: tuple[int, ...]) -> bool:
 STAGE_CHUNK = 4096
 
 
-# Batches of at least this many samples are split across threads (the kernels
-# release the GIL); ROTATION_NODE_THREADS overrides the number of threads.
-THREADED_SAMPLES = 1 << 16
-_threads = int(os.environ.get('ROTATION_NODE_THREADS', 0)) or len(os.sched_getaffinity(0))
+# Batches of at least this many samples may be split across threads (the kernels
+# release the GIL). Measured on the shared 2-core EPYC under load (benchmarks/bench_threads.py,
+# docs/performance.md): at 65536 samples two threads were slower than one for 5 of 6
+# operations (1.08-1.54x); at 1e6 faster for 5 (0.75-0.99x) but not for the memory-bound
+# quaternion_product (1.15x).
+THREADED_SAMPLES = 1 << 18
+_usable_cpus = len(os.sched_getaffinity(0))
+_threads_variable = int(os.environ.get('ROTATION_NODE_THREADS', 0))
+_threads = _threads_variable or _usable_cpus
+_threads_chosen = _threads_variable > 0   # by the variable or set_threads: always used
 _pool = None
 
 
 def set_threads(n: int) -> None:
     """
-    Set how many threads large batches (>= 65536 samples) are split across.
+    Set how many threads large batches (>= 262144 samples) are split across.
 
     Parameters
     ----------
     n : int
-        1 runs everything in the calling thread. The default is the number of
-        CPUs this process may use, or the environment variable
-        ``ROTATION_NODE_THREADS``.
+        1 runs everything in the calling thread. By default (neither this nor
+        the environment variable ``ROTATION_NODE_THREADS`` set) a large batch
+        is split across the CPUs this process may use only while one of them
+        is idle (the 1-minute load average below their number minus a half):
+        on a busy machine a second thread only competes for the same CPUs, and
+        measured slower. A number set here or by the variable is always used.
 
     """
-    global _threads, _pool
+    global _threads, _pool, _threads_chosen
     if int(n) < 1:
         raise ValueError(f'Expected `n` >= 1 threads, got {n!r}.')
-    _threads = int(n)
+    _threads, _threads_chosen = int(n), True
     if _pool is not None:
         _pool.shutdown()
         _pool = None
+
+
+def batch_threads(n: int) -> int:
+    """Return how many threads a batch of ``n`` samples is split across now (see set_threads)."""
+    if _threads == 1 or n < THREADED_SAMPLES:
+        return 1
+    if _threads_chosen or os.getloadavg()[0] < _usable_cpus - 0.5:
+        return _threads
+    return 1
 
 
 def _run(kernel_: Any, inputs: Sequence[FloatArray], trailings: Sequence[tuple[int, ...]],
@@ -706,14 +724,17 @@ def _run(kernel_: Any, inputs: Sequence[FloatArray], trailings: Sequence[tuple[i
     rows per sample.
     """
     n = out.shape[0] // _rows_per_sample(out_trailing)
-    if _threads == 1 or n < THREADED_SAMPLES:
+    threads = batch_threads(n)
+    if threads == 1:
         return kernel_(*inputs, out, *args)
     global _pool
     if _pool is None:
         _pool = ThreadPoolExecutor(_threads, thread_name_prefix='rotation_node')
+    if kernel_.dispatcher is None:
+        kernel_.load()   # once, here, rather than in each thread
     arrays = tuple(inputs) + (out,)
     rows = [_rows_per_sample(t) for t in tuple(trailings) + (out_trailing,)]
-    bounds = np.linspace(0, n, _threads + 1).astype(int)
+    bounds = np.linspace(0, n, threads + 1).astype(int)
     jobs = [_pool.submit(kernel_, *[a[lo * r:hi * r] for a, r in zip(arrays, rows)], *args)
             for lo, hi in zip(bounds[:-1], bounds[1:])]
     for lo, job in zip(bounds[:-1], jobs):
