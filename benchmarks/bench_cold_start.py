@@ -91,6 +91,7 @@ print(imported - start, end - imported)
 
 def _tree_env(tree, **extra):
     env = dict(os.environ, **extra)
+    env.pop('ROTATION_NODE_COMPILED', None)   # set by _machine: starts measured as users start
     if tree is not None:
         env['PYTHONPATH'] = os.pathsep.join(
             [os.path.abspath(tree)] + [p for p in env.get('PYTHONPATH', '').split(os.pathsep)
