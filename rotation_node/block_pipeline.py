@@ -36,10 +36,9 @@ import math
 from typing import Any, Dict, FrozenSet, List, NamedTuple, Optional, Tuple, TYPE_CHECKING
 import warnings
 
-import numba
 import numpy as np
 from rotation_node import conversions, kinematics, messages
-from rotation_node.conversions.kernels import BATCH_SAMPLES
+from rotation_node.conversions.kernels import BATCH_SAMPLES, FLAT_OUT, FLOAT, kernel
 from rotation_node.messages import (
     ANGULAR_VELOCITY, EULER_ANGLES, EULER_RATES, ORIENTATION, OUTPUT_QUATERNION, PUBLISHED_EULER)
 from rotation_node.pipeline import (
@@ -155,7 +154,8 @@ class BlockOutputs:
     numbers: Dict[str, np.ndarray]
 
 
-@numba.njit(cache=True, nogil=True)
+# A kernel (conversions' runtime): interpreted for a few samples, compiled for more.
+@kernel(FLAT_OUT, FLAT_OUT, FLOAT, FLOAT, FLOAT, returns=None)
 def _unwrap_chain(first, third, previous_first, previous_third, period):   # pragma: no cover
     """
     Unwrap ``first`` and ``third`` in place, each against the one before, as ``_unwrapped``.

@@ -528,7 +528,9 @@ def test_every_kernel_gives_the_same_bits_interpreted_and_compiled(monkeypatch, 
     _runtime.compile_kernels()
     calls = [c for n in (1, 7, _runtime.BATCH_SAMPLES + 5) for c in _corpus_calls(rng, n)]
     recorded = _recorded_kernel_calls(monkeypatch, calls)
-    assert {k.__qualname__ for k, _ in recorded} == {k.__qualname__ for k in KERNELS}
+    ours = {k.__qualname__ for k in KERNELS
+            if k.__module__.startswith(('rotation_node.conversions', 'rotation_node.kinematics'))}
+    assert {k.__qualname__ for k, _ in recorded} == ours
     for kernel, arguments in recorded:
         compiled = _run_fresh(kernel.dispatcher, arguments)
         interpreted = _run_fresh(kernel.interpreted, arguments)
