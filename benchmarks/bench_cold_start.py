@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """
-Cold start: the node's first start after installing and every later one, a 1-message convert, imports.
+Cold start: the node's first and later starts, a 1-message convert, the library's imports.
 
 Four measurements, each in fresh processes, repeated (``--rounds``) with the
 trees compared interleaved round by round (``--tree`` several times: the
@@ -295,7 +295,7 @@ def main(argv=None):
                   f'  first output {_summary(row["warm_start_output"])}')
             if row['first_start_output']:
                 ratio = [f / w for f, w in zip(row['first_start_output'],
-                                                row['warm_start_output'])]
+                                               row['warm_start_output'])]
                 print(f'  first / warm start (first output): {_summary(ratio, "x")}'
                       f'  (target <= {TARGET})')
             print(f'  convert, 1 message: wall {_summary(row["convert_wall"], " s")}  CPU '

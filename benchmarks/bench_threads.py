@@ -20,9 +20,8 @@ import statistics
 import sys
 import time
 
-import numpy as np
-
 from _machine import print_machine
+import numpy as np
 
 
 def operations(n, rng):

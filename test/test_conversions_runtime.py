@@ -522,7 +522,10 @@ def _run_fresh(run, arguments):
     return result, [a.tobytes() for a in args if isinstance(a, np.ndarray)]
 
 
-@pytest.mark.filterwarnings('ignore::rotation_node.kinematics._euler_rates.EulerSingularityWarning')
+_IGNORE_SINGULAR = 'ignore::rotation_node.kinematics._euler_rates.EulerSingularityWarning'
+
+
+@pytest.mark.filterwarnings(_IGNORE_SINGULAR)
 def test_every_kernel_gives_the_same_bits_interpreted_and_compiled(monkeypatch, rng):
     """Each kernel's Python function and its compiled code: the same outputs, bit for bit."""
     _runtime.compile_kernels()

@@ -784,7 +784,7 @@ _FILL = {(3,): _fill_3, (4,): _fill_4, (3, 3): _fill_3x3}
 
 
 class _Scratch(threading.local):
-    """Each thread's arrays for single samples given as lists: shape -> (array, flat view, fill)."""
+    """Each thread's arrays for single samples given as lists: shape -> (array, view, fill)."""
 
     def __init__(self) -> None:
         self.first, self.second = {}, {}   # for the first and the second argument
