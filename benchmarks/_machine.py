@@ -7,10 +7,16 @@ AVX-512), and numba compiles the package's kernels for the CPU it runs on.
 :func:`print_machine` prints the CPU model, the SIMD levels numpy found and
 the CPU LLVM targets, at the top of each benchmark's output.
 """
+import os
 import platform
 import timeit
 
 import numpy as np
+
+# The benchmarks time the compiled kernels: every kernel loads at its first call, never
+# runs interpreted (conversions/_runtime.py). Set before the package is imported; the
+# cold-start benchmark removes it from the environment of the processes it starts.
+os.environ.setdefault('ROTATION_NODE_COMPILED', '1')
 
 
 def cpu_model():
@@ -51,9 +57,14 @@ def llvm_target_cpu():
     return numba.config.CPU_NAME or binding.get_host_cpu_name()
 
 
+def batch_threads():
+    """Return how many threads the library splits large batches across (``set_threads``)."""
+    from rotation_node.conversions import _runtime
+    return _runtime._threads
+
+
 def machine_lines():
-    """Lines that say where a benchmark ran: CPU, usable CPUs, numpy SIMD levels, LLVM target."""
-    import os
+    """Lines that say where a benchmark ran: CPU, SIMD levels, LLVM target, load, threads."""
     baseline, found, not_found = numpy_simd_levels()
     return [
         f'machine: {cpu_model()} ({platform.machine()}, {len(os.sched_getaffinity(0))} usable '
@@ -61,6 +72,8 @@ def machine_lines():
         f'numpy {np.__version__} SIMD: baseline {" ".join(baseline) or "-"}; found '
         f'{" ".join(found) or "-"}; not found {" ".join(not_found) or "-"}',
         f'numba kernels compiled for: {llvm_target_cpu()}',
+        f'load average (1, 5, 15 min): {" ".join(f"{v:.2f}" for v in os.getloadavg())}; '
+        f'threads of large batches: {batch_threads()}',
     ]
 
 

@@ -1,36 +1,59 @@
 #!/usr/bin/env python3
 """
-Cold start: a new process imports the library and makes its first calls, against scipy's.
+Cold start: the node's first and later starts, a 1-message convert, the library's imports.
 
-Each round starts two fresh Python processes, one after the other: one
-imports ``rotation_node.conversions`` and calls a public function once for
-each of several shapes (one sample, a (5, 4) batch, a (5, 2, 4) batch, a
-read-only batch, a batch of 2000 for the batch schedule); the other imports
-``scipy.spatial.transform`` and makes scipy's same calls. Times are measured
-inside each process from before its first import (numpy included) to after
-its last call; the process start itself is the same for both and not
-counted. The kernels must be cached first (``python -m
-rotation_node.conversions.warm_up``, which ``./run.sh`` runs after installing):
-this measures a warm install, not a first compilation. Target: the package
-within 2x of scipy, per conversion (median over rounds).
+Four measurements, each in fresh processes, repeated (``--rounds``) with the
+trees compared interleaved round by round (``--tree`` several times: the
+package of each tree is put first on ``PYTHONPATH``, e.g. ``--tree
+/work/main --tree .`` for before and after):
+
+1. **node, first start after installing**: ``rotation_node --ros-args -p
+   input_type:=imu`` with an empty numba cache (``NUMBA_CACHE_DIR`` a new
+   directory, as after ``colcon build``), a publisher of Imu messages on
+   ``/input`` (every 20 ms) and a subscriber of ``/euler`` in this process:
+   seconds from the launch to the node's first log line and to the first
+   converted message;
+2. **node, warm start**: the same with the cache the first start filled;
+3. **``rotation_bag convert`` of a 1-message Imu bag** (warm cache): wall,
+   CPU (user + system) and peak RSS of the process (``/usr/bin/time``);
+4. **library import + first calls vs scipy**: a new process imports
+   ``rotation_node.conversions`` and calls a conversion for 5 shapes, against
+   scipy's same calls (from before its first import to after its last call).
+
+Every node start gets a ROS domain of its own (``ROS_DOMAIN_ID``) and
+``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``; the node is stopped (SIGINT) once
+it has converted a message. Medians and ranges (min-max) over the rounds are
+printed, with the machine and its load (``_machine``).
 
 Usage::
 
-    python benchmarks/bench_cold_start.py [--rounds 5] [--json results.json]
+    python benchmarks/bench_cold_start.py [--rounds 3] [--tree DIR ...] [--skip-first-start]
+        [--json results.json]
 """
 import argparse
 import json
+import os
 import platform
+import queue
+import shutil
+import signal
 import statistics
 import subprocess
 import sys
+import tempfile
+import threading
+import time
 
 from _machine import cpu_model, print_machine
 
+HERE = os.path.dirname(os.path.abspath(__file__))
+VENV_BIN = os.path.dirname(sys.executable)
 TARGET = 2.0
+START_TIMEOUT_S = 900.0
+PARAMS_FILE = os.path.join(HERE, os.pardir, 'config', 'params.yaml')
 
 # conversion -> (package call, scipy call), both of a float64 array ``x`` of quaternions,
-# rotation matrices or Euler angles as the conversion takes (``x`` is built by _PREAMBLE).
+# rotation matrices or Euler angles as the conversion takes (``x`` is built by _PROGRAM).
 CONVERSIONS = {
     'euler_from_quaternion': ('rc.euler_from_quaternion(x, "xyz")',
                               'Rotation.from_quat(x).as_euler("xyz")'),
@@ -66,55 +89,251 @@ print(imported - start, end - imported)
 """
 
 
-def _run(kind, import_line, call):
+def _tree_env(tree, **extra):
+    env = dict(os.environ, **extra)
+    env.pop('ROTATION_NODE_COMPILED', None)   # set by _machine: starts measured as users start
+    if tree is not None:
+        env['PYTHONPATH'] = os.pathsep.join(
+            [os.path.abspath(tree)] + [p for p in env.get('PYTHONPATH', '').split(os.pathsep)
+                                       if p])
+    return env
+
+
+def _summary(values, unit='', scale=1.0):
+    values = [v * scale for v in values]
+    if not values:
+        return '-'
+    return (f'{statistics.median(values):.2f}{unit} '
+            f'[{min(values):.2f}-{max(values):.2f}]')
+
+
+# ------------------------------------------------------------ the node
+
+class _Traffic:
+    """Imu messages published on /input every 20 ms; the first /euler message's arrival."""
+
+    def __init__(self, domain):
+        import rclpy
+        from rclpy.node import Node
+        from sensor_msgs.msg import Imu
+        from geometry_msgs.msg import Vector3Stamped
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=domain)
+        self.node = Node('cold_start_bench', context=self.context)
+        self.publisher = self.node.create_publisher(Imu, '/input', 10)
+        self.first_output = None
+        self.node.create_subscription(Vector3Stamped, '/euler', self._received, 10)
+        self.message = Imu()
+        self.message.orientation.w = 1.0
+        from rclpy.executors import SingleThreadedExecutor
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.node.create_timer(0.02, lambda: self.publisher.publish(self.message))
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.thread.start()
+
+    def _received(self, _msg):
+        if self.first_output is None:
+            self.first_output = time.perf_counter()
+
+    def _spin(self):
+        while not self.stop.is_set() and self.context.ok():
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def close(self):
+        self.stop.set()
+        self.thread.join()
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.context.try_shutdown()
+
+
+def node_start(tree, cache, domain):
+    """Return (seconds to the first log line, seconds to the first converted message)."""
+    env = _tree_env(tree, NUMBA_CACHE_DIR=cache, ROS_DOMAIN_ID=str(domain),
+                    ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', PYTHONUNBUFFERED='1')
+    traffic = _Traffic(domain)
+    lines = queue.SimpleQueue()
+    start = time.perf_counter()
+    process = subprocess.Popen(
+        [os.path.join(VENV_BIN, 'rotation_node'), '--ros-args', '-p', 'input_type:=imu'],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+
+    def read():
+        for line in process.stdout:
+            lines.put((time.perf_counter(), line))
+
+    threading.Thread(target=read, daemon=True).start()
+    first_line = None
+    output = []
+    try:
+        while time.perf_counter() - start < START_TIMEOUT_S:
+            try:
+                at, line = lines.get(timeout=0.05)
+                output.append(line)
+                first_line = at if first_line is None else first_line
+            except queue.Empty:
+                pass
+            if first_line is not None and traffic.first_output is not None:
+                break
+            if process.poll() is not None and lines.empty():
+                raise RuntimeError('the node stopped:\n' + ''.join(output))
+    finally:
+        process.send_signal(signal.SIGINT)
+        try:
+            process.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+        traffic.close()
+    if first_line is None or traffic.first_output is None:
+        raise RuntimeError('no log line or no output within the timeout:\n' + ''.join(output))
+    return first_line - start, traffic.first_output - start, output
+
+
+# ------------------------------------------------------------ convert
+
+def write_one_message_bag(path):
+    """Write a rosbag2 MCAP bag of one sensor_msgs/Imu message on /imu."""
+    from rclpy.serialization import serialize_message
+    from rotation_node.bag.writer import BagWriter
+    from sensor_msgs.msg import Imu
+    msg = Imu()
+    msg.header.frame_id = 'imu_link'
+    msg.header.stamp.sec = 1_700_000_000
+    msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w = (
+        0.1, 0.2, 0.3, 0.9)
+    with BagWriter(path, overwrite=True, compression='none') as writer:
+        writer.write_serialized('/imu', 'sensor_msgs/msg/Imu', serialize_message(msg),
+                                1_700_000_000_001_000_000)
+
+
+def convert_one(tree, cache, source, output):
+    """Return (wall s, CPU s, peak RSS MiB) of ``rotation_bag convert SOURCE OUTPUT``."""
+    env = _tree_env(tree, NUMBA_CACHE_DIR=cache)
+    start = time.perf_counter()
+    result = subprocess.run(
+        ['/usr/bin/time', '-f', '%U %S %M', os.path.join(VENV_BIN, 'rotation_bag'), 'convert',
+         source, output, '--params', PARAMS_FILE, '--force'], capture_output=True, text=True,
+        env=env)
+    wall = time.perf_counter() - start
+    if result.returncode != 0:
+        raise RuntimeError(result.stdout + result.stderr)
+    user, system, kib = result.stderr.strip().splitlines()[-1].split()
+    return wall, float(user) + float(system), int(kib) / 1024
+
+
+# ------------------------------------------------------------ library vs scipy
+
+def library_start(tree, cache, kind, import_line, call):
     code = _PROGRAM.format(import_line=import_line, kind=kind, call=call)
-    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, check=True)
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, check=True,
+                         env=_tree_env(tree, NUMBA_CACHE_DIR=cache))
     import_time, calls_time = map(float, out.stdout.split())
     return import_time, calls_time
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('--rounds', type=int, default=5, help='fresh process pairs per conversion')
+    parser.add_argument('--rounds', type=int, default=3, help='rounds of each measurement')
+    parser.add_argument('--tree', action='append',
+                        help='a source tree to measure (repeatable; default: the installed one)')
+    parser.add_argument('--skip-first-start', action='store_true',
+                        help='no first start with an empty cache (minutes on a busy machine)')
     parser.add_argument('--json', help='write the results to this file')
     args = parser.parse_args(argv)
+    trees = args.tree or [None]
 
+    print_machine()
     import numba
     import scipy
-    print_machine()
     print(f'Python {platform.python_version()}, numba {numba.__version__}, '
           f'scipy {scipy.__version__}')
-    check = subprocess.run([sys.executable, '-m', 'rotation_node.conversions.warm_up'],
-                           capture_output=True, text=True, check=True)
-    print(f'kernels: {check.stdout.strip()}')
-    print('\nnew process: import (numpy included) + first calls with 5 shapes, seconds '
-          f'(median of {args.rounds} rounds)')
-    print(f'{"conversion":34s} {"package":>17s} {"scipy":>17s} {"ratio":>6s}  target <= {TARGET}')
-    print(f'{"":34s} {"import":>8s} {"calls":>8s} {"import":>8s} {"calls":>8s}')
+    work = tempfile.mkdtemp(prefix='cold_start_')
     results = {}
-    for name, (ours, theirs) in CONVERSIONS.items():
-        kind = _SAMPLE[name]
-        rounds = []
-        for _ in range(args.rounds):
-            rounds.append((_run(kind, 'import rotation_node.conversions as rc', ours),
-                           _run(kind, 'from scipy.spatial.transform import Rotation', theirs)))
-        ours_import = statistics.median(r[0][0] for r in rounds)
-        ours_calls = statistics.median(r[0][1] for r in rounds)
-        scipy_import = statistics.median(r[1][0] for r in rounds)
-        scipy_calls = statistics.median(r[1][1] for r in rounds)
-        ratio = statistics.median(sum(r[0]) / sum(r[1]) for r in rounds)
-        results[name] = {'package_import_s': ours_import, 'package_calls_s': ours_calls,
-                         'scipy_import_s': scipy_import, 'scipy_calls_s': scipy_calls,
-                         'ratio': ratio, 'target_met': ratio <= TARGET}
-        print(f'{name:34s} {ours_import:8.3f} {ours_calls:8.3f} {scipy_import:8.3f} '
-              f'{scipy_calls:8.3f} {ratio:6.2f}  {"yes" if ratio <= TARGET else "NO"}')
-    worst = max(r['ratio'] for r in results.values())
-    print(f'\nworst ratio package / scipy: {worst:.2f} (target <= {TARGET}: '
-          f'{"met" if worst <= TARGET else "not met"})')
+    try:
+        warm_caches = {}
+        for tree in trees:   # each tree's kernels compiled once, into a cache of its own
+            warm_caches[tree] = os.path.join(work, f'cache{len(warm_caches)}')
+            subprocess.run([sys.executable, '-m', 'rotation_node.conversions.warm_up',
+                            '--quiet'], check=True,
+                           env=_tree_env(tree, NUMBA_CACHE_DIR=warm_caches[tree]))
+        source = os.path.join(work, 'one.mcap')
+        write_one_message_bag(source)
+        rows = {tree: {'first_start_log': [], 'first_start_output': [], 'warm_start_log': [],
+                       'warm_start_output': [], 'convert_wall': [], 'convert_cpu': [],
+                       'convert_rss': []} for tree in trees}
+        domain = 100 + os.getpid() % 60
+        for round_ in range(args.rounds):
+            for tree in trees:
+                row = rows[tree]
+                if not args.skip_first_start:
+                    empty = tempfile.mkdtemp(dir=work)
+                    log, out, _ = node_start(tree, empty, domain + round_ % 40)
+                    row['first_start_log'].append(log)
+                    row['first_start_output'].append(out)
+                    shutil.rmtree(empty, ignore_errors=True)
+                log, out, _ = node_start(tree, warm_caches[tree], domain + round_ % 40)
+                row['warm_start_log'].append(log)
+                row['warm_start_output'].append(out)
+                wall, cpu, rss = convert_one(tree, warm_caches[tree], source,
+                                             os.path.join(work, 'out.mcap'))
+                row['convert_wall'].append(wall)
+                row['convert_cpu'].append(cpu)
+                row['convert_rss'].append(rss)
+        print(f'\nseconds (median [min-max] of {args.rounds} rounds); node: launch to its first '
+              'log line / to the first converted message')
+        for tree in trees:
+            row = rows[tree]
+            name = tree or 'installed'
+            print(f'\n{name}:')
+            if row['first_start_log']:
+                print(f'  node first start, empty cache: log {_summary(row["first_start_log"])}'
+                      f'  first output {_summary(row["first_start_output"])}')
+            print(f'  node warm start:               log {_summary(row["warm_start_log"])}'
+                  f'  first output {_summary(row["warm_start_output"])}')
+            if row['first_start_output']:
+                ratio = [f / w for f, w in zip(row['first_start_output'],
+                                               row['warm_start_output'])]
+                print(f'  first / warm start (first output): {_summary(ratio, "x")}'
+                      f'  (target <= {TARGET})')
+            print(f'  convert, 1 message: wall {_summary(row["convert_wall"], " s")}  CPU '
+                  f'{_summary(row["convert_cpu"], " s")}  peak RSS '
+                  f'{_summary(row["convert_rss"], " MiB")}')
+            results[name] = row
+
+        print('\nnew process: import (numpy included) + first calls with 5 shapes, seconds '
+              f'(median of {args.rounds} rounds)')
+        print(f'{"conversion":34s} {"tree":>12s} {"package":>17s} {"scipy":>17s} {"ratio":>6s}')
+        for name, (ours, theirs) in CONVERSIONS.items():
+            kind = _SAMPLE[name]
+            for tree in trees:
+                rounds = []
+                for _ in range(args.rounds):
+                    rounds.append((
+                        library_start(tree, warm_caches[tree], kind,
+                                      'import rotation_node.conversions as rc', ours),
+                        library_start(tree, warm_caches[tree], kind,
+                                      'from scipy.spatial.transform import Rotation', theirs)))
+                ours_import = statistics.median(r[0][0] for r in rounds)
+                ours_calls = statistics.median(r[0][1] for r in rounds)
+                scipy_import = statistics.median(r[1][0] for r in rounds)
+                scipy_calls = statistics.median(r[1][1] for r in rounds)
+                ratio = statistics.median(sum(r[0]) / sum(r[1]) for r in rounds)
+                label = os.path.basename(os.path.abspath(tree)) if tree else 'installed'
+                print(f'{name:34s} {label:>12s} {ours_import:8.3f} {ours_calls:8.3f} '
+                      f'{scipy_import:8.3f} {scipy_calls:8.3f} {ratio:6.2f}')
+                results.setdefault('library', {}).setdefault(name, {})[label] = {
+                    'package_import_s': ours_import, 'package_calls_s': ours_calls,
+                    'scipy_import_s': scipy_import, 'scipy_calls_s': scipy_calls,
+                    'ratio': ratio}
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
     if args.json:
         with open(args.json, 'w') as f:
-            json.dump({'cpu': cpu_model(), 'results': results, 'worst_ratio': worst}, f,
-                      indent=1)
+            json.dump({'cpu': cpu_model(), 'load_average': os.getloadavg(),
+                       'results': results}, f, indent=1)
     return 0
 
 

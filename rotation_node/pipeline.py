@@ -58,14 +58,13 @@ from operator import itemgetter
 from typing import Any, Callable, Dict, List, NamedTuple, Optional, Tuple
 import warnings
 
-import numba
 import numpy as np
 from rotation_node import conversions, covariance, kinematics, registry
-from rotation_node.conversions.kernels import BATCH_SAMPLES
+from rotation_node.conversions.kernels import BATCH_SAMPLES, FLAT_OUT, FLOAT, kernel
 from rotation_node.errors import ParameterError
 from rotation_node.frames import FrameConversion
 from rotation_node.mounting import Mounting
-from rotation_node.parameters import INPUT_TYPES, NodeParameters, OUTPUTS
+from rotation_node.parameters import NodeParameters
 from rotation_node.registry import (
     ANGULAR_VELOCITY, EULER_ANGLES, EULER_COVARIANCE, EULER_RATES, ORIENTATION,
     ORIENTATION_COVARIANCE, OUTPUT_QUATERNION, PUBLISHED_EULER, Sample)
@@ -373,7 +372,8 @@ def _unwrapped(angle, previous, period):
     return angle + period * round((previous - angle) / period)
 
 
-@numba.njit(cache=True, nogil=True)
+# A kernel (conversions' runtime): interpreted for a few samples, compiled for more.
+@kernel(FLAT_OUT, FLAT_OUT, FLOAT, FLOAT, FLOAT, returns=None)
 def _unwrap_chain(first, third, previous_first, previous_third, period):   # pragma: no cover
     """
     Unwrap ``first`` and ``third`` in place, each against the one before, as ``_unwrapped``.
@@ -1086,26 +1086,3 @@ class ConversionPipeline:
                         problem='not positive semi-definite (rounding at its edge)')
             return None
         return result
-
-
-def warm_up_conversions() -> None:
-    """
-    Run dummy samples of every input type through every output once.
-
-    The conversions are numba-compiled on first use; calling this at start-up
-    moves that one-off compilation out of the first real message's latency.
-    """
-    for input_type in INPUT_TYPES:
-        if registry.INPUTS[input_type].stream is not None:
-            continue   # its samples come from its own topics; the forms it uses are warmed up
-        for frame in ('body', 'world'):
-            params = NodeParameters(
-                input_type=input_type, outputs=OUTPUTS, angular_velocity_output_frame=frame)
-            pipeline = ConversionPipeline(params)
-            for nanosec in (0, 1_000_000):
-                msg = pipeline.input_type()
-                msg.header.stamp.nanosec = nanosec
-                pipeline.process(msg)
-    angles = np.zeros(3)   # the input messages above carry no covariance
-    covariance.euler_covariance_from_rotation_vector_covariance(angles, np.eye(3), 'xyz')
-    covariance.euler_linearisation_ratio(angles, np.eye(3), 'xyz')

@@ -1,4 +1,4 @@
-"""Tests of rotation_node.conversions._runtime: one signature per kernel, sample views, warm-up."""
+"""Tests of rotation_node.conversions._runtime: kernels interpreted and compiled, views."""
 import importlib
 import importlib.util
 import inspect
@@ -10,13 +10,17 @@ import sys
 
 from numba import njit, typeof, types
 from numba.core.errors import TypingError
-from numba.core.registry import CPUDispatcher
 import numpy as np
 import pytest
+from rotation_dev.hard_cases import (
+    hard_angles, hard_matrices, hard_quaternions, hard_rotation_vectors, near_gimbal_lock_angles,
+    noisy_matrices)
 from rotation_node import conversions as rc
 from rotation_node import kinematics as rk
 from rotation_node.conversions import _quaternion, _runtime, warm_up
 from rotation_node.conversions._runtime import KERNELS, matrix_samples, samples
+
+_runtime.load_numba()   # the compiled views below are compiled here
 
 _MODULES = ['rotation_node.conversions._quaternion', 'rotation_node.conversions._matrix',
             'rotation_node.conversions._euler', 'rotation_node.conversions._axis_angle',
@@ -39,9 +43,9 @@ _VIEWS = {0: njit(lambda a: samples(a, 0)), 3: njit(lambda a: samples(a, 3)),
 def test_compiled_views_are_the_reshape(shape, width):
     a = np.arange(math.prod(shape), dtype=np.float64).reshape(shape)
     got = _VIEWS[width](a)
-    expected = matrix_samples(a) if width == (3, 3) else samples(a, width)
-    assert got.shape == expected.shape
-    assert np.array_equal(got, expected)
+    expected = matrix_samples(a) if width == (3, 3) else samples(a, width)   # interpreted
+    assert got.shape == tuple(expected.shape)
+    assert np.array_equal(got, np.asarray(expected))
     got[...] = -1.0   # a view: writing through it writes the array
     assert np.all(a == -1.0)
 
@@ -207,17 +211,17 @@ def test_a_kernel_called_with_other_types_raises_instead_of_compiling():
     assert len(kernel.signatures) == 1
 
 
-def _checking_unchecked_call(dispatcher, calls):
+def _checking_unchecked_call(kernel, calls):
     """Return a ``call_unchecked`` asserting its contract: arrays of the declared types."""
-    declared = dispatcher.kernel_signature.args
+    declared = kernel.numba_signature().args
 
     def call(*args):
         assert len(args) == len(declared)
         for argument, expected in zip(args, declared):
             if isinstance(expected, types.Array):
-                assert typeof(argument) == expected, (dispatcher.py_func.__qualname__, argument)
-        calls.append(dispatcher)
-        return dispatcher(*args)
+                assert typeof(argument) == expected, (kernel.__qualname__, argument)
+        calls.append(kernel)
+        return kernel(*args)
 
     return call
 
@@ -246,9 +250,10 @@ def test_single_samples_reach_the_compiled_code_with_its_declared_types(
 def test_the_first_unchecked_call_is_typed():
     """A call site passing arrays of the wrong dimensions gets a TypeError, not a wrong read."""
     kernel = _quaternion._conjugate_kernel
+    kernel.load()
     unchecked = kernel.call_unchecked
     try:
-        kernel.call_unchecked = typed_first = _runtime.typed_first_call(kernel)
+        kernel.call_unchecked = typed_first = _runtime.typed_first_call(kernel.dispatcher)
         with pytest.raises(TypeError):
             kernel.call_unchecked(np.zeros((1, 4)), np.zeros(4))
         assert kernel.call_unchecked is typed_first
@@ -265,25 +270,27 @@ def test_the_first_unchecked_call_is_typed():
 _COMPILED_ONLY = {'sin_cos_in_place_kernel', 'atan2_in_place_kernel'}
 
 
-def _dispatchers(module):
+def _loops(module):
     return {name: value for name, value in vars(module).items()
-            if isinstance(value, CPUDispatcher) and inspect.getmodule(value.py_func) is module}
+            if callable(value) and name.endswith('_kernel')
+            and inspect.getmodule(getattr(value, 'py_func', value)) is module}
 
 
 def test_every_kernel_called_from_python_is_declared():
-    """A compiled loop that Python calls (named ..._kernel) has its one declared signature."""
+    """A loop that Python calls (named ..._kernel) is a kernel() with its one signature."""
     declared = set(map(id, KERNELS))
     for module_name in _MODULES:
         module = importlib.import_module(module_name)
-        for name, dispatcher in _dispatchers(module).items():
-            if name.endswith('_kernel') and name not in _COMPILED_ONLY:
-                assert id(dispatcher) in declared, f'{module_name}.{name} is not a kernel()'
+        for name, loop in _loops(module).items():
+            if name not in _COMPILED_ONLY:
+                assert id(loop) in declared, f'{module_name}.{name} is not a kernel()'
 
 
 def test_warm_up_compiles_every_kernel_with_its_signature():
     assert _runtime.compile_kernels() == len(KERNELS)
     for k in KERNELS:
-        assert k.signatures == [k.kernel_signature.args], k.py_func.__qualname__
+        assert k.signatures == [k.numba_signature().args], k.__qualname__
+        assert k.call == k.dispatcher
 
 
 # ------------------------------------------------------------- cold start
@@ -295,8 +302,8 @@ def _python(code, env=None):
     return result.stdout
 
 
-def test_importing_conversions_loads_nothing_beyond_numpy_and_numba():
-    out = _python('import sys, numpy, numba\n'
+def test_importing_conversions_loads_nothing_beyond_numpy():
+    out = _python('import sys, numpy\n'
                   'before = set(sys.modules)\n'
                   'import rotation_node.conversions\n'
                   'print(sorted(m for m in set(sys.modules) - before\n'
@@ -305,12 +312,47 @@ def test_importing_conversions_loads_nothing_beyond_numpy_and_numba():
     assert out.strip() == "['rotation_node', 'rotation_node.conversions']"
 
 
+_POLICY = """
+import sys
+import numpy as np
+from rotation_node import conversions, kinematics
+from rotation_node.conversions import _euler, _runtime
+q = np.tile([0.1, 0.2, 0.3, 0.9], ({n}, 1))
+conversions.euler_from_quaternion(q, 'xyz')
+kinematics.quaternion_derivative([0.0, 0.0, 0.0, 1.0], [1.0, 2.0, 3.0])
+print('numba' in sys.modules, 'llvmlite' in sys.modules,
+      sorted(k.__name__ for k in _runtime.KERNELS if k.dispatcher is not None))
+"""
+
+
+def test_small_calls_run_interpreted_without_numba_and_a_large_one_loads_its_kernel():
+    small = _runtime.INTERPRETED_VALUES // 4
+    assert _python(_POLICY.format(n=small)).split() == ['False', 'False', '[]']
+    assert _python(_POLICY.format(n=small + 1)).split() == [
+        'True', 'True', "['_euler_from_quaternion_kernel']"]
+
+
+def test_a_kernel_is_loaded_once_it_has_run_interpreted_for_as_long_as_a_load_takes(
+        monkeypatch):
+    kernel = _runtime.Kernel(_quaternion._conjugate_kernel.py_func, (_runtime.FLAT_IN,
+                                                                     _runtime.FLAT_OUT),
+                             _runtime.STATUS)
+    q, out = np.array([0.1, 0.2, 0.3, 0.9]), np.empty(4)
+    assert kernel(q, out) == -1 and kernel.dispatcher is None and kernel.used
+    assert kernel.interpreted_seconds > 0.0
+    kernel.interpreted_seconds = _runtime.INTERPRETED_SECONDS * 1.01
+    assert kernel(q, out) == -1
+    assert kernel.dispatcher is not None and kernel.call is kernel.dispatcher
+    assert out.tolist() == [-0.1, -0.2, -0.3, 0.9]
+
+
 def test_the_first_call_does_not_import_scipy_linalg_and_numba_linear_algebra_still_works():
     """The BLAS probe is answered without importing scipy.linalg; np.dot still compiles."""
     out = _python('import importlib.util, sys\n'
                   'import numba, numpy as np\n'
                   'from rotation_node import conversions\n'
-                  'conversions.euler_from_quaternion([0.1, 0.2, 0.3, 0.9], "xyz")\n'
+                  'conversions.euler_from_quaternion(np.tile([0.1, 0.2, 0.3, 0.9], (2000, 1)),'
+                  ' "xyz")\n'
                   'print("scipy.linalg" in sys.modules)\n'
                   'import numba.np.arraymath, numba.np.linalg\n'
                   'print(numba.np.arraymath._HAVE_BLAS'
@@ -327,7 +369,8 @@ def test_numba_registries_loaded_before_the_first_call_are_left_as_they_are():
                   'import numba.np.arraymath\n'
                   'have_blas = numba.np.arraymath._HAVE_BLAS\n'
                   'from rotation_node import conversions\n'
-                  'conversions.quaternion_conjugate([0.0, 0.0, 0.0, 1.0])\n'
+                  'from rotation_node.conversions import _runtime\n'
+                  '_runtime.compile_kernels(_runtime.KERNELS[:1])\n'
                   'print(numba.np.arraymath._HAVE_BLAS == have_blas,\n'
                   '      "scipy.linalg" in sys.modules)\n')
     assert out.split() == ['True', str(importlib.util.find_spec('scipy') is not None)]
@@ -335,7 +378,7 @@ def test_numba_registries_loaded_before_the_first_call_are_left_as_they_are():
 
 def test_kernels_are_cached_in_the_user_cache_where_the_package_is_read_only(tmp_path):
     """Where the in-tree cache is unusable (a system install), the user-wide one is used."""
-    env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path))
+    env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path), ROTATION_NODE_COMPILED='1')
     env.pop('NUMBA_CACHE_DIR', None)
     code = ('from numba.core import caching\n'
             # _InTreeCacheLocator in older numba releases (0.59, Ubuntu 24.04's, among them)
@@ -374,7 +417,7 @@ for line in lines:
 
 
 def _announced(cache, after):
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), ROTATION_NODE_COMPILED='1')
     compiled, *lines = _python(ANNOUNCING.format(after=after), env).splitlines()
     return int(compiled), lines
 
@@ -389,3 +432,247 @@ def test_a_start_that_compiles_kernels_says_so_once_and_a_cached_start_says_noth
 
 def test_a_compilation_shorter_than_the_delay_is_not_announced(tmp_path):
     assert _announced(tmp_path, after=600.0) == (2, [])
+
+
+# ------------------------------------------- interpreted and compiled: the same bits
+
+SEQUENCES = ('xyz', 'ZYX', 'zxz', 'YXY', 'xzy', 'ZXY')
+
+
+def _corpus_calls(rng, n):
+    """Return (name, call) of every public conversion and kinematics function on hard cases."""
+    q, p = hard_quaternions(rng, n), hard_quaternions(rng, n)
+    m, noisy = hard_matrices(rng, n), noisy_matrices(rng, n, 1e-3)
+    v = hard_rotation_vectors(rng, n)
+    t = hard_angles(rng, n)
+    axis = rng.normal(size=(n, 3))
+    r = rng.normal(size=(n, 3))
+    yield 'quaternion_product', lambda: rc.quaternion_product(p, q)
+    yield 'quaternion_conjugate', lambda: rc.quaternion_conjugate(q)
+    yield 'canonical_quaternion', lambda: rc.canonical_quaternion(q)
+    yield 'quaternion_distance', lambda: rc.quaternion_distance(p, q)
+    yield 'rotate_vector', lambda: rc.rotate_vector(q, r)
+    yield 'matrix_from_quaternion', lambda: rc.matrix_from_quaternion(q)
+    yield 'axis_angle_from_quaternion', lambda: rc.axis_angle_from_quaternion(q)
+    yield 'rotation_vector_from_quaternion', lambda: rc.rotation_vector_from_quaternion(q)
+    yield 'quaternion_from_rotation_vector', lambda: rc.quaternion_from_rotation_vector(v)
+    yield 'matrix_from_rotation_vector', lambda: rc.matrix_from_rotation_vector(v)
+    yield 'quaternion_from_axis_angle', lambda: rc.quaternion_from_axis_angle(axis, t)
+    yield 'matrix_from_axis_angle', lambda: rc.matrix_from_axis_angle(axis, t)
+    for matrices in (m, noisy):
+        yield 'quaternion_from_matrix', lambda: rc.quaternion_from_matrix(matrices)
+        yield 'axis_angle_from_matrix', lambda: rc.axis_angle_from_matrix(matrices)
+        yield 'rotation_vector_from_matrix', lambda: rc.rotation_vector_from_matrix(matrices)
+    for seq in SEQUENCES:
+        angles = np.concatenate([near_gimbal_lock_angles(rng, n // 2, seq),
+                                 rng.uniform(-4.0, 4.0, (n - n // 2, 3))])
+        yield f'euler_from_quaternion {seq}', lambda: rc.euler_from_quaternion(q, seq)
+        yield f'euler_from_quaternion {seq} degrees', \
+            lambda: rc.euler_from_quaternion(q, seq, degrees=True)
+        yield f'euler_singularity_margin {seq}', lambda: rc.euler_singularity_margin(q, seq)
+        yield f'euler_from_matrix {seq}', lambda: rc.euler_from_matrix(m, seq)
+        yield f'quaternion_from_euler {seq}', lambda: rc.quaternion_from_euler(angles, seq)
+        yield f'matrix_from_euler {seq}', lambda: rc.matrix_from_euler(angles, seq)
+        yield f'euler_rates_from_angular_velocity {seq}', \
+            lambda: rk.euler_rates_from_angular_velocity(angles, r, seq)
+        yield f'angular_velocity_from_euler_rates {seq}', \
+            lambda: rk.angular_velocity_from_euler_rates(angles, r, seq, 'world')
+    for frame in ('body', 'world'):
+        yield f'quaternion_derivative {frame}', lambda: rk.quaternion_derivative(q, r, frame)
+        yield f'angular_velocity_from_quaternion_derivative {frame}', \
+            lambda: rk.angular_velocity_from_quaternion_derivative(q, p, frame)
+        yield f'matrix_derivative {frame}', lambda: rk.matrix_derivative(m, r, frame)
+        yield f'angular_velocity_from_matrix_derivative {frame}', \
+            lambda: rk.angular_velocity_from_matrix_derivative(m, noisy, frame)
+    stamps = np.cumsum(rng.uniform(0.001, 0.01, n))
+    rates = rng.normal(size=(n, 3))
+    yield 'angular_velocity_from_quaternions', \
+        lambda: rk.angular_velocity_from_quaternions(q, stamps)
+    for method in ('euler', 'midpoint_exp', 'rk4', 'magnus4', 'coning2'):
+        yield f'integrate_angular_velocity {method}', \
+            lambda: rk.integrate_angular_velocity(q[0], rates, stamps, method=method)
+
+
+def _recorded_kernel_calls(monkeypatch, calls):
+    """Record the arguments of every kernel call (copies), made through either path."""
+    recorded = []
+
+    def recorder(kernel, original):
+        def call(*args):
+            recorded.append((kernel, [a.copy() if isinstance(a, np.ndarray) else a
+                                      for a in args]))
+            return original(*args)
+        return call
+
+    for kernel in KERNELS:
+        monkeypatch.setattr(kernel, 'call', recorder(kernel, kernel.call))
+        monkeypatch.setattr(kernel, 'call_unchecked', recorder(kernel, kernel.call_unchecked))
+    for name, call in calls:
+        try:
+            call()
+        except ValueError:   # a hard case that a function refuses: its kernel ran on it anyway
+            pass
+    monkeypatch.undo()
+    return recorded
+
+
+def _run_fresh(run, arguments):
+    args = [a.copy() if isinstance(a, np.ndarray) else a for a in arguments]
+    result = run(*args)
+    return result, [a.tobytes() for a in args if isinstance(a, np.ndarray)]
+
+
+_IGNORE_SINGULAR = 'ignore::rotation_node.kinematics._euler_rates.EulerSingularityWarning'
+
+
+@pytest.mark.filterwarnings(_IGNORE_SINGULAR)
+def test_every_kernel_gives_the_same_bits_interpreted_and_compiled(monkeypatch, rng):
+    """Each kernel's Python function and its compiled code: the same outputs, bit for bit."""
+    _runtime.compile_kernels()
+    calls = [c for n in (1, 7, _runtime.BATCH_SAMPLES + 5) for c in _corpus_calls(rng, n)]
+    recorded = _recorded_kernel_calls(monkeypatch, calls)
+    ours = {k.__qualname__ for k in KERNELS
+            if k.__module__.startswith(('rotation_node.conversions', 'rotation_node.kinematics'))}
+    assert {k.__qualname__ for k, _ in recorded} == ours
+    for kernel, arguments in recorded:
+        compiled = _run_fresh(kernel.dispatcher, arguments)
+        interpreted = _run_fresh(kernel.interpreted, arguments)
+        assert compiled == interpreted, kernel.__qualname__
+
+
+def test_random_samples_give_the_same_bits_interpreted_and_compiled(monkeypatch, rng):
+    _runtime.compile_kernels()
+    q, r = rng.normal(size=(300, 4)), rng.normal(scale=3.0, size=(300, 3))
+    calls = [('euler', lambda: rc.euler_from_quaternion(q, 'ZYX')),
+             ('matrix', lambda: rc.matrix_from_quaternion(q)),
+             ('rotation_vector', lambda: rc.quaternion_from_rotation_vector(r)),
+             ('rotate', lambda: rc.rotate_vector(q, r)),
+             ('euler_from_matrix', lambda: rc.euler_from_matrix(rc.matrix_from_quaternion(q),
+                                                                'zyz'))]
+    for kernel, arguments in _recorded_kernel_calls(monkeypatch, calls):
+        assert _run_fresh(kernel.dispatcher, arguments) == _run_fresh(kernel.interpreted,
+                                                                      arguments)
+
+
+# ------------------------------------------------------- lists, tuples and numbers
+
+@pytest.mark.parametrize('name, call, sample', _CASES, ids=[c[0] for c in _CASES])
+def test_lists_and_tuples_take_the_single_sample_path_with_the_same_results(
+        monkeypatch, name, call, sample):
+    calls = []
+    for kernel in KERNELS:
+        monkeypatch.setattr(kernel, 'call_unchecked',
+                            _checking_unchecked_call(kernel, calls))
+    listed = np.asarray(sample).tolist()
+    if np.ndim(sample) == 0:   # an angle: Python and numpy numbers
+        forms = [listed, np.float64(sample), np.float32(sample), np.int64(2)]
+    else:
+        forms = [listed, tuple(map(tuple, listed)) if np.ndim(sample) == 2 else tuple(listed)]
+    for x in forms:
+        got = call(x)
+        expected = call(np.asarray(x, dtype=np.float64))   # numpy's conversion of x
+        for a, b in zip(got if isinstance(got, tuple) else (got,),
+                        expected if isinstance(expected, tuple) else (expected,)):
+            assert np.asarray(a).tobytes() == np.asarray(b).tobytes(), name
+    assert len(calls) == 2 * len(forms), f'{name}: a list or tuple took the general path'
+
+
+@pytest.mark.parametrize('bad', [
+    [0.1, 0.2, 0.3], [0.1, 0.2, 0.3, 0.4, 0.5], ['a', 0.2, 0.3, 0.9], [0.1, 0.2, 0.3, None],
+    [math.nan, 0.2, 0.3, 0.9], [0.0, 0.0, 0.0, 0.0], (0.1, [0.2], 0.3, 0.9),
+    [[0.1, 0.2], [0.3, 0.9]],
+    [0.1, 0.2, 0.3, math.inf]])
+def test_bad_lists_get_the_messages_arrays_get(bad):
+    def message(x):
+        with pytest.raises(ValueError) as error:
+            rc.euler_from_quaternion(x, 'xyz')
+        return str(error.value)
+
+    try:
+        as_array = np.asarray(bad, dtype=np.float64)
+    except (TypeError, ValueError):
+        as_array = np.asarray(bad, dtype=object)
+    if as_array.dtype == object:   # numpy refuses it too: the message names the list
+        assert message(bad).startswith('Expected `q` to be an array of numbers with shape')
+    else:
+        assert message(bad) == message(as_array)
+    assert message(tuple(bad)) == message(bad).replace('got list', 'got tuple')
+
+
+def test_a_bad_list_as_second_argument_or_matrix_names_it():
+    with pytest.raises(ValueError, match='`v` has a NaN or Inf component'):
+        rc.rotate_vector([0.0, 0.0, 0.0, 1.0], [0.0, math.nan, 1.0])
+    expected = re.escape('Expected `v` to have shape (..., 3), got (2,)')
+    with pytest.raises(ValueError, match=expected):
+        rc.rotate_vector([0.0, 0.0, 0.0, 1.0], [0.0, 1.0])
+    with pytest.raises(ValueError, match='`R` has det <= 0'):
+        rc.quaternion_from_matrix([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]])
+
+
+def test_single_samples_from_lists_in_threads_do_not_mix():
+    """Each thread copies a list into arrays of its own."""
+    from concurrent.futures import ThreadPoolExecutor
+    samples_ = [np.array([0.1 * i, -0.2, 0.3, 0.9]) for i in range(40)]
+    expected = [rc.euler_from_quaternion(q, 'xyz').tobytes() for q in samples_]
+
+    def convert(i):
+        return [rc.euler_from_quaternion(samples_[i].tolist(), 'xyz').tobytes()
+                for _ in range(200)]
+
+    with ThreadPoolExecutor(4) as pool:
+        for i, results in enumerate(pool.map(convert, range(len(samples_)))):
+            assert set(results) == {expected[i]}
+
+
+# ------------------------------------------------------------ loading in the background
+
+BACKGROUND = """
+import sys, time
+import numpy as np
+from rotation_node import conversions
+from rotation_node.conversions import _euler, _runtime, warm_up
+lines = []
+warm_up.load_in_background(lines.append, after={after})
+q = [0.1, 0.2, 0.3, 0.9]
+first = conversions.euler_from_quaternion(q, 'xyz')
+kernel = _euler._euler_from_quaternion_kernel
+print(kernel.dispatcher is None)
+deadline = time.monotonic() + 600
+while kernel.dispatcher is None and time.monotonic() < deadline:
+    time.sleep(0.05)
+time.sleep(0.2)
+print(kernel.dispatcher is not None,
+      conversions.euler_from_quaternion(q, 'xyz').tobytes() == first.tobytes(),
+      sorted(k.__name__ for k in _runtime.KERNELS if k.dispatcher is not None))
+for line in lines:
+    print(line)
+"""
+
+
+def test_kernels_load_in_the_background_as_they_are_first_used(tmp_path):
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
+    env.pop('ROTATION_NODE_COMPILED', None)
+    out = _python(BACKGROUND.format(after=0.0), env).splitlines()
+    assert out[0] == 'True'   # the first call ran interpreted
+    assert out[1] == "True True ['_euler_from_quaternion_kernel']"
+    assert out[2:4] == [warm_up.COMPILING, out[3]]
+    assert re.fullmatch(r'1 kernels compiled in [0-9.]+ s and cached', out[3]), out
+    out = _python(BACKGROUND.format(after=0.0), env).splitlines()   # from the cache: silent
+    assert out == ['True', "True True ['_euler_from_quaternion_kernel']"]
+
+
+# ------------------------------------------------------------ threads
+
+def test_large_batches_use_threads_only_while_a_cpu_is_idle_unless_chosen(monkeypatch):
+    monkeypatch.setattr(_runtime, '_usable_cpus', 2)
+    monkeypatch.setattr(_runtime, '_threads', 2)
+    monkeypatch.setattr(_runtime, '_threads_chosen', False)
+    large = _runtime.THREADED_SAMPLES
+    monkeypatch.setattr(os, 'getloadavg', lambda: (11.9, 11.0, 11.5))   # a busy machine
+    assert _runtime.batch_threads(large) == 1
+    monkeypatch.setattr(os, 'getloadavg', lambda: (1.2, 1.0, 0.9))   # one CPU idle
+    assert _runtime.batch_threads(large) == 2
+    assert _runtime.batch_threads(large - 1) == 1
+    monkeypatch.setattr(os, 'getloadavg', lambda: (11.9, 11.0, 11.5))
+    monkeypatch.setattr(_runtime, '_threads_chosen', True)   # set_threads or the variable
+    assert _runtime.batch_threads(large) == 2

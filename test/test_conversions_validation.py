@@ -178,9 +178,11 @@ def test_empty_batch():
 
 
 @pytest.fixture
-def two_threads():
+def two_threads(monkeypatch):
     from rotation_node.conversions import _runtime
     before = _runtime._threads
+    monkeypatch.setattr(_runtime, 'THREADED_SAMPLES', 1 << 16)   # these batches split
+    monkeypatch.setattr(_runtime, '_threads_chosen', _runtime._threads_chosen)
     rc.set_threads(2)
     yield
     rc.set_threads(before)

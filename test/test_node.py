@@ -647,7 +647,7 @@ START_UP_MOMENTS = {
     # where the signal comes: (the name in rotation_node.node's modules to wrap, before or
     # after it)
     'before rclpy.init': ('rclpy.init', 'before'),
-    'between rclpy.init and the node': ('conversion_node.warm_up_conversions', 'before'),
+    'between rclpy.init and the node': ('conversion_node.load_in_background', 'before'),
     'while the node is configured': ('RotationNode._configure', 'before'),
     'before rclpy handles signals': ('program.install_signal_handlers', 'before'),
     'once rclpy handles signals': ('program.install_signal_handlers', 'after'),

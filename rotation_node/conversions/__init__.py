@@ -27,7 +27,7 @@ gimbal lock, quaternions scaled by 1e+-160).
 Speed: every function runs one compiled (numba) loop over the samples, with
 validation inside it, so a single sample costs little more than the call.
 Large batches evaluate ``sin``, ``cos`` and ``atan2`` in vectorised loops of
-branch-free polynomials (``_trigonometry``), and batches of 65536 samples or more are split
+branch-free polynomials (``_trigonometry``), and batches of 262144 samples or more are split
 across threads (:func:`set_threads`, environment variable ``ROTATION_NODE_THREADS``).
 """
 from . import _axis_angle, _euler, _matrix, _quaternion

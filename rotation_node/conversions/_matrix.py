@@ -33,8 +33,8 @@ import numpy as np
 from ._quaternion import (
     canonical_kernel, canonical_unit_quaternion, quaternion_status, scaled_quaternion)
 from ._runtime import (
-    call_unary, FLAT_IN, FLAT_OUT, FLOAT, is_batch, is_single_sample, jit, kernel, kernel_layout,
-    matrix_samples, new_array, ROWS_IN, ROWS_OUT, samples, status)
+    call_unary, FLAT_IN, FLAT_OUT, FLOAT, is_batch, jit, kernel, kernel_layout,
+    matrix_samples, new_array, ROWS_IN, ROWS_OUT, samples, single_sample, status)
 from ._validation import (
     float_array, NON_FINITE, NOT_ORTHONORMAL, NOT_ROTATION, OK, raise_sample_error)
 
@@ -384,12 +384,13 @@ def convert_matrices(R: ArrayLike, orthonormal_tolerance: float, non_orthonormal
         tolerance = math.inf   # the defaults themselves, valid: no check (~80 ns a call)
     else:
         tolerance = _kernel_tolerance(orthonormal_tolerance, non_orthonormal)
-    if is_single_sample(R, (3, 3)):   # already in the canonical layout, as is its result
+    single = single_sample(R, (3, 3))
+    if single is not None:   # already in the canonical layout, as is its result
         out = new_array(out_trailing)
         if convention is None:
-            bad = fused_kernel.call_unchecked(R, out, tolerance)
+            bad = fused_kernel.call_unchecked(single, out, tolerance)
         else:
-            bad = fused_kernel.call_unchecked(R, out, tolerance, convention)
+            bad = fused_kernel.call_unchecked(single, out, tolerance, convention)
         if bad == -1:
             return out
         # A defect, or the eigenvector method: the general path takes over.

@@ -1,22 +1,58 @@
 """
-The compiled-call machinery of the library: from public arguments to compiled kernels.
+The kernel machinery of the library: from public arguments to kernels, interpreted or compiled.
 
-A *kernel* is a compiled loop over samples. It takes its array arguments in
-one canonical layout, fills a preallocated output and returns the status of
-the first bad sample (see :func:`status`), or -1. This module holds what every
+A *kernel* is a loop over samples. It takes its array arguments in one
+canonical layout, fills a preallocated output and returns the status of the
+first bad sample (see :func:`status`), or -1. This module holds what every
 kernel shares:
 
-- the JIT policy (:data:`jit`) and the kernel declaration (:func:`kernel`):
-  each kernel is compiled for exactly one signature, on its first call or by
-  :func:`compile_kernels`, and cached on disk, so no later call compiles,
-  whatever the caller's leading shape, dtype, memory layout or writability;
-  :class:`KernelCompilation` tells compilations from cache loads;
-- the canonical layout (:func:`kernel_layout`) and the compiled views of it
+- the declarations (:data:`jit` for helpers, :func:`kernel` for kernels,
+  :func:`compiled_form` for a helper whose compiled form differs from its
+  Python one): they record Python functions and import nothing of numba;
+- when a kernel runs interpreted and when compiled (below);
+- the canonical layout (:func:`kernel_layout`) and the views of it
   (:func:`samples`, :func:`matrix_samples`);
 - status packing (:func:`status`, :func:`first_status`);
 - batch schedules: the chunk size and the thread pool (:func:`set_threads`);
 - the one Python-side path from public arguments to kernels
-  (:func:`call_unary`, :func:`call_binary`).
+  (:func:`call_unary`, :func:`call_binary`), with its single-sample fast path
+  for float64 arrays, lists, tuples and numbers (:func:`single_sample`).
+
+Interpreted or compiled
+-----------------------
+Importing the library imports numpy only. Every kernel and every helper is a
+plain Python function, and the same source is also compiled by numba (with
+the helpers inlined), so that a kernel has two runs of one code: interpreted
+(the Python function itself, on ``memoryview`` s of its arrays, whose items are
+Python floats) and compiled. Both compute every sample with the same IEEE
+double operations in the same order, and the library's formulas call only
+correctly rounded or exact functions (``sqrt``, ``frexp``, ``ldexp``), the C
+library's ``atan2``, ``sin`` and ``cos`` (the same in both), or its own
+(``_trigonometry``; the fused multiply-add is exact in both): the results
+are the same bit for bit (``test/test_conversions_runtime.py`` checks every
+kernel both ways).
+
+The policy, per kernel:
+
+- once the kernel is loaded (compiled, or loaded from numba's disk cache),
+  every call runs the compiled code;
+- before that, a call with at most :data:`INTERPRETED_VALUES` values in each
+  array argument (a few hundred samples) runs interpreted (~5-20 us a
+  sample, against ~1 s to import numba and load the kernels: a program
+  converting a few samples never pays for it);
+- a larger call loads the kernel first (importing numba the first time), as
+  does a kernel that has spent :data:`INTERPRETED_SECONDS` interpreted in all
+  (a long-running caller of small conversions then pays the load once, after
+  at most as much time interpreted as the load costs);
+- :func:`compile_kernels` loads kernels explicitly (``warm_up`` all of them),
+  and ``warm_up.load_in_background`` loads each kernel in a background thread
+  as soon as it is first used, while calls run interpreted until it is ready
+  (the node: outputs from the first message, the same numbers either way).
+
+Each kernel is compiled for exactly one signature, on its load, and cached on
+disk, so no later call compiles, whatever the caller's leading shape, dtype,
+memory layout or writability; :class:`KernelCompilation` tells compilations
+from cache loads.
 
 The canonical layout: every array argument is a C-contiguous float64 array
 holding its samples one after the other along the first axis. Samples of
@@ -40,12 +76,8 @@ import os
 import sys
 import threading
 import time
-from typing import Any, Callable, Optional, Sequence, TYPE_CHECKING, TypeGuard
+from typing import Any, Callable, NamedTuple, Optional, Sequence, TYPE_CHECKING, TypeGuard
 
-from numba import njit, types
-from numba.core import event
-from numba.core.errors import RequireLiteralValue, TypingError
-from numba.extending import intrinsic, overload
 import numpy as np
 
 from ._validation import broadcast_pair, float_array, raise_sample_error
@@ -55,23 +87,30 @@ if TYPE_CHECKING:
 
     from ..type_aliases import FloatArray
 
-# Every compiled function is inlined into its callers (numba IR inlining, not
-# left to LLVM). A helper that is called rather than inlined costs a call per
-# sample and, when an array is live across it (the kernels' inputs and
-# outputs always are), an atomic reference-count increment and decrement per
-# call: 2-4x the whole per-sample cost of most kernels, measured.
-# (Inlined callees cannot be called with ``*args``.) Only kernels are cached
-# on disk (:func:`kernel`): an inlined helper is compiled into its callers,
-# and a cache would cost each helper a directory probe at import.
-jit = njit(nogil=True, error_model='numpy', inline='always')
-_cached_jit = njit(cache=True, nogil=True, error_model='numpy', inline='always')
+
+# ------------------------------------------------------------ declarations
+
+class ArgumentType(NamedTuple):
+    """A kernel argument's type, named without numba: a scalar, or an array of ``ndim`` of them."""
+
+    scalar: str          # numba's name of the scalar type: 'float64', 'int64', 'boolean'
+    ndim: int = 0        # 0: a scalar; else a C-contiguous, aligned, writable array
+
+    def numba_type(self) -> Any:
+        """Return the numba type (imports numba)."""
+        from numba import types
+        scalar = getattr(types, self.scalar)
+        return types.Array(scalar, self.ndim, 'C') if self.ndim else scalar
 
 
-# ------------------------------------------------------------ kernel types
+#: Scalar arguments and the status that kernels return.
+INT, FLOAT, BOOL = ArgumentType('int64'), ArgumentType('float64'), ArgumentType('boolean')
+STATUS = INT
 
-def array_type(ndim: int, dtype: Any = types.float64) -> Any:
-    """Return the numba type of a C-contiguous, aligned, writable kernel argument."""
-    return types.Array(dtype, ndim, 'C')
+
+def array_type(ndim: int, dtype: ArgumentType = FLOAT) -> ArgumentType:
+    """Return the type of a C-contiguous, aligned, writable kernel argument."""
+    return ArgumentType(dtype.scalar, ndim)
 
 
 # Inputs are typed writable like outputs: numba accepts a writable array for a
@@ -81,15 +120,110 @@ def array_type(ndim: int, dtype: Any = types.float64) -> Any:
 FLAT_IN, ROWS_IN = array_type(1), array_type(2)
 #: Outputs in the canonical layout (the same types; the names say the role).
 FLAT_OUT, ROWS_OUT = array_type(1), array_type(2)
-#: Scalar arguments and the status that kernels return.
-INT, FLOAT, BOOL = types.int64, types.float64, types.boolean
-STATUS = types.int64
 
 #: Every kernel declared with :func:`kernel`, in declaration order.
-KERNELS: list[Any] = []
+KERNELS: list[Kernel] = []
+
+# id of a helper declared with jit -> the helper; of a compiled_form's function -> its factory.
+_HELPERS: dict[int, Callable[..., Any]] = {}
+_COMPILED_FORMS: dict[int, Callable[[], Any]] = {}
+# id of a Python function -> what compiled code calls instead (made when a kernel loads),
+# and module name -> the namespace the compiled copies of its functions see.
+_COMPILED: dict[int, Any] = {}
+_NAMESPACES: dict[str, dict[str, Any]] = {}
+_numba_loaded = False
+# Held while numba is set up and while a kernel loads: the threads of one large
+# batch, or a background loader and a large call, may all want the same kernel.
+_loading = threading.RLock()
 
 
-_compiling = threading.Lock()
+def jit(py_func: Callable[..., Any]) -> Callable[..., Any]:
+    """
+    Declare a helper of kernels: returned as it is, compiled inlined into the kernels calling it.
+
+    Every compiled helper is inlined into its callers (numba IR inlining, not
+    left to LLVM). A helper that is called rather than inlined costs a call per
+    sample and, when an array is live across it (the kernels' inputs and
+    outputs always are), an atomic reference-count increment and decrement per
+    call: 2-4x the whole per-sample cost of most kernels, measured.
+    (Inlined callees cannot be called with ``*args``.) In Python the helper is
+    the function itself: the interpreted run of a kernel calls it directly.
+    """
+    _HELPERS[id(py_func)] = py_func
+    return py_func
+
+
+def compiled_form(py_func: Callable[..., Any]) -> Callable[[Callable[[], Any]], Any]:
+    """
+    Declare the compiled form of helper ``py_func``: ``factory()`` returns it, when numba loads.
+
+    For what Python and numba must do differently to compute the same values
+    (an LLVM intrinsic such as the fused multiply-add). Compiled code calls
+    what ``factory()`` returns (made once, when the first kernel loads)
+    wherever the source calls ``py_func``.
+    """
+    def decorate(factory):
+        _COMPILED_FORMS[id(py_func)] = factory
+        return factory
+
+    return decorate
+
+
+def _compiled_namespace(module_globals: dict[str, Any]) -> dict[str, Any]:
+    """
+    Return the globals of the compiled copies of a module's functions (helpers compiled).
+
+    numba resolves a function's globals when it compiles it: a copy of each
+    declared function with these globals calls the compiled form of every
+    helper it names (from its own module or imported), while the Python
+    function itself keeps calling the Python helpers.
+    """
+    name = module_globals['__name__']
+    namespace = _NAMESPACES.get(name)
+    if namespace is None:
+        namespace = _NAMESPACES[name] = dict(module_globals)
+        for key, value in module_globals.items():
+            if callable(value):
+                compiled = _compiled_of(value)
+                if compiled is not None:
+                    namespace[key] = compiled
+    return namespace
+
+
+def _compiled_of(value: Any) -> Any:
+    """Return the compiled stand-in of a helper or compiled form (made once), else None."""
+    compiled = _COMPILED.get(id(value))
+    if compiled is not None:
+        return compiled
+    if id(value) in _COMPILED_FORMS:
+        compiled = _COMPILED[id(value)] = _COMPILED_FORMS[id(value)]()
+    elif id(value) in _HELPERS:
+        from numba import njit
+        compiled = _COMPILED[id(value)] = njit(nogil=True, error_model='numpy',
+                                               inline='always')(_compiled_copy(value))
+    return compiled
+
+
+def _compiled_copy(py_func: Callable[..., Any]) -> Callable[..., Any]:
+    """Return ``py_func`` with the globals of :func:`_compiled_namespace` (compiled callees)."""
+    import types as python_types
+    copy = python_types.FunctionType(py_func.__code__, _compiled_namespace(py_func.__globals__),
+                                     py_func.__name__, py_func.__defaults__, py_func.__closure__)
+    copy.__qualname__, copy.__doc__ = py_func.__qualname__, py_func.__doc__
+    copy.__module__ = py_func.__module__
+    copy.__kwdefaults__ = py_func.__kwdefaults__
+    return copy
+
+
+def load_numba() -> None:
+    """Import numba and register the compiled views with it, once (~0.6 s)."""
+    global _numba_loaded
+    with _loading:
+        if _numba_loaded:
+            return
+        _import_numba_registries_without_scipy_linalg()
+        _register_views()
+        _numba_loaded = True
 
 
 def _import_numba_registries_without_scipy_linalg() -> None:
@@ -125,14 +259,14 @@ def _import_numba_registries_without_scipy_linalg() -> None:
         numba_linalg.ensure_blas = probe
 
 
-def _compile(dispatcher: Any) -> None:
-    """Compile ``dispatcher`` for its one signature (or load it from the disk cache), once."""
-    with _compiling:   # threads of one large batch may all make the first call
-        if not dispatcher.kernel_compiled:
-            _import_numba_registries_without_scipy_linalg()
-            dispatcher.compile(dispatcher.kernel_signature)
-            dispatcher.disable_compile()
-            dispatcher.kernel_compiled = True
+# A call runs interpreted while each of its arrays holds at most this many
+# values and the kernel is not loaded: 256 quaternions. Measured
+# (benchmarks/bench_cold_start.py): one interpreted sample costs 5-20 us
+# where importing numba and loading one kernel from the disk cache costs
+# ~0.7 s in a new process (~10-30 ms for each further kernel).
+INTERPRETED_VALUES = 1024
+# A kernel that has run interpreted this long in all is loaded at its next call.
+INTERPRETED_SECONDS = 0.5
 
 
 def typed_first_call(dispatcher: Any) -> Callable[..., Any]:
@@ -146,66 +280,146 @@ def typed_first_call(dispatcher: Any) -> Callable[..., Any]:
     :func:`is_single_sample` checks; a wrong number of dimensions would be
     read out of bounds. Its first call goes through numba's typing instead,
     so that a call site that breaks the contract raises ``TypeError``; then
-    the compiled code replaces it.
+    the compiled code replaces it (on the kernel, where the single-sample
+    path looks it up).
     """
     def call(*args):
         status_ = dispatcher(*args)
         dispatcher.call_unchecked = (
             dispatcher.overloads[dispatcher.kernel_signature.args].entry_point)
+        owner = dispatcher.kernel
+        if owner.call_unchecked is call:
+            owner.call_unchecked = dispatcher.call_unchecked
         return status_
 
     return call
 
 
-def kernel(*argument_types: Any,
-           returns: Any = STATUS) -> Callable[[Callable[..., Any]], Any]:
+class Kernel:
     """
-    Declare a kernel: compiled for exactly one signature, on first use.
+    A declared kernel: its Python function, its one signature, and its compiled form once loaded.
+
+    Calling it runs the compiled code once the kernel is loaded, else
+    interpreted or, for a large call, loads it first (the module's policy).
+    ``call_unchecked`` is the single-sample path: the compiled code without
+    numba's typing of the arguments once loaded (:func:`typed_first_call`),
+    the same policy before.
+    """
+
+    def __init__(self, py_func: Callable[..., Any], argument_types: Sequence[ArgumentType],
+                 returns: Optional[ArgumentType]):
+        self.py_func = py_func
+        self.__name__ = py_func.__name__
+        self.__qualname__ = py_func.__qualname__
+        self.__doc__ = py_func.__doc__
+        self.__module__ = py_func.__module__
+        self.argument_types, self.returns = tuple(argument_types), returns
+        self.dispatcher: Any = None            # numba's, once loaded
+        self.call: Callable[..., Any] = self._interpreted_or_loaded
+        self.call_unchecked: Callable[..., Any] = self._interpreted_or_loaded
+        self.interpreted_seconds = 0.0        # spent interpreted, in all
+        self.used = False                     # called at least once
+
+    def __repr__(self) -> str:
+        state = 'compiled' if self.dispatcher is not None else 'interpreted'
+        return f'<kernel {self.__qualname__} ({state})>'
+
+    def __call__(self, *args: Any) -> Any:
+        return self.call(*args)
+
+    @property
+    def signatures(self) -> list[tuple[Any, ...]]:
+        """The compiled signatures: one once loaded, none before."""
+        return [] if self.dispatcher is None else self.dispatcher.signatures
+
+    def numba_signature(self) -> Any:
+        """Return the numba signature (imports numba)."""
+        from numba import types
+        returns = types.none if self.returns is None else self.returns.numba_type()
+        return returns(*(t.numba_type() for t in self.argument_types))
+
+    def load(self) -> None:
+        """Compile the kernel for its one signature, or load it from the disk cache, once."""
+        with _loading:
+            if self.dispatcher is not None:
+                return
+            load_numba()
+            from numba import njit
+            dispatcher = njit(cache=True, nogil=True, error_model='numpy')(
+                _compiled_copy(self.py_func))
+            dispatcher.kernel_signature = self.numba_signature()
+            dispatcher.kernel = self
+            dispatcher.compile(dispatcher.kernel_signature)
+            dispatcher.disable_compile()   # another signature raises TypeError
+            dispatcher.call_unchecked = typed_first_call(dispatcher)
+            self.dispatcher = dispatcher
+            self.call, self.call_unchecked = dispatcher, dispatcher.call_unchecked
+
+    def interpreted(self, *args: Any) -> Any:
+        """Run the Python function on ``args`` (the interpreted run of the compiled code)."""
+        return self.py_func(*args)
+
+    def _interpreted_or_loaded(self, *args: Any) -> Any:
+        if not self.used:
+            self.used = True
+            if _on_first_use is not None:
+                _on_first_use(self)
+        if (self.interpreted_seconds > INTERPRETED_SECONDS or _loading_forced
+                or any(type(a) is _NDARRAY and a.size > INTERPRETED_VALUES for a in args)):
+            self.load()
+            return self.call(*args)
+        start = time.perf_counter()
+        try:
+            return self.py_func(*args)
+        finally:
+            self.interpreted_seconds += time.perf_counter() - start
+
+
+# Called with a kernel at its first call (warm_up.load_in_background's queue), or None.
+_on_first_use: Optional[Callable[[Kernel], None]] = None
+
+
+def set_first_use_hook(hook: Optional[Callable[[Kernel], None]]) -> None:
+    """Have ``hook(kernel)`` called at each kernel's first call from now on (None: no hook)."""
+    global _on_first_use
+    _on_first_use = hook
+
+
+# Every kernel loads at its first call (ROTATION_NODE_COMPILED=1: no interpreted runs).
+_loading_forced = os.environ.get('ROTATION_NODE_COMPILED', '') not in ('', '0')
+
+
+def kernel(*argument_types: ArgumentType,
+           returns: Optional[ArgumentType] = STATUS) -> Callable[[Callable[..., Any]], Kernel]:
+    """
+    Declare a kernel: one signature, interpreted or compiled as the module says.
 
     Parameters
     ----------
-    *argument_types : numba types
+    *argument_types : ArgumentType
         The kernel's arguments, e.g. ``FLAT_IN, FLAT_OUT, INT``. Arrays are
         C-contiguous, aligned, writable float64 in the canonical layout.
-    returns : numba type or None, optional
+    returns : ArgumentType or None, optional
         The result: the status by default; None for a kernel without one.
 
     Returns
     -------
     callable
-        A decorator returning the numba dispatcher. Its first call compiles
-        the declared signature (or loads it from the disk cache) and then
-        disables compilation, so a call with other types raises ``TypeError``
-        instead of compiling again. Its attribute ``call_unchecked`` runs the
-        same compiled code without numba's typing of the arguments (see
-        :func:`typed_first_call`), for the single-sample path of a call.
+        A decorator returning the :class:`Kernel`. Once loaded, a call with
+        other types raises ``TypeError`` instead of compiling again.
 
     """
-    signature = (types.none if returns is None else returns)(*argument_types)
-
     def decorate(py_func):
-        dispatcher = _cached_jit(py_func)
-        dispatcher.kernel_signature = signature
-        dispatcher.kernel_compiled = False
-
-        def compile_on_first_call(*args, **kwargs):
-            # numba calls this when no compiled signature matches the arguments,
-            # and then calls what it returns with them: now the dispatcher
-            # itself, which accepts them or raises TypeError.
-            _compile(dispatcher)
-            return dispatcher
-
-        dispatcher._compile_for_args = compile_on_first_call
-        dispatcher.call_unchecked = typed_first_call(dispatcher)
-        KERNELS.append(dispatcher)
-        return dispatcher
+        declared = Kernel(py_func, argument_types, returns)
+        KERNELS.append(declared)
+        return declared
 
     return decorate
 
 
-def compile_kernels(kernels: Optional[Sequence[Any]] = None) -> int:
+def compile_kernels(kernels: Optional[Sequence[Kernel]] = None) -> int:
     """
-    Compile every kernel (or those given) for its one signature, from the disk cache where cached.
+    Load every kernel (or those given): compiled for its one signature, or from the cache.
 
     Returns
     -------
@@ -214,12 +428,16 @@ def compile_kernels(kernels: Optional[Sequence[Any]] = None) -> int:
 
     """
     kernels = KERNELS if kernels is None else kernels
-    for dispatcher in kernels:
-        _compile(dispatcher)
+    for declared in kernels:
+        declared.load()
     return len(kernels)
 
 
-class KernelCompilation(event.Listener):
+#: The explicit form of a large call's load: every kernel compiled or loaded from the cache.
+load_kernels = compile_kernels
+
+
+class KernelCompilation:
     """
     Kernels compiled, not loaded from the disk cache, within a ``with`` block.
 
@@ -233,7 +451,8 @@ class KernelCompilation(event.Listener):
     took in all (from the start of the first to the end of the last).
     Compilations of functions that are not kernels (:func:`kernel`) are not
     counted. It listens to numba's ``numba:compile`` event, which numba
-    broadcasts only for a compilation, never for a cache load.
+    broadcasts only for a compilation, never for a cache load (entering the
+    block imports numba).
     """
 
     def __init__(self, on_slow: Callable[[], None], after: float = 1.0):
@@ -287,7 +506,17 @@ class KernelCompilation(event.Listener):
                 self._due = True
 
     def __enter__(self) -> KernelCompilation:
-        self._installed = event.install_listener('numba:compile', self)
+        from numba.core import event
+        outer = self
+
+        class Listener(event.Listener):
+            def on_start(self, ev):
+                outer.on_start(ev)
+
+            def on_end(self, ev):
+                outer.on_end(ev)
+
+        self._installed = event.install_listener('numba:compile', Listener())
         self._installed.__enter__()
         return self
 
@@ -312,60 +541,101 @@ def _rows_per_sample(trailing: tuple[int, ...]) -> int:
     return trailing[0] if trailing else 1
 
 
-@intrinsic
-def _stack_view(typingctx, a, rows, columns):
-    """C-contiguous ``a`` viewed as ``(n,)``, ``(n, rows)`` or ``(n, rows, columns)``: no copy."""
-    if not (isinstance(a, types.Array) and a.layout == 'C'):
-        raise TypingError(f'samples(): expected a C-contiguous array, got {a}.')
-    if not (isinstance(rows, types.IntegerLiteral) and isinstance(columns, types.IntegerLiteral)):
-        raise RequireLiteralValue('samples(): the sample shape must be constant.')
-    trailing = [d for d in (rows.literal_value, columns.literal_value) if d > 0]
-    result = a.copy(ndim=1 + len(trailing), layout='C')
-
-    def codegen(context, builder, signature, args):
-        # Imported here, when a kernel is compiled: not needed to load one from the cache.
-        from numba.core.imputils import impl_ret_borrowed
-        from numba.np.arrayobj import make_array, populate_array
-        source = make_array(signature.args[0])(context, builder, args[0])
-        view = make_array(signature.return_type)(context, builder)
-        intp = context.get_value_type(types.intp)
-        sizes = [math.prod(trailing[i:]) for i in range(len(trailing) + 1)]
-        shape = [builder.sdiv(source.nitems, intp(sizes[0]))] + [intp(d) for d in trailing]
-        strides = [builder.mul(source.itemsize, intp(size)) for size in sizes]
-        populate_array(view, data=source.data, shape=shape, strides=strides,
-                       itemsize=source.itemsize, meminfo=source.meminfo, parent=source.parent)
-        return impl_ret_borrowed(context, builder, signature.return_type, view._getvalue())
-
-    return result(a, rows, columns), codegen
-
-
-def samples(a: FloatArray, width: int) -> FloatArray:
+def samples(a: FloatArray, width: int) -> Any:
     """
     Return the canonical ``a`` as a stack of samples, shape ``(n, width)`` (``(n,)``: width 0).
 
-    How kernels see their flat arguments. In compiled code (the overload
-    below) the view costs nothing: no copy and no call. ``width`` must be a
-    constant there; any C-contiguous array of ``n width`` values is viewed.
+    How kernels see their flat arguments. In compiled code (the compiled form
+    below) the view costs nothing: no copy and no call; ``width`` must be a
+    constant there, and any C-contiguous array of ``n width`` values is viewed.
+    Interpreted, the view is a ``memoryview``, whose items are Python floats
+    (an ndarray's are numpy scalars, 3-5x slower in arithmetic): a kernel
+    reads and writes it by ``[s]`` or ``[s, j]`` and reads its ``shape``, no
+    more (sub-views, ``.T``, ``.flat``: :func:`array_samples`). An empty
+    array stays an array.
     """
+    if a.size == 0:
+        return a.reshape(-1, width) if width else a.reshape(-1)
+    view = memoryview(a)
+    if width == 0 and a.ndim == 1:
+        return view
+    return view.cast('B').cast(a.dtype.char, (a.size // width, width) if width else (a.size,))
+
+
+def matrix_samples(a: FloatArray) -> Any:
+    """Return the matrices ``a`` (3 n, 3), or any C-contiguous 9 n values, as (n, 3, 3).
+
+    Interpreted, a ``memoryview`` indexed by ``[s, i, j]`` (see :func:`samples`).
+    """
+    if a.size == 0:
+        return a.reshape(-1, 3, 3)
+    return memoryview(a).cast('B').cast(a.dtype.char, (a.size // 9, 3, 3))
+
+
+def array_samples(a: FloatArray, width: int) -> FloatArray:
+    """:func:`samples` as an ndarray view when interpreted too: every numpy operation on it."""
     return a.reshape(-1, width) if width else a.reshape(-1)
 
 
-@overload(samples, inline='always', prefer_literal=True)
-def _samples_overload(a, width):
-    if not isinstance(width, types.IntegerLiteral):
-        raise RequireLiteralValue('samples(): `width` must be a constant.')
-    k = width.literal_value
-    return lambda a, width: _stack_view(a, k, 0)
-
-
-def matrix_samples(a: FloatArray) -> FloatArray:
-    """Return the matrices ``a`` (3 n, 3), or any C-contiguous 9 n values, as (n, 3, 3)."""
+def array_matrix_samples(a: FloatArray) -> FloatArray:
+    """:func:`matrix_samples` as an ndarray view when interpreted too."""
     return a.reshape(-1, 3, 3)
 
 
-@overload(matrix_samples, inline='always')
-def _matrix_samples_overload(a):
-    return lambda a: _stack_view(a, 3, 3)
+def _stack_view_intrinsic() -> Any:
+    """Return numba's ``_stack_view(a, rows, columns)``: ``a`` as a stack of samples, no copy."""
+    from numba import types
+    from numba.core.errors import RequireLiteralValue, TypingError
+    from numba.extending import intrinsic
+
+    @intrinsic
+    def _stack_view(typingctx, a, rows, columns):
+        """C-contiguous ``a`` viewed as ``(n,)``, ``(n, rows)`` or ``(n, rows, columns)``."""
+        if not (isinstance(a, types.Array) and a.layout == 'C'):
+            raise TypingError(f'samples(): expected a C-contiguous array, got {a}.')
+        if not (isinstance(rows, types.IntegerLiteral)
+                and isinstance(columns, types.IntegerLiteral)):
+            raise RequireLiteralValue('samples(): the sample shape must be constant.')
+        trailing = [d for d in (rows.literal_value, columns.literal_value) if d > 0]
+        result = a.copy(ndim=1 + len(trailing), layout='C')
+
+        def codegen(context, builder, signature, args):
+            # Imported here, when a kernel is compiled: not needed to load one from the cache.
+            from numba.core.imputils import impl_ret_borrowed
+            from numba.np.arrayobj import make_array, populate_array
+            source = make_array(signature.args[0])(context, builder, args[0])
+            view = make_array(signature.return_type)(context, builder)
+            intp = context.get_value_type(types.intp)
+            sizes = [math.prod(trailing[i:]) for i in range(len(trailing) + 1)]
+            shape = [builder.sdiv(source.nitems, intp(sizes[0]))] + [intp(d) for d in trailing]
+            strides = [builder.mul(source.itemsize, intp(size)) for size in sizes]
+            populate_array(view, data=source.data, shape=shape, strides=strides,
+                           itemsize=source.itemsize, meminfo=source.meminfo,
+                           parent=source.parent)
+            return impl_ret_borrowed(context, builder, signature.return_type, view._getvalue())
+
+        return result(a, rows, columns), codegen
+
+    return _stack_view
+
+
+def _register_views() -> None:
+    """Register the compiled forms of the sample views (:func:`samples` and the others)."""
+    from numba import types
+    from numba.core.errors import RequireLiteralValue
+    from numba.extending import overload
+    view = _stack_view_intrinsic()
+
+    def compiled_samples(a, width):
+        if not isinstance(width, types.IntegerLiteral):
+            raise RequireLiteralValue('samples(): `width` must be a constant.')
+        k = width.literal_value
+        return lambda a, width: view(a, k, 0)
+
+    for function in (samples, array_samples):
+        overload(function, inline='always', prefer_literal=True)(compiled_samples)
+    for function in (matrix_samples, array_matrix_samples):
+        overload(function, inline='always')(lambda a: (lambda a: view(a, 3, 3)))
 
 
 # ------------------------------------------------------------ status packing
@@ -399,32 +669,50 @@ def is_batch(a: FloatArray, trailing: tuple[int, ...]) -> bool:
 STAGE_CHUNK = 4096
 
 
-# Batches of at least this many samples are split across threads (the kernels
-# release the GIL); ROTATION_NODE_THREADS overrides the number of threads.
-THREADED_SAMPLES = 1 << 16
-_threads = int(os.environ.get('ROTATION_NODE_THREADS', 0)) or len(os.sched_getaffinity(0))
+# Batches of at least this many samples may be split across threads (the kernels
+# release the GIL). Measured on the shared 2-core EPYC under load (benchmarks/bench_threads.py,
+# docs/performance.md): at 65536 samples two threads were slower than one for 5 of 6
+# operations (1.08-1.54x); at 1e6 faster for 5 (0.75-0.99x) but not for the memory-bound
+# quaternion_product (1.15x).
+THREADED_SAMPLES = 1 << 18
+_usable_cpus = len(os.sched_getaffinity(0))
+_threads_variable = int(os.environ.get('ROTATION_NODE_THREADS', 0))
+_threads = _threads_variable or _usable_cpus
+_threads_chosen = _threads_variable > 0   # by the variable or set_threads: always used
 _pool = None
 
 
 def set_threads(n: int) -> None:
     """
-    Set how many threads large batches (>= 65536 samples) are split across.
+    Set how many threads large batches (>= 262144 samples) are split across.
 
     Parameters
     ----------
     n : int
-        1 runs everything in the calling thread. The default is the number of
-        CPUs this process may use, or the environment variable
-        ``ROTATION_NODE_THREADS``.
+        1 runs everything in the calling thread. By default (neither this nor
+        the environment variable ``ROTATION_NODE_THREADS`` set) a large batch
+        is split across the CPUs this process may use only while one of them
+        is idle (the 1-minute load average below their number minus a half):
+        on a busy machine a second thread only competes for the same CPUs, and
+        measured slower. A number set here or by the variable is always used.
 
     """
-    global _threads, _pool
+    global _threads, _pool, _threads_chosen
     if int(n) < 1:
         raise ValueError(f'Expected `n` >= 1 threads, got {n!r}.')
-    _threads = int(n)
+    _threads, _threads_chosen = int(n), True
     if _pool is not None:
         _pool.shutdown()
         _pool = None
+
+
+def batch_threads(n: int) -> int:
+    """Return how many threads a batch of ``n`` samples is split across now (see set_threads)."""
+    if _threads == 1 or n < THREADED_SAMPLES:
+        return 1
+    if _threads_chosen or os.getloadavg()[0] < _usable_cpus - 0.5:
+        return _threads
+    return 1
 
 
 def _run(kernel_: Any, inputs: Sequence[FloatArray], trailings: Sequence[tuple[int, ...]],
@@ -436,14 +724,17 @@ def _run(kernel_: Any, inputs: Sequence[FloatArray], trailings: Sequence[tuple[i
     rows per sample.
     """
     n = out.shape[0] // _rows_per_sample(out_trailing)
-    if _threads == 1 or n < THREADED_SAMPLES:
+    threads = batch_threads(n)
+    if threads == 1:
         return kernel_(*inputs, out, *args)
     global _pool
     if _pool is None:
         _pool = ThreadPoolExecutor(_threads, thread_name_prefix='rotation_node')
+    if kernel_.dispatcher is None:
+        kernel_.load()   # once, here, rather than in each thread
     arrays = tuple(inputs) + (out,)
     rows = [_rows_per_sample(t) for t in tuple(trailings) + (out_trailing,)]
-    bounds = np.linspace(0, n, _threads + 1).astype(int)
+    bounds = np.linspace(0, n, threads + 1).astype(int)
     jobs = [_pool.submit(kernel_, *[a[lo * r:hi * r] for a, r in zip(arrays, rows)], *args)
             for lo, hi in zip(bounds[:-1], bounds[1:])]
     for lo, job in zip(bounds[:-1], jobs):
@@ -458,21 +749,57 @@ def _run(kernel_: Any, inputs: Sequence[FloatArray], trailings: Sequence[tuple[i
 # A single-sample call costs ~1 us in all, and numba's dispatch (typing every
 # argument, choosing the compiled signature) would be ~100 ns of it. The
 # single-sample path makes the checks that typing would make itself, in
-# :func:`is_single_sample`, and calls the compiled code directly
+# :func:`single_sample`, and calls the compiled code directly
 # (``kernel_.call_unchecked``): the caller's array as it is (its natural shape
-# is the canonical layout), a scalar result computed into shape (1,), a scalar
-# argument as a float. The names it uses are module globals (``np.empty``
+# is the canonical layout), a list or tuple of numbers copied into a float64
+# array of the thread's own, a scalar result computed into shape (1,), a
+# scalar argument as a float. The names it uses are module globals (``np.empty``
 # looked up through the module costs ~30 ns).
 _FLOAT64 = np.dtype(np.float64)
 _NDARRAY = np.ndarray
 _ONE = (1,)
 _NO_SAMPLES = np.empty(0)
+_NUMBERS = (float, int, np.floating, np.integer)
 new_array = np.empty
+
+
+def _fill_3(m: memoryview, x: Any) -> None:
+    m[0], m[1], m[2] = x
+
+
+def _fill_4(m: memoryview, x: Any) -> None:
+    m[0], m[1], m[2], m[3] = x
+
+
+def _fill_3x3(m: memoryview, x: Any) -> None:
+    (m[0], m[1], m[2]), (m[3], m[4], m[5]), (m[6], m[7], m[8]) = x
+
+
+# Sample shape -> how a list or tuple of numbers (nested for a matrix) is copied
+# into a float64 array: a memoryview's item assignment takes exactly the Python
+# numbers (floats, ints, numpy scalars) that numpy converts alike, and raises
+# for anything else (a string, a wrong length), which the general path then
+# converts or refuses as for any array_like.
+_FILL = {(3,): _fill_3, (4,): _fill_4, (3, 3): _fill_3x3}
+
+
+class _Scratch(threading.local):
+    """Each thread's arrays for single samples given as lists: shape -> (array, view, fill)."""
+
+    def __init__(self) -> None:
+        self.first, self.second = {}, {}   # for the first and the second argument
+        for trailing, fill in _FILL.items():
+            for arrays in (self.first, self.second):
+                array = np.empty(trailing)
+                arrays[trailing] = (array, memoryview(array.reshape(-1)), fill)
+
+
+_scratch = _Scratch()
 
 
 def is_single_sample(x: object, trailing: tuple[int, ...]) -> TypeGuard[FloatArray]:
     """
-    Whether ``x`` is one sample that needs no conversion: the fast path of a call.
+    Whether ``x`` is one sample in a float64 array that needs no conversion.
 
     When it is, ``x`` has exactly the type of a kernel's array argument of
     ``max(1, len(trailing))`` dimensions, and may be passed to the kernel's
@@ -483,6 +810,41 @@ def is_single_sample(x: object, trailing: tuple[int, ...]) -> TypeGuard[FloatArr
     # C-contiguous, aligned and writable, as kernels take their arguments.
     return (type(x) is _NDARRAY and x.shape == trailing and x.dtype is _FLOAT64
             and x.flags.carray)
+
+
+def listed_sample(x: Any, trailing: tuple[int, ...], arrays: dict[Any, Any]) -> Any:
+    """
+    Return the list or tuple ``x`` of one sample copied into the calling thread's array, or None.
+
+    ``arrays`` is ``_scratch.first`` or ``_scratch.second`` (one per argument);
+    the array is valid until the thread's next call. None when ``x`` is not
+    numbers (of lists or tuples for a matrix) of the sample's shape: the general
+    path converts or refuses it as any array_like.
+    """
+    try:
+        array, view, fill = arrays[trailing]
+        fill(view, x)
+    except (KeyError, TypeError, ValueError):
+        return None
+    return array
+
+
+def single_sample(x: object, trailing: tuple[int, ...], argument: int = 0) -> Optional[FloatArray]:
+    """
+    Return ``x`` as one sample in a float64 array a kernel's ``call_unchecked`` takes, or None.
+
+    ``x`` itself when :func:`is_single_sample`; a list or tuple of numbers
+    copied by :func:`listed_sample` (``argument`` 0 or 1: the first or second
+    argument's array); None for anything else (the general path).
+    """
+    kind = type(x)
+    if kind is _NDARRAY:
+        if x.shape == trailing and x.dtype is _FLOAT64 and x.flags.carray:
+            return x
+        return None
+    if kind is list or kind is tuple:
+        return listed_sample(x, trailing, _scratch.second if argument else _scratch.first)
+    return None
 
 
 def call_unary(kernel_: Any, x: ArrayLike, name: str, trailing: tuple[int, ...],
@@ -496,19 +858,25 @@ def call_unary(kernel_: Any, x: ArrayLike, name: str, trailing: tuple[int, ...],
     layout. ``convention`` is the Euler kernels' convention code (a named
     argument: unpacking ``*args`` costs ~50 ns of a ~1 us single-sample call).
     Large inputs go to ``batch_kernel`` (same signature) where one is given,
-    and large batches are split across threads. A single float64 sample skips
-    straight to the compiled code (``kernel_.call_unchecked``), which checks
-    its values.
+    and large batches are split across threads. A single sample (a float64
+    array, list or tuple) skips straight to the kernel's single-sample path
+    (``kernel_.call_unchecked``), which checks its values.
     """
-    if is_single_sample(x, trailing):
+    kind = type(x)   # single_sample, inline: a call costs ~5 % of a ~1 us single sample
+    if kind is _NDARRAY:
+        a = x if (x.shape == trailing and x.dtype is _FLOAT64 and x.flags.carray) else None
+    elif kind is list or kind is tuple:
+        a = listed_sample(x, trailing, _scratch.first)
+    else:
+        a = None
+    if a is not None:
         out = new_array(out_trailing or _ONE)
         if convention is None:
-            bad = kernel_.call_unchecked(x, out)
+            bad = kernel_.call_unchecked(a, out)
         else:
-            bad = kernel_.call_unchecked(x, out, convention)
+            bad = kernel_.call_unchecked(a, out, convention)
         if bad < 0:
             return out if out_trailing else out[0]
-        a = x
     else:
         a = float_array(x, name, trailing)
         out = np.empty(a.shape[:a.ndim - len(trailing)] + out_trailing)
@@ -530,8 +898,8 @@ def call_binary(kernel_: Any, x: ArrayLike, y: ArrayLike, names: tuple[str, str]
     ``out`` gets the common leading shape followed by ``out_trailing``; all
     three reach the kernel in the canonical layout. Large inputs go to
     ``batch_kernel`` where one is given, and large batches are split across
-    threads; single float64 samples skip the checks that the kernel makes
-    anyway.
+    threads; single samples (float64 arrays, lists, tuples, numbers) skip the
+    checks that the kernel makes anyway.
 
     A scalar second argument (``trailings[1] == ()``, an angle) reaches the
     kernel twice, as ``kernel_(x, ys, out, y, *args)``: a single sample as the
@@ -539,11 +907,14 @@ def call_binary(kernel_: Any, x: ArrayLike, y: ArrayLike, names: tuple[str, str]
     so that the kernel has one signature and one sample costs no array.
     """
     scalar_y = trailings[1] == ()
-    if scalar_y and (isinstance(y, float) or is_single_sample(y, ())):
-        y = float(y)
-    if is_single_sample(x, trailings[0]) and (
-            type(y) is float if scalar_y else is_single_sample(y, trailings[1])):
-        a, b = x, y
+    a = single_sample(x, trailings[0])
+    if scalar_y:
+        if type(y) is not float and (isinstance(y, _NUMBERS) or is_single_sample(y, ())):
+            y = float(y)
+        b = y if type(y) is float else None
+    else:
+        b = single_sample(y, trailings[1], 1)
+    if a is not None and b is not None:
         out = new_array(out_trailing or _ONE)
         # One tuple: cheaper than f(a, b, out, *args).
         if scalar_y:

@@ -50,13 +50,11 @@ arguments must be finite.
 """
 from __future__ import annotations
 
+from fractions import Fraction
 import math
 from typing import Any, Callable, TYPE_CHECKING
 
-from numba import types
-from numba.extending import intrinsic
-
-from ._runtime import jit
+from ._runtime import compiled_form, jit
 
 if TYPE_CHECKING:
     from ..type_aliases import FloatArray
@@ -140,15 +138,34 @@ def sin_cos_in_place_kernel(a: FloatArray, cos_out: FloatArray) -> None:
             a[i], cos_out[i] = reduced_sin_cos(a[i])
 
 
-@intrinsic
-def fused_multiply_add(typingctx: Any, a: Any, b: Any, c: Any) -> tuple[Any, Callable[..., Any]]:
-    """Return ``a * b + c`` rounded once (LLVM's ``fma``; a C library call without FMA)."""
-    signature = types.float64(types.float64, types.float64, types.float64)
+def fused_multiply_add(a: float, b: float, c: float) -> float:
+    """
+    Return ``a * b + c`` rounded once.
 
-    def codegen(context, builder, signature, args):
-        return builder.fma(*args)
+    Compiled: LLVM's ``fma`` (the instruction, or a C library call without
+    FMA). Interpreted: exact rational arithmetic rounded once (Python's
+    ``int / int`` rounds correctly), with IEEE's signed zeros: the same value.
+    """
+    if a == 0.0 or b == 0.0 or not (math.isfinite(a) and math.isfinite(b) and math.isfinite(c)):
+        return a * b + c    # the product is exact (or not finite): one rounding
+    return float(Fraction(a) * Fraction(b) + Fraction(c))
 
-    return signature, codegen
+
+@compiled_form(fused_multiply_add)
+def _compiled_fused_multiply_add() -> Callable[..., Any]:
+    from numba import types
+    from numba.extending import intrinsic
+
+    @intrinsic
+    def fma(typingctx: Any, a: Any, b: Any, c: Any) -> tuple[Any, Callable[..., Any]]:
+        signature = types.float64(types.float64, types.float64, types.float64)
+
+        def codegen(context, builder, signature, args):
+            return builder.fma(*args)
+
+        return signature, codegen
+
+    return fma
 
 
 # fdlibm s_atan.c: atan(r) = r - r^3 (T0 + T1 r^2 + ... + T10 r^20) on |r| <= 7/16.

@@ -11,7 +11,8 @@ Declaring and calling kernels (see :mod:`._runtime` for the canonical layout)
     (a kernel with its one signature) and its argument types
     (``FLAT_IN``, ``ROWS_IN``, ``FLAT_OUT``, ``ROWS_OUT``, ``INT``, ``FLOAT``,
     ``BOOL``, :func:`array_type`); :func:`samples` and :func:`matrix_samples`
-    (compiled views of the canonical layout), :func:`kernel_layout`;
+    (views of the canonical layout: compiled, free; interpreted, ndarray views),
+    :func:`kernel_layout`;
     :func:`call_binary` (validation, broadcasting, output, threads, errors);
     :data:`BATCH_SAMPLES`, the size from which conversions with a batch schedule
     use it (its results may differ from the single-sample path in the last bit).
@@ -20,6 +21,9 @@ Validation and error reporting
     :func:`float_array`, :func:`kernel_ready`, :func:`raise_sample_error`, the statuses
     (:func:`status`, :func:`first_status`, :func:`quaternion_status`,
     :func:`vector_status`) and defect codes (``OK``, ``NON_FINITE``).
+
+Kernels run interpreted until loaded (see :mod:`._runtime`): the same source,
+the same results bit for bit.
 
 Scalar formulas (compiled, inlined; tuples in, tuples out)
     :func:`product` (Hamilton), :func:`unit_quaternion`,
@@ -37,9 +41,12 @@ from ._matrix import matrix_at, matrix_defect
 from ._quaternion import (
     canonical_kernel, canonical_unit_quaternion, product, quaternion_status, scaled_quaternion,
     unit_quaternion, vector_status)
+# Interpreted, the kernels of kinematics index sub-views of their samples (``fm[s]``,
+# ``.T``, ``.flat``): ndarray views, not the conversions' memoryviews.
+from ._runtime import array_matrix_samples as matrix_samples, array_samples as samples
 from ._runtime import (
     array_type, BATCH_SAMPLES, BOOL, call_binary, first_status, FLAT_IN, FLAT_OUT, FLOAT, INT,
-    jit, kernel, kernel_layout, matrix_samples, ROWS_IN, ROWS_OUT, samples, status)
+    jit, kernel, kernel_layout, ROWS_IN, ROWS_OUT, status)
 from ._validation import float_array, kernel_ready, NON_FINITE, OK, raise_sample_error
 
 __all__ = [

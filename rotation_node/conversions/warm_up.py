@@ -5,14 +5,18 @@ Each kernel (conversions and kinematics) is compiled for its one signature
 and written to numba's disk cache, so that no later process compiles: a first
 call then costs a cache load, not seconds of compilation. ``./run.sh`` runs
 this after installing. :func:`announcing_compilation` is how a program's
-start-up (the node's) says that it is compiling, when it is.
+start-up says that it is compiling, when it is; :func:`load_in_background`
+is how a long-running program (the node) starts without waiting for it.
 """
 import argparse
 from contextlib import contextmanager
+import queue
 import sys
+import threading
 import time
 from typing import Callable, Iterator, List, Optional
 
+from . import _runtime
 from ._runtime import KernelCompilation
 
 #: What a start that compiles kernels says once it has compiled for a second (measured
@@ -57,6 +61,56 @@ def announcing_compilation(say: Callable[[str], None],
         yield compilation
     if said:
         say(f'{compilation.compiled} kernels compiled in {compilation.seconds:.1f} s and cached')
+
+
+def load_in_background(say: Callable[[str], None], after: float = 1.0) -> threading.Thread:
+    """
+    Load each kernel in a background thread at its first use; calls run interpreted meanwhile.
+
+    For a long-running program's start (the node): it converts from its first
+    input, interpreted (the same numbers, see ``_runtime``), while a daemon
+    thread imports numba at once and then compiles, or loads from the disk
+    cache, every kernel the program calls, in the order of their first calls,
+    each taking over as soon as it is ready. So only the kernels that the
+    configured conversions use are compiled. While kernels compile for longer
+    than ``after`` seconds, ``say(COMPILING)`` is called once (from a timer
+    thread), and ``say('N kernels compiled in ... s and cached')`` when the
+    kernels asked for so far are ready; nothing when they all come from the cache.
+
+    Returns
+    -------
+    threading.Thread
+        The loader (a daemon; it waits for kernels to load for as long as the process
+        runs). A second call returns the first one's.
+
+    """
+    global _background
+    if _background is not None:   # one loader per process
+        return _background
+    pending: 'queue.SimpleQueue[_runtime.Kernel]' = queue.SimpleQueue()
+    for declared in _runtime.KERNELS:   # already called: first in line
+        if declared.used and declared.dispatcher is None:
+            pending.put(declared)
+    _runtime.set_first_use_hook(pending.put)
+
+    def load() -> None:
+        _runtime.load_numba()
+        while True:
+            first = pending.get()
+            with announcing_compilation(say, after):
+                first.load()
+                while True:   # the kernels asked for meanwhile, in one announcement
+                    try:
+                        pending.get_nowait().load()
+                    except queue.Empty:
+                        break
+
+    _background = threading.Thread(target=load, name='rotation_node kernels', daemon=True)
+    _background.start()
+    return _background
+
+
+_background: Optional[threading.Thread] = None
 
 
 def main(argv: Optional[List[str]] = None) -> int:

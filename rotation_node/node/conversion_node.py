@@ -56,7 +56,7 @@ from rclpy.qos import (
 from rclpy.subscription import Subscription
 from rclpy.timer import Timer
 from rotation_node import registry
-from rotation_node.conversions.warm_up import announcing_compilation
+from rotation_node.conversions.warm_up import load_in_background
 from rotation_node.errors import BagError, ParameterError
 from rotation_node.node.diagnostics import (
     ConversionDiagnostics, DIAGNOSTICS_PERIOD_S, input_topic_names)
@@ -65,7 +65,7 @@ from rotation_node.node.qos_adaptation import AUTO, input_qos, policies_text
 from rotation_node.parameters import (
     mounting_frames_problem, NODE_NAME, NodeParameters, PARAMETERS, PARAMETERS_BY_NAME,
     parameters_from_yaml, ParameterSpec)
-from rotation_node.pipeline import CONVERSION_ERROR, ConversionPipeline, warm_up_conversions
+from rotation_node.pipeline import CONVERSION_ERROR, ConversionPipeline
 from rotation_node.static_mounting import (
     MOUNTING_UNKNOWN, needs_static_mounting, placeholder, resolved, StaticMountingLookup,
     TF_STATIC_TOPIC)
@@ -116,9 +116,7 @@ class RotationNode(Node):
     def __init__(self, parameters_files: Sequence[str] = (), **kwargs: Any):
         self._inputs: List[InputTopic] = []   # one per topic of the input type; first, as
         # destroy_node reads it, also when a parameters file is refused below
-        # The parameter services come once the conversions are loaded (below): they answer
-        # as soon as they appear, not after the kernels have been compiled or loaded
-        # (seconds on a first run, which says so on one line).
+        # The parameter services are started below, once the parameters files are read.
         super().__init__(NODE_NAME, start_parameter_services=False, **kwargs)
         try:
             for path in parameters_files:   # as rotation_bag convert reads them
@@ -127,8 +125,10 @@ class RotationNode(Node):
             self.destroy_node()
             raise
         self.get_logger().info(STARTING)
-        with announcing_compilation(self.get_logger().info):
-            warm_up_conversions()
+        # The conversions run interpreted until their compiled kernels, loaded in the
+        # background as each is first used, take over (a first run compiles them, and
+        # says so on one line): the node converts from its first message.
+        load_in_background(self.get_logger().info)
         self._parameter_service = ParameterService(self)
         self.params = NodeParameters()
         # Set by _configure, which __init__ calls below, before any callback can run.
