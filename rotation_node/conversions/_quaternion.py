@@ -244,6 +244,7 @@ def is_plain_vector(x: float, y: float, z: float) -> bool:
 # looks at them again.
 PLAIN_CHUNK = 256
 
+
 @kernel(FLAT_IN, FLAT_IN, FLAT_OUT)
 def _product_kernel(p, q, out):
     fp, fq, fo = samples(p, 4), samples(q, 4), samples(out, 4)
