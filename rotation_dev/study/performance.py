@@ -378,6 +378,9 @@ def performance_markdown(runs, *, quick, command, environment):
             continue
         if run.results is not None:
             summary, growth, peers = _library_tables(run.results)
+            machine = run.output.strip().split('\n\n')[0].splitlines()[:4]
+            parts += ['Where it ran (the first lines of its output):', '', '```', *machine,
+                      '```', '']
             parts += [
                 'Single sample: time per call, validation included (shape (4,), (3,) or (3, 3)); '
                 "the best turn of 200 calls, in turns interleaved with scipy's same conversion "
@@ -387,7 +390,7 @@ def performance_markdown(runs, *, quick, command, environment):
                 'package / scipy (lower is better); speed-up = scipy / package (higher is '
                 'better).', '', summary, '',
                 'Time per rotation (ns) as the batch grows, package / scipy:', '', growth, '',
-                'Against other peers, in the same rounds (every call of an operation '
+                'Against other peers, in rounds (every call of an operation '
                 'interleaved in each round): numpy-quaternion on its own quaternion arrays '
                 '(no conversion counted) and from `(x, y, z, w)` float arrays (the conversion '
                 'to its scalar-first layout and, for the product, back counted); '
