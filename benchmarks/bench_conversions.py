@@ -41,6 +41,7 @@ time, before its best settles. Usage::
 import argparse
 import json
 import math
+import os
 import sys
 
 from _machine import best_seconds, copy_floor, load_line, print_machine
@@ -153,9 +154,17 @@ def _rotated_one(a, v):
     return (a * quaternion.quaternion(0.0, *v.tolist()) * a.conjugate()).vec
 
 
+#: The library's default for large batches: ROTATION_NODE_THREADS, else the usable CPUs.
+THREADS = int(os.environ.get('ROTATION_NODE_THREADS', 0)) or len(os.sched_getaffinity(0))
+
+
 def _peer_groups(batch, single):
     """
-    Return ``{group: (number of samples, calls per turn, {call name: call})}``; the first is ours.
+    Return ``{group: (number of samples, calls per turn, {call name: call}, threads)}``.
+
+    The first call of a group is the package's; ``threads``: ``set_threads``
+    for the group (the largest batches again on one thread, after the
+    default), None: the default.
 
     numpy-quaternion's product and rotation ``q v q*`` (``v`` as a pure
     quaternion) on its own quaternions, and from ``(x, y, z, w)`` float
@@ -179,6 +188,9 @@ def _peer_groups(batch, single):
             'numpy-quaternion from (x, y, z, w)': lambda: _rotated(_scalar_first(q), v),
         }),
     }
+    for name in list(groups):
+        groups[name] += (None,)
+        groups[f'{name}, one thread'] = groups[name][:3] + (1,)
     p1, q1, v1 = single['q'], single['q_other'], single['v']
     a1, b1 = _quaternion_of(p1), _quaternion_of(q1)
 
@@ -190,25 +202,25 @@ def _peer_groups(batch, single):
         'rotation_node (x, y, z, w) ndarray': lambda: rc.quaternion_product(p1, q1),
         'numpy-quaternion, its quaternions': lambda: a1 * b1,
         'numpy-quaternion from (x, y, z, w)': product_from_arrays,
-    })
+    }, None)
     groups['rotate_vector, 1 sample'] = (1, 200, {
         'rotation_node (x, y, z, w) ndarray': lambda: rc.rotate_vector(q1, v1),
         'numpy-quaternion, its quaternions': lambda: _rotated_one(b1, v1),
         'numpy-quaternion from (x, y, z, w)': lambda: _rotated_one(_quaternion_of(q1), v1),
-    })
+    }, None)
     as_list, as_tuple = p1.tolist(), tuple(p1.tolist())
     groups['euler_from_quaternion, 1 sample'] = (1, 200, {
         'rotation_node, ndarray (4,)': lambda: rc.euler_from_quaternion(p1, SEQ),
         'rotation_node, list': lambda: rc.euler_from_quaternion(as_list, SEQ),
         'rotation_node, tuple': lambda: rc.euler_from_quaternion(as_tuple, SEQ),
         'plain-Python math formula, list': lambda: _euler_formula(as_list),
-    })
+    }, None)
     return groups
 
 
 def _check_peers(groups):
     """Raise AssertionError unless every call of a group gives the same result (1e-12)."""
-    for name, (_, _, calls) in groups.items():
+    for name, (_, _, calls, _) in groups.items():
         results = []
         for call in calls.values():
             out = call()
@@ -225,11 +237,13 @@ def _peer_rounds(groups, rounds, turns):
 
     Returns ``{group: {call: [seconds per sample in each round]}}``.
     """
-    times = {name: {call: [] for call in calls} for name, (_, _, calls) in groups.items()}
+    times = {name: {call: [] for call in calls} for name, (_, _, calls, _) in groups.items()}
     for _ in range(rounds):
-        for name, (size, number, calls) in groups.items():
+        for name, (size, number, calls, threads) in groups.items():
+            rc.set_threads(threads or THREADS)
             best = _interleaved_best_times(
                 [lambda _, call=call: call() for call in calls.values()], None, number, turns)
+            rc.set_threads(THREADS)
             for call, seconds in zip(calls, best):
                 times[name][call].append(seconds / size)
     return times
@@ -238,7 +252,7 @@ def _peer_rounds(groups, rounds, turns):
 def _print_peers(groups, times, rounds):
     print(f'\npeers, {rounds} rounds, the calls of a group interleaved in each; time per sample '
           'is the best over the rounds, ratio = ours / peer in each round, min to max')
-    print(f'{"operation":31s} {"call":38s} {"best":>10s} {"ratio ours/this":>17s}')
+    print(f'{"operation":38s} {"call":38s} {"best":>10s} {"ratio ours/this":>17s}')
     for name, per_call in times.items():
         ours = next(iter(per_call.values()))
         for k, (call, seconds) in enumerate(per_call.items()):
@@ -246,7 +260,7 @@ def _print_peers(groups, times, rounds):
             span = '' if k == 0 else f'{min(ratios):6.2f} to {max(ratios):5.2f}'
             best = min(seconds)
             shown = f'{best * 1e9:7.1f} ns' if best < 1e-6 else f'{best * 1e6:7.2f} us'
-            print(f'{name if k == 0 else "":31s} {call:38s} {shown:>10s} {span:>17s}')
+            print(f'{name if k == 0 else "":38s} {call:38s} {shown:>10s} {span:>17s}')
 
 
 def _reference(data):

@@ -391,7 +391,8 @@ def performance_markdown(runs, *, quick, command, environment):
                 'better).', '', summary, '',
                 'Time per rotation (ns) as the batch grows, package / scipy:', '', growth, '',
                 'Against other peers, in rounds (every call of an operation '
-                'interleaved in each round): numpy-quaternion on its own quaternion arrays '
+                'interleaved in each round; large batches of the package on its threads, '
+                'and on one): numpy-quaternion on its own quaternion arrays '
                 '(no conversion counted) and from `(x, y, z, w)` float arrays (the conversion '
                 'to its scalar-first layout and, for the product, back counted); '
                 '`euler_from_quaternion` of one sample as an ndarray, a list and a tuple '
