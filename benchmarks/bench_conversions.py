@@ -251,8 +251,8 @@ def _peer_rounds(groups, rounds, turns):
 
 def _print_peers(groups, times, rounds):
     print(f'\npeers, {rounds} rounds, the calls of a group interleaved in each; time per sample '
-          'is the best over the rounds, ratio = ours / peer in each round, min to max')
-    print(f'{"operation":38s} {"call":38s} {"best":>10s} {"ratio ours/this":>17s}')
+          'is the best over the rounds, ratio = first call / this call in each round, min to max')
+    print(f'{"operation":38s} {"call":38s} {"best":>10s} {"ratio first/this":>17s}')
     for name, per_call in times.items():
         ours = next(iter(per_call.values()))
         for k, (call, seconds) in enumerate(per_call.items()):

@@ -294,7 +294,7 @@ def _peer_table(peers):
             rows.append((group if k == 0 else '', call, _per_sample(t['best_ns']),
                          '' if k == 0 else _span([a / b for a, b in zip(ours, t['round_ns'])])))
     return markdown_table(('operation', 'call', 'time per sample (best round)',
-                           'ratio package / this call, each round'), rows)
+                           'ratio first call / this call, each round'), rows)
 
 
 def _library_headline(results):
@@ -397,7 +397,9 @@ def performance_markdown(runs, *, quick, command, environment):
                 'to its scalar-first layout and, for the product, back counted); '
                 '`euler_from_quaternion` of one sample as an ndarray, a list and a tuple '
                 'against the plain-Python `math` formula (exact where it is not: near gimbal '
-                'lock, see accuracy.md). Ratio below 1: the package is faster.', '', peers]
+                'lock, see accuracy.md). Ratio: the time of the first call of the operation (the '
+                "package's; for Euler angles, with an ndarray) over this call's, in each "
+                'round; below 1, the first call is faster.', '', peers]
         else:
             parts += [('Measured ratios: ' if len(run.ratios) > 1 else 'Measured ratio: ')
                       + ', '.join(_measured_ratios(run, with_target=True)) + '. Its output:',
