@@ -116,11 +116,18 @@ def _floor_time(function, keys, data, repeat):
 
 
 def _interleaved_best_times(functions, data, number, repeat):
-    """Best time per call of each function, measured in turns (so that drifts hit all alike)."""
+    """
+    Best time per call of each function, measured in turns (so that drifts hit all alike).
+
+    Each turn starts with the next function: a large call is slower right
+    after one that freed arrays of another size (its output's pages are new
+    to the process), so no function keeps the first place.
+    """
     best = [math.inf] * len(functions)
-    for _ in range(repeat):
-        for i, function in enumerate(functions):
-            best[i] = min(best[i], _best_time(function, data, number, 1))
+    for turn in range(repeat):
+        for j in range(len(functions)):
+            i = (turn + j) % len(functions)
+            best[i] = min(best[i], _best_time(functions[i], data, number, 1))
     return best
 
 
