@@ -9,6 +9,7 @@ the CPU LLVM targets, at the top of each benchmark's output.
 """
 import os
 import platform
+import sys
 import timeit
 
 import numpy as np
@@ -77,9 +78,23 @@ def machine_lines():
     ]
 
 
+def load_line():
+    """
+    Line: the load average now and the threads rotation_node splits large batches across.
+
+    The threads are the library's setting where it is loaded, else its
+    default (``ROTATION_NODE_THREADS``, else the usable CPUs).
+    """
+    runtime = sys.modules.get('rotation_node.conversions._runtime')
+    threads = getattr(runtime, '_threads', None) or (
+        int(os.environ.get('ROTATION_NODE_THREADS', 0)) or len(os.sched_getaffinity(0)))
+    return (f'load average {" ".join(f"{x:.2f}" for x in os.getloadavg())} (1, 5, 15 min); '
+            f'rotation_node batch threads: {threads}')
+
+
 def print_machine():
-    """Print :func:`machine_lines` (the first lines of every benchmark's output)."""
-    for line in machine_lines():
+    """Print :func:`machine_lines` and :func:`load_line`, the first lines of a benchmark."""
+    for line in machine_lines() + [load_line()]:
         print(line)
 
 

@@ -10,15 +10,25 @@ For every conversion it prints, measured in this run on this machine:
   ``Rotation.from_quat(q).as_euler(seq)`` (target <= 0.10 for every
   conversion), measured next to each row;
 - batch of 10^6: time per rotation for both and the speed-up scipy / package
-  (target >= 2, >= 3 for Euler angles);
+  (target >= 2, >= 3 for Euler angles), measured in several rounds (the two
+  calls interleaved in each) and printed as the range over the rounds;
 - memory floor: the time numpy takes to read the batch's input bytes and
   write its output bytes once (``_machine.copy_floor``), per rotation, and the
   package's batch time as a multiple of it;
-- growth: time per rotation from 10^2 to 10^6 samples for both.
+- growth: time per rotation from 10^2 to 10^6 samples for both;
+- peers beyond scipy, in several rounds, every call of a group interleaved
+  in each round, the ratio package / peer printed as the range over the
+  rounds: ``quaternion_product`` and ``rotate_vector`` against
+  numpy-quaternion (10^6 samples and one), on its own quaternion arrays (no
+  conversion counted) and from the package's ``(x, y, z, w)`` float arrays
+  (the conversion to its scalar-first layout and, for the product, back
+  counted); ``euler_from_quaternion`` of one sample given as an ndarray, a
+  list and a tuple, against the plain-Python ``math`` formula.
 
 The first lines say where it ran: CPU model, the SIMD levels numpy found
-(its ``arctan2``, for one, is SIMD only with AVX-512) and the CPU numba
-compiled the kernels for.
+(its ``arctan2``, for one, is SIMD only with AVX-512), the CPU numba
+compiled the kernels for, the load average and the threads of large
+batches; the load average is printed again at the end.
 
 Times are the best of several repeats (``timeit``), after a warm-up call that
 also loads the compiled kernels. Single samples are timed in turns of 200
@@ -26,15 +36,17 @@ calls, the three calls of a row interleaved, in several passes through all
 rows: a microsecond call on a shared machine needs many turns, spread over
 time, before its best settles. Usage::
 
-    python benchmarks/bench_conversions.py [--quick] [--json results.json]
+    python benchmarks/bench_conversions.py [--quick] [--rounds 5] [--json results.json]
 """
 import argparse
 import json
 import math
+import os
 import sys
 
-from _machine import best_seconds, copy_floor, print_machine
+from _machine import best_seconds, copy_floor, load_line, print_machine
 import numpy as np
+import quaternion
 from rotation_node import conversions as rc
 from scipy.spatial.transform import Rotation
 
@@ -44,10 +56,13 @@ SEQ = 'xyz'
 def _inputs(n, rng):
     q = rng.normal(size=(n, 4))
     q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    q_other = rng.normal(size=(n, 4))
+    q_other /= np.linalg.norm(q_other, axis=-1, keepdims=True)
     rotation = Rotation.from_quat(q)
     v = rotation.as_rotvec()
     return {
-        'q': q, 'R': rotation.as_matrix(), 'v': v, 'angles': rotation.as_euler(SEQ),
+        'q': q, 'q_other': q_other, 'R': rotation.as_matrix(), 'v': v,
+        'angles': rotation.as_euler(SEQ),
         'axis': v / np.linalg.norm(v, axis=-1, keepdims=True), 'angle': np.linalg.norm(v, axis=-1),
     }
 
@@ -101,12 +116,158 @@ def _floor_time(function, keys, data, repeat):
 
 
 def _interleaved_best_times(functions, data, number, repeat):
-    """Best time per call of each function, measured in turns (so that drifts hit all alike)."""
+    """
+    Best time per call of each function, measured in turns (so that drifts hit all alike).
+
+    Each turn starts with the next function: a large call is slower right
+    after one that freed arrays of another size (its output's pages are new
+    to the process), so no function keeps the first place.
+    """
     best = [math.inf] * len(functions)
-    for _ in range(repeat):
-        for i, function in enumerate(functions):
-            best[i] = min(best[i], _best_time(function, data, number, 1))
+    for turn in range(repeat):
+        for j in range(len(functions)):
+            i = (turn + j) % len(functions)
+            best[i] = min(best[i], _best_time(functions[i], data, number, 1))
     return best
+
+
+def _euler_formula(q):
+    """Return roll, pitch, yaw (extrinsic xyz) of a unit ``(x, y, z, w)``: the pasted formula."""
+    x, y, z, w = q
+    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
+    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return roll, pitch, yaw
+
+
+def _scalar_first(q):
+    """Return numpy-quaternion's array of ``(x, y, z, w)`` float quaternions (scalar first)."""
+    return quaternion.from_float_array(q.take((3, 0, 1, 2), axis=-1))
+
+
+def _quaternion_of(q):
+    """Return numpy-quaternion's quaternion of one ``(x, y, z, w)`` ndarray."""
+    x, y, z, w = q.tolist()
+    return quaternion.quaternion(w, x, y, z)
+
+
+def _rotated(a, v):
+    """Return ``a v a*`` on numpy-quaternion's arrays (``v``: float vectors): pairs rotated."""
+    return quaternion.as_vector_part(a * quaternion.from_vector_part(v) * a.conjugate())
+
+
+def _rotated_one(a, v):
+    """Return ``a v a*`` for one numpy-quaternion quaternion and one vector (ndarray (3,))."""
+    return (a * quaternion.quaternion(0.0, *v.tolist()) * a.conjugate()).vec
+
+
+#: The library's default for large batches: ROTATION_NODE_THREADS, else the usable CPUs.
+THREADS = int(os.environ.get('ROTATION_NODE_THREADS', 0)) or len(os.sched_getaffinity(0))
+
+
+def _peer_groups(batch, single):
+    """
+    Return ``{group: (number of samples, calls per turn, {call name: call}, threads)}``.
+
+    The first call of a group is the package's; ``threads``: ``set_threads``
+    for the group (the largest batches again on one thread, after the
+    default), None: the default.
+
+    numpy-quaternion's product and rotation ``q v q*`` (``v`` as a pure
+    quaternion) on its own quaternions, and from ``(x, y, z, w)`` float
+    arrays with the conversions counted (a batch: ``from_float_array``,
+    ``as_float_array`` and a column reorder; one sample: its scalar
+    ``quaternion`` type from Python floats, the cheapest way measured).
+    """
+    n = batch['q'].shape[0]
+    p, q, v = batch['q'], batch['q_other'], batch['v']
+    a, b = _scalar_first(p), _scalar_first(q)
+    groups = {
+        f'quaternion_product, 10^{len(str(n)) - 1}': (n, 1, {
+            'rotation_node (x, y, z, w) arrays': lambda: rc.quaternion_product(p, q),
+            'numpy-quaternion, its quaternions': lambda: a * b,
+            'numpy-quaternion from (x, y, z, w)': lambda: quaternion.as_float_array(
+                _scalar_first(p) * _scalar_first(q)).take((1, 2, 3, 0), axis=-1),
+        }),
+        f'rotate_vector, 10^{len(str(n)) - 1}': (n, 1, {
+            'rotation_node (x, y, z, w) arrays': lambda: rc.rotate_vector(q, v),
+            'numpy-quaternion, its quaternions': lambda: _rotated(b, v),
+            'numpy-quaternion from (x, y, z, w)': lambda: _rotated(_scalar_first(q), v),
+        }),
+    }
+    for name in list(groups):
+        groups[name] += (None,)
+        groups[f'{name}, one thread'] = groups[name][:3] + (1,)
+    p1, q1, v1 = single['q'], single['q_other'], single['v']
+    a1, b1 = _quaternion_of(p1), _quaternion_of(q1)
+
+    def product_from_arrays():
+        r = _quaternion_of(p1) * _quaternion_of(q1)
+        return np.array([r.x, r.y, r.z, r.w])
+
+    groups['quaternion_product, 1 sample'] = (1, 200, {
+        'rotation_node (x, y, z, w) ndarray': lambda: rc.quaternion_product(p1, q1),
+        'numpy-quaternion, its quaternions': lambda: a1 * b1,
+        'numpy-quaternion from (x, y, z, w)': product_from_arrays,
+    }, None)
+    groups['rotate_vector, 1 sample'] = (1, 200, {
+        'rotation_node (x, y, z, w) ndarray': lambda: rc.rotate_vector(q1, v1),
+        'numpy-quaternion, its quaternions': lambda: _rotated_one(b1, v1),
+        'numpy-quaternion from (x, y, z, w)': lambda: _rotated_one(_quaternion_of(q1), v1),
+    }, None)
+    as_list, as_tuple = p1.tolist(), tuple(p1.tolist())
+    groups['euler_from_quaternion, 1 sample'] = (1, 200, {
+        'rotation_node, ndarray (4,)': lambda: rc.euler_from_quaternion(p1, SEQ),
+        'rotation_node, list': lambda: rc.euler_from_quaternion(as_list, SEQ),
+        'rotation_node, tuple': lambda: rc.euler_from_quaternion(as_tuple, SEQ),
+        'plain-Python math formula, list': lambda: _euler_formula(as_list),
+    }, None)
+    return groups
+
+
+def _check_peers(groups):
+    """Raise AssertionError unless every call of a group gives the same result (1e-12)."""
+    for name, (_, _, calls, _) in groups.items():
+        results = []
+        for call in calls.values():
+            out = call()
+            if isinstance(out, np.quaternion) or getattr(out, 'dtype', None) == np.quaternion:
+                out = quaternion.as_float_array(out).take((1, 2, 3, 0), axis=-1)
+            results.append(np.asarray(out, dtype=float))
+        for other in results[1:]:
+            assert np.allclose(results[0], other, rtol=0, atol=1e-12), name
+
+
+def _peer_rounds(groups, rounds, turns):
+    """
+    Return the best time per sample of each call, per round, a group's calls interleaved.
+
+    Returns ``{group: {call: [seconds per sample in each round]}}``.
+    """
+    times = {name: {call: [] for call in calls} for name, (_, _, calls, _) in groups.items()}
+    for _ in range(rounds):
+        for name, (size, number, calls, threads) in groups.items():
+            rc.set_threads(threads or THREADS)
+            best = _interleaved_best_times(
+                [lambda _, call=call: call() for call in calls.values()], None, number, turns)
+            rc.set_threads(THREADS)
+            for call, seconds in zip(calls, best):
+                times[name][call].append(seconds / size)
+    return times
+
+
+def _print_peers(groups, times, rounds):
+    print(f'\npeers, {rounds} rounds, the calls of a group interleaved in each; time per sample '
+          'is the best over the rounds, ratio = first call / this call in each round, min to max')
+    print(f'{"operation":38s} {"call":38s} {"best":>10s} {"ratio first/this":>17s}')
+    for name, per_call in times.items():
+        ours = next(iter(per_call.values()))
+        for k, (call, seconds) in enumerate(per_call.items()):
+            ratios = [a / b for a, b in zip(ours, seconds)]
+            span = '' if k == 0 else f'{min(ratios):6.2f} to {max(ratios):5.2f}'
+            best = min(seconds)
+            shown = f'{best * 1e9:7.1f} ns' if best < 1e-6 else f'{best * 1e6:7.2f} us'
+            print(f'{name if k == 0 else "":38s} {call:38s} {shown:>10s} {span:>17s}')
 
 
 def _reference(data):
@@ -121,6 +282,8 @@ def _single(data):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
     parser.add_argument('--quick', action='store_true', help='fewer repeats, batches up to 10^5')
+    parser.add_argument('--rounds', type=int, default=None,
+                        help='rounds of the batch and peer comparisons (5; --quick: 3)')
     parser.add_argument('--json', help='also write the results to this JSON file')
     args = parser.parse_args(argv)
     rng = np.random.default_rng(0)
@@ -129,13 +292,15 @@ def main(argv=None):
     batches = {n: _inputs(n, rng) for n in sizes}
     single = _single(batches[sizes[0]])
     repeat = 3 if args.quick else 7
+    rounds = args.rounds or (3 if args.quick else 5)
     results = {}
 
     passes, turns = 4, 5 * repeat
     print_machine()
     print(f'rotation_node.conversions vs scipy {__import__("scipy").__version__} '
           f'(numpy {np.__version__}); batches best of {repeat}; single samples best of '
-          f'{passes} passes over all rows x {turns} interleaved turns of 200 calls')
+          f'{passes} passes over all rows x {turns} interleaved turns of 200 calls; '
+          f'10^{largest}: {rounds} rounds, best of 2 each, ours and scipy interleaved')
     print('single: ratio = ours / scipy Rotation.from_quat(q).as_euler(seq), the reference '
           'measured next to each row')
     for ours, theirs, *_ in CONVERSIONS.values():
@@ -149,15 +314,21 @@ def main(argv=None):
             single_best[name] = [min(a, b) for a, b in zip(single_best[name], times)]
 
     print(f'\n{"conversion":34s} {"single: ours":>13s} {"scipy":>9s} {"ref.":>9s} {"ratio":>7s}   '
-          f'{"10^%d: ours" % largest:>12s} {"scipy":>9s} {"speed-up":>9s} {"floor":>8s} '
-          f'{"/floor":>7s}')
+          f'{"10^%d: ours" % largest:>12s} {"scipy":>9s} {"speed-up":>9s} {"rounds":>13s} '
+          f'{"floor":>8s} {"/floor":>7s}')
     for name, (ours, theirs, target, keys) in CONVERSIONS.items():
         single_ours, single_scipy, single_reference = single_best[name]
         growth = {}
-        for n in sizes:
+        for n in sizes[:-1]:
             number = max(1, 10 ** 5 // n)
             growth[n] = (_best_time(ours, batches[n], number, repeat) / n,
                          _best_time(theirs, batches[n], number, repeat) / n)
+        # The largest batch: both in turns, in rounds; the speed-up of each round.
+        per_round = [_interleaved_best_times((ours, theirs), batches[sizes[-1]], 1, 2)
+                     for _ in range(rounds)]
+        speedups = [s / o for o, s in per_round]
+        growth[sizes[-1]] = (min(o for o, _ in per_round) / sizes[-1],
+                             min(s for _, s in per_round) / sizes[-1])
         batch_ours, batch_scipy = growth[sizes[-1]]
         floor = _floor_time(ours, keys, batches[sizes[-1]], repeat) / sizes[-1]
         results[name] = {
@@ -168,6 +339,7 @@ def main(argv=None):
             'batch_n': sizes[-1], 'batch_ns': batch_ours * 1e9,
             'batch_scipy_ns': batch_scipy * 1e9,
             'batch_speedup': batch_scipy / batch_ours, 'batch_target': target,
+            'batch_speedup_rounds': speedups,
             'floor_ns': floor * 1e9, 'floor_ratio': batch_ours / floor,
             'growth_ns': {str(n): [o * 1e9, s * 1e9] for n, (o, s) in growth.items()},
         }
@@ -175,8 +347,8 @@ def main(argv=None):
         print(f'{name:34s} {r["single_us"]:10.2f} us {r["single_scipy_us"]:6.2f} us '
               f'{r["single_reference_us"]:6.2f} us {r["single_ratio"]:7.3f}   '
               f'{r["batch_ns"]:9.1f} ns {r["batch_scipy_ns"]:6.1f} ns '
-              f'{r["batch_speedup"]:8.1f}x {r["floor_ns"]:5.1f} ns '
-              f'{r["floor_ratio"]:6.1f}x')
+              f'{r["batch_speedup"]:8.1f}x {min(speedups):5.1f} to {max(speedups):4.1f}x '
+              f'{r["floor_ns"]:5.1f} ns {r["floor_ratio"]:6.1f}x')
 
     print('\ntime per rotation (ns) as the batch grows, ours / scipy')
     print(f'{"conversion":34s} ' + ' '.join(f'{"10^%d" % int(np.log10(n)):>13s}' for n in sizes))
@@ -184,17 +356,32 @@ def main(argv=None):
         cells = ' '.join(f'{o:6.1f}/{s:<6.1f}' for o, s in r['growth_ns'].values())
         print(f'{name:34s} {cells}')
 
+    groups = _peer_groups(batches[sizes[-1]], single)
+    _check_peers(groups)
+    peers = _peer_rounds(groups, rounds, 3 if args.quick else 5)
+    _print_peers(groups, peers, rounds)
+
     worst_single = max(r['single_ratio'] for r in results.values())
     misses = [n for n, r in results.items() if r['batch_speedup'] < r['batch_target']]
     print(f'\nworst single-sample ratio: {worst_single:.3f} (target <= 0.10)')
     print(f'batch targets missed: {", ".join(misses) if misses else "none"}')
+    low = min(results.items(), key=lambda item: min(item[1]['batch_speedup_rounds']))
+    high = max(results.items(), key=lambda item: max(item[1]['batch_speedup_rounds']))
+    euler = [s for n, r in results.items() if 'euler' in n for s in r['batch_speedup_rounds']]
+    print(f'batch speed-ups over scipy, every round: {min(low[1]["batch_speedup_rounds"]):.1f}x '
+          f'({low[0]}) to {max(high[1]["batch_speedup_rounds"]):.1f}x ({high[0]}); '
+          f'Euler angles {min(euler):.1f}x to {max(euler):.1f}x')
     worst_floor = max(results.items(), key=lambda item: item[1]['floor_ratio'])
     print(f'memory floor: every batch of 10^{largest} within '
           f'{worst_floor[1]["floor_ratio"]:.1f}x of the time to read its input and write its '
           f'output once (numpy copy, one thread), worst {worst_floor[0]}')
+    print(load_line().replace('load average', 'at the end: load average'))
     if args.json:
         with open(args.json, 'w') as f:
-            json.dump(results, f, indent=1)
+            json.dump({'conversions': results, 'peers': {
+                group: {call: {'best_ns': min(seconds) * 1e9, 'round_ns': [
+                    x * 1e9 for x in seconds]} for call, seconds in per_call.items()}
+                for group, per_call in peers.items()}}, f, indent=1)
     return 0
 
 

@@ -119,3 +119,48 @@ def test_rotate_vector_of_huge_vector_does_not_overflow(rng):
     huge = rc.rotate_vector(q, v * 1e308)
     assert np.all(np.isfinite(huge))
     assert np.allclose(huge / 1e308, rc.rotate_vector(q, v), rtol=1e-15, atol=1e-15)
+
+
+def test_rotate_vector_rescaled_samples_agree_bit_for_bit_with_plain_ones(rng):
+    # Chunks of plain samples take the SIMD loop; a chunk holding a sample
+    # that needs rescaling is computed again with the rescaling formulas.
+    # Scaling by a power of two commutes with rounding, so both must agree
+    # to the bit (signed zeros included).
+    q = rc.canonical_quaternion(rng.normal(size=(1000, 4)))
+    q[::7, 3] = 0.0          # rotations by pi: the sign rule decides on x, y, z
+    v = rng.normal(size=(1000, 3))
+    v[::5] = [0.0, -0.0, 1.0]
+    # signed zeros out: the sign rule (w > 0, and w = +0.0 after a flip) decides them
+    q[500:503] = [[0.0, 0.0, -0.0, -1.0], [0.0, 0.0, 1.0, -0.0], [0.0, 0.0, -1.0, 0.0]]
+    v[500:503] = [[-2.0, -0.0, 0.0], [-2.0, -0.0, -0.0], [0.0, 1.0, -0.0]]
+    plain = rc.rotate_vector(q, v)
+    q[300] *= 2.0 ** -600    # tiny: rescaled, the same rotation
+    q[301] *= -(2.0 ** 600)  # huge and negated: the same rotation
+    v[700] *= 2.0 ** 600     # huge vector: rotated at a rescaled size
+    rescaled = rc.rotate_vector(q, v)
+    plain[700] *= 2.0 ** 600
+    assert np.array_equal(rescaled.view(np.int64), plain.view(np.int64))
+
+
+def test_product_of_a_batch_equals_the_products_of_its_samples(rng):
+    p, q = rng.normal(size=(2, 600, 4))
+    p[5] *= 1e-300           # tiny and huge: checked sample by sample, computed alike
+    q[400] *= 1e300
+    p[::9, :3] = -0.0
+    batch = rc.quaternion_product(p, q)
+    one_by_one = np.array([rc.quaternion_product(a, b) for a, b in zip(p, q)])
+    assert np.array_equal(batch.view(np.int64), one_by_one.view(np.int64))
+
+
+@pytest.mark.parametrize('function, trailing', [(rc.quaternion_product, 4),
+                                                (rc.rotate_vector, 3)])
+def test_the_first_bad_sample_of_a_batch_is_named(rng, function, trailing):
+    q = rng.normal(size=(1000, 4))
+    second = rng.normal(size=(1000, trailing))
+    name = 'p' if function is rc.quaternion_product else 'q'
+    q[900] = 0.0
+    with pytest.raises(ValueError, match=rf'`{name}` at index \(900,\) has zero norm'):
+        function(q, second)
+    second[700, 1] = np.nan
+    with pytest.raises(ValueError, match=r'at index \(700,\) has a NaN or Inf'):
+        function(q, second)

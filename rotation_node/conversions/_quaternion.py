@@ -17,6 +17,8 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from ._runtime import (
     call_binary, call_unary, first_status, FLAT_IN, FLAT_OUT, jit, kernel, samples, status)
 from ._validation import NON_FINITE, OK, ZERO_NORM
@@ -97,20 +99,32 @@ def needs_sign_flip(x: float, y: float, z: float, w: float) -> bool:
 
 
 @jit
+def divided_by_norm(x: float, y: float, z: float, w: float) -> Quaternion4:
+    """``q / |q|`` for a quaternion that needs no rescaling (:func:`scaled_quaternion`)."""
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    return x / n, y / n, z / n, w / n
+
+
+@jit
 def unit_quaternion(x: float, y: float, z: float, w: float) -> Quaternion4:
     """``q / |q|`` with its sign kept; any non-zero norm (exact power-of-two rescaling first)."""
     x, y, z, w = scaled_quaternion(x, y, z, w)
-    n = math.sqrt(x * x + y * y + z * z + w * w)
-    return x / n, y / n, z / n, w / n
+    return divided_by_norm(x, y, z, w)
+
+
+@jit
+def with_canonical_sign(x: float, y: float, z: float, w: float) -> Quaternion4:
+    """``q`` or ``-q``, whichever has the canonical sign (:func:`needs_sign_flip`); no branch."""
+    flip = needs_sign_flip(x, y, z, w)
+    # + 0.0 turns w = -0.0 into 0.0
+    return -x if flip else x, -y if flip else y, -z if flip else z, (-w if flip else w) + 0.0
 
 
 @jit
 def canonical_unit_quaternion(x: float, y: float, z: float, w: float) -> Quaternion4:
     """Return the unit quaternion with the canonical sign (see :func:`needs_sign_flip`)."""
     x, y, z, w = unit_quaternion(x, y, z, w)
-    if needs_sign_flip(x, y, z, w):
-        x, y, z, w = -x, -y, -z, -w
-    return x, y, z, w + 0.0  # + 0.0 turns w = -0.0 into 0.0
+    return with_canonical_sign(x, y, z, w)
 
 
 @jit
@@ -140,10 +154,22 @@ def conjugate_product(px: float, py: float, pz: float, pw: float,
 
 
 @jit
+def rotated_by_unit(x: float, y: float, z: float, w: float,
+                    vx: float, vy: float, vz: float) -> Vector3:
+    """``R(q) v`` for a unit quaternion: ``v + w t + u x t`` with ``t = 2 u x v`` (|v| < 2^500)."""
+    tx = 2.0 * (y * vz - z * vy)
+    ty = 2.0 * (z * vx - x * vz)
+    tz = 2.0 * (x * vy - y * vx)
+    return (vx + w * tx + (y * tz - z * ty),
+            vy + w * ty + (z * tx - x * tz),
+            vz + w * tz + (x * ty - y * tx))
+
+
+@jit
 def rotated_vector(x: float, y: float, z: float, w: float,
                    vx: float, vy: float, vz: float) -> Vector3:
     """
-    ``R(q) v`` for a unit quaternion: ``v + w t + u x t`` with ``t = 2 u x v``.
+    ``R(q) v`` for a unit quaternion (:func:`rotated_by_unit`), any finite ``v``.
 
     A vector beyond 2^500 is rotated at an exactly rescaled size, so that
     ``t`` cannot overflow where ``R v`` itself does not.
@@ -151,12 +177,8 @@ def rotated_vector(x: float, y: float, z: float, w: float,
     m = max(abs(vx), abs(vy), abs(vz))
     e = binary_exponent(m) if m > _SAFE_HIGH else 0
     vx, vy, vz = math.ldexp(vx, -e), math.ldexp(vy, -e), math.ldexp(vz, -e)
-    tx = 2.0 * (y * vz - z * vy)
-    ty = 2.0 * (z * vx - x * vz)
-    tz = 2.0 * (x * vy - y * vx)
-    return (math.ldexp(vx + w * tx + (y * tz - z * ty), e),
-            math.ldexp(vy + w * ty + (z * tx - x * tz), e),
-            math.ldexp(vz + w * tz + (x * ty - y * tx), e))
+    rx, ry, rz = rotated_by_unit(x, y, z, w, vx, vy, vz)
+    return math.ldexp(rx, e), math.ldexp(ry, e), math.ldexp(rz, e)
 
 
 @jit
@@ -179,21 +201,68 @@ def vector_status(fv: FloatArray, s: int, argument: int) -> int:
     return -1 if code == OK else status(s, argument, code)
 
 
+# Sums of absolute values within these bounds: no component needs rescaling.
+# A sum above _PLAIN_LOW has a component above a quarter of it, above _SAFE_LOW.
+_PLAIN_LOW = 4.0 * _SAFE_LOW
+_PLAIN_HIGH = _SAFE_HIGH
+
+
+@jit
+def is_plain_quaternion(x: float, y: float, z: float, w: float) -> bool:
+    """
+    Whether ``q`` is finite, non-zero and needs no rescaling (:func:`scaled_quaternion`).
+
+    Without a branch, so that a loop over samples vectorises: a NaN fails
+    both comparisons, as does a quaternion within 2^-498 of zero or beyond
+    2^500 (True is sufficient, not necessary, for a sample to be plain).
+    """
+    m = abs(x) + abs(y) + abs(z) + abs(w)
+    return (m > _PLAIN_LOW) & (m < _PLAIN_HIGH)
+
+
+@jit
+def is_plain_vector(x: float, y: float, z: float) -> bool:
+    """Whether a 3-vector is finite and needs no rescaling (:func:`rotated_vector`), no branch."""
+    return abs(x) + abs(y) + abs(z) < _PLAIN_HIGH
+
+
 # ----------------------------------------------------------------- kernels
 # Kernels take validated inputs and a preallocated output in the canonical
 # layout (see ``_runtime``), fill the output and return the status of the
 # first bad sample, or -1. Allocating in Python and returning an int keeps a
 # single-sample call near numba's dispatch floor.
+#
+# The product and the rotation run chunk by chunk: a loop without branches
+# (which LLVM vectorises) computes every sample of a chunk with the formulas
+# for plain inputs and counts the plain ones (:func:`is_plain_quaternion`,
+# :func:`is_plain_vector`); only a chunk holding another sample is checked
+# sample by sample, for its first bad one, and, where the formulas for plain
+# inputs would not be exact, computed again with the rescaling ones. Results
+# are the same, bit for bit, as those of the sample-by-sample formulas.
+
+# Samples per chunk: its inputs stay in the L1 cache until a second loop
+# looks at them again.
+PLAIN_CHUNK = 256
+
 
 @kernel(FLAT_IN, FLAT_IN, FLAT_OUT)
 def _product_kernel(p, q, out):
     fp, fq, fo = samples(p, 4), samples(q, 4), samples(out, 4)
-    for s in range(fp.shape[0]):
-        bad = first_status(quaternion_status(fp, s, 0), quaternion_status(fq, s, 1))
-        if bad >= 0:
-            return bad
-        fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3] = product(
-            fp[s, 0], fp[s, 1], fp[s, 2], fp[s, 3], fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3])
+    n = fp.shape[0]
+    for start in range(0, n, PLAIN_CHUNK):
+        stop = min(n, start + PLAIN_CHUNK)
+        plain = 0
+        for i in range(start, stop):   # no branch: a SIMD loop
+            s = np.uintp(i)   # an unsigned index: no wraparound test for negative ones
+            px, py, pz, pw = fp[s, 0], fp[s, 1], fp[s, 2], fp[s, 3]
+            qx, qy, qz, qw = fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3]
+            plain += is_plain_quaternion(px, py, pz, pw) & is_plain_quaternion(qx, qy, qz, qw)
+            fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3] = product(px, py, pz, pw, qx, qy, qz, qw)
+        if plain < stop - start:   # a bad sample, or only a huge one: find out which
+            for s in range(start, stop):
+                bad = first_status(quaternion_status(fp, s, 0), quaternion_status(fq, s, 1))
+                if bad >= 0:
+                    return bad
     return -1
 
 
@@ -235,15 +304,37 @@ def _distance_kernel(p, q, out):
     return -1
 
 
+@jit
+def _store_rotated(fo: FloatArray, s: int, x: float, y: float, z: float, w: float,
+                   vx: float, vy: float, vz: float) -> None:
+    """``fo[s] = R(q) v``, q canonical unit (any non-zero finite q, any finite v)."""
+    x, y, z, w = canonical_unit_quaternion(x, y, z, w)
+    fo[s, 0], fo[s, 1], fo[s, 2] = rotated_vector(x, y, z, w, vx, vy, vz)
+
+
 @kernel(FLAT_IN, FLAT_IN, FLAT_OUT)
 def _rotate_kernel(q, v, out):
     fq, fv, fo = samples(q, 4), samples(v, 3), samples(out, 3)
-    for s in range(fq.shape[0]):
-        bad = first_status(quaternion_status(fq, s, 0), vector_status(fv, s, 1))
-        if bad >= 0:
-            return bad
-        x, y, z, w = canonical_unit_quaternion(fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3])
-        fo[s, 0], fo[s, 1], fo[s, 2] = rotated_vector(x, y, z, w, fv[s, 0], fv[s, 1], fv[s, 2])
+    n = fq.shape[0]
+    for start in range(0, n, PLAIN_CHUNK):
+        stop = min(n, start + PLAIN_CHUNK)
+        plain = 0
+        for i in range(start, stop):   # no branch: a SIMD loop
+            s = np.uintp(i)   # an unsigned index: no wraparound test for negative ones
+            x, y, z, w = fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3]
+            vx, vy, vz = fv[s, 0], fv[s, 1], fv[s, 2]
+            plain += is_plain_quaternion(x, y, z, w) & is_plain_vector(vx, vy, vz)
+            # canonical_unit_quaternion and rotated_vector where neither rescales
+            x, y, z, w = divided_by_norm(x, y, z, w)
+            x, y, z, w = with_canonical_sign(x, y, z, w)
+            fo[s, 0], fo[s, 1], fo[s, 2] = rotated_by_unit(x, y, z, w, vx, vy, vz)
+        if plain < stop - start:   # redo the chunk with the rescaling formulas
+            for s in range(start, stop):
+                bad = first_status(quaternion_status(fq, s, 0), vector_status(fv, s, 1))
+                if bad >= 0:
+                    return bad
+                _store_rotated(fo, s, fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3],
+                               fv[s, 0], fv[s, 1], fv[s, 2])
     return -1
 
 
