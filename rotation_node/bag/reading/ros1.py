@@ -33,7 +33,7 @@ from rotation_node.bag.reading.rosbags_input import RosbagsInput
 from rotation_node.bag.records import TopicMetadata
 from rotation_node.errors import BagError
 from rotation_node.wire.message_types import message_class
-from rotation_node.wire.qos import rosbags_qos_yaml
+from rotation_node.wire.qos_yaml import rosbags_qos_yaml
 
 #: The one ROS 1 bag format version there is a reader for.
 SUPPORTED_VERSION = '2.0'
