@@ -19,9 +19,11 @@ import io
 import os
 from pathlib import Path
 import struct
-from typing import Union
+from typing import Callable, List, Optional, Tuple, Union
 
-from rosbags.convert.converter import generate_message_converter, LATCH, STATIC_MSGTYPE_RENAMES
+from rosbags.convert.converter import (
+    generate_message_converter, is_same_wireformat, LATCH, STATIC_MSGTYPE_RENAMES)
+from rosbags.interfaces import Nodetype
 from rosbags.highlevel import AnyReaderError
 from rosbags.rosbag1 import ReaderError
 from rosbags.rosbag1.reader import decompressors as ros1_decompressors
@@ -105,6 +107,10 @@ def _converted_topics(path, reader):
                         reader.typestore, ros2, ros1_type, type_name, {},
                         src_is2=False, dst_is2=True)
                 converters[ros1_type] = lambda data, convert=convert: bytes(convert(data))
+                if is_same_wireformat(reader.typestore, ros2, ros1_type, type_name):
+                    converters[ros1_type] = (ros1_to_cdr_converter(ros2.fielddefs, type_name,
+                                                                   converters[ros1_type])
+                                             or converters[ros1_type])
         except _FORMAT_ERRORS + (KeyError,) as error:   # KeyError: a type left undefined
             raise BagError(f'{path}: cannot convert ROS 1 type {ros1_type} to ROS 2: '
                            f'{error}') from None
@@ -114,6 +120,135 @@ def _converted_topics(path, reader):
             offered_qos_profiles=rosbags_qos_yaml(LATCH if connection.ext.latching else []),
             definition=None if installed else ros2.generate_msgdef(type_name, ros_version=2)[0],
             type_hash=None if installed else ros2.hash_rihs01(type_name)), converters[ros1_type]
+
+
+#: Bytes of the primitive types in ROS 1 and CDR.
+_PRIMITIVE_SIZES = {'bool': 1, 'byte': 1, 'char': 1, 'int8': 1, 'uint8': 1, 'int16': 2,
+                    'uint16': 2, 'int32': 4, 'uint32': 4, 'int64': 8, 'uint64': 8,
+                    'float32': 4, 'float64': 8}
+_ENCAPSULATION = b'\x00\x01\x00\x00'   # little-endian CDR
+_UINT32 = struct.Struct('<I')
+_ZEROS = tuple(bytes(n) for n in range(8))
+_SKIP, _RUN, _STRING = range(3)
+
+
+def _leaves(fielddefs, type_name, leaves):
+    """
+    Append the leaves of ``type_name`` in wire order: ``('skip', 4)``, primitive sizes, strings.
+
+    Return False if the type has a sequence or an empty structure (no fast converter).
+    """
+    if type_name == 'std_msgs/msg/Header':
+        leaves.append((_SKIP, 4))   # ROS 1's seq, which ROS 2 does not have
+    for name, (kind, desc) in fielddefs[type_name][1]:
+        count = 1
+        if name == 'structure_needs_at_least_one_member' or kind == Nodetype.SEQUENCE:
+            return False
+        if kind == Nodetype.ARRAY:
+            (kind, desc), count = desc
+        for _ in range(count):
+            if kind == Nodetype.NAME:
+                if not _leaves(fielddefs, desc, leaves):
+                    return False
+            elif desc[0] in ('string', 'wstring'):
+                leaves.append((_STRING, 0))
+            elif desc[0] in _PRIMITIVE_SIZES:
+                leaves.append((_RUN, _PRIMITIVE_SIZES[desc[0]]))
+            else:
+                return False
+    return True
+
+
+def _run_layouts(sizes):
+    """
+    Return how a run of primitives is laid out in CDR for each start offset modulo 8.
+
+    For ``offset % 8`` = 0..7: ``(segments, CDR bytes)``, a segment ``(padding, start,
+    end)`` being zero padding then the ROS 1 bytes ``start:end`` of the run: each
+    primitive aligned to its size, as CDR aligns it (ROS 1 packs them).
+    """
+    layouts = []
+    for start in range(8):
+        segments: List[list] = []
+        offset, source = start, 0
+        for size in sizes:
+            padding = -offset % size
+            if padding or not segments:
+                segments.append([_ZEROS[padding], source, source])
+            segments[-1][2] += size
+            offset += padding + size
+            source += size
+        layouts.append((tuple(map(tuple, segments)), offset - start))
+    return tuple(layouts)
+
+
+def ros1_to_cdr_converter(fielddefs, type_name: str,
+                          fallback: Callable[[bytes], bytes]) -> Optional[Callable[[bytes], bytes]]:
+    """
+    Return a converter of ROS 1 messages of a type to CDR, or None for types it does not cover.
+
+    What rosbags' ``Typestore.ros1_to_cdr`` gives, byte for byte, for a type
+    of the same wire format in ROS 1 and ROS 2 (``is_same_wireformat``)
+    without sequences: the header's seq dropped, primitives aligned, strings
+    given their NUL, all in a few slices per message instead of a generated
+    function call per nested type (a tenth of the time for sensor_msgs/Imu).
+    A message that is not exactly as long as its type says is given to
+    ``fallback`` (rosbags' conversion), which says what is wrong.
+
+    Parameters
+    ----------
+    fielddefs : dict
+        The ROS 2 typestore's ``fielddefs`` (rosbags).
+    type_name : str
+        ``'pkg/msg/Type'``.
+    fallback : callable
+        ``fallback(data) -> bytes``: rosbags' conversion.
+
+    """
+    leaves: List[Tuple[int, int]] = []
+    if not _leaves(fielddefs, type_name, leaves):
+        return None
+    plan: List[tuple] = []
+    for kind, size in leaves:
+        if kind == _RUN and plan and plan[-1][0] == _RUN:
+            plan[-1][1].append(size)
+        else:
+            plan.append((kind, [size] if kind == _RUN else size))
+    steps = tuple((kind, _run_layouts(sizes) if kind == _RUN else sizes, sum(sizes)
+                   if kind == _RUN else 0) for kind, sizes in plan)
+    unpack_length = _UINT32.unpack_from
+    pack_length = _UINT32.pack
+
+    def convert(data):
+        parts = [_ENCAPSULATION]
+        append = parts.append
+        source = offset = 0   # in the ROS 1 data; in the CDR payload
+        try:
+            for kind, layout, size in steps:
+                if kind == _RUN:
+                    segments, cdr_size = layout[offset & 7]
+                    for padding, start, end in segments:
+                        append(padding)
+                        append(data[source + start:source + end])
+                    source += size
+                    offset += cdr_size
+                elif kind == _STRING:
+                    length, = unpack_length(data, source)
+                    end = source + 4 + length
+                    padding = -offset & 3
+                    append(_ZEROS[padding] + pack_length(length + 1) + data[source + 4:end]
+                           + b'\0')
+                    offset += padding + length + 5
+                    source = end
+                else:
+                    source += layout
+        except struct.error:
+            return fallback(data)
+        if source != len(data):
+            return fallback(data)
+        return b''.join(parts)
+
+    return convert
 
 
 def _chunk_compressions(reader):
