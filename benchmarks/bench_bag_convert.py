@@ -177,7 +177,7 @@ def convert_naive_rosbags(source, output):
 
 def convert_competent(source, output, block_messages=10_000):
     """
-    What a competent user writes: rosbags ``AnyReader``, scipy ``Rotation`` in blocks, rosbags ``Writer``.
+    Convert as a competent user would: rosbags ``AnyReader``, scipy in blocks, rosbags ``Writer``.
 
     Every message of the input is copied (ROS 1 ones as ROS 2 CDR) and each
     Imu message gets its ``/imu/euler`` (Vector3Stamped, its header), the
@@ -224,7 +224,8 @@ def convert_competent(source, output, block_messages=10_000):
                                  bytes(typestore.serialize_cdr(euler, euler_type)))
 
 
-_CONVERT_COMMAND = 'import sys; from rotation_node.bag.cli import main; sys.exit(main(sys.argv[1:]))'
+_CONVERT_COMMAND = ('import sys; from rotation_node.bag.cli import main; '
+                    'sys.exit(main(sys.argv[1:]))')
 
 
 def _process_run(command, env=None):
@@ -278,9 +279,9 @@ def whole_commands(directory, count, repeat, before=None, names=FORMATS):
     contenders = _contender_commands(before)
     print(f'\n## Whole commands, fresh process each (best of {repeat}; wall s, CPU s, '
           'peak RSS MiB); script = rosbags AnyReader + scipy in blocks + rosbags Writer')
-    print(f'{"input":24s} ' + ' '.join(f'{name + " wall":>12s} {"CPU":>6s} {"RSS":>5s}'
-                                      for name in contenders)
-          + f' {"script/convert":>15s}' + (f' {"before/convert":>15s}' if before else ''))
+    columns = ' '.join(f'{name + " wall":>12s} {"CPU":>6s} {"RSS":>5s}' for name in contenders)
+    ratios = f' {"script/convert":>15s}' + (f' {"before/convert":>15s}' if before else '')
+    print(f'{"input":24s} {columns}{ratios}')
     rows = [('1 message, mcap file', 'mcap file', 1)] + [
         (f'{count} msgs, {name}', name, count) for name in names]
     for label, fmt, size in rows:

@@ -227,7 +227,7 @@ def test_usage_error_exits_2():
 
 
 def test_convert_of_an_mcap_bag_loads_no_ros_client_library(workspace):
-    """rclpy (the rcl libraries) and rosbags are for other inputs, mcap's writer module unused."""
+    """Load neither rclpy (the rcl libraries) nor rosbags, nor mcap's writer module."""
     probe = ('import sys; from rotation_node.bag.cli import main; '
              "status = main(['convert', 'imu.mcap', 'out.mcap', '--params', 'params.yaml']); "
              "print(status, sorted(m for m in ('rclpy', 'rosbags', 'matplotlib', 'mcap.writer') "

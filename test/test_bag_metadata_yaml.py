@@ -8,7 +8,7 @@ import yaml
 
 
 def _metadata(tmp_path):
-    """The metadata of a written bag: QoS profiles, type hashes, odd topic names and strings."""
+    """Return the metadata of a written bag: QoS, type hashes, odd topic names and strings."""
     with BagWriter(tmp_path / 'bag', compression='none') as writer:
         writer.add_topic(TopicMetadata('/imu', 'sensor_msgs/msg/Imu',
                                        '- history: keep_last\n  depth: 10'))

@@ -288,7 +288,7 @@ def test_a_bag_is_described_with_its_own_compression(tmp_path, compression, desc
 
 
 def _random_value(store, kind, desc, rng):
-    """A random value of a field (rosbags' field description) of a ROS 1 type."""
+    """Return a random value of a field (rosbags' field description) of a ROS 1 type."""
     from rosbags.interfaces import Nodetype
     if kind == Nodetype.NAME:
         return _random_message(store, desc, rng)
@@ -311,8 +311,8 @@ def _random_value(store, kind, desc, rng):
 
 def _random_message(store, type_name, rng):
     fields = store.fielddefs[type_name][1]
-    return store.types[type_name](**{name: _random_value(store, kind, desc, rng)
-                                      for name, (kind, desc) in fields})
+    values = {name: _random_value(store, kind, desc, rng) for name, (kind, desc) in fields}
+    return store.types[type_name](**values)
 
 
 @pytest.mark.parametrize('type_name', [

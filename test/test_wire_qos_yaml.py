@@ -1,8 +1,9 @@
-"""Tests of rotation_node.wire.qos_yaml: rosbag2's QoS YAML written without rclpy or PyYAML's emitter."""
+"""Tests of rotation_node.wire.qos_yaml: rosbag2's QoS YAML without rclpy or PyYAML's emitter."""
 import pytest
 from rclpy.duration import Duration, Infinite
 from rclpy.qos import DurabilityPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
-from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+from rosbags.interfaces import (
+    Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime)
 from rotation_node.parameters import NodeParameters
 from rotation_node.wire.qos import qos_profile, qos_profiles_yaml
 from rotation_node.wire.qos_yaml import (

@@ -23,5 +23,5 @@ def load(text: Union[str, bytes, IO]) -> Any:
 
 
 def dump(data: Any) -> str:
-    """Return ``data`` as block-style YAML, keys in their order (``yaml.safe_dump(sort_keys=False)``)."""
+    """Return the YAML text of ``data``, block style, keys in their order (as ``safe_dump``)."""
     return yaml.dump(data, Dumper=_DUMPER, sort_keys=False)

@@ -35,7 +35,7 @@ _ZERO_DURATION = {'sec': 0, 'nsec': 0}
 
 def output_policies(params: NodeParameters) -> Dict[str, Any]:
     """
-    Return the policies of the node's output publishers by name: history, depth, reliability, durability.
+    Return the output publishers' history, depth, reliability and durability, by name.
 
     Keep last ``qos.depth``, volatile, the ``qos.reliability`` (``auto``:
     reliable, which every subscriber matches). The other policies are rclpy's

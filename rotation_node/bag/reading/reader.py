@@ -39,11 +39,11 @@ import re
 import tempfile
 from typing import Callable, Dict, Iterable, Iterator, List, Optional, Union
 
+from rotation_node.bag import metadata_yaml
 from rotation_node.bag.reading.compression import (
     decompress_file, LZ4_MAGIC, stored_name, ZSTD_MAGIC, zstd_prefix, ZstdError)
 from rotation_node.bag.reading.mcap_reader import BagReader, checked_topics
 from rotation_node.bag.reading.topic_names import topic_renames
-from rotation_node.bag import metadata_yaml
 from rotation_node.bag.records import BagMessage, TopicMetadata
 from rotation_node.errors import BagError
 

@@ -23,8 +23,8 @@ from typing import Callable, List, Optional, Tuple, Union
 
 from rosbags.convert.converter import (
     generate_message_converter, is_same_wireformat, LATCH, STATIC_MSGTYPE_RENAMES)
-from rosbags.interfaces import Nodetype
 from rosbags.highlevel import AnyReaderError
+from rosbags.interfaces import Nodetype
 from rosbags.rosbag1 import ReaderError
 from rosbags.rosbag1.reader import decompressors as ros1_decompressors
 from rosbags.serde import SerdeError
@@ -182,8 +182,8 @@ def _run_layouts(sizes):
     return tuple(layouts)
 
 
-def ros1_to_cdr_converter(fielddefs, type_name: str,
-                          fallback: Callable[[bytes], bytes]) -> Optional[Callable[[bytes], bytes]]:
+def ros1_to_cdr_converter(fielddefs, type_name: str, fallback: Callable[[bytes], bytes]
+                          ) -> Optional[Callable[[bytes], bytes]]:
     """
     Return a converter of ROS 1 messages of a type to CDR, or None for types it does not cover.
 
