@@ -31,7 +31,8 @@ may be shared; wall time would measure the neighbours too):
    ``--million``), each size converted in a fresh process so that its peak RSS
    is its own; memory that does not grow with the bag length means streaming;
 4. each input format (a rosbag2 mcap directory with zstd chunks, a rosbag2
-   sqlite3 directory, a ROS 1 bag, beside the MCAP file), the same messages:
+   sqlite3 directory, ROS 1 bags uncompressed, bz2 and lz4, beside the MCAP
+   file), the same messages:
    ours (``convert``, which reads them all) against a naive pipeline that
    reads them with rosbags (``AnyReader``, messages deserialised), converts
    with scipy and serialises with rosbags, and against the floor of that
@@ -39,11 +40,23 @@ may be shared; wall time would measure the neighbours too):
    written with ``mcap``), in the same run; and the peak memory of ours at
    two bag lengths, each in a fresh process.
 
+5. whole commands as a user runs them, each in a fresh process (imports,
+   start-up and all): ``rotation_bag convert`` against the competent user's
+   script (:func:`convert_competent`: rosbags ``AnyReader``, scipy
+   ``Rotation`` in blocks, rosbags ``Writer``, imports included), on a
+   1-message bag and on 20 000 messages (a minute of IMU at 200-400 Hz) in
+   each format (MCAP file, rosbag2 mcap, rosbag2 sqlite3, ROS 1 bags
+   uncompressed, bz2, lz4): wall time, CPU time and peak RSS of each
+   process, and the wall-time ratio script/convert (target >= 2x); with
+   ``--before PATH`` also the code checked out at PATH (e.g. ``git worktree
+   add /tmp/before <commit>``), for before/after in one run. On a shared
+   machine compare the CPU columns: wall time counts the neighbours' work.
+
 The CPU model and numpy's SIMD level are printed first. ``--quick`` runs
 everything on smaller bags, once (about a minute).
 
 Run: ``.venv/bin/python benchmarks/bench_bag_convert.py [--quick] [--messages N] [--repeat R]
-[--million] [--formats-only [--format NAME ...]]``.
+[--million] [--formats-only [--format NAME ...]] [--whole [--before PATH]]``.
 """
 import argparse
 import gc
@@ -281,7 +294,7 @@ def whole_commands(directory, count, repeat, before=None, names=FORMATS):
           'peak RSS MiB); script = rosbags AnyReader + scipy in blocks + rosbags Writer')
     columns = ' '.join(f'{name + " wall":>12s} {"CPU":>6s} {"RSS":>5s}' for name in contenders)
     ratios = f' {"script/convert":>15s}' + (f' {"before/convert":>15s}' if before else '')
-    print(f'{"input":24s} {columns}{ratios}')
+    print(f'{"input":24s} {columns}{ratios}  load average (1 min) after the row')
     rows = [('1 message, mcap file', 'mcap file', 1)] + [
         (f'{count} msgs, {name}', name, count) for name in names]
     for label, fmt, size in rows:
@@ -302,7 +315,7 @@ def whole_commands(directory, count, repeat, before=None, names=FORMATS):
         line += f' {best["script"][0] / best["convert"][0]:14.2f}x'
         if before:
             line += f' {best["before"][0] / best["convert"][0]:14.2f}x'
-        print(line, flush=True)
+        print(f'{line}  {os.getloadavg()[0]:.1f}', flush=True)
         _remove(source)
 
 
