@@ -241,19 +241,35 @@ _CONVERT_COMMAND = ('import sys; from rotation_node.bag.cli import main; '
                     'sys.exit(main(sys.argv[1:]))')
 
 
-def _process_run(command, env=None):
-    """Run ``command``; return ``(wall s, CPU s, peak RSS MiB)`` of its process (``wait4``)."""
-    start = time.perf_counter()
-    process = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL,
-                               stderr=subprocess.PIPE)
-    _, status, usage = os.wait4(process.pid, 0)
-    wall = time.perf_counter() - start
-    process.returncode = os.waitstatus_to_exitcode(status)
-    error = process.stderr.read().decode()
-    process.stderr.close()
-    if process.returncode:
-        raise RuntimeError(f'{command} failed: {error}')
-    return wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024
+#: Runs a command (posix_spawn) and prints its wall time, CPU time, peak RSS and exit status.
+_MEASURE = """
+import json, os, sys, time
+start = time.perf_counter()
+pid = os.posix_spawn(sys.argv[1], sys.argv[1:], os.environ,
+                     file_actions=[(os.POSIX_SPAWN_OPEN, 1, os.devnull, os.O_WRONLY, 0)])
+_, status, usage = os.wait4(pid, 0)
+print(json.dumps([time.perf_counter() - start, usage.ru_utime + usage.ru_stime,
+                  usage.ru_maxrss / 1024, os.waitstatus_to_exitcode(status)]))
+"""
+
+
+def _process_run(command, env=None, cwd=None):
+    """
+    Run ``command``; return ``(wall s, CPU s, peak RSS MiB)`` of its process.
+
+    Started by a small launcher process: the peak RSS of a process started
+    from this one would count this one's (Linux keeps the larger of the
+    parent's and the new program's), numba and all. ``cwd``: where it runs
+    (``python -c`` imports from there first: not from a checkout).
+    """
+    result = subprocess.run([sys.executable, '-c', _MEASURE, *command], env=env, cwd=cwd,
+                            capture_output=True, text=True)
+    if result.returncode:
+        raise RuntimeError(f'{command}: the launcher failed: {result.stderr}')
+    wall, cpu, rss, status = json.loads(result.stdout)
+    if status:
+        raise RuntimeError(f'{command} failed: {result.stderr}')
+    return wall, cpu, rss
 
 
 def _contender_commands(before):
@@ -301,12 +317,12 @@ def whole_commands(directory, count, repeat, before=None, names=FORMATS):
         source = write_format_bag(directory, fmt, size)
         outputs = {name: os.path.join(directory, f'whole_{name}') for name in contenders}
         for name, (command, env) in contenders.items():   # warm: numba caches, page cache
-            _process_run(command(source, outputs[name]), env)
+            _process_run(command(source, outputs[name]), env, directory)
             _remove(outputs[name])
         runs = {name: [] for name in contenders}
         for _ in range(repeat):
             for name, (command, env) in contenders.items():
-                runs[name].append(_process_run(command(source, outputs[name]), env))
+                runs[name].append(_process_run(command(source, outputs[name]), env, directory))
                 _remove(outputs[name])
         best = {name: tuple(min(run[i] for run in results) for i in range(3))
                 for name, results in runs.items()}
