@@ -31,7 +31,8 @@ may be shared; wall time would measure the neighbours too):
    ``--million``), each size converted in a fresh process so that its peak RSS
    is its own; memory that does not grow with the bag length means streaming;
 4. each input format (a rosbag2 mcap directory with zstd chunks, a rosbag2
-   sqlite3 directory, a ROS 1 bag, beside the MCAP file), the same messages:
+   sqlite3 directory, ROS 1 bags uncompressed, bz2 and lz4, beside the MCAP
+   file), the same messages:
    ours (``convert``, which reads them all) against a naive pipeline that
    reads them with rosbags (``AnyReader``, messages deserialised), converts
    with scipy and serialises with rosbags, and against the floor of that
@@ -39,11 +40,23 @@ may be shared; wall time would measure the neighbours too):
    written with ``mcap``), in the same run; and the peak memory of ours at
    two bag lengths, each in a fresh process.
 
+5. whole commands as a user runs them, each in a fresh process (imports,
+   start-up and all): ``rotation_bag convert`` against the competent user's
+   script (:func:`convert_competent`: rosbags ``AnyReader``, scipy
+   ``Rotation`` in blocks, rosbags ``Writer``, imports included), on a
+   1-message bag and on 20 000 messages (a minute of IMU at 200-400 Hz) in
+   each format (MCAP file, rosbag2 mcap, rosbag2 sqlite3, ROS 1 bags
+   uncompressed, bz2, lz4): wall time, CPU time and peak RSS of each
+   process, and the wall-time ratio script/convert (target >= 2x); with
+   ``--before PATH`` also the code checked out at PATH (e.g. ``git worktree
+   add /tmp/before <commit>``), for before/after in one run. On a shared
+   machine compare the CPU columns: wall time counts the neighbours' work.
+
 The CPU model and numpy's SIMD level are printed first. ``--quick`` runs
 everything on smaller bags, once (about a minute).
 
 Run: ``.venv/bin/python benchmarks/bench_bag_convert.py [--quick] [--messages N] [--repeat R]
-[--million] [--formats-only [--format NAME ...]]``.
+[--million] [--formats-only [--format NAME ...]] [--whole [--before PATH]]``.
 """
 import argparse
 import gc
@@ -63,6 +76,8 @@ PARAMS_FILE = os.path.join(HERE, os.pardir, 'config', 'params.yaml')
 TOPIC = '/imu'
 PERIOD_NS = 10_000_000   # 100 Hz
 T0_NS = 1_700_000_000_000_000_000
+#: Messages of the whole-command comparison: a minute of IMU at 200-400 Hz.
+WHOLE_MESSAGES = 20_000
 
 
 def write_imu_bag(path, count, seed=0):
@@ -90,7 +105,8 @@ def write_imu_bag(path, count, seed=0):
                                         stamp_ns + 1_000_000)
 
 
-FORMATS = ('mcap file', 'rosbag2 mcap zstd', 'rosbag2 sqlite3', 'ROS 1 bag')
+FORMATS = ('mcap file', 'rosbag2 mcap zstd', 'rosbag2 sqlite3', 'ROS 1 bag', 'ROS 1 bag bz2',
+           'ROS 1 bag lz4')
 
 
 def write_format_bag(directory, fmt, count, seed=0):
@@ -108,12 +124,16 @@ def write_format_bag(directory, fmt, count, seed=0):
     if fmt == 'mcap file':
         return mcap_path
     ros2 = get_typestore(Stores.ROS2_JAZZY)
-    path = Path(directory, name + ('.bag' if fmt == 'ROS 1 bag' else ''))
+    ros1_bag = fmt.startswith('ROS 1 bag')
+    path = Path(directory, name + ('.bag' if ros1_bag else ''))
     with BagReader(mcap_path) as reader:
         records = reader.messages()
-        if fmt == 'ROS 1 bag':
+        if ros1_bag:
             ros1 = get_typestore(Stores.ROS1_NOETIC)
-            with Ros1Writer(path) as writer:
+            writer = Ros1Writer(path)
+            if fmt != 'ROS 1 bag':   # chunks compressed as rosbag record --bz2 / --lz4 does
+                writer.set_compression(Ros1Writer.CompressionFormat[fmt.split()[-1].upper()])
+            with writer:
                 connection = writer.add_connection(TOPIC, 'sensor_msgs/msg/Imu', typestore=ros1)
                 for record in records:
                     writer.write(connection, record.log_time_ns,
@@ -166,6 +186,153 @@ def convert_naive_rosbags(source, output):
             writer.add_message(channels[TOPIC + '/euler'], log_time=log_time,
                                publish_time=log_time, data=bytes(data))
         writer.finish()
+
+
+def convert_competent(source, output, block_messages=10_000):
+    """
+    Convert as a competent user would: rosbags ``AnyReader``, scipy in blocks, rosbags ``Writer``.
+
+    Every message of the input is copied (ROS 1 ones as ROS 2 CDR) and each
+    Imu message gets its ``/imu/euler`` (Vector3Stamped, its header), the
+    angles computed by one scipy call per block of ``block_messages``;
+    written as a rosbag2 directory with MCAP storage, as ``convert`` writes.
+    """
+    import itertools
+    from pathlib import Path
+
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import get_typestore, Stores
+    from scipy.spatial.transform import Rotation
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    vector3 = typestore.types['geometry_msgs/msg/Vector3']
+    vector3_stamped = typestore.types['geometry_msgs/msg/Vector3Stamped']
+    euler_type = 'geometry_msgs/msg/Vector3Stamped'
+    with AnyReader([Path(source)], default_typestore=typestore) as reader, \
+            Writer(output, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        outputs = {c.id: writer.add_connection(c.topic, c.msgtype, typestore=typestore)
+                   for c in reader.connections}
+        eulers = {c.id: writer.add_connection(c.topic + '/euler', euler_type,
+                                              typestore=typestore)
+                  for c in reader.connections if c.msgtype == 'sensor_msgs/msg/Imu'}
+        messages = reader.messages()
+        while block := list(itertools.islice(messages, block_messages)):
+            # As ROS 2 CDR (ROS 1 messages converted), and the Imu messages deserialised.
+            datas = [bytes(raw) if reader.is2 else bytes(typestore.ros1_to_cdr(raw, c.msgtype))
+                     for c, _, raw in block]
+            imus = {index: typestore.deserialize_cdr(data, 'sensor_msgs/msg/Imu')
+                    for index, ((c, _, _), data) in enumerate(zip(block, datas))
+                    if c.id in eulers}
+            q = np.array([(m.orientation.x, m.orientation.y, m.orientation.z,
+                           m.orientation.w) for m in imus.values()]).reshape(-1, 4)
+            angles = Rotation.from_quat(q).as_euler('xyz').tolist() if len(q) else []
+            angles = dict(zip(imus, angles))
+            for index, ((connection, log_time, _), data) in enumerate(zip(block, datas)):
+                writer.write(outputs[connection.id], log_time, data)
+                if index in imus:
+                    x, y, z = angles[index]
+                    euler = vector3_stamped(header=imus[index].header,
+                                            vector=vector3(x=x, y=y, z=z))
+                    writer.write(eulers[connection.id], log_time,
+                                 bytes(typestore.serialize_cdr(euler, euler_type)))
+
+
+_CONVERT_COMMAND = ('import sys; from rotation_node.bag.cli import main; '
+                    'sys.exit(main(sys.argv[1:]))')
+
+
+#: Runs a command (posix_spawn) and prints its wall time, CPU time, peak RSS and exit status.
+_MEASURE = """
+import json, os, sys, time
+start = time.perf_counter()
+pid = os.posix_spawn(sys.argv[1], sys.argv[1:], os.environ,
+                     file_actions=[(os.POSIX_SPAWN_OPEN, 1, os.devnull, os.O_WRONLY, 0)])
+_, status, usage = os.wait4(pid, 0)
+print(json.dumps([time.perf_counter() - start, usage.ru_utime + usage.ru_stime,
+                  usage.ru_maxrss / 1024, os.waitstatus_to_exitcode(status)]))
+"""
+
+
+def _process_run(command, env=None, cwd=None):
+    """
+    Run ``command``; return ``(wall s, CPU s, peak RSS MiB)`` of its process.
+
+    Started by a small launcher process: the peak RSS of a process started
+    from this one would count this one's (Linux keeps the larger of the
+    parent's and the new program's), numba and all. ``cwd``: where it runs
+    (``python -c`` imports from there first: not from a checkout).
+    """
+    result = subprocess.run([sys.executable, '-c', _MEASURE, *command], env=env, cwd=cwd,
+                            capture_output=True, text=True)
+    if result.returncode:
+        raise RuntimeError(f'{command}: the launcher failed: {result.stderr}')
+    wall, cpu, rss, status = json.loads(result.stdout)
+    if status:
+        raise RuntimeError(f'{command} failed: {result.stderr}')
+    return wall, cpu, rss
+
+
+def _contender_commands(before):
+    """``{name: (command(source, output), environment)}`` of the whole-process contenders."""
+    def environment(path):
+        env = dict(os.environ)
+        env['PYTHONPATH'] = os.pathsep.join([path, *filter(None, [env.get('PYTHONPATH')])])
+        return env
+
+    here = os.path.join(HERE, os.pardir)
+    contenders = {}
+    if before:
+        contenders['before'] = (lambda source, output: [
+            sys.executable, '-c', _CONVERT_COMMAND, 'convert', source, output, '--params',
+            PARAMS_FILE, '--force'], environment(before))
+    contenders['convert'] = (lambda source, output: [
+        sys.executable, '-c', _CONVERT_COMMAND, 'convert', source, output, '--params',
+        PARAMS_FILE, '--force'], environment(here))
+    contenders['script'] = (lambda source, output: [
+        sys.executable, __file__, '--competent', source, output], None)
+    return contenders
+
+
+def whole_commands(directory, count, repeat, before=None, names=FORMATS):
+    """
+    Each format at ``count`` messages and a 1-message bag: each contender as a whole process.
+
+    ``convert`` (``rotation_bag convert IN OUT --params config/params.yaml``,
+    imports and all), the same with the code at ``before`` (a checkout of an
+    earlier commit, put first on PYTHONPATH), and the competent user's script
+    (:func:`convert_competent`, in its own process, scipy and rosbags imports
+    included); wall time, CPU time and peak RSS of the process, best of
+    ``repeat`` alternating runs (the best run is the one the machine's other
+    jobs disturbed least), and the ratio script/convert of the wall times.
+    """
+    contenders = _contender_commands(before)
+    print(f'\n## Whole commands, fresh process each (best of {repeat}; wall s, CPU s, '
+          'peak RSS MiB); script = rosbags AnyReader + scipy in blocks + rosbags Writer')
+    columns = ' '.join(f'{name + " wall":>12s} {"CPU":>6s} {"RSS":>5s}' for name in contenders)
+    ratios = f' {"script/convert":>15s}' + (f' {"before/convert":>15s}' if before else '')
+    print(f'{"input":24s} {columns}{ratios}  load average (1 min) after the row')
+    rows = [('1 message, mcap file', 'mcap file', 1)] + [
+        (f'{count} msgs, {name}', name, count) for name in names]
+    for label, fmt, size in rows:
+        source = write_format_bag(directory, fmt, size)
+        outputs = {name: os.path.join(directory, f'whole_{name}') for name in contenders}
+        for name, (command, env) in contenders.items():   # warm: numba caches, page cache
+            _process_run(command(source, outputs[name]), env, directory)
+            _remove(outputs[name])
+        runs = {name: [] for name in contenders}
+        for _ in range(repeat):
+            for name, (command, env) in contenders.items():
+                runs[name].append(_process_run(command(source, outputs[name]), env, directory))
+                _remove(outputs[name])
+        best = {name: tuple(min(run[i] for run in results) for i in range(3))
+                for name, results in runs.items()}
+        line = f'{label:24s} ' + ' '.join(f'{wall:12.2f} {cpu:6.2f} {rss:5.0f}'
+                                          for wall, cpu, rss in best.values())
+        line += f' {best["script"][0] / best["convert"][0]:14.2f}x'
+        if before:
+            line += f' {best["before"][0] / best["convert"][0]:14.2f}x'
+        print(f'{line}  {os.getloadavg()[0]:.1f}', flush=True)
+        _remove(source)
 
 
 def formats(directory, count, repeat, sizes, names=FORMATS):
@@ -521,22 +688,40 @@ def main():
                         help='an input format of section 4 (repeatable; default all)')
     parser.add_argument('--quick', action='store_true',
                         help='20 000 messages, one run each, small scaling sizes (~1 min)')
+    parser.add_argument('--whole', action='store_true',
+                        help='only the whole-command comparison (section 5), at 20 000 '
+                             'messages unless --messages says otherwise')
+    parser.add_argument('--before', metavar='PATH',
+                        help='section 5 also runs the code checked out at PATH (e.g. '
+                             '`git worktree add /tmp/before <commit>`) as "before"')
     parser.add_argument('--child', nargs=2, metavar=('SOURCE', 'OUTPUT'), help=argparse.SUPPRESS)
+    parser.add_argument('--competent', nargs=2, metavar=('SOURCE', 'OUTPUT'),
+                        help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
         _child(*args.child)
         return
+    if args.competent:
+        convert_competent(*args.competent)
+        return
     sizes = [100, 1_000, 10_000, 100_000, 200_000] + ([1_000_000] if args.million else [])
+    whole_messages = WHOLE_MESSAGES
+    if args.whole and '--messages' in sys.argv:
+        whole_messages = args.messages
     if args.quick:
         args.messages, args.repeat, sizes = min(args.messages, 20_000), 1, [1_000, 20_000]
     print_machine()
     with tempfile.TemporaryDirectory() as directory:
-        if not args.formats_only:
+        if not (args.formats_only or args.whole):
             compare(directory, args.messages, args.repeat)
             breakdown(directory)
             scaling(directory, sizes)
-        formats(directory, args.messages, args.repeat, [args.messages // 10, args.messages],
-                args.formats or FORMATS)
+        if not args.whole:
+            formats(directory, args.messages, args.repeat, [args.messages // 10, args.messages],
+                    args.formats or FORMATS)
+        if not args.formats_only:
+            whole_commands(directory, whole_messages, args.repeat, args.before,
+                           args.formats or FORMATS)
 
 
 if __name__ == '__main__':

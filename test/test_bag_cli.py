@@ -11,6 +11,7 @@ import re
 import shutil
 import signal
 import subprocess
+import sys
 
 from bag_helpers import imu_messages, stamp_ns
 import numpy as np
@@ -223,3 +224,22 @@ def test_usage_error_exits_2():
     result = subprocess.run([script('rotation_bag'), 'convert', 'in.mcap'],
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 2 and 'the following arguments are required' in result.stderr
+
+
+def test_convert_of_an_mcap_bag_loads_no_ros_client_library(workspace):
+    """Load neither rclpy (the rcl libraries) nor rosbags, nor mcap's writer module."""
+    probe = ('import sys; from rotation_node.bag.cli import main; '
+             "status = main(['convert', 'imu.mcap', 'out.mcap', '--params', 'params.yaml']); "
+             "print(status, sorted(m for m in ('rclpy', 'rosbags', 'matplotlib', 'mcap.writer') "
+             'if m in sys.modules))')
+    result = subprocess.run([sys.executable, '-c', probe], cwd=workspace, capture_output=True,
+                            text=True, timeout=300)
+    assert result.stdout.split('\n')[-2] == '0 []', result.stderr
+    assert (workspace / 'out.mcap').exists()
+
+
+def test_ros_args_are_removed_as_rclpy_removes_them(workspace, capsys, monkeypatch):
+    monkeypatch.chdir(workspace)
+    assert main(['convert', 'imu.mcap', 'out.mcap', '--ros-args', '-r', '__ns:=/x', '--',
+                 '--params', 'params.yaml']) == 0
+    assert (workspace / 'out.mcap').exists()

@@ -7,6 +7,7 @@ the same messages, bytes and order, also where chunks overlap in time and
 where timestamps are equal across chunks.
 """
 from io import BytesIO
+import struct
 import weakref
 
 import numpy as np
@@ -183,3 +184,33 @@ def test_overlapping_chunk_groups_merge_time_ranges():
                                      info(101, 101), info(95, 99)]) == [[0, 1, 2, 3, 5], [4]]
     assert overlapping_chunk_groups([info(200, 300), info(0, 10), info(100, 150)]) == [
         [1], [2], [0]]
+
+
+def _record(fields, data):
+    header = b''.join(struct.pack('<I', len(name) + 1 + len(value)) + name + b'=' + value
+                      for name, value in fields)
+    return struct.pack('<I', len(header)) + header + struct.pack('<I', len(data)) + data
+
+
+MESSAGE_FIELDS = [(b'op', b'\x02'), (b'conn', struct.pack('<I', 3)),
+                  (b'time', struct.pack('<II', 5, 7))]
+
+
+@pytest.mark.parametrize('fields', [MESSAGE_FIELDS, MESSAGE_FIELDS[::-1]])
+def test_message_data_of_a_plain_message_record(fields):
+    chunk = b'xx' + _record(fields, b'payload') + b'rest'
+    assert ros1_chunks.message_data(chunk, 2, 3, 5 * 10**9 + 7) == b'payload'
+
+
+@pytest.mark.parametrize('chunk, connection, time', [
+    (_record(MESSAGE_FIELDS, b'payload'), 4, 5 * 10**9 + 7),               # another connection
+    (_record(MESSAGE_FIELDS, b'payload'), 3, 5 * 10**9 + 8),               # another time
+    (_record(MESSAGE_FIELDS, b'payload')[:-1], 3, 5 * 10**9 + 7),          # cut short
+    (_record(MESSAGE_FIELDS, b'')[:-2], 3, 5 * 10**9 + 7),                 # length cut
+    (_record([(b'op', b'\x07')] + MESSAGE_FIELDS[1:], b''), 3, 5 * 10**9 + 7),   # connection
+    (_record(MESSAGE_FIELDS + [(b'\xff', b'')], b''), 3, 5 * 10**9 + 7),   # another field
+    (_record([(b'op', b'\x02\x00')] + MESSAGE_FIELDS[1:], b''), 3, 5 * 10**9 + 7),
+    (b'\xff\x00\x00\x00', 3, 5 * 10**9 + 7),                               # header too long
+])
+def test_anything_else_is_left_to_rosbags(chunk, connection, time):
+    assert ros1_chunks.message_data(chunk, 0, connection, time) is None

@@ -21,7 +21,7 @@ from rosbags.highlevel import AnyReader
 from rotation_node.bag.writing.mcap_writer import ChunkWriter
 from rotation_node.wire.message_types import message_definition
 
-COMPRESSIONS = [CompressionType.ZSTD, CompressionType.LZ4, CompressionType.NONE]
+COMPRESSIONS = ['zstd', 'lz4', 'none']
 T0 = 1_700_000_000_000_000_000
 TOPICS = [('/text', 'std_msgs/msg/String'), ('/other', 'std_msgs/msg/String'),
           ('/count', 'std_msgs/msg/Int32')]
@@ -95,7 +95,8 @@ def _play(plan, writer, library_writer):
 def _written(plan, compression, library_writer=False):
     stream = io.BytesIO()
     if library_writer:
-        writer = Writer(stream, compression=compression, chunk_size=2**62)
+        writer = Writer(stream, compression=CompressionType[compression.upper()],
+                        chunk_size=2**62)
     else:
         writer = ChunkWriter(stream, compression=compression)
     _play(plan, writer, library_writer)
@@ -106,13 +107,13 @@ def _messages(plan):
     return [message for step in plan if step[0] == 'chunk' for message in step[1]]
 
 
-@pytest.mark.parametrize('compression', COMPRESSIONS, ids=lambda c: c.name)
+@pytest.mark.parametrize('compression', COMPRESSIONS, ids=str)
 def test_file_is_the_mcap_writers_byte_for_byte(rng, compression):
     plan = _plan(rng)
     assert _written(plan, compression) == _written(plan, compression, library_writer=True)
 
 
-@pytest.mark.parametrize('compression', COMPRESSIONS, ids=lambda c: c.name)
+@pytest.mark.parametrize('compression', COMPRESSIONS, ids=str)
 def test_indexed_linear_and_rosbags_readers_read_every_message(tmp_path, rng, compression):
     plan = _plan(rng)
     expected = _messages(plan)
@@ -136,7 +137,7 @@ def test_indexed_linear_and_rosbags_readers_read_every_message(tmp_path, rng, co
                                   key=lambda message: message[1])
 
 
-@pytest.mark.parametrize('compression', COMPRESSIONS, ids=lambda c: c.name)
+@pytest.mark.parametrize('compression', COMPRESSIONS, ids=str)
 def test_summary_agrees_with_the_messages(rng, compression):
     plan = _plan(rng)
     expected = _messages(plan)
@@ -203,8 +204,8 @@ def _stream(stream):
 
 def test_no_messages_write_no_chunk_and_a_valid_file():
     plan = [('topic', *TOPICS[0]), ('chunk', []), ('topic', *TOPICS[1])]
-    data = _written(plan, CompressionType.ZSTD)
-    assert data == _written(plan, CompressionType.ZSTD, library_writer=True)
+    data = _written(plan, 'zstd')
+    assert data == _written(plan, 'zstd', library_writer=True)
     summary = make_reader(io.BytesIO(data), validate_crcs=True).get_summary()
     assert summary.chunk_indexes == []
     assert summary.statistics.message_count == 0

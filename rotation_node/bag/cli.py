@@ -36,7 +36,6 @@ import os
 import sys
 from typing import List, Optional, Sequence
 
-from rclpy.utilities import remove_ros_args
 from rotation_node.command_line.stop_signal import exit_status, signal_name, StopSignal
 from rotation_node.errors import BagError, RotationNodeError
 
@@ -342,7 +341,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run ``rotation_bag``; return the exit status."""
     argv = sys.argv if argv is None else [PROG, *argv]
-    args = build_parser().parse_args(remove_ros_args(argv)[1:])
+    args = build_parser().parse_args(_without_ros_args(argv)[1:])
     with StopSignal():   # a signal stops the work where it checks (see stop_signal)
         try:
             args.run(args, argv)
@@ -354,6 +353,19 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                   file=sys.stderr)
             return exit_status(interrupt)
     return 0
+
+
+def _without_ros_args(argv):
+    """
+    Return ``argv`` without its ``--ros-args ... [--]`` sections (rclpy's parser).
+
+    rclpy (and the ROS libraries it loads) is imported only if there is one:
+    commands that do not talk to ROS start without it.
+    """
+    if '--ros-args' not in argv:
+        return list(argv)
+    from rclpy.utilities import remove_ros_args
+    return remove_ros_args(argv)
 
 
 def _error(args, error):

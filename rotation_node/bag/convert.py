@@ -43,7 +43,7 @@ from rotation_node.command_line.progress import ProgressBar
 from rotation_node.command_line.stop_signal import raise_if_stopped
 from rotation_node.errors import BagError
 from rotation_node.static_mounting import resolved_from_bag
-from rotation_node.wire.qos import qos_profile, qos_profiles_yaml
+from rotation_node.wire.qos_yaml import output_qos_yaml
 
 if TYPE_CHECKING:
     from rotation_node.parameters import NodeParameters
@@ -181,7 +181,7 @@ def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *
                        for topic in streams}
             converters = {topic: TopicConverter(params, outputs[topic], blocks=blocks)
                           for topic in streams}
-            offered_qos = qos_profiles_yaml([qos_profile(params)])
+            offered_qos = output_qos_yaml(params)
             new_topics = [TopicMetadata(output_topic_name, type_name, offered_qos)
                           for topic_outputs in outputs.values()
                           for output_topic_name, type_name, _ in topic_outputs.values()]

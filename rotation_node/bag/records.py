@@ -10,11 +10,9 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Optional, Tuple
 
-from rclpy.serialization import deserialize_message
 from rotation_node.errors import BagError
-from rotation_node.rclpy_private import RMWError
 from rotation_node.wire.message_types import message_class
 
 #: How ROS 2 messages are serialized in a bag.
@@ -105,12 +103,16 @@ class BagMessage:
             If the type is not installed or the bytes are not a valid message.
 
         """
-        if decode is None:
+        errors: Tuple[type, ...] = (BagError,)   # a decode's own error (rotation_node.wire.cdr)
+        if decode is None:   # rclpy, imported only here: reading bags does not need it
+            from rclpy.serialization import deserialize_message
+            from rotation_node.rclpy_private import RMWError
             decode = functools.partial(deserialize_message,
                                        message_type=message_class(self.type_name))
+            errors = (RMWError, BagError)   # rclpy's for bad CDR
         try:
             return decode(self.data)
-        except (RMWError, BagError) as error:   # rclpy's error for bad CDR; cdr's own
+        except errors as error:
             raise BagError(
                 f'message on {self.topic} at {self.log_time_ns} ns is not a valid '
                 f'{self.type_name}: {error}') from None

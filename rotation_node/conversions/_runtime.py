@@ -329,7 +329,7 @@ class Kernel:
 
     @property
     def signatures(self) -> list[tuple[Any, ...]]:
-        """The compiled signatures: one once loaded, none before."""
+        """Return the compiled signatures: one once loaded, none before."""
         return [] if self.dispatcher is None else self.dispatcher.signatures
 
     def numba_signature(self) -> Any:

@@ -55,7 +55,6 @@ import struct
 from typing import Any, Callable, Dict, List, Mapping, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
-from rclpy.serialization import deserialize_message
 from rosidl_parser.definition import Array, BasicType, NamespacedType, UnboundedString
 from rotation_node.errors import BagError
 from rotation_node.wire.message_types import message_class
@@ -403,6 +402,7 @@ class FixedLayoutCodec:
 
         """
         if data[:2] != _CDR_LE_ID:
+            from rclpy.serialization import deserialize_message   # loads rcl: only here
             try:
                 return deserialize_message(bytes(data), self.message_class)
             except Exception as error:   # rclpy raises RMWError, RuntimeError...

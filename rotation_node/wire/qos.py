@@ -14,12 +14,13 @@ integers; both are read.
 """
 from __future__ import annotations
 
-from typing import Any, Iterable, List, Sequence, Tuple, TYPE_CHECKING
+from typing import Iterable, List, Sequence, Tuple, TYPE_CHECKING
 
 from rclpy.duration import Duration
 from rclpy.qos import (
     DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy)
 from rotation_node.errors import BagError
+from rotation_node.wire.qos_yaml import output_policies, profiles_yaml
 from rotation_node.wire.stamps import split_ns
 import yaml
 
@@ -33,10 +34,6 @@ _POLICIES = (
     ('liveliness', LivelinessPolicy),
 )
 _DURATIONS = ('deadline', 'lifespan', 'liveliness_lease_duration')
-_RELIABILITY = {
-    'reliable': ReliabilityPolicy.RELIABLE,
-    'best_effort': ReliabilityPolicy.BEST_EFFORT,
-}
 
 #: Depth of the reliable queue ``play`` offers at ``--rate 0``, and that
 #: ``record`` requests: deep enough that a burst never overwrites unread samples.
@@ -52,8 +49,8 @@ def qos_profile(params: NodeParameters, *, transient_local: bool = False) -> QoS
     """
     Return the QoS of the node's output publishers (and of its inputs unless adapted).
 
-    ``rotation_bag convert`` stores it as the offered QoS of the topics it adds.
-    ``qos.reliability: auto`` gives reliable, which every subscriber matches.
+    The policies of :func:`rotation_node.wire.qos_yaml.output_policies`, which
+    ``rotation_bag convert`` stores as the offered QoS of the topics it adds.
 
     Parameters
     ----------
@@ -73,10 +70,11 @@ def qos_profile(params: NodeParameters, *, transient_local: bool = False) -> QoS
     if transient_local:
         return QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    policies = output_policies(params)
     return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST, depth=params.qos_depth,
-        reliability=_RELIABILITY.get(params.qos_reliability, ReliabilityPolicy.RELIABLE),
-        durability=DurabilityPolicy.VOLATILE)
+        history=HistoryPolicy[policies['history'].upper()], depth=policies['depth'],
+        reliability=ReliabilityPolicy[policies['reliability'].upper()],
+        durability=DurabilityPolicy[policies['durability'].upper()])
 
 
 def qos_profiles_yaml(profiles: Iterable[QoSProfile]) -> str:
@@ -105,27 +103,7 @@ def qos_profiles_yaml(profiles: Iterable[QoSProfile]) -> str:
         'liveliness_lease_duration': _duration_yaml(profile.liveliness_lease_duration),
         'avoid_ros_namespace_conventions': bool(profile.avoid_ros_namespace_conventions),
     } for profile in profiles]
-    return yaml.safe_dump(entries, sort_keys=False, default_flow_style=False).rstrip('\n')
-
-
-def rosbags_qos_yaml(profiles: Iterable[Any]) -> str:
-    """
-    Serialise QoS profiles as the ``rosbags`` package parses them to rosbag2's YAML.
-
-    Parameters
-    ----------
-    profiles : list of rosbags.interfaces.Qos
-        E.g. the ``offered_qos_profiles`` of a rosbags connection.
-
-    Returns
-    -------
-    str
-        A YAML list in the format of ``qos_profiles_yaml``, ``'[]'`` for none.
-
-    """
-    from rosbags.rosbag2.metadata import dump_qos_v9
-    return yaml.safe_dump(dump_qos_v9(list(profiles)), sort_keys=False,
-                          default_flow_style=False).rstrip('\n')
+    return profiles_yaml(entries)
 
 
 def _policy(entry, key, policy_type):

@@ -39,14 +39,13 @@ import re
 import tempfile
 from typing import Callable, Dict, Iterable, Iterator, List, Optional, Union
 
+from rotation_node.bag import metadata_yaml
 from rotation_node.bag.reading.compression import (
     decompress_file, LZ4_MAGIC, stored_name, ZSTD_MAGIC, zstd_prefix, ZstdError)
 from rotation_node.bag.reading.mcap_reader import BagReader, checked_topics
-from rotation_node.bag.reading.rosbag2_sqlite3 import open_sqlite3_file
 from rotation_node.bag.reading.topic_names import topic_renames
 from rotation_node.bag.records import BagMessage, TopicMetadata
 from rotation_node.errors import BagError
-import yaml
 
 METADATA_FILE = 'metadata.yaml'
 #: rosbag2 storage plugins this package reads.
@@ -108,14 +107,14 @@ def _directory_layout(path: str) -> _DirectoryLayout:
                                 note=f'no {METADATA_FILE}')
     try:
         with open(metadata_path, encoding='utf-8') as stream:
-            info = yaml.safe_load(stream)['rosbag2_bagfile_information']
+            info = metadata_yaml.load(stream)['rosbag2_bagfile_information']
         storage = info['storage_identifier']
         names = [os.path.basename(name) for name in info['relative_file_paths']]
         mode = str(info.get('compression_mode') or '').lower()
         compression_format = str(info.get('compression_format') or '').lower()
     except (OSError, UnicodeDecodeError) as error:
         raise BagError(f'cannot read {metadata_path}: {error}') from None
-    except (yaml.YAMLError, TypeError, KeyError) as error:
+    except (metadata_yaml.YAMLError, TypeError, KeyError) as error:
         raise BagError(f'{metadata_path}: not rosbag2 bag metadata '
                        f'({type(error).__name__}: {error})') from None
     if storage not in STORAGE_PLUGINS:
@@ -334,7 +333,8 @@ class _Opener:
             raise BagError(f'{shown}: empty file (0 bytes), not a bag')
         if prefix.startswith(_MCAP_MAGIC):
             return self._add(BagReader(path, strict=self.strict)), 'mcap'
-        if prefix.startswith(_SQLITE_MAGIC):
+        if prefix.startswith(_SQLITE_MAGIC):   # rosbags and apsw, imported only for sqlite3
+            from rotation_node.bag.reading.rosbag2_sqlite3 import open_sqlite3_file
             return self._add(open_sqlite3_file(path, shown=shown, strict=self.strict)), 'sqlite3'
         version = _ROS1_MAGIC.match(prefix)
         if version is not None:

@@ -19,10 +19,12 @@ import io
 import os
 from pathlib import Path
 import struct
-from typing import Union
+from typing import Any, Callable, List, Optional, Tuple, Union
 
-from rosbags.convert.converter import generate_message_converter, LATCH, STATIC_MSGTYPE_RENAMES
+from rosbags.convert.converter import (
+    generate_message_converter, is_same_wireformat, LATCH, STATIC_MSGTYPE_RENAMES)
 from rosbags.highlevel import AnyReaderError
+from rosbags.interfaces import Nodetype
 from rosbags.rosbag1 import ReaderError
 from rosbags.rosbag1.reader import decompressors as ros1_decompressors
 from rosbags.serde import SerdeError
@@ -33,7 +35,7 @@ from rotation_node.bag.reading.rosbags_input import RosbagsInput
 from rotation_node.bag.records import TopicMetadata
 from rotation_node.errors import BagError
 from rotation_node.wire.message_types import message_class
-from rotation_node.wire.qos import rosbags_qos_yaml
+from rotation_node.wire.qos_yaml import rosbags_qos_yaml
 
 #: The one ROS 1 bag format version there is a reader for.
 SUPPORTED_VERSION = '2.0'
@@ -105,6 +107,10 @@ def _converted_topics(path, reader):
                         reader.typestore, ros2, ros1_type, type_name, {},
                         src_is2=False, dst_is2=True)
                 converters[ros1_type] = lambda data, convert=convert: bytes(convert(data))
+                if is_same_wireformat(reader.typestore, ros2, ros1_type, type_name):
+                    converters[ros1_type] = (ros1_to_cdr_converter(ros2.fielddefs, type_name,
+                                                                   converters[ros1_type])
+                                             or converters[ros1_type])
         except _FORMAT_ERRORS + (KeyError,) as error:   # KeyError: a type left undefined
             raise BagError(f'{path}: cannot convert ROS 1 type {ros1_type} to ROS 2: '
                            f'{error}') from None
@@ -114,6 +120,176 @@ def _converted_topics(path, reader):
             offered_qos_profiles=rosbags_qos_yaml(LATCH if connection.ext.latching else []),
             definition=None if installed else ros2.generate_msgdef(type_name, ros_version=2)[0],
             type_hash=None if installed else ros2.hash_rihs01(type_name)), converters[ros1_type]
+
+
+#: Bytes of the primitive types in ROS 1 and CDR.
+_PRIMITIVE_SIZES = {'bool': 1, 'byte': 1, 'char': 1, 'int8': 1, 'uint8': 1, 'int16': 2,
+                    'uint16': 2, 'int32': 4, 'uint32': 4, 'int64': 8, 'uint64': 8,
+                    'float32': 4, 'float64': 8}
+_ENCAPSULATION = b'\x00\x01\x00\x00'   # little-endian CDR
+_UINT32 = struct.Struct('<I')
+_ZEROS = tuple(bytes(n) for n in range(8))
+_SKIP, _RUN, _STRING, _SEQUENCE = range(4)
+
+
+def _leaves(fielddefs, type_name, leaves):
+    """
+    Append the leaves of ``type_name`` in wire order; return False if there is no fast converter.
+
+    A leaf is ``(_SKIP, 4)`` (a ROS 1 header's seq, which ROS 2 does not
+    have), ``(_RUN, size)`` (a primitive), ``(_STRING, 0)`` or ``(_SEQUENCE,
+    (element steps, least ROS 1 bytes of an element))``. An empty structure
+    (ROS 2's ``structure_needs_at_least_one_member``) has no fast converter.
+    """
+    if type_name == 'std_msgs/msg/Header':
+        leaves.append((_SKIP, 4))
+    for name, (kind, desc) in fielddefs[type_name][1]:
+        if name == 'structure_needs_at_least_one_member':
+            return False
+        count = 1
+        if kind == Nodetype.SEQUENCE:
+            element: List[Tuple[int, Any]] = []
+            if not _leaves_of(fielddefs, *desc[0], element):
+                return False
+            leaves.append((_SEQUENCE, (_steps(element), max(1, _least_size(element)))))
+            continue
+        if kind == Nodetype.ARRAY:
+            (kind, desc), count = desc
+        for _ in range(count):
+            if not _leaves_of(fielddefs, kind, desc, leaves):
+                return False
+    return True
+
+
+def _leaves_of(fielddefs, kind, desc, leaves):
+    """Append the leaves of one field (not an array) of kind ``kind``; False if unsupported."""
+    if kind == Nodetype.NAME:
+        return _leaves(fielddefs, desc, leaves)
+    if kind == Nodetype.BASE and desc[0] in ('string', 'wstring'):
+        leaves.append((_STRING, 0))
+    elif kind == Nodetype.BASE and desc[0] in _PRIMITIVE_SIZES:
+        leaves.append((_RUN, _PRIMITIVE_SIZES[desc[0]]))
+    else:
+        return False
+    return True
+
+
+def _least_size(leaves):
+    """Return the fewest ROS 1 bytes the leaves take (strings and sequences empty)."""
+    return sum(size if kind in (_RUN, _SKIP) else 4 for kind, size in leaves)
+
+
+def _run_layouts(sizes):
+    """
+    Return how a run of primitives is laid out in CDR for each start offset modulo 8.
+
+    For ``offset % 8`` = 0..7: ``(segments, CDR bytes)``, a segment ``(padding, start,
+    end)`` being zero padding then the ROS 1 bytes ``start:end`` of the run: each
+    primitive aligned to its size, as CDR aligns it (ROS 1 packs them).
+    """
+    layouts = []
+    for start in range(8):
+        segments: List[list] = []
+        offset, source = start, 0
+        for size in sizes:
+            padding = -offset % size
+            if padding or not segments:
+                segments.append([_ZEROS[padding], source, source])
+            segments[-1][2] += size
+            offset += padding + size
+            source += size
+        layouts.append((tuple(map(tuple, segments)), offset - start))
+    return tuple(layouts)
+
+
+def _steps(leaves):
+    """Return the steps of the leaves: runs of primitives merged, each with its layouts."""
+    merged: List[list] = []
+    for kind, size in leaves:
+        if kind == _RUN and merged and merged[-1][0] == _RUN:
+            merged[-1][1].append(size)
+        else:
+            merged.append([kind, [size] if kind == _RUN else size])
+    return tuple((kind, _run_layouts(sizes), sum(sizes)) if kind == _RUN else (kind, sizes, 0)
+                 for kind, sizes in merged)
+
+
+class _Damaged(Exception):
+    """The data is not what its type says (rosbags' conversion then says what is wrong)."""
+
+
+def _converted(steps, data, source, offset, append):
+    """Append the CDR parts of ``data`` from ``source`` (CDR ``offset``); return both after."""
+    for kind, layout, size in steps:
+        if kind == _RUN:
+            segments, cdr_size = layout[offset & 7]
+            for padding, start, end in segments:
+                append(padding)
+                append(data[source + start:source + end])
+            source += size
+            offset += cdr_size
+        elif kind == _STRING:
+            length, = _UINT32.unpack_from(data, source)
+            end = source + 4 + length
+            padding = -offset & 3
+            append(_ZEROS[padding] + _UINT32.pack(length + 1) + data[source + 4:end] + b'\0')
+            offset += padding + length + 5
+            source = end
+        elif kind == _SKIP:
+            source += layout
+        else:
+            count, = _UINT32.unpack_from(data, source)
+            element, least = layout
+            if source + 4 + count * least > len(data):
+                raise _Damaged
+            padding = -offset & 3
+            append(_ZEROS[padding] + data[source:source + 4])
+            source += 4
+            offset += padding + 4
+            for _ in range(count):
+                source, offset = _converted(element, data, source, offset, append)
+    return source, offset
+
+
+def ros1_to_cdr_converter(fielddefs, type_name: str, fallback: Callable[[bytes], bytes]
+                          ) -> Optional[Callable[[bytes], bytes]]:
+    """
+    Return a converter of ROS 1 messages of a type to CDR, or None for types it does not cover.
+
+    What rosbags' ``Typestore.ros1_to_cdr`` gives, byte for byte, for a type
+    of the same wire format in ROS 1 and ROS 2 (``is_same_wireformat``):
+    the header's seq dropped, primitives aligned, strings given their NUL,
+    sequences their CDR alignment, in a few slices per message instead of a
+    generated function call per nested type (a quarter of the time for
+    sensor_msgs/Imu). A message that is not exactly as long as its type says
+    is given to ``fallback`` (rosbags' conversion), which says what is wrong.
+
+    Parameters
+    ----------
+    fielddefs : dict
+        The ROS 2 typestore's ``fielddefs`` (rosbags).
+    type_name : str
+        ``'pkg/msg/Type'``.
+    fallback : callable
+        ``fallback(data) -> bytes``: rosbags' conversion.
+
+    """
+    leaves: List[Tuple[int, Any]] = []
+    if not _leaves(fielddefs, type_name, leaves):
+        return None
+    steps = _steps(leaves)
+
+    def convert(data):
+        parts = [_ENCAPSULATION]
+        try:
+            source, _ = _converted(steps, data, 0, 0, parts.append)
+        except (struct.error, _Damaged):
+            return fallback(data)
+        if source != len(data):
+            return fallback(data)
+        return b''.join(parts)
+
+    return convert
 
 
 def _chunk_compressions(reader):

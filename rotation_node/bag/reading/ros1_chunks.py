@@ -28,6 +28,7 @@ import io
 from io import BytesIO
 import os
 from pathlib import Path
+import struct
 from typing import BinaryIO, Collection, Dict, Generator, List, Optional, Sequence, Tuple
 
 import numpy as np
@@ -333,7 +334,7 @@ class ChunkedReader(Reader):
         chunks, counts = np.unique(index['chunk'], return_counts=True)
         unread = dict(zip(chunks.tolist(), counts.tolist()))
         held: 'OrderedDict[int, Tuple[BytesIO, int]]' = OrderedDict()   # stream, size
-        held_bytes, current, stream = 0, -1, BytesIO()
+        held_bytes, current, stream, chunk = 0, -1, BytesIO(), b''
         for time, connection, i, offset in zip(*(index[name].tolist() for name in (
                 'time', 'connection', 'chunk', 'offset'))):
             if i != current:
@@ -344,22 +345,26 @@ class ChunkedReader(Reader):
                 else:
                     chunk = self.decompressed_chunk(i)
                     held[i] = stream, size = BytesIO(chunk), len(chunk)
-                    del chunk
                     held_bytes += size
                     while held_bytes > CHUNK_BYTES_HELD and len(held) > 1:
                         held_bytes -= held.popitem(last=False)[1][1]
-            stream.seek(offset)
-            try:
-                header, data = _message_record(stream)
-                if header.get_uint32('conn') != connection or header.get_time('time') != time:
-                    raise ReaderError('it is not the message its index names.')
-            except (ReaderError, UnicodeDecodeError) as error:
-                raise ReaderError(f'The message at offset {offset} of the chunk at byte '
-                                  f'{self.chunk_infos[i].pos} cannot be read: {error}') from None
+                chunk = stream.getvalue()   # the chunk's bytes themselves, not a copy
+            data = message_data(chunk, offset, connection, time)
+            if data is None:   # anything but a plain message record: rosbags' reading
+                stream.seek(offset)
+                try:
+                    header, data = _message_record(stream)
+                    if (header.get_uint32('conn') != connection
+                            or header.get_time('time') != time):
+                        raise ReaderError('it is not the message its index names.')
+                except (ReaderError, UnicodeDecodeError) as error:
+                    raise ReaderError(f'The message at offset {offset} of the chunk at byte '
+                                      f'{self.chunk_infos[i].pos} cannot be read: '
+                                      f'{error}') from None
             unread[i] -= 1
             if not unread[i]:   # its last message: let the chunk go
                 held_bytes -= held.pop(i)[1]
-                current, stream = -1, BytesIO()
+                current, stream, chunk = -1, BytesIO(), b''
             yield by_id[connection], time, data
 
 
@@ -375,6 +380,49 @@ def _unwrapped(reason: object) -> object:
         if isinstance(inner, tuple):
             return prefix + ' '.join(map(str, inner))
     return reason
+
+
+_UINT32 = struct.Struct('<I')
+_TIME = struct.Struct('<II')
+_MESSAGE_DATA_OP = bytes([RecordType.MSGDATA])
+
+
+def message_data(chunk: bytes, offset: int, connection: int, time: int) -> Optional[bytes]:
+    """
+    Return the data of the message record at ``offset`` of a chunk, or None to read it as rosbags.
+
+    The fast path of :func:`_message_record` and the index check after it:
+    the data of a message data record whose header holds exactly ``op``,
+    ``conn`` and ``time`` (in any order), of the connection and time its index
+    entry gives, with nothing cut short. Anything else (a connection record
+    before it, another field, a damaged length, another connection or time)
+    gives None: rosbags' reading then says what it is, as it did.
+    """
+    unpack = _UINT32.unpack_from
+    try:
+        header_length, = unpack(chunk, offset)
+        position, end = offset + 4, offset + 4 + header_length
+        fields = {}
+        while position < end:
+            size, = unpack(chunk, position)
+            position += 4
+            field_end = position + size
+            separator = chunk.find(b'=', position, field_end)
+            if field_end > end or separator < 0:
+                return None
+            fields[chunk[position:separator]] = chunk[separator + 1:field_end]
+            position = field_end
+        if (len(fields) != 3 or fields.get(b'op') != _MESSAGE_DATA_OP
+                or len(fields.get(b'conn', b'')) < 4 or len(fields.get(b'time', b'')) != 8):
+            return None
+        sec, nsec = _TIME.unpack(fields[b'time'])
+        if unpack(fields[b'conn'])[0] != connection or sec * 10**9 + nsec != time:
+            return None
+        length, = unpack(chunk, end)
+    except struct.error:
+        return None
+    data = chunk[end + 4:end + 4 + length]
+    return data if len(data) == length else None
 
 
 def _message_record(stream):

@@ -29,7 +29,7 @@ from rotation_node.bag.reading.rosbags_input import RosbagsInput
 from rotation_node.bag.records import TopicMetadata
 from rotation_node.errors import BagError
 from rotation_node.wire.message_types import message_definition
-from rotation_node.wire.qos import rosbags_qos_yaml
+from rotation_node.wire.qos_yaml import rosbags_qos_yaml
 
 _ROSBAG2_TABLES = {'topics', 'messages'}
 # What rosbags' Sqlite3Reader.open raises, besides ReaderError, for tables whose text is

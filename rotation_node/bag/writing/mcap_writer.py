@@ -34,9 +34,9 @@ from mcap.opcode import Opcode
 from mcap.records import (
     Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Metadata, MetadataIndex, Schema,
     Statistics, SummaryOffset)
-from mcap.writer import CompressionType, MCAP0_MAGIC
 import numpy as np
-from rotation_node.bag.mcap_layout import MESSAGE_FIELDS, MESSAGE_HEADER, MESSAGE_RECORD_OVERHEAD
+from rotation_node.bag.mcap_layout import (
+    MCAP_MAGIC, MESSAGE_FIELDS, MESSAGE_HEADER, MESSAGE_RECORD_OVERHEAD)
 
 #: Bytes of a MessageIndex record besides its 16-byte entries (opcode, length, channel, size).
 MESSAGE_INDEX_OVERHEAD = 1 + 8 + 2 + 4
@@ -47,15 +47,17 @@ _MESSAGE_INDEX_HEADER = struct.Struct('<BQHI')
 _FOOTER_PREFIX = struct.Struct('<BQQQ')
 
 
-def _compressor(compression: CompressionType):
+def _compressor(compression: str):
     """Return ``(name stored in the chunk, compress(bytes) -> bytes)``, as the library's."""
-    if compression == CompressionType.ZSTD:
+    if compression == 'zstd':
         import zstandard
         return 'zstd', zstandard.compress
-    if compression == CompressionType.LZ4:
+    if compression == 'lz4':
         import lz4.frame
         return 'lz4', lz4.frame.compress
-    return '', None
+    if compression == 'none':
+        return '', None
+    raise ValueError(f"chunk compression must be 'zstd', 'lz4' or 'none', got {compression!r}")
 
 
 class ChunkWriter:
@@ -71,13 +73,15 @@ class ChunkWriter:
     ----------
     stream : binary file
         Where to write; ``tell()`` must give the position (a file opened for writing).
-    compression : mcap.writer.CompressionType, optional
-        Chunk compression: zstd (default), lz4 or none.
+    compression : str, optional
+        Chunk compression: ``'zstd'`` (default), ``'lz4'`` or ``'none'``, the
+        names of the library's ``mcap.writer.CompressionType`` (not imported:
+        that module reads the installed package metadata, tens of milliseconds).
 
     """
 
     def __init__(self, stream: IO[bytes],
-                 compression: CompressionType = CompressionType.ZSTD) -> None:
+                 compression: str = 'zstd') -> None:
         self._stream = stream
         self._compression, self._compress = _compressor(compression)
         self._records = RecordBuilder()     # schemas and channels for the next chunk
@@ -104,7 +108,7 @@ class ChunkWriter:
         """Write the magic and the Header record."""
         builder = RecordBuilder()
         Header(profile, library).write(builder)
-        self._stream.write(MCAP0_MAGIC + builder.end())
+        self._stream.write(MCAP_MAGIC + builder.end())
 
     def register_schema(self, name: str, encoding: str, data: bytes) -> int:
         """Add a schema (written into the next chunk, and the summary); return its id."""
@@ -267,4 +271,4 @@ class ChunkWriter:
             zlib.crc32(summary_data))
         Footer(summary_start=summary_start, summary_offset_start=summary_offset_start,
                summary_crc=summary_crc).write(builder)
-        self._stream.write(summary_data + builder.end() + MCAP0_MAGIC)
+        self._stream.write(summary_data + builder.end() + MCAP_MAGIC)

@@ -46,9 +46,8 @@ import time
 from typing import Any, Dict, List, Optional, Sequence, Tuple, TYPE_CHECKING
 
 import mcap
-from mcap.writer import CompressionType
 import numpy as np
-from rclpy.serialization import serialize_message
+from rotation_node.bag import metadata_yaml
 from rotation_node.bag.records import TopicMetadata
 from rotation_node.bag.writing.mcap_writer import (
     ChunkWriter, MESSAGE_INDEX_ENTRY, MESSAGE_INDEX_OVERHEAD, MESSAGE_RECORD_OVERHEAD)
@@ -56,7 +55,6 @@ from rotation_node.bag.writing.part_output import BagOutput
 from rotation_node.errors import BagError, DiskFullError
 from rotation_node.wire.cdr import message_encoder
 from rotation_node.wire.message_types import message_definition, type_hash, type_name_of
-import yaml
 
 if TYPE_CHECKING:
     from types import TracebackType
@@ -67,9 +65,8 @@ PROFILE = 'ros2'
 #: Version of the rosbag2 metadata written (Jazzy's).
 ROSBAG2_METADATA_VERSION = 9
 LIBRARY = f'rotation_node bag; mcap-python/{mcap.__version__}'
-#: Chunk compressions, by their ``--compression`` name.
-COMPRESSIONS = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
-                'none': CompressionType.NONE}
+#: Chunk compressions, by their ``--compression`` name (mcap's ``CompressionType`` names).
+COMPRESSIONS = ('zstd', 'lz4', 'none')
 #: rosbag2's default for ``ros2 bag record`` with MCAP storage.
 DEFAULT_COMPRESSION = 'zstd'
 #: Uncompressed bytes of messages after which a chunk is written (rosbag2's MCAP default).
@@ -116,13 +113,17 @@ def _all_timestamps(values):
     return kind == 'u' or (kind == 'i' and (not array.size or bool(array.min() >= 0)))
 
 
-def compression_type(name: str) -> CompressionType:
-    """Return the MCAP chunk compression called ``name`` (``'zstd'``, ``'lz4'``, ``'none'``)."""
-    try:
-        return COMPRESSIONS[name]
-    except (KeyError, TypeError):
-        raise BagError(f'compression must be one of {", ".join(COMPRESSIONS)}, '
-                       f'got {name!r}') from None
+def _rclpy_serializer():
+    """Return ``rclpy.serialization.serialize_message``, imported on first use (it loads rcl)."""
+    from rclpy.serialization import serialize_message
+    return serialize_message
+
+
+def _checked_compression(name: str) -> str:
+    """Return ``name`` if it is a chunk compression (``'zstd'``, ``'lz4'``, ``'none'``)."""
+    if isinstance(name, str) and name in COMPRESSIONS:
+        return name
+    raise BagError(f'compression must be one of {", ".join(COMPRESSIONS)}, got {name!r}')
 
 
 class _Channel:
@@ -190,7 +191,7 @@ class BagWriter:
                  chunk_period_s: Optional[float] = None) -> None:
         self.path = os.fspath(path)
         self.compression = compression
-        chunk_compression = compression_type(compression)
+        chunk_compression = _checked_compression(compression)
         self.keep_unfinished = keep_unfinished
         self._output = BagOutput(self.path, overwrite=overwrite)
         self.part_path = self._output.part_path
@@ -334,7 +335,7 @@ class BagWriter:
         if channel is None or channel.msg_class is not type(msg):
             channel = self._channel(topic, type_name_of(type(msg)))
             channel.msg_class = type(msg)
-            channel.encode = message_encoder(channel.type_name) or serialize_message
+            channel.encode = message_encoder(channel.type_name) or _rclpy_serializer()
         self._add(channel.id, channel.encode(msg), log_time_ns, publish_time_ns)
 
     def write_serialized(self, topic: str, type_name: str, data: bytes, log_time_ns: int,
@@ -573,7 +574,7 @@ class BagWriter:
                     'name': topic.name,
                     'type': topic.type_name,
                     'serialization_format': topic.serialization_format,
-                    'offered_qos_profiles': yaml.safe_load(topic.offered_qos_profiles) or [],
+                    'offered_qos_profiles': metadata_yaml.load(topic.offered_qos_profiles) or [],
                     'type_description_hash': (type_hash(topic.type_name)
                                               if topic.type_hash is None else topic.type_hash),
                 },
@@ -618,13 +619,12 @@ class BagWriter:
                     raise
             metadata = self.rosbag2_metadata()
             try:
-                serialized = yaml.safe_dump(metadata, sort_keys=False)
+                serialized = metadata_yaml.dump(metadata)
                 self._writer.add_metadata('rosbag2', {'serialized_metadata': serialized})
                 self._writer.finish()
             except OSError as error:
                 self._fail(error)
-            self._output.finish(yaml.safe_dump({'rosbag2_bagfile_information': metadata},
-                                               sort_keys=False))
+            self._output.finish(metadata_yaml.dump({'rosbag2_bagfile_information': metadata}))
         except BaseException:
             self.abort()
             raise
