@@ -2,8 +2,8 @@
 Test-session set-up shared by all test modules.
 
 ROS isolation: every pytest run gets its own ``ROS_DOMAIN_ID`` (derived from the
-process id, within the range that is valid for localhost discovery) and
-``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, set in ``os.environ`` before any
+process id, within the range that is valid for localhost discovery; one per
+pytest-xdist worker) and ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, set in ``os.environ`` before any
 test starts so that subprocesses started by tests inherit them.
 """
 import os
@@ -18,9 +18,24 @@ settings.register_profile('ci', derandomize=True, deadline=None, print_blob=True
 if os.environ.get('CI'):
     settings.load_profile('ci')
 
-if 'ROTATION_NODE_TEST_DOMAIN_ID' not in os.environ:
-    os.environ['ROTATION_NODE_TEST_DOMAIN_ID'] = str(1 + os.getpid() % 100)
-os.environ['ROS_DOMAIN_ID'] = os.environ['ROTATION_NODE_TEST_DOMAIN_ID']
+
+def _domain_id():
+    """
+    Return this test process's ROS domain: the run's, or under pytest-xdist one per worker.
+
+    The run's domain (``ROTATION_NODE_TEST_DOMAIN_ID``, else from the process id) is set
+    in the environment the xdist workers inherit; worker ``gwN`` takes the N+1-th domain
+    after it, so that no two workers see each other's nodes. Domains 1..101 are valid
+    with ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``.
+    """
+    run = int(os.environ.setdefault('ROTATION_NODE_TEST_DOMAIN_ID', str(1 + os.getpid() % 101)))
+    worker = os.environ.get('PYTEST_XDIST_WORKER')   # 'gw0', 'gw1', ...
+    if worker is None:
+        return run
+    return 1 + (run + int(worker[2:])) % 101
+
+
+os.environ['ROS_DOMAIN_ID'] = str(_domain_id())
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('RCUTILS_COLORIZED_OUTPUT', '0')
 
