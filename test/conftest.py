@@ -3,8 +3,9 @@ Test-session set-up shared by all test modules.
 
 ROS isolation: every pytest run gets its own ``ROS_DOMAIN_ID`` (derived from the
 process id, within the range that is valid for localhost discovery; one per
-pytest-xdist worker) and ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, set in ``os.environ`` before any
-test starts so that subprocesses started by tests inherit them.
+pytest-xdist worker) and ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, set in
+``os.environ`` before any test starts so that subprocesses started by tests
+inherit them.
 """
 import os
 import sys
@@ -49,3 +50,21 @@ def rng():
     """Seeded generator: every random test is reproducible."""
     import numpy as np
     return np.random.default_rng(20261121)
+
+
+def pytest_collection_modifyitems(config, items):
+    """
+    Under pytest-xdist, run the modules with the most slow tests first.
+
+    run.sh sends whole modules to the workers (``--dist loadscope``: a module-scoped
+    fixture, such as a converted bag or a built package, is made once) in this order
+    (``--no-loadscope-reorder``), so that no long module starts last while the other
+    worker is idle.
+    """
+    if os.environ.get('PYTEST_XDIST_WORKER') is None:
+        return
+    slow = {}
+    for item in items:
+        slow[item.module.__name__] = (slow.get(item.module.__name__, 0)
+                                      + (item.get_closest_marker('slow') is not None))
+    items.sort(key=lambda item: -slow[item.module.__name__])   # stable: within a module as it was

@@ -114,7 +114,7 @@ KNOWN_PRIVATE_API_USERS = {
 
 
 def _module_files():
-    """``{module name: source path}`` of every module of the package."""
+    """Return ``{module name: source path}`` of every module of the package."""
     files = {}
     for directory, subdirectories, names in os.walk(ROOT):
         subdirectories[:] = sorted(d for d in subdirectories if d != '__pycache__')
@@ -132,7 +132,7 @@ MODULES = _module_files()
 
 
 def _imported_names(module, path):
-    """Every name ``module`` imports (absolute, dotted), with the line of each."""
+    """Return every name ``module`` imports (absolute, dotted), with the line of each."""
     tree = ast.parse(open(path, encoding='utf-8').read(), path)
     package = module if path.endswith('__init__.py') else module.rpartition('.')[0]
     found = []
@@ -153,7 +153,7 @@ def _imported_names(module, path):
 
 
 def _internal_imports():
-    """``{module: {imported module of the package: first line}}``."""
+    """Return ``{module: {imported module of the package: first line}}``."""
     graph = {}
     for module, path in MODULES.items():
         edges = {}

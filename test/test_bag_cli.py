@@ -82,6 +82,7 @@ def _run(capsys, *argv):
     return status, capsys.readouterr().err
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('damage, args, match', [
     (None, ['missing.mcap', 'out.mcap', '--params', 'params.yaml'],
      'cannot open bag missing.mcap'),
@@ -126,6 +127,7 @@ def test_convert_writes_and_reports(workspace, capsys, monkeypatch):
                                          '/imu/angular_velocity': 8000}
 
 
+@pytest.mark.slow
 def test_convert_notes_what_a_damaged_chunk_held(workspace, capsys, monkeypatch):
     """Zeroed bytes were a silent loss: fewer messages, exit 0, no note (also with --strict)."""
     monkeypatch.chdir(workspace)
@@ -148,6 +150,7 @@ def test_convert_notes_what_a_damaged_chunk_held(workspace, capsys, monkeypatch)
     assert _snapshot(workspace) == before
 
 
+@pytest.mark.slow
 def test_plot_default_name_and_bad_topic(workspace, capsys, monkeypatch):
     monkeypatch.chdir(workspace)
     assert _run(capsys, 'convert', 'imu.mcap', 'out.mcap', '--params', 'params.yaml')[0] == 0
@@ -196,6 +199,7 @@ def test_compare_usage_errors_exit_2(capsys, option):
     assert f'argument {option[0]}' in capsys.readouterr().err
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('args, match', [
     (['missing.mcap'], 'cannot open bag missing.mcap'),
     (['imu.mcap', '--topics', '/nope'], 'topic /nope not in imu.mcap'),

@@ -103,6 +103,7 @@ def test_a_block_a_conversion_rejects_changes_nothing(monkeypatch):
     assert (pipeline._previous_euler, pipeline.stats.received) == state
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(st.lists(st.one_of(st.floats(-10.0, 10.0), st.sampled_from(
     [0.0, -0.0, math.pi, -math.pi, 3 * math.pi, 180.0, -180.0, 540.0])), min_size=1,
@@ -119,6 +120,7 @@ def test_unwrap_chain_is_the_pipelines_unwrapping(angles, period, start):
         assert np.float64(previous_third).tobytes() == third[k].tobytes()
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(st.lists(st.sampled_from([-1.0, -0.0, 0.0, 0.5, 2.0]), max_size=30))
 def test_sign_chain_flips_as_the_pipeline_does(dots):

@@ -295,6 +295,7 @@ def _python(code, env=None):
     return result.stdout
 
 
+@pytest.mark.slow
 def test_importing_conversions_loads_nothing_beyond_numpy_and_numba():
     out = _python('import sys, numpy, numba\n'
                   'before = set(sys.modules)\n'
@@ -305,6 +306,7 @@ def test_importing_conversions_loads_nothing_beyond_numpy_and_numba():
     assert out.strip() == "['rotation_node', 'rotation_node.conversions']"
 
 
+@pytest.mark.slow
 def test_the_first_call_does_not_import_scipy_linalg_and_numba_linear_algebra_still_works():
     """The BLAS probe is answered without importing scipy.linalg; np.dot still compiles."""
     out = _python('import importlib.util, sys\n'
@@ -322,6 +324,7 @@ def test_the_first_call_does_not_import_scipy_linalg_and_numba_linear_algebra_st
     assert out.split() == ['False', 'True', 'numba.np.linalg', 'True']
 
 
+@pytest.mark.slow
 def test_numba_registries_loaded_before_the_first_call_are_left_as_they_are():
     out = _python('import sys\n'
                   'import numba.np.arraymath\n'
@@ -333,6 +336,7 @@ def test_numba_registries_loaded_before_the_first_call_are_left_as_they_are():
     assert out.split() == ['True', str(importlib.util.find_spec('scipy') is not None)]
 
 
+@pytest.mark.slow
 def test_kernels_are_cached_in_the_user_cache_where_the_package_is_read_only(tmp_path):
     """Where the in-tree cache is unusable (a system install), the user-wide one is used."""
     env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path))
@@ -351,6 +355,7 @@ def test_kernels_are_cached_in_the_user_cache_where_the_package_is_read_only(tmp
     assert any('_quaternion_derivative_kernel' in name for name in cached), cached
 
 
+@pytest.mark.slow
 def test_warm_up_entry_point():
     out = _python('from rotation_node.conversions import warm_up; warm_up.main([])')
     assert out.startswith(f'rotation_node: {len(KERNELS)} kernels compiled or loaded')
@@ -379,6 +384,7 @@ def _announced(cache, after):
     return int(compiled), lines
 
 
+@pytest.mark.slow
 def test_a_start_that_compiles_kernels_says_so_once_and_a_cached_start_says_nothing(tmp_path):
     compiled, lines = _announced(tmp_path, after=0.0)   # an empty cache: both compile
     assert compiled == 2
@@ -387,5 +393,6 @@ def test_a_start_that_compiles_kernels_says_so_once_and_a_cached_start_says_noth
     assert _announced(tmp_path, after=0.0) == (0, [])   # loaded from the cache
 
 
+@pytest.mark.slow
 def test_a_compilation_shorter_than_the_delay_is_not_announced(tmp_path):
     assert _announced(tmp_path, after=600.0) == (2, [])
