@@ -16,6 +16,7 @@ A module belongs to the group of the longest name in ``LAYERS`` that it is or
 lies under, so that a new module of a package is placed with it.
 """
 import ast
+import functools
 import os
 
 import pytest
@@ -131,9 +132,15 @@ def _module_files():
 MODULES = _module_files()
 
 
+@functools.lru_cache(maxsize=None)
+def _parsed(path):
+    with open(path, encoding='utf-8') as source:
+        return ast.parse(source.read(), path)
+
+
 def _imported_names(module, path):
     """Return every name ``module`` imports (absolute, dotted), with the line of each."""
-    tree = ast.parse(open(path, encoding='utf-8').read(), path)
+    tree = _parsed(str(path))
     package = module if path.endswith('__init__.py') else module.rpartition('.')[0]
     found = []
     for node in ast.walk(tree):
@@ -281,8 +288,7 @@ def test_circles_are_found():
 
 @pytest.mark.parametrize('module', sorted(MODULES))
 def test_no_module_getattr(module):
-    tree = ast.parse(open(MODULES[module], encoding='utf-8').read())
-    names = {node.name for node in tree.body
+    names = {node.name for node in _parsed(MODULES[module]).body
              if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))}
     assert not names & {'__getattr__', '__dir__'}, (
         f'{module} defines a module __getattr__: import names from where they are defined')

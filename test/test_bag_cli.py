@@ -117,6 +117,7 @@ def test_convert_bad_input(workspace, capsys, monkeypatch, damage, args, match):
     assert _snapshot(workspace) == before
 
 
+@pytest.mark.slow
 def test_convert_writes_and_reports(workspace, capsys, monkeypatch):
     monkeypatch.chdir(workspace)
     status, stderr = _run(capsys, 'convert', 'imu.mcap', 'out.mcap', '--params', 'params.yaml')
@@ -223,6 +224,7 @@ def test_play_bad_input(workspace, args, match):
     assert _snapshot(workspace) == before
 
 
+@pytest.mark.slow
 def test_usage_error_exits_2():
     result = subprocess.run([script('rotation_bag'), 'convert', 'in.mcap'],
                             capture_output=True, text=True, timeout=60)

@@ -138,6 +138,7 @@ def test_two_bags_tf_against_odometry(tmp_path, streams):
     assert document['estimate']['path'] == str(estimate_bag)
 
 
+@pytest.mark.slow
 def test_given_offset_without_alignment(tmp_path, streams):
     """The same motion in both (no W, no M): --align none --time-offset keeps both as given."""
     truth = two_streams(52, duration=10.0, world=[0, 0, 0, 1], mounting=[0, 0, 0, 1],
@@ -168,6 +169,7 @@ def run_failing(capsys, args):
     return err
 
 
+@pytest.mark.slow
 def test_bad_input_is_one_line_and_writes_nothing(tmp_path, one_bag, streams, capsys):
     outputs = ['--json', str(tmp_path / 'r.json'), '--plot', str(tmp_path / 'r.png')]
     base = [str(one_bag), '--reference', '/mocap/pose']

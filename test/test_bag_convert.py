@@ -198,6 +198,7 @@ def test_refuses_to_overwrite_input_or_existing_output(tmp_path, rng):
     assert BagReader(output).message_counts['/imu/euler'] == 3
 
 
+@pytest.mark.slow
 def test_corrupt_chunk_leaves_no_output(tmp_path, rng):
     source, output = tmp_path / 'in.mcap', tmp_path / 'out.mcap'
     _write_bag(source, {'/imu': imu_messages(rng, 8000)})   # several chunks

@@ -190,6 +190,7 @@ def test_two_concurrent_converts_one_fails_with_one_line(workspace, tmp_path):
             == linear_scan(workspace / 'reference' / 'out.mcap'))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('disk', FULL_DISKS)
 def test_full_disk_is_one_line_and_leaves_nothing(workspace, tmp_path, monkeypatch, capsys,
                                                   disk):

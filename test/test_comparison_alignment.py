@@ -119,6 +119,7 @@ def test_one_rotation_fixed_to_the_identity(world, mounting):
         np.testing.assert_array_equal(found.mounting, IDENTITY)
 
 
+@pytest.mark.slow
 def test_a_given_time_offset_is_kept():
     streams = two_streams(32, duration=10.0, time_offset=0.05)
     found = comparison.estimate_alignment(streams.t_ref, streams.q_ref, streams.t_est,
@@ -210,6 +211,7 @@ def test_rotation_about_one_axis_only():
     assert angle_deg(found.world, streams.world) < 0.1
 
 
+@pytest.mark.slow
 def test_no_motion():
     streams = two_streams(42, duration=10.0, amplitude=0.0)
     with pytest.raises(DegenerateMotionError, match='too little motion'):

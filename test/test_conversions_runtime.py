@@ -33,6 +33,7 @@ _VIEWS = {0: njit(lambda a: samples(a, 0)), 3: njit(lambda a: samples(a, 3)),
           (3, 3): njit(lambda a: matrix_samples(a))}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('shape, width', [
     ((1,), 0), ((7,), 0), ((0,), 0), ((4,), 4), ((24,), 4), ((0,), 4), ((6,), 3),
     ((3, 3), 9), ((12, 3), 9), ((3, 3), (3, 3)), ((15, 3), (3, 3)), ((0, 3), (3, 3))])

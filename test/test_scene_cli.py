@@ -172,6 +172,7 @@ def test_signal_removes_the_part_and_says_so_on_one_line(long_scene, tmp_path, s
     assert os.listdir(tmp_path) == []
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('disk', FULL_DISKS)
 def test_full_disk_is_one_line_and_leaves_nothing(long_scene, tmp_path, monkeypatch, capsys,
                                                   disk):
