@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The two commands of the README:
 #   ./run.sh main [ARGS...]   create .venv if missing, run the built-in demo job
-#   ./run.sh test [ARGS...]   create .venv if missing, run the whole test suite
+#   ./run.sh test [ARGS...]   create .venv if missing, run the whole test suite in parallel
 # Everything is installed from PyPI into .venv (override with ROTATION_NODE_VENV);
 # tf2_msgs, which is not on PyPI, is built into it by tools/build_tf2_msgs.sh.
 set -euo pipefail
@@ -36,7 +36,11 @@ case "$cmd" in
     ;;
   test)
     ensure_env
-    exec "$venv/bin/python" -m pytest test "$@"
+    # Parallel workers (pytest-xdist), one per core, each in its own ROS domain; each
+    # test module runs on one worker (its module-scoped fixtures made once), the modules
+    # with slow tests first (test/conftest.py). The user's own -n (-n 0: serial) comes
+    # later and wins. No path: pytest runs setup.cfg's testpaths (test/), or the files given.
+    exec "$venv/bin/python" -m pytest -n auto --dist loadscope --no-loadscope-reorder "$@"
     ;;
   *)
     echo "usage: ./run.sh main [ARGS...] | ./run.sh test [PYTEST ARGS...]" >&2

@@ -2,9 +2,10 @@
 Test-session set-up shared by all test modules.
 
 ROS isolation: every pytest run gets its own ``ROS_DOMAIN_ID`` (derived from the
-process id, within the range that is valid for localhost discovery) and
-``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, set in ``os.environ`` before any
-test starts so that subprocesses started by tests inherit them.
+process id, within the range that is valid for localhost discovery; one per
+pytest-xdist worker) and ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, set in
+``os.environ`` before any test starts so that subprocesses started by tests
+inherit them.
 """
 import os
 import sys
@@ -18,9 +19,24 @@ settings.register_profile('ci', derandomize=True, deadline=None, print_blob=True
 if os.environ.get('CI'):
     settings.load_profile('ci')
 
-if 'ROTATION_NODE_TEST_DOMAIN_ID' not in os.environ:
-    os.environ['ROTATION_NODE_TEST_DOMAIN_ID'] = str(1 + os.getpid() % 100)
-os.environ['ROS_DOMAIN_ID'] = os.environ['ROTATION_NODE_TEST_DOMAIN_ID']
+
+def _domain_id():
+    """
+    Return this test process's ROS domain: the run's, or under pytest-xdist one per worker.
+
+    The run's domain (``ROTATION_NODE_TEST_DOMAIN_ID``, else from the process id) is set
+    in the environment the xdist workers inherit; worker ``gwN`` takes the N+1-th domain
+    after it, so that no two workers see each other's nodes. Domains 1..101 are valid
+    with ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``.
+    """
+    run = int(os.environ.setdefault('ROTATION_NODE_TEST_DOMAIN_ID', str(1 + os.getpid() % 101)))
+    worker = os.environ.get('PYTEST_XDIST_WORKER')   # 'gw0', 'gw1', ...
+    if worker is None:
+        return run
+    return 1 + (run + int(worker[2:])) % 101
+
+
+os.environ['ROS_DOMAIN_ID'] = str(_domain_id())
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('RCUTILS_COLORIZED_OUTPUT', '0')
 
@@ -34,3 +50,21 @@ def rng():
     """Seeded generator: every random test is reproducible."""
     import numpy as np
     return np.random.default_rng(20261121)
+
+
+def pytest_collection_modifyitems(config, items):
+    """
+    Under pytest-xdist, run the modules with the most slow tests first.
+
+    run.sh sends whole modules to the workers (``--dist loadscope``: a module-scoped
+    fixture, such as a converted bag or a built package, is made once) in this order
+    (``--no-loadscope-reorder``), so that no long module starts last while the other
+    worker is idle.
+    """
+    if os.environ.get('PYTEST_XDIST_WORKER') is None:
+        return
+    slow = {}
+    for item in items:
+        slow[item.module.__name__] = (slow.get(item.module.__name__, 0)
+                                      + (item.get_closest_marker('slow') is not None))
+    items.sort(key=lambda item: -slow[item.module.__name__])   # stable: within a module as it was

@@ -77,6 +77,7 @@ def test_output_names():
         batch_output_paths(['a/x.mcap', 'b/x.bag'], 'out')
 
 
+@pytest.mark.slow
 def test_parallel_processes_one_line_per_bag_and_a_bad_bag_fails_alone(
         tmp_path, inputs, capsys):
     expected = _expected_outputs(tmp_path, inputs)
@@ -118,6 +119,7 @@ def test_good_bags_exit_zero(tmp_path, inputs, capsys):
     assert {index.compression for index in summary.chunk_indexes} == {'lz4'}
 
 
+@pytest.mark.slow
 def test_same_tasks_on_a_dask_local_cluster(tmp_path, inputs):
     """The documented Dask route: every bag a task on worker processes, bounded waits."""
     from distributed import Client, LocalCluster
@@ -155,6 +157,7 @@ def damaged_in_the_middle(tmp_path, rng):
     return [(str(path), good) for path, good in bags]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('jobs', ['1', '2'])
 def test_a_damaged_bag_in_the_middle_stops_nothing(tmp_path, damaged_in_the_middle, capsys,
                                                    jobs):

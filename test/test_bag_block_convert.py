@@ -154,6 +154,7 @@ _parameters = st.fixed_dictionaries({
 })
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('input_type', PLAIN_INPUTS)
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(data=st.data())
@@ -198,6 +199,7 @@ def test_every_effect_scene_matches_the_per_message_pipeline(every_effect_bag, v
     assert sum(map(len, outputs)) == stats.published
 
 
+@pytest.mark.slow
 def test_convert_writes_the_same_messages_in_blocks(every_effect_bag, tmp_path):
     params = NodeParameters(input_type='imu', outputs=_outputs_for('imu'), euler_unwrap=True)
     stats = {}

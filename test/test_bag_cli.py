@@ -83,6 +83,7 @@ def _run(capsys, *argv):
     return status, capsys.readouterr().err
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('damage, args, match', [
     (None, ['missing.mcap', 'out.mcap', '--params', 'params.yaml'],
      'cannot open bag missing.mcap'),
@@ -117,6 +118,7 @@ def test_convert_bad_input(workspace, capsys, monkeypatch, damage, args, match):
     assert _snapshot(workspace) == before
 
 
+@pytest.mark.slow
 def test_convert_writes_and_reports(workspace, capsys, monkeypatch):
     monkeypatch.chdir(workspace)
     status, stderr = _run(capsys, 'convert', 'imu.mcap', 'out.mcap', '--params', 'params.yaml')
@@ -127,6 +129,7 @@ def test_convert_writes_and_reports(workspace, capsys, monkeypatch):
                                          '/imu/angular_velocity': 8000}
 
 
+@pytest.mark.slow
 def test_convert_notes_what_a_damaged_chunk_held(workspace, capsys, monkeypatch):
     """Zeroed bytes were a silent loss: fewer messages, exit 0, no note (also with --strict)."""
     monkeypatch.chdir(workspace)
@@ -149,6 +152,7 @@ def test_convert_notes_what_a_damaged_chunk_held(workspace, capsys, monkeypatch)
     assert _snapshot(workspace) == before
 
 
+@pytest.mark.slow
 def test_plot_default_name_and_bad_topic(workspace, capsys, monkeypatch):
     monkeypatch.chdir(workspace)
     assert _run(capsys, 'convert', 'imu.mcap', 'out.mcap', '--params', 'params.yaml')[0] == 0
@@ -197,6 +201,7 @@ def test_compare_usage_errors_exit_2(capsys, option):
     assert f'argument {option[0]}' in capsys.readouterr().err
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('args, match', [
     (['missing.mcap'], 'cannot open bag missing.mcap'),
     (['imu.mcap', '--topics', '/nope'], 'topic /nope not in imu.mcap'),
@@ -220,6 +225,7 @@ def test_play_bad_input(workspace, args, match):
     assert _snapshot(workspace) == before
 
 
+@pytest.mark.slow
 def test_usage_error_exits_2():
     result = subprocess.run([script('rotation_bag'), 'convert', 'in.mcap'],
                             capture_output=True, text=True, timeout=60)

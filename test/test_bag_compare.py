@@ -98,6 +98,7 @@ def check_against_truth(document, streams):
     assert len(document['per_axis_error_deg']['max']) == 3
 
 
+@pytest.mark.slow
 def test_one_bag_pose_against_imu(tmp_path, one_bag, streams, capsys):
     json_path, png = tmp_path / 'result.json', tmp_path / 'result.png'
     status = cli.main(['compare', str(one_bag), '--reference', '/mocap/pose', '--estimate',
@@ -118,6 +119,7 @@ def test_one_bag_pose_against_imu(tmp_path, one_bag, streams, capsys):
     assert sorted(os.listdir(tmp_path)) == ['result.json', 'result.png']
 
 
+@pytest.mark.slow
 def test_two_bags_tf_against_odometry(tmp_path, streams):
     reference_bag, estimate_bag = tmp_path / 'mocap.mcap', tmp_path / 'robot'
     with BagWriter(reference_bag) as writer:
@@ -136,6 +138,7 @@ def test_two_bags_tf_against_odometry(tmp_path, streams):
     assert document['estimate']['path'] == str(estimate_bag)
 
 
+@pytest.mark.slow
 def test_given_offset_without_alignment(tmp_path, streams):
     """The same motion in both (no W, no M): --align none --time-offset keeps both as given."""
     truth = two_streams(52, duration=10.0, world=[0, 0, 0, 1], mounting=[0, 0, 0, 1],
@@ -166,6 +169,7 @@ def run_failing(capsys, args):
     return err
 
 
+@pytest.mark.slow
 def test_bad_input_is_one_line_and_writes_nothing(tmp_path, one_bag, streams, capsys):
     outputs = ['--json', str(tmp_path / 'r.json'), '--plot', str(tmp_path / 'r.png')]
     base = [str(one_bag), '--reference', '/mocap/pose']
@@ -178,6 +182,7 @@ def test_bad_input_is_one_line_and_writes_nothing(tmp_path, one_bag, streams, ca
     assert os.listdir(tmp_path) == []
 
 
+@pytest.mark.slow
 def test_degenerate_motion_is_refused(tmp_path, capsys):
     truth = two_streams(53, duration=10.0, axes=(0.0, 0.0, 1.0))
     bag = tmp_path / 'yaw.mcap'
@@ -200,6 +205,7 @@ def test_alignment_choices_are_the_same_in_the_cli():
     assert cli.ALIGN_CHOICES == compare.ALIGN_CHOICES
 
 
+@pytest.mark.slow
 def test_unknown_and_zero_orientations_are_dropped(tmp_path, streams, capsys):
     bag = tmp_path / 'gaps.mcap'
     with BagWriter(bag) as writer:
@@ -222,6 +228,7 @@ def test_unknown_and_zero_orientations_are_dropped(tmp_path, streams, capsys):
     check_against_truth(json.loads(json_path.read_text()), streams)
 
 
+@pytest.mark.slow
 def test_euler_angles_of_the_parameters_sequence(tmp_path, streams):
     params = tmp_path / 'params.yaml'
     params.write_text('rotation_node:\n  ros__parameters:\n'
@@ -256,6 +263,7 @@ def scene_bag(tmp_path_factory):
     return bag, json.loads((directory / 'mocap.mcap.truth.json').read_text())
 
 
+@pytest.mark.slow
 def test_scene_truth_is_recovered_within_a_bounded_search(tmp_path, scene_bag, capsys):
     bag, truth = scene_bag
     result = tmp_path / 'result.json'
@@ -277,6 +285,7 @@ def test_scene_truth_is_recovered_within_a_bounded_search(tmp_path, scene_bag, c
     assert abs(document['error_deg']['rmse'] - expected_rms) < 0.1 * expected_rms
 
 
+@pytest.mark.slow
 def test_a_motion_that_repeats_makes_the_offset_ambiguous(scene_bag, capsys):
     """A free body's motion repeats up to a world rotation: W absorbs a shift by a period."""
     bag, truth = scene_bag

@@ -8,13 +8,13 @@ into a running ``rotation_node``, records its outputs and checks that
 """
 import operator
 import os
-import subprocess
 
 from bag_helpers import imu_messages, plain, stamp_ns
 import pytest
 from rclpy.duration import Duration
 from rclpy.qos import QoSProfile
 from ros_harness import make_input_message, PLAIN_INPUT_TYPES, RosProcess, script, TestNode
+from rotation_node.bag.cli import main as cli_main
 from rotation_node.bag.convert import convert, output_topic
 from rotation_node.bag.reading.mcap_reader import BagReader
 from rotation_node.bag.writing.writer import BagWriter
@@ -198,6 +198,7 @@ def test_refuses_to_overwrite_input_or_existing_output(tmp_path, rng):
     assert BagReader(output).message_counts['/imu/euler'] == 3
 
 
+@pytest.mark.slow
 def test_corrupt_chunk_leaves_no_output(tmp_path, rng):
     source, output = tmp_path / 'in.mcap', tmp_path / 'out.mcap'
     _write_bag(source, {'/imu': imu_messages(rng, 8000)})   # several chunks
@@ -209,6 +210,7 @@ def test_corrupt_chunk_leaves_no_output(tmp_path, rng):
     assert os.listdir(tmp_path) == ['in.mcap'] and source.read_bytes() == bytes(data)
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(180)
 def test_live_node_round_trip_equals_convert(tmp_path, rng):
     """``record`` a publisher -> play into rotation_node -> record its outputs == convert."""
@@ -258,10 +260,9 @@ def test_live_node_round_trip_equals_convert(tmp_path, rng):
             assert recorder.stop() == 0, recorder.output
             assert node.stop() == 0, node.output
 
-    # 3. Convert the recorded input offline and compare.
-    result = subprocess.run([script('rotation_bag'), 'convert', recorded_input, converted,
-                             '--params', params_file], capture_output=True, text=True, timeout=120)
-    assert result.returncode == 0, result.stderr
+    # 3. Convert the recorded input offline (the command, in-process) and compare.
+    assert cli_main(['convert', str(recorded_input), str(converted),
+                     '--params', str(params_file)]) == 0
     for topic in output_topics:
         live, offline = _outputs(recorded_output, topic), _outputs(converted, topic)
         assert len(live) == len(offline) == count
@@ -270,6 +271,7 @@ def test_live_node_round_trip_equals_convert(tmp_path, rng):
         assert _output_bytes(recorded_output, topic) == _output_bytes(converted, topic)
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(180)
 def test_px4_imu_with_covariance_live_node_equals_convert(tmp_path, rng):
     """An NED/FRD Imu stream with covariance: live rotation_node == rotation_bag convert."""
@@ -309,10 +311,7 @@ def test_px4_imu_with_covariance_live_node_equals_convert(tmp_path, rng):
             client.spin_for(0.3)
             assert node.stop() == 0, node.output
 
-    result = subprocess.run([script('rotation_bag'), 'convert', source, converted,
-                             '--params', params_file],
-                            capture_output=True, text=True, timeout=120)
-    assert result.returncode == 0, result.stderr
+    assert cli_main(['convert', str(source), str(converted), '--params', str(params_file)]) == 0
     for name in outputs:
         live = [(stamp_ns(m), plain(m)) for m in received[name]]
         offline = _outputs(converted, f'/imu/{name}')

@@ -217,6 +217,7 @@ def test_parquet_with_a_pyarrow_that_does_not_load_is_one_line(
     assert _listing(tmp_path) == before
 
 
+@pytest.mark.slow
 def test_parquet_holds_the_csvs_values(imu_bag, tmp_path):
     import pyarrow.parquet as pq  # in requirements.txt: the test suite has it
     path, _ = imu_bag

@@ -34,6 +34,7 @@ def results(sources, tmp_path_factory):
                                  str(tmp_path_factory.mktemp('fuzz_runs')))
 
 
+@pytest.mark.slow
 def test_layouts_tile_the_files_and_find_every_stored_message(sources):
     """The parsers that place the length-field damage read the files as their writers wrote."""
     for source in sources.values():
@@ -52,6 +53,7 @@ def test_layouts_tile_the_files_and_find_every_stored_message(sources):
         assert all(offset + width <= len(data) for offset, width, _, _ in layout.lengths)
 
 
+@pytest.mark.slow
 def test_the_corpus_is_seeded_and_damages_its_inputs(sources, tmp_path):
     cases = fuzz_corpus.corpus(sources)
     assert len(cases) >= 250
@@ -72,6 +74,7 @@ def test_the_corpus_is_seeded_and_damages_its_inputs(sources, tmp_path):
             assert digest != untouched, case.case_id
 
 
+@pytest.mark.slow
 def test_undamaged_bags_are_read_whole(results):
     """The control of the classification: every source as written converts, plays, plots clean."""
     controls = [r for r in results if r['damage'] == 'none']
@@ -84,6 +87,7 @@ def test_undamaged_bags_are_read_whole(results):
         written['/imu'] if r['command'] == 'plot' else sum(written.values()))] == []
 
 
+@pytest.mark.slow
 def test_the_independent_readers_stop_where_a_file_is_cut(sources, tmp_path):
     for name in ('mcap-none', 'mcap-none-unchunked'):   # (rosbags' readers need an index)
         source = sources[name]
@@ -95,6 +99,7 @@ def test_the_independent_readers_stop_where_a_file_is_cut(sources, tmp_path):
         assert 0 < sum(counts.values()) < sum(fuzz_corpus.WRITTEN.values()), name
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('command', COMMANDS)
 @pytest.mark.parametrize('bag_format', FORMATS)
 def test_damaged_bags_end_in_one_line_or_a_note(results, bag_format, command):
@@ -107,6 +112,7 @@ def test_damaged_bags_end_in_one_line_or_a_note(results, bag_format, command):
         + fuzz_corpus.failure_summary(failed))
 
 
+@pytest.mark.slow
 def test_the_outcome_table_counts_every_run_once(results):
     for command in COMMANDS:
         rows = [line.split('|')[1:-1] for line in
@@ -147,6 +153,7 @@ def test_each_outcome_is_classified_as_what_it_is(
     assert klass == expected
 
 
+@pytest.mark.slow
 def test_a_crash_or_a_hang_costs_one_case_and_the_next_runs(sources, tmp_path, monkeypatch):
     cases = [case for case in fuzz_corpus.corpus(sources) if case.damage == 'truncate'][:3]
     real_run_case = fuzz_corpus.run_case

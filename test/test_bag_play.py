@@ -36,6 +36,7 @@ def _raw_collector(client, topic):
     return received
 
 
+@pytest.mark.slow
 def test_rate_zero_delivers_every_message_byte_exact(tmp_path, rng):
     count = 3000
     path = tmp_path / 'burst.mcap'
@@ -51,6 +52,7 @@ def test_rate_zero_delivers_every_message_byte_exact(tmp_path, rng):
     assert f'published {count} messages' in player.output
 
 
+@pytest.mark.slow
 def test_rate_scales_recorded_timing_with_recorded_qos(tmp_path, rng):
     """Gaps between received messages = recorded gaps / rate (first ones may precede discovery)."""
     period_ns, rate = 50_000_000, 2.0
@@ -81,6 +83,7 @@ def test_rate_scales_recorded_timing_with_recorded_qos(tmp_path, rng):
     assert np.all(np.diff([i for _, i in arrivals]) == 1)   # in order, none skipped
 
 
+@pytest.mark.slow
 def test_topics_filter(tmp_path, rng):
     path = tmp_path / 'two.mcap'
     with BagWriter(path) as writer:
@@ -99,6 +102,7 @@ def test_topics_filter(tmp_path, rng):
     assert imus == []
 
 
+@pytest.mark.slow
 def test_loop_repeats_until_interrupted(tmp_path, rng):
     path = tmp_path / 'short.mcap'
     _imu_bag(path, imu_messages(rng, 5))
@@ -111,6 +115,7 @@ def test_loop_repeats_until_interrupted(tmp_path, rng):
     assert [stamp_ns(m) for m in received[:15]] == [stamp_ns(m) for m in received[:5]] * 3
 
 
+@pytest.mark.slow
 def test_wait_for_subscribers_at_recorded_rate_loses_nothing(tmp_path, rng):
     """The player starts first; it waits for the late subscriber, then plays every message."""
     count = 50
@@ -128,6 +133,7 @@ def test_wait_for_subscribers_at_recorded_rate_loses_nothing(tmp_path, rng):
         assert received == [r.data for r in reader.messages()]
 
 
+@pytest.mark.slow
 def test_negative_delay_is_rejected_before_anything_is_published(tmp_path, rng):
     path = tmp_path / 'some.mcap'
     _imu_bag(path, imu_messages(rng, 3))

@@ -36,6 +36,7 @@ def converted(tmp_path_factory):
     return output
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('topic, panels', [
     ('/imu', 2),
     *[(f'/imu/{name}', 2 if name in ('axis_angle', 'euler_covariance') else 1)
@@ -60,6 +61,7 @@ def test_bad_topic_leaves_no_file(tmp_path, converted, topic, match):
     assert os.listdir(tmp_path) == []
 
 
+@pytest.mark.slow
 def test_refuses_to_overwrite(tmp_path, converted):
     png = tmp_path / 'plot.png'
     png.write_bytes(b'old')
@@ -73,6 +75,7 @@ def test_refuses_to_overwrite(tmp_path, converted):
 PLAIN_INPUTS = [name for name, entry in registry.INPUTS.items() if entry.stream is None]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('input_type', PLAIN_INPUTS)
 def test_every_input_type_is_drawn_as_euler_angles_with_gaps(tmp_path, rng, input_type):
     """The orientation of any input, as Euler angles (scipy), NaN where unknown or invalid."""

@@ -120,6 +120,7 @@ def _layouts(chunking):
             yield name, dict(chunking=chunking, index_types=index_types, **options)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('chunking', CHUNKINGS)
 def test_every_layout_reads_every_message_exactly(tmp_path, chunking):
     """128 layouts per chunking; files with messages, with channels only, with nothing."""
@@ -327,6 +328,7 @@ def _outcomes_in_a_child(paths, strict, limit_bytes=512 << 20):
     return outcomes
 
 
+@pytest.mark.slow
 def test_lengths_past_the_end_never_allocate_and_are_said(tmp_path):
     """A MemoryError, an OverflowError: what these lengths gave; now a note, or one line."""
     rows, paths = _damaged_files(tmp_path)

@@ -92,6 +92,7 @@ def test_reader_returns_every_message(mixed_bag):
     reader.close()
 
 
+@pytest.mark.slow
 def test_rosbags_anyreader_reads_every_field(mixed_bag):
     path, rows = mixed_bag
     with AnyReader([pathlib.Path(path)]) as reader:   # no type store: definitions from the bag
@@ -426,6 +427,7 @@ def test_qos_yaml_from_bag_parses_to_profiles(mixed_bag):
     assert profile.depth == 7 and profile.lifespan.nanoseconds == 1_000_000_500
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('compression', ['ZSTD', 'LZ4'])
 def test_reads_compressed_chunks_and_detects_their_damage(tmp_path, rng, compression):
     """rosbag2's zstd presets (and other writers) compress chunks."""
@@ -454,6 +456,7 @@ def test_reads_compressed_chunks_and_detects_their_damage(tmp_path, rng, compres
         assert 'does not decompress' in reader.notes[0] or 'CRC' in reader.notes[0]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('layout', ['in_order', 'overlapping', 'equal_boundaries'])
 def test_reading_gives_the_mcap_library_log_time_order(tmp_path, layout):
     """Chunk after chunk where chunks do not overlap, else through mcap's heap: the same order."""

@@ -91,6 +91,7 @@ def test_rosbag2_directory_and_its_storage_file_read_byte_for_byte(tmp_path, row
         assert file_records == records and file_bag.compression == bag.compression
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('storage, mode', LAYOUTS, ids=LAYOUT_IDS)
 def test_split_bag_is_one_stream_and_converts_as_unsplit(tmp_path, rows, storage, mode):
     split = write_split_rosbag2(tmp_path / 'split', rows, 3, storage=storage, compression=mode)
@@ -303,6 +304,7 @@ def test_bad_input_is_one_line_exit_1_nothing_written(tmp_path, capsys, rows, na
         assert file_snapshot(tmp_path) == before
 
 
+@pytest.mark.slow
 def test_play_maps_invalid_topic_names_and_does_not_die(tmp_path, rows):
     """Play publishes /imu-raw as /imu_raw with a note, never InvalidTopicNameException."""
     renamed = [('/imu-raw' if t == '/imu' else t, *rest) for t, *rest in rows[:30]]
@@ -314,6 +316,7 @@ def test_play_maps_invalid_topic_names_and_does_not_die(tmp_path, rows):
     assert 'Traceback' not in result.stderr and 'Exception' not in result.stderr
 
 
+@pytest.mark.slow
 def test_relative_topic_names_stay_relative(tmp_path, rows, capsys):
     """``groundtruth`` (evo's example bag) is a name rclpy accepts: kept, outputs beside it."""
     relative = [('groundtruth' if t == '/imu' else t, *rest) for t, *rest in rows]

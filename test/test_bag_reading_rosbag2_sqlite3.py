@@ -121,6 +121,7 @@ def test_a_damaged_database_is_one_line_naming_the_row(tmp_path, capsys, bag, da
         assert file_snapshot(tmp_path) == before
 
 
+@pytest.mark.slow
 def test_play_stops_at_a_damaged_row_with_one_line(bag):
     """The row is reached while playing: one line, exit status 1, no traceback."""
     path, _ = bag

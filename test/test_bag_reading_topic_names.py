@@ -47,6 +47,7 @@ def test_examples(name, mapped):
     assert _rclpy_accepts(mapped)
 
 
+@pytest.mark.slow
 @given(st.text(max_size=40))
 def test_every_name_maps_to_a_name_rclpy_accepts_and_valid_names_stay(name):
     mapped = ros2_topic_name(name)

@@ -17,7 +17,7 @@ from rotation_node.wire.qos import qos_profiles_from_yaml
 from sensor_msgs.msg import Imu
 from std_msgs.msg import String
 
-pytestmark = pytest.mark.timeout(120)
+pytestmark = [pytest.mark.timeout(120), pytest.mark.slow]   # starts processes
 
 
 def _record(path, *args):

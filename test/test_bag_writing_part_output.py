@@ -76,6 +76,7 @@ def _size(path):
         return 0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('seed', [1])
 def test_sigkill_leaves_a_part_holding_a_prefix_of_the_bag(workspace, tmp_path, seed):
     reference = (workspace / 'reference' / 'out.mcap').read_bytes()
@@ -110,6 +111,7 @@ def _sigterm_once_written(process, storage_file):
     return stderr
 
 
+@pytest.mark.slow
 def test_sigterm_removes_the_part_and_says_so_on_one_line(workspace, tmp_path):
     process = _convert(workspace, tmp_path / 'out')
     stderr = _sigterm_once_written(process, tmp_path / 'out.part' / 'out_0.mcap')
@@ -118,6 +120,7 @@ def test_sigterm_removes_the_part_and_says_so_on_one_line(workspace, tmp_path):
     assert os.listdir(tmp_path) == []
 
 
+@pytest.mark.slow
 def test_sigterm_at_any_moment_leaves_nothing_or_the_complete_bag(workspace, tmp_path):
     """SIGTERM spread over a whole run: 143, one line and nothing; or the complete output."""
     reference = linear_scan(workspace / 'reference' / 'out.mcap')
@@ -146,6 +149,7 @@ def test_sigterm_at_any_moment_leaves_nothing_or_the_complete_bag(workspace, tmp
     assert 143 in outcomes, 'no run was interrupted'
 
 
+@pytest.mark.slow
 def test_sigterm_stops_a_many_bag_convert_and_its_workers(workspace, tmp_path):
     """SIGTERM to ``convert A B C OUTDIR --jobs 2``: the workers stop too, no .part is left."""
     inputs = []
@@ -170,6 +174,7 @@ def test_sigterm_stops_a_many_bag_convert_and_its_workers(workspace, tmp_path):
         assert sorted(os.listdir(many / name)) == ['metadata.yaml', f'{name}_0.mcap']
 
 
+@pytest.mark.slow
 def test_two_concurrent_converts_one_fails_with_one_line(workspace, tmp_path):
     output = tmp_path / 'same'
     processes = [_convert(workspace, output) for _ in range(2)]
@@ -185,6 +190,7 @@ def test_two_concurrent_converts_one_fails_with_one_line(workspace, tmp_path):
             == linear_scan(workspace / 'reference' / 'out.mcap'))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('disk', FULL_DISKS)
 def test_full_disk_is_one_line_and_leaves_nothing(workspace, tmp_path, monkeypatch, capsys,
                                                   disk):
@@ -226,6 +232,7 @@ def test_rename_replacing_swaps_files_and_directories(tmp_path):
     assert os.listdir(tmp_path) == ['old'] and (tmp_path / 'old').read_text() == 'file'
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('option, expected', [(None, 'lz4'), ('zstd', 'zstd'), ('none', '')])
 def test_convert_compresses_as_its_input_unless_told(workspace, tmp_path, option, expected):
     source = tmp_path / 'lz4.mcap'

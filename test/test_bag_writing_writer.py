@@ -156,6 +156,7 @@ def test_failure_removes_the_part_unless_keep_unfinished(tmp_path, rng):
     assert len(linear_scan(tmp_path / 'kept.mcap.part')) == 50
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('disk', FULL_DISKS)
 def test_full_disk_keeps_a_valid_bag_of_what_was_written(tmp_path, rng, monkeypatch, disk):
     limit = 256 * 1024
@@ -231,6 +232,7 @@ def test_metadata_yaml_qos_profiles_are_read_by_rosbags(tmp_path):
     assert (qos.deadline.sec, qos.deadline.nsec) == (2, 5)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not can_mount(), reason='needs a tmpfs mount (root)')
 @pytest.mark.parametrize('keep_unfinished', [True, False])
 def test_full_disk_without_reservation_is_a_write_error(tmp_path, rng, monkeypatch,
@@ -269,6 +271,7 @@ def _serialized(rng, count):
     return messages
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('compression', ['zstd', 'lz4', 'none'])
 def test_block_writes_the_bytes_of_message_by_message(tmp_path, rng, monkeypatch, compression):
     monkeypatch.setattr(writer_module, 'CHUNK_SIZE', 8192)
@@ -340,6 +343,7 @@ def test_live_recording_writes_a_chunk_every_period(tmp_path, monkeypatch):
         (3 * 10**9, 3_490_000_000)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('compression', ['zstd', 'none'])
 def test_reservations_cover_every_chunk_and_the_close(tmp_path, rng, monkeypatch, compression):
     """Each reservation covers the chunk written after it and everything written to close."""

@@ -26,6 +26,7 @@ def as_list(statistics):
             *statistics.axis_rmse]
 
 
+@pytest.mark.slow
 def test_sixty_seconds_at_a_third_of_a_degree():
     """The issue's case: 100 Hz reference, 200 Hz estimate, 0.3 deg noise on both."""
     streams = two_streams(11, duration=60.0, rate_ref=100.0, rate_est=200.0, noise_ref_deg=0.3,
@@ -46,6 +47,7 @@ def test_sixty_seconds_at_a_third_of_a_degree():
     np.testing.assert_allclose(as_list(estimated), as_list(true), rtol=0.05)
 
 
+@pytest.mark.slow
 def test_time_offset_std_counts_the_estimate_noise_its_fit_smooths():
     """
     Over draws of estimate noise, the time offset errors spread as much as its std says.
@@ -66,6 +68,7 @@ def test_time_offset_std_counts_the_estimate_noise_its_fit_smooths():
     assert 0.6 < ratio < 1.3
 
 
+@pytest.mark.slow
 def test_error_statistics_are_the_injected_noise():
     """With a noise-free estimate the errors are the reference's noise (reversed)."""
     streams = two_streams(12, duration=30.0, noise_ref_deg=0.3, noise_est_deg=0.0,
@@ -78,6 +81,7 @@ def test_error_statistics_are_the_injected_noise():
                                as_list(injected) + [injected.maximum], rtol=0.05)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('seed, duration, rate_ref, rate_est, noise_deg, offset, start', [
     (21, 20.0, 50.0, 100.0, 1.0, 0.25, 0.0),
     (22, 30.0, 120.0, 400.0, 0.1, -0.0042, 1.7e4),
@@ -97,6 +101,7 @@ def test_rates_lengths_and_noise(seed, duration, rate_ref, rate_est, noise_deg, 
         assert angle_deg(estimate, truth) < 0.3
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('world, mounting', [(True, False), (False, True), (False, False)])
 def test_one_rotation_fixed_to_the_identity(world, mounting):
     streams = two_streams(31, duration=10.0, time_offset=0.11,
@@ -114,6 +119,7 @@ def test_one_rotation_fixed_to_the_identity(world, mounting):
         np.testing.assert_array_equal(found.mounting, IDENTITY)
 
 
+@pytest.mark.slow
 def test_a_given_time_offset_is_kept():
     streams = two_streams(32, duration=10.0, time_offset=0.05)
     found = comparison.estimate_alignment(streams.t_ref, streams.q_ref, streams.t_est,
@@ -176,6 +182,7 @@ def test_pairs_least_squares_against_a_brute_force_search(rng):
     assert np.argmin(costs) == len(grid) // 2   # the centre: no step of the grid is better
 
 
+@pytest.mark.slow
 def test_pairs_with_both_rotations_against_a_general_minimiser(rng):
     world, mounting = Rotation.random(2, random_state=rng).as_quat()
     q_ref, q_est = pairs(rng, 8, 5.0, world, mounting)
@@ -191,6 +198,7 @@ def test_pairs_with_both_rotations_against_a_general_minimiser(rng):
     assert cost(np.zeros(6)) <= result.fun + 1e-14
 
 
+@pytest.mark.slow
 def test_rotation_about_one_axis_only():
     streams = two_streams(41, duration=10.0, axes=(0.0, 0.0, 1.0))
     with pytest.raises(DegenerateMotionError, match='cannot be told apart'):
@@ -203,6 +211,7 @@ def test_rotation_about_one_axis_only():
     assert angle_deg(found.world, streams.world) < 0.1
 
 
+@pytest.mark.slow
 def test_no_motion():
     streams = two_streams(42, duration=10.0, amplitude=0.0)
     with pytest.raises(DegenerateMotionError, match='too little motion'):

@@ -7,6 +7,7 @@ from rotation_node.errors import ComparisonError, DegenerateMotionError
 from scipy.spatial.transform import Rotation
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('seed, offset, rate_ref, rate_est, noise_deg', [
     (1, 0.0373, 100.0, 200.0, 0.3),
     (2, -0.4125, 120.0, 400.0, 0.3),

@@ -91,6 +91,7 @@ def test_rotation_vector_from_matrix_near_pi(rng):
     assert max(errors) <= BOUND
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(v=arrays(np.float64, 3, elements=st.floats(-3.0, 3.0)))
 def test_exp_log_round_trip(v):

@@ -220,6 +220,7 @@ def test_leading_dimensions_are_kept(rng):
     assert rc.euler_singularity_margin(q, 'zyx').shape == (2, 3, 5)
 
 
+@pytest.mark.slow
 @settings(max_examples=150, deadline=None)
 @given(q=arrays(np.float64, 4, elements=st.floats(-1, 1)).filter(lambda q: np.abs(q).max() > 1e-6),
        seq=st.sampled_from(SEQUENCES))
@@ -241,6 +242,7 @@ def test_batch_schedule_is_as_exact_as_the_fused_kernel(rng, seq):
         <= ROUND_TRIP * mpr.EPS
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('seq', ['xyz', 'ZXZ', 'zyz', 'YXZ'])
 def test_batch_schedule_is_the_scalar_formulas_with_the_branch_free_atan2(rng, seq):
     # The batch differs from single samples only in its atan2 (0.8 ulp, branch-free):
@@ -348,6 +350,7 @@ _NEAR_STEP = st.tuples(st.integers(-4, 4), st.integers(-2, 2)).map(
     kn[0] * (np.pi / 2))
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(angles=st.tuples(_NEAR_STEP, _NEAR_STEP, _NEAR_STEP), seq=st.sampled_from(SEQUENCES),
        through_matrix=st.booleans())

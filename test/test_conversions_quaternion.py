@@ -91,6 +91,7 @@ def test_distance_of_a_rotation_to_itself_is_exactly_zero(rng):
     assert all(rc.quaternion_distance(x, s * x) == 0.0 for x in q[::50] for s in (1.0, -1.0))
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(q=nonzero_quaternions, sign=st.sampled_from([1.0, -1.0]))
 def test_distance_to_the_same_or_negated_quaternion_is_zero(q, sign):
@@ -104,6 +105,7 @@ def test_rotate_vector_matches_matrix(rng):
     assert np.allclose(rc.rotate_vector(q, v), expected, atol=1e-14)
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(p=nonzero_quaternions, q=nonzero_quaternions)
 def test_distance_is_symmetric_and_bounded(p, q):

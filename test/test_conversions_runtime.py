@@ -37,6 +37,7 @@ _VIEWS = {0: njit(lambda a: samples(a, 0)), 3: njit(lambda a: samples(a, 3)),
           (3, 3): njit(lambda a: matrix_samples(a))}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('shape, width', [
     ((1,), 0), ((7,), 0), ((0,), 0), ((4,), 4), ((24,), 4), ((0,), 4), ((6,), 3),
     ((3, 3), 9), ((12, 3), 9), ((3, 3), (3, 3)), ((15, 3), (3, 3)), ((0, 3), (3, 3))])
@@ -302,6 +303,7 @@ def _python(code, env=None):
     return result.stdout
 
 
+@pytest.mark.slow
 def test_importing_conversions_loads_nothing_beyond_numpy():
     out = _python('import sys, numpy\n'
                   'before = set(sys.modules)\n'
@@ -346,6 +348,7 @@ def test_a_kernel_is_loaded_once_it_has_run_interpreted_for_as_long_as_a_load_ta
     assert out.tolist() == [-0.1, -0.2, -0.3, 0.9]
 
 
+@pytest.mark.slow
 def test_the_first_call_does_not_import_scipy_linalg_and_numba_linear_algebra_still_works():
     """The BLAS probe is answered without importing scipy.linalg; np.dot still compiles."""
     out = _python('import importlib.util, sys\n'
@@ -364,6 +367,7 @@ def test_the_first_call_does_not_import_scipy_linalg_and_numba_linear_algebra_st
     assert out.split() == ['False', 'True', 'numba.np.linalg', 'True']
 
 
+@pytest.mark.slow
 def test_numba_registries_loaded_before_the_first_call_are_left_as_they_are():
     out = _python('import sys\n'
                   'import numba.np.arraymath\n'
@@ -376,6 +380,7 @@ def test_numba_registries_loaded_before_the_first_call_are_left_as_they_are():
     assert out.split() == ['True', str(importlib.util.find_spec('scipy') is not None)]
 
 
+@pytest.mark.slow
 def test_kernels_are_cached_in_the_user_cache_where_the_package_is_read_only(tmp_path):
     """Where the in-tree cache is unusable (a system install), the user-wide one is used."""
     env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path), ROTATION_NODE_COMPILED='1')
@@ -394,6 +399,7 @@ def test_kernels_are_cached_in_the_user_cache_where_the_package_is_read_only(tmp
     assert any('_quaternion_derivative_kernel' in name for name in cached), cached
 
 
+@pytest.mark.slow
 def test_warm_up_entry_point():
     out = _python('from rotation_node.conversions import warm_up; warm_up.main([])')
     # the library's kernels (this process may also hold kernels of modules above it)
@@ -425,6 +431,7 @@ def _announced(cache, after):
     return int(compiled), lines
 
 
+@pytest.mark.slow
 def test_a_start_that_compiles_kernels_says_so_once_and_a_cached_start_says_nothing(tmp_path):
     compiled, lines = _announced(tmp_path, after=0.0)   # an empty cache: both compile
     assert compiled == 2
@@ -433,6 +440,7 @@ def test_a_start_that_compiles_kernels_says_so_once_and_a_cached_start_says_noth
     assert _announced(tmp_path, after=0.0) == (0, [])   # loaded from the cache
 
 
+@pytest.mark.slow
 def test_a_compilation_shorter_than_the_delay_is_not_announced(tmp_path):
     assert _announced(tmp_path, after=600.0) == (2, [])
 

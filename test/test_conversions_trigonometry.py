@@ -23,6 +23,7 @@ def _angles(rng):
         10.0 ** rng.uniform(5.8, 308, 200) * rng.choice([-1, 1], 200)])
 
 
+@pytest.mark.slow
 def test_sin_cos_is_accurate(rng):
     for a in _angles(rng):
         got = sin_cos(a)
@@ -40,6 +41,7 @@ def test_sin_cos_keeps_signs_and_symmetry(rng):
         assert sin_cos(-a) == (-s, c)
 
 
+@pytest.mark.slow
 def test_batch_form_equals_the_scalar_form_bit_for_bit(rng):
     for angles in (rng.uniform(-50, 50, 5000), _angles(rng)):   # the second has |a| > limit
         sines, cosines = angles.copy(), np.empty_like(angles)
@@ -48,6 +50,7 @@ def test_batch_form_equals_the_scalar_form_bit_for_bit(rng):
         assert np.array_equal(sines, expected[:, 0]) and np.array_equal(cosines, expected[:, 1])
 
 
+@pytest.mark.slow
 def test_reduced_form_is_the_full_form_within_the_limit(rng):
     for a in rng.uniform(-REDUCTION_LIMIT, REDUCTION_LIMIT, 1000):
         assert reduced_sin_cos(a) == sin_cos(a)
@@ -82,6 +85,7 @@ def _atan2_arguments(rng):
     return np.concatenate(pairs, axis=1)
 
 
+@pytest.mark.slow
 def test_atan2_is_accurate_to_0_8_ulp(rng):
     # Zero arguments (signed zeros, which mpmath does not have) are the next test's.
     arguments = _atan2_arguments(rng)
@@ -105,6 +109,7 @@ def test_atan2_is_odd_in_y(rng):
         assert atan2(-y, x) == -atan2(y, x)
 
 
+@pytest.mark.slow
 def test_atan2_batch_form_equals_the_scalar_form_bit_for_bit(rng):
     y, x = _atan2_arguments(rng)
     got = y.copy()

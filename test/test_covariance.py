@@ -115,6 +115,7 @@ def statistical_bound(cov, n, k=5.0):
     return k * np.sqrt((var[:, None] * var[None, :] + cov ** 2) / n)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('frame', FRAMES)
 def test_euler_covariance_matches_monte_carlo_every_convention(rng, frame):
     q_hat = monte_carlo_orientation(rng)
@@ -135,6 +136,7 @@ def test_euler_covariance_matches_monte_carlo_every_convention(rng, frame):
     assert not failures, f'first-order vs Monte Carlo ({frame}): ' + '; '.join(failures)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('frame', FRAMES)
 def test_quaternion_covariance_matches_monte_carlo(rng, frame):
     q_hat = Rotation.from_euler('xyz', [0.4, -0.7, 2.1]).as_quat()

@@ -3,9 +3,11 @@ import re
 import subprocess
 import sys
 
+import pytest
 from rotation_dev.paths import REPOSITORY
 
 
+@pytest.mark.slow
 def test_main_job_replays_the_tumbling_box_through_the_node(tmp_path):
     result = subprocess.run([sys.executable, '-m', 'rotation_dev.demo', '--out', str(tmp_path)],
                             cwd=REPOSITORY, capture_output=True, text=True, timeout=240)

@@ -103,6 +103,7 @@ def test_frames_are_related_by_the_rotation(rng, frame):
                                rk.matrix_derivative(R, omega_world, 'world'), atol=1e-14)
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(q=arrays(np.float64, 4, elements=st.floats(-1, 1)).filter(lambda q: np.abs(q).max() > 1e-3),
        omega=arrays(np.float64, 3, elements=st.floats(-1e3, 1e3)),

@@ -129,6 +129,7 @@ def test_degrees(rng, seq, frame):
         np.rad2deg(angles), rates_deg, seq, frame, degrees=True), omega, rtol=0, atol=1e-14)
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(seq=st.sampled_from(rc.SEQUENCES), frame=st.sampled_from(FRAMES),
        first=st.floats(-10, 10), middle=st.floats(MARGIN, np.pi / 2 - MARGIN),

@@ -28,6 +28,9 @@ from rotation_node.pipeline import input_message_type
 from rotation_node.registry import OUTPUTS as OUTPUT_TYPES
 from scipy.spatial.transform import Rotation
 
+# Starts processes or builds packages: not in the edit-test loop (-m "not slow").
+pytestmark = pytest.mark.slow
+
 CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'params.yaml'
 STAMP_NS = 1_700_000_000_000_000_000
 OMEGA_BODY = np.array([0.4, -0.9, 1.7])

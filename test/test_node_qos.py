@@ -24,6 +24,9 @@ from rotation_node.registry import OUTPUTS
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Header
 
+# Starts processes or builds packages: not in the edit-test loop (-m "not slow").
+pytestmark = pytest.mark.slow
+
 START_TIMEOUT_S = 60.0
 STAMP_NS = 1_700_000_000_000_000_000
 RELIABLE = QoSProfile(depth=1000)

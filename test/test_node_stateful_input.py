@@ -24,6 +24,9 @@ from rclpy.qos import DurabilityPolicy, QoSProfile
 from rotation_node import registry
 from rotation_node.registry import InputTopic, Sample
 
+# Starts processes or builds packages: not in the edit-test loop (-m "not slow").
+pytestmark = pytest.mark.slow
+
 LATCHED = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 

@@ -26,6 +26,9 @@ from ros_harness import RosProcess, TestNode
 from rotation_node.conversions.warm_up import COMPILING
 from scipy.spatial.transform import Rotation
 
+# Starts processes or builds packages: not in the edit-test loop (-m "not slow").
+pytestmark = pytest.mark.slow
+
 ROOT = Path(__file__).resolve().parent.parent
 EXECUTABLES = ('rotation_node', 'rotation_bag', 'rotation_scene')
 SITE = os.path.join('lib', f'python{sys.version_info[0]}.{sys.version_info[1]}', 'site-packages')

@@ -4,6 +4,9 @@ from pathlib import Path
 from ament_pep257.main import main
 import pytest
 
+# Starts processes or builds packages: not in the edit-test loop (-m "not slow").
+pytestmark = pytest.mark.slow
+
 ROOT = Path(__file__).resolve().parent.parent
 #: Not sources of the package: the environment, colcon's and the demo's outputs.
 EXCLUDE = ('.venv', '.venv-jazzy', 'build', 'install', 'log', 'out')

@@ -724,6 +724,7 @@ RATE = st.one_of(st.floats(-1e300, 1e300),
                  st.sampled_from([0.0, -0.0, 1e-310, 1e300, math.nan, math.inf, -math.inf]))
 
 
+@pytest.mark.slow
 @settings(max_examples=150, deadline=None)
 @given(st.lists(st.tuples(FIELD, FIELD, FIELD, FIELD), min_size=1, max_size=4),
        st.tuples(RATE, RATE, RATE), st.booleans())

@@ -61,6 +61,7 @@ def test_numbers_are_read_as_the_c_library_reads_them(text):
     assert same(ros_scalar(text), c_library_value(text)), (ros_scalar(text), c_library_value(text))
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(st.from_regex(r'[+-]?(0[xX])?[0-9a-fA-F_]{0,6}\.?[0-9]{0,4}([eEpP][+-]?[0-9]{1,4})?',
                      fullmatch=True))

@@ -26,6 +26,7 @@ def test_writes_the_bag_and_says_what_it_wrote(tmp_path, capsys):
                                          '/truth/angular_velocity': 401}
 
 
+@pytest.mark.slow
 def test_same_seed_gives_a_byte_identical_bag_across_processes(tmp_path):
     """Separate processes, so nothing (heap contents, caches) is shared between the runs."""
     scene = os.path.join(SCENES_DIR, 'every_effect.yaml')
@@ -93,6 +94,7 @@ def test_bad_seed_is_a_usage_error(tmp_path, capsys, seed):
     assert os.listdir(tmp_path) == []
 
 
+@pytest.mark.slow
 def test_console_script_reports_errors_with_status_1(tmp_path):
     out = tmp_path / 'out.mcap'
     out.write_bytes(b'')
@@ -134,6 +136,7 @@ def _size(path):
         return 0
 
 
+@pytest.mark.slow
 def test_sigkill_leaves_a_part_holding_a_prefix_of_the_bag(long_scene, tmp_path):
     reference = (long_scene / 'reference' / 'out.mcap').read_bytes()
     threshold = int(np.random.default_rng(11).uniform(0.1, 0.6) * len(reference))
@@ -153,6 +156,7 @@ def test_sigkill_leaves_a_part_holding_a_prefix_of_the_bag(long_scene, tmp_path)
         long_scene / 'reference' / 'out.mcap')[:len(recovered)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('stop', [signal.SIGTERM, signal.SIGINT], ids=lambda s: s.name)
 def test_signal_removes_the_part_and_says_so_on_one_line(long_scene, tmp_path, stop):
     output = tmp_path / 'out'
@@ -168,6 +172,7 @@ def test_signal_removes_the_part_and_says_so_on_one_line(long_scene, tmp_path, s
     assert os.listdir(tmp_path) == []
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('disk', FULL_DISKS)
 def test_full_disk_is_one_line_and_leaves_nothing(long_scene, tmp_path, monkeypatch, capsys,
                                                   disk):

@@ -98,6 +98,7 @@ def test_reference_against_the_estimate_stream_by_its_own_convention(tmp_path):
     assert truth['estimate']['messages'] == len(est_stamps)
 
 
+@pytest.mark.slow
 def test_reference_noise_is_body_side_with_the_std_asked(tmp_path):
     scene = reference_scene(CONSTANT_RATE, noise=0.01, rate=500.0, duration=4.0)
     path = tmp_path / 'scene.mcap'

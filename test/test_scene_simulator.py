@@ -159,6 +159,7 @@ def test_bad_seed(seed):
 SHIPPED_SCENES = sorted(name for name in os.listdir(SCENES_DIR) if name.endswith('.yaml'))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('name', SHIPPED_SCENES)
 def test_blocks_are_bit_identical_to_the_whole_simulation(name):
     """Motion state, sign continuity, random walks and bursts carry over from block to block."""

@@ -17,6 +17,9 @@ from rotation_dev.paths import REPOSITORY
 from rotation_dev.study import comparison, covariance, integration, measure, methods
 from rotation_node.kinematics import INTEGRATION_METHODS
 
+# Starts processes or builds packages: not in the edit-test loop (-m "not slow").
+pytestmark = pytest.mark.slow
+
 STUDY = (sys.executable, '-m', 'rotation_dev.study')
 #: Bound on one quick run (it takes about a minute on an idle machine).
 QUICK_TIMEOUT_S = 300.0

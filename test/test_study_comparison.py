@@ -1,7 +1,9 @@
 """Tests of rotation_dev.study.comparison: accuracy and cost of the two-stream estimates."""
+import pytest
 from rotation_dev.study import comparison as study
 
 
+@pytest.mark.slow
 def test_quick_rows_meet_the_targets_and_render():
     rows = study.measure(quick=True)
     assert [(r.noise_deg, r.duration_s) for r in rows] == [

@@ -1,7 +1,9 @@
 """Tests of rotation_dev.study.covariance: first-order Euler covariance against Monte Carlo."""
+import pytest
 from rotation_dev.study import covariance as study
 
 
+@pytest.mark.slow
 def test_study_finds_where_linearisation_holds_and_where_it_breaks():
     rows = study.measure(quick=True)
     assert {r.sweep for r in rows} == {'sigma', 'margin'}
@@ -14,6 +16,7 @@ def test_study_finds_where_linearisation_holds_and_where_it_breaks():
     assert study.trusted_ratio(rows, 0.01) <= study.trusted_ratio(rows, 0.1)
 
 
+@pytest.mark.slow
 def test_section_and_plot():
     rows = study.measure(quick=True)
     text = study.covariance_markdown(rows, heading='##')

@@ -6,6 +6,9 @@ import pytest
 from rotation_dev.paths import BENCHMARKS_DIR
 from rotation_dev.study import performance
 
+# Starts processes or builds packages: not in the edit-test loop (-m "not slow").
+pytestmark = pytest.mark.slow
+
 # The ratio lines as the scripts print them (bench_node: median; bench_bag_convert: both).
 NODE_OUTPUT = ('  median ratio rotation_node / relay = 0.920 (spread 0.905 to 0.936; '
                'target <= 1.0)\n')

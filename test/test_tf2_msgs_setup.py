@@ -11,8 +11,12 @@ import os
 import subprocess
 import sys
 
+import pytest
 from ros_harness import RosProcess, TestNode
 from rosbags.typesys import get_typestore, Stores
+
+# Starts processes or builds packages: not in the edit-test loop (-m "not slow").
+pytestmark = pytest.mark.slow
 
 #: Environment of a process started from a shell that knows nothing of ROS: the ROS
 #: wheels' start-up hook (``ros_wheels_bootstrapper``) sets the library path afresh.

@@ -53,6 +53,7 @@ def random_walk(rng, n, step=0.3):
     return out
 
 
+@pytest.mark.slow
 def test_three_edge_chain_matches_scipy_after_every_sample(rng):
     # map -> odom at 10 Hz, odom -> base_link at 30 Hz (other phase), base_link -> imu static.
     buffer = TfOrientationBuffer()

@@ -11,7 +11,6 @@ same messages from a bag with ``rotation_bag convert``, and check both against
 the oracle and against each other; a missing frame, unconnected trees and a
 cycle are counted on /diagnostics while the node keeps running.
 """
-import subprocess
 
 from bag_helpers import write_rosbag2
 from diagnostic_msgs.msg import DiagnosticArray
@@ -24,6 +23,7 @@ from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from rclpy.serialization import serialize_message
 from ros_harness import RosProcess, script, TestNode
+from rotation_node.bag.cli import main as cli_main
 from rotation_node.bag.convert import convert, output_topic
 from rotation_node.bag.plot import plot_series, plot_topic
 from rotation_node.bag.reading.mcap_reader import BagReader
@@ -255,6 +255,7 @@ def _start_node(client, namespace, parameters):
     return node
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(240)
 def test_live_node_and_convert_match_scipy_and_each_other(tmp_path, rng):
     chain = Chain(rng)
@@ -301,10 +302,7 @@ def test_live_node_and_convert_match_scipy_and_each_other(tmp_path, rng):
     params_file.write_text(yaml.safe_dump({'rotation_node': {'ros__parameters': {
         'input_type': 'tf', 'tf': {'parent_frame': 'map', 'child_frame': 'imu_link'},
         'outputs': ['quaternion', 'angular_velocity']}}}))
-    result = subprocess.run([script('rotation_bag'), 'convert', bag, converted,
-                             '--params', params_file], capture_output=True, text=True,
-                            timeout=120)
-    assert result.returncode == 0, result.stderr
+    assert cli_main(['convert', str(bag), str(converted), '--params', str(params_file)]) == 0
     with BagReader(converted) as reader:
         assert reader.topics[output_topic('/tf', 'quaternion')] == \
             'geometry_msgs/msg/QuaternionStamped'
@@ -315,6 +313,7 @@ def test_live_node_and_convert_match_scipy_and_each_other(tmp_path, rng):
     assert offline['angular_velocity'] == rates
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(180)
 def test_missing_frame_and_cycle_keep_the_node_alive_and_show_on_diagnostics():
     namespace = '/tf_faults'
@@ -354,6 +353,7 @@ def test_missing_frame_and_cycle_keep_the_node_alive_and_show_on_diagnostics():
     assert 'loop: base_link -> odom -> base_link' in node.output
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(180)
 def test_a_parameter_change_keeps_the_static_transforms():
     namespace = '/tf_reconfigured'
@@ -429,6 +429,7 @@ def test_plot_draws_the_converted_orientation_and_refuses_the_tf_topic(tmp_path,
         plot_topic(converted, '/tf', tmp_path / 'tf.png', params=params)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('storage', ['sqlite3', 'mcap'])
 def test_a_rosbag2_directory_written_by_rosbags_converts(tmp_path, rng, storage):
     chain = Chain(rng, seconds=1.0)

@@ -145,6 +145,7 @@ def test_encoding_is_zero_padded_cdr_byte_for_byte(type_name, text, rng, rosbags
     assert fixed_layout_codec(type_name).encode(msg) == reference
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('text', STRINGS)
 @pytest.mark.parametrize('type_name', FIXED_TYPES)
 def test_equal_messages_give_equal_bytes(type_name, text, rng):

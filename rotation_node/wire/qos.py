@@ -14,18 +14,15 @@ integers; both are read.
 """
 from __future__ import annotations
 
-from typing import Iterable, List, Sequence, Tuple, TYPE_CHECKING
+from typing import Iterable, List, Sequence, Tuple
 
 from rclpy.duration import Duration
 from rclpy.qos import (
     DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy)
 from rotation_node.errors import BagError
-from rotation_node.wire.qos_yaml import output_policies, profiles_yaml
+from rotation_node.wire.qos_yaml import output_policies, profiles_yaml, QosParameters
 from rotation_node.wire.stamps import split_ns
 import yaml
-
-if TYPE_CHECKING:
-    from rotation_node.parameters import NodeParameters
 
 _POLICIES = (
     ('history', HistoryPolicy),
@@ -45,7 +42,7 @@ def _duration_yaml(duration):
     return {'sec': seconds, 'nsec': nanoseconds}
 
 
-def qos_profile(params: NodeParameters, *, transient_local: bool = False) -> QoSProfile:
+def qos_profile(params: QosParameters, *, transient_local: bool = False) -> QoSProfile:
     """
     Return the QoS of the node's output publishers (and of its inputs unless adapted).
 
@@ -54,7 +51,7 @@ def qos_profile(params: NodeParameters, *, transient_local: bool = False) -> QoS
 
     Parameters
     ----------
-    params : rotation_node.parameters.NodeParameters
+    params : rotation_node.wire.qos_yaml.QosParameters
         ``qos.reliability`` and ``qos.depth`` (keep last).
     transient_local : bool, optional
         An input topic of latched data (``/tf_static``): reliable, keep all and

@@ -16,10 +16,15 @@ get :func:`rosbags_qos_yaml`. Profiles as rclpy objects, and reading the YAML:
 from __future__ import annotations
 
 import re
-from typing import Any, Dict, Iterable, List, Mapping, TYPE_CHECKING
+from typing import Any, Dict, Iterable, List, Mapping, Protocol
 
-if TYPE_CHECKING:
-    from rotation_node.parameters import NodeParameters
+
+class QosParameters(Protocol):
+    """The node's ``qos.*`` parameters (what :class:`rotation_node.parameters.NodeParameters` has)."""
+
+    qos_reliability: str
+    qos_depth: int
+
 
 #: The keys of an entry, in rosbag2's order.
 ENTRY_KEYS = ('history', 'depth', 'reliability', 'durability', 'deadline', 'lifespan',
@@ -33,7 +38,7 @@ _OUTPUT_RELIABILITIES = ('reliable', 'best_effort')
 _ZERO_DURATION = {'sec': 0, 'nsec': 0}
 
 
-def output_policies(params: NodeParameters) -> Dict[str, Any]:
+def output_policies(params: QosParameters) -> Dict[str, Any]:
     """
     Return the output publishers' history, depth, reliability and durability, by name.
 
@@ -48,7 +53,7 @@ def output_policies(params: NodeParameters) -> Dict[str, Any]:
             'durability': 'volatile'}
 
 
-def output_qos_yaml(params: NodeParameters) -> str:
+def output_qos_yaml(params: QosParameters) -> str:
     """Return the ``offered_qos_profiles`` of a topic the node (or ``convert``) publishes."""
     return profiles_yaml([{
         **output_policies(params), 'deadline': _ZERO_DURATION, 'lifespan': _ZERO_DURATION,
