@@ -403,8 +403,8 @@ def test_kernels_are_cached_in_the_user_cache_where_the_package_is_read_only(tmp
 def test_warm_up_entry_point():
     out = _python('from rotation_node.conversions import warm_up; warm_up.main([])')
     # the library's kernels (this process may also hold kernels of modules above it)
-    library = [k for k in KERNELS
-               if k.__module__.startswith(('rotation_node.conversions', 'rotation_node.kinematics'))]
+    library = [k for k in KERNELS if k.__module__.startswith(
+        ('rotation_node.conversions', 'rotation_node.kinematics'))]
     assert out.startswith(f'rotation_node: {len(library)} kernels compiled or loaded')
     assert _python('from rotation_node.conversions import warm_up; '
                    'warm_up.main(["--quiet"])') == ''

@@ -563,7 +563,8 @@ def samples(a: FloatArray, width: int) -> Any:
 
 
 def matrix_samples(a: FloatArray) -> Any:
-    """Return the matrices ``a`` (3 n, 3), or any C-contiguous 9 n values, as (n, 3, 3).
+    """
+    Return the matrices ``a`` (3 n, 3), or any C-contiguous 9 n values, as (n, 3, 3).
 
     Interpreted, a ``memoryview`` indexed by ``[s, i, j]`` (see :func:`samples`).
     """

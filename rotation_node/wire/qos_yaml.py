@@ -20,7 +20,7 @@ from typing import Any, Dict, Iterable, List, Mapping, Protocol
 
 
 class QosParameters(Protocol):
-    """The node's ``qos.*`` parameters (what :class:`rotation_node.parameters.NodeParameters` has)."""
+    """The node's ``qos.*`` parameters (those of ``rotation_node.parameters.NodeParameters``)."""
 
     qos_reliability: str
     qos_depth: int
