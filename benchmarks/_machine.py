@@ -58,14 +58,8 @@ def llvm_target_cpu():
     return numba.config.CPU_NAME or binding.get_host_cpu_name()
 
 
-def batch_threads():
-    """Return how many threads the library splits large batches across (``set_threads``)."""
-    from rotation_node.conversions import _runtime
-    return _runtime._threads
-
-
 def machine_lines():
-    """Lines that say where a benchmark ran: CPU, SIMD levels, LLVM target, load, threads."""
+    """Lines that say where a benchmark ran: CPU, SIMD levels, LLVM target."""
     baseline, found, not_found = numpy_simd_levels()
     return [
         f'machine: {cpu_model()} ({platform.machine()}, {len(os.sched_getaffinity(0))} usable '
@@ -73,8 +67,6 @@ def machine_lines():
         f'numpy {np.__version__} SIMD: baseline {" ".join(baseline) or "-"}; found '
         f'{" ".join(found) or "-"}; not found {" ".join(not_found) or "-"}',
         f'numba kernels compiled for: {llvm_target_cpu()}',
-        f'load average (1, 5, 15 min): {" ".join(f"{v:.2f}" for v in os.getloadavg())}; '
-        f'threads of large batches: {batch_threads()}',
     ]
 
 

@@ -197,7 +197,7 @@ def node_start(tree, cache, domain):
 def write_one_message_bag(path):
     """Write a rosbag2 MCAP bag of one sensor_msgs/Imu message on /imu."""
     from rclpy.serialization import serialize_message
-    from rotation_node.bag.writer import BagWriter
+    from rotation_node.bag.writing.writer import BagWriter
     from sensor_msgs.msg import Imu
     msg = Imu()
     msg.header.frame_id = 'imu_link'
