@@ -55,7 +55,7 @@ import dataclasses
 from dataclasses import dataclass, field
 import math
 from operator import itemgetter
-from typing import Any, Callable, Dict, List, NamedTuple, Optional, Tuple
+from typing import Any, Callable, cast, Dict, List, NamedTuple, Optional, Tuple
 import warnings
 
 import numpy as np
@@ -706,7 +706,8 @@ class ConversionPipeline:
         """Return the block's outputs and their count: every needed value once, then outputs."""
         params, n = self.params, len(block.stamp_ns)
         values: Dict[str, Tuple[np.ndarray, np.ndarray]] = {}
-        for name, requires, compute in self._block_plan:
+        # process_block, the only caller, has checked that there is a block plan.
+        for name, requires, compute in cast(List[Tuple[Any, Any, Any]], self._block_plan):
             rows = run.kept
             for required in requires:
                 rows = rows & values[required][0]
@@ -831,7 +832,7 @@ class ConversionPipeline:
         state = self.state
         previous_q, previous_ns = state.previous_quaternion, state.previous_stamp_ns
         state.previous_quaternion, state.previous_stamp_ns = q, stamp_ns
-        if previous_q is None:
+        if previous_q is None or previous_ns is None:   # both set together
             return None
         if stamp_ns <= previous_ns:
             self._issue(TIMESTAMP_NOT_INCREASING, stamp=seconds_text(stamp_ns),

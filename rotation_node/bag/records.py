@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from typing import Any, Callable, Optional, Tuple
+from typing import Any, Callable, Optional, Tuple, Type
 
 from rotation_node.errors import BagError
 from rotation_node.wire.message_types import message_class
@@ -103,7 +103,8 @@ class BagMessage:
             If the type is not installed or the bytes are not a valid message.
 
         """
-        errors: Tuple[type, ...] = (BagError,)   # a decode's own error (rotation_node.wire.cdr)
+        # a decode's own error (rotation_node.wire.cdr)
+        errors: Tuple[Type[BaseException], ...] = (BagError,)
         if decode is None:   # rclpy, imported only here: reading bags does not need it
             from rclpy.serialization import deserialize_message
             from rotation_node.rclpy_private import RMWError

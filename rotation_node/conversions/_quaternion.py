@@ -259,8 +259,8 @@ def _product_kernel(p, q, out):
             plain += is_plain_quaternion(px, py, pz, pw) & is_plain_quaternion(qx, qy, qz, qw)
             fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3] = product(px, py, pz, pw, qx, qy, qz, qw)
         if plain < stop - start:   # a bad sample, or only a huge one: find out which
-            for s in range(start, stop):
-                bad = first_status(quaternion_status(fp, s, 0), quaternion_status(fq, s, 1))
+            for k in range(start, stop):
+                bad = first_status(quaternion_status(fp, k, 0), quaternion_status(fq, k, 1))
                 if bad >= 0:
                     return bad
     return -1
@@ -329,12 +329,12 @@ def _rotate_kernel(q, v, out):
             x, y, z, w = with_canonical_sign(x, y, z, w)
             fo[s, 0], fo[s, 1], fo[s, 2] = rotated_by_unit(x, y, z, w, vx, vy, vz)
         if plain < stop - start:   # redo the chunk with the rescaling formulas
-            for s in range(start, stop):
-                bad = first_status(quaternion_status(fq, s, 0), vector_status(fv, s, 1))
+            for k in range(start, stop):
+                bad = first_status(quaternion_status(fq, k, 0), vector_status(fv, k, 1))
                 if bad >= 0:
                     return bad
-                _store_rotated(fo, s, fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3],
-                               fv[s, 0], fv[s, 1], fv[s, 2])
+                _store_rotated(fo, k, fq[k, 0], fq[k, 1], fq[k, 2], fq[k, 3],
+                               fv[k, 0], fv[k, 1], fv[k, 2])
     return -1
 
 

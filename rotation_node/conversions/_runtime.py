@@ -556,10 +556,13 @@ def samples(a: FloatArray, width: int) -> Any:
     """
     if a.size == 0:
         return a.reshape(-1, width) if width else a.reshape(-1)
-    view = memoryview(a)
+    # numpy's stubs make an ndarray a buffer only for Python >= 3.12 (it is one at run time);
+    # typeshed's memoryview.cast takes only the formats it names (a.dtype.char is 'd' here).
+    view = memoryview(a)   # type: ignore[arg-type]
     if width == 0 and a.ndim == 1:
         return view
-    return view.cast('B').cast(a.dtype.char, (a.size // width, width) if width else (a.size,))
+    return view.cast('B').cast(a.dtype.char,  # type: ignore[arg-type]
+                               (a.size // width, width) if width else (a.size,))
 
 
 def matrix_samples(a: FloatArray) -> Any:
@@ -570,7 +573,9 @@ def matrix_samples(a: FloatArray) -> Any:
     """
     if a.size == 0:
         return a.reshape(-1, 3, 3)
-    return memoryview(a).cast('B').cast(a.dtype.char, (a.size // 9, 3, 3))
+    # An ndarray is a buffer and its char is 'd': stubs as in samples().
+    return memoryview(a).cast('B').cast(a.dtype.char,  # type: ignore[arg-type]
+                                        (a.size // 9, 3, 3))
 
 
 def array_samples(a: FloatArray, width: int) -> FloatArray:
@@ -635,8 +640,8 @@ def _register_views() -> None:
 
     for function in (samples, array_samples):
         overload(function, inline='always', prefer_literal=True)(compiled_samples)
-    for function in (matrix_samples, array_matrix_samples):
-        overload(function, inline='always')(lambda a: (lambda a: view(a, 3, 3)))
+    for matrix_function in (matrix_samples, array_matrix_samples):
+        overload(matrix_function, inline='always')(lambda a: (lambda a: view(a, 3, 3)))
 
 
 # ------------------------------------------------------------ status packing
@@ -787,12 +792,17 @@ _FILL = {(3,): _fill_3, (4,): _fill_4, (3, 3): _fill_3x3}
 class _Scratch(threading.local):
     """Each thread's arrays for single samples given as lists: shape -> (array, view, fill)."""
 
+    first: dict[tuple[int, ...], tuple[FloatArray, memoryview, Callable[..., Any]]]
+    second: dict[tuple[int, ...], tuple[FloatArray, memoryview, Callable[..., Any]]]
+
     def __init__(self) -> None:
         self.first, self.second = {}, {}   # for the first and the second argument
         for trailing, fill in _FILL.items():
             for arrays in (self.first, self.second):
                 array = np.empty(trailing)
-                arrays[trailing] = (array, memoryview(array.reshape(-1)), fill)
+                # An ndarray is a buffer at run time; numpy's stubs say so only for 3.12+.
+                arrays[trailing] = (array, memoryview(array.reshape(-1)),  # type: ignore[arg-type]
+                                    fill)
 
 
 _scratch = _Scratch()
@@ -840,8 +850,9 @@ def single_sample(x: object, trailing: tuple[int, ...], argument: int = 0) -> Op
     """
     kind = type(x)
     if kind is _NDARRAY:
-        if x.shape == trailing and x.dtype is _FLOAT64 and x.flags.carray:
-            return x
+        array: FloatArray = x   # type: ignore[assignment]  # mypy does not narrow x by kind
+        if array.shape == trailing and array.dtype is _FLOAT64 and array.flags.carray:
+            return array
         return None
     if kind is list or kind is tuple:
         return listed_sample(x, trailing, _scratch.second if argument else _scratch.first)
@@ -864,8 +875,11 @@ def call_unary(kernel_: Any, x: ArrayLike, name: str, trailing: tuple[int, ...],
     (``kernel_.call_unchecked``), which checks its values.
     """
     kind = type(x)   # single_sample, inline: a call costs ~5 % of a ~1 us single sample
+    a: Optional[FloatArray]
     if kind is _NDARRAY:
-        a = x if (x.shape == trailing and x.dtype is _FLOAT64 and x.flags.carray) else None
+        array: FloatArray = x   # type: ignore[assignment]  # mypy does not narrow x by kind
+        a = (array if (array.shape == trailing and array.dtype is _FLOAT64
+                       and array.flags.carray) else None)
     elif kind is list or kind is tuple:
         a = listed_sample(x, trailing, _scratch.first)
     else:
@@ -908,6 +922,7 @@ def call_binary(kernel_: Any, x: ArrayLike, y: ArrayLike, names: tuple[str, str]
     so that the kernel has one signature and one sample costs no array.
     """
     scalar_y = trailings[1] == ()
+    b: float | FloatArray | None
     a = single_sample(x, trailings[0])
     if scalar_y:
         if type(y) is not float and (isinstance(y, _NUMBERS) or is_single_sample(y, ())):

@@ -22,8 +22,13 @@ from typing import Any, Dict, Iterable, List, Mapping, Protocol
 class QosParameters(Protocol):
     """The node's ``qos.*`` parameters (those of ``rotation_node.parameters.NodeParameters``)."""
 
-    qos_reliability: str
-    qos_depth: int
+    @property
+    def qos_reliability(self) -> str:
+        """Return the ``qos.reliability`` parameter."""
+
+    @property
+    def qos_depth(self) -> int:
+        """Return the ``qos.depth`` parameter."""
 
 
 #: The keys of an entry, in rosbag2's order.

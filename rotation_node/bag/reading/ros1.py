@@ -19,7 +19,7 @@ import io
 import os
 from pathlib import Path
 import struct
-from typing import Any, Callable, List, Optional, Tuple, Union
+from typing import Any, Callable, Dict, List, Optional, Tuple, Union
 
 from rosbags.convert.converter import (
     generate_message_converter, is_same_wireformat, LATCH, STATIC_MSGTYPE_RENAMES)
@@ -91,7 +91,7 @@ def open_ros1_bag(path: Union[str, os.PathLike]) -> RosbagsInput:
 def _converted_topics(path, reader):
     """Yield ``(connection, ROS 2 TopicMetadata, ROS 1 data -> CDR)`` of every connection."""
     ros2 = get_typestore(Stores.ROS2_JAZZY)
-    converters = {}
+    converters: Dict[str, Callable[[bytes], bytes]] = {}
     for connection in reader.connections:
         ros1_type = connection.msgtype
         type_name = STATIC_MSGTYPE_RENAMES.get(ros1_type, ros1_type)
@@ -106,7 +106,11 @@ def _converted_topics(path, reader):
                     convert = generate_message_converter(
                         reader.typestore, ros2, ros1_type, type_name, {},
                         src_is2=False, dst_is2=True)
-                converters[ros1_type] = lambda data, convert=convert: bytes(convert(data))
+
+                def converter(data: bytes, convert: Callable[[Any], Any] = convert) -> bytes:
+                    return bytes(convert(data))
+
+                converters[ros1_type] = converter
                 if is_same_wireformat(reader.typestore, ros2, ros1_type, type_name):
                     converters[ros1_type] = (ros1_to_cdr_converter(ros2.fielddefs, type_name,
                                                                    converters[ros1_type])
@@ -149,7 +153,8 @@ def _leaves(fielddefs, type_name, leaves):
         count = 1
         if kind == Nodetype.SEQUENCE:
             element: List[Tuple[int, Any]] = []
-            if not _leaves_of(fielddefs, *desc[0], element):
+            element_kind, element_desc = desc[0]
+            if not _leaves_of(fielddefs, element_kind, element_desc, element):
                 return False
             leaves.append((_SEQUENCE, (_steps(element), max(1, _least_size(element)))))
             continue
@@ -251,7 +256,8 @@ def _converted(steps, data, source, offset, append):
     return source, offset
 
 
-def ros1_to_cdr_converter(fielddefs, type_name: str, fallback: Callable[[bytes], bytes]
+def ros1_to_cdr_converter(fielddefs: Dict[str, Any], type_name: str,
+                          fallback: Callable[[bytes], bytes]
                           ) -> Optional[Callable[[bytes], bytes]]:
     """
     Return a converter of ROS 1 messages of a type to CDR, or None for types it does not cover.
@@ -279,7 +285,7 @@ def ros1_to_cdr_converter(fielddefs, type_name: str, fallback: Callable[[bytes],
         return None
     steps = _steps(leaves)
 
-    def convert(data):
+    def convert(data: bytes) -> bytes:
         parts = [_ENCAPSULATION]
         try:
             source, _ = _converted(steps, data, 0, 0, parts.append)
