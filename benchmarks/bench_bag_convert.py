@@ -276,6 +276,7 @@ def _contender_commands(before):
     """``{name: (command(source, output), environment)}`` of the whole-process contenders."""
     def environment(path):
         env = dict(os.environ)
+        env.pop('ROTATION_NODE_COMPILED', None)   # set by _machine: commands run as users run them
         env['PYTHONPATH'] = os.pathsep.join([path, *filter(None, [env.get('PYTHONPATH')])])
         return env
 

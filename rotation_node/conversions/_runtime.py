@@ -37,7 +37,7 @@ The policy, per kernel:
 - once the kernel is loaded (compiled, or loaded from numba's disk cache),
   every call runs the compiled code;
 - before that, a call with at most :data:`INTERPRETED_VALUES` values in each
-  array argument (a few hundred samples) runs interpreted (~5-20 us a
+  array argument (a few thousand samples) runs interpreted (~5-20 us a
   sample, against ~1 s to import numba and load the kernels: a program
   converting a few samples never pays for it);
 - a larger call loads the kernel first (importing numba the first time), as
@@ -260,11 +260,14 @@ def _import_numba_registries_without_scipy_linalg() -> None:
 
 
 # A call runs interpreted while each of its arrays holds at most this many
-# values and the kernel is not loaded: 256 quaternions. Measured
-# (benchmarks/bench_cold_start.py): one interpreted sample costs 5-20 us
-# where importing numba and loading one kernel from the disk cache costs
-# ~0.7 s in a new process (~10-30 ms for each further kernel).
-INTERPRETED_VALUES = 1024
+# values and the kernel is not loaded: 4096 quaternions, so that the blocks
+# of ``rotation_bag convert`` (at most 1023 samples, 9207 values as
+# matrices) run interpreted too. Measured (benchmarks/bench_cold_start.py,
+# bench_bag_convert.py --whole): one interpreted sample costs 5-20 us where
+# importing numba and loading one kernel from the disk cache costs ~0.7 s in
+# a new process (~10-30 ms for each further kernel); a bag of 2e4 Imu
+# messages converts in 0.75-1.09 s interpreted, 1.34-2.00 s loading kernels.
+INTERPRETED_VALUES = 16384
 # A kernel that has run interpreted this long in all is loaded at its next call.
 INTERPRETED_SECONDS = 0.5
 
