@@ -15,9 +15,25 @@ import timeit
 import numpy as np
 
 # The benchmarks time the compiled kernels: every kernel loads at its first call, never
-# runs interpreted (conversions/_runtime.py). Set before the package is imported; the
-# cold-start benchmark removes it from the environment of the processes it starts.
+# runs interpreted (conversions/_runtime.py). Set before the package is imported;
+# tree_environment removes it from the processes measured as users start them.
 os.environ.setdefault('ROTATION_NODE_COMPILED', '1')
+
+
+def tree_environment(tree=None, **extra):
+    """
+    Return the environment of a process that runs as a user's would, from source ``tree``.
+
+    This process's environment with ``extra``, without ``ROTATION_NODE_COMPILED`` (set
+    above for the benchmarks' own calls), and ``tree`` (if given) first on ``PYTHONPATH``.
+    """
+    env = dict(os.environ, **extra)
+    env.pop('ROTATION_NODE_COMPILED', None)
+    if tree is not None:
+        env['PYTHONPATH'] = os.pathsep.join(
+            [os.path.abspath(tree)] + [p for p in env.get('PYTHONPATH', '').split(os.pathsep)
+                                       if p])
+    return env
 
 
 def cpu_model():

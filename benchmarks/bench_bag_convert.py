@@ -68,7 +68,7 @@ import tempfile
 import threading
 import time
 
-from _machine import print_machine
+from _machine import print_machine, tree_environment
 import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -274,21 +274,15 @@ def _process_run(command, env=None, cwd=None):
 
 def _contender_commands(before):
     """``{name: (command(source, output), environment)}`` of the whole-process contenders."""
-    def environment(path):
-        env = dict(os.environ)
-        env.pop('ROTATION_NODE_COMPILED', None)   # set by _machine: commands run as users run them
-        env['PYTHONPATH'] = os.pathsep.join([path, *filter(None, [env.get('PYTHONPATH')])])
-        return env
-
     here = os.path.join(HERE, os.pardir)
     contenders = {}
     if before:
         contenders['before'] = (lambda source, output: [
             sys.executable, '-c', _CONVERT_COMMAND, 'convert', source, output, '--params',
-            PARAMS_FILE, '--force'], environment(before))
+            PARAMS_FILE, '--force'], tree_environment(before))
     contenders['convert'] = (lambda source, output: [
         sys.executable, '-c', _CONVERT_COMMAND, 'convert', source, output, '--params',
-        PARAMS_FILE, '--force'], environment(here))
+        PARAMS_FILE, '--force'], tree_environment(here))
     contenders['script'] = (lambda source, output: [
         sys.executable, __file__, '--competent', source, output], None)
     return contenders

@@ -44,7 +44,7 @@ import tempfile
 import threading
 import time
 
-from _machine import cpu_model, print_machine
+from _machine import cpu_model, print_machine, tree_environment
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 VENV_BIN = os.path.dirname(sys.executable)
@@ -87,16 +87,6 @@ for x in (one, np.broadcast_to(one, (5,) + one.shape).copy(),
 end = time.perf_counter()
 print(imported - start, end - imported)
 """
-
-
-def _tree_env(tree, **extra):
-    env = dict(os.environ, **extra)
-    env.pop('ROTATION_NODE_COMPILED', None)   # set by _machine: starts measured as users start
-    if tree is not None:
-        env['PYTHONPATH'] = os.pathsep.join(
-            [os.path.abspath(tree)] + [p for p in env.get('PYTHONPATH', '').split(os.pathsep)
-                                       if p])
-    return env
 
 
 def _summary(values, unit='', scale=1.0):
@@ -151,8 +141,8 @@ class _Traffic:
 
 def node_start(tree, cache, domain):
     """Return (seconds to the first log line, seconds to the first converted message)."""
-    env = _tree_env(tree, NUMBA_CACHE_DIR=cache, ROS_DOMAIN_ID=str(domain),
-                    ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', PYTHONUNBUFFERED='1')
+    env = tree_environment(tree, NUMBA_CACHE_DIR=cache, ROS_DOMAIN_ID=str(domain),
+                           ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', PYTHONUNBUFFERED='1')
     traffic = _Traffic(domain)
     lines = queue.SimpleQueue()
     start = time.perf_counter()
@@ -211,7 +201,7 @@ def write_one_message_bag(path):
 
 def convert_one(tree, cache, source, output):
     """Return (wall s, CPU s, peak RSS MiB) of ``rotation_bag convert SOURCE OUTPUT``."""
-    env = _tree_env(tree, NUMBA_CACHE_DIR=cache)
+    env = tree_environment(tree, NUMBA_CACHE_DIR=cache)
     start = time.perf_counter()
     result = subprocess.run(
         ['/usr/bin/time', '-f', '%U %S %M', os.path.join(VENV_BIN, 'rotation_bag'), 'convert',
@@ -229,7 +219,7 @@ def convert_one(tree, cache, source, output):
 def library_start(tree, cache, kind, import_line, call):
     code = _PROGRAM.format(import_line=import_line, kind=kind, call=call)
     out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, check=True,
-                         env=_tree_env(tree, NUMBA_CACHE_DIR=cache))
+                         env=tree_environment(tree, NUMBA_CACHE_DIR=cache))
     import_time, calls_time = map(float, out.stdout.split())
     return import_time, calls_time
 
@@ -258,7 +248,7 @@ def main(argv=None):
             warm_caches[tree] = os.path.join(work, f'cache{len(warm_caches)}')
             subprocess.run([sys.executable, '-m', 'rotation_node.conversions.warm_up',
                             '--quiet'], check=True,
-                           env=_tree_env(tree, NUMBA_CACHE_DIR=warm_caches[tree]))
+                           env=tree_environment(tree, NUMBA_CACHE_DIR=warm_caches[tree]))
         source = os.path.join(work, 'one.mcap')
         write_one_message_bag(source)
         rows = {tree: {'first_start_log': [], 'first_start_output': [], 'warm_start_log': [],
