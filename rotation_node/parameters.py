@@ -1,26 +1,23 @@
 """
 Parameters of the orientation-conversion node, in one table.
 
-Every parameter is a field of :class:`NodeParameters`; its ROS name, default,
-description and allowed values live in that field's :class:`ParameterSpec`, and
+Every parameter is a field of :class:`NodeParameters`, with its ROS name,
+default, description and allowed values in that field's :class:`ParameterSpec`;
 :data:`PARAMETERS` lists them in declaration order. The node declares its ROS
-parameters from this table (``declare_parameters`` with a ``ParameterDescriptor``
-each: description, constraints, ranges; on-set and post-set callbacks check and
-apply a change), and :func:`parameters_from_yaml` reads the same parameters from
-a ROS parameters file for ``rotation_bag convert``, so the live node and the
-offline conversion accept exactly the same values. This module does not import
-rclpy.
-
-Values are typed as ROS types them: a double parameter needs a float (``0.0``,
-not ``0``), a string array a list of strings.
+parameters from this table (a ``ParameterDescriptor`` each: description,
+constraints, ranges; rclpy's set-parameters callbacks check and apply a change),
+and ``rotation_bag convert`` reads the same parameters from a ROS parameters file
+(:func:`parameters_from_yaml`), so both accept exactly the same values. Values
+are typed as ROS types them: a double parameter needs a float (``0.0``, not
+``0``), a string array a list of strings. This module does not import rclpy.
 
 Where rcl and rclpy differ
 --------------------------
 A node reads its ``--params-file`` through rcl (``rcl_yaml_param_parser``);
 rclpy's ``rclpy.parameter.parameter_dict_from_yaml_file`` reads the same file
-otherwise. The files are read here as rcl reads them, so that ``convert`` and
-the node accept the same files; these are the differences, each kept here and
-in :mod:`rotation_node.ros_yaml` for that reason alone:
+otherwise. Files are read here as rcl reads them, so that ``convert`` and the
+node accept the same files; these differences are the reason this module and
+:mod:`rotation_node.ros_yaml` read files themselves:
 
 1. Plain scalars are typed by rcl's ``get_value`` (``rcl_yaml_param_parser/src/
    parse.c``: the yes/no/on/off booleans, ``strtol`` base 0, then ``strtod``),
@@ -73,47 +70,23 @@ if TYPE_CHECKING:
     from rotation_node.type_aliases import StrPath
 
 NODE_NAME = 'rotation_node'
-
 INPUT_TYPES = tuple(registry.INPUTS)
-"""Values of ``input_type``: the input types of :data:`rotation_node.registry.INPUTS`."""
-
 OUTPUTS = tuple(registry.OUTPUTS)
-"""Values allowed in ``outputs``: the outputs of :data:`rotation_node.registry.OUTPUTS`."""
-
 FRAMES = ('body', 'world')
 COVARIANCE_FRAMES = ('fixed', 'body')
 RELIABILITIES = ('auto', 'reliable', 'best_effort')
-
+#: Parameters every rclpy node declares by itself; a parameters file may set them.
 ROS_BUILTIN_PARAMETERS = frozenset({'use_sim_time', 'start_type_description_service'})
-"""Parameters every rclpy node declares by itself; a parameters file may set them."""
 
 
 @dataclass(frozen=True, kw_only=True)
 class ParameterSpec(FieldSpec):
     """
-    One node parameter: ROS name, default, description and allowed values.
+    One node parameter: a field spec whose ``name`` is the ROS name (``'euler.sequence'``).
 
-    A :class:`~rotation_node.validation.FieldSpec` whose ``name`` is the ROS
-    name and whose ``kind`` gives the type and allowed values.
-
-    Attributes
-    ----------
-    name : str
-        ROS parameter name, e.g. ``'euler.sequence'``.
-    default : str, bool, int, float or tuple of str
-        Default value; its Python type is the parameter's type (a tuple of str
-        is a ROS string array).
-    description : str
-        One-line description, shown by ``ros2 param describe``.
-    kind : rotation_node.validation.ValueKind
-        Type and allowed values (choices, bounds).
-    check : callable, optional
-        Further check ``check(value, where)`` of a value of the right kind.
-    rule : str, optional
-        The allowed values in words, where the kind cannot say them.
-    attribute : str
-        Name of the :class:`NodeParameters` field that holds the value.
-
+    ``default``'s Python type is the parameter's type (a tuple of str is a ROS
+    string array); ``description`` is what ``ros2 param describe`` shows;
+    ``rule`` says the allowed values in words where the kind cannot.
     """
 
     default: Any
@@ -122,7 +95,7 @@ class ParameterSpec(FieldSpec):
 
     @property
     def type(self) -> type:  # noqa: A003
-        """Python type of the value: str, bool, int, float or tuple (string array)."""
+        """Return the Python type of the value: str, bool, int, float or tuple (string array)."""
         return type(self.default)
 
     @property
@@ -142,7 +115,6 @@ class ParameterSpec(FieldSpec):
 
 
 _PARAMETER = KeyPath(error_type=ParameterError, template="parameter '{}'")
-"""How errors name a parameter: ``parameter 'qos.depth': ...``."""
 
 
 def _frame_name(value: str, where: KeyPath) -> str:
@@ -153,7 +125,6 @@ def _frame_name(value: str, where: KeyPath) -> str:
 
 
 def _rotation(value: tuple, where: KeyPath) -> tuple:
-    """Check: [x, y, z, w] of unit norm, or [roll, pitch, yaw] in degrees."""
     try:
         quaternion_from_rotation_values(value)
     except ValueError as exc:
@@ -165,7 +136,7 @@ _ROTATION_RULE = ('[x, y, z, w] (unit quaternion) or [roll, pitch, yaw] (degrees
                   'floating-point numbers')
 
 
-def _parameter(name, default, description, kind, **options):
+def _parameter(name, default, kind, description, **options):
     return ParameterSpec(name=name, default=default, description=description, kind=kind,
                          **options).field(default)
 
@@ -176,141 +147,110 @@ class NodeParameters:
     The node's parameter values; always valid (checked on construction).
 
     Construct it with keyword arguments named after the fields, from ROS names
-    with :meth:`from_ros`, or from a parameters file with
-    :func:`parameters_from_yaml`. Each field's :class:`ParameterSpec` (ROS name,
-    default, description, allowed values) is in :data:`PARAMETERS`.
-
-    Raises
-    ------
-    ParameterError
-        A value is invalid; the message names the ROS parameter.
-
+    (:meth:`from_ros`), or from a parameters file (:func:`parameters_from_yaml`);
+    an invalid value raises ParameterError naming the ROS parameter.
     """
 
     input_type: str = _parameter(
-        'input_type', 'imu',
-        'Message type subscribed on the topic "input"; changing it recreates the subscription',
-        Choice(INPUT_TYPES))
+        'input_type', 'imu', Choice(INPUT_TYPES),
+        'Message type subscribed on the topic "input"; changing it recreates the subscription')
     outputs: tuple = _parameter(
-        'outputs', ('euler',),
-        'Outputs to publish, each on the relative topic of the same name',
-        ChoiceList(OUTPUTS, item='output'))
+        'outputs', ('euler',), ChoiceList(OUTPUTS, item='output'),
+        'Outputs to publish, each on the relative topic of the same name')
     euler_sequence: str = _parameter(
-        'euler.sequence', 'xyz',
+        'euler.sequence', 'xyz', Text('an Euler sequence', parser=parse_sequence),
         'Euler axis sequence of the euler input and outputs: lower case extrinsic, '
         'upper case intrinsic; xyz is ROS roll, pitch, yaw (REP 103)',
-        Text('an Euler sequence', parser=parse_sequence),
         rule='three of x, y, z, no two consecutive alike, all lower case (extrinsic) '
              'or all upper case (intrinsic)')
     euler_degrees: bool = _parameter(
-        'euler.degrees', False,
-        'Euler angles (input and output) and Euler rates in degrees instead of radians',
-        Boolean())
+        'euler.degrees', False, Boolean(),
+        'Euler angles (input and output) and Euler rates in degrees instead of radians')
     euler_unwrap: bool = _parameter(
-        'euler.unwrap', False,
+        'euler.unwrap', False, Boolean(),
         'Keep the first and third Euler angles continuous over time instead of '
-        'wrapping them to (-pi, pi]',
-        Boolean())
+        'wrapping them to (-pi, pi]')
     euler_singularity_threshold: float = _parameter(
-        'euler.singularity_threshold', 0.01,
+        'euler.singularity_threshold', 0.01, Real(0.0, math.pi / 2, integers=False),
         'Distance (rad) of the middle Euler angle from gimbal lock below which a '
-        'sample counts as near-singular',
-        Real(0.0, math.pi / 2, integers=False))
+        'sample counts as near-singular')
     quaternion_continuity: bool = _parameter(
-        'quaternion.continuity', False,
+        'quaternion.continuity', False, Boolean(),
         'Choose the sign of each output quaternion to be continuous with the previous '
-        'one, instead of w >= 0',
-        Boolean())
+        'one, instead of w >= 0')
     quaternion_norm_tolerance: float = _parameter(
-        'quaternion.norm_tolerance', 1e-3,
-        'Largest | |q| - 1 | of an input quaternion normalised without a warning',
-        Real(0.0, 1.0, integers=False))
+        'quaternion.norm_tolerance', 1e-3, Real(0.0, 1.0, integers=False),
+        'Largest | |q| - 1 | of an input quaternion normalised without a warning')
     angular_velocity_input_frame: str = _parameter(
-        'angular_velocity.input_frame', 'body',
+        'angular_velocity.input_frame', 'body', Choice(FRAMES),
         'Frame of the angular velocity carried by Imu and Odometry inputs '
-        '(body as REP 145 says)',
-        Choice(FRAMES))
+        '(body as REP 145 says)')
     angular_velocity_output_frame: str = _parameter(
-        'angular_velocity.output_frame', 'body',
-        'Frame of the angular_velocity output',
-        Choice(FRAMES))
+        'angular_velocity.output_frame', 'body', Choice(FRAMES),
+        'Frame of the angular_velocity output')
     covariance_frame: str = _parameter(
-        'covariance.frame', 'fixed',
+        'covariance.frame', 'fixed', Choice(COVARIANCE_FRAMES),
         'Axes of the input orientation covariance: fixed (rotation about the world axes, '
-        'REP 145) or body (about the body axes)',
-        Choice(COVARIANCE_FRAMES))
+        'REP 145) or body (about the body axes)')
     covariance_max_linearisation_ratio: float = _parameter(
-        'covariance.max_linearisation_ratio', 0.3,
+        'covariance.max_linearisation_ratio', 0.3, Real(0.0, 1e6, integers=False),
         'Largest orientation standard deviation over distance from gimbal lock (rad/rad) for '
-        'which euler_stddev and euler_covariance are published (about 10 % accurate at 0.3)',
-        Real(0.0, 1e6, integers=False))
+        'which euler_stddev and euler_covariance are published (about 10 % accurate at 0.3)')
     frames_input_world: str = _parameter(
-        'frames.input_world', 'enu',
-        'World frame convention of the input: enu (x east, y north, z up; REP 103) or ned',
-        Choice(WORLD_FRAMES))
+        'frames.input_world', 'enu', Choice(WORLD_FRAMES),
+        'World frame convention of the input: enu (x east, y north, z up; REP 103) or ned')
     frames_input_body: str = _parameter(
-        'frames.input_body', 'flu',
-        'Body frame convention of the input: flu (x forward, y left, z up; REP 103) or frd',
-        Choice(BODY_FRAMES))
+        'frames.input_body', 'flu', Choice(BODY_FRAMES),
+        'Body frame convention of the input: flu (x forward, y left, z up; REP 103) or frd')
     frames_output_world: str = _parameter(
-        'frames.output_world', 'enu',
-        'World frame convention of the outputs: enu or ned',
-        Choice(WORLD_FRAMES))
+        'frames.output_world', 'enu', Choice(WORLD_FRAMES),
+        'World frame convention of the outputs: enu or ned')
     frames_output_body: str = _parameter(
-        'frames.output_body', 'flu',
-        'Body frame convention of the outputs: flu or frd',
-        Choice(BODY_FRAMES))
+        'frames.output_body', 'flu', Choice(BODY_FRAMES),
+        'Body frame convention of the outputs: flu or frd')
     mounting_body_rotation: tuple = _parameter(
-        'mounting.body_rotation', IDENTITY,
+        'mounting.body_rotation', IDENTITY, Reals((3, 4)),
         "M in R' = W R M: the output body frame's orientation in the input's body frame "
         '(e.g. base_link in imu_link); applied to orientation, angular velocity and covariance',
-        Reals((3, 4)), check=_rotation, rule=_ROTATION_RULE)
+        check=_rotation, rule=_ROTATION_RULE)
     mounting_world_rotation: tuple = _parameter(
-        'mounting.world_rotation', IDENTITY,
+        'mounting.world_rotation', IDENTITY, Reals((3, 4)),
         "W in R' = W R M: the input world frame's orientation in the output world frame",
-        Reals((3, 4)), check=_rotation, rule=_ROTATION_RULE)
+        check=_rotation, rule=_ROTATION_RULE)
     mounting_yaw_offset: float = _parameter(
-        'mounting.yaw_offset', 0.0,
+        'mounting.yaw_offset', 0.0, Real(integers=False),
         "Added to the yaw (rad), as robot_localization's yaw_offset: W = Rz(yaw_offset + "
-        'magnetic_declination) mounting.world_rotation',
-        Real(integers=False))
+        'magnetic_declination) mounting.world_rotation')
     mounting_magnetic_declination: float = _parameter(
-        'mounting.magnetic_declination', 0.0,
-        "Added to the yaw (rad), as robot_localization's magnetic_declination_radians",
-        Real(integers=False))
+        'mounting.magnetic_declination', 0.0, Real(integers=False),
+        "Added to the yaw (rad), as robot_localization's magnetic_declination_radians")
     mounting_tf_sensor_frame: str = _parameter(
-        'mounting.tf_sensor_frame', '',
+        'mounting.tf_sensor_frame', '', Text(),
         'With mounting.tf_body_frame: M is read once from /tf_static, the orientation of '
-        'tf_body_frame in this frame (e.g. imu_link)',
-        Text(), check=_frame_name,
+        'tf_body_frame in this frame (e.g. imu_link)', check=_frame_name,
         rule='a TF frame name without a leading /; with mounting.tf_body_frame')
     mounting_tf_body_frame: str = _parameter(
-        'mounting.tf_body_frame', '',
+        'mounting.tf_body_frame', '', Text(),
         'With mounting.tf_sensor_frame: the output body frame whose orientation in '
-        'tf_sensor_frame is M (e.g. base_link)',
-        Text(), check=_frame_name,
+        'tf_sensor_frame is M (e.g. base_link)', check=_frame_name,
         rule='a TF frame name without a leading /, not mounting.tf_sensor_frame; with '
              'mounting.tf_sensor_frame and mounting.body_rotation left at identity')
     qos_reliability: str = _parameter(
-        'qos.reliability', 'auto',
+        'qos.reliability', 'auto', Choice(RELIABILITIES),
         'Reliability of the input subscriptions and output publishers; auto: inputs adapt '
-        'reliability and durability to what the publishers offer, outputs are reliable',
-        Choice(RELIABILITIES))
+        'reliability and durability to what the publishers offer, outputs are reliable')
     qos_depth: int = _parameter(
-        'qos.depth', 1000,
-        'History depth (keep last) of the input subscriptions and of the output publishers',
-        Integer(1, 10000))
+        'qos.depth', 1000, Integer(1, 10000),
+        'History depth (keep last) of the input subscriptions and of the output publishers')
     tf_parent_frame: str = _parameter(
-        'tf.parent_frame', '',
+        'tf.parent_frame', '', Text(),
         'input_type tf: the frame the orientation is expressed in (tf2 target frame, '
-        'e.g. map)',
-        Text(), check=_frame_name,
+        'e.g. map)', check=_frame_name,
         rule='a TF frame name without a leading /; required with input_type tf')
     tf_child_frame: str = _parameter(
-        'tf.child_frame', '',
+        'tf.child_frame', '', Text(),
         'input_type tf: the frame whose orientation is published (tf2 source frame, '
-        'e.g. base_link)',
-        Text(), check=_frame_name,
+        'e.g. base_link)', check=_frame_name,
         rule='a TF frame name without a leading /, not tf.parent_frame; required with '
              'input_type tf')
 
@@ -322,20 +262,12 @@ class NodeParameters:
             _check_tf_frames(self)
 
     @classmethod
-    def from_ros(cls, values: Mapping[str, Any]) -> 'NodeParameters':
+    def from_ros(cls, values: Mapping[str, Any]) -> NodeParameters:
         """Return parameters from ``{ROS name: value}``; missing ones take their defaults."""
         return cls().replaced(values)
 
-    def replaced(self, values: Mapping[str, Any]) -> 'NodeParameters':
-        """
-        Return a copy with the parameters named (by ROS name) in ``values`` changed.
-
-        Raises
-        ------
-        ParameterError
-            A name is not a parameter of the node, or a value is invalid.
-
-        """
+    def replaced(self, values: Mapping[str, Any]) -> NodeParameters:
+        """Return a copy with the parameters named (by ROS name) in ``values`` changed."""
         return replace(self, **checked_arguments(type(self), values, _PARAMETER,
                                                  unknown=unknown_parameter_error))
 
@@ -344,15 +276,8 @@ class NodeParameters:
         """
         Check each value of ``{ROS name: value}`` on its own, not their combination.
 
-        What :meth:`replaced` checks, except the input type's own rule over several
-        parameters (``input_type: tf`` needs both frames): for the values of one
-        ``set_parameters`` request, whose combination is checked once all are in.
-
-        Raises
-        ------
-        ParameterError
-            A name is not a parameter of the node, or a value is invalid.
-
+        For the values of one ``set_parameters`` request, whose combination
+        (``input_type: tf`` needs both frames) is checked once all are in.
         """
         checked_arguments(cls, values, _PARAMETER, unknown=unknown_parameter_error)
 
@@ -367,8 +292,8 @@ def mounting_frames_problem(params: NodeParameters) -> str:
     Return why only one of the two ``mounting.tf_*`` frames is set ('' if both or neither).
 
     Not checked on construction: ROS declares and sets parameters one at a
-    time, so the node checks it once all are set (at start-up, and in
-    ``set_parameters_atomically``); ``convert`` and ``export`` before reading.
+    time, so the node checks it once all are set (at start-up, and per
+    ``set_parameters`` request); ``convert`` and ``export`` before reading.
     """
     sensor, body = params.mounting_tf_sensor_frame, params.mounting_tf_body_frame
     if bool(sensor) == bool(body):
@@ -380,7 +305,6 @@ def mounting_frames_problem(params: NodeParameters) -> str:
 
 
 def _check_mounting_frames(params: NodeParameters) -> None:
-    """Check: two different mounting frames, and then no mounting.body_rotation."""
     sensor, body = params.mounting_tf_sensor_frame, params.mounting_tf_body_frame
     if not (sensor and body):
         return
@@ -393,7 +317,6 @@ def _check_mounting_frames(params: NodeParameters) -> None:
 
 
 def _check_tf_frames(params: NodeParameters) -> None:
-    """Check the parameters of ``input_type: tf``: both frames named, and different."""
     for name, value, example in (('tf.parent_frame', params.tf_parent_frame, 'map'),
                                  ('tf.child_frame', params.tf_child_frame, 'base_link')):
         if not value:
@@ -405,18 +328,11 @@ def _check_tf_frames(params: NodeParameters) -> None:
 
 
 PARAMETERS = cast(Tuple[ParameterSpec, ...], field_specs(NodeParameters))
-"""The parameter table: one :class:`ParameterSpec` per :class:`NodeParameters` field."""
-
 PARAMETERS_BY_NAME = {spec.name: spec for spec in PARAMETERS}
 
 
 def unknown_parameter_error(name: str, where: str = '') -> ParameterError:
-    """
-    Return the error for a name that is not a parameter of the node.
-
-    It names the nearest parameter (``difflib``) and lists them all; ``where``
-    (e.g. ``' in -p euler.sequense:=xyz'``) follows the name.
-    """
+    """Return the error for a name that is not a parameter: the nearest one, and all of them."""
     return ParameterError(
         f"unknown parameter '{name}'{where}{did_you_mean(name, PARAMETERS_BY_NAME)}; "
         f"the node's parameters are {', '.join(PARAMETERS_BY_NAME)}")
@@ -424,7 +340,7 @@ def unknown_parameter_error(name: str, where: str = '') -> ParameterError:
 
 def parameters_from_yaml(path: StrPath, node_name: str = NODE_NAME) -> NodeParameters:
     """
-    Read the node's parameters from a ROS 2 parameters file.
+    Read the node's parameters from a ROS 2 parameters file, as the node reads its own.
 
     The file has the format ``ros2 run ... --ros-args --params-file`` reads::
 
@@ -434,30 +350,13 @@ def parameters_from_yaml(path: StrPath, node_name: str = NODE_NAME) -> NodeParam
             euler:
               sequence: ZYX       # nested keys join with '.', or write euler.sequence
 
-    Every section whose key matches the node (rcl wildcards ``*`` and ``**``
-    allowed) is applied in file order; sections of other nodes are ignored.
-    Parameters not in the file keep their defaults.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        The parameters file.
-    node_name : str, optional
-        Node name, or fully qualified name (``/ns/name``) to match the keys against.
-
-    Returns
-    -------
-    NodeParameters
-
-    Raises
-    ------
-    ParameterError
-        The file is missing or unreadable, is not valid YAML, has no section for
-        the node, or sets an unknown parameter or an invalid value; the message
-        names the file and the parameter.
-
+    Every section whose key matches ``node_name`` (a name, or ``/ns/name``; rcl
+    wildcards ``*`` and ``**`` in the keys) is applied in file order; sections
+    of other nodes are ignored, parameters not in the file keep their defaults.
+    Raises ParameterError, naming the file and the parameter, for a file that
+    cannot be read, is not valid YAML, has no section for the node, or sets an
+    unknown parameter or an invalid value.
     """
-    path = Path(path)
     fq_name = node_name if node_name.startswith('/') else '/' + node_name
     sections = parameters_file_sections(path)
     matching = [values for key, values in sections if _node_key_matches(key, fq_name)]
@@ -467,31 +366,22 @@ def parameters_from_yaml(path: StrPath, node_name: str = NODE_NAME) -> NodeParam
             f"{parameters_file_label(path)}: no section for node '{fq_name}' (its sections: "
             f'{found}; '
             f"key it '{fq_name}:', '/**/{fq_name.rsplit('/', 1)[-1]}:' or '/**:')")
-    values = {}
-    for section in matching:
-        values.update(section)
-    for name in ROS_BUILTIN_PARAMETERS.intersection(values):
-        del values[name]
+    values = {name: value for section in matching for name, value in section.items()
+              if name not in ROS_BUILTIN_PARAMETERS}
     try:
         return NodeParameters.from_ros(values)
     except ParameterError as exc:
         raise ParameterError(f'{parameters_file_label(path)}: {exc}') from None
 
 
-#: The parameters files launch_ros writes for a launch file's ``parameters=[{...}]`` (and
-#: for a file it substitutes in): ``NamedTemporaryFile(prefix='launch_params_')``.
+#: launch_ros writes a launch file's ``parameters=[{...}]`` to such a file in the temporary
+#: directory (``NamedTemporaryFile(prefix='launch_params_')``): messages name it thus.
 _LAUNCH_PARAMETERS_FILE = re.compile(r'launch_params_[A-Za-z0-9_]+')
 LAUNCH_PARAMETERS = 'the parameters the launch file gives'
 
 
 def parameters_file_label(path: StrPath) -> str:
-    """
-    Return how messages name a parameters file: ``parameters file <path>``.
-
-    A temporary file launch_ros wrote from a launch file's parameters is named
-    :data:`LAUNCH_PARAMETERS` instead: the user never wrote it, and it is gone
-    when the message is read; the message names the parameter and its value.
-    """
+    """Return how messages name a parameters file: ``parameters file <path>`` (or launch's)."""
     path = Path(path)
     if (_LAUNCH_PARAMETERS_FILE.fullmatch(path.name)
             and path.parent == Path(tempfile.gettempdir())):
@@ -501,28 +391,13 @@ def parameters_file_label(path: StrPath) -> str:
 
 def parameters_file_sections(path: StrPath) -> list[tuple[str, dict[str, Any]]]:
     """
-    Read the sections of a ROS 2 parameters file, for any node.
+    Return the sections of a ROS 2 parameters file, for any node, as rcl reads them.
 
-    Node keys may nest as namespaces (``robot: {rotation_node: {ros__parameters:
-    ...}}`` is the section ``robot/rotation_node``), as rcl reads them.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        The parameters file.
-
-    Returns
-    -------
-    list of (str, dict)
-        ``(node key, {parameter name: value})`` in file order, nested parameter
-        names joined with ``'.'``.
-
-    Raises
-    ------
-    ParameterError
-        The file cannot be read, is not valid YAML, is not a mapping of node
-        names, or a node key holds no ``ros__parameters`` mapping.
-
+    ``(node key, {parameter name: value})`` in file order, nested parameter names
+    joined with '.', nested node keys as namespaces (``robot: {rotation_node:
+    {ros__parameters: ...}}`` is the section ``robot/rotation_node``). Raises
+    ParameterError for a file that cannot be read, is not valid YAML, or is not
+    a mapping of node keys each holding a ``ros__parameters`` mapping.
     """
     label = parameters_file_label(path)
     document = load_ros_yaml(path, label, ParameterError, aliases=False)
@@ -534,19 +409,18 @@ def parameters_file_sections(path: StrPath) -> list[tuple[str, dict[str, Any]]]:
         for key, value in mapping.items():
             name = f'{prefix}/{str(key).strip("/")}' if prefix else str(key)
             if isinstance(value, dict) and isinstance(value.get('ros__parameters'), dict):
+                values = _flattened(value['ros__parameters'])
                 problem = _node_key_problem(name) or next(filter(None, (
-                    _value_problem(parameter, v)
-                    for parameter, v in _flattened(value['ros__parameters']).items())), '')
+                    _value_problem(parameter, v) for parameter, v in values.items())), '')
                 if problem:
                     raise ParameterError(f"{label}: section '{name}': {problem}")
-                sections.append((name, _flattened(value['ros__parameters'])))
+                sections.append((name, values))
             elif (isinstance(value, dict) and value and 'ros__parameters' not in value
                     and all(isinstance(child, dict) for child in value.values())):
                 read(name, value)   # a namespace of node keys
             else:
                 raise ParameterError(
-                    f"{label}: section '{name}' needs a 'ros__parameters:' "
-                    'mapping')
+                    f"{label}: section '{name}' needs a 'ros__parameters:' mapping")
     read('', document)
     return sections
 
@@ -573,13 +447,12 @@ def _value_problem(name, value):
     """Return what rcl refuses in a parameter value of a file ('' if nothing)."""
     if value is None:
         return f"parameter '{name}' has no value"
-    if isinstance(value, list):
-        kinds = {type(item) for item in value}
-        if not kinds <= {bool, int, float, str}:
-            return f"parameter '{name}': a list may hold only booleans, numbers or strings"
-        if len(kinds) > 1:
-            return (f"parameter '{name}': a list must hold values of one type, got "
-                    f"{', '.join(sorted(kind.__name__ for kind in kinds))}")
+    kinds = {type(item) for item in value} if isinstance(value, list) else set()
+    if not kinds <= {bool, int, float, str}:
+        return f"parameter '{name}': a list may hold only booleans, numbers or strings"
+    if len(kinds) > 1:
+        return (f"parameter '{name}': a list must hold values of one type, got "
+                f"{', '.join(sorted(kind.__name__ for kind in kinds))}")
     return ''
 
 
@@ -587,18 +460,16 @@ def _flattened(mapping, prefix=''):
     """Return ``{'a.b': value}`` from nested ``{'a': {'b': value}}``, as rcl reads it."""
     flat = {}
     for key, value in mapping.items():
-        name = f'{prefix}{key}'
         if isinstance(value, dict):
-            flat.update(_flattened(value, name + '.'))
+            flat.update(_flattened(value, f'{prefix}{key}.'))
         else:
-            flat[name] = value
+            flat[f'{prefix}{key}'] = value
     return flat
 
 
 def _node_key_matches(key, fq_name):
     """Whether a parameters-file node key (rcl syntax, wildcards * and **) names the node."""
-    tokens = key.strip('/').split('/')
     pattern = ''.join(
         '(?:/[^/]+)*' if token == '**' else '/[^/]+' if token == '*' else '/' + re.escape(token)
-        for token in tokens)
+        for token in key.strip('/').split('/'))
     return re.fullmatch(pattern, fq_name) is not None
