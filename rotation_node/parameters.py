@@ -1,15 +1,12 @@
 """
-Parameters of the orientation-conversion node, in one table.
+Parameters of the orientation-conversion node, in one table: :class:`NodeParameters`.
 
-Every parameter is a field of :class:`NodeParameters`, with its ROS name,
-default, description and allowed values in that field's :class:`ParameterSpec`;
-:data:`PARAMETERS` lists them in declaration order. The node declares its ROS
-parameters from this table (a ``ParameterDescriptor`` each: description,
-constraints, ranges; rclpy's set-parameters callbacks check and apply a change),
-and ``rotation_bag convert`` reads the same parameters from a ROS parameters file
-(:func:`parameters_from_yaml`), so both accept exactly the same values. Values
-are typed as ROS types them: a double parameter needs a float (``0.0``, not
-``0``), a string array a list of strings. This module does not import rclpy.
+Each field's :class:`ParameterSpec` holds its ROS name, default, description and
+allowed values; :data:`PARAMETERS` lists them in declaration order. The node
+declares its ROS parameters from it (a ``ParameterDescriptor`` each), and
+``rotation_bag convert`` reads the same parameters from a ROS parameters file
+(:func:`parameters_from_yaml`): both accept exactly the same values, typed as ROS
+types them (a double needs ``0.0``, not ``0``). This module does not import rclpy.
 
 Where rcl and rclpy differ
 --------------------------
@@ -41,11 +38,9 @@ node accept the same files; these differences are the reason this module and
    :data:`LAUNCH_PARAMETERS`), the section and the parameter; rcl names none
    (:func:`parameters_file_label`).
 
-At run time rclpy checks each declared parameter of a ``set_parameters`` request
-on its own; the rules between parameters (``input_type: tf`` needs both
-``tf.*`` frames, ``mounting.tf_*`` both or neither) are checked by the node once
-a whole request is in (:meth:`NodeParameters.check_each`,
-:func:`mounting_frames_problem`).
+At run time rclpy checks each parameter of a ``set_parameters`` request on its
+own; the node checks the rules between parameters (``input_type: tf`` needs both
+``tf.*`` frames, ``mounting.tf_*`` both or neither) once a whole request is in.
 """
 from __future__ import annotations
 
@@ -92,11 +87,6 @@ class ParameterSpec(FieldSpec):
     default: Any
     description: str
     rule: str = ''
-
-    @property
-    def type(self) -> type:  # noqa: A003
-        """Return the Python type of the value: str, bool, int, float or tuple (string array)."""
-        return type(self.default)
 
     @property
     def choices(self) -> Optional[tuple]:

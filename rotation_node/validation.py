@@ -1,22 +1,14 @@
 """
 The checks of node parameters and scene files: dataclass fields of a kind of value.
 
-A dataclass made of :func:`checked_field` fields says, per field, its kind of
-value (:class:`Boolean`, :class:`Integer`, :class:`Real`, :class:`Text`,
-:class:`Choice`, :class:`ChoiceList`, :class:`Vector`, :class:`Reals`; for
-scenes also a dataclass: :class:`DataclassByTag`, :class:`DataclassesByName`,
-:class:`NestedDataclass`) and, where the domain asks for more (a unit
-quaternion, a frame name without a leading /), a further check
-``check(value, where)`` returning the value to store or raising
-``where.error(...)``. :func:`checked_arguments` checks a mapping (a parsed YAML
-file, ROS parameters) against those fields: unknown keys first, with the nearest
-valid name (``difflib``), then missing required keys, then each value by its
-kind, so a misspelt key reads as what it is.
-
-Each problem raises the error type of a :class:`KeyPath`, and its message
-starts with the value's path as the :class:`KeyPath` names it
-(``motion.half_angle``, ``parameter 'qos.depth'``). Values are shown by type
-and a bounded repr: a megabyte-long string is not copied into a log line.
+A :func:`checked_field` says its kind of value (:class:`Boolean`, :class:`Real`,
+:class:`Choice`, ..., for scenes also a nested dataclass) and, where the domain
+asks for more (a unit quaternion), a ``check(value, where)`` that returns the
+value to store or raises ``where.error(...)``. :func:`checked_arguments` checks a
+mapping against those fields: unknown keys first, with the nearest valid name,
+then missing required keys, then each value by its kind. Each problem raises the
+error type of a :class:`KeyPath`, naming the value's path (``motion.half_angle``,
+``parameter 'qos.depth'``) and showing the value by type and a bounded repr.
 """
 from __future__ import annotations
 

@@ -86,7 +86,7 @@ def parameter_descriptor(spec: ParameterSpec) -> ParameterDescriptor:
     descriptor = ParameterDescriptor(
         name=spec.name, description=spec.description,
         additional_constraints=spec.constraints)
-    if spec.bounds is not None and spec.type is float:
+    if spec.bounds is not None and isinstance(spec.default, float):
         descriptor.floating_point_range = [
             FloatingPointRange(from_value=spec.bounds[0], to_value=spec.bounds[1])]
     elif spec.bounds is not None:

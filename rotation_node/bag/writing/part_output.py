@@ -334,24 +334,16 @@ class BagOutput:
 
     def keep(self) -> None:
         """Close and leave the unfinished bag in ``part_path`` (after a failure)."""
-        self.closed = True
-        if self.stream.closed:
-            return
-        try:
-            self.stream.flush()
-        except OSError:
-            pass
-        try:
-            self.stream.close()
-        except OSError:
-            pass
+        self._close_quietly()
 
     def discard(self) -> None:
         """Close and remove ``part_path``; the output is left as it was."""
-        if not self.stream.closed:
-            try:
-                self.stream.close()
-            except OSError:
-                pass
-        self.closed = True
+        self._close_quietly()
         _remove(self.part_path)
+
+    def _close_quietly(self):
+        self.closed = True
+        try:
+            self.stream.close()   # flushes what is buffered, and closes the file even if not
+        except OSError:
+            pass

@@ -99,28 +99,18 @@ def _timestamp(value, name):
 
 
 def _all_timestamps(values):
-    """
-    Return whether every value is an integer in [0, 2**64), as :func:`_timestamp` checks.
-
-    The check for a whole block, as one numpy array: integer values (Python or
-    numpy integers; bools among integers, as ``operator.index`` takes them)
-    that fit uint64. Anything else (floats, strings, an integer out of range,
-    which makes the array's dtype object) answers False, and each value is
-    then checked by :func:`_timestamp`, which names the bad one.
-    """
+    """Whether every value is an integer in [0, 2**64), for a block (False: ask _timestamp)."""
     array = np.array(values)
     kind = array.dtype.kind
     return kind == 'u' or (kind == 'i' and (not array.size or bool(array.min() >= 0)))
 
 
-def _rclpy_serializer():
-    """Return ``rclpy.serialization.serialize_message``, imported on first use (it loads rcl)."""
+def _rclpy_serializer():   # imported on first use: it loads rcl
     from rclpy.serialization import serialize_message
     return serialize_message
 
 
 def _checked_compression(name: str) -> str:
-    """Return ``name`` if it is a chunk compression (``'zstd'``, ``'lz4'``, ``'none'``)."""
     if isinstance(name, str) and name in COMPRESSIONS:
         return name
     raise BagError(f'compression must be one of {", ".join(COMPRESSIONS)}, got {name!r}')
@@ -509,16 +499,7 @@ class BagWriter:
                 f'{dropped} not written', kept=self.message_count, dropped=dropped)
 
     def _reserve_chunk(self):
-        """
-        Reserve the space for a chunk of the pending messages and for closing the bag.
-
-        Returns
-        -------
-        int
-            How many of the first messages of ``pending`` fit: all of them, or
-            on a full disk the most of the halves tried (0 if none).
-
-        """
+        """Reserve space for a chunk and for closing; return how many pending messages fit."""
         count = len(self._pending_datas)
         data_bytes = self._pending_bytes
         # A message index record per channel (its entries are in _MESSAGE_OVERHEAD).
@@ -549,15 +530,7 @@ class BagWriter:
         raise BagError(f'cannot write output {self.path}: {error.strerror}{kept}') from None
 
     def rosbag2_metadata(self) -> Dict[str, Any]:
-        """
-        Return the rosbag2 bag metadata (version 9) of what is written so far.
-
-        Returns
-        -------
-        dict
-            The contents of ``metadata.yaml``'s ``rosbag2_bagfile_information``.
-
-        """
+        """Return metadata.yaml's ``rosbag2_bagfile_information`` (version 9) of what is written."""
         statistics = self._writer.statistics
         count = statistics.message_count
         start = statistics.message_start_time if count else 0
