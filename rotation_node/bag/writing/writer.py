@@ -530,7 +530,7 @@ class BagWriter:
         raise BagError(f'cannot write output {self.path}: {error.strerror}{kept}') from None
 
     def rosbag2_metadata(self) -> Dict[str, Any]:
-        """Return metadata.yaml's ``rosbag2_bagfile_information`` (version 9) so far."""
+        """Return metadata.yaml's ``rosbag2_bagfile_information`` (version 9) of the bag so far."""
         statistics = self._writer.statistics
         count = statistics.message_count
         start = statistics.message_start_time if count else 0
