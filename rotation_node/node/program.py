@@ -43,20 +43,10 @@ _ROS_FLAGS_WITH_VALUE = frozenset((
 
 def ros_arguments(args: Sequence[str]) -> List[Tuple[str, Optional[str]]]:
     """
-    Return the ``(flag, value)`` pairs of the ROS arguments in a command line.
+    Return the ``(flag, value)`` pairs of the ROS arguments of a command line (``sys.argv``).
 
-    Parameters
-    ----------
-    args : sequence of str
-        The command line (``sys.argv``); ROS arguments are those after each
-        ``--ros-args``, up to the next ``--``.
-
-    Returns
-    -------
-    list of (str, str or None)
-        E.g. ``[('--params-file', 'a.yaml'), ('-p', 'qos.depth:=5')]``; flags
-        without a value (``--disable-stdout-logs``) with None.
-
+    ROS arguments are those after each ``--ros-args``, up to the next ``--``: e.g.
+    ``[('--params-file', 'a.yaml'), ('-p', 'qos.depth:=5'), ('--disable-stdout-logs', None)]``.
     """
     pairs: List[Tuple[str, Optional[str]]] = []
     in_ros_args, index = False, 0
