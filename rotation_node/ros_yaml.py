@@ -83,7 +83,16 @@ _ROS_SCALAR_TAG = 'tag:rotation_node,2024:ros-scalar'
 
 
 class _RosLoader(yaml.SafeLoader):
-    """SafeLoader with ROS scalar typing, keys as written and duplicate keys refused."""
+    """SafeLoader with ROS scalar typing, keys as written, duplicate keys (and aliases) refused."""
+
+    aliases = True   # False for a parameters file: rcl refuses aliases there
+
+    def compose_node(self, parent, index):
+        if not self.aliases and self.check_event(yaml.AliasEvent):
+            raise yaml.composer.ComposerError(
+                None, None, 'aliases (*name) are not allowed in a parameters file (ROS refuses '
+                'them)', self.peek_event().start_mark)
+        return super().compose_node(parent, index)
 
     def construct_mapping(self, node, deep=False):
         if not isinstance(node, yaml.MappingNode):
@@ -115,17 +124,6 @@ _RosLoader.yaml_implicit_resolvers = {
 _RosLoader.add_constructor(
     _ROS_SCALAR_TAG,
     lambda loader, node: ros_scalar(loader.construct_scalar(node)))  # type: ignore[arg-type]
-
-
-class _RosLoaderWithoutAliases(_RosLoader):
-    """The loader of parameters files: rcl refuses aliases there, so does this one."""
-
-    def compose_node(self, parent, index):
-        if self.check_event(yaml.AliasEvent):
-            raise yaml.composer.ComposerError(
-                None, None, 'aliases (*name) are not allowed in a parameters file (ROS refuses '
-                'them)', self.peek_event().start_mark)
-        return super().compose_node(parent, index)
 
 
 def _check_size(node, label, error, depth=1, sizes=None):
@@ -166,7 +164,8 @@ def load_ros_yaml(path: Any, label: str, error: Type[Exception], *,
         text = data.decode('utf-8')
     except UnicodeDecodeError as exc:
         raise error(f'{label}: not UTF-8 text (byte {exc.start})') from None
-    loader = (_RosLoader if aliases else _RosLoaderWithoutAliases)(text)
+    loader = _RosLoader(text)
+    loader.aliases = aliases
     try:
         node = loader.get_single_node()
         if node is None:
