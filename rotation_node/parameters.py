@@ -257,7 +257,11 @@ class NodeParameters:
         return cls().replaced(values)
 
     def replaced(self, values: Mapping[str, Any]) -> NodeParameters:
-        """Return a copy with the parameters named (by ROS name) in ``values`` changed."""
+        """
+        Return a copy with the parameters named (by ROS name) in ``values`` changed.
+
+        Raises ParameterError for a name that is not a parameter, or an invalid value.
+        """
         return replace(self, **checked_arguments(type(self), values, _PARAMETER,
                                                  unknown=unknown_parameter_error))
 
@@ -267,7 +271,8 @@ class NodeParameters:
         Check each value of ``{ROS name: value}`` on its own, not their combination.
 
         For the values of one ``set_parameters`` request, whose combination
-        (``input_type: tf`` needs both frames) is checked once all are in.
+        (``input_type: tf`` needs both frames) is checked once all are in. Raises
+        ParameterError for a name that is not a parameter, or an invalid value.
         """
         checked_arguments(cls, values, _PARAMETER, unknown=unknown_parameter_error)
 
