@@ -246,13 +246,11 @@ class BagOutput:
                                  os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
         except FileExistsError:
             raise BagError(_part_exists_message(self.path)) from None
-        except OSError as error:
+        except BaseException as error:   # also Ctrl-C, SIGTERM between the directory and the file
             if not self.single_file and os.path.isdir(self.part_path):
                 _remove(self.part_path)
-            raise BagError(f'cannot create output {self.path}: {error.strerror}') from None
-        except BaseException:   # Ctrl-C, SIGTERM between creating the directory and the file
-            if not self.single_file:
-                _remove(self.part_path)
+            if isinstance(error, OSError):
+                raise BagError(f'cannot create output {self.path}: {error.strerror}') from None
             raise
         self.stream = os.fdopen(descriptor, 'wb')
         self._can_reserve = True
