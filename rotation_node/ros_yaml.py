@@ -126,7 +126,7 @@ _RosLoader.add_constructor(
     lambda loader, node: ros_scalar(loader.construct_scalar(node)))  # type: ignore[arg-type]
 
 
-def _check_size(node, label, error, depth=1, sizes=None):
+def _expanded_size(node, label, error, depth=1, sizes=None):
     """Return the node count of ``node`` with its aliases expanded; refuse too many or too deep."""
     sizes = {} if sizes is None else sizes   # id(node) -> its count, for nodes counted
     if id(node) not in sizes:
@@ -135,7 +135,7 @@ def _check_size(node, label, error, depth=1, sizes=None):
         children = () if isinstance(node, yaml.ScalarNode) else (
             [item for pair in node.value for item in pair]
             if isinstance(node, yaml.MappingNode) else node.value)
-        size = 1 + sum(_check_size(child, label, error, depth + 1, sizes) for child in children)
+        size = 1 + sum(_expanded_size(child, label, error, depth + 1, sizes) for child in children)
         if size > MAX_NODES:
             raise error(f'{label}: its aliases expand it beyond {MAX_NODES} YAML nodes; refused')
         sizes[id(node)] = size
@@ -170,7 +170,7 @@ def load_ros_yaml(path: Any, label: str, error: Type[Exception], *,
         node = loader.get_single_node()
         if node is None:
             return None
-        _check_size(node, label, error)
+        _expanded_size(node, label, error)
         return loader.construct_document(node)
     except yaml.YAMLError as exc:
         mark = getattr(exc, 'problem_mark', None)
