@@ -104,7 +104,7 @@ class ParameterSpec(FieldSpec):
         return self.kind.constraints or self.rule
 
 
-_PARAMETER = KeyPath(error_type=ParameterError, template="parameter '{}'")
+_PARAMETER_PATH = KeyPath(error_type=ParameterError, template="parameter '{}'")
 
 
 def _frame_name(value: str, where: KeyPath) -> str:
@@ -246,7 +246,7 @@ class NodeParameters:
 
     def __post_init__(self) -> None:
         """Check every value, then the input type's own parameters; string arrays as tuples."""
-        check_fields_in_place(self, _PARAMETER)
+        check_fields_in_place(self, _PARAMETER_PATH)
         _check_mounting_frames(self)
         if self.input_type == 'tf':
             _check_tf_frames(self)
@@ -262,7 +262,7 @@ class NodeParameters:
 
         Raises ParameterError for a name that is not a parameter, or an invalid value.
         """
-        return replace(self, **checked_arguments(type(self), values, _PARAMETER,
+        return replace(self, **checked_arguments(type(self), values, _PARAMETER_PATH,
                                                  unknown=unknown_parameter_error))
 
     @classmethod
@@ -274,7 +274,7 @@ class NodeParameters:
         (``input_type: tf`` needs both frames) is checked once all are in. Raises
         ParameterError for a name that is not a parameter, or an invalid value.
         """
-        checked_arguments(cls, values, _PARAMETER, unknown=unknown_parameter_error)
+        checked_arguments(cls, values, _PARAMETER_PATH, unknown=unknown_parameter_error)
 
     def to_ros(self) -> dict:
         """Return ``{ROS name: value}``, string arrays as lists (what rclpy expects)."""
