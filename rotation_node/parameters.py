@@ -131,6 +131,12 @@ def _parameter(name, default, kind, description, **options):
                          **options).field(default)
 
 
+def _frame_parameter(name, description, rule):
+    """Return a TF frame name parameter ('': none); ``rule`` adds to the rule of frame names."""
+    return _parameter(name, '', Text(), description, check=_frame_name,
+                      rule='a TF frame name without a leading /' + rule)
+
+
 @dataclass(frozen=True)
 class NodeParameters:
     """
@@ -214,17 +220,16 @@ class NodeParameters:
     mounting_magnetic_declination: float = _parameter(
         'mounting.magnetic_declination', 0.0, Real(integers=False),
         "Added to the yaw (rad), as robot_localization's magnetic_declination_radians")
-    mounting_tf_sensor_frame: str = _parameter(
-        'mounting.tf_sensor_frame', '', Text(),
+    mounting_tf_sensor_frame: str = _frame_parameter(
+        'mounting.tf_sensor_frame',
         'With mounting.tf_body_frame: M is read once from /tf_static, the orientation of '
-        'tf_body_frame in this frame (e.g. imu_link)', check=_frame_name,
-        rule='a TF frame name without a leading /; with mounting.tf_body_frame')
-    mounting_tf_body_frame: str = _parameter(
-        'mounting.tf_body_frame', '', Text(),
+        'tf_body_frame in this frame (e.g. imu_link)', '; with mounting.tf_body_frame')
+    mounting_tf_body_frame: str = _frame_parameter(
+        'mounting.tf_body_frame',
         'With mounting.tf_sensor_frame: the output body frame whose orientation in '
-        'tf_sensor_frame is M (e.g. base_link)', check=_frame_name,
-        rule='a TF frame name without a leading /, not mounting.tf_sensor_frame; with '
-             'mounting.tf_sensor_frame and mounting.body_rotation left at identity')
+        'tf_sensor_frame is M (e.g. base_link)',
+        ', not mounting.tf_sensor_frame; with mounting.tf_sensor_frame and '
+        'mounting.body_rotation left at identity')
     qos_reliability: str = _parameter(
         'qos.reliability', 'auto', Choice(RELIABILITIES),
         'Reliability of the input subscriptions and output publishers; auto: inputs adapt '
@@ -232,17 +237,14 @@ class NodeParameters:
     qos_depth: int = _parameter(
         'qos.depth', 1000, Integer(1, 10000),
         'History depth (keep last) of the input subscriptions and of the output publishers')
-    tf_parent_frame: str = _parameter(
-        'tf.parent_frame', '', Text(),
+    tf_parent_frame: str = _frame_parameter(
+        'tf.parent_frame',
         'input_type tf: the frame the orientation is expressed in (tf2 target frame, '
-        'e.g. map)', check=_frame_name,
-        rule='a TF frame name without a leading /; required with input_type tf')
-    tf_child_frame: str = _parameter(
-        'tf.child_frame', '', Text(),
+        'e.g. map)', '; required with input_type tf')
+    tf_child_frame: str = _frame_parameter(
+        'tf.child_frame',
         'input_type tf: the frame whose orientation is published (tf2 source frame, '
-        'e.g. base_link)', check=_frame_name,
-        rule='a TF frame name without a leading /, not tf.parent_frame; required with '
-             'input_type tf')
+        'e.g. base_link)', ', not tf.parent_frame; required with input_type tf')
 
     def __post_init__(self) -> None:
         """Check every value, then the input type's own parameters; string arrays as tuples."""
