@@ -25,8 +25,6 @@ than :data:`MAX_FILE_BYTES`, a document whose aliases expand it beyond
 :data:`MAX_NODES` nodes (a "billion laughs" alias bomb), or one nested deeper
 than :data:`MAX_DEPTH` is refused before it is built.
 """
-from decimal import Decimal
-from fractions import Fraction
 import math
 import re
 import sys
@@ -129,6 +127,8 @@ def _exact(number, value):
     significand, exponent = parts[0][2 if hexadecimal else 0:], parts[1:] or ['0']
     if value == 0.0:   # exact for a zero significand only (and a huge exponent costs nothing)
         return not significand.strip('0.')
+    from decimal import Decimal   # (and fractions): only for subnormal numbers
+    from fractions import Fraction
     if hexadecimal:
         whole, _, fraction = significand.partition('.')
         exact = (Fraction(int(whole + fraction, 16), 16 ** len(fraction))

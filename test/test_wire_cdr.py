@@ -268,8 +268,15 @@ def test_stamped_encoder_rejects_the_wrong_count_of_numbers():
         encode(header, [1.0, 2.0])
 
 
+def _layout_message(layout):
+    """Return the std_msgs/MultiArrayLayout of a registry.ArrayLayout."""
+    return MultiArrayLayout(dim=[MultiArrayDimension(label=d.label, size=d.size, stride=d.stride)
+                                 for d in layout.dim], data_offset=layout.data_offset)
+
+
 LAYOUTS = {
-    **{name: output.message.layout for name, output in OUTPUTS.items() if output.message.layout},
+    **{name: _layout_message(output.message.layout) for name, output in OUTPUTS.items()
+       if output.message.layout},
     'labels 0..4 characters': MultiArrayLayout(
         dim=[MultiArrayDimension(label='abcd'[:n], size=n, stride=7 * n) for n in range(5)],
         data_offset=3)}
