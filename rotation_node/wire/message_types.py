@@ -230,7 +230,8 @@ def _type_description_file(type_name):
         with open(path, encoding='utf-8') as stream:
             return json.load(stream)
     except (OSError, ValueError) as error:
-        raise BagError(f'type description {path} of {type_name} is unreadable: {error}') from None
+        raise BagError(f'the type description {path} of {type_name} is unreadable: '
+                       f'{error}') from None
 
 
 @functools.lru_cache(maxsize=None)
@@ -317,16 +318,17 @@ def message_fields(type_name: str) -> Optional[Tuple[MessageField, ...]]:
         return None
     try:
         described = description['type_description_msg']['type_description']
-        if described['type_name'] != type_name:
-            raise ValueError(f"it describes {described['type_name']}")
         fields = []
         for field in described['fields']:
             container, basic = divmod(field['type']['type_id'], _CONTAINER_STEP)
             fields.append(MessageField(
                 field['name'], _FIELD_TYPES[basic], _CONTAINERS[container],
                 field['type']['capacity'], field['type']['nested_type_name']))
-    except (KeyError, TypeError, ValueError, IndexError) as error:
-        raise BagError(f'the type description of {type_name} is not one: {error!r}') from None
+    except (KeyError, TypeError, IndexError) as error:
+        raise BagError(f'the type description of {type_name} is malformed '
+                       f'({type(error).__name__} {error})') from None
+    if described['type_name'] != type_name:
+        raise BagError(f"the type description of {type_name} describes {described['type_name']}")
     if [field.name for field in fields] == [_EMPTY_MESSAGE_PLACEHOLDER]:
         return ()
     return tuple(fields)
