@@ -56,7 +56,6 @@ from dataclasses import dataclass, replace
 import math
 from pathlib import Path
 import re
-import tempfile
 from typing import Any, cast, Mapping, Optional, Tuple, TYPE_CHECKING
 
 from rotation_node import registry
@@ -493,9 +492,10 @@ def parameters_file_label(path: StrPath) -> str:
     when the message is read; the message names the parameter and its value.
     """
     path = Path(path)
-    if (_LAUNCH_PARAMETERS_FILE.fullmatch(path.name)
-            and path.parent == Path(tempfile.gettempdir())):
-        return LAUNCH_PARAMETERS
+    if _LAUNCH_PARAMETERS_FILE.fullmatch(path.name):
+        import tempfile   # (and shutil, random): only for the names launch_ros gives
+        if path.parent == Path(tempfile.gettempdir()):
+            return LAUNCH_PARAMETERS
     return f'parameters file {path}'
 
 
