@@ -253,7 +253,7 @@ class DecodedBlock(NamedTuple):
 @functools.lru_cache(maxsize=None)
 def _view_class(type_name):
     """Return the named tuple class that views messages of ``type_name`` (``pkg/msg/Type``)."""
-    package, _, name = split_type_name(type_name)
+    name = split_type_name(type_name)[2]
     # mypy cannot type a namedtuple whose fields are only known at run time.
     view = collections.namedtuple(  # type: ignore[misc]
         name, [field.name for field in _fields(type_name)])
