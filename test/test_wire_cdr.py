@@ -21,6 +21,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.typesys import get_typestore, Stores
 from rotation_node.errors import BagError
 from rotation_node.registry import OUTPUTS
+from rotation_node.wire import cdr
 from rotation_node.wire.cdr import (
     CDR_LE, fixed_layout_codec, float64_multi_array_block_encoder, float64_multi_array_encoder,
     message_encoder)
@@ -230,6 +231,22 @@ def test_types_without_a_fixed_layout_have_no_codec(type_name):
 def test_unknown_type_is_an_error():
     with pytest.raises(BagError, match='nope_msgs'):
         fixed_layout_codec('nope_msgs/msg/Nope')
+
+
+def test_a_type_installed_without_a_description_is_left_to_rclpy(monkeypatch):
+    """No type description (a package built without one): no codec, the type still known."""
+    monkeypatch.setattr(cdr, 'message_fields', lambda type_name: None)
+    caches = (fixed_layout_codec, message_encoder)
+    for cached in caches:
+        cached.cache_clear()
+    try:
+        assert fixed_layout_codec('sensor_msgs/msg/Imu') is None
+        assert message_encoder('sensor_msgs/msg/Imu') is None   # the writer serialises with rclpy
+        with pytest.raises(BagError, match='nope_msgs'):
+            fixed_layout_codec('nope_msgs/msg/Nope')
+    finally:
+        for cached in caches:   # nothing computed without the descriptions stays
+            cached.cache_clear()
 
 
 def test_encoding_an_impossible_value_names_the_field():
