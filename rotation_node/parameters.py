@@ -48,7 +48,6 @@ from dataclasses import dataclass, replace
 import math
 from pathlib import Path
 import re
-import tempfile
 from typing import Any, cast, Mapping, Optional, Tuple, TYPE_CHECKING
 
 from rotation_node import registry
@@ -380,9 +379,10 @@ LAUNCH_PARAMETERS = 'the parameters the launch file gives'
 def parameters_file_label(path: StrPath) -> str:
     """Return how messages name a parameters file: ``parameters file <path>`` (or launch's)."""
     path = Path(path)
-    if (_LAUNCH_PARAMETERS_FILE.fullmatch(path.name)
-            and path.parent == Path(tempfile.gettempdir())):
-        return LAUNCH_PARAMETERS
+    if _LAUNCH_PARAMETERS_FILE.fullmatch(path.name):
+        import tempfile   # (and shutil, random): only for the names launch_ros gives
+        if path.parent == Path(tempfile.gettempdir()):
+            return LAUNCH_PARAMETERS
     return f'parameters file {path}'
 
 

@@ -17,8 +17,9 @@ reads one sample from each message through the fields it names; an input type
 that needs per-stream state (several topics, a buffer) names the module of its
 stream instead (:attr:`InputType.stream`).
 
-This module does not import rclpy: message classes and the CDR encoders are
-looked up when first used.
+This module imports neither rclpy nor the Python message packages: message
+classes and the CDR encoders are looked up when first used (a message is
+built only by the node; ``rotation_bag convert`` encodes without building one).
 """
 from __future__ import annotations
 
@@ -306,6 +307,21 @@ INPUTS = {entry.name: entry for entry in _INPUT_LIST}
 # Output messages -------------------------------------------------------------------
 
 
+class ArrayDimension(NamedTuple):
+    """The values of a std_msgs/MultiArrayDimension."""
+
+    label: str
+    size: int
+    stride: int
+
+
+class ArrayLayout(NamedTuple):
+    """The values of a std_msgs/MultiArrayLayout (read as the message is)."""
+
+    dim: Tuple[ArrayDimension, ...]
+    data_offset: int = 0
+
+
 @dataclass(frozen=True)
 class OutputMessage:
     """
@@ -323,8 +339,8 @@ class OutputMessage:
     stamped_numbers : bool
         The type is a std_msgs/Header followed by the numbers only, which
         :mod:`rotation_node.wire.cdr` encodes without building a message.
-    layout : object, optional
-        std_msgs/MultiArrayLayout of a Float64MultiArray type.
+    layout : ArrayLayout, optional
+        The std_msgs/MultiArrayLayout of a Float64MultiArray type, as values.
 
     """
 
@@ -332,7 +348,7 @@ class OutputMessage:
     build: Callable[[Any, Sequence[float]], Any]
     numbers: Callable[[Any], Sequence[float]]
     stamped_numbers: bool = False
-    layout: Any = None
+    layout: Optional[ArrayLayout] = None
 
     @property
     def message_class(self) -> type:
@@ -438,14 +454,18 @@ def float64_multi_array(dimensions: Sequence[Tuple[str, int, int]]) -> OutputMes
     Float64MultiArray has no header: these outputs carry no stamp or frame_id.
 
     """
-    from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
-    layout = MultiArrayLayout(
-        dim=[MultiArrayDimension(label=label, size=size, stride=stride)
-             for label, size, stride in dimensions], data_offset=0)
+    layout = ArrayLayout(tuple(ArrayDimension(*dimension) for dimension in dimensions))
+
+    @functools.lru_cache(maxsize=None)
+    def layout_message():   # one, shared by the messages built
+        dimension_class = _message_class('std_msgs/msg/MultiArrayDimension')
+        return _message_class('std_msgs/msg/MultiArrayLayout')(
+            dim=[dimension_class(label=d.label, size=d.size, stride=d.stride) for d in layout.dim],
+            data_offset=layout.data_offset)
 
     def build(header, numbers):
-        message = Float64MultiArray()
-        message.layout = layout
+        message = _message_class('std_msgs/msg/Float64MultiArray')()
+        message.layout = layout_message()
         message.data = array.array('d', numbers)   # a tuple, list or array of float64
         return message
     return OutputMessage('std_msgs/msg/Float64MultiArray', build, lambda msg: msg.data,

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 import dataclasses
-import difflib
 import math
 import re
 from typing import Any, Callable, Iterable, Optional
@@ -39,6 +38,7 @@ def type_and_repr(value: Any) -> str:
 
 def nearest_name(name: Any, names: Iterable[str]) -> str:
     """Return the valid name nearest to ``name`` (``difflib``), or '' if none is near."""
+    import difflib   # (and heapq): only for a name that is not valid
     matches = difflib.get_close_matches(str(name), list(names), n=1, cutoff=0.6)
     return matches[0] if matches else ''
 

@@ -17,7 +17,7 @@ from bag_helpers import imu_messages, stamp_ns
 import numpy as np
 import pytest
 from ros_harness import script
-from rotation_node.bag.cli import main
+from rotation_node.bag.cli import build_parser, main
 from rotation_node.bag.reading.mcap_reader import BagReader
 from rotation_node.bag.records import TopicMetadata
 from rotation_node.bag.writing.writer import BagWriter
@@ -232,12 +232,22 @@ def test_usage_error_exits_2():
     assert result.returncode == 2 and 'the following arguments are required' in result.stderr
 
 
+#: What ``convert`` of an MCAP bag of a fixed-layout type does without (its start-up).
+NOT_LOADED_BY_CONVERT = (
+    'rclpy', 'rosidl_parser', 'std_msgs', 'sensor_msgs', 'geometry_msgs', 'builtin_interfaces',
+    'rosbags', 'matplotlib', 'mcap.writer', 'numba', 'concurrent.futures', 'ctypes.util')
+
+
 def test_convert_of_an_mcap_bag_loads_no_ros_client_library(workspace):
-    """Load neither rclpy (the rcl libraries) nor rosbags, nor mcap's writer module."""
+    """
+    Load neither rclpy (the rcl libraries) nor the message packages, rosbags, numba...
+
+    The messages are decoded and encoded from the types' installed descriptions;
+    the kernels of a small bag run interpreted.
+    """
     probe = ('import sys; from rotation_node.bag.cli import main; '
              "status = main(['convert', 'imu.mcap', 'out.mcap', '--params', 'params.yaml']); "
-             "print(status, sorted(m for m in ('rclpy', 'rosbags', 'matplotlib', 'mcap.writer') "
-             'if m in sys.modules))')
+             f'print(status, sorted(m for m in {NOT_LOADED_BY_CONVERT!r} if m in sys.modules))')
     result = subprocess.run([sys.executable, '-c', probe], cwd=workspace, capture_output=True,
                             text=True, timeout=300)
     assert result.stdout.split('\n')[-2] == '0 []', result.stderr
@@ -249,3 +259,29 @@ def test_ros_args_are_removed_as_rclpy_removes_them(workspace, capsys, monkeypat
     assert main(['convert', 'imu.mcap', 'out.mcap', '--ros-args', '-r', '__ns:=/x', '--',
                  '--params', 'params.yaml']) == 0
     assert (workspace / 'out.mcap').exists()
+
+
+COMMAND_LINES = [
+    ['record', 'out.mcap', '--topics', '/imu', '/odom', '--duration', '2', '--compression', 'lz4'],
+    ['play', 'in.mcap', '--rate', '0', '--topics', '/imu', '--loop', '--strict'],
+    ['convert', 'a.mcap', 'b.mcap', 'outdir', '--params', 'p.yaml', '--topic', '/imu', '--jobs',
+     '2', '--force'],
+    ['plot', 'in.mcap', '--topic', '/imu/euler', '-o', 'x.png'],
+    ['export', 'in.mcap', 'out.csv', '--params', 'p.yaml', '--topic', '/imu'],
+    ['compare', 'ref.mcap', 'est.mcap', '--reference', '/a', '--estimate', '/b', '--time-offset',
+     '0.5', '--align', 'world', '--reference-frames', 'map', 'base'],
+]
+
+
+@pytest.mark.parametrize('arguments', COMMAND_LINES, ids=[line[0] for line in COMMAND_LINES])
+def test_the_parser_of_one_command_reads_it_as_the_whole_parser(arguments):
+    assert vars(build_parser(arguments[0]).parse_args(arguments)) == vars(
+        build_parser().parse_args(arguments))
+
+
+def test_help_lists_every_command(capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(['--help'])
+    assert exit_.value.code == 0
+    listed = re.findall(r'^    (\w+) ', capsys.readouterr().out, re.MULTILINE)
+    assert listed == [line[0] for line in COMMAND_LINES]

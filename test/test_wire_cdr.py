@@ -21,6 +21,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.typesys import get_typestore, Stores
 from rotation_node.errors import BagError
 from rotation_node.registry import OUTPUTS
+from rotation_node.wire import cdr
 from rotation_node.wire.cdr import (
     CDR_LE, fixed_layout_codec, float64_multi_array_block_encoder, float64_multi_array_encoder,
     message_encoder)
@@ -232,6 +233,22 @@ def test_unknown_type_is_an_error():
         fixed_layout_codec('nope_msgs/msg/Nope')
 
 
+def test_a_type_installed_without_a_description_is_left_to_rclpy(monkeypatch):
+    """No type description (a package built without one): no codec, the type still known."""
+    monkeypatch.setattr(cdr, 'message_fields', lambda type_name: None)
+    caches = (fixed_layout_codec, message_encoder)
+    for cached in caches:
+        cached.cache_clear()
+    try:
+        assert fixed_layout_codec('sensor_msgs/msg/Imu') is None
+        assert message_encoder('sensor_msgs/msg/Imu') is None   # the writer serialises with rclpy
+        with pytest.raises(BagError, match='nope_msgs'):
+            fixed_layout_codec('nope_msgs/msg/Nope')
+    finally:
+        for cached in caches:   # nothing computed without the descriptions stays
+            cached.cache_clear()
+
+
 def test_encoding_an_impossible_value_names_the_field():
     codec = fixed_layout_codec('geometry_msgs/msg/Vector3Stamped')
     view = codec.decode(serialize_message(message_class('geometry_msgs/msg/Vector3Stamped')()))
@@ -268,8 +285,15 @@ def test_stamped_encoder_rejects_the_wrong_count_of_numbers():
         encode(header, [1.0, 2.0])
 
 
+def _layout_message(layout):
+    """Return the std_msgs/MultiArrayLayout of a registry.ArrayLayout."""
+    return MultiArrayLayout(dim=[MultiArrayDimension(label=d.label, size=d.size, stride=d.stride)
+                                 for d in layout.dim], data_offset=layout.data_offset)
+
+
 LAYOUTS = {
-    **{name: output.message.layout for name, output in OUTPUTS.items() if output.message.layout},
+    **{name: _layout_message(output.message.layout) for name, output in OUTPUTS.items()
+       if output.message.layout},
     'labels 0..4 characters': MultiArrayLayout(
         dim=[MultiArrayDimension(label='abcd'[:n], size=n, stride=7 * n) for n in range(5)],
         data_offset=3)}

@@ -204,13 +204,7 @@ def _positive_int(text):
     return value
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """Return the argument parser of ``rotation_bag``."""
-    parser = argparse.ArgumentParser(
-        prog=PROG, description='Record, play, convert, plot and export ROS 2 bags; compare '
-                               'two orientation topics.')
-    commands = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
-
+def _add_record(commands):
     record = commands.add_parser('record', help='record live topics to an MCAP bag')
     record.add_argument('output', metavar='OUT',
                         help='rosbag2 directory to create, or a single MCAP file *.mcap')
@@ -222,6 +216,8 @@ def build_parser() -> argparse.ArgumentParser:
     record.add_argument('--force', action='store_true', help='replace OUT')
     record.set_defaults(run=_record)
 
+
+def _add_play(commands):
     play = commands.add_parser('play', help='publish the messages of a bag')
     play.add_argument('input', metavar='IN', help='any bag (rosbag2 directory, .mcap, .db3, '
                                                   'ROS 1 .bag...)')
@@ -238,6 +234,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_strict(play, 'playing')
     play.set_defaults(run=_play)
 
+
+def _add_convert(commands):
     convert = commands.add_parser(
         'convert', help="add the node's outputs for the input topics to a copy of a bag",
         usage=f'{PROG} convert IN [IN ...] OUT --params FILE [--topic T] [--compression C] '
@@ -264,6 +262,8 @@ def build_parser() -> argparse.ArgumentParser:
                               'processes (default 1)')
     convert.set_defaults(run=_convert)
 
+
+def _add_plot(commands):
     plot = commands.add_parser('plot', help='plot a topic (input or converted) over time as a PNG')
     plot.add_argument('input', metavar='IN', help='any bag (rosbag2 directory, .mcap, .db3, '
                                                   'ROS 1 .bag...)')
@@ -277,6 +277,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_strict(plot, 'plotting')
     plot.set_defaults(run=_plot)
 
+
+def _add_export(commands):
     export = commands.add_parser(
         'export', help="write the node's outputs for one topic as a CSV or Parquet table",
         description="Write the converted values of one input topic (the node's outputs, as "
@@ -294,6 +296,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_strict(export, 'exporting')
     export.set_defaults(run=_export)
 
+
+def _add_compare(commands):
     compare = commands.add_parser(
         'compare', help='compare an orientation topic with a reference: time offset, '
                         'alignment, errors',
@@ -335,13 +339,35 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument('--force', action='store_true', help='overwrite the JSON and PNG')
     _add_strict(compare, 'reading')
     compare.set_defaults(run=_compare)
+
+
+#: ``rotation_bag`` COMMAND -> adds its parser (with its ``run``) to the subparsers.
+_COMMANDS = {'record': _add_record, 'play': _add_play, 'convert': _add_convert, 'plot': _add_plot,
+             'export': _add_export, 'compare': _add_compare}
+
+
+def build_parser(command: Optional[str] = None) -> argparse.ArgumentParser:
+    """
+    Return the argument parser of ``rotation_bag``: of every command, or of ``command`` only.
+
+    :func:`main` builds the one command given (with its ``--help``), not all of them.
+    """
+    parser = argparse.ArgumentParser(
+        prog=PROG, description='Record, play, convert, plot and export ROS 2 bags; compare '
+                               'two orientation topics.')
+    commands = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
+    for name, add_command in _COMMANDS.items():
+        if command in (None, name):
+            add_command(commands)
     return parser
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run ``rotation_bag``; return the exit status."""
     argv = sys.argv if argv is None else [PROG, *argv]
-    args = build_parser().parse_args(_without_ros_args(argv)[1:])
+    arguments = _without_ros_args(argv)[1:]
+    command = arguments[0] if arguments and arguments[0] in _COMMANDS else None
+    args = build_parser(command).parse_args(arguments)
     with StopSignal():   # a signal stops the work where it checks (see stop_signal)
         try:
             args.run(args, argv)

@@ -69,7 +69,6 @@ or wherever ``NUMBA_CACHE_DIR`` says.
 """
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 import importlib.util
 import math
 import os
@@ -738,6 +737,7 @@ def _run(kernel_: Any, inputs: Sequence[FloatArray], trailings: Sequence[tuple[i
         return kernel_(*inputs, out, *args)
     global _pool
     if _pool is None:
+        from concurrent.futures import ThreadPoolExecutor   # (and logging): for large batches
         _pool = ThreadPoolExecutor(_threads, thread_name_prefix='rotation_node')
     if kernel_.dispatcher is None:
         kernel_.load()   # once, here, rather than in each thread

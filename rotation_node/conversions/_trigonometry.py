@@ -50,7 +50,6 @@ arguments must be finite.
 """
 from __future__ import annotations
 
-from fractions import Fraction
 import math
 from typing import Any, Callable, TYPE_CHECKING
 
@@ -148,6 +147,7 @@ def fused_multiply_add(a: float, b: float, c: float) -> float:
     """
     if a == 0.0 or b == 0.0 or not (math.isfinite(a) and math.isfinite(b) and math.isfinite(c)):
         return a * b + c    # the product is exact (or not finite): one rounding
+    from fractions import Fraction   # (and decimal): here only, microseconds beside its use
     return float(Fraction(a) * Fraction(b) + Fraction(c))
 
 

@@ -14,7 +14,9 @@ sequences, bounded or wide strings. std_msgs/Header, sensor_msgs/Imu,
 nav_msgs/Odometry and the geometry_msgs ``*Stamped`` types are. Once the
 lengths of its strings are known, every field of such a message is at a
 fixed offset: a :class:`PayloadLayout`, computed once per set of string
-lengths from the type's rosidl definition (``SLOT_TYPES``), and given in the
+lengths from the type's fields as its installed type description gives them
+(:func:`rotation_node.wire.message_types.message_fields`: neither rclpy nor
+the Python message packages are imported to encode or decode), and given in the
 two forms the codec uses: a ``struct.Struct`` that packs or unpacks one
 message in one call (:meth:`FixedLayoutCodec.decode`, :meth:`~FixedLayoutCodec.encode`),
 and a numpy structured dtype that reads or writes the fields of a block of
@@ -55,9 +57,8 @@ import struct
 from typing import Any, Callable, Dict, List, Mapping, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
-from rosidl_parser.definition import Array, BasicType, NamespacedType, UnboundedString
 from rotation_node.errors import BagError
-from rotation_node.wire.message_types import message_class
+from rotation_node.wire.message_types import message_class, message_fields, split_type_name
 
 #: Encapsulation header of little-endian plain CDR (the options bytes zero).
 CDR_LE = b'\x00\x01\x00\x00'
@@ -67,8 +68,8 @@ _CDR_LE_ID = CDR_LE[:2]   # the representation identifier; the options are ignor
 _ENCAPSULATION_SIZE = len(CDR_LE)
 _UINT32 = struct.Struct('<I')
 _STRING = 's'   # the struct code of a string's bytes (after its uint32 length)
-# struct codes of the rosidl basic types with a fixed size, which is also their
-# alignment; numpy reads the same codes with '<' as the same types.
+# struct codes of the basic types with a fixed size (by their names in type descriptions),
+# which is also their alignment; numpy reads the same codes with '<' as the same types.
 _STRUCT_CODES = {
     'boolean': '?', 'int8': 'b', 'uint8': 'B', 'int16': 'h', 'uint16': 'H', 'int32': 'i',
     'uint32': 'I', 'int64': 'q', 'uint64': 'Q', 'float': 'f', 'double': 'd'}
@@ -250,19 +251,27 @@ class DecodedBlock(NamedTuple):
 
 
 @functools.lru_cache(maxsize=None)
-def _view_class(msg_class):
-    """Return the named tuple class that views messages of ``msg_class``."""
+def _view_class(type_name):
+    """Return the named tuple class that views messages of ``type_name`` (``pkg/msg/Type``)."""
+    name = split_type_name(type_name)[2]
     # mypy cannot type a namedtuple whose fields are only known at run time.
     view = collections.namedtuple(  # type: ignore[misc]
-        msg_class.__name__, msg_class.get_fields_and_field_types())
-    view.__doc__ = (f'Read-only view of a decoded {msg_class.__module__.split(".")[0]}/msg/'
-                    f'{msg_class.__name__} (rotation_node.wire.cdr).')
+        name, [field.name for field in _fields(type_name)])
+    view.__doc__ = f'Read-only view of a decoded {type_name} (rotation_node.wire.cdr).'
     return view
 
 
-def _compile(msg_class, prefix, leaves, position):
+def _fields(type_name):
+    """Return the fields of a type; one without an installed description has no fixed layout."""
+    fields = message_fields(type_name)
+    if fields is None:
+        raise _NotFixedLayout(f'{type_name} has no type description installed')
+    return fields
+
+
+def _compile(type_name, prefix, leaves, position):
     """
-    Append the leaves of ``msg_class`` to ``leaves``; return ``(build, position)``.
+    Append the leaves of ``type_name`` to ``leaves``; return ``(build, position)``.
 
     ``build(values)`` makes the view of the message from the tuple its type's
     struct unpacks, whose items from ``position`` on are this message's: one per
@@ -270,37 +279,34 @@ def _compile(msg_class, prefix, leaves, position):
     The returned position is the first item after them.
     """
     new = tuple.__new__   # the named tuple's own __new__ is a Python function: slower
-    view = _view_class(msg_class)
+    view = _view_class(type_name)
     start, getters, values_only = position, [], True
-    for name, slot in zip(msg_class.get_fields_and_field_types(), msg_class.SLOT_TYPES):
-        path = prefix + name
-        value_type = slot.value_type if isinstance(slot, Array) else slot
-        if isinstance(slot, NamespacedType):
-            getter, position = _compile(
-                message_class('/'.join((*slot.namespaces, slot.name))), path + '.', leaves,
-                position)
+    for field in _fields(type_name):
+        path = prefix + field.name
+        if field.field_type == 'nested_type' and not field.container:
+            getter, position = _compile(field.nested_type_name, path + '.', leaves, position)
             values_only = False
-        elif isinstance(slot, UnboundedString):
+        elif field.field_type == 'string' and not field.container:
             leaves.append(_Leaf(path, _STRING, 0))
             getter = functools.partial(_string_at, position + 1)
             position += 2
             values_only = False
-        elif isinstance(value_type, BasicType) and value_type.typename in _STRUCT_CODES:
-            code = _STRUCT_CODES[value_type.typename]
-            if slot is value_type:
+        elif field.field_type in _STRUCT_CODES and field.container in ('', 'array'):
+            code = _STRUCT_CODES[field.field_type]
+            if not field.container:
                 leaves.append(_Leaf(path, code, 0))
                 getter = operator.itemgetter(position)
                 position += 1
             else:
-                leaves.append(_Leaf(path, code, slot.size))
-                getter = operator.itemgetter(slice(position, position + slot.size))
-                position += slot.size
+                leaves.append(_Leaf(path, code, field.capacity))
+                getter = operator.itemgetter(slice(position, position + field.capacity))
+                position += field.capacity
                 values_only = False
         else:
-            raise _NotFixedLayout(f'{path} ({type(slot).__name__})')
+            raise _NotFixedLayout(f'{path} ({field.field_type} {field.container or "value"})')
         getters.append(getter)
     if not getters:
-        raise _NotFixedLayout(f'{msg_class.__name__} has no fields')
+        raise _NotFixedLayout(f'{type_name} has no fields')
     if values_only:   # no nested message, array or string: a slice of the unpacked tuple
         end = position
         return (lambda values: new(view, values[start:end])), position
@@ -327,8 +333,6 @@ class FixedLayoutCodec:
     Attributes
     ----------
     type_name : str
-    message_class : type
-        The rclpy message class, used for data that is not little-endian CDR.
     view_class : type
         The named tuple class :meth:`decode` returns.
 
@@ -336,14 +340,13 @@ class FixedLayoutCodec:
 
     def __init__(self, type_name: str) -> None:
         self.type_name = type_name
-        self.message_class = message_class(type_name)
         leaves: List[_Leaf] = []
         try:
-            self._build, _ = _compile(self.message_class, '', leaves, 0)
+            self._build, _ = _compile(type_name, '', leaves, 0)
         except _NotFixedLayout as error:
             raise BagError(f'{type_name} has no fixed CDR layout: {error}') from None
         self._leaves = tuple(leaves)
-        self.view_class = _view_class(self.message_class)
+        self.view_class = _view_class(type_name)
         self._getters = [operator.attrgetter(leaf.path) for leaf in leaves]
         # For each string, the bytes from the end of the previous one (or the
         # payload start) to the end of its uint32 length, by that offset % 8:
@@ -404,7 +407,7 @@ class FixedLayoutCodec:
         if data[:2] != _CDR_LE_ID:
             from rclpy.serialization import deserialize_message   # loads rcl: only here
             try:
-                return deserialize_message(bytes(data), self.message_class)
+                return deserialize_message(bytes(data), message_class(self.type_name))
             except Exception as error:   # rclpy raises RMWError, RuntimeError...
                 raise BagError(f'{self.type_name}: encapsulation {bytes(data[:4]).hex(" ")} '
                                f'is not little-endian CDR and rclpy failed: {error}') from None
@@ -628,7 +631,9 @@ def fixed_layout_codec(type_name: str) -> Optional[FixedLayoutCodec]:
         If the type name is malformed or the type is not installed.
 
     """
-    message_class(type_name)   # an unknown type is an error, not "no codec"
+    if message_fields(type_name) is None:
+        message_class(type_name)   # an unknown type is an error, not "no codec"
+        return None   # installed without a type description: rclpy's to encode and decode
     try:
         return FixedLayoutCodec(type_name)
     except BagError:
@@ -653,8 +658,9 @@ def float64_multi_array_encoder(layout: Any) -> Callable[[Sequence[float]], byte
 
     Parameters
     ----------
-    layout : std_msgs.msg.MultiArrayLayout
-        Encoded once; every message gets it.
+    layout : std_msgs.msg.MultiArrayLayout or rotation_node.registry.ArrayLayout
+        Encoded once; every message gets it (read: ``dim``, each with
+        ``label``, ``size``, ``stride``; ``data_offset``).
 
     Returns
     -------

@@ -1,13 +1,14 @@
 """
-ROS 2 message types by name: Python classes, full definitions and type hashes.
+ROS 2 message types by name: Python classes, fields, full definitions and type hashes.
 
 A type name is the ROS 2 resource name ``'pkg/msg/Type'`` as stored in a bag
 (``sensor_msgs/msg/Imu``). Classes come from the installed Python message
-packages (``import pkg.msg``); definitions and hashes from the ``.msg`` and
-``.json`` files the packages install under ``<prefix>/share/<pkg>/msg/``,
-where ``<prefix>`` is each entry of ``AMENT_PREFIX_PATH`` and then the
-interpreter's own prefix (PyPI wheels install there without setting
-``AMENT_PREFIX_PATH``).
+packages (``import pkg.msg``, which imports every type of the package: only
+where a message object is built or rclpy serialises); fields, definitions and
+hashes from the ``.msg`` and ``.json`` files the packages install under
+``<prefix>/share/<pkg>/msg/``, where ``<prefix>`` is each entry of
+``AMENT_PREFIX_PATH`` and then the interpreter's own prefix (PyPI wheels
+install there without setting ``AMENT_PREFIX_PATH``).
 """
 import functools
 import importlib
@@ -15,6 +16,7 @@ import json
 import os
 import re
 import sys
+from typing import NamedTuple, Optional, Tuple
 
 from rotation_node.errors import BagError
 
@@ -30,6 +32,18 @@ _PRIMITIVE_TYPES = frozenset((
     'bool', 'byte', 'char', 'float32', 'float64', 'int8', 'uint8', 'int16', 'uint16',
     'int32', 'uint32', 'int64', 'uint64', 'string', 'wstring'))
 _DEFINITION_DELIMITER = '=' * 80 + '\n'
+# The field types of REP-2011 type descriptions (type_description_interfaces/msg/FieldType):
+# a basic type's id is its index here; plus 48 for a fixed array of it, 96 for a bounded
+# sequence, 144 for an unbounded sequence (the containers' order below).
+_FIELD_TYPES = (
+    'not_set', 'nested_type', 'int8', 'uint8', 'int16', 'uint16', 'int32', 'uint32', 'int64',
+    'uint64', 'float', 'double', 'long_double', 'char', 'wchar', 'boolean', 'byte', 'string',
+    'wstring', 'fixed_string', 'fixed_wstring', 'bounded_string', 'bounded_wstring')
+_CONTAINERS = ('', 'array', 'bounded_sequence', 'sequence')
+_CONTAINER_STEP = 48
+# The one uint8 field a type description gives a message without fields (rosidl's placeholder;
+# the Python class has no field).
+_EMPTY_MESSAGE_PLACEHOLDER = 'structure_needs_at_least_one_member'
 
 
 def split_type_name(type_name: str) -> tuple[str, str, str]:
@@ -206,6 +220,21 @@ def message_definition(type_name: str) -> str:
 
 
 @functools.lru_cache(maxsize=None)
+def _type_description_file(type_name):
+    """Return the contents of a type's ``share/<pkg>/msg/<Type>.json`` (REP-2011), or None."""
+    package, kind, name = split_type_name(type_name)
+    path = _interface_file(package, kind, name, '.json')
+    if path is None:
+        return None
+    try:
+        with open(path, encoding='utf-8') as stream:
+            return json.load(stream)
+    except (OSError, ValueError) as error:
+        raise BagError(f'the type description {path} of {type_name} is unreadable: '
+                       f'{error}') from None
+
+
+@functools.lru_cache(maxsize=None)
 def type_hash(type_name: str) -> str:
     """
     Return the REP-2011 type hash (``'RIHS01_...'``) of a message type.
@@ -222,10 +251,84 @@ def type_hash(type_name: str) -> str:
         or ``''`` if there is none (rosbag2 stores ``''`` then too).
 
     """
-    package, kind, name = split_type_name(type_name)
-    path = _interface_file(package, kind, name, '.json')
-    if path is None:
-        return ''
-    with open(path, encoding='utf-8') as stream:
-        hashes = json.load(stream).get('type_hashes', [])
+    description = _type_description_file(type_name)
+    hashes = [] if description is None else description.get('type_hashes', [])
     return next((h['hash_string'] for h in hashes if h.get('type_name') == type_name), '')
+
+
+class MessageField(NamedTuple):
+    """
+    One field of a message type, as its REP-2011 type description gives it.
+
+    Attributes
+    ----------
+    name : str
+        ``'orientation_covariance'``.
+    field_type : str
+        The basic type, by its REP-2011 name: ``'double'``, ``'float'``,
+        ``'int32'``, ``'uint8'``, ``'boolean'``, ``'byte'``, ``'char'``,
+        ``'string'``, ``'bounded_string'``, ``'wstring'``...; or
+        ``'nested_type'`` for a message (:attr:`nested_type_name`).
+    container : str
+        ``''`` for one value, ``'array'`` (fixed size), ``'bounded_sequence'``
+        or ``'sequence'``.
+    capacity : int
+        The elements of an array, the most a bounded sequence holds; else 0.
+    nested_type_name : str
+        The message type of a nested field, ``'std_msgs/msg/Header'``; else ``''``.
+
+    """
+
+    name: str
+    field_type: str
+    container: str
+    capacity: int
+    nested_type_name: str
+
+
+@functools.lru_cache(maxsize=None)
+def message_fields(type_name: str) -> Optional[Tuple[MessageField, ...]]:
+    """
+    Return the fields of a message type in their order, without importing its Python package.
+
+    From the REP-2011 type description the package installs beside its
+    ``.msg`` file (``share/<pkg>/msg/<Type>.json``, generated since ROS 2 Iron).
+
+    Parameters
+    ----------
+    type_name : str
+        ``'pkg/msg/Type'``.
+
+    Returns
+    -------
+    tuple of MessageField or None
+        As the Python class has them (none for a message without fields, such
+        as std_msgs/Empty); None if the type has no type description
+        installed (a package built without one; its Python class may still exist).
+
+    Raises
+    ------
+    BagError
+        If the name is malformed, or the description file is unreadable or
+        describes another type.
+
+    """
+    description = _type_description_file(type_name)
+    if description is None:
+        return None
+    try:
+        described = description['type_description_msg']['type_description']
+        fields = []
+        for field in described['fields']:
+            container, basic = divmod(field['type']['type_id'], _CONTAINER_STEP)
+            fields.append(MessageField(
+                field['name'], _FIELD_TYPES[basic], _CONTAINERS[container],
+                field['type']['capacity'], field['type']['nested_type_name']))
+    except (KeyError, TypeError, IndexError) as error:
+        raise BagError(f'the type description of {type_name} is malformed '
+                       f'({type(error).__name__} {error})') from None
+    if described['type_name'] != type_name:
+        raise BagError(f"the type description of {type_name} describes {described['type_name']}")
+    if [field.name for field in fields] == [_EMPTY_MESSAGE_PLACEHOLDER]:
+        return ()
+    return tuple(fields)

@@ -34,7 +34,6 @@ from typing import (
     Collection, Dict, Iterable, Iterator, List, NamedTuple, Optional, Tuple, TYPE_CHECKING, Union)
 import zlib
 
-import lz4.frame
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import EndOfFile, McapError
 from mcap.opcode import Opcode
@@ -201,6 +200,7 @@ def _unzstd(stored, size, offset):
 
 def _unlz4(stored, size, offset):
     """Decompress an lz4 chunk that says it holds ``size`` bytes, never holding more than that."""
+    import lz4.frame   # only for lz4 chunks
     decompressor = lz4.frame.LZ4FrameDecompressor()
     pending = [stored]   # the frame, given to the decompressor once
 

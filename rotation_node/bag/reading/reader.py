@@ -36,7 +36,6 @@ import heapq
 import operator
 import os
 import re
-import tempfile
 from typing import Callable, Dict, Iterable, Iterator, List, Optional, Union
 
 from rotation_node.bag import metadata_yaml
@@ -371,6 +370,7 @@ class _Opener:
             raise BagError(f'{shown}: zstd-compressed file that does not hold a bag '
                            f'(it holds {kind})')
         if self.tmpdir is None:
+            import tempfile   # (and shutil): only for zstd-compressed files
             self.tmpdir = tempfile.TemporaryDirectory(prefix='rotation_bag.')
         target = os.path.join(self.tmpdir.name, f'{len(self.sources)}_{stored_name(path)}')
         try:

@@ -21,7 +21,6 @@ as a valid bag holding every chunk written so far.
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 import errno
 import os
 import shutil
@@ -44,8 +43,8 @@ _UNSUPPORTED = (errno.EOPNOTSUPP, errno.ENOSYS, errno.EINVAL)
 
 
 def _load_libc():
-    try:
-        return ctypes.CDLL(ctypes.util.find_library('c') or None, use_errno=True)
+    try:   # the C library the interpreter runs on (no ctypes.util.find_library: ldconfig)
+        return ctypes.CDLL(None, use_errno=True)
     except OSError:
         return None
 
