@@ -70,6 +70,7 @@ or wherever ``NUMBA_CACHE_DIR`` says.
 """
 from __future__ import annotations
 
+from array import array as PythonArray
 from concurrent.futures import ThreadPoolExecutor
 import importlib.util
 import math
@@ -867,6 +868,18 @@ _NUMBERS = (float, int, np.floating, np.integer)
 new_array = np.empty
 
 
+def is_listed(x: object, kind: type) -> bool:
+    """
+    Whether ``x`` (of type ``kind``) may be one sample given as Python numbers.
+
+    A list or tuple, or an ``array.array`` of doubles (how rclpy holds a
+    message's float64 sequences); their items are then taken as ``float()``
+    takes them, which numpy's conversion agrees with.
+    """
+    return (kind is list or kind is tuple
+            or (kind is PythonArray and x.typecode == 'd'))  # type: ignore[attr-defined]
+
+
 class _Scratch(threading.local):
     """
     Each thread's arrays for single samples given as lists or tuples.
@@ -911,7 +924,7 @@ def is_single_sample(x: object, trailing: tuple[int, ...]) -> TypeGuard[FloatArr
 
 def listed_sample(x: Any, scratch: tuple[Any, Any, int]) -> Any:
     """
-    Return the list or tuple ``x`` of one sample copied into a scratch array, or None.
+    Return the list, tuple or array.array ``x`` of one sample copied into a scratch array, or None.
 
     ``scratch`` is the ``(array, view, values)`` of the sample's shape in
     ``_scratch.first`` or ``_scratch.second`` (one per argument); the array
@@ -953,7 +966,7 @@ def single_sample(x: object, trailing: tuple[int, ...], argument: int = 0) -> Op
     """
     Return ``x`` as one sample in a float64 array a kernel's ``call_unchecked`` takes, or None.
 
-    ``x`` itself when :func:`is_single_sample`; a list or tuple of numbers
+    ``x`` itself when :func:`is_single_sample`; numbers (:func:`is_listed`)
     copied by :func:`listed_sample` (``argument`` 0 or 1: the first or second
     argument's array); None for anything else (the general path).
     """
@@ -963,7 +976,7 @@ def single_sample(x: object, trailing: tuple[int, ...], argument: int = 0) -> Op
         if array.shape == trailing and array.dtype is _FLOAT64 and array.flags.carray:
             return array
         return None
-    if kind is list or kind is tuple:
+    if is_listed(x, kind):
         return listed_sample(x, (_scratch.second if argument else _scratch.first).get(
             trailing, _NO_SCRATCH))
     return None
@@ -990,7 +1003,7 @@ def call_unary(kernel_: Any, x: ArrayLike, name: str, trailing: tuple[int, ...],
         array: FloatArray = x   # type: ignore[assignment]  # mypy does not narrow x by kind
         a = (array if (array.shape == trailing and array.dtype is _FLOAT64
                        and array.flags.carray) else None)
-    elif kind is list or kind is tuple:
+    elif kind is list or kind is tuple or (kind is PythonArray and is_listed(x, kind)):
         call_tuple = kernel_.call_tuple
         if call_tuple is not None:   # numba unboxes the tuple: no copy, no checks here
             out = new_array(out_trailing or _ONE)
@@ -1050,8 +1063,7 @@ def call_binary(kernel_: Any, x: ArrayLike, y: ArrayLike, names: tuple[str, str]
     if scalar_y and type(y) is not float and (isinstance(y, _NUMBERS) or is_single_sample(y, ())):
         y = float(y)
     kind_x, kind_y = type(x), type(y)
-    listed = ((kind_x is list or kind_x is tuple)
-              and (kind_y is float if scalar_y else (kind_y is list or kind_y is tuple)))
+    listed = is_listed(x, kind_x) and (kind_y is float if scalar_y else is_listed(y, kind_y))
     call_tuple = kernel_.call_tuple
     if listed and call_tuple is not None:   # numba unboxes the tuples: no copies
         out = new_array(out_trailing or _ONE)
