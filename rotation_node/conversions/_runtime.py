@@ -273,11 +273,11 @@ INTERPRETED_VALUES = 16384
 # A kernel that has run interpreted this long in all is loaded at its next call.
 INTERPRETED_SECONDS = 0.5
 # A loaded kernel that has copied this many single samples given as lists or
-# tuples of floats into arrays loads its tuple form (Kernel.load_tuple_form) at
-# the next (at the first with ROTATION_NODE_COMPILED=1): ~0.2 us less a call
-# from then on, against ~10-30 ms to load it from the disk cache (seconds to
-# compile it, once after installation). A program converting a few samples
-# never pays for it.
+# tuples of floats into arrays loads its tuple form (Kernel.load_tuple_form)
+# (with ROTATION_NODE_COMPILED=1 at the first such call after its own load):
+# ~0.1-0.4 us less a call from then on, against ~10-30 ms to load it from the
+# disk cache (seconds to compile it, once after installation). A program
+# converting a few samples never pays for it.
 TUPLE_COPIES = 1000
 _NO_TUPLE_FORM = -(1 << 62)   # tuple_copies of a kernel without a tuple form
 
@@ -336,6 +336,7 @@ class Kernel:
         # how many lists and tuples the loaded kernel has copied into arrays meanwhile.
         self.call_tuple: Optional[Callable[..., Any]] = None
         self.tuple_copies = 0
+        self.tuple_form_queued = False        # handed to the background loader
 
     def __repr__(self) -> str:
         state = 'compiled' if self.dispatcher is not None else 'interpreted'
@@ -398,6 +399,7 @@ class Kernel:
             signature = array_signature.return_type(*arguments)
             dispatcher = njit(cache=True, nogil=True, error_model='numpy')(
                 _compiled_copy(self.py_func))
+            dispatcher.kernel_signature = signature   # a kernel's compilation (KernelCompilation)
             try:
                 dispatcher.compile(signature)
             except NumbaError:
@@ -426,12 +428,29 @@ class Kernel:
             self.interpreted_seconds += time.perf_counter() - start
 
 
-# Called with a kernel at its first call (warm_up.load_in_background's queue), or None.
-_on_first_use: Optional[Callable[[Kernel], None]] = None
+class TupleForm(NamedTuple):
+    """A kernel's tuple form, due to be loaded (:meth:`Kernel.load_tuple_form`)."""
+
+    kernel: Kernel
+    widths: tuple[int, ...]
+
+    def load(self) -> None:
+        """Load it (compile it, or load it from the disk cache)."""
+        self.kernel.load_tuple_form(self.widths)
 
 
-def set_first_use_hook(hook: Optional[Callable[[Kernel], None]]) -> None:
-    """Have ``hook(kernel)`` called at each kernel's first call from now on (None: no hook)."""
+# Called with a kernel at its first call, and with a kernel's TupleForm when it is due
+# (warm_up.load_in_background's queue: it calls their load()), or None.
+_on_first_use: Optional[Callable[[Kernel | TupleForm], None]] = None
+
+
+def set_first_use_hook(hook: Optional[Callable[[Kernel | TupleForm], None]]) -> None:
+    """
+    Have ``hook(kernel)`` called at each kernel's first call from now on (None: no hook).
+
+    And ``hook(TupleForm(kernel, widths))`` when a loaded kernel's tuple form
+    is due (:func:`copied`), instead of loading it in the calling thread.
+    """
     global _on_first_use
     _on_first_use = hook
 
@@ -954,12 +973,19 @@ def copied(kernel_: Any, widths: tuple[int, ...]) -> None:
     Count a single sample that ``kernel_`` took as lists or tuples copied into arrays.
 
     ``widths``: the sample widths of its list arguments. A loaded kernel
-    loads its tuple form when the count says so (:data:`TUPLE_COPIES`).
+    loads its tuple form when the count says so (:data:`TUPLE_COPIES`), or
+    hands it to the background loader, where there is one (the node's:
+    a message callback never waits for a compilation).
     """
     kernel_.tuple_copies += 1
-    if ((kernel_.tuple_copies >= TUPLE_COPIES or _loading_forced)
+    if not ((kernel_.tuple_copies >= TUPLE_COPIES or _loading_forced)
             and kernel_.dispatcher is not None):
+        return
+    if _on_first_use is None or _loading_forced:
         kernel_.load_tuple_form(widths)
+    elif not kernel_.tuple_form_queued:   # a background loader (the node's) loads it
+        kernel_.tuple_form_queued = True
+        _on_first_use(TupleForm(kernel_, widths))
 
 
 def single_sample(x: object, trailing: tuple[int, ...], argument: int = 0) -> Optional[FloatArray]:
@@ -1008,7 +1034,7 @@ def call_unary(kernel_: Any, x: ArrayLike, name: str, trailing: tuple[int, ...],
         if call_tuple is not None:   # numba unboxes the tuple: no copy, no checks here
             out = new_array(out_trailing or _ONE)
             try:
-                sample = x if kind is tuple else tuple(x)
+                sample = x if kind is tuple else tuple(x)  # type: ignore[arg-type]
                 bad = (call_tuple(sample, out) if convention is None
                        else call_tuple(sample, out, convention))
             except (TypeError, ValueError, OverflowError):
@@ -1062,36 +1088,52 @@ def call_binary(kernel_: Any, x: ArrayLike, y: ArrayLike, names: tuple[str, str]
     scalar_y = trailings[1] == ()
     if scalar_y and type(y) is not float and (isinstance(y, _NUMBERS) or is_single_sample(y, ())):
         y = float(y)
-    kind_x, kind_y = type(x), type(y)
-    listed = is_listed(x, kind_x) and (kind_y is float if scalar_y else is_listed(y, kind_y))
+    xv: Any = x   # the arguments as they came; mypy: any object
+    yv: Any = y
+    kind_x, kind_y = type(xv), type(yv)
+    # is_listed, inline for lists and tuples: a call costs ~5 % of a ~1 us single sample
+    listed = ((kind_x is tuple or kind_x is list
+               or (kind_x is PythonArray and is_listed(xv, kind_x)))
+              and (kind_y is float if scalar_y else (
+                  kind_y is tuple or kind_y is list
+                  or (kind_y is PythonArray and is_listed(yv, kind_y)))))
     call_tuple = kernel_.call_tuple
     if listed and call_tuple is not None:   # numba unboxes the tuples: no copies
         out = new_array(out_trailing or _ONE)
         try:
-            tx = x if kind_x is tuple else tuple(x)
+            tx = xv if kind_x is tuple else tuple(xv)
             # One tuple of arguments: cheaper than f(a, b, out, *args).
             if scalar_y:
-                bad = call_tuple(*((tx, _NO_SAMPLES, out, y) + args))
+                bad = call_tuple(*((tx, _NO_SAMPLES, out, yv) + args))
             else:
-                bad = call_tuple(*((tx, y if kind_y is tuple else tuple(y), out) + args))
+                bad = call_tuple(*((tx, yv if kind_y is tuple else tuple(yv), out) + args))
         except (TypeError, ValueError, OverflowError):
             bad = 0   # not numbers of the samples' shapes: the general path says why
         if bad < 0:
             return out if out_trailing else out[0]
-    b: float | FloatArray | None
-    a = single_sample(x, trailings[0])
-    if scalar_y:
-        b = y if kind_y is float else None
+    a: Any
+    b: Any
+    # single_sample, inline for float64 arrays (a call costs ~5 % of a single sample)
+    if (kind_x is _NDARRAY and xv.shape == trailings[0] and xv.dtype is _FLOAT64
+            and xv.flags.carray):
+        a = xv
     else:
-        b = single_sample(y, trailings[1], 1)
+        a = single_sample(xv, trailings[0])
+    if scalar_y:
+        b = yv if kind_y is float else None
+    elif (kind_y is _NDARRAY and yv.shape == trailings[1] and yv.dtype is _FLOAT64
+            and yv.flags.carray):
+        b = yv
+    else:
+        b = single_sample(yv, trailings[1], 1)
     if a is not None and b is not None:
+        if listed and len(trailings[0]) <= 1 and len(trailings[1]) <= 1:
+            copied(kernel_, trailings[0] + trailings[1])
         out = new_array(out_trailing or _ONE)
         if scalar_y:
             bad = kernel_.call_unchecked(*((a, _NO_SAMPLES, out, b) + args))
         else:
             bad = kernel_.call_unchecked(*((a, b, out) + args))
-        if listed and len(trailings[0]) <= 1 and len(trailings[1]) <= 1:
-            copied(kernel_, trailings[0] + trailings[1])
         if bad < 0:
             return out if out_trailing else out[0]
     else:
