@@ -1085,7 +1085,7 @@ def call_binary(kernel_: Any, x: ArrayLike, y: ArrayLike, names: tuple[str, str]
     float ``y`` with ``ys`` empty, several as the array ``ys`` (``y`` unused),
     so that the kernel has one signature and one sample costs no array.
     """
-    scalar_y = trailings[1] == ()
+    scalar_y = not trailings[1]   # (): an angle
     if scalar_y and type(y) is not float and (isinstance(y, _NUMBERS) or is_single_sample(y, ())):
         y = float(y)
     xv: Any = x   # the arguments as they came; mypy: any object
@@ -1102,11 +1102,12 @@ def call_binary(kernel_: Any, x: ArrayLike, y: ArrayLike, names: tuple[str, str]
         out = new_array(out_trailing or _ONE)
         try:
             tx = xv if kind_x is tuple else tuple(xv)
-            # One tuple of arguments: cheaper than f(a, b, out, *args).
-            if scalar_y:
+            if scalar_y:   # one tuple of arguments: cheaper than f(a, b, out, *args)
                 bad = call_tuple(*((tx, _NO_SAMPLES, out, yv) + args))
-            else:
+            elif args:
                 bad = call_tuple(*((tx, yv if kind_y is tuple else tuple(yv), out) + args))
+            else:
+                bad = call_tuple(tx, yv if kind_y is tuple else tuple(yv), out)
         except (TypeError, ValueError, OverflowError):
             bad = 0   # not numbers of the samples' shapes: the general path says why
         if bad < 0:
