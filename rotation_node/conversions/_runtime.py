@@ -45,6 +45,10 @@ The policy, per kernel:
   does a kernel that has spent :data:`INTERPRETED_SECONDS` interpreted in all
   (a long-running caller of small conversions then pays the load once, after
   at most as much time interpreted as the load costs);
+- a loaded kernel called with single samples given as lists or tuples loads
+  its tuple form (the same source compiled for tuples of floats, see
+  :meth:`Kernel.load_tuple_form`) once it has copied :data:`TUPLE_COPIES`
+  of them into arrays; the background loader loads it where there is one;
 - :func:`compile_kernels` loads kernels explicitly (``warm_up`` all of them),
   and ``warm_up.load_in_background`` loads each kernel in a background thread
   as soon as it is first used, while calls run interpreted until it is ready
@@ -52,8 +56,8 @@ The policy, per kernel:
 
 Each kernel is compiled for exactly one signature, on its load, and cached on
 disk, so no later call compiles, whatever the caller's leading shape, dtype,
-memory layout or writability; :class:`KernelCompilation` tells compilations
-from cache loads.
+memory layout or writability (its tuple form, in a dispatcher of its own, for
+one more); :class:`KernelCompilation` tells compilations from cache loads.
 
 The canonical layout: every array argument is a C-contiguous float64 array
 holding its samples one after the other along the first axis. Samples of
