@@ -777,7 +777,7 @@ def test_python_values_take_the_tuple_form_once_loaded(monkeypatch):
 
 def test_a_background_loader_gets_the_tuple_form_instead_of_the_caller(monkeypatch):
     """With the node's loader, a callback copying tuples never waits for a tuple form to load."""
-    kernel = _runtime.KERNELS[[k.__name__ for k in KERNELS].index('canonical_kernel')]
+    kernel = next(k for k in KERNELS if k.__name__ == '_matrix_from_quaternion_kernel')
     _runtime.compile_kernels([kernel])
     handed = []
     monkeypatch.setattr(_runtime, '_on_first_use', handed.append)
@@ -787,16 +787,16 @@ def test_a_background_loader_gets_the_tuple_form_instead_of_the_caller(monkeypat
     monkeypatch.setattr(kernel, 'tuple_copies', 0)
     monkeypatch.setattr(kernel, 'tuple_form_queued', False)
     q = (0.1, -0.2, 0.3, -0.9)
-    expected = rc.canonical_quaternion(np.array(q))
+    expected = rc.matrix_from_quaternion(np.array(q))
     for _ in range(4):
-        _same_result(rc.canonical_quaternion(q), expected)
+        _same_result(rc.matrix_from_quaternion(q), expected)
     assert kernel.call_tuple is None   # not loaded in the calling thread
     assert handed == [_runtime.TupleForm(kernel, (4,))]   # handed over once
     handed[0].load()   # what the loader does
     assert kernel.call_tuple is not None
     calls = []
     _counted_tuple_forms(monkeypatch, calls)
-    _same_result(rc.canonical_quaternion(q), expected)
+    _same_result(rc.matrix_from_quaternion(q), expected)
     assert calls == [kernel]
 
 
