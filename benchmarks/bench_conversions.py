@@ -52,6 +52,7 @@ from _machine import best_seconds, copy_floor, load_line, print_machine
 import numpy as np
 import quaternion
 from rotation_node import conversions as rc
+from rotation_node.conversions import _runtime
 from scipy.spatial.transform import Rotation
 
 SEQ = 'xyz'
@@ -351,18 +352,20 @@ def _print_peers(groups, times, rounds):
             print(f'{name if k == 0 else "":52s} {call:38s} {shown:>10s} {span:>17s}')
 
 
-def _warm_python_values(groups, calls=2000):
+def _warm_python_values(groups):
     """
-    Call each call of the Python-value groups ``calls`` times: the steady state of a caller.
+    Call the Python-value groups' calls into the steady state of a caller of many samples.
 
-    A loaded kernel loads its tuple form after it has copied 1000 single
-    samples given as lists or tuples (at once with ROTATION_NODE_COMPILED=1);
-    that load is not what the rows measure.
+    A loaded kernel loads its tuple form once it has copied ``TUPLE_COPIES``
+    single samples given as lists or tuples into arrays (at once with
+    ROTATION_NODE_COMPILED=1); that load is not what the rows measure.
     """
+    _runtime.compile_kernels()   # loaded (from the cache), as in a long-running caller
+    copies = 2 if _runtime._loading_forced else _runtime.TUPLE_COPIES + 2
     for name, (_, _, group_calls, _) in groups.items():
         if name in _PYTHON_VALUE_GROUPS:
             for call in group_calls.values():
-                for _ in range(calls):
+                for _ in range(copies):
                     call()
 
 

@@ -278,11 +278,13 @@ INTERPRETED_VALUES = 16384
 INTERPRETED_SECONDS = 0.5
 # A loaded kernel that has copied this many single samples given as lists or
 # tuples of floats into arrays loads its tuple form (Kernel.load_tuple_form)
-# (with ROTATION_NODE_COMPILED=1 at the first such call after its own load):
-# ~0.1-0.4 us less a call from then on, against ~10-30 ms to load it from the
-# disk cache (seconds to compile it, once after installation). A program
-# converting a few samples never pays for it.
-TUPLE_COPIES = 1000
+# (with ROTATION_NODE_COMPILED=1 at the first such call after its own load).
+# Measured (benchmarks/bench_conversions.py --single): the tuple form saves
+# 0.1-0.4 us a call, and loading it from the disk cache costs ~10-30 ms
+# (seconds to compile it, once after installation): as for INTERPRETED_SECONDS,
+# a caller pays the load once its copies have cost about as much, and a
+# program converting a few thousand samples never pays for it.
+TUPLE_COPIES = 100_000
 _NO_TUPLE_FORM = -(1 << 62)   # tuple_copies of a kernel without a tuple form
 
 
