@@ -22,8 +22,12 @@ For every conversion it prints, measured in this run on this machine:
   numpy-quaternion (10^6 samples and one), on its own quaternion arrays (no
   conversion counted) and from the package's ``(x, y, z, w)`` float arrays
   (the conversion to its scalar-first layout and, for the product, back
-  counted); ``euler_from_quaternion`` of one sample given as an ndarray, a
-  list and a tuple, against the plain-Python ``math`` formula.
+  counted); ``euler_from_quaternion``, ``quaternion_from_euler``,
+  ``matrix_from_quaternion``, ``rotate_vector`` and ``quaternion_product`` of
+  one sample given as an ndarray, a list and a tuple of Python floats, against
+  the plain-Python ``math`` formula, with the ratios list / ndarray, tuple /
+  ndarray and package / formula of each round (``--single``: only the
+  groups of one sample).
 
 The first lines say where it ran: CPU model, the SIMD levels numpy found
 (its ``arctan2``, for one, is SIMD only with AVX-512), the CPU numba
@@ -36,7 +40,7 @@ calls, the three calls of a row interleaved, in several passes through all
 rows: a microsecond call on a shared machine needs many turns, spread over
 time, before its best settles. Usage::
 
-    python benchmarks/bench_conversions.py [--quick] [--rounds 5] [--json results.json]
+    python benchmarks/bench_conversions.py [--quick] [--single] [--rounds 5] [--json results.json]
 """
 import argparse
 import json
@@ -48,6 +52,7 @@ from _machine import best_seconds, copy_floor, load_line, print_machine
 import numpy as np
 import quaternion
 from rotation_node import conversions as rc
+from rotation_node.conversions import _runtime
 from scipy.spatial.transform import Rotation
 
 SEQ = 'xyz'
@@ -140,6 +145,81 @@ def _euler_formula(q):
     return roll, pitch, yaw
 
 
+def _quaternion_formula(angles):
+    """Return the unit ``(x, y, z, w)`` of roll, pitch, yaw (extrinsic xyz): the pasted formula."""
+    roll, pitch, yaw = angles
+    cr, sr = math.cos(0.5 * roll), math.sin(0.5 * roll)
+    cp, sp = math.cos(0.5 * pitch), math.sin(0.5 * pitch)
+    cy, sy = math.cos(0.5 * yaw), math.sin(0.5 * yaw)
+    return (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy)
+
+
+def _matrix_formula(q):
+    """Return the rotation matrix (nested lists) of a unit ``(x, y, z, w)``: the pasted formula."""
+    x, y, z, w = q
+    return [[1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w)],
+            [2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w)],
+            [2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y)]]
+
+
+def _rotate_formula(q, v):
+    """Return ``v`` rotated by a unit ``(x, y, z, w)`` (``v + w t + u x t``, ``t = 2 u x v``)."""
+    x, y, z, w = q
+    vx, vy, vz = v
+    tx, ty, tz = 2.0 * (y * vz - z * vy), 2.0 * (z * vx - x * vz), 2.0 * (x * vy - y * vx)
+    return (vx + w * tx + y * tz - z * ty, vy + w * ty + z * tx - x * tz,
+            vz + w * tz + x * ty - y * tx)
+
+
+def _product_formula(p, q):
+    """Return the Hamilton product of two ``(x, y, z, w)``: the pasted formula."""
+    x1, y1, z1, w1 = p
+    x2, y2, z2, w2 = q
+    return (w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2, w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2, w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2)
+
+
+#: The groups of :func:`_python_value_groups`.
+_PYTHON_VALUE_GROUPS = tuple(f'{name}, 1 sample from Python values' for name in (
+    'euler_from_quaternion', 'quaternion_from_euler', 'matrix_from_quaternion', 'rotate_vector',
+    'quaternion_product'))
+
+
+def _python_value_groups(single):
+    """
+    Return the groups of one sample from Python values, as :func:`_peer_groups` does.
+
+    Each operation on one sample given as a float64 ndarray, a list and a
+    tuple of Python floats (what a ROS message's fields give), and the
+    plain-Python ``math`` formula on the list (what people paste into a
+    callback; exact only where the library is, see accuracy.md).
+    """
+    p1, q1, v1, angles = single['q'], single['q_other'], single['v'], single['angles']
+    operations = {
+        'euler_from_quaternion': (lambda q: rc.euler_from_quaternion(q, SEQ), (p1,),
+                                  _euler_formula),
+        'quaternion_from_euler': (lambda a: rc.quaternion_from_euler(a, SEQ), (angles,),
+                                  _quaternion_formula),
+        'matrix_from_quaternion': (rc.matrix_from_quaternion, (p1,), _matrix_formula),
+        'rotate_vector': (rc.rotate_vector, (q1, v1), _rotate_formula),
+        'quaternion_product': (rc.quaternion_product, (p1, q1), _product_formula),
+    }
+    groups = {}
+    assert tuple(f'{name}, 1 sample from Python values'
+                 for name in operations) == _PYTHON_VALUE_GROUPS
+    for name, (ours, arrays, formula) in operations.items():
+        lists = [a.tolist() for a in arrays]
+        tuples = [tuple(a) for a in lists]
+        groups[f'{name}, 1 sample from Python values'] = (1, 200, {
+            'rotation_node, ndarray': lambda ours=ours, x=arrays: ours(*x),
+            'rotation_node, list': lambda ours=ours, x=lists: ours(*x),
+            'rotation_node, tuple': lambda ours=ours, x=tuples: ours(*x),
+            'plain-Python math formula, list': lambda formula=formula, x=lists: formula(*x),
+        }, None)
+    return groups
+
+
 def _scalar_first(q):
     """Return numpy-quaternion's array of ``(x, y, z, w)`` float quaternions (scalar first)."""
     return quaternion.from_float_array(q.take((3, 0, 1, 2), axis=-1))
@@ -215,18 +295,17 @@ def _peer_groups(batch, single):
         'numpy-quaternion, its quaternions': lambda: _rotated_one(b1, v1),
         'numpy-quaternion from (x, y, z, w)': lambda: _rotated_one(_quaternion_of(q1), v1),
     }, None)
-    as_list, as_tuple = p1.tolist(), tuple(p1.tolist())
-    groups['euler_from_quaternion, 1 sample'] = (1, 200, {
-        'rotation_node, ndarray (4,)': lambda: rc.euler_from_quaternion(p1, SEQ),
-        'rotation_node, list': lambda: rc.euler_from_quaternion(as_list, SEQ),
-        'rotation_node, tuple': lambda: rc.euler_from_quaternion(as_tuple, SEQ),
-        'plain-Python math formula, list': lambda: _euler_formula(as_list),
-    }, None)
+    groups.update(_python_value_groups(single))
     return groups
 
 
 def _check_peers(groups):
-    """Raise AssertionError unless every call of a group gives the same result (1e-12)."""
+    """
+    Raise AssertionError unless every call of a group gives the same result (1e-12).
+
+    Quaternions may differ in sign (the package's are canonical, w >= 0);
+    the package's own calls of a group must agree bit for bit.
+    """
     for name, (_, _, calls, _) in groups.items():
         results = []
         for call in calls.values():
@@ -234,8 +313,11 @@ def _check_peers(groups):
             if isinstance(out, np.quaternion) or getattr(out, 'dtype', None) == np.quaternion:
                 out = quaternion.as_float_array(out).take((1, 2, 3, 0), axis=-1)
             results.append(np.asarray(out, dtype=float))
-        for other in results[1:]:
-            assert np.allclose(results[0], other, rtol=0, atol=1e-12), name
+        for call, other in zip(list(calls)[1:], results[1:]):
+            if call.startswith('rotation_node'):
+                assert results[0].tobytes() == other.tobytes(), (name, call)
+            assert (np.allclose(results[0], other, rtol=0, atol=1e-12)
+                    or np.allclose(results[0], -other, rtol=0, atol=1e-12)), (name, call)
 
 
 def _peer_rounds(groups, rounds, turns):
@@ -259,7 +341,7 @@ def _peer_rounds(groups, rounds, turns):
 def _print_peers(groups, times, rounds):
     print(f'\npeers, {rounds} rounds, the calls of a group interleaved in each; time per sample '
           'is the best over the rounds, ratio = first call / this call in each round, min to max')
-    print(f'{"operation":38s} {"call":38s} {"best":>10s} {"ratio first/this":>17s}')
+    print(f'{"operation":52s} {"call":38s} {"best":>10s} {"ratio first/this":>17s}')
     for name, per_call in times.items():
         ours = next(iter(per_call.values()))
         for k, (call, seconds) in enumerate(per_call.items()):
@@ -267,7 +349,44 @@ def _print_peers(groups, times, rounds):
             span = '' if k == 0 else f'{min(ratios):6.2f} to {max(ratios):5.2f}'
             best = min(seconds)
             shown = f'{best * 1e9:7.1f} ns' if best < 1e-6 else f'{best * 1e6:7.2f} us'
-            print(f'{name if k == 0 else "":38s} {call:38s} {shown:>10s} {span:>17s}')
+            print(f'{name if k == 0 else "":52s} {call:38s} {shown:>10s} {span:>17s}')
+
+
+def _warm_python_values(groups):
+    """
+    Call the Python-value groups' calls into the steady state of a caller of many samples.
+
+    A loaded kernel loads its tuple form once it has copied ``TUPLE_COPIES``
+    single samples given as lists or tuples into arrays (at once with
+    ROTATION_NODE_COMPILED=1); that load is not what the rows measure.
+    """
+    _runtime.compile_kernels()   # loaded (from the cache), as in a long-running caller
+    copies = 2 if _runtime._loading_forced else _runtime.TUPLE_COPIES + 2
+    for name, (_, _, group_calls, _) in groups.items():
+        if name in _PYTHON_VALUE_GROUPS:
+            for call in group_calls.values():
+                for _ in range(copies):
+                    call()
+
+
+def _print_python_values(times):
+    """Print, per operation, list / ndarray, tuple / ndarray and ours / formula, each round."""
+    print('\none sample from Python values: time ratios in each round, min to max')
+    print(f'{"operation":52s} {"list/ndarray":>14s} {"tuple/ndarray":>14s} '
+          f'{"ndarray/formula":>16s} {"list/formula":>14s} {"tuple/formula":>14s}')
+    summary = {}
+    for name, per_call in times.items():
+        if name not in _PYTHON_VALUE_GROUPS:
+            continue
+        ndarray, listed, tupled, formula = per_call.values()
+        ratios = {'list/ndarray': (listed, ndarray), 'tuple/ndarray': (tupled, ndarray),
+                  'ndarray/formula': (ndarray, formula), 'list/formula': (listed, formula),
+                  'tuple/formula': (tupled, formula)}
+        summary[name] = {key: [a / b for a, b in zip(*pair)] for key, pair in ratios.items()}
+        cells = ' '.join(f'{min(r):6.2f}-{max(r):<5.2f}'.rjust(width) for r, width in zip(
+            summary[name].values(), (14, 14, 16, 14, 14)))
+        print(f'{name:52s} {cells}')
+    return summary
 
 
 def _reference(data):
@@ -279,13 +398,42 @@ def _single(data):
     return {key: value[0] for key, value in data.items()}
 
 
+def _main_single(args):
+    """``--single``: the groups of one sample only, in rounds; print them and the ratios."""
+    rounds = args.rounds or (3 if args.quick else 5)
+    data = _inputs(100, np.random.default_rng(0))
+    print_machine()
+    groups = {name: group for name, group in _peer_groups(data, _single(data)).items()
+              if group[0] == 1}
+    _check_peers(groups)
+    _warm_python_values(groups)
+    print(f'one sample, {rounds} rounds of {3 if args.quick else 5} interleaved turns of 200 '
+          'calls per group')
+    peers = _peer_rounds(groups, rounds, 3 if args.quick else 5)
+    _print_peers(groups, peers, rounds)
+    ratios = _print_python_values(peers)
+    print(load_line().replace('load average', 'at the end: load average'))
+    if args.json:
+        with open(args.json, 'w') as f:
+            json.dump({'peers': {
+                group: {call: {'best_ns': min(seconds) * 1e9, 'round_ns': [
+                    x * 1e9 for x in seconds]} for call, seconds in per_call.items()}
+                for group, per_call in peers.items()}, 'python_values': ratios}, f, indent=1)
+    return 0
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
     parser.add_argument('--quick', action='store_true', help='fewer repeats, batches up to 10^5')
     parser.add_argument('--rounds', type=int, default=None,
                         help='rounds of the batch and peer comparisons (5; --quick: 3)')
     parser.add_argument('--json', help='also write the results to this JSON file')
+    parser.add_argument('--single', action='store_true',
+                        help='only one sample: from Python values (ndarray, list, tuple, the '
+                             'plain-Python formula) and against numpy-quaternion')
     args = parser.parse_args(argv)
+    if args.single:
+        return _main_single(args)
     rng = np.random.default_rng(0)
     largest = 5 if args.quick else 6
     sizes = [10 ** k for k in range(2, largest + 1)]
@@ -354,12 +502,14 @@ def main(argv=None):
     print(f'{"conversion":34s} ' + ' '.join(f'{"10^%d" % int(np.log10(n)):>13s}' for n in sizes))
     for name, r in results.items():
         cells = ' '.join(f'{o:6.1f}/{s:<6.1f}' for o, s in r['growth_ns'].values())
-        print(f'{name:34s} {cells}')
+        print(f'{name:52s} {cells}')
 
     groups = _peer_groups(batches[sizes[-1]], single)
     _check_peers(groups)
+    _warm_python_values(groups)
     peers = _peer_rounds(groups, rounds, 3 if args.quick else 5)
     _print_peers(groups, peers, rounds)
+    _print_python_values(peers)
 
     worst_single = max(r['single_ratio'] for r in results.values())
     misses = [n for n, r in results.items() if r['batch_speedup'] < r['batch_target']]

@@ -573,9 +573,11 @@ def test_random_samples_give_the_same_bits_interpreted_and_compiled(monkeypatch,
 def test_lists_and_tuples_take_the_single_sample_path_with_the_same_results(
         monkeypatch, name, call, sample):
     calls = []
+    monkeypatch.setattr(_runtime, 'copied', lambda kernel_, widths: None)   # no tuple forms
     for kernel in KERNELS:
         monkeypatch.setattr(kernel, 'call_unchecked',
                             _checking_unchecked_call(kernel, calls))
+        monkeypatch.setattr(kernel, 'call_tuple', None)
     listed = np.asarray(sample).tolist()
     if np.ndim(sample) == 0:   # an angle: Python and numpy numbers
         forms = [listed, np.float64(sample), np.float32(sample), np.int64(2)]
@@ -635,6 +637,214 @@ def test_single_samples_from_lists_in_threads_do_not_mix():
     with ThreadPoolExecutor(4) as pool:
         for i, results in enumerate(pool.map(convert, range(len(samples_)))):
             assert set(results) == {expected[i]}
+
+
+# Calls of one sample whose every argument may be Python values: (name, call, samples).
+_PYTHON_VALUE_CALLS = [
+    ('euler_from_quaternion', lambda q: rc.euler_from_quaternion(q, 'xyz'), ('q',)),
+    ('euler_from_quaternion ZXZ degrees',
+     lambda q: rc.euler_from_quaternion(q, 'ZXZ', degrees=True), ('q',)),
+    ('quaternion_from_euler', lambda a: rc.quaternion_from_euler(a, 'xyz'), ('v',)),
+    ('matrix_from_quaternion', rc.matrix_from_quaternion, ('q',)),
+    ('rotate_vector', rc.rotate_vector, ('q', 'v')),
+    ('quaternion_product', rc.quaternion_product, ('q', 'q')),
+    ('quaternion_distance', rc.quaternion_distance, ('q', 'q')),
+    ('quaternion_from_axis_angle', rc.quaternion_from_axis_angle, ('v', 'angle')),
+]
+
+
+def _message_field_values(sample):
+    """
+    Return ``sample`` (ndarray (4,) or (3,), or a number) as ROS messages hold it.
+
+    The attributes of a geometry_msgs Quaternion or Vector3 (Python floats, as a
+    callback reads them into a tuple), rclpy's array.array of a float64 sequence
+    (std_msgs Float64MultiArray), the first values of a fixed-size float64 array
+    field (sensor_msgs Imu's covariance, a numpy array) and a float64 field.
+    """
+    from array import array
+
+    from geometry_msgs.msg import Quaternion, Vector3
+    from sensor_msgs.msg import Imu
+    from std_msgs.msg import Float64, Float64MultiArray
+    if np.ndim(sample) == 0:
+        return [Float64(data=float(sample)).data]
+    values = [float(v) for v in sample]
+    message = Quaternion(**dict(zip('xyzw', values))) if len(values) == 4 else \
+        Vector3(**dict(zip('xyz', values)))
+    fields = tuple(getattr(message, name) for name in 'xyzw'[:len(values)])
+    sequence = Float64MultiArray(data=values).data
+    assert type(sequence) is array
+    imu = Imu()
+    imu.orientation_covariance[:len(values)] = values
+    return [fields, sequence, imu.orientation_covariance[:len(values)].copy()]
+
+
+def _python_value_forms(sample):
+    """Return ``sample`` in every form of Python values a caller may pass (and ROS fields)."""
+    if np.ndim(sample) == 0:
+        return [float(sample), np.float64(sample)] + _message_field_values(sample)
+    listed = np.asarray(sample).tolist()
+    return [listed, tuple(listed)] + _message_field_values(sample)
+
+
+def _python_value_samples(rng):
+    """Quaternions and vectors: random ones and hard cases (near 0, pi, gimbal lock, tiny)."""
+    q = np.concatenate([rng.normal(size=(6, 4)), hard_quaternions(rng, 16)])
+    v = np.concatenate([rng.normal(size=(6, 3)), hard_rotation_vectors(rng, 16)])
+    return {'q': q, 'v': v, 'angle': np.concatenate([rng.normal(size=6), v[:16, 0]])}
+
+
+def _same_result(got, expected):
+    for a, b in zip(got if isinstance(got, tuple) else (got,),
+                    expected if isinstance(expected, tuple) else (expected,)):
+        assert type(a) is type(b) and np.asarray(a).tobytes() == np.asarray(b).tobytes()
+
+
+def _outcome(call, arguments):
+    """Return ``call(*arguments)``, or the message of the ValueError it raises (a bad sample)."""
+    try:
+        return call(*arguments)
+    except ValueError as error:
+        return str(error)
+
+
+def _same_outcome(got, expected):
+    if isinstance(expected, str):
+        assert got == expected
+    else:
+        _same_result(got, expected)
+
+
+@pytest.mark.parametrize('name, call, kinds', _PYTHON_VALUE_CALLS,
+                         ids=[c[0] for c in _PYTHON_VALUE_CALLS])
+def test_python_values_and_message_fields_give_the_bits_of_float64_arrays(
+        monkeypatch, rng, name, call, kinds):
+    """
+    Lists, tuples, ROS message fields and numbers: the float64 array's result, bit for bit.
+
+    Both before a kernel's tuple form is loaded (lists copied into arrays) and
+    after (numba unboxes the tuple), each in the same process.
+    """
+    _runtime.compile_kernels()
+    monkeypatch.setattr(_runtime, 'copied', lambda kernel_, widths: None)
+    samples_ = _python_value_samples(rng)
+    cases = [tuple(samples_[kind][i] for kind in kinds) for i in range(len(samples_['q']))]
+    calls = []
+    for loaded in (False, True):
+        if loaded:   # the first copy loads the tuple form
+            monkeypatch.undo()
+            monkeypatch.setattr(_runtime, 'TUPLE_COPIES', 1)
+            call(*[_python_value_forms(a)[0] for a in cases[0]])
+            _counted_tuple_forms(monkeypatch, calls)
+        for arguments in cases:   # a hard case may be bad (a zero axis): the same message
+            expected = _outcome(call, [np.asarray(a, dtype=np.float64) if np.ndim(a)
+                                       else float(a) for a in arguments])
+            for forms in zip(*[_python_value_forms(a) for a in arguments]):
+                _same_outcome(_outcome(call, forms), expected)
+            for i in range(len(arguments)):   # one argument a Python value, the others arrays
+                mixed = [np.asarray(a, dtype=np.float64) for a in arguments]
+                mixed[i] = _python_value_forms(arguments[i])[0]
+                _same_outcome(_outcome(call, mixed), expected)
+    assert calls, f'{name}: no call took a tuple form'
+
+
+def _counted_tuple_forms(monkeypatch, calls):
+    for kernel in KERNELS:
+        if kernel.call_tuple is not None:
+            def counted(*args, kernel=kernel, original=kernel.call_tuple):
+                calls.append(kernel)
+                return original(*args)
+            monkeypatch.setattr(kernel, 'call_tuple', counted)
+
+
+def test_python_values_take_the_tuple_form_once_loaded(monkeypatch):
+    monkeypatch.setattr(_runtime, 'TUPLE_COPIES', 3)
+    kernel = _runtime.KERNELS[[k.__name__ for k in KERNELS].index('_rotate_kernel')]
+    q, v = [0.1, -0.2, 0.3, 0.9], (1.0, 2.0, 3.0)
+    expected = rc.rotate_vector(np.array(q), np.array(v))
+    monkeypatch.setattr(kernel, 'call_tuple', None)
+    monkeypatch.setattr(kernel, 'tuple_copies', 0)
+    for _ in range(3):   # copied into arrays, counted
+        _same_result(rc.rotate_vector(q, v), expected)
+    assert kernel.call_tuple is not None and kernel.tuple_copies == 3
+    calls = []
+    _counted_tuple_forms(monkeypatch, calls)
+    _same_result(rc.rotate_vector(q, v), expected)
+    _same_result(rc.rotate_vector(q, np.array(v)), expected)   # an array: the other path
+    assert calls == [kernel]
+
+
+def test_a_background_loader_gets_the_tuple_form_instead_of_the_caller(monkeypatch):
+    """With the node's loader, a callback copying tuples never waits for a tuple form to load."""
+    kernel = next(k for k in KERNELS if k.__name__ == '_matrix_from_quaternion_kernel')
+    _runtime.compile_kernels([kernel])
+    handed = []
+    monkeypatch.setattr(_runtime, '_on_first_use', handed.append)
+    monkeypatch.setattr(_runtime, '_loading_forced', False)
+    monkeypatch.setattr(_runtime, 'TUPLE_COPIES', 2)
+    monkeypatch.setattr(kernel, 'call_tuple', None)
+    monkeypatch.setattr(kernel, 'tuple_copies', 0)
+    monkeypatch.setattr(kernel, 'tuple_form_queued', False)
+    q = (0.1, -0.2, 0.3, -0.9)
+    expected = rc.matrix_from_quaternion(np.array(q))
+    for _ in range(4):
+        _same_result(rc.matrix_from_quaternion(q), expected)
+    assert kernel.call_tuple is None   # not loaded in the calling thread
+    assert handed == [_runtime.TupleForm(kernel, (4,))]   # handed over once
+    handed[0].load()   # what the loader does
+    assert kernel.call_tuple is not None
+    calls = []
+    _counted_tuple_forms(monkeypatch, calls)
+    _same_result(rc.matrix_from_quaternion(q), expected)
+    assert calls == [kernel]
+
+
+_BAD_PYTHON_VALUES = [
+    ([0.1, 0.2, 0.3], (1.0, 2.0, 3.0)), ([0.1, 0.2, 0.3, 0.4, 0.5], (1.0, 2.0, 3.0)),
+    (['a', 0.2, 0.3, 0.9], (1.0, 2.0, 3.0)), ([0.1, 0.2, 0.3, None], (1.0, 2.0, 3.0)),
+    ([math.nan, 0.2, 0.3, 0.9], (1.0, 2.0, 3.0)), ([0.0, 0.0, 0.0, 0.0], (1.0, 2.0, 3.0)),
+    ((0.1, [0.2], 0.3, 0.9), (1.0, 2.0, 3.0)), ([0.1, np.array([0.2]), 0.3, 0.9], (1.0, 2.0, 3.0)),
+    ([10 ** 400, 0.0, 0.0, 1.0], (1.0, 2.0, 3.0)), ([0.1, 0.2, 0.3, 0.9], (1.0, math.inf, 3.0)),
+    ([0.1, 0.2, 0.3, 0.9], (1.0, 2.0)), ([0.1, 0.2, 0.3, 0.9], ('x', 2.0, 3.0)),
+    ([[0.1, 0.2], [0.3, 0.9]], (1.0, 2.0, 3.0))]
+
+
+@pytest.mark.parametrize('loaded', [False, True], ids=['copied', 'tuple form'])
+@pytest.mark.parametrize('q, v', _BAD_PYTHON_VALUES)
+def test_bad_python_values_get_the_one_line_error_of_their_array(monkeypatch, loaded, q, v):
+    """What numpy's conversion of a list refuses or a kernel finds bad: one ValueError line."""
+    def message(q, v):
+        with pytest.raises(ValueError) as error:
+            rc.rotate_vector(q, v)
+        return str(error.value)
+
+    if loaded:
+        monkeypatch.setattr(_runtime, 'TUPLE_COPIES', 1)
+        for _ in range(2):
+            rc.rotate_vector([0.1, 0.2, 0.3, 0.9], [1.0, 2.0, 3.0])
+        assert _runtime.KERNELS[[k.__name__ for k in KERNELS].index(
+            '_rotate_kernel')].call_tuple is not None
+    else:
+        monkeypatch.setattr(_runtime, 'copied', lambda kernel_, widths: None)
+        for kernel in KERNELS:
+            monkeypatch.setattr(kernel, 'call_tuple', None)
+    q, v = list(q), tuple(v)
+    listed = message(q, v)
+    assert '\n' not in listed
+    assert message(tuple(q), v) == listed.replace('got list', 'got tuple')   # about q
+    assert message(q, list(v)) == listed.replace('got tuple', 'got list')    # about v
+
+    def as_array(x):
+        try:
+            return np.asarray(x, dtype=np.float64)
+        except (TypeError, ValueError, OverflowError):
+            return None
+
+    if as_array(q) is not None and as_array(v) is not None:   # numpy converts them: the same
+        assert listed == message(as_array(q), as_array(v))
+    else:   # numpy refuses one: the message names it and what numpy said
+        assert listed.startswith('Expected `')
 
 
 # ------------------------------------------------------------ loading in the background

@@ -15,12 +15,13 @@ are declared, compiled and called is :mod:`._runtime`'s business.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import Any, Callable, TYPE_CHECKING
 
 import numpy as np
 
 from ._runtime import (
-    call_binary, call_unary, first_status, FLAT_IN, FLAT_OUT, jit, kernel, samples, status)
+    call_binary, call_unary, compiled_form, first_status, FLAT_IN, FLAT_OUT, jit, kernel, samples,
+    status)
 from ._validation import NON_FINITE, OK, ZERO_NORM
 
 if TYPE_CHECKING:
@@ -98,11 +99,35 @@ def needs_sign_flip(x: float, y: float, z: float, w: float) -> bool:
         x < 0.0 or (x == 0.0 and (y < 0.0 or (y == 0.0 and z < 0.0)))))
 
 
-@jit
-def divided_by_norm(x: float, y: float, z: float, w: float) -> Quaternion4:
-    """``q / |q|`` for a quaternion that needs no rescaling (:func:`scaled_quaternion`)."""
+def _divided_by_norm(x: float, y: float, z: float, w: float) -> Quaternion4:
     n = math.sqrt(x * x + y * y + z * z + w * w)
     return x / n, y / n, z / n, w / n
+
+
+def _over_zero(a: float) -> float:
+    """Return ``a / +0.0`` as IEEE division gives it (Python raises): +-inf, or NaN for ``a`` 0."""
+    return math.copysign(math.inf, a) if a != 0.0 else math.nan
+
+
+def divided_by_norm(x: float, y: float, z: float, w: float) -> Quaternion4:
+    """
+    ``q / |q|`` for a quaternion that needs no rescaling (:func:`scaled_quaternion`).
+
+    Compiled: the four divisions. Interpreted, a zero norm (a zero quaternion,
+    or one too small to square, which a branch-free loop divides before it
+    checks and then redoes) gives what the divisions give compiled, where
+    Python's division raises ``ZeroDivisionError``.
+    """
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    if n == 0.0:
+        return _over_zero(x), _over_zero(y), _over_zero(z), _over_zero(w)
+    return x / n, y / n, z / n, w / n
+
+
+@compiled_form(divided_by_norm)
+def _compiled_divided_by_norm() -> Callable[..., Any]:
+    from numba import njit
+    return njit(nogil=True, error_model='numpy', inline='always')(_divided_by_norm)
 
 
 @jit

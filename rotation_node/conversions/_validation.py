@@ -67,7 +67,7 @@ def float_array(x: ArrayLike, name: str, trailing: tuple[int, ...]) -> FloatArra
     """
     try:
         a = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:   # Overflow: an int beyond float64
         raise ValueError(
             f'Expected `{name}` to be an array of numbers with shape '
             f'{_SHAPE_TEXT[trailing]}, got {type(x).__name__}: {exc}') from None

@@ -67,6 +67,9 @@ def load_in_background(say: Callable[[str], None], after: float = 1.0) -> thread
     """
     Load each kernel in a background thread at its first use; calls run interpreted meanwhile.
 
+    And each kernel's tuple form when it is due (``_runtime.copied``): lists
+    and tuples are copied into arrays meanwhile.
+
     For a long-running program's start (the node): it converts from its first
     input, interpreted (the same numbers, see ``_runtime``), while a daemon
     thread imports numba at once and then compiles, or loads from the disk
@@ -87,7 +90,7 @@ def load_in_background(say: Callable[[str], None], after: float = 1.0) -> thread
     global _background
     if _background is not None:   # one loader per process
         return _background
-    pending: 'queue.SimpleQueue[_runtime.Kernel]' = queue.SimpleQueue()
+    pending: 'queue.SimpleQueue[_runtime.Kernel | _runtime.TupleForm]' = queue.SimpleQueue()
     for declared in _runtime.KERNELS:   # already called: first in line
         if declared.used and declared.dispatcher is None:
             pending.put(declared)
