@@ -23,7 +23,7 @@ if TYPE_CHECKING:
 
 
 def is_world_frame(frame: object) -> bool:
-    """Return True for ``frame == 'world'`` (``w_w = R w_b``), False for ``'body'``; else ValueError."""
+    """Return True for ``frame == 'world'`` (``w_w = R w_b``), False for ``'body'``, else raise."""
     if frame == 'body':
         return False
     if frame == 'world':

@@ -94,7 +94,7 @@ def integrate(q0: FloatArray, momentum0: FloatArray, momentum_norm: float,
               inverse_inertia: FloatArray, t: FloatArray, substeps: int, axes: IntArray,
               fractions: FloatArray) -> tuple[FloatArray, FloatArray]:
     """
-    Return the unit quaternions (n, 4) and body angular momenta (n, 3) of a free rigid body at ``t``.
+    Return a free rigid body's unit quaternions (n, 4) and body angular momenta (n, 3) at ``t``.
 
     It starts from ``q0`` (body-to-world) and ``momentum0 = I w`` at ``t[0]``
     (``inverse_inertia = 1 / I_i`` along the body axes) and takes ``substeps`` steps
