@@ -47,6 +47,7 @@ import numpy as np
 
 from rotation_node import conversions
 from rotation_node.errors import RotationNodeError
+from rotation_node.kinematics import slerp
 from rotation_node.wire.stamps import seconds_text
 
 DEFAULT_CACHE_TIME_NS = 10_000_000_000
@@ -136,37 +137,6 @@ class _Sample(NamedTuple):
     stamp_ns: int
     quaternion: np.ndarray
     parent: str
-
-
-def slerp(q0: np.ndarray, q1: np.ndarray, fraction: float) -> np.ndarray:
-    """
-    Spherical linear interpolation between two unit quaternions, the shorter way round.
-
-    ``q0 (x) exp(fraction log(q0* (x) q1))`` through the library's exponential
-    and logarithm maps (``atan2`` forms): stable for nearly equal quaternions,
-    where ``acos`` of the dot product loses half the digits.
-
-    Parameters
-    ----------
-    q0, q1 : ndarray, shape (4,)
-        Unit quaternions (x, y, z, w); either sign.
-    fraction : float
-        0 gives ``q0`` exactly, 1 gives ``q1`` exactly.
-
-    Returns
-    -------
-    ndarray, shape (4,)
-        The interpolated rotation (unit; sign of ``q0``'s side).
-
-    """
-    if fraction == 0.0:
-        return q0
-    if fraction == 1.0:
-        return q1
-    step = conversions.rotation_vector_from_quaternion(
-        conversions.quaternion_product(conversions.quaternion_conjugate(q0), q1))
-    return conversions.quaternion_product(
-        q0, conversions.quaternion_from_rotation_vector(fraction * step))
 
 
 class _StaticEdge:
