@@ -26,6 +26,7 @@ from typing import ClassVar, Mapping, Optional, Tuple, TYPE_CHECKING, Union
 import numpy as np
 from rotation_node.conversions import parse_sequence
 from rotation_node.errors import SceneError
+from rotation_node.mounting import normalised_unit_quaternion
 from rotation_node.ros_yaml import load_ros_yaml
 from rotation_node.validation import (
     checked_field, Choice, ChoiceList, dataclass_from_mapping, DataclassByTag, DataclassesByName,
@@ -41,9 +42,6 @@ DEFAULT_START_TIME = 1735689600.0
 #: Largest number of samples a scene may ask for (``duration * rate + 1``).
 MAX_SAMPLES = 10_000_000
 
-#: A scene's orientation must have unit norm to within this (it is then normalised).
-UNIT_NORM_TOLERANCE = 1e-6
-
 # builtin_interfaces/Time.sec is an int32.
 _MAX_STAMP_SECONDS = 2**31 - 1
 
@@ -55,12 +53,11 @@ TRUTH_ANGULAR_VELOCITY_TOPIC = '/truth/angular_velocity'
 # --- what the domain adds to the kinds: (value, where) -> stored value -----------
 
 def _unit_quaternion(q, where):
-    """Check: [x, y, z, w] of unit norm within UNIT_NORM_TOLERANCE; stored normalised."""
-    norm = math.sqrt(math.fsum(c * c for c in q))
-    if abs(norm - 1.0) > UNIT_NORM_TOLERANCE:
-        raise where.error(f'expected a unit quaternion [x, y, z, w], got norm {norm!r} '
-                          f'(tolerance {UNIT_NORM_TOLERANCE})')
-    return tuple(c / norm for c in q)
+    """Check: [x, y, z, w] of unit norm within the mountings' tolerance; stored normalised."""
+    try:
+        return normalised_unit_quaternion(q)
+    except ValueError as error:
+        raise where.error(str(error)) from None
 
 
 def _principal_moments(moments, where):
