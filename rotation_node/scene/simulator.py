@@ -182,24 +182,11 @@ def simulate_blocks(scene: Scene, seed: int = 0,
 
 def simulate(scene: Scene, seed: int = 0) -> Simulation:
     """
-    Return the truth and the sensor stream of a scene, as arrays.
+    Return the truth and the sensor stream of a whole scene, as arrays.
 
-    Parameters
-    ----------
-    scene : Scene
-        A validated scene (:func:`rotation_node.scene.spec.load_scene`).
-    seed : int, optional
-        Seed of the effects' random draws, >= 0. Default 0.
-
-    Returns
-    -------
-    Simulation
-
-    Raises
-    ------
-    ValueError
-        If ``seed`` is not a non-negative integer.
-
+    :func:`simulate_blocks` in one block: ``scene`` validated
+    (:func:`rotation_node.scene.spec.load_scene`), ``seed`` (>= 0, else ValueError)
+    seeding the effects' random draws.
     """
     simulation, = simulate_blocks(scene, seed, block_samples=scene.sample_count)
     return simulation
