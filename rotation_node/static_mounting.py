@@ -20,6 +20,7 @@ from typing import Any, Optional, TYPE_CHECKING
 
 from rotation_node.errors import BagError, ParameterError
 from rotation_node.parameters import mounting_frames_problem
+from rotation_node.registry import TF_STATIC_TOPIC as _TF_STATIC_INPUT
 from rotation_node.tf_buffer import RejectedTransformError, TfLookupError, TfOrientationBuffer
 
 if TYPE_CHECKING:
@@ -29,7 +30,7 @@ if TYPE_CHECKING:
 MOUNTING_UNKNOWN = 'mounting_unknown'
 
 #: The topic of static transforms (the ``tf`` input type's ``/tf_static``).
-TF_STATIC_TOPIC = '/tf_static'
+TF_STATIC_TOPIC = _TF_STATIC_INPUT.name
 
 
 def needs_static_mounting(params: NodeParameters) -> bool:
