@@ -60,6 +60,7 @@ from .conversions import matrix_from_quaternion, parse_sequence
 from .kinematics import (
     angular_velocity_from_euler_rates, DEFAULT_SINGULARITY_THRESHOLD,
     euler_rates_from_angular_velocity, EulerSingularityWarning)
+from .kinematics._validation import is_world_frame
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
@@ -146,14 +147,6 @@ def _unit_quaternion(quaternion) -> np.ndarray:
     return q / norm
 
 
-def _frame_is_world(frame: str) -> bool:
-    if frame == 'world':
-        return True
-    if frame == 'body':
-        return False
-    raise ValueError(f"Expected `frame` to be 'world' or 'body', got {frame!r}.")
-
-
 def rotation_vector_covariance_jacobian(angles: ArrayLike, seq: str, frame: str = 'world',
                                         degrees: bool = False) -> np.ndarray:
     """
@@ -181,7 +174,7 @@ def rotation_vector_covariance_jacobian(angles: ArrayLike, seq: str, frame: str 
         Bad ``seq`` or ``frame``; wrong shape or NaN/Inf ``angles``.
 
     """
-    world = _frame_is_world(frame)
+    world = is_world_frame(frame)
     a = finite_array(angles, 'angles', (3,))
     columns = angular_velocity_from_euler_rates(a[..., None, :], _IDENTITY, seq,
                                                 'world' if world else 'body', degrees)
@@ -272,7 +265,7 @@ def euler_covariance_from_rotation_vector_covariance(
         NaN/Inf, naming the argument.
 
     """
-    world = _frame_is_world(frame)
+    world = is_world_frame(frame)
     a = finite_array(angles, 'angles', (3,))
     sigma = finite_array(covariance, 'covariance', (3, 3))
     # One row of angles per column of J^-1: equal leading shapes need no broadcast copy.
@@ -400,7 +393,7 @@ def quaternion_covariance_from_rotation_vector_covariance(quaternion: ArrayLike,
         Bad ``frame``; wrong shape, NaN/Inf or zero quaternion, naming the argument.
 
     """
-    m = _tangent_basis(_unit_quaternion(quaternion), _frame_is_world(frame))
+    m = _tangent_basis(_unit_quaternion(quaternion), is_world_frame(frame))
     return 0.25 * _congruence(m, finite_array(covariance, 'covariance', (3, 3)))
 
 
@@ -433,7 +426,7 @@ def rotation_vector_covariance_from_quaternion_covariance(quaternion: ArrayLike,
         Bad ``frame``; wrong shape, NaN/Inf or zero quaternion, naming the argument.
 
     """
-    m = _tangent_basis(_unit_quaternion(quaternion), _frame_is_world(frame))
+    m = _tangent_basis(_unit_quaternion(quaternion), is_world_frame(frame))
     sigma = finite_array(covariance, 'covariance', (4, 4))
     return 4.0 * _congruence(np.swapaxes(m, -1, -2), sigma)
 

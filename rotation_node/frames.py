@@ -210,23 +210,11 @@ class FrameConversion:
 
     def quaternion(self, quaternion: ArrayLike) -> np.ndarray:
         """
-        Return the orientation ``(x, y, z, w)`` in the target frames.
+        Return the orientation ``q_P (x) q (x) q_B`` (x, y, z, w) in the target frames.
 
-        Parameters
-        ----------
-        quaternion : array_like, shape (..., 4)
-            Body-to-world orientation in the source frames, any norm.
-
-        Returns
-        -------
-        ndarray, shape (..., 4)
-            ``q_P (x) q (x) q_B``: same norm, ``w >= 0``.
-
-        Raises
-        ------
-        ValueError
-            Wrong shape or NaN/Inf, naming ``quaternion``.
-
+        ``quaternion`` (..., 4) is the body-to-world orientation in the source frames,
+        any norm; the result has the same norm and ``w >= 0``. A wrong shape or NaN/Inf
+        raises ValueError naming ``quaternion``.
         """
         q = finite_array(quaternion, 'quaternion', (4,))
         single = q.ndim == 1   # Python floats: a tenth of the time of numpy's small arrays
@@ -246,20 +234,8 @@ class FrameConversion:
         """
         Return the body-to-world rotation matrix in the target frames, ``P R B`` (exact).
 
-        Parameters
-        ----------
-        matrix : array_like, shape (..., 3, 3)
-            Body-to-world rotation matrix in the source frames.
-
-        Returns
-        -------
-        ndarray, shape (..., 3, 3)
-
-        Raises
-        ------
-        ValueError
-            Wrong shape or NaN/Inf, naming ``matrix``.
-
+        ``matrix`` (..., 3, 3) is in the source frames; a wrong shape or NaN/Inf raises
+        ValueError naming ``matrix``.
         """
         m = finite_array(matrix, 'matrix', (3, 3))
         (wi, ws), (bi, bs) = self._world, self._body
@@ -267,89 +243,33 @@ class FrameConversion:
 
     def world_vector(self, vector: ArrayLike) -> np.ndarray:
         """
-        Return a world-coordinate vector (world angular velocity, position) in the target world.
+        Return ``P v`` (exact) for world-frame vectors (world angular velocity, position).
 
-        Parameters
-        ----------
-        vector : array_like, shape (..., 3)
-            Coordinates in the source frame.
-
-        Returns
-        -------
-        ndarray, shape (..., 3)
-            ``P v`` (exact).
-
-        Raises
-        ------
-        ValueError
-            Wrong shape or NaN/Inf, naming ``vector``.
-
+        ``vector`` is (..., 3); a wrong shape or NaN/Inf raises ValueError naming ``vector``.
         """
         return _permute_vector(finite_array(vector, 'vector', (3,)), self._world)
 
     def body_vector(self, vector: ArrayLike) -> np.ndarray:
         """
-        Return a body-coordinate vector (body angular velocity) in the target body frame.
+        Return ``B v`` (exact) for body-frame vectors (body angular velocity).
 
-        Parameters
-        ----------
-        vector : array_like, shape (..., 3)
-            Coordinates in the source frame.
-
-        Returns
-        -------
-        ndarray, shape (..., 3)
-            ``B v`` (exact).
-
-        Raises
-        ------
-        ValueError
-            Wrong shape or NaN/Inf, naming ``vector``.
-
+        ``vector`` is (..., 3); a wrong shape or NaN/Inf raises ValueError naming ``vector``.
         """
         return _permute_vector(finite_array(vector, 'vector', (3,)), self._body)
 
     def world_covariance(self, covariance: ArrayLike) -> np.ndarray:
         """
-        Return a world-frame covariance (fixed-axes rotation vector) in the target world.
+        Return ``P Sigma P^T`` (exact) for a world-frame (fixed-axes) rotation-vector covariance.
 
-        Parameters
-        ----------
-        covariance : array_like, shape (..., 3, 3)
-            Covariance in the source frame.
-
-        Returns
-        -------
-        ndarray, shape (..., 3, 3)
-            ``P Sigma P^T`` (exact).
-
-        Raises
-        ------
-        ValueError
-            Wrong shape or NaN/Inf, naming ``covariance``.
-
+        ``covariance`` is (..., 3, 3); a wrong shape or NaN/Inf raises ValueError naming it.
         """
         return _permute_covariance(finite_array(covariance, 'covariance', (3, 3)), self._world)
 
     def body_covariance(self, covariance: ArrayLike) -> np.ndarray:
         """
-        Return a body-frame covariance (body-axes rotation vector) in the target body frame.
+        Return ``B Sigma B^T`` (exact) for a body-frame (body-axes) rotation-vector covariance.
 
-        Parameters
-        ----------
-        covariance : array_like, shape (..., 3, 3)
-            Covariance in the source frame.
-
-        Returns
-        -------
-        ndarray, shape (..., 3, 3)
-            ``B Sigma B^T`` (exact).
-
-        Raises
-        ------
-        ValueError
-            Wrong shape or NaN/Inf, naming ``covariance``.
-
+        ``covariance`` is (..., 3, 3); a wrong shape or NaN/Inf raises ValueError naming it.
         """
         return _permute_covariance(finite_array(covariance, 'covariance', (3, 3)), self._body)
 

@@ -39,12 +39,23 @@ from .conversions import matrix_from_quaternion, quaternion_from_euler
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
-__all__ = ['IDENTITY', 'Mounting', 'quaternion_from_rotation_values', 'UNIT_NORM_TOLERANCE']
+__all__ = ['IDENTITY', 'Mounting', 'normalised_unit_quaternion', 'quaternion_from_rotation_values',
+           'UNIT_NORM_TOLERANCE']
 
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
 
-#: A quaternion of a mounting must have unit norm within this (it is then normalised).
+#: A quaternion given as a parameter or in a scene must have unit norm within this (it is
+#: then normalised).
 UNIT_NORM_TOLERANCE = 1e-6
+
+
+def normalised_unit_quaternion(values: Sequence[float]) -> tuple[float, ...]:
+    """Return ``[x, y, z, w]`` over its norm; a ValueError unless that is 1 within tolerance."""
+    norm = math.hypot(*values)
+    if abs(norm - 1.0) > UNIT_NORM_TOLERANCE:
+        raise ValueError(f'expected a unit quaternion [x, y, z, w], got norm {norm!r} '
+                         f'(tolerance {UNIT_NORM_TOLERANCE:g})')
+    return tuple(c / norm for c in values)
 
 
 def quaternion_from_rotation_values(values: Sequence[float]) -> tuple[float, ...]:
@@ -71,11 +82,7 @@ def quaternion_from_rotation_values(values: Sequence[float]) -> tuple[float, ...
         q = quaternion_from_euler(v, 'xyz', degrees=True)
         return tuple(float(c) for c in q)
     if len(v) == 4:
-        norm = math.hypot(*v)
-        if abs(norm - 1.0) > UNIT_NORM_TOLERANCE:
-            raise ValueError(f'expected a unit quaternion [x, y, z, w], got norm {norm!r} '
-                             f'(tolerance {UNIT_NORM_TOLERANCE:g})')
-        return tuple(c / norm for c in v)
+        return normalised_unit_quaternion(v)
     raise ValueError(f'expected [x, y, z, w] (a quaternion) or [roll, pitch, yaw] (degrees), '
                      f'got {len(v)} numbers')
 

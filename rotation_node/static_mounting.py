@@ -20,7 +20,8 @@ from typing import Any, Optional, TYPE_CHECKING
 
 from rotation_node.errors import BagError, ParameterError
 from rotation_node.parameters import mounting_frames_problem
-from rotation_node.tf_buffer import RejectedTransformError, TfLookupError, TfOrientationBuffer
+from rotation_node.registry import TF_STATIC_TOPIC as _TF_STATIC_INPUT
+from rotation_node.tf_buffer import TfLookupError, TfOrientationBuffer
 
 if TYPE_CHECKING:
     from rotation_node.parameters import NodeParameters
@@ -29,7 +30,7 @@ if TYPE_CHECKING:
 MOUNTING_UNKNOWN = 'mounting_unknown'
 
 #: The topic of static transforms (the ``tf`` input type's ``/tf_static``).
-TF_STATIC_TOPIC = '/tf_static'
+TF_STATIC_TOPIC = _TF_STATIC_INPUT.name
 
 
 def needs_static_mounting(params: NodeParameters) -> bool:
@@ -92,13 +93,8 @@ class StaticMountingLookup:
             before (``problem`` says why).
 
         """
-        for transform in msg.transforms:
-            header, rotation = transform.header, transform.transform.rotation
-            try:
-                self.buffer.insert(header.frame_id, transform.child_frame_id, 0,
-                                   (rotation.x, rotation.y, rotation.z, rotation.w), static=True)
-            except RejectedTransformError as exc:
-                self.problem = str(exc)
+        for exc in self.buffer.insert_transforms(msg.transforms, static=True):
+            self.problem = str(exc)
         try:
             found = self.buffer.lookup_orientation(self.sensor, self.body)
         except TfLookupError as exc:

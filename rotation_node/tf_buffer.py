@@ -41,13 +41,14 @@ nanoseconds (as ``builtin_interfaces/Time`` ``sec * 10**9 + nanosec``).
 """
 from bisect import bisect_right
 import math
-from typing import Dict, List, NamedTuple, Optional, Sequence, Set, Tuple, Union
+from typing import Any, Dict, List, NamedTuple, Optional, Sequence, Set, Tuple, Union
 
 import numpy as np
 
 from rotation_node import conversions
 from rotation_node.errors import RotationNodeError
-from rotation_node.wire.stamps import seconds_text
+from rotation_node.kinematics import slerp
+from rotation_node.wire.stamps import seconds_text, stamp_ns as _stamp_ns
 
 DEFAULT_CACHE_TIME_NS = 10_000_000_000
 """How long a dynamic edge keeps its samples behind the newest one (tf2's default, 10 s)."""
@@ -136,37 +137,6 @@ class _Sample(NamedTuple):
     stamp_ns: int
     quaternion: np.ndarray
     parent: str
-
-
-def slerp(q0: np.ndarray, q1: np.ndarray, fraction: float) -> np.ndarray:
-    """
-    Spherical linear interpolation between two unit quaternions, the shorter way round.
-
-    ``q0 (x) exp(fraction log(q0* (x) q1))`` through the library's exponential
-    and logarithm maps (``atan2`` forms): stable for nearly equal quaternions,
-    where ``acos`` of the dot product loses half the digits.
-
-    Parameters
-    ----------
-    q0, q1 : ndarray, shape (4,)
-        Unit quaternions (x, y, z, w); either sign.
-    fraction : float
-        0 gives ``q0`` exactly, 1 gives ``q1`` exactly.
-
-    Returns
-    -------
-    ndarray, shape (4,)
-        The interpolated rotation (unit; sign of ``q0``'s side).
-
-    """
-    if fraction == 0.0:
-        return q0
-    if fraction == 1.0:
-        return q1
-    step = conversions.rotation_vector_from_quaternion(
-        conversions.quaternion_product(conversions.quaternion_conjugate(q0), q1))
-    return conversions.quaternion_product(
-        q0, conversions.quaternion_from_rotation_vector(fraction * step))
 
 
 class _StaticEdge:
@@ -347,6 +317,21 @@ class TfOrientationBuffer:
                 f'transform {parent!r} -> {child!r} ignored: stamp {seconds_text(stamp_ns)} s is '
                 f'more than the cache time {seconds_text(self.cache_time_ns)} s before the '
                 f'newest sample of that edge ({seconds_text(newest)} s)')
+
+    def insert_transforms(self, transforms: Sequence[Any], *,
+                          static: bool = False) -> List[RejectedTransformError]:
+        """Add the ``TransformStamped`` of a TFMessage; return why tf2 would ignore any of them."""
+        rejected = []
+        for transform in transforms:
+            header, rotation = transform.header, transform.transform.rotation
+            translation = transform.transform.translation
+            try:
+                self.insert(header.frame_id, transform.child_frame_id, _stamp_ns(header.stamp),
+                            (rotation.x, rotation.y, rotation.z, rotation.w), static=static,
+                            translation=(translation.x, translation.y, translation.z))
+            except RejectedTransformError as exc:
+                rejected.append(exc)
+        return rejected
 
     def lookup_orientation(self, parent: str, child: str, stamp_ns: int = 0) -> TfOrientation:
         """

@@ -21,9 +21,9 @@ from typing import Any, Callable, Optional, Tuple
 import numpy as np
 from rotation_node.registry import Sample, TF_STATIC_TOPIC
 from rotation_node.tf_buffer import (
-    CycleError, ExtrapolationError, NotConnectedError, RejectedTransformError, TfLookupError,
-    TfOrientation, TfOrientationBuffer, UnknownFrameError)
-from rotation_node.wire.stamps import split_ns, stamp_ns
+    CycleError, ExtrapolationError, NotConnectedError, TfLookupError, TfOrientation,
+    TfOrientationBuffer, UnknownFrameError)
+from rotation_node.wire.stamps import split_ns
 
 TF_UNKNOWN_FRAME = 'tf_unknown_frame'
 TF_NOT_CONNECTED = 'tf_not_connected'
@@ -91,17 +91,9 @@ class TfSampleStream:
             and the lookup time), or none.
 
         """
-        static = topic == self._static_topic
         buffer = self.buffer
-        for transform in msg.transforms:
-            header, rotation = transform.header, transform.transform.rotation
-            translation = transform.transform.translation
-            try:
-                buffer.insert(header.frame_id, transform.child_frame_id, stamp_ns(header.stamp),
-                              (rotation.x, rotation.y, rotation.z, rotation.w), static=static,
-                              translation=(translation.x, translation.y, translation.z))
-            except RejectedTransformError as exc:
-                self._report(TF_SAMPLE_IGNORED, f'{exc} [{exc.reason}]')
+        for exc in buffer.insert_transforms(msg.transforms, static=topic == self._static_topic):
+            self._report(TF_SAMPLE_IGNORED, f'{exc} [{exc.reason}]')
         try:
             found = buffer.lookup_orientation(self.parent, self.child)
         except TfLookupError as exc:

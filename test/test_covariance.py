@@ -318,3 +318,15 @@ def test_covariance_defect_says_what_makes_a_matrix_no_covariance(matrix, defect
         assert np.linalg.eigvalsh(values).min() >= -1e-15 * np.abs(values).max()
     elif defect == 'not positive semi-definite':
         assert np.linalg.eigvalsh(values).min() < 0.0
+
+
+@pytest.mark.parametrize('call', [
+    lambda frame: cv.rotation_vector_covariance_jacobian([0.1, 0.2, 0.3], 'xyz', frame),
+    lambda frame: cv.quaternion_covariance_from_rotation_vector_covariance(
+        [0.0, 0.0, 0.0, 1.0], np.eye(3), frame),
+    lambda frame: cv.rotation_vector_covariance_from_quaternion_covariance(
+        [0.0, 0.0, 0.0, 1.0], np.eye(4), frame),
+])
+def test_a_frame_other_than_world_or_body_is_refused(call):
+    with pytest.raises(ValueError, match="`frame` to be 'body' or 'world', got 'enu'"):
+        call('enu')

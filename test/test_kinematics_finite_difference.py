@@ -4,6 +4,7 @@ import pytest
 
 from rotation_node import conversions as rc
 from rotation_node import kinematics as rk
+from scipy.spatial.transform import Rotation, Slerp
 from test_kinematics_coning import coning_orientation, coning_rate
 
 FRAMES = ('body', 'world')
@@ -101,3 +102,35 @@ def test_input_not_modified(rng):
 def test_bad_input_raises_naming_the_argument(q, t, frame, message):
     with pytest.raises(ValueError, match=message):
         rk.angular_velocity_from_quaternions(q, t, frame)
+
+
+def angle_between(q, expected: Rotation) -> float:
+    return (Rotation.from_quat(q) * expected.inv()).magnitude()
+
+
+def test_slerp_is_exact_at_the_ends_and_stable_for_close_quaternions(rng):
+    q0, q1 = Rotation.random(2, random_state=rng).as_quat()
+    np.testing.assert_array_equal(rk.slerp(q0, q1, 0.0), rc.canonical_quaternion(q0))
+    assert angle_between(rk.slerp(q0, q1, 1.0), Rotation.from_quat(q1)) < 4e-16
+    for fraction in (0.25, 0.5, 0.9):
+        expected = Slerp([0.0, 1.0], Rotation.from_quat([q0, q1]))(fraction)
+        assert angle_between(rk.slerp(q0, q1, fraction), expected) < 4e-16
+    # 1e-9 rad apart: the step is 0.3e-9 rad to the rounding of q0 (acos of their dot
+    # product, 1.0 in float64, would give a step of 0).
+    axis = np.array([0.6, 0.0, 0.8])
+    q1 = (Rotation.from_quat(q0) * Rotation.from_rotvec(1e-9 * axis)).as_quat()
+    step = (Rotation.from_quat(q0).inv() * Rotation.from_quat(rk.slerp(q0, q1, 0.3))).as_rotvec()
+    np.testing.assert_allclose(step, 0.3e-9 * axis, rtol=0, atol=4e-16)
+    # The shorter way round whatever the signs of the ends.
+    assert angle_between(rk.slerp(q0, -q0, 0.5), Rotation.from_quat(q0)) < 4e-16
+
+
+def test_slerp_close_quaternions_relative_accuracy():
+    # Exact relative step for a tiny rotation: q1 = q0 (x) exp(v) built in one product,
+    # so the only error is slerp's; the step must come back as 0.3 v to ~1e-15 relative.
+    q0 = np.array([0.0, 0.0, 0.0, 1.0])
+    v = np.array([3e-10, -4e-10, 1.2e-9])
+    q1 = np.array([*(0.5 * v), 1.0])   # exp(v) to 1e-28, normalised below
+    q1 /= np.linalg.norm(q1)
+    result = rk.slerp(q0, q1, 0.3)
+    np.testing.assert_allclose(Rotation.from_quat(result).as_rotvec(), 0.3 * v, rtol=1e-14)

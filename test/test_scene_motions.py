@@ -11,27 +11,24 @@ from scipy.spatial.transform import Rotation
 
 SCENES_DIR = os.path.join(os.path.dirname(__file__), '..', 'config', 'scenes')
 
-# Motions as (truth function, arguments before t); each exercises something hard.
+# Scene motions, each exercising something hard; Euler sweeps end at SWEEP_DURATION.
 MOTIONS = {
-    'constant_rate': (motions.constant_rate_truth,
-                      ([0.2, -0.1, 0.4, np.sqrt(0.79)], [1.3, -2.1, 4.0])),  # passes |w| t = pi
-    'coning': (motions.coning_truth, (0.2, 3.0)),
-    'coning_wide': (motions.coning_truth, (2.5, -1.7)),
-    'torque_free': (motions.torque_free_truth,
-                    ([1.0, 2.0, 2.5], [0.1, -0.2, 0.3, np.sqrt(0.86)], [3.0, 0.5, 1.0])),
-    'dzhanibekov': (motions.torque_free_truth,
-                    ([1.0, 2.0, 3.0], [0.0, 0.0, 0.0, 1.0], [0.01, 4.0, 0.01])),
-    'euler_sweep_gimbal_lock': (motions.euler_sweep_truth,
-                                ('ZYX', [-0.5, np.pi / 2 - 0.4, 0.3],
-                                 [0.7, np.pi / 2 + 0.4, -0.4], 2.0)),
-    'euler_sweep_proper': (motions.euler_sweep_truth,
-                           ('zxz', [0.3, -0.2, 1.0], [-1.0, 0.3, 2.0], 2.0)),
+    'constant_rate': spec.ConstantRate([0.2, -0.1, 0.4, np.sqrt(0.79)],
+                                       [1.3, -2.1, 4.0]),  # passes |w| t = pi
+    'coning': spec.Coning(0.2, 3.0),
+    'coning_wide': spec.Coning(2.5, -1.7),
+    'torque_free': spec.TorqueFree([1.0, 2.0, 2.5], [0.1, -0.2, 0.3, np.sqrt(0.86)],
+                                   [3.0, 0.5, 1.0]),
+    'dzhanibekov': spec.TorqueFree([1.0, 2.0, 3.0], [0.0, 0.0, 0.0, 1.0], [0.01, 4.0, 0.01]),
+    'euler_sweep_gimbal_lock': spec.EulerSweep('ZYX', [-0.5, np.pi / 2 - 0.4, 0.3],
+                                               [0.7, np.pi / 2 + 0.4, -0.4]),
+    'euler_sweep_proper': spec.EulerSweep('zxz', [0.3, -0.2, 1.0], [-1.0, 0.3, 2.0]),
 }
+SWEEP_DURATION = 2.0
 
 
 def sample(name, t):
-    function, arguments = MOTIONS[name]
-    return function(*arguments, t)
+    return motions.motion_truth(MOTIONS[name], t, SWEEP_DURATION)
 
 
 def geodesic_distance(p, q):
@@ -70,7 +67,7 @@ def test_constant_rate_is_exact():
     q0 = np.array([0.2, -0.1, 0.4, np.sqrt(0.79)])
     w0 = np.array([1.3, -2.1, 4.0])
     t = np.linspace(0.0, 10.0, 1001)
-    q, w = motions.constant_rate_truth(q0, w0, t)
+    q, w = motions.motion_truth(spec.ConstantRate(q0, w0), t, 10.0)
     expected = (Rotation.from_quat(q0) * Rotation.from_rotvec(w0 * t[:, None])).as_quat()
     assert geodesic_distance(q, expected).max() < 1e-13
     np.testing.assert_array_equal(q[0], q0)
@@ -102,7 +99,7 @@ def test_coning_body_z_axis_stays_on_the_cone():
 def invariant_drift(name, duration=20.0, rate=100.0):
     t = np.arange(0.0, duration + 0.5 / rate, 1.0 / rate)
     q, w = sample(name, t)
-    inertia = np.asarray(MOTIONS[name][1][0])
+    inertia = np.asarray(MOTIONS[name].inertia)
     energy = np.einsum('ij,ij->i', w, inertia * w)
     momentum = np.linalg.norm(inertia * w, axis=1)
     momentum_world = world_momentum(inertia, q, w)
@@ -125,7 +122,7 @@ def test_torque_free_symmetric_top_precesses_analytically():
     inertia = [2.0, 2.0, 3.0]
     w0 = np.array([0.4, -0.3, 2.5])
     t = np.linspace(0.0, 20.0, 2001)
-    _, w = motions.torque_free_truth(inertia, [0, 0, 0, 1], w0, t)
+    _, w = motions.motion_truth(spec.TorqueFree(inertia, [0, 0, 0, 1], w0), t, 20.0)
     rate = (inertia[2] - inertia[0]) / inertia[0] * w0[2]
     transverse = (w0[0] + 1j * w0[1]) * np.exp(1j * rate * t)
     np.testing.assert_allclose(w[:, 0] + 1j * w[:, 1], transverse, rtol=0, atol=1e-11)
@@ -134,7 +131,9 @@ def test_torque_free_symmetric_top_precesses_analytically():
 
 def test_torque_free_matches_a_tight_reference_integration():
     """Against scipy DOP853 at rtol 1e-13 on (q, w): agreement to ~1e-12 over 10 s."""
-    inertia, q0, w0 = (np.asarray(x, dtype=float) for x in MOTIONS['torque_free'][1])
+    motion = MOTIONS['torque_free']
+    inertia, q0, w0 = (np.asarray(x, dtype=float)
+                       for x in (motion.inertia, motion.orientation, motion.angular_velocity))
     t = np.linspace(0.0, 10.0, 1001)
 
     def rhs(_, y):
@@ -144,7 +143,7 @@ def test_torque_free_matches_a_tight_reference_integration():
 
     reference = solve_ivp(rhs, (0.0, 10.0), np.concatenate((q0, w0)), method='DOP853',
                           t_eval=t, rtol=1e-13, atol=1e-14).y.T
-    q, w = motions.torque_free_truth(inertia, q0, w0, t)
+    q, w = motions.motion_truth(motion, t, 10.0)
     assert np.abs(w - reference[:, 4:]).max() < 1e-10
     assert geodesic_distance(q, reference[:, :4]).max() < 1e-10
 
@@ -168,7 +167,7 @@ def test_tumbling_box_scene_flips_about_its_intermediate_axis():
 def test_euler_sweep_follows_its_angles(seq):
     start, end, duration = np.array([0.3, -0.2, 1.0]), np.array([-1.0, 0.4, 2.0]), 2.0
     t = np.linspace(0.0, duration, 201)
-    q, _ = motions.euler_sweep_truth(seq, start, end, duration, t)
+    q, _ = motions.motion_truth(spec.EulerSweep(seq, start, end), t, duration)
     angles = start + (end - start) * (t / duration)[:, None]
     assert geodesic_distance(q, Rotation.from_euler(seq, angles).as_quat()).max() < 1e-14
     assert geodesic_distance(q[-1], Rotation.from_euler(seq, end).as_quat()) < 1e-14
@@ -190,12 +189,3 @@ def test_motion_truth_dispatches_on_the_scene_motion():
     expected_q, expected_w = motions.coning_truth(0.3, 2.0, t)
     np.testing.assert_array_equal(q, expected_q)
     np.testing.assert_array_equal(w, expected_w)
-
-
-def test_sign_continuous_keeps_rotations_and_first_sign(rng):
-    q = rng.standard_normal((50, 4))
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    continuous = motions.sign_continuous(q)
-    np.testing.assert_array_equal(np.abs(continuous), np.abs(q))
-    np.testing.assert_array_equal(continuous[0], q[0])
-    assert np.all(np.einsum('ij,ij->i', continuous[1:], continuous[:-1]) >= 0)

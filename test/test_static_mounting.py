@@ -45,6 +45,18 @@ def test_lookup_composes_the_static_chain():
     assert not needs_static_mounting(found)
 
 
+def test_a_transform_tf2_would_ignore_gives_no_mounting():
+    """A NaN translation: tf2 ignores the whole transform, so it gives no mounting."""
+    lookup = StaticMountingLookup(NodeParameters(**FRAMES))
+    broken = edge('base_link', 'imu_link', EXPECTED_M.inv())
+    broken.transform.translation.x = float('nan')
+    assert lookup.add(static_message(broken)) is None
+    assert 'do not exist' in lookup.problem   # the sample never named its frames
+    found = lookup.add(static_message(edge('base_link', 'imu_link', EXPECTED_M.inv())))
+    m = Rotation.from_quat(found.mounting_body_rotation)
+    assert (m.inv() * EXPECTED_M).magnitude() < 1e-15
+
+
 def test_resolved_keeps_the_other_parameters():
     params = NodeParameters(outputs=('quaternion',), mounting_yaw_offset=0.5, **FRAMES)
     done = resolved(params, [0.0, 0.0, 0.6, 0.8])

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from rotation_node.tf_buffer import (
     CycleError, DEFAULT_CACHE_TIME_NS, ExtrapolationError, MAX_GRAPH_DEPTH, NotConnectedError,
-    RejectedTransformError, slerp, TfLookupError, TfOrientationBuffer, UnknownFrameError)
+    RejectedTransformError, TfLookupError, TfOrientationBuffer, UnknownFrameError)
 from scipy.spatial.transform import Rotation, Slerp
 
 S = 1_000_000_000                  # nanoseconds per second
@@ -285,33 +285,6 @@ def test_shorter_cache_time():
     assert buffer.lookup_orientation('map', 'odom', T0 + S // 2).stamp_ns == T0 + S // 2
     with pytest.raises(ValueError, match='cache_time_ns'):
         TfOrientationBuffer(cache_time_ns=-1)
-
-
-def test_slerp_is_exact_at_the_ends_and_stable_for_close_quaternions(rng):
-    q0, q1 = Rotation.random(2, random_state=rng).as_quat()
-    assert slerp(q0, q1, 0.0) is q0 and slerp(q0, q1, 1.0) is q1
-    for fraction in (0.25, 0.5, 0.9):
-        expected = Slerp([0.0, 1.0], Rotation.from_quat([q0, q1]))(fraction)
-        assert angle_between(slerp(q0, q1, fraction), expected) < 4e-16
-    # 1e-9 rad apart: the step is 0.3e-9 rad to the rounding of q0 (acos of their dot
-    # product, 1.0 in float64, would give a step of 0).
-    axis = np.array([0.6, 0.0, 0.8])
-    q1 = (Rotation.from_quat(q0) * Rotation.from_rotvec(1e-9 * axis)).as_quat()
-    step = (Rotation.from_quat(q0).inv() * Rotation.from_quat(slerp(q0, q1, 0.3))).as_rotvec()
-    np.testing.assert_allclose(step, 0.3e-9 * axis, rtol=0, atol=4e-16)
-    # The shorter way round whatever the signs of the ends.
-    assert angle_between(slerp(q0, -q0, 0.5), Rotation.from_quat(q0)) < 4e-16
-
-
-def test_slerp_close_quaternions_relative_accuracy(rng):
-    # Exact relative step for a tiny rotation: q1 = q0 (x) exp(v) built in one product,
-    # so the only error is slerp's; the step must come back as 0.3 v to ~1e-15 relative.
-    q0 = np.array([0.0, 0.0, 0.0, 1.0])
-    v = np.array([3e-10, -4e-10, 1.2e-9])
-    q1 = np.array([*(0.5 * v), 1.0])   # exp(v) to 1e-28, normalised below
-    q1 /= np.linalg.norm(q1)
-    result = slerp(q0, q1, 0.3)
-    np.testing.assert_allclose(Rotation.from_quat(result).as_rotvec(), 0.3 * v, rtol=1e-14)
 
 
 def test_unknown_frames_are_named():

@@ -8,7 +8,7 @@ over the scene's duration with ``N`` equal steps:
 - ``coning.yaml``: classical coning, the analytic truth of
   :func:`rotation_node.scene.motions.coning_truth`;
 - ``tumbling_box.yaml``: a box spinning near its intermediate axis (it flips
-  every ~2.6 s), the truth of :func:`rotation_node.scene.motions.torque_free_truth`
+  every ~2.6 s), the truth of :func:`rotation_node.scene.motions.motion_truth`
   (a fourth-order Lie-Poisson splitting). Near the separatrix the motion is
   ill-conditioned: a perturbation of round-off size grows by many orders of
   magnitude over the flips, so the truth itself is only known to the level

@@ -30,9 +30,10 @@ determine what was asked), both ``ValueError``.
 from ._alignment import (align_pairs, aligned_series, AlignedSeries, Alignment, chordal_mean,
                          estimate_alignment, IDENTITY, kabsch)
 from ._series import (error_statistics, ErrorStatistics, interpolate_orientations,
-                      orientation_errors, slerp)
+                      orientation_errors)
 from ._time_offset import estimate_time_offset, TimeOffset
 from ..errors import ComparisonError, DegenerateMotionError
+from ..kinematics import slerp  # the one slerp, shared with tf_buffer
 
 __all__ = [
     'AlignedSeries', 'Alignment', 'ComparisonError', 'DegenerateMotionError', 'ErrorStatistics',

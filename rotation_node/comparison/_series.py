@@ -13,6 +13,7 @@ import numpy as np
 
 from .. import conversions
 from ..errors import ComparisonError
+from ..kinematics import slerp
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
@@ -52,31 +53,6 @@ def checked_series(t: ArrayLike, q: ArrayLike, name: str) -> Tuple[FloatArray, F
 def median_step(t: FloatArray) -> float:
     """Median time between consecutive samples."""
     return float(np.median(np.diff(t)))
-
-
-def slerp(q0: ArrayLike, q1: ArrayLike, fraction: ArrayLike) -> FloatArray:
-    """
-    Spherical linear interpolation, the shorter way: ``q0 (x) exp(u log(q0* (x) q1))``.
-
-    Parameters
-    ----------
-    q0, q1 : array_like, shape (..., 4)
-        Unit quaternions (x, y, z, w); either sign.
-    fraction : array_like, shape (...)
-        ``u``: 0 gives ``q0`` (exactly, canonical), 1 gives ``q1`` (to rounding).
-
-    Returns
-    -------
-    ndarray, shape (..., 4)
-        Unit canonical quaternions.
-
-    """
-    q0 = conversions.canonical_quaternion(q0)
-    step = conversions.rotation_vector_from_quaternion(
-        conversions.quaternion_product(conversions.quaternion_conjugate(q0), q1))
-    part = conversions.quaternion_from_rotation_vector(
-        step * np.asarray(fraction, dtype=np.float64)[..., None])
-    return conversions.canonical_quaternion(conversions.quaternion_product(q0, part))
 
 
 def interpolate_orientations(t: ArrayLike, q: ArrayLike, t_query: ArrayLike, *,

@@ -1,5 +1,5 @@
 """
-Angular velocity: derivatives, Euler rates, finite differences, attitude integration.
+Angular velocity: derivatives, Euler rates, finite differences, slerp, attitude integration.
 
 Pure numpy + numba, built on :mod:`rotation_node.conversions`; no rclpy import.
 Every function takes array_like input with any leading dimensions (broadcast
@@ -22,7 +22,7 @@ from ._derivatives import (
 from ._euler_rates import (
     angular_velocity_from_euler_rates, DEFAULT_SINGULARITY_THRESHOLD,
     euler_rates_from_angular_velocity, EulerSingularityWarning)
-from ._finite_difference import angular_velocity_from_quaternions
+from ._finite_difference import angular_velocity_from_quaternions, slerp
 from ._integration import integrate_angular_velocity, INTEGRATION_METHODS
 
 __all__ = [
@@ -30,5 +30,5 @@ __all__ = [
     'angular_velocity_from_euler_rates', 'angular_velocity_from_matrix_derivative',
     'angular_velocity_from_quaternion_derivative', 'angular_velocity_from_quaternions',
     'euler_rates_from_angular_velocity', 'integrate_angular_velocity', 'matrix_derivative',
-    'quaternion_derivative',
+    'quaternion_derivative', 'slerp',
 ]

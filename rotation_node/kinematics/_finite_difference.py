@@ -8,6 +8,9 @@ angular velocity over the step. By the Magnus expansion
 ``log(q_k^-1 q_{k+1}) = h w_b(t_k + h/2) + O(h^3)``, so it is a second-order
 estimate at the midpoint time, and exact for a constant angular velocity.
 It aliases when the true rotation per step reaches pi (``|w| h >= pi``).
+
+:func:`slerp` goes the other way: the orientation a fraction of the way along
+that constant-rate rotation between two samples.
 """
 from __future__ import annotations
 
@@ -16,6 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ._validation import is_world_frame, sample_times
+from .. import conversions
 from ..conversions.kernels import (
     BOOL, FLAT_IN, FLAT_OUT, float_array, kernel, product, quaternion_status, raise_sample_error,
     rotation_vector_from_quaternion_scalar, samples, scaled_quaternion)
@@ -99,3 +103,32 @@ def angular_velocity_from_quaternions(q: ArrayLike, t: ArrayLike,
     if bad >= 0:
         raise_sample_error(bad, ('q',), (a,), ((4,),))
     return out
+
+
+def slerp(q0: ArrayLike, q1: ArrayLike, fraction: ArrayLike) -> FloatArray:
+    """
+    Spherical linear interpolation, the shorter way: ``q0 (x) exp(u log(q0* (x) q1))``.
+
+    Through the library's exponential and logarithm maps (``atan2`` forms): stable
+    for nearly equal quaternions, where ``acos`` of the dot product loses half the
+    digits.
+
+    Parameters
+    ----------
+    q0, q1 : array_like, shape (..., 4)
+        Unit quaternions (x, y, z, w); either sign.
+    fraction : array_like, shape (...)
+        ``u``: 0 gives ``q0`` (exactly, canonical), 1 gives ``q1`` (to rounding).
+
+    Returns
+    -------
+    ndarray, shape (..., 4)
+        Unit canonical quaternions.
+
+    """
+    q0 = conversions.canonical_quaternion(q0)
+    step = conversions.rotation_vector_from_quaternion(
+        conversions.quaternion_product(conversions.quaternion_conjugate(q0), q1))
+    part = conversions.quaternion_from_rotation_vector(
+        step * np.asarray(fraction, dtype=np.float64)[..., None])
+    return conversions.canonical_quaternion(conversions.quaternion_product(q0, part))

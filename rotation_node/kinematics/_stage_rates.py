@@ -25,15 +25,10 @@ if TYPE_CHECKING:
 
 def _lagrange_stencils(t, h, nodes):
     """
-    Stencil indices and Lagrange weights of the local interpolating cubic.
+    Return the stencils ``(K, P)`` and Lagrange weights ``(K, S, P)`` of the local cubics.
 
-    Returns
-    -------
-    stencil : ndarray of int, shape (K, P)
-        Sample indices used for step ``k`` (``P = min(N, 4)``).
-    weights : ndarray, shape (K, S, P)
-        The rate at ``t_k + nodes[s] h_k`` is ``sum_p weights[k, s, p] omega[stencil[k, p]]``.
-
+    Step ``k`` uses samples ``stencil[k]`` (``P = min(N, 4)``); the rate at
+    ``t_k + nodes[s] h_k`` is ``sum_p weights[k, s, p] omega[stencil[k, p]]``.
     """
     n = t.shape[0]
     points = min(n, 4)
@@ -62,31 +57,12 @@ def _first_non_finite(values, trailing_ndim):
 def stage_rates(omega: ArrayLike | Callable[[FloatArray], ArrayLike], t: FloatArray,
                 h: FloatArray, nodes: FloatArray) -> FloatArray:
     """
-    Angular velocity at ``t_k + nodes[s] h_k`` for every step ``k``.
+    Return the angular velocity at ``t_k + nodes[s] h_k``, shape (..., N - 1, S, 3), all finite.
 
-    Parameters
-    ----------
-    omega : callable or array_like
-        ``omega(times)`` with ``times`` of shape (M,) returning shape
-        (..., M, 3); or samples of shape (..., N, 3) at ``t``.
-    t : ndarray, shape (N,)
-        Validated, strictly increasing sample times.
-    h : ndarray, shape (N - 1,)
-        Their steps.
-    nodes : ndarray, shape (S,)
-        The method's stage fractions, in [0, 1].
-
-    Returns
-    -------
-    ndarray, shape (..., N - 1, S, 3)
-        The rates, all finite.
-
-    Raises
-    ------
-    ValueError
-        Samples of the wrong shape or with a NaN/Inf; a function whose result
-        has the wrong shape or a NaN/Inf (naming the time).
-
+    ``omega`` is ``omega(times)`` (``times`` of shape (M,) -> shape (..., M, 3)) or
+    samples of shape (..., N, 3) at the validated times ``t`` (steps ``h``),
+    interpolated by local cubics. A ValueError names a wrong shape or a NaN/Inf
+    (for a function, the time at which it returned one).
     """
     steps, stages = h.shape[0], nodes.shape[0]
     if callable(omega):

@@ -23,26 +23,7 @@ if TYPE_CHECKING:
 
 
 def is_world_frame(frame: object) -> bool:
-    """
-    Validate ``frame`` and say whether it is the world frame.
-
-    Parameters
-    ----------
-    frame : str
-        ``'body'`` (angular velocity in body coordinates, ``w_b``) or
-        ``'world'`` (in world coordinates, ``w_w = R w_b``).
-
-    Returns
-    -------
-    bool
-        True for ``'world'``, False for ``'body'``.
-
-    Raises
-    ------
-    ValueError
-        If ``frame`` is anything else.
-
-    """
+    """Return True for ``frame == 'world'`` (``w_w = R w_b``), False for ``'body'``, else raise."""
     if frame == 'body':
         return False
     if frame == 'world':
@@ -53,31 +34,11 @@ def is_world_frame(frame: object) -> bool:
 def sample_times(t: ArrayLike, n_samples: Optional[int] = None,
                  series_name: str = 't') -> tuple[FloatArray, FloatArray]:
     """
-    Validate sample times and return them with the steps between them.
+    Return the validated times ``t`` (float64) and their steps ``t[1:] - t[:-1]``, all > 0.
 
-    Parameters
-    ----------
-    t : array_like, shape (N,)
-        Times in seconds, finite and strictly increasing, N >= 2.
-    n_samples : int, optional
-        The ``N`` of the time series argument (its time axis length); by
-        default ``t``'s own length.
-    series_name : str, optional
-        The name of that argument, for the error message when ``N < 2``.
-
-    Returns
-    -------
-    t : ndarray, shape (N,)
-        The times as float64.
-    h : ndarray, shape (N - 1,)
-        The steps ``t[1:] - t[:-1]``, all > 0.
-
-    Raises
-    ------
-    ValueError
-        Fewer than two samples; ``t`` not numeric, not of shape (N,), with a
-        NaN/Inf, or not strictly increasing (naming the first offending pair).
-
+    ``n_samples`` is the time axis length of the series argument ``series_name``
+    (default: ``t``'s own length). A ValueError names what is wrong: fewer than two
+    samples, a shape or a NaN/Inf, or the first pair that is not strictly increasing.
     """
     try:
         t = np.asarray(t, dtype=np.float64)

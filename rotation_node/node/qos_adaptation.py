@@ -6,7 +6,7 @@ reliability and durability that every publisher on it matches (as ``ros2 bag
 record`` adapts to what is offered), from the profiles the ROS graph shows
 (``Node.get_publishers_info_by_topic``) and from incompatible-QoS events (a
 publisher the graph does not show yet). Pure functions of the profiles: the
-node subscribes again when the result changes (:mod:`.subscription_handoff`).
+node subscribes again when the result changes (:mod:`.handoff`).
 """
 from __future__ import annotations
 

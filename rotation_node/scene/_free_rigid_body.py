@@ -94,34 +94,14 @@ def integrate(q0: FloatArray, momentum0: FloatArray, momentum_norm: float,
               inverse_inertia: FloatArray, t: FloatArray, substeps: int, axes: IntArray,
               fractions: FloatArray) -> tuple[FloatArray, FloatArray]:
     """
-    Integrate a free rigid body from ``t[0]`` and return its state at every ``t``.
+    Return a free rigid body's unit quaternions (n, 4) and body angular momenta (n, 3) at ``t``.
 
-    Parameters
-    ----------
-    q0 : ndarray, shape (4,)
-        Unit quaternion (x, y, z, w) at ``t[0]``, body-to-world.
-    momentum0 : ndarray, shape (3,)
-        Body angular momentum ``I w`` at ``t[0]``.
-    momentum_norm : float
-        ``|L|``, held exactly along the motion: ``|momentum0|`` at the start
-        of the motion (passed on, so that integrating in pieces, each from
-        the last state of the one before, gives the same result as at once).
-    inverse_inertia : ndarray, shape (3,)
-        ``1 / I_i``, principal axes along the body x, y, z axes.
-    t : ndarray, shape (n,)
-        Non-decreasing sample times, s.
-    substeps : int
-        Internal steps between consecutive samples.
-    axes, fractions : ndarray, shape (m,)
-        One step's axis flows (``AXES``, ``FRACTIONS``).
-
-    Returns
-    -------
-    q : ndarray, shape (n, 4)
-        Unit quaternions, continuous in sign.
-    momentum : ndarray, shape (n, 3)
-        Body angular momentum, ``|L|`` equal to ``momentum_norm``.
-
+    It starts from ``q0`` (body-to-world) and ``momentum0 = I w`` at ``t[0]``
+    (``inverse_inertia = 1 / I_i`` along the body axes) and takes ``substeps`` steps
+    of the flows ``axes``, ``fractions`` (``AXES``, ``FRACTIONS``) between samples.
+    ``momentum_norm`` is ``|L|`` at the start of the motion, held exactly: passed on,
+    so that integrating in pieces, each from the last state of the one before, gives
+    the same result as at once.
     """
     n = t.shape[0]
     q_out = np.empty((n, 4))

@@ -1,8 +1,8 @@
 """
 Ground-truth motions: orientation and body angular velocity at given times.
 
-Every function returns ``(q, w)`` for times ``t`` (seconds since the first
-sample, shape ``(n,)``):
+:func:`motion_truth` returns ``(q, w)`` of a scene's motion for times ``t``
+(seconds since the first sample, shape ``(n,)``):
 
 - ``q``, shape (n, 4): unit quaternions (x, y, z, w), active, body-to-world,
   continuous in sign (``q[k] . q[k-1] >= 0``), so that a sign flip in a sensor
@@ -33,26 +33,7 @@ from . import _free_rigid_body
 from .spec import Coning, ConstantRate, EulerSweep, Motion, TorqueFree
 
 if TYPE_CHECKING:
-    from numpy.typing import ArrayLike
     from rotation_node.type_aliases import FloatArray
-
-
-def sign_continuous(q: FloatArray) -> FloatArray:
-    """
-    Return the quaternion series with signs chosen so that consecutive ones have ``dot >= 0``.
-
-    Parameters
-    ----------
-    q : ndarray, shape (n, 4)
-        Quaternions (x, y, z, w); ``q[0]`` keeps its sign.
-
-    Returns
-    -------
-    ndarray, shape (n, 4)
-        ``+-q[k]``, the same rotations.
-
-    """
-    return _continue_signs(q, None, 1.0)[0]
 
 
 def _continue_signs(q, previous, previous_sign):
@@ -74,32 +55,8 @@ def _continue_signs(q, previous, previous_sign):
     return q * signs[:, np.newaxis], q[-1].copy(), float(signs[-1])
 
 
-def constant_rate_truth(orientation: ArrayLike, angular_velocity: ArrayLike,
-                        t: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """
-    Return the exact rotation at constant body rate: ``q(t) = q0 (x) exp(w t)``.
-
-    Parameters
-    ----------
-    orientation : array_like, shape (4,)
-        ``q0`` (x, y, z, w), unit, at ``t = 0``.
-    angular_velocity : array_like, shape (3,)
-        Body angular velocity ``w``, rad/s.
-    t : array_like, shape (n,)
-        Times, s.
-
-    Returns
-    -------
-    q : ndarray, shape (n, 4)
-    w : ndarray, shape (n, 3)
-
-    """
-    q, w = _constant_rate_unsigned(orientation, angular_velocity, t)
-    # exp(w t) comes back canonical (scalar >= 0); undo the jump at |w| t = pi.
-    return sign_continuous(q), w
-
-
 def _constant_rate_unsigned(orientation, angular_velocity, t):
+    """Return ``q0 (x) exp(w t)`` and ``w``; exp comes back canonical (scalar >= 0), unsigned."""
     t = np.asarray(t, dtype=np.float64)
     w = np.broadcast_to(np.asarray(angular_velocity, dtype=np.float64), (t.size, 3))
     q = quaternion_product(orientation, quaternion_from_rotation_vector(w * t[:, np.newaxis]))
@@ -142,50 +99,24 @@ def coning_truth(half_angle: float, frequency: float,
     return q, w
 
 
-def torque_free_truth(inertia: ArrayLike, orientation: ArrayLike, angular_velocity: ArrayLike,
-                      t: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """
-    Return a free rigid body's motion: ``I w' = (I w) x w`` with attitude.
-
-    Integrated by a fourth-order Lie-Poisson splitting
-    (:mod:`rotation_node.scene._free_rigid_body`) with internal steps of at
-    most ``MAX_STEP_ANGLE`` rad: ``|I w|`` and the world angular momentum
-    ``R I w`` stay constant to round-off, the kinetic energy within ~1e-14
-    (relative), with no secular drift. The trajectory itself is as accurate as
-    the motion is well-conditioned: ~1e-12 of a tight DOP853 reference for a
-    generic spin, but a spin started near the intermediate axis amplifies
-    round-off at every flip, and the tumbling-box scene's truth is
-    reproducible only to ~3e-9 rad (two different time grids differ by that;
-    see docs/accuracy.md).
-
-    Parameters
-    ----------
-    inertia : array_like, shape (3,)
-        Principal moments about the body x, y, z axes.
-    orientation : array_like, shape (4,)
-        Orientation (x, y, z, w) at ``t[0]``.
-    angular_velocity : array_like, shape (3,)
-        Body angular velocity at ``t[0]``, rad/s.
-    t : array_like, shape (n,)
-        Non-decreasing times, s.
-
-    Returns
-    -------
-    q : ndarray, shape (n, 4)
-    w : ndarray, shape (n, 3)
-
-    """
-    t = np.ascontiguousarray(t, dtype=np.float64)
-    return _TorqueFree(inertia, orientation, angular_velocity, longest_interval(t)).truth(t)
-
-
 def longest_interval(t: FloatArray) -> float:
     """Return the longest interval between consecutive times ``t`` (0 for fewer than two)."""
     return float(np.max(np.diff(t), initial=0.0))
 
 
 class _TorqueFree:
-    """The torque-free integration, resumable: each ``truth(t)`` continues the previous one."""
+    """
+    The torque-free integration, resumable: each ``truth(t)`` continues the previous one.
+
+    A fourth-order Lie-Poisson splitting (:mod:`rotation_node.scene._free_rigid_body`)
+    with internal steps of at most ``MAX_STEP_ANGLE`` rad: ``|I w|`` and the world
+    angular momentum ``R I w`` stay constant to round-off, the kinetic energy within
+    ~1e-14 (relative), with no secular drift. The trajectory itself is as accurate as
+    the motion is well-conditioned: ~1e-12 of a tight DOP853 reference for a generic
+    spin, but a spin started near the intermediate axis amplifies round-off at every
+    flip, and the tumbling-box scene's truth is reproducible only to ~3e-9 rad (two
+    different time grids differ by that; see docs/accuracy.md).
+    """
 
     def __init__(self, inertia, orientation, angular_velocity, longest):
         self.inverse_inertia = 1.0 / np.asarray(inertia, dtype=np.float64)
@@ -213,38 +144,13 @@ class _TorqueFree:
         return q, momentum * self.inverse_inertia
 
 
-def euler_sweep_truth(sequence: str, start: ArrayLike, end: ArrayLike, duration: float,
-                      t: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """
-    Return the rotation whose Euler angles move linearly from ``start`` to ``end``.
-
-    The angles are ``start`` at ``t = 0`` and ``end`` at ``t = duration``.
-
-    The body angular velocity follows from the constant Euler rates; that map
-    is defined everywhere, gimbal lock included (only its inverse is singular).
-
-    Parameters
-    ----------
-    sequence : str
-        Euler sequence (upper case intrinsic, lower case extrinsic).
-    start, end : array_like, shape (3,)
-        Angles of ``sequence`` at ``t = 0`` and ``t = duration``, rad.
-    duration : float
-        Sweep time, s (> 0).
-    t : array_like, shape (n,)
-        Times, s.
-
-    Returns
-    -------
-    q : ndarray, shape (n, 4)
-    w : ndarray, shape (n, 3)
-
-    """
-    q, w = _euler_sweep_unsigned(sequence, start, end, duration, t)
-    return sign_continuous(q), w
-
-
 def _euler_sweep_unsigned(sequence, start, end, duration, t):
+    """
+    Return the Euler angles' rotation moving linearly from ``start`` (t = 0) to ``end``.
+
+    The body angular velocity follows from the constant Euler rates; that map is
+    defined everywhere, gimbal lock included (only its inverse is singular).
+    """
     t = np.asarray(t, dtype=np.float64)
     start = np.asarray(start, dtype=np.float64)
     rates = (np.asarray(end, dtype=np.float64) - start) / duration

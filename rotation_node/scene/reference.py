@@ -35,7 +35,7 @@ from rotation_node.wire.stamps import NS_PER_S as _NS_PER_S
 
 from .effects import effect_rng
 from .motions import MotionStream
-from .spec import GyroNoise, OrientationNoise, Reference, Scene
+from .spec import GyroNoise, OrientationNoise, Reference, Scene, stamps_ns, start_stamp_ns
 
 if TYPE_CHECKING:
     from rotation_node.type_aliases import StrPath
@@ -79,15 +79,9 @@ def _reference(scene):
     return scene.reference
 
 
-def _start_ns(scene):
-    whole_seconds = int(scene.start_time // 1)
-    return whole_seconds * _NS_PER_S + round((scene.start_time - whole_seconds) * _NS_PER_S)
-
-
 def reference_stamps_ns(scene: Scene, start: int, stop: int) -> np.ndarray:
     """Return the stamps of reference samples ``start .. stop-1``, ns since the epoch."""
-    offsets = np.round(np.arange(start, stop) * (_NS_PER_S / _reference(scene).rate))
-    return _start_ns(scene) + offsets.astype(np.int64)
+    return stamps_ns(scene.start_time, _reference(scene).rate, start, stop)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -139,7 +133,7 @@ class ReferenceStream:
         self.reference: Reference = _reference(scene)
         self._scene = scene
         self._next, self._stop = reference_index_range(scene)
-        self._first_ns = _start_ns(scene)
+        self._first_ns = start_stamp_ns(scene.start_time)
         self._motion = MotionStream(scene.motion, scene.duration, 1.0 / self.reference.rate)
         self._rng = effect_rng(seed, 'reference.orientation_noise')
         self._started = False

@@ -44,9 +44,10 @@ from rotation_node.wire.stamps import time_message as _time_message
 from sensor_msgs.msg import Imu
 
 from .effects import EffectsStream, SensorStream, UNKNOWN_COVARIANCE
-from .motions import MotionStream
+from .motions import longest_interval, MotionStream
 from .reference import ReferenceBlock, ReferenceStream, truth_path, truth_record
-from .spec import Scene, TRUTH_ANGULAR_VELOCITY_TOPIC, TRUTH_ORIENTATION_TOPIC
+from .spec import (
+    Scene, stamps_ns, start_stamp_ns, TRUTH_ANGULAR_VELOCITY_TOPIC, TRUTH_ORIENTATION_TOPIC)
 
 if TYPE_CHECKING:
     from rotation_node.type_aliases import IntArray, StrPath
@@ -98,25 +99,8 @@ BLOCK_SAMPLES = 20_000
 
 
 def sample_stamps_ns(scene: Scene) -> IntArray:
-    """
-    Return the nominal stamps ``start_time + k / rate``, k = 0 .. n-1, in ns since the epoch.
-
-    ``start_time`` is read as whole seconds plus a fraction rounded to ns.
-
-    Returns
-    -------
-    ndarray of int64, shape (n,)
-
-    """
-    return _stamps_ns(scene, 0, scene.sample_count)
-
-
-def _stamps_ns(scene, start, stop):
-    """Return the nominal stamps of samples ``start .. stop-1`` (as computed for all samples)."""
-    whole_seconds = int(scene.start_time // 1)
-    start_ns = whole_seconds * _NS_PER_S + round((scene.start_time - whole_seconds) * _NS_PER_S)
-    offsets = np.round(np.arange(start, stop) * (_NS_PER_S / scene.rate))
-    return start_ns + offsets.astype(np.int64)
+    """Return the nominal stamps ``start_time + k / rate``, k = 0 .. n-1, in ns since the epoch."""
+    return stamps_ns(scene.start_time, scene.rate, 0, scene.sample_count)
 
 
 def _block_bounds(scene, block_samples):
@@ -126,12 +110,12 @@ def _block_bounds(scene, block_samples):
 
 def _longest_interval(scene, bounds):
     """Return the longest interval between consecutive sample times, s, computed block by block."""
-    first_ns = _stamps_ns(scene, 0, 1)[0]
+    first_ns = start_stamp_ns(scene.start_time)
     longest, previous = 0.0, None
     for start, stop in bounds:
-        time = (_stamps_ns(scene, start, stop) - first_ns) / _NS_PER_S
+        time = (stamps_ns(scene.start_time, scene.rate, start, stop) - first_ns) / _NS_PER_S
         linked = time if previous is None else np.concatenate(([previous], time))
-        longest = max(longest, float(np.max(np.diff(linked), initial=0.0)))
+        longest = max(longest, longest_interval(linked))
         previous = time[-1]
     return longest
 
@@ -174,17 +158,16 @@ def simulate_blocks(scene: Scene, seed: int = 0,
     seed = _check_seed(seed)
     bounds = _block_bounds(scene, max(int(block_samples), 1))
     longest = _longest_interval(scene, bounds) if len(bounds) > 1 else None
-    first_ns = _stamps_ns(scene, 0, 1)[0]
+    first_ns = start_stamp_ns(scene.start_time)
     motion: Optional[MotionStream] = None
     effects: Optional[EffectsStream] = None
     reference = None if scene.reference is None else ReferenceStream(scene, seed)
     for start, stop in bounds:
-        stamp_ns = _stamps_ns(scene, start, stop)
+        stamp_ns = stamps_ns(scene.start_time, scene.rate, start, stop)
         time = (stamp_ns - first_ns) / _NS_PER_S
         if motion is None or effects is None:
             motion = MotionStream(scene.motion, scene.duration,
-                                  float(np.max(np.diff(time), initial=0.0))
-                                  if longest is None else longest)
+                                  longest_interval(time) if longest is None else longest)
             effects = EffectsStream(scene.effects, seed)
         q, w = motion.truth(time)
         sensor, masks = effects.apply(SensorStream.from_truth(time, stamp_ns, q, w))
@@ -199,24 +182,11 @@ def simulate_blocks(scene: Scene, seed: int = 0,
 
 def simulate(scene: Scene, seed: int = 0) -> Simulation:
     """
-    Return the truth and the sensor stream of a scene, as arrays.
+    Return the truth and the sensor stream of a whole scene, as arrays.
 
-    Parameters
-    ----------
-    scene : Scene
-        A validated scene (:func:`rotation_node.scene.spec.load_scene`).
-    seed : int, optional
-        Seed of the effects' random draws, >= 0. Default 0.
-
-    Returns
-    -------
-    Simulation
-
-    Raises
-    ------
-    ValueError
-        If ``seed`` is not a non-negative integer.
-
+    :func:`simulate_blocks` in one block: ``scene`` validated
+    (:func:`rotation_node.scene.spec.load_scene`), ``seed`` (>= 0, else ValueError)
+    seeding the effects' random draws.
     """
     simulation, = simulate_blocks(scene, seed, block_samples=scene.sample_count)
     return simulation

@@ -23,12 +23,15 @@ import math
 import re
 from typing import ClassVar, Mapping, Optional, Tuple, TYPE_CHECKING, Union
 
+import numpy as np
 from rotation_node.conversions import parse_sequence
 from rotation_node.errors import SceneError
+from rotation_node.mounting import normalised_unit_quaternion
 from rotation_node.ros_yaml import load_ros_yaml
 from rotation_node.validation import (
     checked_field, Choice, ChoiceList, dataclass_from_mapping, DataclassByTag, DataclassesByName,
     Integer, KeyPath, NestedDataclass, Real, Text, type_and_repr, Vector)
+from rotation_node.wire.stamps import NS_PER_S
 
 if TYPE_CHECKING:
     from rotation_node.type_aliases import StrPath
@@ -38,9 +41,6 @@ DEFAULT_START_TIME = 1735689600.0
 
 #: Largest number of samples a scene may ask for (``duration * rate + 1``).
 MAX_SAMPLES = 10_000_000
-
-#: A scene's orientation must have unit norm to within this (it is then normalised).
-UNIT_NORM_TOLERANCE = 1e-6
 
 # builtin_interfaces/Time.sec is an int32.
 _MAX_STAMP_SECONDS = 2**31 - 1
@@ -53,12 +53,11 @@ TRUTH_ANGULAR_VELOCITY_TOPIC = '/truth/angular_velocity'
 # --- what the domain adds to the kinds: (value, where) -> stored value -----------
 
 def _unit_quaternion(q, where):
-    """Check: [x, y, z, w] of unit norm within UNIT_NORM_TOLERANCE; stored normalised."""
-    norm = math.sqrt(math.fsum(c * c for c in q))
-    if abs(norm - 1.0) > UNIT_NORM_TOLERANCE:
-        raise where.error(f'expected a unit quaternion [x, y, z, w], got norm {norm!r} '
-                          f'(tolerance {UNIT_NORM_TOLERANCE})')
-    return tuple(c / norm for c in q)
+    """Check: [x, y, z, w] of unit norm within the mountings' tolerance; stored normalised."""
+    try:
+        return normalised_unit_quaternion(q)
+    except ValueError as error:
+        raise where.error(str(error)) from None
 
 
 def _principal_moments(moments, where):
@@ -183,10 +182,10 @@ class EulerSweep:
     end: Tuple[float, ...] = checked_field(_VECTOR)
 
 
-#: Motion classes by their scene ``type``.
 #: What a scene's ``motion`` is.
 Motion = Union[ConstantRate, Coning, TorqueFree, EulerSweep]
 
+#: Motion classes by their scene ``type``.
 MOTIONS = {cls.type: cls for cls in (ConstantRate, Coning, TorqueFree, EulerSweep)}
 
 
@@ -410,6 +409,18 @@ def sample_count(duration: float, rate: float) -> int:
     """
     n = duration * rate
     return math.floor(n + 1e-9 * max(1.0, n)) + 1
+
+
+def start_stamp_ns(start_time: float) -> int:
+    """Return ``start_time`` in ns since the epoch: whole seconds plus a fraction rounded to ns."""
+    whole_seconds = int(start_time // 1)
+    return whole_seconds * NS_PER_S + round((start_time - whole_seconds) * NS_PER_S)
+
+
+def stamps_ns(start_time: float, rate: float, start: int, stop: int) -> np.ndarray:
+    """Return the stamps ``start_time + k / rate`` of samples ``k = start .. stop-1``, in ns."""
+    offsets = np.round(np.arange(start, stop) * (NS_PER_S / rate))
+    return start_stamp_ns(start_time) + offsets.astype(np.int64)
 
 
 def scene_from_dict(data: object) -> Scene:
