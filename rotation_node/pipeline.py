@@ -60,7 +60,7 @@ import warnings
 
 import numpy as np
 from rotation_node import conversions, covariance, kinematics, registry
-from rotation_node.conversions.kernels import BATCH_SAMPLES, FLAT_OUT, FLOAT, kernel
+from rotation_node.conversions.kernels import BATCH_SAMPLES, FLAT_OUT, FLOAT, jit, kernel
 from rotation_node.errors import ParameterError
 from rotation_node.frames import FrameConversion
 from rotation_node.mounting import Mounting
@@ -367,40 +367,39 @@ def block_form_missing(params: NodeParameters) -> Optional[str]:
     return None
 
 
+# The rules of the values that carry state from one sample to the next, each defined once:
+# the per-message form calls them in Python, the block form in a kernel loop (conversions'
+# runtime: interpreted for a few samples, compiled for more; the same operations either way).
+
+@jit
 def _unwrapped(angle, previous, period):
-    """Return ``angle`` shifted by the multiple of ``period`` nearest to ``previous``."""
+    """Return ``angle`` shifted by the multiple of ``period`` nearest to ``previous`` (ties even)."""
     return angle + period * round((previous - angle) / period)
 
 
-# A kernel (conversions' runtime): interpreted for a few samples, compiled for more.
-@kernel(FLAT_OUT, FLAT_OUT, FLOAT, FLOAT, FLOAT, returns=None)
-def _unwrap_chain(first, third, previous_first, previous_third, period):   # pragma: no cover
-    """
-    Unwrap ``first`` and ``third`` in place, each against the one before, as ``_unwrapped``.
-
-    ``rint`` rounds half to even as Python's ``round``; ``+ 0.0`` makes a zero
-    correction +0, as ``_unwrapped``'s ``period * 0`` (an int) is.
-    """
-    for s in range(first.shape[0]):
-        first[s] = first[s] + (period * np.rint((previous_first - first[s]) / period) + 0.0)
-        third[s] = third[s] + (period * np.rint((previous_third - third[s]) / period) + 0.0)
-        previous_first, previous_third = first[s], third[s]
+@jit
+def _turns_away(previous_x, previous_y, previous_z, previous_w, x, y, z, w):
+    """Return whether quaternion ``(x, y, z, w)`` is published negated: its dot product with
+    the previous output quaternion is negative (0 and -0 are not)."""
+    return previous_x * x + previous_y * y + previous_z * z + previous_w * w < 0.0
 
 
-def _sign_chain(dots):
-    """
-    Signs of sign-continuous quaternions from the dot products of consecutive canonical ones.
+@kernel(FLAT_OUT, FLOAT, FLOAT, FLOAT, returns=None)
+def _unwrap_chain(angles, first, third, period):   # pragma: no cover
+    """Unwrap Euler triples (flat) in place as ``_unwrapped``, from the previous ``first``, ``third``."""
+    for s in range(0, angles.shape[0], 3):
+        first = _unwrapped(angles[s], first, period)
+        third = _unwrapped(angles[s + 2], third, period)
+        angles[s], angles[s + 2] = first, third
 
-    ``dots[k]`` is the dot product of the canonical quaternions ``k - 1`` and
-    ``k`` (the first with the previous output); quaternion ``k`` flips when
-    its dot product with the previous (flipped) one is negative.
-    """
-    negative = dots < 0.0
-    reset = dots == 0.0   # a zero dot product flips nothing: the sign restarts at +1
-    flips = np.cumsum(negative)
-    at_reset = np.where(reset, flips, 0)
-    base = np.maximum.accumulate(at_reset) if at_reset.size else at_reset
-    return np.where((flips - base) % 2 == 1, -1.0, 1.0)
+
+@kernel(FLAT_OUT, FLOAT, FLOAT, FLOAT, FLOAT, returns=None)
+def _sign_chain(q, x, y, z, w):   # pragma: no cover
+    """Negate quaternions (flat) in place as ``_turns_away`` says, from the previous output."""
+    for s in range(0, q.shape[0], 4):
+        if _turns_away(x, y, z, w, q[s], q[s + 1], q[s + 2], q[s + 3]):
+            q[s], q[s + 1], q[s + 2], q[s + 3] = -q[s], -q[s + 1], -q[s + 2], -q[s + 3]
+        x, y, z, w = q[s], q[s + 1], q[s + 2], q[s + 3]
 
 
 def _is_not_unit(norm, tolerance):
@@ -410,15 +409,15 @@ def _is_not_unit(norm, tolerance):
 
 def _rates_between(previous_q, q, steps_ns, frame):
     """
-    Return the constant rates carrying each ``previous_q`` into ``q`` in ``steps_ns``: (m, 3).
+    Return the constant rate carrying ``previous_q`` into ``q`` in ``steps_ns``: (3,), or (m, 3).
 
-    Over unit steps, then divided by each step (a difference of integer
-    nanoseconds: exact, unlike a difference of float seconds), the very
-    division the kernel makes for one pair over its step (the per-message form).
+    One pair (4,) and a step, or rows (m, 4) and steps (m, 1): over a unit
+    step, then divided by the step in seconds (from a difference of integer
+    nanoseconds: exact, unlike a difference of float seconds).
     """
     rates = kinematics.angular_velocity_from_quaternions(
-        np.stack((previous_q, q), axis=1), (0.0, 1.0), frame=frame)[:, 0]
-    return rates / (np.asarray(steps_ns, dtype=np.float64) * 1e-9)[:, None]
+        np.stack((previous_q, q), axis=-2), (0.0, 1.0), frame=frame)[..., 0, :]
+    return rates / (steps_ns * 1e-9)
 
 
 class _BlockRun:
@@ -838,9 +837,7 @@ class ConversionPipeline:
             self._issue(TIMESTAMP_NOT_INCREASING, stamp=seconds_text(stamp_ns),
                         previous=seconds_text(previous_ns))
             return None
-        # The same rate as _rates_between's over unit steps (the kernel divides by the step).
-        return kinematics.angular_velocity_from_quaternions(
-            np.stack((previous_q, q)), (0.0, (stamp_ns - previous_ns) * 1e-9), frame=frame)[0]
+        return _rates_between(previous_q, q, stamp_ns - previous_ns, frame)
 
     def _angular_velocity_block(self, block, rows, values, run):
         """Return where the angular velocity is available and its values (as one sample's)."""
@@ -896,7 +893,7 @@ class ConversionPipeline:
         if valid.any():
             target = indices[valid]
             omega[target] = _rates_between(previous_q[valid], q[target],
-                                           stamps[valid] - previous_ns[valid],
+                                           (stamps[valid] - previous_ns[valid])[:, None],
                                            params.angular_velocity_output_frame)
             available[target] = True
         return available, omega
@@ -913,7 +910,7 @@ class ConversionPipeline:
         if not self.params.quaternion_continuity:
             return q
         previous = self.state.previous_output_quaternion
-        if previous is not None and np.dot(previous, q) < 0.0:
+        if previous is not None and _turns_away(*previous.tolist(), *q.tolist()):
             q = -q
         self.state.previous_output_quaternion = q
         return q
@@ -927,15 +924,9 @@ class ConversionPipeline:
             return rows, out
         canonical = conversions.canonical_quaternion(q[indices])
         if self.params.quaternion_continuity:
-            previous = run.state.previous_output_quaternion
-            before = np.empty_like(canonical)
-            before[1:] = canonical[:-1]
-            before[0] = 0.0 if previous is None else previous
-            dots = np.einsum('ij,ij->i', before, canonical)
-            # The per-sample np.dot decides signs this estimate leaves in doubt.
-            for k in np.flatnonzero(np.abs(dots) < 1e-9).tolist():
-                dots[k] = 0.0 if k == 0 and previous is None else np.dot(before[k], canonical[k])
-            canonical = canonical * _sign_chain(dots)[:, None]
+            previous = run.state.previous_output_quaternion   # none: a dot product of 0
+            _sign_chain(canonical.reshape(-1), *(0.0,) * 4 if previous is None
+                        else previous.tolist())
             run.state.previous_output_quaternion = canonical[-1].copy()
         out[indices] = canonical
         return rows, out
@@ -981,12 +972,8 @@ class ConversionPipeline:
         if self.params.euler_unwrap:
             # The stream's first sample is published as it is, and the next unwrapped on it.
             start = 0 if previous is not None else 1
-            if previous is None:
-                previous = angles[0]
-            first, third = angles[start:, 0].copy(), angles[start:, 2].copy()
-            _unwrap_chain(first, third, float(previous[0]), float(previous[2]),
-                          self._angle_period)
-            angles[start:, 0], angles[start:, 2] = first, third
+            first, _, third = angles[0].tolist() if previous is None else previous
+            _unwrap_chain(angles[start:].reshape(-1), first, third, self._angle_period)
         published[indices] = angles
         run.state.previous_euler = tuple(angles[-1].tolist())
         return rows, published
