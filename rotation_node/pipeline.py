@@ -39,9 +39,14 @@ the node can spend per message.
 
 Exactness of the block form: blocks stay below the conversions' batch
 schedules (:data:`BLOCK_SAMPLES`), whose vectorised ``atan2`` may differ in the
-last bit, so that a block call runs the single-sample code once per sample; a
-decision a last-bit difference could flip (the norm tolerance, the sign of a
-dot product) is made with the per-message expression where in doubt.
+last bit, so that a block call runs the single-sample code once per sample. A
+rule carried from sample to sample (the sign continuity of the output
+quaternion, the unwrapping of Euler angles) is one scalar function that the
+per-message form calls in Python and the block form in a kernel loop
+(:func:`~rotation_node.conversions.kernels.kernel`: interpreted or compiled,
+the same operations); the finite-difference rate is one function of one pair
+or of rows; the norm tolerance, a decision a last-bit difference could flip, is
+decided by the per-message expression wherever a block's estimate is in doubt.
 
 The finite-difference angular velocity is the constant rate that carries the
 previous orientation into the current one over the interval between their
@@ -60,6 +65,8 @@ import warnings
 
 import numpy as np
 from rotation_node import conversions, covariance, kinematics, registry
+# samples: memoryviews interpreted (Python floats), where kernels.samples gives ndarrays.
+from rotation_node.conversions._runtime import samples
 from rotation_node.conversions.kernels import BATCH_SAMPLES, FLAT_OUT, FLOAT, jit, kernel
 from rotation_node.errors import ParameterError
 from rotation_node.frames import FrameConversion
@@ -373,33 +380,34 @@ def block_form_missing(params: NodeParameters) -> Optional[str]:
 
 @jit
 def _unwrapped(angle, previous, period):
-    """Return ``angle`` shifted by the multiple of ``period`` nearest to ``previous`` (ties even)."""
+    """Return ``angle`` shifted by the multiple of ``period`` nearest ``previous`` (ties even)."""
     return angle + period * round((previous - angle) / period)
 
 
 @jit
 def _turns_away(previous_x, previous_y, previous_z, previous_w, x, y, z, w):
-    """Return whether quaternion ``(x, y, z, w)`` is published negated: its dot product with
-    the previous output quaternion is negative (0 and -0 are not)."""
+    """Return whether ``(x, y, z, w)`` is published negated: its dot with the previous is < 0."""
     return previous_x * x + previous_y * y + previous_z * z + previous_w * w < 0.0
 
 
 @kernel(FLAT_OUT, FLOAT, FLOAT, FLOAT, returns=None)
 def _unwrap_chain(angles, first, third, period):   # pragma: no cover
-    """Unwrap Euler triples (flat) in place as ``_unwrapped``, from the previous ``first``, ``third``."""
-    for s in range(0, angles.shape[0], 3):
-        first = _unwrapped(angles[s], first, period)
-        third = _unwrapped(angles[s + 2], third, period)
-        angles[s], angles[s + 2] = first, third
+    """Unwrap Euler triples (flat) in place with ``_unwrapped``, from the previous first, third."""
+    triples = samples(angles, 3)
+    for s in range(triples.shape[0]):
+        first = _unwrapped(triples[s, 0], first, period)
+        third = _unwrapped(triples[s, 2], third, period)
+        triples[s, 0], triples[s, 2] = first, third
 
 
 @kernel(FLAT_OUT, FLOAT, FLOAT, FLOAT, FLOAT, returns=None)
 def _sign_chain(q, x, y, z, w):   # pragma: no cover
-    """Negate quaternions (flat) in place as ``_turns_away`` says, from the previous output."""
-    for s in range(0, q.shape[0], 4):
-        if _turns_away(x, y, z, w, q[s], q[s + 1], q[s + 2], q[s + 3]):
-            q[s], q[s + 1], q[s + 2], q[s + 3] = -q[s], -q[s + 1], -q[s + 2], -q[s + 3]
-        x, y, z, w = q[s], q[s + 1], q[s + 2], q[s + 3]
+    """Negate quaternions (flat) in place where ``_turns_away`` says, from the previous output."""
+    fq = samples(q, 4)
+    for s in range(fq.shape[0]):
+        if _turns_away(x, y, z, w, fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3]):
+            fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3] = -fq[s, 0], -fq[s, 1], -fq[s, 2], -fq[s, 3]
+        x, y, z, w = fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3]
 
 
 def _is_not_unit(norm, tolerance):
@@ -429,6 +437,10 @@ class _BlockRun:
         self.kept = np.ones(n, dtype=bool)     # not dropped
         self.zero = np.zeros(n, dtype=bool)    # a (0, 0, 0, 0) quaternion
         self.near_singular = 0
+
+    def issue(self, sample, reason, **fields):
+        """Report ``reason`` for ``sample`` once the block is converted, as ``_issue`` does."""
+        self.events.append((sample, reason, fields))
 
 
 class ConversionPipeline:
@@ -729,7 +741,7 @@ class ConversionPipeline:
             published += present
         unknown = run.kept & ~values[ORIENTATION][0] & (published < len(self._outputs))
         for s in np.flatnonzero(unknown).tolist():
-            run.events.append((s, self._unknown_orientation(run.zero[s]), {}))
+            run.issue(s, self._unknown_orientation(run.zero[s]))
         return outputs, int(published.sum())
 
     # The values, in the order of VALUES: each one's per-message form, then its block form.
@@ -768,8 +780,8 @@ class ConversionPipeline:
         finite = np.isfinite(orientation).all(axis=1)
         run.kept = ~known | finite
         for s in np.flatnonzero(~run.kept).tolist():
-            run.events.append((s, NON_FINITE_ORIENTATION,
-                               {'form': form, 'values': tuple(orientation[s].tolist())}))
+            run.issue(s, NON_FINITE_ORIENTATION, form=form,
+                      values=tuple(orientation[s].tolist()))
         use = known & finite
         q = np.zeros((len(orientation), 4))
         if form != registry.QUATERNION:
@@ -788,7 +800,7 @@ class ConversionPipeline:
                 sample = tuple(orientation[s].tolist())
                 norm = math.hypot(*sample)
                 if _is_not_unit(norm, tolerance):
-                    run.events.append((s, NON_UNIT_QUATERNION, {'values': sample, 'norm': norm}))
+                    run.issue(s, NON_UNIT_QUATERNION, values=sample, norm=norm)
         if self._mounting is not None and use.any():
             q[use] = self._mounting.quaternion(q[use])
         return use, q
@@ -833,11 +845,12 @@ class ConversionPipeline:
         state.previous_quaternion, state.previous_stamp_ns = q, stamp_ns
         if previous_q is None or previous_ns is None:   # both set together
             return None
-        if stamp_ns <= previous_ns:
+        step_ns = stamp_ns - previous_ns
+        if step_ns <= 0:
             self._issue(TIMESTAMP_NOT_INCREASING, stamp=seconds_text(stamp_ns),
                         previous=seconds_text(previous_ns))
             return None
-        return _rates_between(previous_q, q, stamp_ns - previous_ns, frame)
+        return _rates_between(previous_q, q, step_ns, frame)
 
     def _angular_velocity_block(self, block, rows, values, run):
         """Return where the angular velocity is available and its values (as one sample's)."""
@@ -851,8 +864,7 @@ class ConversionPipeline:
             raw = block.angular_velocity
             finite = np.isfinite(raw).all(axis=1)
             for s in np.flatnonzero(measured & ~finite).tolist():
-                run.events.append((s, NON_FINITE_ANGULAR_VELOCITY,
-                                   {'values': tuple(raw[s].tolist())}))
+                run.issue(s, NON_FINITE_ANGULAR_VELOCITY, values=tuple(raw[s].tolist()))
             measured &= finite
             if self._mounting is not None and measured.any():
                 raw = raw.copy()
@@ -869,33 +881,26 @@ class ConversionPipeline:
         indices = np.flatnonzero(differenced)
         if not indices.size:
             return available, omega
-        # The finite differences, each from the sample before (the first from the state).
+        # The finite differences along the chain of the state's sample and these.
         state = run.state
-        stamps = block.stamp_ns[indices]
-        previous_q = np.empty((len(indices), 4))
-        previous_q[1:] = q[indices[:-1]]
-        previous_ns = np.empty(len(indices), dtype=np.int64)
-        previous_ns[1:] = stamps[:-1]
-        has_previous = np.ones(len(indices), dtype=bool)
-        if state.previous_quaternion is None:
-            has_previous[0] = False
-            previous_q[0], previous_ns[0] = 0.0, 0
+        chain_q, chain_ns, targets = q[indices], block.stamp_ns[indices], indices
+        if state.previous_quaternion is None:   # the stream's first sample has none
+            targets = indices[1:]
         else:
-            previous_q[0], previous_ns[0] = state.previous_quaternion, state.previous_stamp_ns
-        state.previous_quaternion = q[indices[-1]].copy()
-        state.previous_stamp_ns = int(stamps[-1])
-        increasing = stamps > previous_ns
-        for j in np.flatnonzero(has_previous & ~increasing).tolist():
-            run.events.append((int(indices[j]), TIMESTAMP_NOT_INCREASING,
-                               {'stamp': seconds_text(int(stamps[j])),
-                                'previous': seconds_text(int(previous_ns[j]))}))
-        valid = has_previous & increasing
+            chain_q = np.concatenate(([state.previous_quaternion], chain_q))
+            chain_ns = np.concatenate(([state.previous_stamp_ns], chain_ns))
+        state.previous_quaternion, state.previous_stamp_ns = chain_q[-1].copy(), int(
+            chain_ns[-1])
+        steps_ns = chain_ns[1:] - chain_ns[:-1]
+        for j in np.flatnonzero(steps_ns <= 0).tolist():
+            run.issue(int(targets[j]), TIMESTAMP_NOT_INCREASING, stamp=seconds_text(
+                int(chain_ns[j + 1])), previous=seconds_text(int(chain_ns[j])))
+        valid = steps_ns > 0
         if valid.any():
-            target = indices[valid]
-            omega[target] = _rates_between(previous_q[valid], q[target],
-                                           (stamps[valid] - previous_ns[valid])[:, None],
-                                           params.angular_velocity_output_frame)
-            available[target] = True
+            omega[targets[valid]] = _rates_between(
+                chain_q[:-1][valid], chain_q[1:][valid], steps_ns[valid, None],
+                params.angular_velocity_output_frame)
+            available[targets[valid]] = True
         return available, omega
 
     def _measured_in_output_frame(self, q, omega):
@@ -924,9 +929,10 @@ class ConversionPipeline:
             return rows, out
         canonical = conversions.canonical_quaternion(q[indices])
         if self.params.quaternion_continuity:
-            previous = run.state.previous_output_quaternion   # none: a dot product of 0
-            _sign_chain(canonical.reshape(-1), *(0.0,) * 4 if previous is None
-                        else previous.tolist())
+            previous = run.state.previous_output_quaternion
+            # No previous turns nothing away, as a dot product of 0.
+            _sign_chain(canonical.reshape(-1),
+                        *((0.0,) * 4 if previous is None else previous.tolist()))
             run.state.previous_output_quaternion = canonical[-1].copy()
         out[indices] = canonical
         return rows, out
@@ -993,7 +999,7 @@ class ConversionPipeline:
                                                values[ANGULAR_VELOCITY][1][rows])
         singular = rows & np.isnan(rates[:, 0])
         for s in np.flatnonzero(singular).tolist():
-            run.events.append((s, EULER_RATES_NEAR_SINGULAR, self._singularity_fields()))
+            run.issue(s, EULER_RATES_NEAR_SINGULAR, **self._singularity_fields())
         return rows & ~singular, rates
 
     def _euler_rates_of(self, angles, omega):

@@ -923,8 +923,8 @@ def _quaternion_stream(quaternions):
     st.sampled_from([False, True]))
 def test_sign_continuity_and_unwrapping_agree_per_message_and_in_blocks(quaternions, degrees):
     """The stateful rules on quarter turns (ties of sign) and turns near the wrap of the angles."""
-    params = dict(input_type='quaternion', outputs=('quaternion', 'euler', 'angular_velocity'),
-                  quaternion_continuity=True, euler_unwrap=True, euler_degrees=degrees)
+    params = {'input_type': 'quaternion', 'outputs': ('quaternion', 'euler', 'angular_velocity'),
+              'quaternion_continuity': True, 'euler_unwrap': True, 'euler_degrees': degrees}
     messages, block = _quaternion_stream(quaternions)
     one = ConversionPipeline(NodeParameters(**params))
     alone = [one.process_values(msg) for msg in messages]
