@@ -827,15 +827,11 @@ class ConversionPipeline:
                 self._issue(NON_FINITE_ANGULAR_VELOCITY, values=omega)
                 return None
             input_frame = self.params.angular_velocity_input_frame
+            if q is None and input_frame != frame:
+                return None   # the frame change needs the orientation
             if self._frames is not None:
                 omega = (self._frames.world_vector(omega) if input_frame == 'world'
                          else self._frames.body_vector(omega))
-            if self._mounting is not None:
-                omega = self._mounting.vector(omega, input_frame)
-            if input_frame == frame:
-                return np.array(omega)
-            if q is None:
-                return None   # the frame change needs the orientation
             return self._measured_in_output_frame(q, omega)
         if q is None:
             return None
@@ -866,16 +862,10 @@ class ConversionPipeline:
             for s in np.flatnonzero(measured & ~finite).tolist():
                 run.issue(s, NON_FINITE_ANGULAR_VELOCITY, values=tuple(raw[s].tolist()))
             measured &= finite
-            if self._mounting is not None and measured.any():
-                raw = raw.copy()
-                raw[measured] = self._mounting.vector(raw[measured],
-                                                      params.angular_velocity_input_frame)
             if params.angular_velocity_input_frame != params.angular_velocity_output_frame:
                 measured &= known   # the frame change needs the orientation
-                if measured.any():
-                    raw = raw.copy()
-                    raw[measured] = self._measured_in_output_frame(q[measured], raw[measured])
-            omega[measured] = raw[measured]
+            if measured.any():
+                omega[measured] = self._measured_in_output_frame(q[measured], raw[measured])
             available |= measured
             differenced &= ~(rows & block.angular_velocity_known)
         indices = np.flatnonzero(differenced)
@@ -904,8 +894,13 @@ class ConversionPipeline:
         return available, omega
 
     def _measured_in_output_frame(self, q, omega):
-        """Return measured rates of ``angular_velocity.input_frame`` in the output frame."""
-        if self.params.angular_velocity_output_frame != 'world':
+        """Return measured rates (one or rows) mounted and in the output frame (``q``: from)."""
+        params = self.params
+        if self._mounting is not None:
+            omega = self._mounting.vector(omega, params.angular_velocity_input_frame)
+        if params.angular_velocity_input_frame == params.angular_velocity_output_frame:
+            return np.array(omega)
+        if params.angular_velocity_output_frame != 'world':
             q = conversions.quaternion_conjugate(q)
         return conversions.rotate_vector(q, omega)
 
