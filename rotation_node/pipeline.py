@@ -390,6 +390,10 @@ def _turns_away(previous_x, previous_y, previous_z, previous_w, x, y, z, w):
     return previous_x * x + previous_y * y + previous_z * z + previous_w * w < 0.0
 
 
+#: The previous output quaternion of the stream's first: a dot product of 0 turns nothing away.
+_NO_QUATERNION = (0.0, 0.0, 0.0, 0.0)
+
+
 @kernel(FLAT_OUT, FLOAT, FLOAT, FLOAT, returns=None)
 def _unwrap_chain(angles, first, third, period):   # pragma: no cover
     """Unwrap Euler triples (flat) in place with ``_unwrapped``, from the previous first, third."""
@@ -423,9 +427,9 @@ def _rates_between(previous_q, q, steps_ns, frame):
     step, then divided by the step in seconds (from a difference of integer
     nanoseconds: exact, unlike a difference of float seconds).
     """
-    rates = kinematics.angular_velocity_from_quaternions(
-        np.stack((previous_q, q), axis=-2), (0.0, 1.0), frame=frame)[..., 0, :]
-    return rates / (steps_ns * 1e-9)
+    pairs = np.array((previous_q, q)).swapaxes(0, -2)   # (2, 4) or (m, 2, 4): np.stack's, sooner
+    rates = kinematics.angular_velocity_from_quaternions(pairs, (0.0, 1.0), frame=frame)
+    return rates[..., 0, :] / (steps_ns * 1e-9)
 
 
 class _BlockRun:
@@ -910,7 +914,7 @@ class ConversionPipeline:
         if not self.params.quaternion_continuity:
             return q
         previous = self.state.previous_output_quaternion
-        if previous is not None and _turns_away(*previous.tolist(), *q.tolist()):
+        if _turns_away(*(_NO_QUATERNION if previous is None else previous.tolist()), *q.tolist()):
             q = -q
         self.state.previous_output_quaternion = q
         return q
@@ -925,9 +929,8 @@ class ConversionPipeline:
         canonical = conversions.canonical_quaternion(q[indices])
         if self.params.quaternion_continuity:
             previous = run.state.previous_output_quaternion
-            # No previous turns nothing away, as a dot product of 0.
             _sign_chain(canonical.reshape(-1),
-                        *((0.0,) * 4 if previous is None else previous.tolist()))
+                        *(_NO_QUATERNION if previous is None else previous.tolist()))
             run.state.previous_output_quaternion = canonical[-1].copy()
         out[indices] = canonical
         return rows, out

@@ -18,6 +18,7 @@ import pytest
 from ros_harness import (
     INPUT_COVARIANCE, make_input_message, oracle_output, output_values, PLAIN_INPUT_TYPES)
 from rotation_node import conversions, registry
+from rotation_node import pipeline as pipeline_module
 from rotation_node.conversions import SEQUENCES
 from rotation_node.conversions.kernels import BATCH_SAMPLES
 from rotation_node.parameters import NodeParameters, OUTPUTS
@@ -905,6 +906,24 @@ def test_a_dot_product_of_zero_negates_nothing():
     assert _turns_away(0.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, -1e-300)
 
 
+def test_each_stateful_rule_is_the_one_both_forms_call(monkeypatch):
+    """Another rule changes the per-message and the block form alike: neither has its own."""
+    for chain in (_sign_chain, _unwrap_chain):
+        monkeypatch.setattr(chain, 'call', chain.interpreted)   # calls the rule as Python
+    monkeypatch.setattr(pipeline_module, '_turns_away', lambda *values: True)
+    monkeypatch.setattr(pipeline_module, '_unwrapped', lambda angle, previous, period: previous)
+    quaternions = Rotation.random(6, random_state=3).as_quat().tolist()
+    outputs = ('quaternion', 'euler')
+    alone, blocks = _both_forms(quaternions, {
+        'input_type': 'quaternion', 'outputs': outputs, 'quaternion_continuity': True,
+        'euler_unwrap': True})
+    for name in outputs:
+        assert blocks[name].tobytes() == alone[name].tobytes(), name
+    assert (alone['quaternion'].reshape(-1, 4)[:, 3] < 0.0).all()   # each canonical negated
+    euler = alone['euler'].reshape(-1, 3)
+    assert (euler[:, [0, 2]] == euler[0, [0, 2]]).all()   # each the previous
+
+
 def _quaternion_stream(quaternions):
     """Messages of ``quaternions`` and the same samples as a block."""
     stamps = STAMP_NS + 10_000_000 * np.arange(len(quaternions), dtype=np.int64)
@@ -925,16 +944,24 @@ def test_sign_continuity_and_unwrapping_agree_per_message_and_in_blocks(quaterni
     """The stateful rules on quarter turns (ties of sign) and turns near the wrap of the angles."""
     params = {'input_type': 'quaternion', 'outputs': ('quaternion', 'euler', 'angular_velocity'),
               'quaternion_continuity': True, 'euler_unwrap': True, 'euler_degrees': degrees}
+    alone, blocks = _both_forms(quaternions, params)
+    for name in params['outputs']:
+        assert blocks[name].tobytes() == alone[name].tobytes(), name
+    assert alone['stats'] == blocks['stats']
+
+
+def _both_forms(quaternions, params):
+    """Return each output's numbers (flat) and the stats: message by message, and in 2 blocks."""
     messages, block = _quaternion_stream(quaternions)
     one = ConversionPipeline(NodeParameters(**params))
-    alone = [one.process_values(msg) for msg in messages]
+    results = [one.process_values(msg) for msg in messages]
+    alone = {name: np.array([numbers for sample in results for output, _, numbers in sample
+                             if output == name], dtype=float).reshape(-1)
+             for name in params['outputs']}
     blocks = ConversionPipeline(NodeParameters(**params))
     half = len(quaternions) // 2   # two blocks: the second continues the first's state
     outputs = [blocks.process_block(SampleBlock(*(a[:half] for a in block[:3]))),
                blocks.process_block(SampleBlock(*(a[half:] for a in block[:3])))]
-    for name in params['outputs']:
-        expected = np.array([numbers for results in alone for output, _, numbers in results
-                             if output == name], dtype=float).reshape(-1)
-        got = np.concatenate([o.numbers[name].reshape(-1) for o in outputs])
-        assert got.tobytes() == expected.tobytes(), name
-    assert one.stats == blocks.stats
+    in_blocks = {name: np.concatenate([o.numbers[name].reshape(-1) for o in outputs])
+                 for name in params['outputs']}
+    return {**alone, 'stats': one.stats}, {**in_blocks, 'stats': blocks.stats}
