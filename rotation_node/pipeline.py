@@ -409,9 +409,11 @@ def _sign_chain(q, x, y, z, w):   # pragma: no cover
     """Negate quaternions (flat) in place where ``_turns_away`` says, from the previous output."""
     fq = samples(q, 4)
     for s in range(fq.shape[0]):
-        if _turns_away(x, y, z, w, fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3]):
-            fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3] = -fq[s, 0], -fq[s, 1], -fq[s, 2], -fq[s, 3]
-        x, y, z, w = fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3]
+        qx, qy, qz, qw = fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3]
+        if _turns_away(x, y, z, w, qx, qy, qz, qw):
+            qx, qy, qz, qw = -qx, -qy, -qz, -qw
+            fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3] = qx, qy, qz, qw
+        x, y, z, w = qx, qy, qz, qw
 
 
 def _is_not_unit(norm, tolerance):
