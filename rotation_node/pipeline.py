@@ -39,9 +39,14 @@ the node can spend per message.
 
 Exactness of the block form: blocks stay below the conversions' batch
 schedules (:data:`BLOCK_SAMPLES`), whose vectorised ``atan2`` may differ in the
-last bit, so that a block call runs the single-sample code once per sample; a
-decision a last-bit difference could flip (the norm tolerance, the sign of a
-dot product) is made with the per-message expression where in doubt.
+last bit, so that a block call runs the single-sample code once per sample. A
+rule carried from sample to sample (the sign continuity of the output
+quaternion, the unwrapping of Euler angles) is one scalar function that the
+per-message form calls in Python and the block form in a kernel loop
+(:func:`~rotation_node.conversions.kernels.kernel`: interpreted or compiled,
+the same operations); the finite-difference rate is one function of one pair
+or of rows; the norm tolerance, a decision a last-bit difference could flip, is
+decided by the per-message expression wherever a block's estimate is in doubt.
 
 The finite-difference angular velocity is the constant rate that carries the
 previous orientation into the current one over the interval between their
@@ -60,7 +65,9 @@ import warnings
 
 import numpy as np
 from rotation_node import conversions, covariance, kinematics, registry
-from rotation_node.conversions.kernels import BATCH_SAMPLES, FLAT_OUT, FLOAT, kernel
+# samples: memoryviews interpreted (Python floats), where kernels.samples gives ndarrays.
+from rotation_node.conversions._runtime import samples
+from rotation_node.conversions.kernels import BATCH_SAMPLES, FLAT_OUT, FLOAT, jit, kernel
 from rotation_node.errors import ParameterError
 from rotation_node.frames import FrameConversion
 from rotation_node.mounting import Mounting
@@ -367,40 +374,46 @@ def block_form_missing(params: NodeParameters) -> Optional[str]:
     return None
 
 
+# The rules of the values that carry state from one sample to the next, each defined once:
+# the per-message form calls them in Python, the block form in a kernel loop (conversions'
+# runtime: interpreted for a few samples, compiled for more; the same operations either way).
+
+@jit
 def _unwrapped(angle, previous, period):
-    """Return ``angle`` shifted by the multiple of ``period`` nearest to ``previous``."""
+    """Return ``angle`` shifted by the multiple of ``period`` nearest ``previous`` (ties even)."""
     return angle + period * round((previous - angle) / period)
 
 
-# A kernel (conversions' runtime): interpreted for a few samples, compiled for more.
-@kernel(FLAT_OUT, FLAT_OUT, FLOAT, FLOAT, FLOAT, returns=None)
-def _unwrap_chain(first, third, previous_first, previous_third, period):   # pragma: no cover
-    """
-    Unwrap ``first`` and ``third`` in place, each against the one before, as ``_unwrapped``.
-
-    ``rint`` rounds half to even as Python's ``round``; ``+ 0.0`` makes a zero
-    correction +0, as ``_unwrapped``'s ``period * 0`` (an int) is.
-    """
-    for s in range(first.shape[0]):
-        first[s] = first[s] + (period * np.rint((previous_first - first[s]) / period) + 0.0)
-        third[s] = third[s] + (period * np.rint((previous_third - third[s]) / period) + 0.0)
-        previous_first, previous_third = first[s], third[s]
+@jit
+def _turns_away(previous_x, previous_y, previous_z, previous_w, x, y, z, w):
+    """Return whether ``(x, y, z, w)`` is published negated: its dot with the previous is < 0."""
+    return previous_x * x + previous_y * y + previous_z * z + previous_w * w < 0.0
 
 
-def _sign_chain(dots):
-    """
-    Signs of sign-continuous quaternions from the dot products of consecutive canonical ones.
+#: The previous output quaternion of the stream's first: a dot product of 0 turns nothing away.
+_NO_QUATERNION = (0.0, 0.0, 0.0, 0.0)
 
-    ``dots[k]`` is the dot product of the canonical quaternions ``k - 1`` and
-    ``k`` (the first with the previous output); quaternion ``k`` flips when
-    its dot product with the previous (flipped) one is negative.
-    """
-    negative = dots < 0.0
-    reset = dots == 0.0   # a zero dot product flips nothing: the sign restarts at +1
-    flips = np.cumsum(negative)
-    at_reset = np.where(reset, flips, 0)
-    base = np.maximum.accumulate(at_reset) if at_reset.size else at_reset
-    return np.where((flips - base) % 2 == 1, -1.0, 1.0)
+
+@kernel(FLAT_OUT, FLOAT, FLOAT, FLOAT, returns=None)
+def _unwrap_chain(angles, first, third, period):   # pragma: no cover
+    """Unwrap Euler triples (flat) in place with ``_unwrapped``, from the previous first, third."""
+    triples = samples(angles, 3)
+    for s in range(triples.shape[0]):
+        first = _unwrapped(triples[s, 0], first, period)
+        third = _unwrapped(triples[s, 2], third, period)
+        triples[s, 0], triples[s, 2] = first, third
+
+
+@kernel(FLAT_OUT, FLOAT, FLOAT, FLOAT, FLOAT, returns=None)
+def _sign_chain(q, x, y, z, w):   # pragma: no cover
+    """Negate quaternions (flat) in place where ``_turns_away`` says, from the previous output."""
+    fq = samples(q, 4)
+    for s in range(fq.shape[0]):
+        qx, qy, qz, qw = fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3]
+        if _turns_away(x, y, z, w, qx, qy, qz, qw):
+            qx, qy, qz, qw = -qx, -qy, -qz, -qw
+            fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3] = qx, qy, qz, qw
+        x, y, z, w = qx, qy, qz, qw
 
 
 def _is_not_unit(norm, tolerance):
@@ -410,15 +423,15 @@ def _is_not_unit(norm, tolerance):
 
 def _rates_between(previous_q, q, steps_ns, frame):
     """
-    Return the constant rates carrying each ``previous_q`` into ``q`` in ``steps_ns``: (m, 3).
+    Return the constant rate carrying ``previous_q`` into ``q`` in ``steps_ns``: (3,), or (m, 3).
 
-    Over unit steps, then divided by each step (a difference of integer
-    nanoseconds: exact, unlike a difference of float seconds), the very
-    division the kernel makes for one pair over its step (the per-message form).
+    One pair (4,) and a step, or rows (m, 4) and steps (m, 1): over a unit
+    step, then divided by the step in seconds (from a difference of integer
+    nanoseconds: exact, unlike a difference of float seconds).
     """
-    rates = kinematics.angular_velocity_from_quaternions(
-        np.stack((previous_q, q), axis=1), (0.0, 1.0), frame=frame)[:, 0]
-    return rates / (np.asarray(steps_ns, dtype=np.float64) * 1e-9)[:, None]
+    pairs = np.array((previous_q, q)).swapaxes(0, -2)   # (2, 4) or (m, 2, 4): np.stack's, sooner
+    rates = kinematics.angular_velocity_from_quaternions(pairs, (0.0, 1.0), frame=frame)
+    return rates[..., 0, :] / (steps_ns * 1e-9)
 
 
 class _BlockRun:
@@ -430,6 +443,10 @@ class _BlockRun:
         self.kept = np.ones(n, dtype=bool)     # not dropped
         self.zero = np.zeros(n, dtype=bool)    # a (0, 0, 0, 0) quaternion
         self.near_singular = 0
+
+    def issue(self, sample, reason, **fields):
+        """Report ``reason`` for ``sample`` once the block is converted, as ``_issue`` does."""
+        self.events.append((sample, reason, fields))
 
 
 class ConversionPipeline:
@@ -730,7 +747,7 @@ class ConversionPipeline:
             published += present
         unknown = run.kept & ~values[ORIENTATION][0] & (published < len(self._outputs))
         for s in np.flatnonzero(unknown).tolist():
-            run.events.append((s, self._unknown_orientation(run.zero[s]), {}))
+            run.issue(s, self._unknown_orientation(run.zero[s]))
         return outputs, int(published.sum())
 
     # The values, in the order of VALUES: each one's per-message form, then its block form.
@@ -769,8 +786,8 @@ class ConversionPipeline:
         finite = np.isfinite(orientation).all(axis=1)
         run.kept = ~known | finite
         for s in np.flatnonzero(~run.kept).tolist():
-            run.events.append((s, NON_FINITE_ORIENTATION,
-                               {'form': form, 'values': tuple(orientation[s].tolist())}))
+            run.issue(s, NON_FINITE_ORIENTATION, form=form,
+                      values=tuple(orientation[s].tolist()))
         use = known & finite
         q = np.zeros((len(orientation), 4))
         if form != registry.QUATERNION:
@@ -789,7 +806,7 @@ class ConversionPipeline:
                 sample = tuple(orientation[s].tolist())
                 norm = math.hypot(*sample)
                 if _is_not_unit(norm, tolerance):
-                    run.events.append((s, NON_UNIT_QUATERNION, {'values': sample, 'norm': norm}))
+                    run.issue(s, NON_UNIT_QUATERNION, values=sample, norm=norm)
         if self._mounting is not None and use.any():
             q[use] = self._mounting.quaternion(q[use])
         return use, q
@@ -816,15 +833,11 @@ class ConversionPipeline:
                 self._issue(NON_FINITE_ANGULAR_VELOCITY, values=omega)
                 return None
             input_frame = self.params.angular_velocity_input_frame
+            if q is None and input_frame != frame:
+                return None   # the frame change needs the orientation
             if self._frames is not None:
                 omega = (self._frames.world_vector(omega) if input_frame == 'world'
                          else self._frames.body_vector(omega))
-            if self._mounting is not None:
-                omega = self._mounting.vector(omega, input_frame)
-            if input_frame == frame:
-                return np.array(omega)
-            if q is None:
-                return None   # the frame change needs the orientation
             return self._measured_in_output_frame(q, omega)
         if q is None:
             return None
@@ -834,13 +847,12 @@ class ConversionPipeline:
         state.previous_quaternion, state.previous_stamp_ns = q, stamp_ns
         if previous_q is None or previous_ns is None:   # both set together
             return None
-        if stamp_ns <= previous_ns:
+        step_ns = stamp_ns - previous_ns
+        if step_ns <= 0:
             self._issue(TIMESTAMP_NOT_INCREASING, stamp=seconds_text(stamp_ns),
                         previous=seconds_text(previous_ns))
             return None
-        # The same rate as _rates_between's over unit steps (the kernel divides by the step).
-        return kinematics.angular_velocity_from_quaternions(
-            np.stack((previous_q, q)), (0.0, (stamp_ns - previous_ns) * 1e-9), frame=frame)[0]
+        return _rates_between(previous_q, q, step_ns, frame)
 
     def _angular_velocity_block(self, block, rows, values, run):
         """Return where the angular velocity is available and its values (as one sample's)."""
@@ -854,56 +866,47 @@ class ConversionPipeline:
             raw = block.angular_velocity
             finite = np.isfinite(raw).all(axis=1)
             for s in np.flatnonzero(measured & ~finite).tolist():
-                run.events.append((s, NON_FINITE_ANGULAR_VELOCITY,
-                                   {'values': tuple(raw[s].tolist())}))
+                run.issue(s, NON_FINITE_ANGULAR_VELOCITY, values=tuple(raw[s].tolist()))
             measured &= finite
-            if self._mounting is not None and measured.any():
-                raw = raw.copy()
-                raw[measured] = self._mounting.vector(raw[measured],
-                                                      params.angular_velocity_input_frame)
             if params.angular_velocity_input_frame != params.angular_velocity_output_frame:
                 measured &= known   # the frame change needs the orientation
-                if measured.any():
-                    raw = raw.copy()
-                    raw[measured] = self._measured_in_output_frame(q[measured], raw[measured])
-            omega[measured] = raw[measured]
+            if measured.any():
+                omega[measured] = self._measured_in_output_frame(q[measured], raw[measured])
             available |= measured
             differenced &= ~(rows & block.angular_velocity_known)
         indices = np.flatnonzero(differenced)
         if not indices.size:
             return available, omega
-        # The finite differences, each from the sample before (the first from the state).
+        # The finite differences along the chain of the state's sample and these.
         state = run.state
-        stamps = block.stamp_ns[indices]
-        previous_q = np.empty((len(indices), 4))
-        previous_q[1:] = q[indices[:-1]]
-        previous_ns = np.empty(len(indices), dtype=np.int64)
-        previous_ns[1:] = stamps[:-1]
-        has_previous = np.ones(len(indices), dtype=bool)
-        if state.previous_quaternion is None:
-            has_previous[0] = False
-            previous_q[0], previous_ns[0] = 0.0, 0
+        chain_q, chain_ns, targets = q[indices], block.stamp_ns[indices], indices
+        if state.previous_quaternion is None:   # the stream's first sample has none
+            targets = indices[1:]
         else:
-            previous_q[0], previous_ns[0] = state.previous_quaternion, state.previous_stamp_ns
-        state.previous_quaternion = q[indices[-1]].copy()
-        state.previous_stamp_ns = int(stamps[-1])
-        increasing = stamps > previous_ns
-        for j in np.flatnonzero(has_previous & ~increasing).tolist():
-            run.events.append((int(indices[j]), TIMESTAMP_NOT_INCREASING,
-                               {'stamp': seconds_text(int(stamps[j])),
-                                'previous': seconds_text(int(previous_ns[j]))}))
-        valid = has_previous & increasing
+            chain_q = np.concatenate(([state.previous_quaternion], chain_q))
+            chain_ns = np.concatenate(([state.previous_stamp_ns], chain_ns))
+        state.previous_quaternion, state.previous_stamp_ns = chain_q[-1].copy(), int(
+            chain_ns[-1])
+        steps_ns = chain_ns[1:] - chain_ns[:-1]
+        for j in np.flatnonzero(steps_ns <= 0).tolist():
+            run.issue(int(targets[j]), TIMESTAMP_NOT_INCREASING, stamp=seconds_text(
+                int(chain_ns[j + 1])), previous=seconds_text(int(chain_ns[j])))
+        valid = steps_ns > 0
         if valid.any():
-            target = indices[valid]
-            omega[target] = _rates_between(previous_q[valid], q[target],
-                                           stamps[valid] - previous_ns[valid],
-                                           params.angular_velocity_output_frame)
-            available[target] = True
+            omega[targets[valid]] = _rates_between(
+                chain_q[:-1][valid], chain_q[1:][valid], steps_ns[valid, None],
+                params.angular_velocity_output_frame)
+            available[targets[valid]] = True
         return available, omega
 
     def _measured_in_output_frame(self, q, omega):
-        """Return measured rates of ``angular_velocity.input_frame`` in the output frame."""
-        if self.params.angular_velocity_output_frame != 'world':
+        """Return measured rates (one or rows) mounted and in the output frame (``q``: from)."""
+        params = self.params
+        if self._mounting is not None:
+            omega = self._mounting.vector(omega, params.angular_velocity_input_frame)
+        if params.angular_velocity_input_frame == params.angular_velocity_output_frame:
+            return np.array(omega)
+        if params.angular_velocity_output_frame != 'world':
             q = conversions.quaternion_conjugate(q)
         return conversions.rotate_vector(q, omega)
 
@@ -913,7 +916,7 @@ class ConversionPipeline:
         if not self.params.quaternion_continuity:
             return q
         previous = self.state.previous_output_quaternion
-        if previous is not None and np.dot(previous, q) < 0.0:
+        if _turns_away(*(_NO_QUATERNION if previous is None else previous.tolist()), *q.tolist()):
             q = -q
         self.state.previous_output_quaternion = q
         return q
@@ -928,14 +931,8 @@ class ConversionPipeline:
         canonical = conversions.canonical_quaternion(q[indices])
         if self.params.quaternion_continuity:
             previous = run.state.previous_output_quaternion
-            before = np.empty_like(canonical)
-            before[1:] = canonical[:-1]
-            before[0] = 0.0 if previous is None else previous
-            dots = np.einsum('ij,ij->i', before, canonical)
-            # The per-sample np.dot decides signs this estimate leaves in doubt.
-            for k in np.flatnonzero(np.abs(dots) < 1e-9).tolist():
-                dots[k] = 0.0 if k == 0 and previous is None else np.dot(before[k], canonical[k])
-            canonical = canonical * _sign_chain(dots)[:, None]
+            _sign_chain(canonical.reshape(-1),
+                        *(_NO_QUATERNION if previous is None else previous.tolist()))
             run.state.previous_output_quaternion = canonical[-1].copy()
         out[indices] = canonical
         return rows, out
@@ -981,12 +978,8 @@ class ConversionPipeline:
         if self.params.euler_unwrap:
             # The stream's first sample is published as it is, and the next unwrapped on it.
             start = 0 if previous is not None else 1
-            if previous is None:
-                previous = angles[0]
-            first, third = angles[start:, 0].copy(), angles[start:, 2].copy()
-            _unwrap_chain(first, third, float(previous[0]), float(previous[2]),
-                          self._angle_period)
-            angles[start:, 0], angles[start:, 2] = first, third
+            first, _, third = angles[0].tolist() if previous is None else previous
+            _unwrap_chain(angles[start:].reshape(-1), first, third, self._angle_period)
         published[indices] = angles
         run.state.previous_euler = tuple(angles[-1].tolist())
         return rows, published
@@ -1006,7 +999,7 @@ class ConversionPipeline:
                                                values[ANGULAR_VELOCITY][1][rows])
         singular = rows & np.isnan(rates[:, 0])
         for s in np.flatnonzero(singular).tolist():
-            run.events.append((s, EULER_RATES_NEAR_SINGULAR, self._singularity_fields()))
+            run.issue(s, EULER_RATES_NEAR_SINGULAR, **self._singularity_fields())
         return rows & ~singular, rates
 
     def _euler_rates_of(self, angles, omega):

@@ -18,11 +18,12 @@ import pytest
 from ros_harness import (
     INPUT_COVARIANCE, make_input_message, oracle_output, output_values, PLAIN_INPUT_TYPES)
 from rotation_node import conversions, registry
+from rotation_node import pipeline as pipeline_module
 from rotation_node.conversions import SEQUENCES
 from rotation_node.conversions.kernels import BATCH_SAMPLES
 from rotation_node.parameters import NodeParameters, OUTPUTS
 from rotation_node.pipeline import (
-    _sign_chain, _unwrap_chain, _unwrapped, block_form_missing, BLOCK_SAMPLES,
+    _sign_chain, _turns_away, _unwrap_chain, _unwrapped, block_form_missing, BLOCK_SAMPLES,
     CONVERSION_ERROR, ConversionPipeline, COVARIANCE_TOO_LARGE, COVARIANCE_UNKNOWN,
     EULER_COVARIANCE_NEAR_SINGULAR, EULER_COVARIANCE_NOT_LINEAR, EULER_RATES_NEAR_SINGULAR,
     input_message_type,
@@ -841,29 +842,126 @@ def test_a_block_a_conversion_rejects_changes_nothing(monkeypatch):
     assert (p.state.previous_euler, p.stats.received) == state
 
 
-@settings(max_examples=200, deadline=None)
-@given(st.lists(st.one_of(st.floats(-10.0, 10.0), st.sampled_from(
-    [0.0, -0.0, math.pi, -math.pi, 3 * math.pi, 180.0, -180.0, 540.0])), min_size=1,
-    max_size=30), st.sampled_from([2.0 * math.pi, 360.0]), st.sampled_from([0.0, -0.0, 1.0]))
-def test_the_block_forms_unwrap_chain_is_the_unwrapping_of_one_sample(angles, period, start):
-    first = np.array(angles)
-    third = -first
-    _unwrap_chain(first, third, start, -start, period)
-    previous_first, previous_third = start, -start
-    for k, angle in enumerate(angles):
-        previous_first = _unwrapped(angle, previous_first, period)
-        previous_third = _unwrapped(-angle, previous_third, period)
-        assert np.float64(previous_first).tobytes() == first[k].tobytes()
-        assert np.float64(previous_third).tobytes() == third[k].tobytes()
+def _interpreted_and_compiled(chain, flat, *previous):
+    """Return what a chain kernel makes of ``flat``: run interpreted, and compiled."""
+    chain.load()
+    interpreted, compiled = flat.copy(), flat.copy()
+    chain.interpreted(interpreted, *previous)
+    chain.dispatcher(compiled, *previous)
+    return interpreted, compiled
+
+
+_ANGLES = st.one_of(st.floats(-10.0, 10.0), st.sampled_from(
+    [0.0, -0.0, math.pi, -math.pi, 3 * math.pi, 180.0, -180.0, 540.0, 90.0, -270.0]))
 
 
 @settings(max_examples=200, deadline=None)
-@given(st.lists(st.sampled_from([-1.0, -0.0, 0.0, 0.5, 2.0]), max_size=30))
-def test_the_block_forms_sign_chain_flips_as_one_sample_does(dots):
-    """A quaternion flips when its dot product with the previous, flipped, one is negative."""
-    signs = _sign_chain(np.array(dots, dtype=float))
-    previous_sign = 1.0
-    for k, dot in enumerate(dots):
-        sign = -1.0 if previous_sign * dot < 0.0 else 1.0
-        assert signs[k] == sign
-        previous_sign = sign
+@given(st.lists(st.tuples(_ANGLES, _ANGLES), max_size=30), st.sampled_from([2.0 * math.pi, 360.0]),
+       st.tuples(st.sampled_from([0.0, -0.0, 1.0, 180.0]), st.sampled_from([0.0, -180.0])))
+def test_the_block_forms_unwrap_chain_is_the_unwrapping_of_each_sample(angles, period, start):
+    """Half a period from the previous (e.g. 180 after 0 in degrees) rounds half to even."""
+    published, (first, third) = [], start
+    for angle_first, angle_third in angles:
+        first = _unwrapped(angle_first, first, period)
+        third = _unwrapped(angle_third, third, period)
+        published.append((first, 0.25, third))
+    triples = np.array([(a, 0.25, b) for a, b in angles]).reshape(-1)
+    for got in _interpreted_and_compiled(_unwrap_chain, triples, *start, period):
+        assert got.tobytes() == np.array(published).reshape(-1).tobytes()
+
+
+def test_an_unwrapping_tie_rounds_half_to_even_in_both_forms():
+    # (0 - 180) / 360 = -0.5 rounds to -0: 180 stays; (0 - 540) / 360 = -1.5 rounds to -2.
+    for got in _interpreted_and_compiled(_unwrap_chain, np.array([180.0, 0.0, 540.0]),
+                                         0.0, 0.0, 360.0):
+        assert got.tolist() == [180.0, 0.0, -180.0]
+    assert (_unwrapped(180.0, 0.0, 360.0), _unwrapped(540.0, 0.0, 360.0)) == (180.0, -180.0)
+
+
+# Quaternions some of them a quarter turn apart: dot products exactly 0 and -0 between them.
+_QUARTER_TURNS = [(0.0, 0.0, 0.0, 1.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, -0.0, -1.0),
+                  (0.5, 0.5, 0.5, 0.5), (-0.5, 0.5, -0.5, 0.5), (0.0, -0.0, 1.0, 0.0),
+                  (-0.0, -0.0, 0.0, 1.0), (0.6, 0.8, 0.0, 0.0), (0.8, -0.6, 0.0, 0.0)]
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.sampled_from(_QUARTER_TURNS), max_size=30),
+       st.sampled_from([(0.0,) * 4, (0.0, 0.0, 0.0, 1.0), (0.0, -0.0, 1.0, 0.0)]))
+def test_the_block_forms_sign_chain_negates_as_each_sample_alone(quaternions, previous):
+    """A quaternion is negated when its dot product with the previous output is below 0."""
+    published, last = [], previous
+    for q in quaternions:
+        if _turns_away(*last, *q):
+            q = tuple(-c for c in q)
+        published.append(q)
+        last = q
+    flat = np.array(quaternions, dtype=float).reshape(-1)
+    for got in _interpreted_and_compiled(_sign_chain, flat, *previous):
+        assert got.tobytes() == np.array(published, dtype=float).reshape(-1).tobytes()
+
+
+def test_a_dot_product_of_zero_negates_nothing():
+    assert not _turns_away(0.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0)   # 0
+    assert not _turns_away(0.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, -0.0)   # -0
+    assert _turns_away(0.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, -1e-300)
+
+
+def test_each_stateful_rule_is_the_one_both_forms_call(monkeypatch):
+    """Another rule changes the per-message and the block form alike: neither has its own."""
+    for chain in (_sign_chain, _unwrap_chain):
+        monkeypatch.setattr(chain, 'call', chain.interpreted)   # calls the rule as Python
+    monkeypatch.setattr(pipeline_module, '_turns_away', lambda *values: True)
+    monkeypatch.setattr(pipeline_module, '_unwrapped', lambda angle, previous, period: previous)
+    quaternions = Rotation.random(6, random_state=3).as_quat().tolist()
+    outputs = ('quaternion', 'euler')
+    alone, blocks = _both_forms(quaternions, {
+        'input_type': 'quaternion', 'outputs': outputs, 'quaternion_continuity': True,
+        'euler_unwrap': True})
+    for name in outputs:
+        assert blocks[name].tobytes() == alone[name].tobytes(), name
+    assert (alone['quaternion'].reshape(-1, 4)[:, 3] < 0.0).all()   # each canonical negated
+    euler = alone['euler'].reshape(-1, 3)
+    assert (euler[:, [0, 2]] == euler[0, [0, 2]]).all()   # each the previous
+
+
+def _quaternion_stream(quaternions):
+    """Messages of ``quaternions`` and the same samples as a block."""
+    stamps = STAMP_NS + 10_000_000 * np.arange(len(quaternions), dtype=np.int64)
+    messages = []
+    for stamp, q in zip(stamps.tolist(), quaternions):
+        msg = make_input_message('quaternion', Rotation.identity(), stamp_ns=stamp)
+        set_orientation(msg, 'quaternion', q)
+        messages.append(msg)
+    return messages, SampleBlock(stamps, np.array(quaternions, dtype=float),
+                                 np.ones(len(quaternions), dtype=bool))
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.one_of(st.sampled_from(_QUARTER_TURNS), st.tuples(
+    *[st.floats(-1.0, 1.0)] * 3, st.floats(0.1, 1.0))), min_size=1, max_size=20),
+    st.sampled_from([False, True]))
+def test_sign_continuity_and_unwrapping_agree_per_message_and_in_blocks(quaternions, degrees):
+    """The stateful rules on quarter turns (ties of sign) and turns near the wrap of the angles."""
+    params = {'input_type': 'quaternion', 'outputs': ('quaternion', 'euler', 'angular_velocity'),
+              'quaternion_continuity': True, 'euler_unwrap': True, 'euler_degrees': degrees}
+    alone, blocks = _both_forms(quaternions, params)
+    for name in params['outputs']:
+        assert blocks[name].tobytes() == alone[name].tobytes(), name
+    assert alone['stats'] == blocks['stats']
+
+
+def _both_forms(quaternions, params):
+    """Return each output's numbers (flat) and the stats: message by message, and in 2 blocks."""
+    messages, block = _quaternion_stream(quaternions)
+    one = ConversionPipeline(NodeParameters(**params))
+    results = [one.process_values(msg) for msg in messages]
+    alone = {name: np.array([numbers for sample in results for output, _, numbers in sample
+                             if output == name], dtype=float).reshape(-1)
+             for name in params['outputs']}
+    blocks = ConversionPipeline(NodeParameters(**params))
+    half = len(quaternions) // 2   # two blocks: the second continues the first's state
+    outputs = [blocks.process_block(SampleBlock(*(a[:half] for a in block[:3]))),
+               blocks.process_block(SampleBlock(*(a[half:] for a in block[:3])))]
+    in_blocks = {name: np.concatenate([o.numbers[name].reshape(-1) for o in outputs])
+                 for name in params['outputs']}
+    return {**alone, 'stats': one.stats}, {**in_blocks, 'stats': blocks.stats}
