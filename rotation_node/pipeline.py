@@ -65,9 +65,8 @@ import warnings
 
 import numpy as np
 from rotation_node import conversions, covariance, kinematics, registry
-# samples: memoryviews interpreted (Python floats), where kernels.samples gives ndarrays.
-from rotation_node.conversions._runtime import samples
-from rotation_node.conversions.kernels import BATCH_SAMPLES, FLAT_OUT, FLOAT, jit, kernel
+from rotation_node.conversions.kernels import (
+    BATCH_SAMPLES, FLAT_OUT, FLOAT, item_samples, jit, kernel)
 from rotation_node.errors import ParameterError
 from rotation_node.frames import FrameConversion
 from rotation_node.mounting import Mounting
@@ -397,7 +396,7 @@ _NO_QUATERNION = (0.0, 0.0, 0.0, 0.0)
 @kernel(FLAT_OUT, FLOAT, FLOAT, FLOAT, returns=None)
 def _unwrap_chain(angles, first, third, period):   # pragma: no cover
     """Unwrap Euler triples (flat) in place with ``_unwrapped``, from the previous first, third."""
-    triples = samples(angles, 3)
+    triples = item_samples(angles, 3)
     for s in range(triples.shape[0]):
         first = _unwrapped(triples[s, 0], first, period)
         third = _unwrapped(triples[s, 2], third, period)
@@ -407,7 +406,7 @@ def _unwrap_chain(angles, first, third, period):   # pragma: no cover
 @kernel(FLAT_OUT, FLOAT, FLOAT, FLOAT, FLOAT, returns=None)
 def _sign_chain(q, x, y, z, w):   # pragma: no cover
     """Negate quaternions (flat) in place where ``_turns_away`` says, from the previous output."""
-    fq = samples(q, 4)
+    fq = item_samples(q, 4)
     for s in range(fq.shape[0]):
         qx, qy, qz, qw = fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3]
         if _turns_away(x, y, z, w, qx, qy, qz, qw):
