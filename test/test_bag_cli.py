@@ -232,6 +232,7 @@ def test_usage_error_exits_2():
     assert result.returncode == 2 and 'the following arguments are required' in result.stderr
 
 
+@pytest.mark.slow
 def test_convert_of_an_mcap_bag_loads_no_ros_client_library(workspace):
     """Load neither rclpy (the rcl libraries) nor rosbags, nor mcap's writer module."""
     probe = ('import sys; from rotation_node.bag.cli import main; '
