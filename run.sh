@@ -36,11 +36,14 @@ case "$cmd" in
     ;;
   test)
     ensure_env
-    # Parallel workers (pytest-xdist), one per core, each in its own ROS domain; each
-    # test module runs on one worker (its module-scoped fixtures made once), the modules
-    # with slow tests first (test/conftest.py). The user's own -n (-n 0: serial) comes
-    # later and wins. No path: pytest runs setup.cfg's testpaths (test/), or the files given.
-    exec "$venv/bin/python" -m pytest -n auto --dist loadscope --no-loadscope-reorder "$@"
+    # Parallel workers (pytest-xdist), one more than the cores (the slow tests spend most
+    # of their time waiting for processes, discovery and signals: the extra worker computes
+    # meanwhile), each in its own ROS domain; each test module runs on one worker (its
+    # module-scoped fixtures made once), the modules with slow tests first (test/conftest.py).
+    # The user's own -n (-n 0: serial) comes later and wins. No path: pytest runs
+    # setup.cfg's testpaths (test/), or the files given.
+    exec "$venv/bin/python" -m pytest -n "$(($(nproc) + 1))" --dist loadscope \
+      --no-loadscope-reorder "$@"
     ;;
   *)
     echo "usage: ./run.sh main [ARGS...] | ./run.sh test [PYTEST ARGS...]" >&2

@@ -54,17 +54,26 @@ def rng():
 
 def pytest_collection_modifyitems(config, items):
     """
-    Under pytest-xdist, run the modules with the most slow tests first.
+    Under pytest-xdist, run the modules whose every test is slow first, then those with most.
 
     run.sh sends whole modules to the workers (``--dist loadscope``: a module-scoped
     fixture, such as a converted bag or a built package, is made once) in this order
     (``--no-loadscope-reorder``), so that no long module starts last while the other
-    worker is idle.
+    workers are idle. The modules of slow tests only (processes, builds, the linters, the
+    study) are the long ones, also when they hold a single test: xdist gives a worker its
+    next module as soon as two of its tests are left, so two such modules at the end
+    would queue on one worker.
     """
     if os.environ.get('PYTEST_XDIST_WORKER') is None:
         return
-    slow = {}
+    slow, tests = {}, {}
     for item in items:
-        slow[item.module.__name__] = (slow.get(item.module.__name__, 0)
-                                      + (item.get_closest_marker('slow') is not None))
-    items.sort(key=lambda item: -slow[item.module.__name__])   # stable: within a module as it was
+        module = item.module.__name__
+        slow[module] = slow.get(module, 0) + (item.get_closest_marker('slow') is not None)
+        tests[module] = tests.get(module, 0) + 1
+
+    def rank(item):
+        module = item.module.__name__
+        return (slow[module] < tests[module], -slow[module])
+
+    items.sort(key=rank)   # stable: within a module as it was

@@ -238,6 +238,7 @@ NOT_LOADED_BY_CONVERT = (
     'rosbags', 'matplotlib', 'mcap.writer', 'numba', 'concurrent.futures', 'ctypes.util')
 
 
+@pytest.mark.slow
 def test_convert_of_an_mcap_bag_loads_no_ros_client_library(workspace):
     """
     Load neither rclpy (the rcl libraries) nor the message packages, rosbags, numba...

@@ -327,6 +327,7 @@ print('numba' in sys.modules, 'llvmlite' in sys.modules,
 """
 
 
+@pytest.mark.slow
 def test_small_calls_run_interpreted_without_numba_and_a_large_one_loads_its_kernel():
     small = _runtime.INTERPRETED_VALUES // 4
     assert _python(_POLICY.format(n=small)).split() == ['False', 'False', '[]']
@@ -872,6 +873,7 @@ for line in lines:
 """
 
 
+@pytest.mark.slow
 def test_kernels_load_in_the_background_as_they_are_first_used(tmp_path):
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
     env.pop('ROTATION_NODE_COMPILED', None)

@@ -10,6 +10,7 @@ runtime package must not need them. package.xml is checked against what the runt
 package and the launch files import, and against the rosdep keys that exist.
 """
 import ast
+import functools
 import json
 import os
 from pathlib import Path
@@ -401,6 +402,7 @@ VERSION_KEYS = {'numpy': 'python3-numpy', 'numba': 'python3-numba', 'PyYAML': 'p
                 'matplotlib': 'python3-matplotlib', 'scipy': 'python3-scipy'}
 
 
+@functools.cache   # one process start for the three tests that read them
 def _setup_requirements():
     """Return setup.py's ``(install_requires, extras_require)``."""
     result = subprocess.run([sys.executable, '-c', SETUP_REQUIREMENTS], cwd=ROOT,
