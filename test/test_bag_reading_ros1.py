@@ -349,6 +349,26 @@ def test_fast_conversion_gives_rosbags_bytes_and_errors(rng, type_name):
                 convert(bad)
         else:
             assert convert(bad) == expected
+    _assert_blocks_convert_as_one_by_one(convert, ros1, type_name, rng)
+
+
+def _assert_blocks_convert_as_one_by_one(convert, ros1, type_name, rng):
+    """Messages alike in length and layout convert in blocks; any other gives None or the same."""
+    datas = [bytes(ros1.serialize_ros1(_random_message(ros1, type_name, rng), type_name))
+             for _ in range(12)]
+    alike = [datas[0]] * 6 + [datas[1]] * 3   # evenly spaced, then apart
+    bad = [datas[2][:-1], datas[3] + b'\0', b'\xff' * len(datas[4])]
+    messages = alike[:6] + [datas[k] for k in rng.permutation(len(datas))] + alike[6:] + bad
+    chunk, starts = b'', []
+    for k, data in enumerate(messages):
+        gap = b'' if k < 6 else b'gap' * int(rng.integers(1, 3))
+        chunk += gap
+        starts.append(len(chunk))
+        chunk += data
+    converted = convert.block(chunk, np.array(starts), np.array([len(d) for d in messages]))
+    assert all(cdr is not None for cdr in converted[:6] + converted[-6:-3])
+    for data, cdr in zip(messages, converted):
+        assert cdr is None or cdr == convert(data)
 
 
 def test_empty_structures_are_left_to_rosbags():
