@@ -375,3 +375,18 @@ def test_empty_structures_are_left_to_rosbags():
     from rotation_node.bag.reading.ros1 import ros1_to_cdr_converter
     ros2 = get_typestore(Stores.ROS2_JAZZY)
     assert ros1_to_cdr_converter(ros2.fielddefs, 'std_msgs/msg/Empty', bytes) is None
+
+
+def test_ros2_types_are_the_installed_definitions_which_are_rosbags_jazzy_types():
+    """Installed types parse to rosbags' Jazzy field definitions (so the bytes stay the same)."""
+    from rotation_node.bag.reading.ros1 import ros2_typestore
+    names = ['sensor_msgs/msg/Imu', 'nav_msgs/msg/Odometry', 'sensor_msgs/msg/NavSatFix',
+             'tf2_msgs/msg/TFMessage', 'geometry_msgs/msg/PoseStamped', 'std_msgs/msg/String',
+             'sensor_msgs/msg/JointState', 'sensor_msgs/msg/CameraInfo']
+    store, jazzy = ros2_typestore(names), get_typestore(Stores.ROS2_JAZZY)
+    assert store is not jazzy and set(names) <= set(store.fielddefs) < set(jazzy.fielddefs)
+    for name in store.fielddefs:
+        assert store.fielddefs[name] == jazzy.fielddefs[name], name
+    # A type not installed here: rosbags' Jazzy types, all of them.
+    assert 'my_msgs/msg/Thing' not in ros2_typestore(names + ['my_msgs/msg/Thing']).fielddefs
+    assert len(ros2_typestore(names + ['my_msgs/msg/Thing']).fielddefs) == len(jazzy.fielddefs)
