@@ -22,9 +22,6 @@ import struct
 from typing import Any, Callable, Collection, Dict, List, Optional, Tuple, Union
 
 import numpy as np
-from rosbags.convert.converter import (
-    generate_message_converter, is_same_wireformat, LATCH, STATIC_MSGTYPE_RENAMES)
-from rosbags.highlevel import AnyReaderError
 from rosbags.interfaces import Nodetype
 from rosbags.rosbag1 import ReaderError
 from rosbags.rosbag1.reader import decompressors as ros1_decompressors
@@ -36,12 +33,20 @@ from rotation_node.bag.reading.rosbags_input import RosbagsInput
 from rotation_node.bag.records import BagMessage, TopicMetadata
 from rotation_node.errors import BagError
 from rotation_node.wire.message_types import message_class, message_definition
-from rotation_node.wire.qos_yaml import rosbags_qos_yaml
+from rotation_node.wire.qos_yaml import profiles_yaml
 
 #: The one ROS 1 bag format version there is a reader for.
 SUPPORTED_VERSION = '2.0'
 # What rosbags raises for a bag it cannot read or a message it cannot convert.
-_FORMAT_ERRORS = (AnyReaderError, ReaderError, SerdeError, TypesysError, struct.error)
+_FORMAT_ERRORS = (ReaderError, SerdeError, TypesysError, struct.error)
+#: ROS 1 types converted to a ROS 2 type of another name (as rosbags-convert renames them).
+_RENAMED_TYPES = {'tf/msg/tfMessage': 'tf2_msgs/msg/TFMessage'}
+_INFINITE = {'sec': 2147483647, 'nsec': 4294967295}
+#: What a latched ROS 1 topic offers (rosbags-convert's QoS for it): reliable, transient local.
+LATCHED_QOS_YAML = profiles_yaml([{
+    'history': 'unknown', 'depth': 0, 'reliability': 'reliable', 'durability': 'transient_local',
+    'deadline': _INFINITE, 'lifespan': _INFINITE, 'liveliness': 'automatic',
+    'liveliness_lease_duration': _INFINITE, 'avoid_ros_namespace_conventions': False}])
 
 
 def _installed(type_name):
@@ -169,7 +174,50 @@ def ros2_typestore(type_names: Collection[str]) -> Any:
 
 def _ros2_type_name(ros1_type: str) -> str:
     """Return the ROS 2 type a ROS 1 type is converted to (``tf/tfMessage`` is renamed)."""
-    return STATIC_MSGTYPE_RENAMES.get(ros1_type, ros1_type)
+    return _RENAMED_TYPES.get(ros1_type, ros1_type)
+
+
+def same_wire_format(ros1: Any, ros2: Any, ros1_type: str, type_name: str) -> bool:
+    """
+    Whether a ROS 1 type and a ROS 2 type have the same fields (the header's seq aside).
+
+    Field by field the same kinds and primitive types, nested types alike
+    (rosbags-convert's ``is_same_wireformat``): the ROS 1 data is then the
+    CDR data's values, packed. ``ros1``, ``ros2``: rosbags typestores.
+    """
+    if ros1_type == 'std_msgs/msg/Header':
+        return True
+    fields, ros2_fields = ros1.fielddefs[ros1_type][1], ros2.fielddefs[type_name][1]
+    if len(fields) != len(ros2_fields):
+        return False
+    for (_, field), (_, ros2_field) in zip(fields, ros2_fields):
+        if field != ros2_field:
+            return False
+        if field[0] in (Nodetype.SEQUENCE, Nodetype.ARRAY):
+            field, ros2_field = field[1][0], ros2_field[1][0]
+        if field[0] == Nodetype.NAME and not same_wire_format(
+                ros1, ros2, field[1], ros2_field[1]):
+            return False
+    return True
+
+
+def _rosbags_converter(ros1: Any, ros2: Any, ros1_type: str, type_name: str
+                       ) -> Callable[[bytes], bytes]:
+    """Return rosbags-convert's conversion of a ROS 1 type's messages to the ROS 2 type, as CDR."""
+    if same_wire_format(ros1, ros2, ros1_type, type_name):   # without importing rosbags.convert
+        def converted(data: bytes) -> bytes:
+            return bytes(ros2.ros1_to_cdr(data, type_name))
+
+        return converted
+    from rosbags.convert.converter import generate_message_converter
+    with contextlib.redirect_stdout(io.StringIO()):   # it prints its plans
+        convert = generate_message_converter(ros1, ros2, ros1_type, type_name, {},
+                                             src_is2=False, dst_is2=True)
+
+    def migrated(data: bytes) -> bytes:
+        return bytes(convert(data))
+
+    return migrated
 
 
 def _converted_topics(path, reader):
@@ -186,26 +234,19 @@ def _converted_topics(path, reader):
                 types.pop('std_msgs/msg/Header', None)
                 ros2.register(types)
             if ros1_type not in converters:
-                with contextlib.redirect_stdout(io.StringIO()):   # it prints its plans
-                    convert = generate_message_converter(
-                        reader.typestore, ros2, ros1_type, type_name, {},
-                        src_is2=False, dst_is2=True)
-
-                def converter(data: bytes, convert: Callable[[Any], Any] = convert) -> bytes:
-                    return bytes(convert(data))
-
+                converter = _rosbags_converter(reader.typestore, ros2, ros1_type, type_name)
+                if same_wire_format(reader.typestore, ros2, ros1_type, type_name):
+                    converter = (ros1_to_cdr_converter(ros2.fielddefs, type_name, converter)
+                                 or converter)
                 converters[ros1_type] = converter
-                if is_same_wireformat(reader.typestore, ros2, ros1_type, type_name):
-                    converters[ros1_type] = (ros1_to_cdr_converter(ros2.fielddefs, type_name,
-                                                                   converters[ros1_type])
-                                             or converters[ros1_type])
         except _FORMAT_ERRORS + (KeyError,) as error:   # KeyError: a type left undefined
             raise BagError(f'{path}: cannot convert ROS 1 type {ros1_type} to ROS 2: '
                            f'{error}') from None
         installed = _installed(type_name)
         yield connection, TopicMetadata(
             name=connection.topic, type_name=type_name,
-            offered_qos_profiles=rosbags_qos_yaml(LATCH if connection.ext.latching else []),
+            offered_qos_profiles=(LATCHED_QOS_YAML if connection.ext.latching
+                                  else profiles_yaml([])),
             definition=None if installed else ros2.generate_msgdef(type_name, ros_version=2)[0],
             type_hash=None if installed else ros2.hash_rihs01(type_name)), converters[ros1_type]
 

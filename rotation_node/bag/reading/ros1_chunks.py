@@ -30,16 +30,15 @@ import os
 from pathlib import Path
 import struct
 import threading
-from typing import (BinaryIO, Collection, Dict, Generator, List, NamedTuple, Optional, Sequence,
-                    Tuple)
+from typing import (Any, BinaryIO, Collection, Dict, Generator, List, NamedTuple, Optional,
+                    Sequence, Tuple)
 
 import numpy as np
-from rosbags.highlevel import AnyReader
-from rosbags.interfaces import Connection
+from rosbags.interfaces import Connection, MessageDefinitionFormat
 from rosbags.rosbag1 import ReaderError
 from rosbags.rosbag1.reader import ChunkInfo, Header, read_bytes, read_uint32, Reader, RecordType
 from rosbags.rosbag1.reader import decompressors as ros1_decompressors
-from rosbags.typesys import get_typestore, Stores
+from rosbags.typesys import get_types_from_msg, get_typestore, Stores
 
 #: One entry of an index data record (version 1): the message's time and its offset in the chunk.
 INDEX_ENTRY = np.dtype([('sec', '<u4'), ('nsec', '<u4'), ('offset', '<u4')])
@@ -682,14 +681,15 @@ def _message_record(stream):
     return header, read_bytes(stream, read_uint32(stream))
 
 
-class ChunkedAnyReader(AnyReader):
+class ChunkedAnyReader:
     """
-    rosbags' ``AnyReader`` over one ROS 1 bag read by :class:`ChunkedReader`.
+    One ROS 1 bag read by :class:`ChunkedReader`, with the message types its definitions give.
 
-    ``AnyReader`` builds the bag's types from the definitions stored in it
-    (``typestore``) and checks their MD5 sums; its own constructor would pick
-    the reader by the file name's suffix, this one is a ROS 1 bag whatever
-    its name.
+    What rosbags' ``AnyReader`` gives for one ROS 1 bag (``readers``,
+    ``connections``, ``typestore``; ``open`` and ``close``), without importing
+    it (its rosbag2 modules take a twentieth of a second): the ``typestore``
+    holds the types of the definitions stored in the bag (ROS 2 names), their
+    MD5 sums checked; whatever its name, the file is read as a ROS 1 bag.
 
     Parameters
     ----------
@@ -699,11 +699,71 @@ class ChunkedAnyReader(AnyReader):
     """
 
     def __init__(self, path: Path) -> None:
-        # What AnyReader.__init__ sets, for one ROS 1 bag.
         self.paths = [path]
-        self.is2 = False
-        self.stack = None
-        self.connections = []
-        self.default_typestore = None
-        self.typestore = get_typestore(Stores.EMPTY)
         self.readers = [ChunkedReader(path)]
+        self.connections: List[Connection] = []
+        self.typestore = get_typestore(Stores.EMPTY)
+
+    def open(self) -> None:  # noqa: A003  (rosbags names it so)
+        """
+        Open the bag and build its types.
+
+        Raises
+        ------
+        rosbags.rosbag1.ReaderError
+            If the bag is damaged, or a definition does not have the MD5 sum
+            its connection gives.
+        rosbags.typesys.base.TypesysError
+            If a definition cannot be parsed.
+
+        """
+        reader = self.readers[0]
+        reader.open()
+        try:
+            self.typestore = bag_typestore(reader.connections)
+        except BaseException:
+            reader.close()
+            raise
+        self.connections = list(reader.connections)
+
+    def close(self) -> None:
+        """Close the bag."""
+        self.readers[0].close()
+        self.connections = []
+
+    def __enter__(self) -> 'ChunkedAnyReader':
+        self.open()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def bag_typestore(connections: Sequence[Connection]) -> Any:
+    """
+    Return a rosbags typestore of the types the connections' stored definitions give.
+
+    As ``AnyReader`` builds it: every definition parsed, the MD5 sum of each
+    type checked against its connection's.
+
+    Raises
+    ------
+    rosbags.rosbag1.ReaderError
+        ``Message type 'pkg/msg/T' hash mismatch ...``.
+    rosbags.typesys.base.TypesysError
+        If a definition cannot be parsed.
+
+    """
+    types: Dict[str, Any] = {}
+    digests: Dict[str, str] = {}
+    for connection in connections:
+        if connection.msgdef.format == MessageDefinitionFormat.MSG:
+            types.update(get_types_from_msg(connection.msgdef.data, connection.msgtype))
+        if connection.digest:
+            digests[connection.msgtype] = connection.digest
+    typestore = get_typestore(Stores.EMPTY)
+    typestore.register(types)
+    for type_name, digest in digests.items():
+        if (have := typestore.generate_msgdef(type_name)[1]) != digest:
+            raise ReaderError(f'Message type {type_name!r} hash mismatch {have} != {digest}')
+    return typestore
