@@ -1,18 +1,21 @@
 """
 ROS 1 bags (format version 2.0) read as ROS 2 messages.
 
-The ``rosbags`` package reads the bag (every chunk compression of ROS 1:
-none, bz2, lz4), one chunk at a time (:mod:`rotation_node.bag.reading.ros1_chunks`),
-and builds the bag's message types from the definitions stored in it
-(``AnyReader``); each message is then converted, as
+The ``rosbags`` package's ROS 1 reader reads the bag (every chunk compression
+of ROS 1: none, bz2, lz4), one chunk at a time, a chunk's messages as one
+batch (:mod:`rotation_node.bag.reading.ros1_chunks`), with the message types
+the definitions stored in it give; each message is then converted, as
 ``rosbags-convert`` converts a ROS 1 bag to ROS 2, to the ROS 2 type of the
 same name (``sensor_msgs/Imu`` -> ``sensor_msgs/msg/Imu``, ``tf/tfMessage``
 -> ``tf2_msgs/msg/TFMessage``) and serialized as CDR: ``std_msgs/Header``
 loses its ``seq``, times keep their seconds and nanoseconds, everything else
-keeps its value. A type that ROS 2 (Jazzy) does not have keeps the bag's own
-definition. A latched topic is given the QoS rosbags gives it (reliable,
-transient local); the log time is the time the ROS 1 recorder received the
-message, also used as the publish time.
+keeps its value (:class:`Ros1ToCdr`: a batch's messages of one type and
+layout at once). The ROS 2 type is the one installed here
+(:func:`ros2_typestore`); one not installed is rosbags' Jazzy type, and a
+type that ROS 2 (Jazzy) does not have keeps the bag's own definition. A
+latched topic is given the QoS rosbags gives it (reliable, transient local);
+the log time is the time the ROS 1 recorder received the message, also used
+as the publish time.
 """
 import contextlib
 import io

@@ -9,7 +9,10 @@ of messages: the bag header, the connection records, the chunk info records
 (their per-connection message counts give each connection's count) and the
 chunk records' headers (position, size, compression). A chunk's index data
 records, which follow the chunk in the file, are read (as numpy arrays) when
-the messages reach the chunk, and the chunk is decompressed then.
+the messages reach the chunk, and the chunk is decompressed then: in another
+thread while the chunk before it is used (:class:`_ChunksAhead`). The
+messages of a chunk come as one batch (:meth:`ChunkedReader.message_batches`):
+their records found for all of them at once (:func:`plain_message_records`).
 
 Chunks whose time ranges overlap are read together, as one group
 (:func:`overlapping_chunk_groups`): a recording whose chunks follow each other
