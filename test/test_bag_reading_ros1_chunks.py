@@ -7,6 +7,7 @@ the same messages, bytes and order, also where chunks overlap in time and
 where timestamps are equal across chunks.
 """
 from io import BytesIO
+import os
 import struct
 import weakref
 
@@ -303,6 +304,23 @@ def test_a_chunk_decompressed_ahead_fails_where_it_is_reached(tmp_path, rng):
         with pytest.raises(ros1_chunks.ReaderError,
                            match=f'The chunk at byte {reader.chunk_infos[3].pos} cannot be '
                                  'decompressed'):
+            for _ in reader.messages():
+                read += 1
+    assert read == before
+
+
+def test_a_chunk_read_ahead_that_is_cut_short_fails_where_it_is_reached(tmp_path, rng):
+    """The file is cut inside chunk 3 after the bag was opened: chunks 0 to 2 are read whole."""
+    rows = _string_rows(rng, 10**12 + np.arange(600) * 1000)
+    path = _write_bag(tmp_path / 'bz2.bag', rows, compression=Writer.CompressionFormat.BZ2)
+    read = 0
+    with ChunkedReader(path) as reader:
+        chunk = reader.chunks[reader.chunk_infos[3].pos]
+        before = sum(sum(info.connection_counts.values()) for info in reader.chunk_infos[:3])
+        os.truncate(path, chunk.datapos + 10)
+        # (its index, after the chunk's data, is read first)
+        with pytest.raises(ros1_chunks.ReaderError,
+                           match=f'after the chunk at byte {reader.chunk_infos[3].pos} cannot'):
             for _ in reader.messages():
                 read += 1
     assert read == before

@@ -467,12 +467,17 @@ def _decompressed(reader: ChunkedReader, i: int, data: bytes) -> bytes:
 class _Decompression(threading.Thread):
     """One chunk decompressed in a thread of its own (bz2 and lz4 release the GIL meanwhile)."""
 
-    def __init__(self, reader: ChunkedReader, i: int, data: bytes) -> None:
+    def __init__(self, reader: ChunkedReader, i: int) -> None:
         super().__init__(name=f'ROS 1 chunk {i}', daemon=True)
-        self._reader, self._i, self._data = reader, i, data
+        self._reader, self._i = reader, i
         self._result: Optional[bytes] = None
         self._error: Optional[BaseException] = None
-        self.start()
+        try:   # read here: the file is not shared with the thread
+            self._data = reader.stored_chunk(i)
+        except ReaderError as error:   # raised where the chunk is used
+            self._error = error
+        else:
+            self.start()
 
     def run(self) -> None:
         try:
@@ -483,8 +488,9 @@ class _Decompression(threading.Thread):
             self._data = b''
 
     def result(self) -> bytes:
-        """Return the decompressed chunk; raise what decompressing it raised."""
-        self.join()
+        """Return the decompressed chunk; raise what reading or decompressing it raised."""
+        if self.ident is not None:
+            self.join()
         if self._error is not None:
             raise self._error
         assert self._result is not None
@@ -495,8 +501,9 @@ class _ChunksAhead:
     """
     At most one chunk decompressed ahead of the one being read, in a thread.
 
-    Its stored bytes are read in the reading thread (the file is not shared);
-    a chunk stored uncompressed is not read ahead.
+    Its stored bytes are read in the reading thread (the file is not shared),
+    what fails raised where the chunk is used; a chunk stored uncompressed is
+    not read ahead.
     """
 
     def __init__(self, reader: ChunkedReader) -> None:
@@ -508,7 +515,7 @@ class _ChunksAhead:
         reader = self._reader
         decompressor = reader.chunks[reader.chunk_infos[i].pos].decompressor
         if self._ahead is None and decompressor is not _NO_DECOMPRESSION:
-            self._ahead = i, _Decompression(reader, i, reader.stored_chunk(i))
+            self._ahead = i, _Decompression(reader, i)
 
     def take(self, i: int) -> bytes:
         """Return chunk ``i`` decompressed: the one read ahead, or read now."""
