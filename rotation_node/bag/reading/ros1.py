@@ -142,8 +142,8 @@ def _block_cdrs(batch: MessageBatch, blocks: Dict[int, Callable[..., list]]
                 ) -> List[Optional[bytes]]:
     """Return the CDR data of a batch's messages that convert in blocks, None for the others."""
     connections = batch.connections
-    if len(connections) == 1:
-        return [None]
+    if len(connections) <= 1:   # one message: converted as one
+        return [None] * len(connections)
     first = connections[0].item()
     if (connections == first).all():
         block = blocks.get(first)
