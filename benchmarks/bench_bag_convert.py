@@ -46,7 +46,8 @@ may be shared; wall time would measure the neighbours too):
    ``Rotation`` in blocks, rosbags ``Writer``, imports included), on a
    1-message bag and on 20 000 messages (a minute of IMU at 200-400 Hz) in
    each format (MCAP file, rosbag2 mcap, rosbag2 sqlite3, ROS 1 bags
-   uncompressed, bz2, lz4): wall time, CPU time and peak RSS of each
+   uncompressed, bz2, lz4), or on the bags given with ``--input``: wall
+   time, CPU time and peak RSS of each
    process, and the wall-time ratio script/convert (target >= 2x); with
    ``--before PATH`` also the code checked out at PATH (e.g. ``git worktree
    add /tmp/before <commit>``), for before/after in one run. On a shared
@@ -56,7 +57,7 @@ The CPU model and numpy's SIMD level are printed first. ``--quick`` runs
 everything on smaller bags, once (about a minute).
 
 Run: ``.venv/bin/python benchmarks/bench_bag_convert.py [--quick] [--messages N] [--repeat R]
-[--million] [--formats-only [--format NAME ...]] [--whole [--before PATH]]``.
+[--million] [--formats-only [--format NAME ...]] [--whole [--before PATH] [--input BAG ...]]``.
 """
 import argparse
 import gc
@@ -288,9 +289,11 @@ def _contender_commands(before):
     return contenders
 
 
-def whole_commands(directory, count, repeat, before=None, names=FORMATS):
+def whole_commands(directory, count, repeat, before=None, names=FORMATS, inputs=()):
     """
     Each format at ``count`` messages and a 1-message bag: each contender as a whole process.
+
+    With ``inputs`` (paths of bags), those bags instead, as they are.
 
     ``convert`` (``rotation_bag convert IN OUT --params config/params.yaml``,
     imports and all), the same with the code at ``before`` (a checkout of an
@@ -308,8 +311,10 @@ def whole_commands(directory, count, repeat, before=None, names=FORMATS):
     print(f'{"input":24s} {columns}{ratios}  load average (1 min) after the row')
     rows = [('1 message, mcap file', 'mcap file', 1)] + [
         (f'{count} msgs, {name}', name, count) for name in names]
+    if inputs:
+        rows = [(os.path.basename(path.rstrip(os.sep)), path, None) for path in inputs]
     for label, fmt, size in rows:
-        source = write_format_bag(directory, fmt, size)
+        source = fmt if size is None else write_format_bag(directory, fmt, size)
         outputs = {name: os.path.join(directory, f'whole_{name}') for name in contenders}
         for name, (command, env) in contenders.items():   # warm: numba caches, page cache
             _process_run(command(source, outputs[name]), env, directory)
@@ -327,7 +332,8 @@ def whole_commands(directory, count, repeat, before=None, names=FORMATS):
         if before:
             line += f' {best["before"][0] / best["convert"][0]:14.2f}x'
         print(f'{line}  {os.getloadavg()[0]:.1f}', flush=True)
-        _remove(source)
+        if size is not None:
+            _remove(source)
 
 
 def formats(directory, count, repeat, sizes, names=FORMATS):
@@ -686,6 +692,9 @@ def main():
     parser.add_argument('--whole', action='store_true',
                         help='only the whole-command comparison (section 5), at 20 000 '
                              'messages unless --messages says otherwise')
+    parser.add_argument('--input', action='append', default=[], metavar='BAG',
+                        help='section 5 on this bag (repeatable) instead of the generated ones; '
+                             'its Imu topics converted, every topic copied')
     parser.add_argument('--before', metavar='PATH',
                         help='section 5 also runs the code checked out at PATH (e.g. '
                              '`git worktree add /tmp/before <commit>`) as "before"')
@@ -716,7 +725,7 @@ def main():
                     args.formats or FORMATS)
         if not args.formats_only:
             whole_commands(directory, whole_messages, args.repeat, args.before,
-                           args.formats or FORMATS)
+                           args.formats or FORMATS, [os.path.abspath(p) for p in args.input])
 
 
 if __name__ == '__main__':

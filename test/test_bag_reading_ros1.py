@@ -349,9 +349,81 @@ def test_fast_conversion_gives_rosbags_bytes_and_errors(rng, type_name):
                 convert(bad)
         else:
             assert convert(bad) == expected
+    _assert_blocks_convert_as_one_by_one(convert, ros1, type_name, rng)
+
+
+def _assert_blocks_convert_as_one_by_one(convert, ros1, type_name, rng):
+    """Messages alike in length and layout convert in blocks; any other gives None or the same."""
+    datas = [bytes(ros1.serialize_ros1(_random_message(ros1, type_name, rng), type_name))
+             for _ in range(12)]
+    alike = [datas[0]] * 6 + [datas[1]] * 3   # evenly spaced, then apart
+    bad = [datas[2][:-1], datas[3] + b'\0', b'\xff' * len(datas[4])]
+    messages = alike[:6] + [datas[k] for k in rng.permutation(len(datas))] + alike[6:] + bad
+    chunk, starts = b'', []
+    for k, data in enumerate(messages):
+        gap = b'' if k < 6 else b'gap' * int(rng.integers(1, 3))
+        chunk += gap
+        starts.append(len(chunk))
+        chunk += data
+    converted = convert.block(chunk, np.array(starts), np.array([len(d) for d in messages]))
+    assert all(cdr is not None for cdr in converted[:6] + converted[-6:-3])
+    for data, cdr in zip(messages, converted):
+        assert cdr is None or cdr == convert(data)
 
 
 def test_empty_structures_are_left_to_rosbags():
     from rotation_node.bag.reading.ros1 import ros1_to_cdr_converter
     ros2 = get_typestore(Stores.ROS2_JAZZY)
     assert ros1_to_cdr_converter(ros2.fielddefs, 'std_msgs/msg/Empty', bytes) is None
+
+
+def test_ros2_types_are_the_installed_definitions_which_are_rosbags_jazzy_types():
+    """Installed types parse to rosbags' Jazzy field definitions (so the bytes stay the same)."""
+    from rotation_node.bag.reading.ros1 import ros2_typestore
+    names = ['sensor_msgs/msg/Imu', 'nav_msgs/msg/Odometry', 'sensor_msgs/msg/NavSatFix',
+             'tf2_msgs/msg/TFMessage', 'geometry_msgs/msg/PoseStamped', 'std_msgs/msg/String',
+             'sensor_msgs/msg/JointState', 'sensor_msgs/msg/CameraInfo']
+    store, jazzy = ros2_typestore(names), get_typestore(Stores.ROS2_JAZZY)
+    assert store is not jazzy and set(names) <= set(store.fielddefs) < set(jazzy.fielddefs)
+    for name in store.fielddefs:
+        assert store.fielddefs[name] == jazzy.fielddefs[name], name
+    # A type not installed here: rosbags' Jazzy types, all of them.
+    assert 'my_msgs/msg/Thing' not in ros2_typestore(names + ['my_msgs/msg/Thing']).fielddefs
+    assert len(ros2_typestore(names + ['my_msgs/msg/Thing']).fielddefs) == len(jazzy.fielddefs)
+
+
+def test_same_wire_format_is_rosbags_convert_rule():
+    from rosbags.convert.converter import is_same_wireformat
+    from rotation_node.bag.reading.ros1 import same_wire_format
+    ros1, ros2 = get_typestore(Stores.ROS1_NOETIC), get_typestore(Stores.ROS2_JAZZY)
+    ros1.register(get_types_from_msg('int32 a\nstring b\n', 'my_msgs/msg/Thing'))
+    ros2.register(get_types_from_msg('int32 a\nstring b\nfloat64 c\n', 'my_msgs/msg/Thing'))
+    ros1.register(get_types_from_msg('std_msgs/Header header\nmy_msgs/Thing[] things\n',
+                                     'my_msgs/msg/Things'))
+    ros2.register(get_types_from_msg('std_msgs/Header header\nmy_msgs/Thing[] things\n',
+                                     'my_msgs/msg/Things'))
+    names = ['sensor_msgs/msg/Imu', 'nav_msgs/msg/Odometry', 'sensor_msgs/msg/NavSatFix',
+             'geometry_msgs/msg/TransformStamped', 'sensor_msgs/msg/CameraInfo',
+             'sensor_msgs/msg/PointCloud2', 'std_msgs/msg/Header', 'my_msgs/msg/Thing',
+             'my_msgs/msg/Things', 'sensor_msgs/msg/BatteryState', 'sensor_msgs/msg/Range']
+    answers = [same_wire_format(ros1, ros2, name, name) for name in names]
+    assert answers == [is_same_wireformat(ros1, ros2, name, name) for name in names]
+    assert True in answers and False in answers
+
+
+def test_a_latched_topic_offers_what_rosbags_convert_gives_it():
+    from rosbags.convert.converter import LATCH
+    from rotation_node.bag.reading.ros1 import LATCHED_QOS_YAML
+    from rotation_node.wire.qos_yaml import profiles_yaml, rosbags_qos_yaml
+    assert LATCHED_QOS_YAML == rosbags_qos_yaml(LATCH)
+    assert profiles_yaml([]) == rosbags_qos_yaml([])
+
+
+def test_a_definition_that_is_not_its_md5_sum_is_refused(ros1_bag):
+    path, _ = ros1_bag
+    data = path.read_bytes()
+    md5 = re.search(rb'md5sum=([0-9a-f]{32})', data)[1]
+    path.write_bytes(data.replace(md5, b'0' * 32))
+    with pytest.raises(BagError, match=r'old.bag: cannot read ROS 1 bag: Message type '
+                                       r"'.*' hash mismatch [0-9a-f]{32} != 0{32}$"):
+        open_bag(path)

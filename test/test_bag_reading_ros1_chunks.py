@@ -7,6 +7,7 @@ the same messages, bytes and order, also where chunks overlap in time and
 where timestamps are equal across chunks.
 """
 from io import BytesIO
+import os
 import struct
 import weakref
 
@@ -214,3 +215,112 @@ def test_message_data_of_a_plain_message_record(fields):
 ])
 def test_anything_else_is_left_to_rosbags(chunk, connection, time):
     assert ros1_chunks.message_data(chunk, 0, connection, time) is None
+
+
+def _connection_record(connection):
+    fields = [(b'op', b'\x07'), (b'conn', struct.pack('<I', connection)), (b'topic', b'/a')]
+    return _record(fields, b'\x04\x00\x00\x00type')
+
+
+def test_plain_message_records_find_what_message_data_finds(rng):
+    """All at once, each record as message_data reads it alone; anything else is left to it."""
+    records, entries = [], []
+    position = 0
+    for k in range(200):
+        time = (5 + k) * 10**9 + 7
+        fields = [(b'op', b'\x02'), (b'conn', struct.pack('<I', k % 3)),
+                  (b'time', struct.pack('<II', 5 + k, 7))]
+        kind = rng.integers(12)
+        connection = k % 3
+        if kind == 0:
+            fields = fields[::-1]                        # another order: another layout
+        elif kind == 1:
+            fields = fields + [(b'x', b'')]              # another field
+        elif kind == 2:
+            connection += 1                              # not the index's connection
+        elif kind == 3:
+            time += 1                                    # not the index's time
+        elif kind == 4:
+            records.append(_connection_record(k % 3))   # a connection record before it
+        data = bytes(rng.integers(0, 256, rng.integers(0, 40)).tolist())
+        record = _record(fields, data)
+        if kind == 5:   # a data length past the chunk's end
+            record = record[:-len(data) - 4] + struct.pack('<I', 10**6) + data
+        entries.append((position, connection, time))
+        records.append(record)
+        position = sum(len(r) for r in records)
+    chunk = b''.join(records) + b'\x00\x00\x00\xff'
+    entries.append((len(chunk) - 4, 0, 0))               # a header running past the chunk
+    offsets, connections, times = (np.array(column, np.int64) for column in zip(*entries))
+    plain, starts, lengths = ros1_chunks.plain_message_records(chunk, offsets, connections, times)
+    found = [chunk[s:s + n] if p else None for p, s, n in zip(plain, starts, lengths)]
+    assert found == [ros1_chunks.message_data(chunk, *entry) for entry in entries]
+    assert 100 < plain.sum() < len(entries) - 50
+
+
+def _count_decompressions(monkeypatch):
+    """Return the list the chunk indices decompressed are appended to (in any thread)."""
+    decompressed = []
+    real = ros1_chunks._decompressed
+
+    def counted(reader, i, data):
+        decompressed.append(i)
+        return real(reader, i, data)
+
+    monkeypatch.setattr(ros1_chunks, '_decompressed', counted)
+    return decompressed
+
+
+def test_the_next_chunk_is_decompressed_ahead_and_no_further(tmp_path, rng, monkeypatch):
+    rows = _string_rows(rng, 10**12 + np.arange(1500) * 1000)
+    path = _write_bag(tmp_path / 'bz2.bag', rows, chunk_bytes=1500,
+                      compression=Writer.CompressionFormat.BZ2)
+    decompressed = _count_decompressions(monkeypatch)
+    with ChunkedReader(path) as reader:
+        chunks = len(reader.chunk_infos)
+        positions = {info.pos: i for i, info in enumerate(reader.chunk_infos)}
+        assert chunks > 20
+        read = []
+        for batch in reader.message_batches():
+            i = next(k for k, info in enumerate(reader.chunk_infos)
+                     if info.start_time <= batch.times[0] < info.end_time)
+            read.append(i)
+            assert decompressed[:len(read)] == read and len(decompressed) <= len(read) + 1
+        assert read == list(range(chunks)) and sorted(decompressed) == read
+        assert len(positions) == chunks
+
+
+def test_a_chunk_decompressed_ahead_fails_where_it_is_reached(tmp_path, rng):
+    rows = _string_rows(rng, 10**12 + np.arange(600) * 1000)
+    path = _write_bag(tmp_path / 'bz2.bag', rows, compression=Writer.CompressionFormat.BZ2)
+    with ChunkedReader(path) as reader:
+        damaged = reader.chunks[reader.chunk_infos[3].pos]
+        before = sum(sum(info.connection_counts.values()) for info in reader.chunk_infos[:3])
+    data = bytearray(path.read_bytes())
+    data[damaged.datapos + 20:damaged.datapos + 40] = b'\xff' * 20
+    path.write_bytes(bytes(data))
+    read = 0
+    with ChunkedReader(path) as reader:
+        with pytest.raises(ros1_chunks.ReaderError,
+                           match=f'The chunk at byte {reader.chunk_infos[3].pos} cannot be '
+                                 'decompressed'):
+            for _ in reader.messages():
+                read += 1
+    assert read == before
+
+
+def test_a_chunk_read_ahead_that_is_cut_short_fails_where_it_is_reached(tmp_path, rng):
+    """The file is cut inside chunk 3 after the bag was opened: chunks 0 to 2 are read whole."""
+    rows = _string_rows(rng, 10**12 + np.arange(600) * 1000)
+    path = _write_bag(tmp_path / 'bz2.bag', rows, compression=Writer.CompressionFormat.BZ2)
+    read = 0
+    with ChunkedReader(path) as reader:
+        chunk = reader.chunks[reader.chunk_infos[3].pos]
+        before = sum(sum(info.connection_counts.values()) for info in reader.chunk_infos[:3])
+        os.truncate(path, chunk.datapos + 10)
+        # (its index, after the chunk's data, is read first)
+        with pytest.raises(ros1_chunks.ReaderError,
+                           match=f'after the chunk at byte {reader.chunk_infos[3].pos} cannot'):
+            for _ in reader.messages():
+                read += 1
+    assert read == before

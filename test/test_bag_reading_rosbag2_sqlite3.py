@@ -149,3 +149,66 @@ def test_rows_of_no_topic_are_a_note_or_with_strict_an_error(tmp_path, capsys, b
     assert status == 1 and capsys.readouterr().err.splitlines() == [
         f'rotation_bag convert: error: {note}; refused (--strict)']
     assert not (tmp_path / 'strict.mcap').exists()
+
+
+def _rosbags_topics(path):
+    """Return the topics rosbags' own sqlite3 reader reads, in this module's terms."""
+    from rosbags.interfaces import MessageDefinitionFormat
+    from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
+    from rotation_node.wire.qos_yaml import rosbags_qos_yaml
+    encodings = {MessageDefinitionFormat.MSG: 'ros2msg', MessageDefinitionFormat.IDL: 'ros2idl',
+                 MessageDefinitionFormat.NONE: None}
+    reader = Sqlite3Reader(path)
+    reader.open()
+    try:
+        return [(c.id, c.topic, c.msgtype, (encodings[c.msgdef.format], c.msgdef.data), c.digest,
+                 c.msgcount, c.ext.serialization_format,
+                 rosbags_qos_yaml(c.ext.offered_qos_profiles))
+                for c in reader.connections], reader.metadata.message_count
+    finally:
+        reader.close()
+
+
+QOS_PROFILES = [
+    '',
+    '- history: keep_last\n  depth: 10\n  reliability: best_effort\n  durability: volatile\n'
+    '  deadline:\n    sec: 0\n    nsec: 0\n  lifespan:\n    sec: 0\n    nsec: 0\n'
+    '  liveliness: automatic\n  liveliness_lease_duration:\n    sec: 0\n    nsec: 0\n'
+    '  avoid_ros_namespace_conventions: false',
+    # Humble's numbers, an unknown number and name, durations of "infinity", two profiles.
+    '- history: 3\n  depth: 0\n  reliability: 1\n  durability: 9\n'
+    '  deadline:\n    sec: 2147483647\n    nsec: 4294967295\n'
+    '  lifespan:\n    sec: 9223372036\n    nsec: 854775807\n  liveliness: sometimes\n'
+    '  liveliness_lease_duration:\n    sec: 0\n    nsec: 0\n'
+    '  avoid_ros_namespace_conventions: true\n'
+    '- history: 1\n  depth: 5\n  reliability: 2\n  durability: 2\n'
+    '  deadline:\n    sec: 1\n    nsec: 2\n  lifespan:\n    sec: 3\n    nsec: 4\n'
+    '  liveliness: 1\n  liveliness_lease_duration:\n    sec: 5\n    nsec: 6\n'
+    '  avoid_ros_namespace_conventions: false',
+]
+
+
+@pytest.mark.parametrize('schema', ['jazzy', 'no message_definitions', 'no QoS'])
+def test_topics_are_what_rosbags_reads(tmp_path, rng, schema):
+    """Every schema of the topics table, QoS profiles of each distribution: as rosbags reads."""
+    from rotation_node.bag.reading.rosbag2_sqlite3 import Sqlite3Storage
+    rows = (serialized_rows('/imu', imu_messages(rng, 5))
+            + serialized_rows('/b', imu_messages(rng, 3)))
+    path = write_rosbag2(tmp_path / 'run', rows, storage='sqlite3') / 'run.db3'
+    _sql(path, 'INSERT INTO topics (name, type, serialization_format, offered_qos_profiles, '
+               "type_description_hash) VALUES ('/none', 'pkg/msg/T', 'cdr', '', 'x')")
+    for topic_id, profiles in enumerate(QOS_PROFILES[::-1], start=1):
+        _sql(path, 'UPDATE topics SET offered_qos_profiles = ? WHERE id = ?', profiles, topic_id)
+    if schema != 'jazzy':
+        _sql(path, 'DROP TABLE schema')
+        _sql(path, 'DROP TABLE message_definitions')
+    if schema == 'no QoS':
+        _sql(path, 'ALTER TABLE topics DROP COLUMN offered_qos_profiles')
+    storage = Sqlite3Storage(path)
+    storage.open()
+    try:
+        assert ([tuple(c) for c in storage.connections], storage.message_count) == \
+            _rosbags_topics(path)
+    finally:
+        storage.close()
+    assert len(storage.connections) == 3

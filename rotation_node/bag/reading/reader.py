@@ -8,7 +8,7 @@ What ``rotation_bag convert``, ``play`` and ``plot`` accept as input:
   outside one;
 - storage ``mcap`` (read with the mcap library, chunk by chunk, the CDR bytes
   passed on unchanged: :class:`rotation_node.bag.reading.mcap_reader.BagReader`) and
-  ``sqlite3`` (``.db3``, read with the ``rosbags`` package:
+  ``sqlite3`` (``.db3``, read with ``apsw`` as the ``rosbags`` package reads it:
   :mod:`rotation_node.bag.reading.rosbag2_sqlite3`);
 - split bags (several storage files): read as one stream, merged in log-time
   order (ties in file order), so that one pipeline per topic runs across the
@@ -332,7 +332,7 @@ class _Opener:
             raise BagError(f'{shown}: empty file (0 bytes), not a bag')
         if prefix.startswith(_MCAP_MAGIC):
             return self._add(BagReader(path, strict=self.strict)), 'mcap'
-        if prefix.startswith(_SQLITE_MAGIC):   # rosbags and apsw, imported only for sqlite3
+        if prefix.startswith(_SQLITE_MAGIC):   # apsw, imported only for sqlite3
             from rotation_node.bag.reading.rosbag2_sqlite3 import open_sqlite3_file
             return self._add(open_sqlite3_file(path, shown=shown, strict=self.strict)), 'sqlite3'
         version = _ROS1_MAGIC.match(prefix)

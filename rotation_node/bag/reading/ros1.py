@@ -1,52 +1,65 @@
 """
 ROS 1 bags (format version 2.0) read as ROS 2 messages.
 
-The ``rosbags`` package reads the bag (every chunk compression of ROS 1:
-none, bz2, lz4), one chunk at a time (:mod:`rotation_node.bag.reading.ros1_chunks`),
-and builds the bag's message types from the definitions stored in it
-(``AnyReader``); each message is then converted, as
+The ``rosbags`` package's ROS 1 reader reads the bag (every chunk compression
+of ROS 1: none, bz2, lz4), one chunk at a time, a chunk's messages as one
+batch (:mod:`rotation_node.bag.reading.ros1_chunks`), with the message types
+the definitions stored in it give; each message is then converted, as
 ``rosbags-convert`` converts a ROS 1 bag to ROS 2, to the ROS 2 type of the
 same name (``sensor_msgs/Imu`` -> ``sensor_msgs/msg/Imu``, ``tf/tfMessage``
 -> ``tf2_msgs/msg/TFMessage``) and serialized as CDR: ``std_msgs/Header``
 loses its ``seq``, times keep their seconds and nanoseconds, everything else
-keeps its value. A type that ROS 2 (Jazzy) does not have keeps the bag's own
-definition. A latched topic is given the QoS rosbags gives it (reliable,
-transient local); the log time is the time the ROS 1 recorder received the
-message, also used as the publish time.
+keeps its value (:class:`Ros1ToCdr`: a batch's messages of one type and
+layout at once). The ROS 2 type is the one installed here
+(:func:`ros2_typestore`); one not installed is rosbags' Jazzy type, and a
+type that ROS 2 (Jazzy) does not have keeps the bag's own definition. A
+latched topic is given the QoS rosbags gives it (reliable, transient local);
+the log time is the time the ROS 1 recorder received the message, also used
+as the publish time.
 """
 import contextlib
 import io
 import os
 from pathlib import Path
 import struct
-from typing import Any, Callable, Dict, List, Optional, Tuple, Union
+from typing import Any, Callable, Collection, Dict, List, Optional, Tuple, Union
 
-from rosbags.convert.converter import (
-    generate_message_converter, is_same_wireformat, LATCH, STATIC_MSGTYPE_RENAMES)
-from rosbags.highlevel import AnyReaderError
+import numpy as np
 from rosbags.interfaces import Nodetype
 from rosbags.rosbag1 import ReaderError
 from rosbags.rosbag1.reader import decompressors as ros1_decompressors
 from rosbags.serde import SerdeError
 from rosbags.typesys import get_types_from_msg, get_typestore, Stores
 from rosbags.typesys.base import TypesysError
-from rotation_node.bag.reading.ros1_chunks import ChunkedAnyReader
+from rotation_node.bag.reading.ros1_chunks import ChunkedAnyReader, MessageBatch
 from rotation_node.bag.reading.rosbags_input import RosbagsInput
-from rotation_node.bag.records import TopicMetadata
+from rotation_node.bag.records import BagMessage, TopicMetadata
 from rotation_node.errors import BagError
-from rotation_node.wire.message_types import message_class
-from rotation_node.wire.qos_yaml import rosbags_qos_yaml
+from rotation_node.wire.message_types import message_definition
+from rotation_node.wire.qos_yaml import profiles_yaml
 
 #: The one ROS 1 bag format version there is a reader for.
 SUPPORTED_VERSION = '2.0'
 # What rosbags raises for a bag it cannot read or a message it cannot convert.
-_FORMAT_ERRORS = (AnyReaderError, ReaderError, SerdeError, TypesysError, struct.error)
+_FORMAT_ERRORS = (ReaderError, SerdeError, TypesysError, struct.error)
+#: ROS 1 types converted to a ROS 2 type of another name (as rosbags-convert renames them).
+_RENAMED_TYPES = {'tf/msg/tfMessage': 'tf2_msgs/msg/TFMessage'}
+_INFINITE = {'sec': 2147483647, 'nsec': 4294967295}
+#: What a latched ROS 1 topic offers (rosbags-convert's QoS for it): reliable, transient local.
+LATCHED_QOS_YAML = profiles_yaml([{
+    'history': 'unknown', 'depth': 0, 'reliability': 'reliable', 'durability': 'transient_local',
+    'deadline': _INFINITE, 'lifespan': _INFINITE, 'liveliness': 'automatic',
+    'liveliness_lease_duration': _INFINITE, 'avoid_ros_namespace_conventions': False}])
 
 
 def _installed(type_name):
-    """Whether the ROS 2 Python message package of ``type_name`` is installed."""
+    """
+    Whether the definition of ``type_name`` is installed: the one the writer then writes.
+
+    (Not its Python class: importing a message package imports all its modules.)
+    """
     try:
-        message_class(type_name)
+        message_definition(type_name)
     except BagError:
         return False
     return True
@@ -80,21 +93,147 @@ def open_ros1_bag(path: Union[str, os.PathLike]) -> RosbagsInput:
         raise BagError(f'{path}: cannot read ROS 1 bag: {error}') from None
     try:
         compressions = _chunk_compressions(reader)
-        return RosbagsInput(path, reader, _FORMAT_ERRORS + (ValueError, IndexError),
-                            _converted_topics(path, reader), _output_compression(compressions),
-                            stored_compression='/'.join(sorted(compressions - {'none'})) or 'none')
+        return Ros1Input(path, reader, _FORMAT_ERRORS + (ValueError, IndexError),
+                         _converted_topics(path, reader), _output_compression(compressions),
+                         stored_compression='/'.join(sorted(compressions - {'none'})) or 'none')
     except BaseException:
         reader.close()
         raise
 
 
+class Ros1Input(RosbagsInput):
+    """
+    A ROS 1 bag read as ROS 2 CDR messages, a chunk's batch of messages at a time.
+
+    The messages of :meth:`ChunkedReader.message_batches
+    <rotation_node.bag.reading.ros1_chunks.ChunkedReader.message_batches>`,
+    converted in blocks where the type has a :class:`Ros1ToCdr` (and one by one
+    otherwise, where a message is converted by rosbags, or fails, as
+    ``RosbagsInput`` converts it).
+    """
+
+    def _messages(self, connections):
+        reader = self._reader.readers[0]
+        by_id = {connection.id: connection for connection in connections}
+        converters = {connection.id: self._to_cdr[connection.id] for connection in connections}
+        blocks = {id_: converter.block for id_, converter in converters.items()
+                  if isinstance(converter, Ros1ToCdr)}
+        type_names = self.topics
+        batches = reader.message_batches(connections)
+        while True:
+            try:
+                batch = next(batches)
+            except StopIteration:
+                return
+            except self._errors as error:   # the reader names where
+                raise self.corrupt(error) from None
+            chunk, starts, lengths = batch.chunk, batch.starts, batch.lengths
+            for k, (connection_id, time_ns, cdr) in enumerate(zip(
+                    batch.connections.tolist(), batch.times.tolist(), _block_cdrs(batch, blocks))):
+                connection = by_id[connection_id]
+                if cdr is None:
+                    start = starts[k].item()
+                    cdr = self.cdr(connection, time_ns, chunk[start:start + lengths[k].item()])
+                yield BagMessage(connection.topic, type_names[connection.topic], cdr, time_ns,
+                                 time_ns)
+
+
+def _block_cdrs(batch: MessageBatch, blocks: Dict[int, Callable[..., list]]
+                ) -> List[Optional[bytes]]:
+    """Return the CDR data of a batch's messages that convert in blocks, None for the others."""
+    connections = batch.connections
+    if len(connections) <= 1:   # one message: converted as one
+        return [None] * len(connections)
+    first = connections[0].item()
+    if (connections == first).all():
+        block = blocks.get(first)
+        return [None] * len(connections) if block is None else block(
+            batch.chunk, batch.starts, batch.lengths)
+    result: List[Optional[bytes]] = [None] * len(connections)
+    for connection_id in set(connections.tolist()):
+        block = blocks.get(connection_id)
+        if block is not None:
+            members = np.flatnonzero(connections == connection_id)
+            for index, cdr in zip(members.tolist(), block(batch.chunk, batch.starts[members],
+                                                          batch.lengths[members])):
+                result[index] = cdr
+    return result
+
+
+def ros2_typestore(type_names: Collection[str]) -> Any:
+    """
+    Return a rosbags typestore of ROS 2 types with at least ``type_names`` ('pkg/msg/Type').
+
+    The types from their definitions installed here (``message_definition``),
+    as the output's schemas are written, if every one is installed; else
+    rosbags' Jazzy types (as ``rosbags-convert`` converts). The first costs a
+    few milliseconds per type, the second a tenth of a second.
+    """
+    store = get_typestore(Stores.EMPTY)
+    try:
+        for type_name in type_names:
+            if type_name not in store.fielddefs:
+                store.register(get_types_from_msg(message_definition(type_name), type_name))
+    except (BagError, TypesysError):   # not installed, or not a definition rosbags parses
+        return get_typestore(Stores.ROS2_JAZZY)
+    return store
+
+
+def _ros2_type_name(ros1_type: str) -> str:
+    """Return the ROS 2 type a ROS 1 type is converted to (``tf/tfMessage`` is renamed)."""
+    return _RENAMED_TYPES.get(ros1_type, ros1_type)
+
+
+def same_wire_format(ros1: Any, ros2: Any, ros1_type: str, type_name: str) -> bool:
+    """
+    Whether a ROS 1 type and a ROS 2 type have the same fields (the header's seq aside).
+
+    Field by field the same kinds and primitive types, nested types alike
+    (rosbags-convert's ``is_same_wireformat``): the ROS 1 data is then the
+    CDR data's values, packed. ``ros1``, ``ros2``: rosbags typestores.
+    """
+    if ros1_type == 'std_msgs/msg/Header':
+        return True
+    fields, ros2_fields = ros1.fielddefs[ros1_type][1], ros2.fielddefs[type_name][1]
+    if len(fields) != len(ros2_fields):
+        return False
+    for (_, field), (_, ros2_field) in zip(fields, ros2_fields):
+        if field != ros2_field:
+            return False
+        if field[0] in (Nodetype.SEQUENCE, Nodetype.ARRAY):
+            field, ros2_field = field[1][0], ros2_field[1][0]
+        if field[0] == Nodetype.NAME and not same_wire_format(
+                ros1, ros2, field[1], ros2_field[1]):
+            return False
+    return True
+
+
+def _rosbags_converter(ros1: Any, ros2: Any, ros1_type: str, type_name: str
+                       ) -> Callable[[bytes], bytes]:
+    """Return rosbags-convert's conversion of a ROS 1 type's messages to the ROS 2 type, as CDR."""
+    if same_wire_format(ros1, ros2, ros1_type, type_name):   # without importing rosbags.convert
+        def converted(data: bytes) -> bytes:
+            return bytes(ros2.ros1_to_cdr(data, type_name))
+
+        return converted
+    from rosbags.convert.converter import generate_message_converter
+    with contextlib.redirect_stdout(io.StringIO()):   # it prints its plans
+        convert = generate_message_converter(ros1, ros2, ros1_type, type_name, {},
+                                             src_is2=False, dst_is2=True)
+
+    def migrated(data: bytes) -> bytes:
+        return bytes(convert(data))
+
+    return migrated
+
+
 def _converted_topics(path, reader):
     """Yield ``(connection, ROS 2 TopicMetadata, ROS 1 data -> CDR)`` of every connection."""
-    ros2 = get_typestore(Stores.ROS2_JAZZY)
+    ros2 = ros2_typestore({_ros2_type_name(c.msgtype) for c in reader.connections})
     converters: Dict[str, Callable[[bytes], bytes]] = {}
     for connection in reader.connections:
         ros1_type = connection.msgtype
-        type_name = STATIC_MSGTYPE_RENAMES.get(ros1_type, ros1_type)
+        type_name = _ros2_type_name(ros1_type)
         try:
             if type_name not in ros2.fielddefs:   # as rosbags-convert: the bag's definition
                 types = get_types_from_msg(
@@ -102,26 +241,19 @@ def _converted_topics(path, reader):
                 types.pop('std_msgs/msg/Header', None)
                 ros2.register(types)
             if ros1_type not in converters:
-                with contextlib.redirect_stdout(io.StringIO()):   # it prints its plans
-                    convert = generate_message_converter(
-                        reader.typestore, ros2, ros1_type, type_name, {},
-                        src_is2=False, dst_is2=True)
-
-                def converter(data: bytes, convert: Callable[[Any], Any] = convert) -> bytes:
-                    return bytes(convert(data))
-
+                converter = _rosbags_converter(reader.typestore, ros2, ros1_type, type_name)
+                if same_wire_format(reader.typestore, ros2, ros1_type, type_name):
+                    converter = (ros1_to_cdr_converter(ros2.fielddefs, type_name, converter)
+                                 or converter)
                 converters[ros1_type] = converter
-                if is_same_wireformat(reader.typestore, ros2, ros1_type, type_name):
-                    converters[ros1_type] = (ros1_to_cdr_converter(ros2.fielddefs, type_name,
-                                                                   converters[ros1_type])
-                                             or converters[ros1_type])
         except _FORMAT_ERRORS + (KeyError,) as error:   # KeyError: a type left undefined
             raise BagError(f'{path}: cannot convert ROS 1 type {ros1_type} to ROS 2: '
                            f'{error}') from None
         installed = _installed(type_name)
         yield connection, TopicMetadata(
             name=connection.topic, type_name=type_name,
-            offered_qos_profiles=rosbags_qos_yaml(LATCH if connection.ext.latching else []),
+            offered_qos_profiles=(LATCHED_QOS_YAML if connection.ext.latching
+                                  else profiles_yaml([])),
             definition=None if installed else ros2.generate_msgdef(type_name, ros_version=2)[0],
             type_hash=None if installed else ros2.hash_rihs01(type_name)), converters[ros1_type]
 
@@ -223,52 +355,156 @@ class _Damaged(Exception):
     """The data is not what its type says (rosbags' conversion then says what is wrong)."""
 
 
-def _converted(steps, data, source, offset, append):
-    """Append the CDR parts of ``data`` from ``source`` (CDR ``offset``); return both after."""
+def _converted(steps, data, source, offset, emit, length_fields):
+    """
+    Emit the CDR parts of ``data`` from ``source`` (CDR ``offset``); return both after.
+
+    ``emit(constant, start, end)``: the bytes ``constant``, then ``data[start:end]``.
+    The positions of the lengths read (strings, sequences) are appended to
+    ``length_fields``: the parts depend on ``len(data)`` and their values alone.
+    """
     for kind, layout, size in steps:
         if kind == _RUN:
             segments, cdr_size = layout[offset & 7]
             for padding, start, end in segments:
-                append(padding)
-                append(data[source + start:source + end])
+                emit(padding, source + start, source + end)
             source += size
             offset += cdr_size
         elif kind == _STRING:
+            length_fields.append(source)
             length, = _UINT32.unpack_from(data, source)
             end = source + 4 + length
             padding = -offset & 3
-            append(_ZEROS[padding] + _UINT32.pack(length + 1) + data[source + 4:end] + b'\0')
+            emit(_ZEROS[padding] + _UINT32.pack(length + 1), source + 4, end)
+            emit(b'\0', end, end)
             offset += padding + length + 5
             source = end
         elif kind == _SKIP:
             source += layout
         else:
+            length_fields.append(source)
             count, = _UINT32.unpack_from(data, source)
             element, least = layout
             if source + 4 + count * least > len(data):
                 raise _Damaged
             padding = -offset & 3
-            append(_ZEROS[padding] + data[source:source + 4])
+            emit(_ZEROS[padding], source, source + 4)
             source += 4
             offset += padding + 4
             for _ in range(count):
-                source, offset = _converted(element, data, source, offset, append)
+                source, offset = _converted(element, data, source, offset, emit, length_fields)
     return source, offset
 
 
-def ros1_to_cdr_converter(fielddefs: Dict[str, Any], type_name: str,
-                          fallback: Callable[[bytes], bytes]
-                          ) -> Optional[Callable[[bytes], bytes]]:
+#: Message layouts (the lengths of their strings and sequences) converted as one block each,
+#: for the messages of one length in one call of ``Ros1ToCdr.block``; the rest one by one.
+_BLOCK_LAYOUTS_TRIED = 4
+
+
+class Ros1ToCdr:
     """
-    Return a converter of ROS 1 messages of a type to CDR, or None for types it does not cover.
+    ROS 1 messages of one type to CDR by slices: one message (call) or a block of them (``block``).
 
     What rosbags' ``Typestore.ros1_to_cdr`` gives, byte for byte, for a type
     of the same wire format in ROS 1 and ROS 2 (``is_same_wireformat``):
     the header's seq dropped, primitives aligned, strings given their NUL,
-    sequences their CDR alignment, in a few slices per message instead of a
-    generated function call per nested type (a quarter of the time for
-    sensor_msgs/Imu). A message that is not exactly as long as its type says
-    is given to ``fallback`` (rosbags' conversion), which says what is wrong.
+    sequences their CDR alignment. A message that is not exactly as long as
+    its type says is given to ``fallback`` (rosbags' conversion), which says
+    what is wrong. Made by :func:`ros1_to_cdr_converter`.
+    """
+
+    def __init__(self, steps: tuple, fallback: Callable[[bytes], bytes]) -> None:
+        self._steps, self._fallback = steps, fallback
+
+    def _parts(self, data: bytes) -> Optional[Tuple[list, list]]:
+        """Return the ``(constant, start, end)`` parts and the length fields, or None: fallback."""
+        parts: List[Tuple[bytes, int, int]] = []
+        length_fields: List[int] = []
+
+        def emit(constant: bytes, start: int, end: int) -> None:
+            parts.append((constant, start, end))
+
+        try:
+            source, _ = _converted(self._steps, data, 0, 0, emit, length_fields)
+        except (struct.error, _Damaged):
+            return None
+        return (parts, length_fields) if source == len(data) else None
+
+    def __call__(self, data: bytes) -> bytes:
+        """Return one message's CDR data."""
+        converted = self._parts(data)
+        if converted is None:
+            return self._fallback(data)
+        return _ENCAPSULATION + b''.join(
+            constant + data[start:end] for constant, start, end in converted[0])
+
+    def block(self, chunk: bytes, starts: np.ndarray, lengths: np.ndarray
+              ) -> List[Optional[bytes]]:
+        """
+        Return the CDR data of the messages ``chunk[starts[k]:starts[k] + lengths[k]]``.
+
+        Messages of one length whose strings and sequences have the lengths
+        of the first of them are converted together, as that one is, by one
+        copy of their bytes through numpy; None for the others (convert them
+        one by one: the call, which falls back to rosbags).
+        """
+        result: List[Optional[bytes]] = [None] * len(starts)
+        buffer = np.frombuffer(chunk, np.uint8)
+        for length in set(lengths.tolist()):   # (np.unique would import numpy.ma: 10 ms)
+            members = np.flatnonzero(lengths == length)
+            for _ in range(_BLOCK_LAYOUTS_TRIED):
+                if not len(members):
+                    break
+                first = starts[members[0]].item()
+                data = chunk[first:first + length]
+                converted = self._parts(data)
+                if converted is None:
+                    break
+                parts, length_fields = converted
+                alike = np.ones(len(members), bool)
+                if length_fields:   # the same lengths: the same parts
+                    at = (np.array(length_fields)[:, None] + np.arange(4)).ravel()
+                    alike = (buffer[starts[members][:, None] + at]
+                             == buffer[first + at]).all(axis=1)
+                same = members[alike]
+                copies = self._copies(buffer, starts[same], length, parts)
+                for index, cdr in zip(same.tolist(), copies):
+                    result[index] = cdr
+                members = members[~alike]
+        return result
+
+    @staticmethod
+    def _copies(buffer: np.ndarray, starts: np.ndarray, length: int, parts: list) -> List[bytes]:
+        """Return the CDR data of the messages of ``length`` bytes at ``starts``, as ``parts``."""
+        if len(starts) > 1 and (np.diff(starts) == starts[1] - starts[0]).all() and (
+                starts[1] > starts[0]):   # evenly spaced (records alike): a view of them
+            rows = np.lib.stride_tricks.as_strided(
+                buffer[starts[0]:], (len(starts), length), (starts[1] - starts[0], 1),
+                writeable=False)
+        else:
+            rows = buffer[starts[:, None] + np.arange(length)]
+        template = bytearray(_ENCAPSULATION)
+        copies = []
+        for constant, start, end in parts:
+            template += constant
+            copies.append((len(template), start, end))
+            template += bytes(end - start)
+        size = len(template)
+        out = np.empty((len(starts), size), np.uint8)
+        out[:] = np.frombuffer(template, np.uint8)
+        for target, start, end in copies:
+            out[:, target:target + end - start] = rows[:, start:end]
+        blob = out.tobytes()
+        return [blob[k:k + size] for k in range(0, len(blob), size)]
+
+
+def ros1_to_cdr_converter(fielddefs: Dict[str, Any], type_name: str,
+                          fallback: Callable[[bytes], bytes]) -> Optional[Ros1ToCdr]:
+    """
+    Return a converter of ROS 1 messages of a type to CDR, or None for types it does not cover.
+
+    See :class:`Ros1ToCdr` (a quarter of rosbags' time for sensor_msgs/Imu one
+    message at a time, a fraction of that in blocks).
 
     Parameters
     ----------
@@ -283,19 +519,7 @@ def ros1_to_cdr_converter(fielddefs: Dict[str, Any], type_name: str,
     leaves: List[Tuple[int, Any]] = []
     if not _leaves(fielddefs, type_name, leaves):
         return None
-    steps = _steps(leaves)
-
-    def convert(data: bytes) -> bytes:
-        parts = [_ENCAPSULATION]
-        try:
-            source, _ = _converted(steps, data, 0, 0, parts.append)
-        except (struct.error, _Damaged):
-            return fallback(data)
-        if source != len(data):
-            return fallback(data)
-        return b''.join(parts)
-
-    return convert
+    return Ros1ToCdr(_steps(leaves), fallback)
 
 
 def _chunk_compressions(reader):

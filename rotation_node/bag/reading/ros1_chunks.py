@@ -9,7 +9,10 @@ of messages: the bag header, the connection records, the chunk info records
 (their per-connection message counts give each connection's count) and the
 chunk records' headers (position, size, compression). A chunk's index data
 records, which follow the chunk in the file, are read (as numpy arrays) when
-the messages reach the chunk, and the chunk is decompressed then.
+the messages reach the chunk, and the chunk is decompressed then: in another
+thread while the chunk before it is used (:class:`_ChunksAhead`). The
+messages of a chunk come as one batch (:meth:`ChunkedReader.message_batches`):
+their records found for all of them at once (:func:`plain_message_records`).
 
 Chunks whose time ranges overlap are read together, as one group
 (:func:`overlapping_chunk_groups`): a recording whose chunks follow each other
@@ -29,14 +32,16 @@ from io import BytesIO
 import os
 from pathlib import Path
 import struct
-from typing import BinaryIO, Collection, Dict, Generator, List, Optional, Sequence, Tuple
+import threading
+from typing import (Any, BinaryIO, Collection, Dict, Generator, List, NamedTuple, Optional,
+                    Sequence, Tuple)
 
 import numpy as np
-from rosbags.highlevel import AnyReader
-from rosbags.interfaces import Connection
+from rosbags.interfaces import Connection, MessageDefinitionFormat
 from rosbags.rosbag1 import ReaderError
 from rosbags.rosbag1.reader import ChunkInfo, Header, read_bytes, read_uint32, Reader, RecordType
-from rosbags.typesys import get_typestore, Stores
+from rosbags.rosbag1.reader import decompressors as ros1_decompressors
+from rosbags.typesys import get_types_from_msg, get_typestore, Stores
 
 #: One entry of an index data record (version 1): the message's time and its offset in the chunk.
 INDEX_ENTRY = np.dtype([('sec', '<u4'), ('nsec', '<u4'), ('offset', '<u4')])
@@ -197,18 +202,46 @@ class ChunkedReader(Reader):
             If the bag is not open or its data are damaged.
 
         """
+        by_id = {c.id: c for c in self.connections}
+        for batch in self.message_batches(connections, start, stop):
+            chunk = batch.chunk
+            for connection, time, begin, length in zip(
+                    batch.connections.tolist(), batch.times.tolist(), batch.starts.tolist(),
+                    batch.lengths.tolist()):
+                yield by_id[connection], time, chunk[begin:begin + length]
+
+    def message_batches(self, connections: Collection[Connection] = (),
+                        start: Optional[int] = None, stop: Optional[int] = None
+                        ) -> Generator['MessageBatch', None, None]:
+        """
+        Yield the messages of :meth:`messages`, in its order, as batches of one chunk's messages.
+
+        A batch is the next messages of one chunk that are plain message
+        records, found in the chunk's bytes for all of them at once
+        (:func:`plain_message_records`); a message stored otherwise is a batch
+        of its own, read as rosbags reads it. While a batch is used, the
+        next chunk is decompressed beside it (:class:`_Decompression`).
+
+        Parameters and errors as :meth:`messages`.
+        """
         self._check_open()
         ranks: Dict[int, int] = {}
         for rank, connection in enumerate(connections or self.connections):
             ranks.setdefault(connection.id, rank)
         infos = self.chunk_infos
-        by_id = {c.id: c for c in self.connections}
+        groups = []
         for group in overlapping_chunk_groups(infos):
             if stop is not None and min(infos[i].start_time for i in group) >= stop:
-                return
+                break
             if ((start is None or max(infos[i].end_time for i in group) > start)
                     and any(c in ranks for i in group for c in infos[i].connection_counts)):
-                yield from self._group_messages(group, ranks, by_id, start, stop)
+                groups.append(group)
+        ahead = _ChunksAhead(self)
+        for number, group in enumerate(groups):
+            # The first chunk of the next group is likely the one that starts first.
+            following = (min(groups[number + 1], key=lambda i: infos[i].start_time)
+                         if number + 1 < len(groups) else None)
+            yield from self._group_batches(group, ranks, start, stop, ahead, following)
 
     def group_index(self, group: Sequence[int], ranks: Dict[int, int]) -> np.ndarray:
         """
@@ -304,23 +337,30 @@ class ChunkedReader(Reader):
             If the chunk is cut short or cannot be decompressed.
 
         """
+        return _decompressed(self, i, self.stored_chunk(i))
+
+    def stored_chunk(self, i: int) -> bytes:
+        """
+        Return the data of chunk ``i`` as stored (compressed).
+
+        Raises
+        ------
+        rosbags.rosbag1.ReaderError
+            If the chunk is cut short.
+
+        """
         pos = self.chunk_infos[i].pos
         chunk = self.chunks[pos]
         bio = self._file()
         try:
             bio.seek(chunk.datapos)
-            data = read_bytes(bio, chunk.datasize)
+            return read_bytes(bio, chunk.datasize)
         except ReaderError as error:
             raise ReaderError(f'The chunk at byte {pos} is cut short: {error}') from None
-        try:
-            return chunk.decompressor(data)
-        except _DECOMPRESSION_ERRORS as error:
-            raise ReaderError(f'The chunk at byte {pos} cannot be decompressed: '
-                              f'{error}') from None
 
-    def _group_messages(self, group, ranks, by_id, start, stop):
+    def _group_batches(self, group, ranks, start, stop, ahead, following):
         """
-        Yield the messages of one chunk group (``by_id``: the connections by id).
+        Yield the batches of one chunk group; ``following``: the chunk to decompress after it.
 
         A chunk is freed after its last message, and the least recently read
         ones when more than ``CHUNK_BYTES_HELD`` are held (read again if
@@ -331,24 +371,49 @@ class ChunkedReader(Reader):
             index = index[index['time'] >= start]
         if stop is not None:
             index = index[index['time'] < stop]
-        chunks, counts = np.unique(index['chunk'], return_counts=True)
+        chunk_of = index['chunk']
+        chunks, counts = np.unique(chunk_of, return_counts=True)
         unread = dict(zip(chunks.tolist(), counts.tolist()))
+        ahead.keep_only(unread)
         held: 'OrderedDict[int, Tuple[BytesIO, int]]' = OrderedDict()   # stream, size
-        held_bytes, current, stream, chunk = 0, -1, BytesIO(), b''
-        for time, connection, i, offset in zip(*(index[name].tolist() for name in (
-                'time', 'connection', 'chunk', 'offset'))):
-            if i != current:
-                current = i
-                if i in held:
-                    stream = held[i][0]
-                    held.move_to_end(i)
-                else:
-                    chunk = self.decompressed_chunk(i)
-                    held[i] = stream, size = BytesIO(chunk), len(chunk)
-                    held_bytes += size
-                    while held_bytes > CHUNK_BYTES_HELD and len(held) > 1:
-                        held_bytes -= held.popitem(last=False)[1][1]
-                chunk = stream.getvalue()   # the chunk's bytes themselves, not a copy
+        held_bytes = 0
+        # Runs of entries in one chunk.
+        edges = [0, *(np.flatnonzero(chunk_of[1:] != chunk_of[:-1]) + 1).tolist(), len(index)]
+        runs = [(chunk_of[a].item(), a, b) for a, b in zip(edges, edges[1:]) if b > a]
+        for number, (i, a, b) in enumerate(runs):
+            if i in held:
+                stream = held[i][0]
+                held.move_to_end(i)
+            else:
+                chunk = ahead.take(i)
+                held[i] = stream, size = BytesIO(chunk), len(chunk)
+                held_bytes += size
+                while held_bytes > CHUNK_BYTES_HELD and len(held) > 1:
+                    held_bytes -= held.popitem(last=False)[1][1]
+            later = next((j for j, _, _ in runs[number + 1:] if j not in held), following)
+            if later is not None:
+                ahead.start(later)
+            yield from self._run_batches(i, stream, index[a:b])
+            unread[i] -= b - a
+            if not unread[i]:   # its last message: let the chunk go
+                held_bytes -= held.pop(i)[1]
+            del stream
+
+    def _run_batches(self, i, stream, entries):
+        """Yield the batches of index ``entries`` of chunk ``i`` (held by ``stream``)."""
+        chunk = stream.getvalue()   # the chunk's bytes themselves, not a copy
+        connections, times, offsets = entries['connection'], entries['time'], entries['offset']
+        plain, starts, lengths = plain_message_records(chunk, offsets, connections, times)
+        if plain.all():
+            yield MessageBatch(connections, times, chunk, starts, lengths)
+            return
+        done = 0
+        for k in np.flatnonzero(~plain).tolist():
+            if k > done:
+                part = slice(done, k)
+                yield MessageBatch(connections[part], times[part], chunk, starts[part],
+                                   lengths[part])
+            offset, connection, time = offsets[k].item(), connections[k].item(), times[k].item()
             data = message_data(chunk, offset, connection, time)
             if data is None:   # anything but a plain message record: rosbags' reading
                 stream.seek(offset)
@@ -361,11 +426,108 @@ class ChunkedReader(Reader):
                     raise ReaderError(f'The message at offset {offset} of the chunk at byte '
                                       f'{self.chunk_infos[i].pos} cannot be read: '
                                       f'{error}') from None
-            unread[i] -= 1
-            if not unread[i]:   # its last message: let the chunk go
-                held_bytes -= held.pop(i)[1]
-                current, stream, chunk = -1, BytesIO(), b''
-            yield by_id[connection], time, data
+            part = slice(k, k + 1)
+            yield MessageBatch(connections[part], times[part], data, _ZERO_START,
+                               np.array([len(data)], np.int64))
+            done = k + 1
+        if done < len(entries):
+            part = slice(done, None)
+            yield MessageBatch(connections[part], times[part], chunk, starts[part],
+                               lengths[part])
+
+
+class MessageBatch(NamedTuple):
+    """
+    Messages read together: message ``k`` is ``chunk[starts[k]:starts[k] + lengths[k]]``.
+
+    ``connections`` (ids), ``times`` (ns), ``starts`` and ``lengths`` are
+    int64 arrays, one element per message, in reading order.
+    """
+
+    connections: np.ndarray
+    times: np.ndarray
+    chunk: bytes
+    starts: np.ndarray
+    lengths: np.ndarray
+
+
+_ZERO_START = np.zeros(1, np.int64)
+_NO_DECOMPRESSION = ros1_decompressors['none']
+
+
+def _decompressed(reader: ChunkedReader, i: int, data: bytes) -> bytes:
+    """Return chunk ``i``'s stored ``data`` decompressed; ReaderError if it cannot be."""
+    try:
+        return reader.chunks[reader.chunk_infos[i].pos].decompressor(data)
+    except _DECOMPRESSION_ERRORS as error:
+        raise ReaderError(f'The chunk at byte {reader.chunk_infos[i].pos} cannot be '
+                          f'decompressed: {error}') from None
+
+
+class _Decompression(threading.Thread):
+    """One chunk decompressed in a thread of its own (bz2 and lz4 release the GIL meanwhile)."""
+
+    def __init__(self, reader: ChunkedReader, i: int) -> None:
+        super().__init__(name=f'ROS 1 chunk {i}', daemon=True)
+        self._reader, self._i = reader, i
+        self._result: Optional[bytes] = None
+        self._error: Optional[BaseException] = None
+        try:   # read here: the file is not shared with the thread
+            self._data = reader.stored_chunk(i)
+        except ReaderError as error:   # raised where the chunk is used
+            self._error = error
+        else:
+            self.start()
+
+    def run(self) -> None:
+        try:
+            self._result = _decompressed(self._reader, self._i, self._data)
+        except BaseException as error:   # noqa: B902  (raised where the chunk is used)
+            self._error = error
+        finally:
+            self._data = b''
+
+    def result(self) -> bytes:
+        """Return the decompressed chunk; raise what reading or decompressing it raised."""
+        if self.ident is not None:
+            self.join()
+        if self._error is not None:
+            raise self._error
+        assert self._result is not None
+        return self._result
+
+
+class _ChunksAhead:
+    """
+    At most one chunk decompressed ahead of the one being read, in a thread.
+
+    Its stored bytes are read in the reading thread (the file is not shared),
+    what fails raised where the chunk is used; a chunk stored uncompressed is
+    not read ahead.
+    """
+
+    def __init__(self, reader: ChunkedReader) -> None:
+        self._reader = reader
+        self._ahead: Optional[Tuple[int, _Decompression]] = None
+
+    def start(self, i: int) -> None:
+        """Start decompressing chunk ``i`` unless a chunk is being decompressed already."""
+        reader = self._reader
+        decompressor = reader.chunks[reader.chunk_infos[i].pos].decompressor
+        if self._ahead is None and decompressor is not _NO_DECOMPRESSION:
+            self._ahead = i, _Decompression(reader, i)
+
+    def take(self, i: int) -> bytes:
+        """Return chunk ``i`` decompressed: the one read ahead, or read now."""
+        if self._ahead is not None and self._ahead[0] == i:
+            ahead, self._ahead = self._ahead[1], None
+            return ahead.result()
+        return self._reader.decompressed_chunk(i)
+
+    def keep_only(self, needed: Collection[int]) -> None:
+        """Forget the chunk read ahead unless it is ``needed`` (its thread ends by itself)."""
+        if self._ahead is not None and self._ahead[0] not in needed:
+            self._ahead = None
 
 
 def _unwrapped(reason: object) -> object:
@@ -387,16 +549,15 @@ _TIME = struct.Struct('<II')
 _MESSAGE_DATA_OP = bytes([RecordType.MSGDATA])
 
 
-def message_data(chunk: bytes, offset: int, connection: int, time: int) -> Optional[bytes]:
+def plain_record_layout(chunk: bytes, offset: int) -> Optional[Tuple[int, int, int]]:
     """
-    Return the data of the message record at ``offset`` of a chunk, or None to read it as rosbags.
+    Return where a plain message record's fields are, or None if it is not one.
 
-    The fast path of :func:`_message_record` and the index check after it:
-    the data of a message data record whose header holds exactly ``op``,
-    ``conn`` and ``time`` (in any order), of the connection and time its index
-    entry gives, with nothing cut short. Anything else (a connection record
-    before it, another field, a damaged length, another connection or time)
-    gives None: rosbags' reading then says what it is, as it did.
+    A plain message record: a header of exactly the fields ``op`` (message
+    data), ``conn`` (at least 4 bytes) and ``time`` (8 bytes), in any order,
+    then the data's length, all within the chunk. Returned: the header's
+    length and the offsets (from the record's start) of the ``conn`` and
+    ``time`` values.
     """
     unpack = _UINT32.unpack_from
     try:
@@ -410,19 +571,111 @@ def message_data(chunk: bytes, offset: int, connection: int, time: int) -> Optio
             separator = chunk.find(b'=', position, field_end)
             if field_end > end or separator < 0:
                 return None
-            fields[chunk[position:separator]] = chunk[separator + 1:field_end]
+            fields[chunk[position:separator]] = (separator + 1, field_end)
             position = field_end
-        if (len(fields) != 3 or fields.get(b'op') != _MESSAGE_DATA_OP
-                or len(fields.get(b'conn', b'')) < 4 or len(fields.get(b'time', b'')) != 8):
+        if len(fields) != 3 or fields.keys() != {b'op', b'conn', b'time'}:
             return None
-        sec, nsec = _TIME.unpack(fields[b'time'])
-        if unpack(fields[b'conn'])[0] != connection or sec * 10**9 + nsec != time:
+        (op, op_end), (conn, conn_end), (time, time_end) = (
+            fields[b'op'], fields[b'conn'], fields[b'time'])
+        if (chunk[op:op_end] != _MESSAGE_DATA_OP or conn_end - conn < 4
+                or time_end - time != 8 or len(chunk) < end + 4):
             return None
-        length, = unpack(chunk, end)
     except struct.error:
         return None
+    return header_length, conn - offset, time - offset
+
+
+def message_data(chunk: bytes, offset: int, connection: int, time: int) -> Optional[bytes]:
+    """
+    Return the data of the message record at ``offset`` of a chunk, or None to read it as rosbags.
+
+    The fast path of :func:`_message_record` and the index check after it:
+    the data of a plain message record (:func:`plain_record_layout`) of the
+    connection and time its index entry gives, with nothing cut short.
+    Anything else (a connection record before it, another field, a damaged
+    length, another connection or time) gives None: rosbags' reading then
+    says what it is, as it did.
+    """
+    layout = plain_record_layout(chunk, offset)
+    if layout is None:
+        return None
+    header_length, conn, time_at = layout
+    sec, nsec = _TIME.unpack_from(chunk, offset + time_at)
+    if _UINT32.unpack_from(chunk, offset + conn)[0] != connection or sec * 10**9 + nsec != time:
+        return None
+    end = offset + 4 + header_length
+    length, = _UINT32.unpack_from(chunk, end)
     data = chunk[end + 4:end + 4 + length]
     return data if len(data) == length else None
+
+
+#: Layouts of plain message records tried on one run of a chunk's messages before the rest
+#: is read one message at a time.
+_RECORD_LAYOUTS_TRIED = 8
+
+
+def plain_message_records(chunk: bytes, offsets: np.ndarray, connections: np.ndarray,
+                          times: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Find many messages' data in a chunk at once: what :func:`message_data` finds of each.
+
+    Parameters
+    ----------
+    chunk : bytes
+        A decompressed chunk.
+    offsets, connections, times : ndarray of int64
+        Index entries: where each record starts, the connection and time it must have.
+
+    Returns
+    -------
+    (ndarray of bool, ndarray of int64, ndarray of int64)
+        Which entries are plain message records of their connection and time
+        (those :func:`message_data` returns the data of), and where their data
+        starts and how long it is (the others' starts and lengths are 0).
+        Records laid out as one before them are found by comparing their
+        bytes, all at once: the same header length and bytes except the
+        ``conn`` and ``time`` values, which must be the index entry's.
+
+    """
+    n = len(offsets)
+    plain = np.zeros(n, bool)
+    starts = np.zeros(n, np.int64)
+    lengths = np.zeros(n, np.int64)
+    buffer = np.frombuffer(chunk, np.uint8)
+    pending = np.arange(n)
+    seed = 0   # the place in ``pending`` of the record whose layout is tried next
+    tried = 0
+    while seed < len(pending) and tried < _RECORD_LAYOUTS_TRIED:
+        first = pending[seed].item()
+        at_seed = offsets[first].item()
+        layout = plain_record_layout(chunk, at_seed)
+        if layout is None:   # left to message_data
+            seed += 1
+            continue
+        tried += 1
+        header_length, conn, time_at = layout
+        size = 4 + header_length + 4   # through the data's length
+        at = offsets[pending]
+        fits = at <= len(chunk) - size
+        rows = buffer[np.where(fits, at, at_seed)[:, None] + np.arange(size)]
+        compared = np.ones(size, bool)
+        compared[conn:conn + 4] = compared[time_at:time_at + 8] = compared[-4:] = False
+        # conn, time (sec, nsec) in the order they are stored, then the data's length
+        values = rows[:, ~compared].copy().view('<u4')
+        conn_column, sec_column = (0, 1) if conn < time_at else (2, 0)
+        begin = at + size
+        length = values[:, 3].astype(np.int64)
+        found = (fits & (rows[:, compared] == buffer[at_seed:at_seed + size][compared]).all(axis=1)
+                 & (values[:, conn_column] == connections[pending])
+                 & (values[:, sec_column].astype(np.int64) * 10**9 + values[:, sec_column + 1]
+                    == times[pending])
+                 & (begin + length <= len(chunk)))
+        which = pending[found]
+        plain[which], starts[which], lengths[which] = True, begin[found], length[found]
+        pending = pending[~found]
+        # The seed itself stays when it is not its index entry's message.
+        seed = int(np.searchsorted(pending, first)) + (not found[seed])
+    return plain, starts, lengths
 
 
 def _message_record(stream):
@@ -438,14 +691,15 @@ def _message_record(stream):
     return header, read_bytes(stream, read_uint32(stream))
 
 
-class ChunkedAnyReader(AnyReader):
+class ChunkedAnyReader:
     """
-    rosbags' ``AnyReader`` over one ROS 1 bag read by :class:`ChunkedReader`.
+    One ROS 1 bag read by :class:`ChunkedReader`, with the message types its definitions give.
 
-    ``AnyReader`` builds the bag's types from the definitions stored in it
-    (``typestore``) and checks their MD5 sums; its own constructor would pick
-    the reader by the file name's suffix, this one is a ROS 1 bag whatever
-    its name.
+    What rosbags' ``AnyReader`` gives for one ROS 1 bag (``readers``,
+    ``connections``, ``typestore``; ``open`` and ``close``), without importing
+    it (its rosbag2 modules take a twentieth of a second): the ``typestore``
+    holds the types of the definitions stored in the bag (ROS 2 names), their
+    MD5 sums checked; whatever its name, the file is read as a ROS 1 bag.
 
     Parameters
     ----------
@@ -455,11 +709,71 @@ class ChunkedAnyReader(AnyReader):
     """
 
     def __init__(self, path: Path) -> None:
-        # What AnyReader.__init__ sets, for one ROS 1 bag.
         self.paths = [path]
-        self.is2 = False
-        self.stack = None
-        self.connections = []
-        self.default_typestore = None
-        self.typestore = get_typestore(Stores.EMPTY)
         self.readers = [ChunkedReader(path)]
+        self.connections: List[Connection] = []
+        self.typestore = get_typestore(Stores.EMPTY)
+
+    def open(self) -> None:  # noqa: A003  (rosbags names it so)
+        """
+        Open the bag and build its types.
+
+        Raises
+        ------
+        rosbags.rosbag1.ReaderError
+            If the bag is damaged, or a definition does not have the MD5 sum
+            its connection gives.
+        rosbags.typesys.base.TypesysError
+            If a definition cannot be parsed.
+
+        """
+        reader = self.readers[0]
+        reader.open()
+        try:
+            self.typestore = bag_typestore(reader.connections)
+        except BaseException:
+            reader.close()
+            raise
+        self.connections = list(reader.connections)
+
+    def close(self) -> None:
+        """Close the bag."""
+        self.readers[0].close()
+        self.connections = []
+
+    def __enter__(self) -> 'ChunkedAnyReader':
+        self.open()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def bag_typestore(connections: Sequence[Connection]) -> Any:
+    """
+    Return a rosbags typestore of the types the connections' stored definitions give.
+
+    As ``AnyReader`` builds it: every definition parsed, the MD5 sum of each
+    type checked against its connection's.
+
+    Raises
+    ------
+    rosbags.rosbag1.ReaderError
+        ``Message type 'pkg/msg/T' hash mismatch ...``.
+    rosbags.typesys.base.TypesysError
+        If a definition cannot be parsed.
+
+    """
+    types: Dict[str, Any] = {}
+    digests: Dict[str, str] = {}
+    for connection in connections:
+        if connection.msgdef.format == MessageDefinitionFormat.MSG:
+            types.update(get_types_from_msg(connection.msgdef.data, connection.msgtype))
+        if connection.digest:
+            digests[connection.msgtype] = connection.digest
+    typestore = get_typestore(Stores.EMPTY)
+    typestore.register(types)
+    for type_name, digest in digests.items():
+        if (have := typestore.generate_msgdef(type_name)[1]) != digest:
+            raise ReaderError(f'Message type {type_name!r} hash mismatch {have} != {digest}')
+    return typestore

@@ -1,15 +1,18 @@
 """
-rosbag2's ``sqlite3`` storage files (``.db3``), read with the ``rosbags`` package.
+rosbag2's ``sqlite3`` storage files (``.db3``), read with ``apsw``.
 
-rosbags' reader (:class:`rosbags.rosbag2.storage_sqlite3.Sqlite3Reader`) reads
-the ``topics`` (and ``message_definitions``) tables when it opens the file and
-the ``messages`` table row by row. A damaged file surfaces from several layers:
-SQLite's own errors (``apsw.CorruptError`` for a damaged page, met only when a
-query reaches it), text that is not UTF-8, QoS profiles that are not what
-rosbag2 writes, a message row whose ``data`` is not a BLOB or whose
-``timestamp`` is not a time (a non-negative integer). :class:`Sqlite3Storage`
-turns each into a :class:`rosbags.rosbag2.errors.ReaderError` naming the table
-and the row (``messages`` rows by their ``id``), so that a bag read through
+:class:`Sqlite3Storage` reads what the ``rosbags`` package's sqlite3 reader
+reads (``rosbags.rosbag2.storage_sqlite3.Sqlite3Reader``), the same way,
+without importing rosbags' rosbag2 modules (a twentieth of a second): the
+``topics`` (and ``message_definitions``) tables when it opens the file, the
+QoS profiles normalised as rosbags normalises them, and the ``messages``
+table row by row. A damaged file surfaces from several layers: SQLite's own
+errors (``apsw.CorruptError`` for a damaged page, met only when a query
+reaches it), text that is not UTF-8, QoS profiles that are not what rosbag2
+writes, a message row whose ``data`` is not a BLOB or whose ``timestamp`` is
+not a time (a non-negative integer). :class:`Sqlite3Storage` turns each into
+a :class:`DamagedStorage` naming the table and the row (``messages`` rows by
+their ``id``), so that a bag read through
 :class:`~rotation_node.bag.reading.rosbags_input.RosbagsInput` fails with one line.
 The file is opened read-only and immutable: it is never changed.
 """
@@ -17,26 +20,31 @@ import contextlib
 import os
 from pathlib import Path
 import sqlite3
-from typing import Any, Collection, Generator, Optional, Tuple
+from typing import Any, Collection, Dict, Generator, List, NamedTuple, Optional, Tuple
 import urllib.parse
 
 import apsw
-from rosbags.interfaces import Connection
-from rosbags.rosbag2.errors import ReaderError
-from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
+from rosbags.interfaces import QosDurability, QosHistory, QosLiveliness, QosReliability
+from rotation_node.bag import metadata_yaml
 from rotation_node.bag.reading.compression import decompressed_message, is_zstd, ZstdError
 from rotation_node.bag.reading.rosbags_input import RosbagsInput
 from rotation_node.bag.records import TopicMetadata
 from rotation_node.errors import BagError
 from rotation_node.wire.message_types import message_definition
-from rotation_node.wire.qos_yaml import rosbags_qos_yaml
+from rotation_node.wire.qos_yaml import profiles_yaml
 
 _ROSBAG2_TABLES = {'topics', 'messages'}
-# What rosbags' Sqlite3Reader.open raises, besides ReaderError, for tables whose text is
-# damaged: a name or definition that is not UTF-8 (apsw decodes TEXT), an unknown definition
-# encoding (KeyError), QoS profiles that are YAML but not a list of mappings (TypeError,
-# AttributeError from its parse_qos).
+# What reading the topics and message_definitions tables raises for damaged text: a name or
+# definition that is not UTF-8 (apsw decodes TEXT), an unknown definition encoding
+# (KeyError), QoS profiles that are YAML but not a list of mappings (TypeError,
+# AttributeError, KeyError).
 _DAMAGED_TABLE_ERRORS = (UnicodeDecodeError, KeyError, TypeError, AttributeError, ValueError)
+#: Definition encodings rosbag2 writes.
+_ENCODINGS = ('ros2msg', 'ros2idl')
+
+
+class DamagedStorage(Exception):
+    """A sqlite3 storage file that cannot be read as rosbag2 storage, and where."""
 
 
 def sqlite_tables(path: str, shown: Optional[str] = None) -> set:
@@ -60,14 +68,89 @@ def sqlite_tables(path: str, shown: Optional[str] = None) -> set:
         raise BagError(f'{shown or path}: damaged sqlite3 database: {error}') from None
 
 
-class Sqlite3Storage(Sqlite3Reader):
-    """
-    rosbags' sqlite3 storage reader whose errors on damaged data name the table and row.
+class StoredTopic(NamedTuple):
+    """One row of the ``topics`` table, as rosbags reads it (a rosbags ``Connection``'s fields)."""
 
-    ``messages`` yields what rosbags' yields, in the same order (by
-    ``timestamp``), ``data`` always ``bytes`` and ``timestamp`` always an
-    ``int`` >= 0.
+    id: int   # noqa: A003  (rosbags names it so)
+    topic: str
+    msgtype: str
+    #: ``(encoding, text)`` of the type's row of ``message_definitions``, or ``(None, '')``.
+    msgdef: Tuple[Optional[str], str]
+    digest: str
+    msgcount: int
+    serialization_format: str
+    #: The offered QoS profiles, normalised as rosbags normalises them, as rosbag2's YAML.
+    offered_qos_profiles: str
+
+
+def _policy(policy: Any, item: Any, key: str) -> str:
+    """Return a QoS policy of a profile by name, as rosbags reads it (``unknown`` if neither)."""
+    try:
+        value = item[key]
+        member = (policy(value) if isinstance(value, int)
+                  else policy.__members__[value.upper()])
+    except (KeyError, ValueError):
+        member = policy(policy.UNKNOWN)
+    return member.name.lower()
+
+
+def qos_profiles_yaml(stored: Any) -> str:
     """
+    Return a topic's ``offered_qos_profiles`` as rosbags reads and then writes them (version 9).
+
+    ``stored``: the YAML text (or whatever the column holds). Policies given
+    by number or by name, unknown ones ``unknown``; the rest as stored.
+
+    Raises
+    ------
+    DamagedStorage
+        If the text is not YAML.
+    KeyError, TypeError, AttributeError
+        If it is not a list of QoS profiles.
+
+    """
+    if not stored:
+        return profiles_yaml([])
+    try:
+        items = metadata_yaml.load(stored) if isinstance(stored, str) else stored
+    except metadata_yaml.YAMLError as error:
+        raise DamagedStorage(f'Could not load YAML from offered_qos_profiles: {error}') from None
+    return profiles_yaml([{
+        'history': _policy(QosHistory, item, 'history'),
+        'depth': item['depth'],
+        'reliability': _policy(QosReliability, item, 'reliability'),
+        'durability': _policy(QosDurability, item, 'durability'),
+        'deadline': {'sec': item['deadline']['sec'], 'nsec': item['deadline']['nsec']},
+        'lifespan': {'sec': item['lifespan']['sec'], 'nsec': item['lifespan']['nsec']},
+        'liveliness': _policy(QosLiveliness, item, 'liveliness'),
+        'liveliness_lease_duration': {'sec': item['liveliness_lease_duration']['sec'],
+                                      'nsec': item['liveliness_lease_duration']['nsec']},
+        'avoid_ros_namespace_conventions': item['avoid_ros_namespace_conventions'],
+    } for item in items])
+
+
+class Sqlite3Storage:
+    """
+    A rosbag2 sqlite3 storage file: its topics, and its messages by time.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+
+    Attributes
+    ----------
+    connections : list of StoredTopic
+        The ``topics`` table, by ``id``; ``msgcount`` counts each topic's rows.
+    message_count : int
+        Rows of the ``messages`` table (also those of no topic).
+
+    """
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.dbconn: Optional[apsw.Connection] = None
+        self.connections: List[StoredTopic] = []
+        self.message_count = 0
 
     def open(self) -> None:  # noqa: A003  (rosbags names it so)
         """
@@ -75,36 +158,91 @@ class Sqlite3Storage(Sqlite3Reader):
 
         Raises
         ------
-        rosbags.rosbag2.errors.ReaderError
+        DamagedStorage
             If it cannot be opened or its topics or message definitions are damaged.
 
         """
         try:
-            super().open()
-        except ReaderError as error:
-            if not isinstance(error.__cause__, apsw.Error):
-                raise
-            raise ReaderError(f'{error.__cause__}{_damaged_table(self.path)}') from None
+            self.dbconn = apsw.Connection(f'file:{self.path}?immutable=1',
+                                          flags=apsw.SQLITE_OPEN_READONLY | apsw.SQLITE_OPEN_URI)
+            self._read_topics(self.dbconn)
+        except apsw.Error as error:
+            self.close()
+            raise DamagedStorage(f'{error}{_damaged_table(self.path)}') from None
         except _DAMAGED_TABLE_ERRORS as error:
-            raise ReaderError(f'the topics or message_definitions table is damaged: '
-                              f'{type(error).__name__}: {error}') from None
+            self.close()
+            raise DamagedStorage(f'the topics or message_definitions table is damaged: '
+                                 f'{type(error).__name__}: {error}') from None
+        except BaseException:
+            self.close()
+            raise
 
-    def messages(self, connections: Collection[Connection], start: Optional[int] = None,
+    def _read_topics(self, database: apsw.Connection) -> None:
+        """Read the topics as rosbags' reader does, by the schema version of the file."""
+        tables, = _one_row(database,
+                           "SELECT count(*) FROM sqlite_master WHERE type = 'table' "
+                           "AND name IN ('messages', 'topics')")
+        if tables != 2:
+            raise DamagedStorage(f'Cannot open database {self.path} or database missing tables.')
+        if database.execute('PRAGMA table_info(schema)').fetchall():
+            schema, = database.execute('SELECT schema_version FROM schema').fetchone() or (-1,)
+        elif any(column[1] == 'offered_qos_profiles'
+                 for column in database.execute('PRAGMA table_info(topics)')):
+            schema = 2
+        else:
+            schema = 1
+        definitions: Dict[str, Tuple[str, str]] = {}
+        if schema >= 4:
+            for name, encoding, text, _ in database.execute(
+                    'SELECT topic_type, encoding, encoded_message_definition, '
+                    'type_description_hash FROM message_definitions ORDER BY id'):
+                definitions.setdefault(name, (encoding, text))
+        columns = ['serialization_format']
+        if schema >= 2:
+            columns.append('offered_qos_profiles')
+        if schema >= 4:
+            columns.append('type_description_hash')
+        self.connections = []
+        for topic_id, topic, type_name, count, serialization_format, *more in database.execute(
+                'SELECT topics.id, name, type, count(messages.id), '
+                f'{", ".join(columns)} FROM topics '
+                'LEFT JOIN messages ON topics.id == messages.topic_id '
+                'GROUP BY topics.id ORDER BY topics.id'):
+            encoding, text = definitions.get(type_name, (None, ''))
+            if encoding is not None and encoding not in _ENCODINGS:
+                raise KeyError(encoding)
+            self.connections.append(StoredTopic(
+                topic_id, topic, type_name, (encoding, text), more[1] if schema >= 4 else '',
+                count, serialization_format,
+                qos_profiles_yaml(more[0]) if schema >= 2 else profiles_yaml([])))
+        _, _, self.message_count = _one_row(
+            database, 'SELECT MIN(timestamp), MAX(timestamp) + 1, COUNT(*) FROM messages')
+
+    def close(self) -> None:
+        """Close the database."""
+        database, self.dbconn = self.dbconn, None
+        if database is not None:
+            database.close()
+
+    def messages(self, connections: Collection[StoredTopic], start: Optional[int] = None,
                  stop: Optional[int] = None
-                 ) -> Generator[Tuple[Connection, int, bytes], None, None]:
+                 ) -> Generator[Tuple[StoredTopic, int, bytes], None, None]:
         """
         Yield ``(connection, timestamp, data)`` of the messages of ``connections`` by time.
 
+        What rosbags' reader yields, in the same order (by ``timestamp``),
+        ``data`` always ``bytes`` and ``timestamp`` always an ``int`` >= 0.
+
         Raises
         ------
-        rosbags.rosbag2.errors.ReaderError
+        DamagedStorage
             When a damaged page or row is reached: ``messages table, row id
             12: data is TEXT, not a BLOB``; ``... after row id 40: database
             disk image is malformed``.
 
         """
         if self.dbconn is None:
-            raise ReaderError('Rosbag is not open.')
+            raise DamagedStorage('Rosbag is not open.')
         ids = sorted({connection.id for connection in connections})
         query = ('SELECT messages.id, topics.id, messages.timestamp, messages.data '
                  'FROM messages JOIN topics ON messages.topic_id = topics.id '
@@ -122,15 +260,15 @@ class Sqlite3Storage(Sqlite3Reader):
             for row_id, topic_id, timestamp, data in self.dbconn.execute(
                     query + ' ORDER BY timestamp', arguments):
                 if type(data) is not bytes:
-                    raise ReaderError(f'messages table, row id {row_id}: data is '
-                                      f'{_sqlite_type(data)}, not a BLOB')
+                    raise DamagedStorage(f'messages table, row id {row_id}: data is '
+                                         f'{_sqlite_type(data)}, not a BLOB')
                 if type(timestamp) is not int or timestamp < 0:
-                    raise ReaderError(f'messages table, row id {row_id}: timestamp '
-                                      f'{timestamp!r} is not a time (an INTEGER >= 0 ns)')
+                    raise DamagedStorage(f'messages table, row id {row_id}: timestamp '
+                                         f'{timestamp!r} is not a time (an INTEGER >= 0 ns)')
                 yield by_id[topic_id], timestamp, data
         except (apsw.Error, UnicodeDecodeError) as error:   # a damaged page; text not UTF-8
             where = 'before its first row' if row_id is None else f'after row id {row_id}'
-            raise ReaderError(f'messages table, {where}: {error}') from None
+            raise DamagedStorage(f'messages table, {where}: {error}') from None
 
 
 def _damaged_table(path: object) -> str:
@@ -161,28 +299,26 @@ def _damaged_table(path: object) -> str:
         database.close()
 
 
+def _one_row(database: apsw.Connection, query: str) -> tuple:
+    """Return the row of a query that gives one (an aggregate)."""
+    row = database.execute(query).fetchone()
+    assert row is not None
+    return row
+
+
 def _sqlite_type(value: Any) -> str:
     """Return the SQLite storage class of a value apsw read: ``'TEXT'``, ``'NULL'``..."""
     return {str: 'TEXT', int: 'INTEGER', float: 'REAL', bytes: 'BLOB'}.get(type(value), 'NULL')
-
-
-def _with_rosbag2_extension(connections, path):
-    """Give ``(connection, its rosbag2 extension)``: what sqlite3 storage records per topic."""
-    from rosbags.interfaces import ConnectionExtRosbag2
-    for connection in connections:
-        if not isinstance(connection.ext, ConnectionExtRosbag2):   # never from sqlite3 storage
-            raise BagError(f'{path}: topic {connection.topic} has no rosbag2 metadata')
-        yield connection, connection.ext
 
 
 def _rows_without_topic(reader: Sqlite3Storage, path: str) -> Optional[str]:
     """
     Say which message rows name no topic of the ``topics`` table, or None if none does.
 
-    Such rows cannot be read as messages of any topic: rosbags counts every
-    row (``metadata.message_count``) but the topics only theirs.
+    Such rows cannot be read as messages of any topic: the table counts every
+    row but the topics only theirs.
     """
-    lost = reader.metadata.message_count - sum(c.msgcount for c in reader.connections)
+    lost = reader.message_count - sum(c.msgcount for c in reader.connections)
     if lost <= 0 or reader.dbconn is None:
         return None
     row_id, topic_id = next(iter(reader.dbconn.execute(
@@ -224,7 +360,7 @@ def open_sqlite3_file(path: str, *, shown: Optional[str] = None,
     reader = Sqlite3Storage(Path(path))
     try:
         reader.open()
-    except ReaderError as error:
+    except DamagedStorage as error:
         raise BagError(f'{shown}: cannot read rosbag2 sqlite3 storage: '
                        f'{str(error).replace(path, shown)}') from None
     try:
@@ -232,13 +368,14 @@ def open_sqlite3_file(path: str, *, shown: Optional[str] = None,
         first_message_compression = _message_compression(reader)
         if lost is not None and strict:
             raise BagError(f'{lost}; refused (--strict)')
-        source = RosbagsInput(shown, reader, (ReaderError, ZstdError), [
+        source = RosbagsInput(shown, reader, (DamagedStorage, ZstdError), [
             (connection, TopicMetadata(
                 name=connection.topic, type_name=connection.msgtype,
-                offered_qos_profiles=rosbags_qos_yaml(ext.offered_qos_profiles),
-                type_hash=connection.digest, serialization_format=ext.serialization_format,
+                offered_qos_profiles=connection.offered_qos_profiles,
+                type_hash=connection.digest,
+                serialization_format=connection.serialization_format,
                 **_definition(connection.msgtype, connection.msgdef)), decompressed_message)
-            for connection, ext in _with_rosbag2_extension(reader.connections, shown)])
+            for connection in reader.connections])
     except apsw.Error as error:   # met by the query for rows without topic
         reader.close()
         raise BagError(f'{shown}: cannot read rosbag2 sqlite3 storage: {error}') from None
@@ -253,16 +390,15 @@ def open_sqlite3_file(path: str, *, shown: Optional[str] = None,
 
 def _definition(type_name, msgdef):
     """
-    ``definition`` and ``definition_encoding`` of a topic from a rosbags definition.
+    ``definition`` and ``definition_encoding`` of a topic from its ``message_definitions`` row.
 
     A bag without definitions (sqlite3 before Iron) gets the installed one;
     if the type is not installed either, the encoding ``unknown`` that rosbag2
     records then.
     """
-    from rosbags.interfaces import MessageDefinitionFormat
-    encodings = {MessageDefinitionFormat.MSG: 'ros2msg', MessageDefinitionFormat.IDL: 'ros2idl'}
-    if msgdef.format in encodings:
-        return {'definition': msgdef.data, 'definition_encoding': encodings[msgdef.format]}
+    encoding, text = msgdef
+    if encoding is not None:
+        return {'definition': text, 'definition_encoding': encoding}
     try:
         message_definition(type_name)
     except BagError:

@@ -90,23 +90,38 @@ class RosbagsInput:
         return self._messages(connections) if connections else iter(())
 
     def _messages(self, connections):
-        type_names, to_cdr, errors = self.topics, self._to_cdr, self._errors
+        type_names = self.topics
         stored = self._reader.messages(connections)
         while True:
             try:
                 connection, time_ns, data = next(stored)
             except StopIteration:
                 return
-            except errors as error:   # the reader names where
-                raise BagError(f'{self.path} is corrupt: {error}') from None
-            try:
-                cdr = to_cdr[connection.id](data)
-            except errors as error:
-                raise BagError(f'{self.path} is corrupt: the message of {connection.topic} at '
-                               f'log time {time_ns} ns cannot be read: '
-                               f'{type(error).__name__}: {error}') from None
-            yield BagMessage(connection.topic, type_names[connection.topic], cdr, time_ns,
-                             time_ns)
+            except self._errors as error:   # the reader names where
+                raise self.corrupt(error) from None
+            yield BagMessage(connection.topic, type_names[connection.topic],
+                             self.cdr(connection, time_ns, data), time_ns, time_ns)
+
+    def corrupt(self, error: Exception) -> BagError:
+        """Return the error to raise for one of ``errors`` that the reader raised."""
+        return BagError(f'{self.path} is corrupt: {error}')
+
+    def cdr(self, connection: Any, time_ns: int, data: bytes) -> bytes:
+        """
+        Return the CDR data of a message of ``connection`` stored as ``data``.
+
+        Raises
+        ------
+        BagError
+            If it cannot be converted, naming its topic and log time.
+
+        """
+        try:
+            return self._to_cdr[connection.id](data)
+        except self._errors as error:
+            raise BagError(f'{self.path} is corrupt: the message of {connection.topic} at '
+                           f'log time {time_ns} ns cannot be read: '
+                           f'{type(error).__name__}: {error}') from None
 
     def close(self) -> None:
         """Close the reader."""
