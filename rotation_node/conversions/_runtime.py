@@ -1034,8 +1034,9 @@ def call_unary(kernel_: Any, x: ArrayLike, name: str, trailing: tuple[int, ...],
     argument: unpacking ``*args`` costs ~50 ns of a ~1 us single-sample call).
     Large inputs go to ``batch_kernel`` (same signature) where one is given,
     and large batches are split across threads. A single sample (a float64
-    array, list, tuple or object with attributes x, y, z(, w)) skips straight to the kernel's single-sample path
-    (``kernel_.call_unchecked``), which checks its values.
+    array, list, tuple, or object with attributes x, y, z(, w)) skips
+    straight to the kernel's single-sample path (``kernel_.call_tuple`` or
+    ``kernel_.call_unchecked``), which checks its values.
     """
     kind = type(x)   # single_sample, inline: a call costs ~5 % of a ~1 us single sample
     a: Optional[FloatArray]
@@ -1101,9 +1102,8 @@ def call_binary(kernel_: Any, x: ArrayLike, y: ArrayLike, names: tuple[str, str]
     ``out`` gets the common leading shape followed by ``out_trailing``; all
     three reach the kernel in the canonical layout. Large inputs go to
     ``batch_kernel`` where one is given, and large batches are split across
-    threads; single samples (float64 arrays, lists, tuples, numbers, objects with
-    attributes x, y, z(, w)) skip the
-    checks that the kernel makes anyway.
+    threads; single samples (float64 arrays, lists, tuples, numbers, objects
+    with attributes x, y, z(, w)) skip the checks that the kernel makes anyway.
 
     A scalar second argument (``trailings[1] == ()``, an angle) reaches the
     kernel twice, as ``kernel_(x, ys, out, y, *args)``: a single sample as the
