@@ -1117,25 +1117,33 @@ def call_binary(kernel_: Any, x: ArrayLike, y: ArrayLike, names: tuple[str, str]
     yv: Any = y
     kind_x, kind_y = type(xv), type(yv)
     # is_listed, inline for lists and tuples: a call costs ~5 % of a ~1 us single sample
-    listed = ((kind_x is tuple or kind_x is list
-               or (kind_x is PythonArray and is_listed(xv, kind_x)))
-              and (kind_y is float if scalar_y else (
-                  kind_y is tuple or kind_y is list
-                  or (kind_y is PythonArray and is_listed(yv, kind_y)))))
-    if not listed and kind_x is not _NDARRAY:   # objects with attributes x, y, z(, w): tuples
-        try:
-            sx = xv if kind_x is tuple or kind_x is list else message_readers[kind_x](xv)
-        except (KeyError, AttributeError):   # a new type, or a slot never set
-            sx = message_sample(xv, kind_x)
-        if scalar_y or kind_y is tuple or kind_y is list:
+    # (tuples, lists and arrays tested in the order of the original expression: no test more)
+    if kind_x is tuple or kind_x is list:
+        listed = (kind_y is float if scalar_y else (
+            kind_y is tuple or kind_y is list
+            or (kind_y is PythonArray and is_listed(yv, kind_y))))
+    elif kind_x is _NDARRAY:
+        listed = False
+    else:   # an array.array of doubles, or an object with attributes x, y, z(, w) (a ROS
+        # message), given as its tuple; the same for the second argument
+        if kind_x is PythonArray and is_listed(xv, kind_x):
+            sx = xv
+        else:
+            try:
+                sx = message_readers[kind_x](xv)
+            except (KeyError, AttributeError):   # a new type, or a slot never set
+                sx = message_sample(xv, kind_x)
+        if (scalar_y or kind_y is tuple or kind_y is list
+                or (kind_y is PythonArray and is_listed(yv, kind_y))):
             sy = yv if not scalar_y or kind_y is float else None
         else:
             try:
                 sy = message_readers[kind_y](yv)
             except (KeyError, AttributeError):
                 sy = message_sample(yv, kind_y)
-        if sx is not None and sy is not None:
-            xv, yv, kind_x, kind_y, listed = sx, sy, type(sx), type(sy), True
+        listed = sx is not None and sy is not None
+        if listed:
+            xv, yv, kind_x, kind_y = sx, sy, type(sx), type(sy)
     call_tuple = kernel_.call_tuple
     if listed and call_tuple is not None:   # numba unboxes the tuples: no copies
         out = new_array(out_trailing or _ONE)
