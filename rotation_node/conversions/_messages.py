@@ -84,8 +84,9 @@ def _each_object_decides(x: Any) -> Any:
 
 def _new_reader(kind: type) -> Callable[[Any], Any]:
     """Return the reader of objects of type ``kind`` (see :data:`message_readers`)."""
-    if any(hasattr(kind, name) for name in _NOT_SAMPLES):
-        return _no_sample   # sequences, arrays and numbers: numpy's conversion decides
+    if issubclass(kind, type) or any(hasattr(kind, name) for name in _NOT_SAMPLES):
+        return _no_sample   # classes (a message class for its instance); sequences, arrays and
+        # numbers: numpy's conversion decides
     if not (getattr(kind, '__dictoffset__', 1) == 0 and not hasattr(kind, '__getattr__')
             and kind.__getattribute__ is object.__getattribute__):
         return _each_object_decides   # instance attributes: each object has its own
