@@ -24,9 +24,11 @@ For every conversion it prints, measured in this run on this machine:
   (the conversion to its scalar-first layout and, for the product, back
   counted); ``euler_from_quaternion``, ``quaternion_from_euler``,
   ``matrix_from_quaternion``, ``rotate_vector`` and ``quaternion_product`` of
-  one sample given as an ndarray, a list and a tuple of Python floats, against
-  the plain-Python ``math`` formula, with the ratios list / ndarray, tuple /
-  ndarray and package / formula of each round (``--single``: only the
+  one sample given as an ndarray, a list and a tuple of Python floats and as
+  geometry_msgs Quaternion and Vector3 objects (a ROS message's fields as a
+  callback has them), against the plain-Python ``math`` formula, with the
+  ratios list / ndarray, tuple / ndarray, message / ndarray and package /
+  formula of each round (``--single``: only the
   groups of one sample).
 
 The first lines say where it ran: CPU model, the SIMD levels numpy found
@@ -191,10 +193,12 @@ def _python_value_groups(single):
     Return the groups of one sample from Python values, as :func:`_peer_groups` does.
 
     Each operation on one sample given as a float64 ndarray, a list and a
-    tuple of Python floats (what a ROS message's fields give), and the
-    plain-Python ``math`` formula on the list (what people paste into a
+    tuple of Python floats (what a ROS message's fields give), geometry_msgs
+    Quaternion and Vector3 objects (a message's fields as they come), and
+    the plain-Python ``math`` formula on the list (what people paste into a
     callback; exact only where the library is, see accuracy.md).
     """
+    from geometry_msgs.msg import Quaternion, Vector3
     p1, q1, v1, angles = single['q'], single['q_other'], single['v'], single['angles']
     operations = {
         'euler_from_quaternion': (lambda q: rc.euler_from_quaternion(q, SEQ), (p1,),
@@ -211,10 +215,13 @@ def _python_value_groups(single):
     for name, (ours, arrays, formula) in operations.items():
         lists = [a.tolist() for a in arrays]
         tuples = [tuple(a) for a in lists]
+        messages = [Quaternion(**dict(zip('xyzw', x))) if len(x) == 4 else
+                    Vector3(**dict(zip('xyz', x))) for x in lists]
         groups[f'{name}, 1 sample from Python values'] = (1, 200, {
             'rotation_node, ndarray': lambda ours=ours, x=arrays: ours(*x),
             'rotation_node, list': lambda ours=ours, x=lists: ours(*x),
             'rotation_node, tuple': lambda ours=ours, x=tuples: ours(*x),
+            'rotation_node, geometry_msgs': lambda ours=ours, x=messages: ours(*x),
             'plain-Python math formula, list': lambda formula=formula, x=lists: formula(*x),
         }, None)
     return groups
@@ -371,20 +378,23 @@ def _warm_python_values(groups):
 
 def _print_python_values(times):
     """Print, per operation, list / ndarray, tuple / ndarray and ours / formula, each round."""
-    print('\none sample from Python values: time ratios in each round, min to max')
+    print('\none sample from Python values: time ratios in each round, min to max '
+          '(message: geometry_msgs Quaternion and Vector3 objects)')
     print(f'{"operation":52s} {"list/ndarray":>14s} {"tuple/ndarray":>14s} '
-          f'{"ndarray/formula":>16s} {"list/formula":>14s} {"tuple/formula":>14s}')
+          f'{"message/ndarray":>16s} {"ndarray/formula":>16s} {"list/formula":>14s} '
+          f'{"tuple/formula":>14s}')
     summary = {}
     for name, per_call in times.items():
         if name not in _PYTHON_VALUE_GROUPS:
             continue
-        ndarray, listed, tupled, formula = per_call.values()
+        ndarray, listed, tupled, message, formula = per_call.values()
         ratios = {'list/ndarray': (listed, ndarray), 'tuple/ndarray': (tupled, ndarray),
+                  'message/ndarray': (message, ndarray),
                   'ndarray/formula': (ndarray, formula), 'list/formula': (listed, formula),
                   'tuple/formula': (tupled, formula)}
         summary[name] = {key: [a / b for a, b in zip(*pair)] for key, pair in ratios.items()}
         cells = ' '.join(f'{min(r):6.2f}-{max(r):<5.2f}'.rjust(width) for r, width in zip(
-            summary[name].values(), (14, 14, 16, 14, 14)))
+            summary[name].values(), (14, 14, 16, 16, 14, 14)))
         print(f'{name:52s} {cells}')
     return summary
 

@@ -2,6 +2,7 @@
 import importlib
 import importlib.util
 import inspect
+import itertools
 import math
 import os
 import re
@@ -654,6 +655,45 @@ _PYTHON_VALUE_CALLS = [
 ]
 
 
+class _Attributes:
+    """A plain duck-typed sample: whatever attributes it is given, in its instance dict."""
+
+    def __init__(self, **attributes):
+        self.__dict__.update(attributes)
+
+
+class _SlotQuaternion:
+    """A quaternion of plain slots (no properties, no instance dict): the type decides."""
+
+    __slots__ = ('x', 'y', 'z', 'w')
+
+    def __init__(self, x, y, z, w):
+        self.x, self.y, self.z, self.w = x, y, z, w
+
+
+class _SlotVector:
+    __slots__ = ('x', 'y', 'z')
+
+    def __init__(self, x, y, z):
+        self.x, self.y, self.z = x, y, z
+
+
+def _message_objects(values):
+    """
+    Return a quaternion's or 3-vector's Python floats as objects with attributes x, y, z(, w).
+
+    geometry_msgs Quaternion (alone and as a Pose's field), Vector3 and
+    Point, a plain class with instance attributes and one with slots.
+    """
+    from geometry_msgs.msg import Point, Pose, Quaternion, Vector3
+    if len(values) == 4:
+        fields = dict(zip('xyzw', values))
+        return [Quaternion(**fields), Pose(orientation=Quaternion(**fields)).orientation,
+                _Attributes(**fields), _SlotQuaternion(*values)]
+    fields = dict(zip('xyz', values))
+    return [Vector3(**fields), Point(**fields), _Attributes(**fields), _SlotVector(*values)]
+
+
 def _message_field_values(sample):
     """
     Return ``sample`` (ndarray (4,) or (3,), or a number) as ROS messages hold it.
@@ -661,7 +701,8 @@ def _message_field_values(sample):
     The attributes of a geometry_msgs Quaternion or Vector3 (Python floats, as a
     callback reads them into a tuple), rclpy's array.array of a float64 sequence
     (std_msgs Float64MultiArray), the first values of a fixed-size float64 array
-    field (sensor_msgs Imu's covariance, a numpy array) and a float64 field.
+    field (sensor_msgs Imu's covariance, a numpy array), a float64 field, and
+    the message objects themselves (:func:`_message_objects`).
     """
     from array import array
 
@@ -678,7 +719,8 @@ def _message_field_values(sample):
     assert type(sequence) is array
     imu = Imu()
     imu.orientation_covariance[:len(values)] = values
-    return [fields, sequence, imu.orientation_covariance[:len(values)].copy()]
+    return [fields, sequence, imu.orientation_covariance[:len(values)].copy()] + \
+        _message_objects(values)
 
 
 def _python_value_forms(sample):
@@ -741,7 +783,9 @@ def test_python_values_and_message_fields_give_the_bits_of_float64_arrays(
         for arguments in cases:   # a hard case may be bad (a zero axis): the same message
             expected = _outcome(call, [np.asarray(a, dtype=np.float64) if np.ndim(a)
                                        else float(a) for a in arguments])
-            for forms in zip(*[_python_value_forms(a) for a in arguments]):
+            form_lists = [_python_value_forms(a) for a in arguments]
+            count = max(map(len, form_lists))   # an angle's forms, again for each vector form
+            for forms in zip(*[itertools.islice(itertools.cycle(f), count) for f in form_lists]):
                 _same_outcome(_outcome(call, forms), expected)
             for i in range(len(arguments)):   # one argument a Python value, the others arrays
                 mixed = [np.asarray(a, dtype=np.float64) for a in arguments]
@@ -846,6 +890,131 @@ def test_bad_python_values_get_the_one_line_error_of_their_array(monkeypatch, lo
         assert listed == message(as_array(q), as_array(v))
     else:   # numpy refuses one: the message names it and what numpy said
         assert listed.startswith('Expected `')
+
+
+# ------------------------------------------------------- message objects
+
+def _message_calls(q, v):
+    """Return calls of every kind of single-sample argument: (name, function, arguments)."""
+    return [('euler', lambda a: rc.euler_from_quaternion(a, 'ZYX', degrees=True), (q,)),
+            ('matrix', rc.matrix_from_quaternion, (q,)),
+            ('rotation_vector', rc.rotation_vector_from_quaternion, (q,)),
+            ('from_euler', lambda a: rc.quaternion_from_euler(a, 'xyz'), (v,)),
+            ('rotate', rc.rotate_vector, (q, v)), ('product', rc.quaternion_product, (q, q)),
+            ('distance', rc.quaternion_distance, (q, q)),
+            ('axis_angle', rc.quaternion_from_axis_angle, (v, 0.75)),
+            # An object names its components: scalar_first reorders a tuple, never an object.
+            ('scalar_first', lambda a: rc.quaternion_conjugate(
+                (a[3],) + a[:3] if type(a) is tuple else a, scalar_first=True), (q,))]
+
+
+def _use_tuple_forms(monkeypatch, loaded):
+    """Before kernels' tuple forms load (samples copied into arrays), or after (loaded)."""
+    _runtime.compile_kernels()
+    if loaded:
+        monkeypatch.setattr(_runtime, 'TUPLE_COPIES', 1)
+        for _, call, arguments in _message_calls((0.1, 0.2, 0.3, 0.9), (1.0, 2.0, 3.0)):
+            for _ in range(2):
+                call(*arguments)
+    else:
+        monkeypatch.setattr(_runtime, 'copied', lambda kernel_, widths: None)
+        for kernel in KERNELS:
+            monkeypatch.setattr(kernel, 'call_tuple', None)
+
+
+@pytest.mark.parametrize('loaded', [False, True], ids=['copied', 'tuple form'])
+def test_message_objects_take_the_single_sample_path_with_the_bits_of_tuples(
+        monkeypatch, loaded):
+    """A Quaternion, Vector3 or Point never reaches the general path (float_array)."""
+    from geometry_msgs.msg import Point, Quaternion, Vector3
+    _use_tuple_forms(monkeypatch, loaded)
+    q, v = (0.1, -0.2, 0.3, 0.9), (1.0, -2.0, 3.5)
+    expected = [call(*arguments) for _, call, arguments in _message_calls(q, v)]
+    messages = [(Quaternion(**dict(zip('xyzw', q))), vector(**dict(zip('xyz', v))))
+                for vector in (Vector3, Point)]
+
+    def general_path(*args):
+        raise AssertionError(f'the general path took {args}')
+
+    monkeypatch.setattr(_runtime, 'float_array', general_path)
+    calls = []
+    _counted_tuple_forms(monkeypatch, calls)
+    for qm, vm in messages:
+        for (name, call, arguments), result in zip(_message_calls(qm, vm), expected):
+            _same_result(call(*arguments), result)
+    _same_result(rc.rotate_vector(np.array(q), messages[0][1]), expected[4])   # mixed
+    _same_result(rc.rotate_vector(messages[0][0], list(v)), expected[4])
+    assert bool(calls) == loaded
+
+
+def _bad_message_objects():
+    from geometry_msgs.msg import Quaternion, Vector3
+    strings, nones = Quaternion(check_fields=False), Quaternion(check_fields=False)
+    strings.y, nones.w = 'a', None
+    return [
+        (lambda: rc.euler_from_quaternion(Vector3(x=0.1), 'xyz'),
+         'Expected `q` to be an array of numbers with shape (..., 4) or objects with attributes '
+         'x, y, z, w, got Vector3: it has no attribute w (a quaternion is x, y, z, w)'),
+        (lambda: rc.rotate_vector(Quaternion(), Quaternion()),
+         'Expected `v` to be an array of numbers with shape (..., 3) or objects with attributes '
+         'x, y, z, got Quaternion: it has an attribute w: a quaternion where a 3-vector '
+         '(x, y, z) is needed'),
+        (lambda: rc.quaternion_product(Quaternion(), _Attributes(x=0.1, y=0.2)),
+         'got _Attributes: it has no attribute z, w'),
+        (lambda: rc.rotate_vector(Quaternion(), _SlotQuaternion(0.0, 0.0, 0.0, 1.0)),
+         'got _SlotQuaternion: it has an attribute w'),
+        (lambda: rc.matrix_from_quaternion(strings),
+         "got Quaternion: could not convert string to float: 'a'"),
+        # numpy takes None as NaN, in a list too (test_bad_lists_get_the_messages_arrays_get)
+        (lambda: rc.matrix_from_quaternion(nones), '`q` has a NaN or Inf component.'),
+        (lambda: rc.euler_from_quaternion([Quaternion(), [Quaternion(), Vector3()]], 'xyz'),
+         'got list: item [1][1], a Vector3, has no attribute w'),
+        (lambda: rc.rotate_vector([Quaternion()], (Vector3(), Quaternion())),
+         'got tuple: item [1], a Quaternion, has an attribute w'),
+        (lambda: rc.euler_from_quaternion(Quaternion(x=math.nan), 'xyz'),
+         '`q` has a NaN or Inf component.'),
+        (lambda: rc.euler_from_quaternion(Quaternion(x=0.0, w=0.0), 'xyz'),
+         '`q` has zero norm'),
+        (lambda: rc.euler_from_quaternion([Quaternion(), Quaternion(w=math.inf)], 'xyz'),
+         '`q` at index (1,) has a NaN or Inf component.'),
+        (lambda: rc.euler_from_quaternion(object(), 'xyz'),
+         'Expected `q` to be an array of numbers with shape (..., 4), got object: float()')]
+
+
+@pytest.mark.parametrize('loaded', [False, True], ids=['copied', 'tuple form'])
+@pytest.mark.parametrize('case', range(12))
+def test_bad_message_objects_get_one_line_errors_naming_what_is_wrong(monkeypatch, loaded, case):
+    _use_tuple_forms(monkeypatch, loaded)
+    call, expected = _bad_message_objects()[case]
+    with pytest.raises(ValueError) as error:
+        call()
+    assert '\n' not in str(error.value)
+    assert expected in str(error.value)
+
+
+def test_lists_of_message_objects_give_the_bits_of_their_arrays(rng):
+    from geometry_msgs.msg import Point, Quaternion, Vector3
+    q, v = rng.normal(size=(6, 4)), rng.normal(size=(6, 3))
+    quaternions = [Quaternion(**dict(zip('xyzw', map(float, x)))) for x in q]
+    vectors = [(Vector3 if i % 2 else Point)(**dict(zip('xyz', map(float, x))))
+               for i, x in enumerate(v)]
+    checks = [
+        (rc.euler_from_quaternion(quaternions, 'xyz'), rc.euler_from_quaternion(q, 'xyz')),
+        (rc.rotate_vector(quaternions, vectors), rc.rotate_vector(q, v)),
+        (rc.rotate_vector(quaternions[2], tuple(vectors)), rc.rotate_vector(q[2], v)),
+        (rc.quaternion_product(tuple(quaternions), quaternions[::-1]),
+         rc.quaternion_product(q, q[::-1])),
+        (rc.matrix_from_quaternion([quaternions[:3], quaternions[3:]]),
+         rc.matrix_from_quaternion(q.reshape(2, 3, 4))),
+        (rc.matrix_from_quaternion([quaternions[0], tuple(q[1]), list(q[2])]),   # mixed
+         rc.matrix_from_quaternion(q[:3])),
+        (rc.quaternion_from_axis_angle(vectors, v[:, 0]),
+         rc.quaternion_from_axis_angle(v, v[:, 0])),
+        # Named components: scalar_first reorders arrays, never objects (4 of them here).
+        (rc.quaternion_conjugate(quaternions[:4], scalar_first=True),
+         rc.quaternion_conjugate(q[:4][:, [3, 0, 1, 2]], scalar_first=True))]
+    for got, expected in checks:
+        assert got.shape == expected.shape and got.tobytes() == expected.tobytes()
 
 
 # ------------------------------------------------------------ loading in the background

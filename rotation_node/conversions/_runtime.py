@@ -16,7 +16,8 @@ kernel shares:
 - batch schedules: the chunk size and the thread pool (:func:`set_threads`);
 - the one Python-side path from public arguments to kernels
   (:func:`call_unary`, :func:`call_binary`), with its single-sample fast path
-  for float64 arrays, lists, tuples and numbers (:func:`single_sample`, and
+  for float64 arrays, lists, tuples, numbers and objects with attributes
+  x, y, z(, w) such as ROS messages (:func:`single_sample`, and
   each kernel's tuple form: :meth:`Kernel.load_tuple_form`).
 
 Interpreted or compiled
@@ -85,6 +86,7 @@ from typing import Any, Callable, NamedTuple, Optional, Sequence, TYPE_CHECKING,
 
 import numpy as np
 
+from ._messages import message_readers, message_sample
 from ._validation import broadcast_pair, float_array, raise_sample_error
 
 if TYPE_CHECKING:
@@ -883,7 +885,9 @@ def _run(kernel_: Any, inputs: Sequence[FloatArray], trailings: Sequence[tuple[i
 # copying it into an array in Python cost ~200 ns, more than checking an
 # array), so that lists and tuples cost no more than a float64 array. Before
 # the tuple form is loaded they are copied into a float64 array of the
-# thread's own (:func:`listed_sample`). The names the path uses are module
+# thread's own (:func:`listed_sample`). An object with attributes x, y, z(, w)
+# (a ROS message, ``_messages``) is read into the tuple of them (~0.1 us for a
+# rosidl class) and then taken as that tuple. The names the path uses are module
 # globals (``np.empty`` looked up through the module costs ~30 ns).
 _FLOAT64 = np.dtype(np.float64)
 _NDARRAY = np.ndarray
@@ -999,8 +1003,10 @@ def single_sample(x: object, trailing: tuple[int, ...], argument: int = 0) -> Op
     Return ``x`` as one sample in a float64 array a kernel's ``call_unchecked`` takes, or None.
 
     ``x`` itself when :func:`is_single_sample`; numbers (:func:`is_listed`)
-    copied by :func:`listed_sample` (``argument`` 0 or 1: the first or second
-    argument's array); None for anything else (the general path).
+    and the tuple of an object's attributes x, y, z(, w)
+    (``_messages.message_sample``) copied by :func:`listed_sample`
+    (``argument`` 0 or 1: the first or second argument's array); None for
+    anything else (the general path).
     """
     kind = type(x)
     if kind is _NDARRAY:
@@ -1008,10 +1014,12 @@ def single_sample(x: object, trailing: tuple[int, ...], argument: int = 0) -> Op
         if array.shape == trailing and array.dtype is _FLOAT64 and array.flags.carray:
             return array
         return None
-    if is_listed(x, kind):
-        return listed_sample(x, (_scratch.second if argument else _scratch.first).get(
-            trailing, _NO_SCRATCH))
-    return None
+    if not is_listed(x, kind):   # an object with attributes x, y, z(, w): the tuple of them
+        x = message_sample(x, kind)
+        if x is None:
+            return None
+    return listed_sample(x, (_scratch.second if argument else _scratch.first).get(
+        trailing, _NO_SCRATCH))
 
 
 def call_unary(kernel_: Any, x: ArrayLike, name: str, trailing: tuple[int, ...],
@@ -1026,8 +1034,9 @@ def call_unary(kernel_: Any, x: ArrayLike, name: str, trailing: tuple[int, ...],
     argument: unpacking ``*args`` costs ~50 ns of a ~1 us single-sample call).
     Large inputs go to ``batch_kernel`` (same signature) where one is given,
     and large batches are split across threads. A single sample (a float64
-    array, list or tuple) skips straight to the kernel's single-sample path
-    (``kernel_.call_unchecked``), which checks its values.
+    array, list, tuple, or object with attributes x, y, z(, w)) skips
+    straight to the kernel's single-sample path (``kernel_.call_tuple`` or
+    ``kernel_.call_unchecked``), which checks its values.
     """
     kind = type(x)   # single_sample, inline: a call costs ~5 % of a ~1 us single sample
     a: Optional[FloatArray]
@@ -1035,12 +1044,24 @@ def call_unary(kernel_: Any, x: ArrayLike, name: str, trailing: tuple[int, ...],
         array: FloatArray = x   # type: ignore[assignment]  # mypy does not narrow x by kind
         a = (array if (array.shape == trailing and array.dtype is _FLOAT64
                        and array.flags.carray) else None)
-    elif kind is list or kind is tuple or (kind is PythonArray and is_listed(x, kind)):
+    else:
+        sample: Any
+        if kind is list or kind is tuple or (kind is PythonArray and is_listed(x, kind)):
+            sample = x
+        else:   # an object with attributes x, y, z(, w) (a ROS message): their tuple, or None
+            try:
+                sample = message_readers[kind](x)
+            except (KeyError, AttributeError):   # a new type, or a slot never set
+                sample = message_sample(x, kind)
+            kind = tuple
         call_tuple = kernel_.call_tuple
-        if call_tuple is not None:   # numba unboxes the tuple: no copy, no checks here
+        if sample is None:
+            a = None
+        elif call_tuple is not None:   # numba unboxes the tuple: no copy, no checks here
             out = new_array(out_trailing or _ONE)
             try:
-                sample = x if kind is tuple else tuple(x)  # type: ignore[arg-type]
+                if kind is not tuple:
+                    sample = tuple(sample)
                 bad = (call_tuple(sample, out) if convention is None
                        else call_tuple(sample, out, convention))
             except (TypeError, ValueError, OverflowError):
@@ -1049,11 +1070,9 @@ def call_unary(kernel_: Any, x: ArrayLike, name: str, trailing: tuple[int, ...],
                 return out if out_trailing else out[0]
             a = None   # a bad sample: the general path raises its error
         else:
-            a = listed_sample(x, _scratch.first.get(trailing, _NO_SCRATCH))
+            a = listed_sample(sample, _scratch.first.get(trailing, _NO_SCRATCH))
             if a is not None and len(trailing) == 1:
                 copied(kernel_, trailing)
-    else:
-        a = None
     if a is not None:
         out = new_array(out_trailing or _ONE)
         if convention is None:
@@ -1083,8 +1102,8 @@ def call_binary(kernel_: Any, x: ArrayLike, y: ArrayLike, names: tuple[str, str]
     ``out`` gets the common leading shape followed by ``out_trailing``; all
     three reach the kernel in the canonical layout. Large inputs go to
     ``batch_kernel`` where one is given, and large batches are split across
-    threads; single samples (float64 arrays, lists, tuples, numbers) skip the
-    checks that the kernel makes anyway.
+    threads; single samples (float64 arrays, lists, tuples, numbers, objects
+    with attributes x, y, z(, w)) skip the checks that the kernel makes anyway.
 
     A scalar second argument (``trailings[1] == ()``, an angle) reaches the
     kernel twice, as ``kernel_(x, ys, out, y, *args)``: a single sample as the
@@ -1098,11 +1117,33 @@ def call_binary(kernel_: Any, x: ArrayLike, y: ArrayLike, names: tuple[str, str]
     yv: Any = y
     kind_x, kind_y = type(xv), type(yv)
     # is_listed, inline for lists and tuples: a call costs ~5 % of a ~1 us single sample
-    listed = ((kind_x is tuple or kind_x is list
-               or (kind_x is PythonArray and is_listed(xv, kind_x)))
-              and (kind_y is float if scalar_y else (
-                  kind_y is tuple or kind_y is list
-                  or (kind_y is PythonArray and is_listed(yv, kind_y)))))
+    # (tuples, lists and arrays tested in the order of the original expression: no test more)
+    if kind_x is tuple or kind_x is list:
+        listed = (kind_y is float if scalar_y else (
+            kind_y is tuple or kind_y is list
+            or (kind_y is PythonArray and is_listed(yv, kind_y))))
+    elif kind_x is _NDARRAY:
+        listed = False
+    else:   # an array.array of doubles, or an object with attributes x, y, z(, w) (a ROS
+        # message), given as its tuple; the same for the second argument
+        if kind_x is PythonArray and is_listed(xv, kind_x):
+            sx = xv
+        else:
+            try:
+                sx = message_readers[kind_x](xv)
+            except (KeyError, AttributeError):   # a new type, or a slot never set
+                sx = message_sample(xv, kind_x)
+        if (scalar_y or kind_y is tuple or kind_y is list
+                or (kind_y is PythonArray and is_listed(yv, kind_y))):
+            sy = yv if not scalar_y or kind_y is float else None
+        else:
+            try:
+                sy = message_readers[kind_y](yv)
+            except (KeyError, AttributeError):
+                sy = message_sample(yv, kind_y)
+        listed = sx is not None and sy is not None
+        if listed:
+            xv, yv, kind_x, kind_y = sx, sy, type(sx), type(sy)
     call_tuple = kernel_.call_tuple
     if listed and call_tuple is not None:   # numba unboxes the tuples: no copies
         out = new_array(out_trailing or _ONE)

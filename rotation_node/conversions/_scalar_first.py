@@ -27,9 +27,14 @@ _TO_SCALAR_FIRST = [3, 0, 1, 2]
 
 
 def scalar_last(q: Any) -> Any:
-    """Reorder (w, x, y, z) to (x, y, z, w); anything else unchanged (the function checks it)."""
+    """
+    Reorder (w, x, y, z) to (x, y, z, w); anything else unchanged (the function checks it).
+
+    Objects with attributes x, y, z, w (ROS messages, and lists of them: an
+    object array) name their components: they are taken as they are.
+    """
     a = np.asarray(q)
-    if a.ndim == 0 or a.shape[-1] != 4:
+    if a.ndim == 0 or a.shape[-1] != 4 or a.dtype == object:
         return q
     return a[..., _TO_SCALAR_LAST]
 

@@ -16,6 +16,8 @@ from typing import Any, NamedTuple, NoReturn, Sequence, TYPE_CHECKING
 
 import numpy as np
 
+from ._messages import message_values, QUATERNION_FIELDS, refusal
+
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
 
@@ -68,14 +70,37 @@ def float_array(x: ArrayLike, name: str, trailing: tuple[int, ...]) -> FloatArra
     try:
         a = np.asarray(x, dtype=np.float64)
     except (TypeError, ValueError, OverflowError) as exc:   # Overflow: an int beyond float64
-        raise ValueError(
-            f'Expected `{name}` to be an array of numbers with shape '
-            f'{_SHAPE_TEXT[trailing]}, got {type(x).__name__}: {exc}') from None
+        a = _message_array(x, name, trailing, exc)
     k = len(trailing)
     if a.shape[a.ndim - k:] != trailing or a.ndim < k:
         raise ValueError(
             f'Expected `{name}` to have shape {_SHAPE_TEXT[trailing]}, got {a.shape}.')
     return kernel_ready(a)
+
+
+def _message_array(x: Any, name: str, trailing: tuple[int, ...],
+                   refused: Exception) -> NDArray[Any]:
+    """
+    Return ``x``, which numpy refused, as an array of its messages' values, or raise ValueError.
+
+    ``x``: an object with attributes x, y, z(, w) or a (nested) list or tuple
+    of them (``_messages``). The error names what is wrong: the first object
+    lacking an attribute, else what numpy says of the values (or of ``x``
+    itself, ``refused``, when it holds no such objects).
+    """
+    values, found = message_values(x, trailing)
+    why: object = refused
+    if found:
+        try:
+            return np.asarray(values, dtype=np.float64)
+        except (TypeError, ValueError, OverflowError) as exc:
+            why = exc
+    lacking = refusal(x, trailing)   # an object without the attributes: named first
+    objects = (f' or objects with attributes {", ".join(QUATERNION_FIELDS[:trailing[0]])}'
+               if found or lacking else '')
+    raise ValueError(f'Expected `{name}` to be an array of numbers with shape '
+                     f'{_SHAPE_TEXT[trailing]}{objects}, got {type(x).__name__}: '
+                     f'{lacking or why}') from None
 
 
 def kernel_ready(a: NDArray[Any]) -> FloatArray:
