@@ -23,6 +23,22 @@ from rotation_node.conversions._runtime import KERNELS, matrix_samples, samples
 
 _runtime.load_numba()   # the compiled views below are compiled here
 
+
+@pytest.fixture(autouse=True)
+def _no_background_loader():
+    """
+    Run each test without a background kernel loader, whatever ran before in the process.
+
+    A node made in this process (another module's test on the same worker) leaves its
+    loader's hook set for the process's life: kernels and tuple forms would be handed to
+    it and load later, instead of in the calling thread as these tests expect. A test
+    about the loader sets the hook itself.
+    """
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(_runtime, '_on_first_use', None)
+        yield
+
+
 _MODULES = ['rotation_node.conversions._quaternion', 'rotation_node.conversions._matrix',
             'rotation_node.conversions._euler', 'rotation_node.conversions._axis_angle',
             'rotation_node.conversions._trigonometry',
