@@ -1086,3 +1086,79 @@ def test_large_batches_use_threads_only_while_a_cpu_is_idle_unless_chosen(monkey
     monkeypatch.setattr(os, 'getloadavg', lambda: (11.9, 11.0, 11.5))
     monkeypatch.setattr(_runtime, '_threads_chosen', True)   # set_threads or the variable
     assert _runtime.batch_threads(large) == 2
+
+
+# ------------------------------------------------------------ tuple forms and warm_up
+
+@pytest.fixture(autouse=True, scope='module')
+def _tuple_forms_cached():
+    """
+    warm_up's tuple forms in the disk cache (seconds once, then cache loads).
+
+    Without a background loader, a call loads a due tuple form only from the
+    cache (``_runtime.copied``): the tests above that make tuple forms due at
+    once (``TUPLE_COPIES`` 1) find them there, as after ``./run.sh``.
+    """
+    warm_up.warm_up()
+
+
+def _copied_kernels(monkeypatch):
+    """Record each kernel that a single sample copied into arrays reaches, with its widths."""
+    reached = {}
+    copied = _runtime.copied
+
+    def recording(kernel_, widths):
+        reached[kernel_] = widths
+        copied(kernel_, widths)
+
+    monkeypatch.setattr(_runtime, 'copied', recording)
+    return reached
+
+
+def _listed(sample):
+    return sample.tolist() if isinstance(sample, np.ndarray) else sample
+
+
+def test_warm_up_leaves_every_tuple_form_that_single_samples_reach_in_the_cache(monkeypatch):
+    """After warm_up, each due tuple form loads from the disk cache: nothing compiles."""
+    _runtime.compile_kernels()
+    monkeypatch.setattr(_runtime, '_loading_forced', False)
+    monkeypatch.setattr(_runtime, 'TUPLE_COPIES', 1)
+    for kernel in KERNELS:   # as in a new process: no tuple form loaded yet
+        monkeypatch.setattr(kernel, 'call_tuple', None)
+        monkeypatch.setattr(kernel, 'tuple_copies', 0)
+    reached = _copied_kernels(monkeypatch)
+    with _runtime.KernelCompilation(lambda: None) as compilation:
+        for name, call, sample in _CASES:   # one argument a list
+            call(_listed(sample))
+        q, v = (0.1, 0.2, 0.3, 0.9), (1.0, 2.0, 3.0)
+        for name, call, arguments in _message_calls(q, v):   # every argument a tuple
+            call(*arguments)
+        rk.quaternion_derivative(q, v)
+        rk.angular_velocity_from_euler_rates(v, v, 'xyz')
+    assert compilation.compiled == 0
+    assert len(reached) >= 15, sorted(k.__name__ for k in reached)
+    assert [k.__name__ for k in reached if k.call_tuple is None] == []
+
+
+def test_a_call_never_compiles_a_tuple_form_that_is_not_cached(monkeypatch, tmp_path):
+    """Without warm_up's cache, a due tuple form is left alone: the copies go on, no stall."""
+    from numba.core import config
+    kernel = next(k for k in KERNELS if k.__name__ == '_euler_from_quaternion_kernel')
+    _runtime.compile_kernels([kernel])
+    monkeypatch.setattr(config, 'CACHE_DIR', str(tmp_path))   # an empty cache
+    monkeypatch.setattr(_runtime, '_loading_forced', False)
+    monkeypatch.setattr(_runtime, 'TUPLE_COPIES', 2)
+    monkeypatch.setattr(kernel, 'call_tuple', None)
+    monkeypatch.setattr(kernel, 'tuple_copies', 0)
+    q = [0.1, -0.2, 0.3, 0.9]
+    expected = rc.euler_from_quaternion(np.array(q), 'ZYX')
+    with _runtime.KernelCompilation(lambda: None) as compilation:
+        for _ in range(5):
+            _same_result(rc.euler_from_quaternion(q, 'ZYX'), expected)
+    assert compilation.compiled == 0 and kernel.call_tuple is None
+    assert kernel.tuple_copies < 0   # not counted towards it any more: checked once
+    with _runtime.KernelCompilation(lambda: None) as compilation, \
+            _runtime.compiling_tuple_forms():   # as warm_up asks: compiled at once
+        _same_result(rc.euler_from_quaternion(q, 'ZYX'), expected)
+    assert compilation.compiled == 1 and kernel.call_tuple is not None

@@ -49,7 +49,9 @@ The policy, per kernel:
 - a loaded kernel called with single samples given as lists or tuples loads
   its tuple form (the same source compiled for tuples of floats, see
   :meth:`Kernel.load_tuple_form`) once it has copied :data:`TUPLE_COPIES`
-  of them into arrays; the background loader loads it where there is one;
+  of them into arrays: from the disk cache only (``warm_up`` puts it there;
+  a call never compiles one unasked), or by the background loader where
+  there is one;
 - :func:`compile_kernels` loads kernels explicitly (``warm_up`` all of them),
   and ``warm_up.load_in_background`` loads each kernel in a background thread
   as soon as it is first used, while calls run interpreted until it is ready
@@ -76,13 +78,15 @@ or wherever ``NUMBA_CACHE_DIR`` says.
 from __future__ import annotations
 
 from array import array as PythonArray
+from contextlib import contextmanager
 import importlib.util
 import math
 import os
 import sys
 import threading
 import time
-from typing import Any, Callable, NamedTuple, Optional, Sequence, TYPE_CHECKING, TypeGuard
+from typing import (
+    Any, Callable, Iterator, NamedTuple, Optional, Sequence, TYPE_CHECKING, TypeGuard)
 
 import numpy as np
 
@@ -281,12 +285,16 @@ INTERPRETED_SECONDS = 0.5
 # tuples of floats into arrays loads its tuple form (Kernel.load_tuple_form)
 # (with ROTATION_NODE_COMPILED=1 at the first such call after its own load).
 # Measured (benchmarks/bench_conversions.py --single): the tuple form saves
-# 0.1-0.4 us a call, and loading it from the disk cache costs ~10-30 ms
-# (seconds to compile it, once after installation): as for INTERPRETED_SECONDS,
-# a caller pays the load once its copies have cost about as much, and a
-# program converting a few thousand samples never pays for it.
+# 0.1-0.4 us a call, and loading it from the disk cache costs ~10-30 ms: as for
+# INTERPRETED_SECONDS, a caller pays the load once its copies have cost about as
+# much, and a program converting a few thousand samples never pays for it. Compiling
+# it costs seconds: warm_up does (and caches it), a call only where asked (copied).
 TUPLE_COPIES = 100_000
 _NO_TUPLE_FORM = -(1 << 62)   # tuple_copies of a kernel without a tuple form
+# tuple_copies of a kernel whose tuple form was due but not in the disk cache: a call
+# never compiles one (seconds) in the calling thread unasked (warm_up caches them); the
+# kernel goes on copying.
+_TUPLE_FORM_NOT_CACHED = -(1 << 61)
 
 
 def typed_first_call(dispatcher: Any) -> Callable[..., Any]:
@@ -380,9 +388,12 @@ class Kernel:
             self.dispatcher = dispatcher
             self.call, self.call_unchecked = dispatcher, dispatcher.call_unchecked
 
-    def load_tuple_form(self, widths: tuple[int, ...]) -> None:
+    def load_tuple_form(self, widths: tuple[int, ...], may_compile: bool = True) -> None:
         """
         Load the kernel's tuple form: its first ``len(widths)`` inputs one sample as floats.
+
+        ``may_compile=False``: only from the disk cache; where it is not there,
+        nothing (and ``tuple_copies`` stops counting towards it).
 
         The same source compiled (or loaded from the disk cache) for another
         signature, in a dispatcher of its own: input ``i`` a tuple of
@@ -394,7 +405,8 @@ class Kernel:
         takes its inputs other than by ``samples()`` has none (stays None).
         """
         with _loading:
-            if self.call_tuple is not None or self.tuple_copies < 0:
+            if (self.call_tuple is not None or self.tuple_copies == _NO_TUPLE_FORM
+                    or (self.tuple_copies < 0 and not may_compile)):
                 return
             self.load()
             from numba import njit, types
@@ -407,6 +419,9 @@ class Kernel:
             dispatcher = njit(cache=True, nogil=True, error_model='numpy')(
                 _compiled_copy(self.py_func))
             dispatcher.kernel_signature = signature   # a kernel's compilation (KernelCompilation)
+            if not may_compile and not _is_cached(dispatcher, signature):
+                self.tuple_copies = _TUPLE_FORM_NOT_CACHED
+                return
             try:
                 dispatcher.compile(signature)
             except NumbaError:
@@ -433,6 +448,23 @@ class Kernel:
             return self.py_func(*args)
         finally:
             self.interpreted_seconds += time.perf_counter() - start
+
+
+def _is_cached(dispatcher: Any, signature: Any) -> bool:
+    """
+    Whether numba's disk cache holds ``dispatcher``'s code for ``signature`` (loading it once).
+
+    ``dispatcher.compile`` then loads it again (~10 ms, once a kernel), rather
+    than this repeating numba's private steps of installing a cached overload.
+    The check is numba's own (``Dispatcher.compile`` asks its ``_cache`` so);
+    a numba without that private attribute counts as not cached: no compilation.
+    """
+    from numba.core.compiler_lock import global_compiler_lock
+    cache = getattr(dispatcher, '_cache', None)
+    if cache is None:
+        return False
+    with global_compiler_lock:
+        return cache.load_overload(signature, dispatcher.targetctx) is not None
 
 
 class TupleForm(NamedTuple):
@@ -985,17 +1017,40 @@ def copied(kernel_: Any, widths: tuple[int, ...]) -> None:
     ``widths``: the sample widths of its list arguments. A loaded kernel
     loads its tuple form when the count says so (:data:`TUPLE_COPIES`), or
     hands it to the background loader, where there is one (the node's:
-    a message callback never waits for a compilation).
+    a message callback never waits for a compilation). Without one, the
+    calling thread loads it only from the disk cache (``warm_up`` puts it
+    there), never compiling it unasked: it compiles it only with
+    ``ROTATION_NODE_COMPILED=1``, or within :func:`compiling_tuple_forms`.
     """
     kernel_.tuple_copies += 1
-    if not ((kernel_.tuple_copies >= TUPLE_COPIES or _loading_forced)
-            and kernel_.dispatcher is not None):
+    asked = _loading_forced or _tuple_forms_compiled
+    if not ((kernel_.tuple_copies >= TUPLE_COPIES or asked) and kernel_.dispatcher is not None):
         return
-    if _on_first_use is None or _loading_forced:
-        kernel_.load_tuple_form(widths)
+    if _on_first_use is None or asked:
+        kernel_.load_tuple_form(widths, may_compile=asked)
     elif not kernel_.tuple_form_queued:   # a background loader (the node's) loads it
         kernel_.tuple_form_queued = True
         _on_first_use(TupleForm(kernel_, widths))
+
+
+# Within compiling_tuple_forms(): copied() compiles (or loads) each tuple form at once.
+_tuple_forms_compiled = False
+
+
+@contextmanager
+def compiling_tuple_forms() -> Iterator[None]:
+    """
+    Within the block, a loaded kernel taking a list or tuple compiles or loads its tuple form.
+
+    At its first such call (the next, for a kernel loaded by that call):
+    how ``warm_up`` compiles and caches the tuple forms that single samples reach.
+    """
+    global _tuple_forms_compiled
+    _tuple_forms_compiled = True
+    try:
+        yield
+    finally:
+        _tuple_forms_compiled = False
 
 
 def single_sample(x: object, trailing: tuple[int, ...], argument: int = 0) -> Optional[FloatArray]:

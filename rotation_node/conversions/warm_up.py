@@ -3,13 +3,16 @@ Compile and cache every kernel once: ``python -m rotation_node.conversions.warm_
 
 Each kernel (conversions and kinematics) is compiled for its one signature
 and written to numba's disk cache, so that no later process compiles: a first
-call then costs a cache load, not seconds of compilation. ``./run.sh`` runs
+call then costs a cache load, not seconds of compilation. So is the tuple form
+of each kernel that a single sample given as a list or tuple reaches
+(``_runtime.copied``), which a later process loads only from the cache. ``./run.sh`` runs
 this after installing. :func:`announcing_compilation` is how a program's
 start-up says that it is compiling, when it is; :func:`load_in_background`
 is how a long-running program (the node) starts without waiting for it.
 """
 import argparse
 from contextlib import contextmanager
+import inspect
 import queue
 import sys
 import threading
@@ -18,6 +21,16 @@ from typing import Callable, Iterator, List, Optional
 
 from . import _runtime
 from ._runtime import KernelCompilation
+
+# One single sample for each argument name of the public functions taking samples
+# (their required arguments): a public function whose required arguments are all
+# named here is called with them as tuples, so that its kernel's tuple form is
+# compiled; the others take no single samples as tuples (matrices, time series).
+_TUPLE_ARGUMENTS = {
+    'q': (0.0, 0.0, 0.0, 1.0), 'p': (0.0, 0.0, 0.0, 1.0), 'q_dot': (0.0, 0.0, 0.0, 0.0),
+    'v': (0.1, 0.2, 0.3), 'axis': (0.0, 0.0, 1.0), 'angles': (0.1, 0.2, 0.3),
+    'rates': (0.1, 0.2, 0.3), 'omega': (0.1, 0.2, 0.3), 'angle': 0.5, 'seq': 'xyz',
+}
 
 #: What a start that compiles kernels says once it has compiled for a second (measured
 #: after `colcon build`: docs/node.md).
@@ -35,9 +48,24 @@ def warm_up() -> int:
         The number of kernels.
 
     """
-    from .. import kinematics  # noqa: F401  (declares its kernels)
-    from ._runtime import compile_kernels
-    return compile_kernels()
+    from .. import conversions, kinematics
+    from ._runtime import compile_kernels, compiling_tuple_forms
+    count = compile_kernels()
+    with compiling_tuple_forms():
+        for module in (conversions, kinematics):
+            for name in module.__all__:
+                _call_with_tuples(getattr(module, name))
+    return count
+
+
+def _call_with_tuples(function: object) -> None:
+    """Call ``function`` with a tuple for each required argument, if all are named in the table."""
+    if not inspect.isfunction(function):
+        return
+    required = [parameter.name for parameter in inspect.signature(function).parameters.values()
+                if parameter.default is inspect.Parameter.empty]
+    if required and all(name in _TUPLE_ARGUMENTS for name in required):
+        function(*(_TUPLE_ARGUMENTS[name] for name in required))
 
 
 @contextmanager
