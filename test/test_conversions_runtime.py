@@ -230,7 +230,14 @@ def test_a_kernel_called_with_other_types_raises_instead_of_compiling():
 
 
 def _checking_unchecked_call(kernel, calls):
-    """Return a ``call_unchecked`` asserting its contract: arrays of the declared types."""
+    """
+    Return a ``call_unchecked`` asserting its contract: arrays of the declared types.
+
+    It runs the kernel as it is (its compiled code once loaded, else its Python
+    function) and never loads it: loading installs the kernel's own
+    ``call_unchecked`` over this one (as with ROTATION_NODE_COMPILED=1, where a
+    kernel loads at its first call), and later calls would go uncounted.
+    """
     declared = kernel.numba_signature().args
 
     def call(*args):
@@ -239,7 +246,8 @@ def _checking_unchecked_call(kernel, calls):
             if isinstance(expected, types.Array):
                 assert typeof(argument) == expected, (kernel.__qualname__, argument)
         calls.append(kernel)
-        return kernel(*args)
+        run = kernel.interpreted if kernel.dispatcher is None else kernel.dispatcher
+        return run(*args)
 
     return call
 
@@ -346,16 +354,19 @@ print('numba' in sys.modules, 'llvmlite' in sys.modules,
 
 @pytest.mark.slow
 def test_small_calls_run_interpreted_without_numba_and_a_large_one_loads_its_kernel():
+    env = dict(os.environ)
+    env.pop('ROTATION_NODE_COMPILED', None)   # the default policy, whatever the caller's
     small = _runtime.INTERPRETED_VALUES // 4
-    assert _python(_POLICY.format(n=small)).split() == ['False', 'False', '[]']
+    assert _python(_POLICY.format(n=small), env).split() == ['False', 'False', '[]']
     # the kernel of the call's schedule (a batch schedule from BATCH_SAMPLES samples)
     used = ('_euler_from_quaternion_batch_kernel' if small + 1 >= _runtime.BATCH_SAMPLES
             else '_euler_from_quaternion_kernel')
-    assert _python(_POLICY.format(n=small + 1)).split() == ['True', 'True', f"['{used}']"]
+    assert _python(_POLICY.format(n=small + 1), env).split() == ['True', 'True', f"['{used}']"]
 
 
 def test_a_kernel_is_loaded_once_it_has_run_interpreted_for_as_long_as_a_load_takes(
         monkeypatch):
+    monkeypatch.setattr(_runtime, '_loading_forced', False)   # not ROTATION_NODE_COMPILED=1
     kernel = _runtime.Kernel(_quaternion._conjugate_kernel.py_func, (_runtime.FLAT_IN,
                                                                      _runtime.FLAT_OUT),
                              _runtime.STATUS)
@@ -820,8 +831,10 @@ def _counted_tuple_forms(monkeypatch, calls):
 
 
 def test_python_values_take_the_tuple_form_once_loaded(monkeypatch):
+    monkeypatch.setattr(_runtime, '_loading_forced', False)   # not ROTATION_NODE_COMPILED=1
     monkeypatch.setattr(_runtime, 'TUPLE_COPIES', 3)
     kernel = _runtime.KERNELS[[k.__name__ for k in KERNELS].index('_rotate_kernel')]
+    _runtime.compile_kernels([kernel])   # loaded, whichever tests ran before
     q, v = [0.1, -0.2, 0.3, 0.9], (1.0, 2.0, 3.0)
     expected = rc.rotate_vector(np.array(q), np.array(v))
     monkeypatch.setattr(kernel, 'call_tuple', None)
