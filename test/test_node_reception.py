@@ -86,6 +86,22 @@ def test_a_restarted_publisher_is_a_new_sequence():
     assert reception.lost == 0
 
 
+@pytest.mark.parametrize('gid', [None, b'A'], ids=['without_gids', 'with_gids'])
+def test_a_message_older_than_one_accepted_stays_lost(gid):
+    """
+    A replaced subscription's successor delivers, from the publisher's history, messages
+    the old one skipped, after newer ones (seen under load, qos.depth changed mid-stream).
+    """
+    reception = Reception(100)
+    assert all(reception.accept(info(n, gid=gid)) for n in [*range(1, 11), *range(20, 26)])
+    assert reception.lost == 9
+    assert not any(reception.accept(info(n, gid=gid)) for n in range(11, 16))   # late
+    assert reception.accept(info(26, gid=gid)) and not reception.accept(info(22, gid=gid))
+    assert (reception.lost, reception.duplicates, reception.publishers) == (9, 1, 1)
+    assert all(reception.accept(info(n, gid=gid)) for n in range(27, 30))
+    assert reception.lost == 9
+
+
 def test_publishers_followed_are_bounded():
     reception = Reception(1000)
     for publisher in range(MAX_PUBLISHERS + 3):

@@ -13,6 +13,9 @@ gave it (1, 2, 3, ... per publisher) and the publisher's source timestamp.
 - **duplicates**: while the node replaces a subscription (a new QoS), the old
   and the new one both receive the same messages for a moment; a message
   already accepted is recognised by its (sequence number, source timestamp).
+  The new one can also deliver, from the publisher's history, messages older
+  than the last one accepted from that publisher, which the old one skipped:
+  they were counted lost in its gap, and are not accepted (late).
 
 Which publisher sent a message: newer rclpy releases put the publisher's GID in
 the message info (``publisher_gid``) and gaps are then counted per publisher,
@@ -79,7 +82,8 @@ class Reception:
         self.duplicates = 0
         self._seen: Set[Identity] = set()
         self._order: Deque[Identity] = collections.deque()   # of _seen, oldest first
-        # per publisher [GID or None, last number], the most recently heard first
+        # per publisher [GID or None, last number, its source timestamp], the most recently
+        # heard first
         self._sequences: List[list] = []
         self._on_new_publisher = on_new_publisher
         self.resize(memory)
@@ -115,12 +119,33 @@ class Reception:
         order.append(identity)
         if len(order) > self._memory:
             seen.discard(order.popleft())
-        number = identity[0]
+        number, stamp = identity
         if number is not None:
-            self.lost += self._gap(number, publisher_key(info))
+            key = publisher_key(info)
+            if self._late(number, stamp, key):
+                return False
+            self.lost += self._gap(number, key, stamp)
         return True
 
-    def _gap(self, number: int, key: Optional[bytes]) -> int:
+    def _late(self, number: int, stamp: Optional[int], key: Optional[bytes]) -> bool:
+        """
+        Whether a message is older than one already accepted from its publisher.
+
+        Counted lost in that publisher's gap already; accepting it would count it twice
+        (and convert it out of order). Its publisher: the one of its GID; without GIDs,
+        a sequence past its number, whose last message was sent later, within the
+        messages remembered (a restarted publisher's messages are sent later than all
+        before, a publisher far behind another is another).
+        """
+        for sequence_key, last, last_stamp in self._sequences:
+            if sequence_key == key and number < last and (
+                    key is not None
+                    or (stamp is not None and last_stamp is not None and stamp < last_stamp
+                        and last - number <= self._memory)):
+                return True
+        return False
+
+    def _gap(self, number: int, key: Optional[bytes], stamp: Optional[int]) -> int:
         """Messages missing before ``number`` in the sequence it continues."""
         sequences = self._sequences
         if sequences:
@@ -128,29 +153,30 @@ class Reception:
             # the one publisher heard last, in order: the common case, first
             if first[0] == key and first[1] < number and (key is not None or len(sequences) == 1):
                 gap = number - first[1] - 1
-                first[1] = number
+                first[1:] = number, stamp
                 return gap
         if key is not None:   # the publisher is known: its own sequence, exactly
             for k, sequence in enumerate(sequences):
                 if sequence[0] == key:
                     gap = max(number - sequence[1] - 1, 0)
-                    sequence[1] = max(number, sequence[1])
+                    if number > sequence[1]:
+                        sequence[1:] = number, stamp
                     sequences.insert(0, sequences.pop(k))
                     return gap
-            return self._new_sequence(key, number)
+            return self._new_sequence(key, number, stamp)
         below = [(sequence[1], k) for k, sequence in enumerate(sequences)
                  if sequence[0] is None and sequence[1] < number]
         if not below:   # a new publisher (or one that restarted)
-            return self._new_sequence(None, number)
+            return self._new_sequence(None, number, stamp)
         last, k = max(below)
         sequence = sequences.pop(k)
-        sequence[1] = number
+        sequence[1:] = number, stamp
         sequences.insert(0, sequence)
         return number - last - 1
 
-    def _new_sequence(self, key: Optional[bytes], number: int) -> int:
+    def _new_sequence(self, key: Optional[bytes], number: int, stamp: Optional[int]) -> int:
         """Follow a publisher from its message ``number``; nothing before it counts."""
-        self._sequences.insert(0, [key, number])
+        self._sequences.insert(0, [key, number, stamp])
         del self._sequences[MAX_PUBLISHERS:]
         if self._on_new_publisher is not None:
             self._on_new_publisher()
