@@ -89,6 +89,8 @@ def test_a_restarted_publisher_is_a_new_sequence():
 @pytest.mark.parametrize('gid', [None, b'A'], ids=['without_gids', 'with_gids'])
 def test_a_message_older_than_one_accepted_stays_lost(gid):
     """
+    Late messages are not accepted, and stay counted lost.
+
     A replaced subscription's successor delivers, from the publisher's history, messages
     the old one skipped, after newer ones (seen under load, qos.depth changed mid-stream).
     """
