@@ -24,6 +24,18 @@ from rotation_node.conversions._runtime import KERNELS, matrix_samples, samples
 _runtime.load_numba()   # the compiled views below are compiled here
 
 
+@pytest.fixture(autouse=True, scope='module')
+def _tuple_forms_cached():
+    """
+    warm_up's tuple forms in the disk cache (seconds once, then cache loads).
+
+    Without a background loader, a call loads a due tuple form only from the
+    cache (``_runtime.copied``): the tests that make tuple forms due at once
+    (``TUPLE_COPIES`` 1) find them there, as after ``./run.sh``.
+    """
+    warm_up.warm_up()
+
+
 @pytest.fixture(autouse=True)
 def _no_background_loader():
     """
@@ -1102,17 +1114,6 @@ def test_large_batches_use_threads_only_while_a_cpu_is_idle_unless_chosen(monkey
 
 
 # ------------------------------------------------------------ tuple forms and warm_up
-
-@pytest.fixture(autouse=True, scope='module')
-def _tuple_forms_cached():
-    """
-    warm_up's tuple forms in the disk cache (seconds once, then cache loads).
-
-    Without a background loader, a call loads a due tuple form only from the
-    cache (``_runtime.copied``): the tests above that make tuple forms due at
-    once (``TUPLE_COPIES`` 1) find them there, as after ``./run.sh``.
-    """
-    warm_up.warm_up()
 
 
 def _copied_kernels(monkeypatch):
