@@ -20,6 +20,7 @@ from rosidl_parser.definition import (
     BoundedSequence, BoundedString, NamespacedType)
 
 from rotation_node.wire.message_types import message_class
+from rotation_node.wire.qos_yaml import profiles_yaml
 
 _INTEGER_RANGES = {
     'int8': (-2**7, 2**7), 'uint8': (0, 2**8), 'int16': (-2**15, 2**15), 'uint16': (0, 2**16),
@@ -233,3 +234,22 @@ def file_snapshot(directory):
     return {os.path.relpath(os.path.join(root, name), directory):
             open(os.path.join(root, name), 'rb').read()
             for root, _, names in os.walk(directory) for name in names}
+
+
+def rosbags_qos_yaml(profiles):
+    """
+    Serialise QoS profiles as the ``rosbags`` package parses them to rosbag2's YAML.
+
+    Parameters
+    ----------
+    profiles : list of rosbags.interfaces.Qos
+        E.g. the ``offered_qos_profiles`` of a rosbags connection.
+
+    Returns
+    -------
+    str
+        A YAML list in the format of :func:`profiles_yaml`, ``'[]'`` for none.
+
+    """
+    from rosbags.rosbag2.metadata import dump_qos_v9
+    return profiles_yaml(dump_qos_v9(list(profiles)))

@@ -414,7 +414,8 @@ def test_same_wire_format_is_rosbags_convert_rule():
 def test_a_latched_topic_offers_what_rosbags_convert_gives_it():
     from rosbags.convert.converter import LATCH
     from rotation_node.bag.reading.ros1 import LATCHED_QOS_YAML
-    from rotation_node.wire.qos_yaml import profiles_yaml, rosbags_qos_yaml
+    from bag_helpers import rosbags_qos_yaml
+    from rotation_node.wire.qos_yaml import profiles_yaml
     assert LATCHED_QOS_YAML == rosbags_qos_yaml(LATCH)
     assert profiles_yaml([]) == rosbags_qos_yaml([])
 

@@ -155,7 +155,7 @@ def _rosbags_topics(path):
     """Return the topics rosbags' own sqlite3 reader reads, in this module's terms."""
     from rosbags.interfaces import MessageDefinitionFormat
     from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
-    from rotation_node.wire.qos_yaml import rosbags_qos_yaml
+    from bag_helpers import rosbags_qos_yaml
     encodings = {MessageDefinitionFormat.MSG: 'ros2msg', MessageDefinitionFormat.IDL: 'ros2idl',
                  MessageDefinitionFormat.NONE: None}
     reader = Sqlite3Reader(path)

@@ -1,4 +1,5 @@
 """Tests of rotation_node.wire.qos_yaml: rosbag2's QoS YAML without rclpy or PyYAML's emitter."""
+from bag_helpers import rosbags_qos_yaml
 import pytest
 from rclpy.duration import Duration, Infinite
 from rclpy.qos import DurabilityPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
@@ -6,8 +7,7 @@ from rosbags.interfaces import (
     Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime)
 from rotation_node.parameters import NodeParameters
 from rotation_node.wire.qos import qos_profile, qos_profiles_yaml
-from rotation_node.wire.qos_yaml import (
-    output_qos_yaml, profiles_yaml, rosbags_qos_yaml)
+from rotation_node.wire.qos_yaml import output_qos_yaml, profiles_yaml
 import yaml
 
 

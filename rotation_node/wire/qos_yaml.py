@@ -9,8 +9,7 @@ durations as ``{sec, nsec}``. :func:`profiles_yaml` writes that shape
 directly, as PyYAML's ``safe_dump`` writes it, without PyYAML's emitter
 (most of the time of writing a small bag) and without rclpy (whose import
 loads the ROS client libraries): ``rotation_bag convert`` offers
-:func:`output_qos_yaml` for the topics it adds, and bags read with rosbags
-get :func:`rosbags_qos_yaml`. Profiles as rclpy objects, and reading the YAML:
+:func:`output_qos_yaml` for the topics it adds. Profiles as rclpy objects, and reading the YAML:
 :mod:`rotation_node.wire.qos`.
 """
 from __future__ import annotations
@@ -119,22 +118,3 @@ def profiles_yaml(entries: Iterable[Mapping[str, Any]]) -> str:
                                   default_flow_style=False).rstrip('\n')
         lines += entry_lines
     return '\n'.join(lines) if lines else '[]'
-
-
-def rosbags_qos_yaml(profiles: Iterable[Any]) -> str:
-    """
-    Serialise QoS profiles as the ``rosbags`` package parses them to rosbag2's YAML.
-
-    Parameters
-    ----------
-    profiles : list of rosbags.interfaces.Qos
-        E.g. the ``offered_qos_profiles`` of a rosbags connection.
-
-    Returns
-    -------
-    str
-        A YAML list in the format of :func:`profiles_yaml`, ``'[]'`` for none.
-
-    """
-    from rosbags.rosbag2.metadata import dump_qos_v9
-    return profiles_yaml(dump_qos_v9(list(profiles)))
