@@ -15,17 +15,7 @@ class BagError(RotationNodeError, ValueError):
 
 
 class DiskFullError(BagError):
-    """
-    The disk filled while a bag was written.
-
-    Attributes
-    ----------
-    kept : int
-        Messages written to the bag before (a closed bag holds them).
-    dropped : int
-        Messages that were not written.
-
-    """
+    """The disk filled while a bag was written: ``kept`` messages are in it, ``dropped`` not."""
 
     def __init__(self, message: str, *, kept: int, dropped: int) -> None:
         super().__init__(message)

@@ -2,45 +2,17 @@
 Parameters of the orientation-conversion node, in one table: :class:`NodeParameters`.
 
 Each field's :class:`ParameterSpec` holds its ROS name, default, description and
-allowed values; :data:`PARAMETERS` lists them in declaration order. The node
-declares its ROS parameters from it (a ``ParameterDescriptor`` each), and
-``rotation_bag convert`` reads the same parameters from a ROS parameters file
-(:func:`parameters_from_yaml`): both accept exactly the same values, typed as ROS
-types them (a double needs ``0.0``, not ``0``). This module does not import rclpy.
-
-Where rcl and rclpy differ
---------------------------
-A node reads its ``--params-file`` through rcl (``rcl_yaml_param_parser``);
-rclpy's ``rclpy.parameter.parameter_dict_from_yaml_file`` reads the same file
-otherwise. Files are read here as rcl reads them, so that ``convert`` and the
-node accept the same files; these differences are the reason this module and
-:mod:`rotation_node.ros_yaml` read files themselves:
-
-1. Plain scalars are typed by rcl's ``get_value`` (``rcl_yaml_param_parser/src/
-   parse.c``: the yes/no/on/off booleans, ``strtol`` base 0, then ``strtod``),
-   not by PyYAML's YAML 1.1 resolvers that rclpy's ``yaml.safe_load`` uses: ``1e3``,
-   ``1.0e3`` and ``0x1p-3`` are doubles (rclpy: strings), ``1_000`` is a string
-   (rclpy: 1000); a number beyond the double range is a string
-   (:func:`rotation_node.ros_yaml.ros_scalar`).
-2. Aliases are refused (rcl ``parser.c``: an alias event is an error; rclpy
-   expands them), and a key given twice is an error (rclpy keeps the last).
-3. Node keys: rcl nests namespace keys (``robot: {rotation_node: {ros__parameters:
-   ...}}`` is ``/robot/rotation_node``, ``parser.c``/``namespace.c``) and checks
-   the names; the node applies sections whose key matches it with the wildcards
-   ``*`` (one token) and ``**`` (any tokens), in file order (rclcpp
-   ``parameter_map.cpp``; rclpy's ``node.cpp`` likewise). rclpy's function matches
-   keys exactly and ``/**`` only (:func:`parameters_file_sections`,
-   :func:`_node_key_matches`).
-4. Values: rcl refuses a parameter without a value (``null``) and a list mixing
-   types or holding mappings (``parse.c``); rclpy turns either into a string
-   (:func:`_value_problem`).
-5. Naming: errors name the file (or, for the temporary file launch_ros writes,
-   :data:`LAUNCH_PARAMETERS`), the section and the parameter; rcl names none
-   (:func:`parameters_file_label`).
-
-At run time rclpy checks each parameter of a ``set_parameters`` request on its
-own; the node checks the rules between parameters (``input_type: tf`` needs both
-``tf.*`` frames, ``mounting.tf_*`` both or neither) once a whole request is in.
+allowed values (:data:`PARAMETERS`). The node declares its parameters from it and
+``rotation_bag convert`` reads the same ones from a parameters file
+(:func:`parameters_from_yaml`): both accept exactly the same values and files.
+Files are read as rcl reads a ``--params-file``, not with rclpy's
+``parameter_dict_from_yaml_file``, which differs: scalars typed by rcl's
+``strtol``/``strtod`` (:mod:`rotation_node.ros_yaml`), aliases, duplicate keys,
+``null`` values and mixed lists refused, node keys nested as namespaces and
+matched with the wildcards ``*`` and ``**`` in file order (rclcpp's
+``parameter_map.cpp``), and errors naming the file, section and parameter.
+The rules between parameters (``input_type: tf`` needs both ``tf.*`` frames,
+``mounting.tf_*`` both or neither) are checked once all values are in.
 """
 from __future__ import annotations
 
@@ -67,8 +39,6 @@ NODE_NAME = 'rotation_node'
 INPUT_TYPES = tuple(registry.INPUTS)
 OUTPUTS = tuple(registry.OUTPUTS)
 FRAMES = ('body', 'world')
-COVARIANCE_FRAMES = ('fixed', 'body')
-RELIABILITIES = ('auto', 'reliable', 'best_effort')
 #: Parameters every rclpy node declares by itself; a parameters file may set them.
 ROS_BUILTIN_PARAMETERS = frozenset({'use_sim_time', 'start_type_description_service'})
 
@@ -78,8 +48,7 @@ class ParameterSpec(FieldSpec):
     """
     One node parameter: a field spec whose ``name`` is the ROS name (``'euler.sequence'``).
 
-    ``default``'s Python type is the parameter's type (a tuple of str is a ROS
-    string array); ``description`` is what ``ros2 param describe`` shows;
+    ``default``'s Python type is the parameter's (a tuple of str: a string array);
     ``rule`` says the allowed values in words where the kind cannot.
     """
 
@@ -139,11 +108,10 @@ def _frame_parameter(name, description, rule):
 @dataclass(frozen=True)
 class NodeParameters:
     """
-    The node's parameter values; always valid (checked on construction).
+    The node's parameter values; always valid (ParameterError naming the parameter).
 
-    Construct it with keyword arguments named after the fields, from ROS names
-    (:meth:`from_ros`), or from a parameters file (:func:`parameters_from_yaml`);
-    an invalid value raises ParameterError naming the ROS parameter.
+    From keyword arguments, ROS names (:meth:`from_ros`) or a parameters file
+    (:func:`parameters_from_yaml`).
     """
 
     input_type: str = _parameter(
@@ -184,7 +152,7 @@ class NodeParameters:
         'angular_velocity.output_frame', 'body', Choice(FRAMES),
         'Frame of the angular_velocity output')
     covariance_frame: str = _parameter(
-        'covariance.frame', 'fixed', Choice(COVARIANCE_FRAMES),
+        'covariance.frame', 'fixed', Choice(('fixed', 'body')),
         'Axes of the input orientation covariance: fixed (rotation about the world axes, '
         'REP 145) or body (about the body axes)')
     covariance_max_linearisation_ratio: float = _parameter(
@@ -230,7 +198,7 @@ class NodeParameters:
         ', not mounting.tf_sensor_frame; with mounting.tf_sensor_frame and '
         'mounting.body_rotation left at identity')
     qos_reliability: str = _parameter(
-        'qos.reliability', 'auto', Choice(RELIABILITIES),
+        'qos.reliability', 'auto', Choice(('auto', 'reliable', 'best_effort')),
         'Reliability of the input subscriptions and output publishers; auto: inputs adapt '
         'reliability and durability to what the publishers offer, outputs are reliable')
     qos_depth: int = _parameter(
@@ -258,23 +226,13 @@ class NodeParameters:
         return cls().replaced(values)
 
     def replaced(self, values: Mapping[str, Any]) -> NodeParameters:
-        """
-        Return a copy with the parameters named (by ROS name) in ``values`` changed.
-
-        Raises ParameterError for a name that is not a parameter, or an invalid value.
-        """
+        """Return a copy with the parameters in ``{ROS name: value}`` changed; ParameterError."""
         return replace(self, **checked_arguments(type(self), values, _PARAMETER_PATH,
                                                  unknown=unknown_parameter_error))
 
     @classmethod
     def check_each(cls, values: Mapping[str, Any]) -> None:
-        """
-        Check each value of ``{ROS name: value}`` on its own, not their combination.
-
-        For the values of one ``set_parameters`` request, whose combination
-        (``input_type: tf`` needs both frames) is checked once all are in. Raises
-        ParameterError for a name that is not a parameter, or an invalid value.
-        """
+        """Check each value of ``{ROS name: value}`` on its own (a ``set_parameters`` request)."""
         checked_arguments(cls, values, _PARAMETER_PATH, unknown=unknown_parameter_error)
 
     def to_ros(self) -> dict:
@@ -287,9 +245,7 @@ def mounting_frames_problem(params: NodeParameters) -> str:
     """
     Return why only one of the two ``mounting.tf_*`` frames is set ('' if both or neither).
 
-    Not checked on construction: ROS declares and sets parameters one at a
-    time, so the node checks it once all are set (at start-up, and per
-    ``set_parameters`` request); ``convert`` and ``export`` before reading.
+    Not checked on construction: ROS sets parameters one at a time.
     """
     sensor, body = params.mounting_tf_sensor_frame, params.mounting_tf_body_frame
     if bool(sensor) == bool(body):
@@ -338,20 +294,11 @@ def parameters_from_yaml(path: StrPath, node_name: str = NODE_NAME) -> NodeParam
     """
     Read the node's parameters from a ROS 2 parameters file, as the node reads its own.
 
-    The file has the format ``ros2 run ... --ros-args --params-file`` reads::
-
-        rotation_node:            # or /rotation_node, /**, /**/rotation_node
-          ros__parameters:
-            input_type: imu
-            euler:
-              sequence: ZYX       # nested keys join with '.', or write euler.sequence
-
-    Every section whose key matches ``node_name`` (a name, or ``/ns/name``; rcl
-    wildcards ``*`` and ``**`` in the keys) is applied in file order; sections
-    of other nodes are ignored, parameters not in the file keep their defaults.
-    Raises ParameterError, naming the file and the parameter, for a file that
-    cannot be read, is not valid YAML, has no section for the node, or sets an
-    unknown parameter or an invalid value.
+    Every section whose key matches ``node_name`` (a name or ``/ns/name``; keys may
+    use ``*`` and ``**``) is applied in file order; parameters not set keep their
+    defaults. ParameterError, naming the file and the parameter, for a file that
+    cannot be read or parsed, has no section for the node, or sets an unknown
+    parameter or an invalid value.
     """
     fq_name = node_name if node_name.startswith('/') else '/' + node_name
     sections = parameters_file_sections(path)
@@ -370,10 +317,8 @@ def parameters_from_yaml(path: StrPath, node_name: str = NODE_NAME) -> NodeParam
         raise ParameterError(f'{parameters_file_label(path)}: {exc}') from None
 
 
-#: launch_ros writes a launch file's ``parameters=[{...}]`` to such a file in the temporary
-#: directory (``NamedTemporaryFile(prefix='launch_params_')``): messages name it thus.
+# launch_ros writes a launch file's parameters=[{...}] to a temporary file named so.
 _LAUNCH_PARAMETERS_FILE = re.compile(r'launch_params_[A-Za-z0-9_]+')
-LAUNCH_PARAMETERS = 'the parameters the launch file gives'
 
 
 def parameters_file_label(path: StrPath) -> str:
@@ -382,19 +327,16 @@ def parameters_file_label(path: StrPath) -> str:
     if _LAUNCH_PARAMETERS_FILE.fullmatch(path.name):
         import tempfile   # (and shutil, random): only for the names launch_ros gives
         if path.parent == Path(tempfile.gettempdir()):
-            return LAUNCH_PARAMETERS
+            return 'the parameters the launch file gives'
     return f'parameters file {path}'
 
 
 def parameters_file_sections(path: StrPath) -> list[tuple[str, dict[str, Any]]]:
     """
-    Return the sections of a ROS 2 parameters file, for any node, as rcl reads them.
+    Return ``[(node key, {parameter: value})]`` of a parameters file, for any node, as rcl.
 
-    ``(node key, {parameter name: value})`` in file order, nested parameter names
-    joined with '.', nested node keys as namespaces (``robot: {rotation_node:
-    {ros__parameters: ...}}`` is the section ``robot/rotation_node``). Raises
-    ParameterError for a file that cannot be read, is not valid YAML, or is not
-    a mapping of node keys each holding a ``ros__parameters`` mapping.
+    Nested parameter names joined with '.', nested node keys as namespaces
+    (``robot/rotation_node``); ParameterError for what rcl refuses.
     """
     label = parameters_file_label(path)
     document = load_ros_yaml(path, label, ParameterError, aliases=False)

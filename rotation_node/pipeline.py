@@ -1,66 +1,37 @@
 """
 Conversion pipeline shared by the live node and ``rotation_bag convert``.
 
-:class:`ConversionPipeline` turns the messages of one input stream (the type
-named by the ``input_type`` parameter) into the output messages listed by
-``outputs``. It holds the per-stream state that conversions over time need
-(:class:`StreamState`: the previous orientation and stamp for the
-finite-difference angular velocity, the previous Euler angles for unwrapping,
-the previous quaternion for sign continuity), and it never raises on bad data:
-a bad message is dropped or partly converted, counted in
-:attr:`ConversionPipeline.stats` by reason (:data:`REASONS`), and reported to
-an optional ``on_issue`` callback. All rotation math is done by
-:mod:`rotation_node.conversions` and :mod:`rotation_node.kinematics`.
+:class:`ConversionPipeline` turns the messages of one input stream into the
+configured outputs. Each sample passes :data:`SAMPLE_TRANSFORMS`; then the
+named values the outputs need are computed once each, in the order of
+:data:`VALUES`, each unavailable (None) when one it requires is, and each
+output is computed from its values or skipped. Bad data never raises: it is
+dropped or partly converted, counted in :class:`PipelineStats` and reported
+with its text in :data:`REASONS`.
 
-The input and output types are declared in :mod:`rotation_node.registry`: an
-input message is read into samples (header, orientation, optional angular
-velocity and covariance), each sample passes the input-stage transforms of
-:data:`SAMPLE_TRANSFORMS`, and then the named values an output needs
-(:data:`rotation_node.registry.PIPELINE_VALUES`) are computed once each, in
-the order of :data:`VALUES`, each from the values it depends on; a value is
-unavailable (None) when one it requires is. Each configured output is then
-computed from its values, or skipped when one is unavailable.
-
-Each :class:`Value` has a per-message form (:meth:`ConversionPipeline.process`,
-:meth:`~ConversionPipeline.process_values`: one message, the node) and, where
-it has one, a block form beside it (:meth:`ConversionPipeline.process_block`:
-a :class:`~rotation_node.sample_block.SampleBlock` of samples as arrays, one
-library call per conversion, ``rotation_bag convert``). Both forms read and
-write the same :class:`StreamState` and counters and report through the same
-reason table, so that a stream can go block by block and message by message
-in any mix, and give the same numbers bit for bit, the same counters and the
-same reports in the same order (per sample in stream order; within a sample,
-in the order of :data:`VALUES`). :func:`block_form_missing` says when the
-parameters leave a stream to the per-message form. The per-message form is
-not a block of one: numpy's cost per call on arrays of one sample (about
-150 us a message through :meth:`~ConversionPipeline.process_block`, against
-about 10 us through :meth:`~ConversionPipeline.process_values`) is more than
-the node can spend per message.
+Each :class:`Value` declares its per-message form (one message: the node) and,
+beside it, its block form (a :class:`~rotation_node.sample_block.SampleBlock`,
+one library call per conversion: ``convert``). Both read and write the same
+:class:`StreamState`, counters and reports, so a stream may mix them and gets
+the same numbers bit for bit and the same reports in the same order. The
+per-message form is not a block of one: numpy's cost per call (about 150 us a
+message, against 10 us) is more than the node can spend per message.
 
 Exactness of the block form: blocks stay below the conversions' batch
-schedules (:data:`BLOCK_SAMPLES`), whose vectorised ``atan2`` may differ in the
-last bit, so that a block call runs the single-sample code once per sample. A
-rule carried from sample to sample (the sign continuity of the output
-quaternion, the unwrapping of Euler angles) is one scalar function that the
-per-message form calls in Python and the block form in a kernel loop
-(:func:`~rotation_node.conversions.kernels.kernel`: interpreted or compiled,
-the same operations); the finite-difference rate is one function of one pair
-or of rows; the norm tolerance, a decision a last-bit difference could flip, is
-decided by the per-message expression wherever a block's estimate is in doubt.
-
-The finite-difference angular velocity is the constant rate that carries the
-previous orientation into the current one over the interval between their
-stamps: exact for a constant rate, second-order accurate at the interval's
-midpoint, so half a sample period older than the stamp it is published with.
-It needs increasing stamps: the first message, and a message whose stamp is
-not after the previous one, produce no finite-difference outputs.
+schedules (:data:`BLOCK_SAMPLES`; vectorised ``atan2`` may differ in the last
+bit); a rule carried from sample to sample (sign continuity, unwrapping) is one
+scalar ``@jit`` function called in Python per message and in a kernel loop per
+block; the norm tolerance is decided by the per-message expression wherever a
+block's estimate is in doubt. The finite-difference rate is that of
+``kinematics.angular_velocity_from_quaternions`` (docs/numerics.md) over
+integer-nanosecond steps, and needs increasing stamps.
 """
 from collections import Counter
 import dataclasses
 from dataclasses import dataclass, field
 import math
 from operator import itemgetter
-from typing import Any, Callable, cast, Dict, List, NamedTuple, Optional, Tuple
+from typing import Any, Callable, Dict, List, NamedTuple, Optional, Tuple
 import warnings
 
 import numpy as np
@@ -77,7 +48,6 @@ from rotation_node.registry import (
 from rotation_node.sample_block import SampleBlock
 from rotation_node.wire.stamps import header_stamp_ns, seconds_text
 
-# The reasons of the reports, each declared once in REASONS with its kind and text.
 NON_FINITE_ORIENTATION = 'non_finite_orientation'
 CONVERSION_ERROR = 'conversion_error'
 ORIENTATION_UNKNOWN = 'orientation_unknown'
@@ -160,10 +130,9 @@ SAMPLE_TRANSFORMS: List[Callable[[NodeParameters], Optional[Callable[[Sample], S
 """
 Input-stage transforms: ``factory(params) -> transform(sample) -> sample``, or None.
 
-Each factory is called once per pipeline; the transforms it returns are applied,
-in this order, to every sample before any value is computed from it (e.g. a
-change of the input's world or body frame convention). None means the parameters
-need no transform. A transform leaves the stream to the per-message form.
+Each factory is called once per pipeline (None: the parameters need none); the
+transforms are applied in order to every sample before any value is computed.
+A transform leaves the stream to the per-message form.
 """
 
 
@@ -171,9 +140,8 @@ def mounting_of(params: NodeParameters) -> Optional[Mounting]:
     """
     Return the ``mounting.*`` parameters' :class:`~rotation_node.mounting.Mounting`, or None.
 
-    None when it is the identity: the outputs are then those of a pipeline
-    without mounting, bit for bit. Applied after the frame conventions
-    (``frames.*``), in the output's conventions: ``R_out = W (F_w R_in F_b) M``.
+    None when it is the identity (outputs bit for bit those without mounting).
+    Applied after the frame conventions: ``R_out = W (F_w R_in F_b) M``.
     """
     if params.mounting_tf_sensor_frame or params.mounting_tf_body_frame:
         raise ParameterError('mounting.tf_sensor_frame and mounting.tf_body_frame: the mounting '
@@ -191,35 +159,14 @@ def input_message_type(input_type: str) -> type:
 
 @dataclass
 class PipelineStats:
-    """
-    Counters of a pipeline since it was created.
+    """Counters of a pipeline since it was created."""
 
-    Attributes
-    ----------
-    received : int
-        Input messages processed.
-    published : int
-        Output messages returned (all outputs together).
-    dropped : collections.Counter
-        Input samples that produced no output because they were invalid, by reason
-        (:data:`DROP_REASONS` and the input type's own).
-    skipped : collections.Counter
-        Input samples of which some outputs could not be computed, by reason
-        (:data:`SKIP_REASONS`).
-    normalised : int
-        Input quaternions further than ``quaternion.norm_tolerance`` from unit length.
-    near_singular : int
-        Samples whose middle Euler angle was within ``euler.singularity_threshold``
-        of gimbal lock (counted when an Euler output is enabled).
-
-    """
-
-    received: int = 0
-    published: int = 0
-    dropped: Counter = field(default_factory=Counter)
-    skipped: Counter = field(default_factory=Counter)
-    normalised: int = 0
-    near_singular: int = 0
+    received: int = 0    # input messages
+    published: int = 0   # output messages, all outputs together
+    dropped: Counter = field(default_factory=Counter)   # samples without output, by reason
+    skipped: Counter = field(default_factory=Counter)   # samples with some outputs skipped
+    normalised: int = 0   # quaternions beyond quaternion.norm_tolerance from unit length
+    near_singular: int = 0   # within euler.singularity_threshold of gimbal lock
 
 
 @dataclass
@@ -234,64 +181,31 @@ class StreamState:
 
 @dataclass
 class BlockOutputs:
-    """
-    What a block gave: for each output, which messages have it and its numbers.
+    """Per output, in the order of ``outputs``: which messages have it, and their numbers."""
 
-    Attributes
-    ----------
-    present : dict
-        ``{output name: bool array (n,)}`` in the order of ``outputs``.
-    numbers : dict
-        ``{output name: float64 array (count, k)}``, one row per message that
-        has the output, in message order: what the per-message form returns
-        as the output's numbers.
-
-    """
-
-    present: Dict[str, np.ndarray]
-    numbers: Dict[str, np.ndarray]
+    present: Dict[str, np.ndarray]   # bool (n,)
+    numbers: Dict[str, np.ndarray]   # float64 (count, k): the per-message numbers, in order
 
 
 class _Dropped(Exception):
-    """Internal: the current sample is invalid and produces no output."""
-
-    def __init__(self, reason, **fields):
-        super().__init__(reason)
-        self.reason = reason
-        self.fields = fields
+    """The current sample is invalid and produces no output: ``(reason, fields)``."""
 
 
 class Value(NamedTuple):
     """
     How the pipeline computes one named value, per message and (where it can) per block.
 
-    Attributes
-    ----------
-    name : str
-        One of :data:`rotation_node.registry.PIPELINE_VALUES`.
-    requires : tuple of str
-        Values that must be available; without one, this value is unavailable.
-    uses : tuple of str
-        Values read when available (computed before this one, not required).
-    method : str
-        Name of the :class:`ConversionPipeline` method
-        ``method(sample, values) -> value or None`` that computes it for one sample.
-    block_method : str or None
-        Name of the :class:`ConversionPipeline` method
-        ``block_method(block, rows, values, run) -> (available, array)`` that
-        computes it for the ``rows`` of a block (those where every value it
-        requires is available): the same numbers, state changes and reports;
-        None when the value has no block form.
-    reads : tuple of str
-        The optional :class:`~rotation_node.registry.Sample` fields it reads
-        (``'angular_velocity'``, ``'covariance'``): input messages are read into
-        them only when a value computed reads them.
-
+    ``method(sample, values) -> value or None`` computes it for one sample;
+    ``block_method(block, rows, values, run) -> (available, array)`` for the
+    ``rows`` of a block where what it requires is available, with the same
+    numbers, state changes and reports (None: no block form). ``reads`` are
+    the optional :class:`~rotation_node.registry.Sample` fields it reads: a
+    message is read into them only when a value computed reads them.
     """
 
-    name: str
-    requires: Tuple[str, ...]
-    uses: Tuple[str, ...]
+    name: str                    # one of registry.PIPELINE_VALUES
+    requires: Tuple[str, ...]    # unavailable without these
+    uses: Tuple[str, ...]        # read when available (computed before, not required)
     method: str
     block_method: Optional[str]
     reads: Tuple[str, ...] = ()
@@ -330,35 +244,14 @@ def _needed_values(outputs):
 
 
 def output_has_block_form(name: str) -> bool:
-    """
-    Return whether the output ``name`` has a block form.
-
-    It has one when every value it needs (with what those require) has a block
-    form, and its registry ``compute`` is None (the value as it is) or declared
-    to take arrays of samples
-    (:attr:`~rotation_node.registry.OutputType.compute_takes_blocks`).
-    """
+    """Return whether every value the output needs has a block form, and its compute too."""
     output = registry.OUTPUTS[name]
     return ((output.compute is None or output.compute_takes_blocks)
             and all(value.block_method is not None for value in _needed_values((name,))))
 
 
 def block_form_missing(params: NodeParameters) -> Optional[str]:
-    """
-    Return why the parameters' streams are converted message by message, or None.
-
-    Parameters
-    ----------
-    params : rotation_node.parameters.NodeParameters
-        The node's parameters (input type, outputs, frames).
-
-    Returns
-    -------
-    str or None
-        E.g. ``'output euler_stddev has no block form'``; None when
-        :meth:`ConversionPipeline.process_block` converts blocks of such a stream.
-
-    """
+    """Return why the parameters' streams are converted message by message, or None."""
     input_type = registry.INPUTS[params.input_type]
     if input_type.stream is not None:
         return f'input type {params.input_type} reads samples from a stream of its own'
@@ -373,9 +266,8 @@ def block_form_missing(params: NodeParameters) -> Optional[str]:
     return None
 
 
-# The rules of the values that carry state from one sample to the next, each defined once:
-# the per-message form calls them in Python, the block form in a kernel loop (conversions'
-# runtime: interpreted for a few samples, compiled for more; the same operations either way).
+# The rules carried from sample to sample, each defined once: the per-message form calls
+# them in Python, the block form in a kernel loop (interpreted or compiled, the same operations).
 
 @jit
 def _unwrapped(angle, previous, period):
@@ -424,9 +316,7 @@ def _rates_between(previous_q, q, steps_ns, frame):
     """
     Return the constant rate carrying ``previous_q`` into ``q`` in ``steps_ns``: (3,), or (m, 3).
 
-    One pair (4,) and a step, or rows (m, 4) and steps (m, 1): over a unit
-    step, then divided by the step in seconds (from a difference of integer
-    nanoseconds: exact, unlike a difference of float seconds).
+    Over a unit step, then divided by the step in seconds: exact integer steps.
     """
     pairs = np.array((previous_q, q)).swapaxes(0, -2)   # (2, 4) or (m, 2, 4): np.stack's, sooner
     rates = kinematics.angular_velocity_from_quaternions(pairs, (0.0, 1.0), frame=frame)
@@ -444,47 +334,20 @@ class _BlockRun:
         self.near_singular = 0
 
     def issue(self, sample, reason, **fields):
-        """Report ``reason`` for ``sample`` once the block is converted, as ``_issue`` does."""
+        """Report ``reason`` for ``sample`` once the block is converted."""
         self.events.append((sample, reason, fields))
 
 
 class ConversionPipeline:
     """
-    Convert input messages into the configured output messages, one stream at a time.
+    Convert the messages of one input stream into the configured outputs.
 
-    Parameters
-    ----------
-    params : NodeParameters
-        Input type, outputs and conventions.
-    on_issue : callable, optional
-        Called as ``on_issue(reason, detail)`` for every dropped sample, skipped
-        output group and normalised quaternion (``detail`` is a sentence for a log).
-    stats : PipelineStats, optional
-        Counters to continue (e.g. across a parameter change); new ones by default.
-
-    Attributes
-    ----------
-    params : NodeParameters
-    stats : PipelineStats
-        The counters, of both forms.
-    state : StreamState
-        The per-stream state, of both forms.
-    on_issue : callable or None
-        As the parameter.
-    block_form_missing : str or None
-        Why :meth:`process_block` cannot convert this stream
-        (:func:`block_form_missing`); None when it can.
-    reads_angular_velocity : bool
-        Whether samples (and blocks) must carry the input's angular velocity:
-        it has one and a value computed reads it.
-
-    Notes
-    -----
-    The per-stream state (:attr:`state`, and any state of the input type's
-    sample stream) starts empty: create a new pipeline per input stream.
-    Outputs share the header object of the sample they come from (the input
-    message's ``header``).
-
+    ``on_issue(reason, detail)`` is called for every dropped sample, skipped
+    output group and normalised quaternion (``detail``: a sentence for a log);
+    ``stats`` are counters to continue (across a parameter change). The stream
+    state starts empty: one pipeline per input stream. Outputs share the input
+    message's header object. ``reads_angular_velocity``: samples and blocks
+    must carry the input's angular velocity.
     """
 
     def __init__(self, params: NodeParameters, *, on_issue: Optional[Callable] = None,
@@ -541,23 +404,10 @@ class ConversionPipeline:
 
     def process(self, msg: Any, topic: str = registry.INPUT_TOPIC.name) -> list:
         """
-        Convert one input message.
+        Return ``[(output name, message)]`` of one input message (empty when dropped).
 
-        Parameters
-        ----------
-        msg : message of class :attr:`input_type`
-            The input message.
-        topic : str, optional
-            The input type's relative topic the message came on (input types
-            with several topics tell them apart by it).
-
-        Returns
-        -------
-        list of (str, message)
-            ``(output name, message)`` for each output that could be computed, in
-            the order of ``outputs`` (for each sample the message gave); empty
-            when the message was dropped. Never raises on bad data.
-
+        In the order of ``outputs``, for each sample the message gave; ``topic`` is
+        the input type's relative topic it came on. Never raises on bad data.
         """
         builders = self._builders
         return [(name, builders[name](header, numbers))
@@ -565,31 +415,11 @@ class ConversionPipeline:
 
     def process_values(self, msg: Any, topic: str = registry.INPUT_TOPIC.name) -> list:
         """
-        Convert one input message into the numbers of the output messages.
+        Return ``[(output name, header, numbers)]``: :meth:`process` without building messages.
 
-        :meth:`process` without building the messages, for callers that encode
-        them themselves (the node, ``rotation_bag convert``); same outputs, same counts.
-
-        Parameters
-        ----------
-        msg : object
-            A message of class :attr:`input_type`, or any object with the
-            fields the input type is read from (``header`` and the orientation
-            and angular velocity fields, e.g. a view from
-            :mod:`rotation_node.wire.cdr`).
-        topic : str, optional
-            As for :meth:`process`.
-
-        Returns
-        -------
-        list of (str, header, sequence of float)
-            ``(output name, header, numbers)`` for each output that could be
-            computed, in the order of ``outputs`` (for each sample the message
-            gave); empty when the message was dropped. ``numbers`` are what the
-            output's :class:`~rotation_node.registry.OutputMessage` builds the
-            message from: ``(x, y, z[, w])`` of the stamped outputs, ``data`` of
-            the Float64MultiArray ones. Never raises on bad data.
-
+        ``msg`` may be any object with the fields the input type reads (a
+        :mod:`rotation_node.wire.cdr` view); ``numbers`` are what the output's
+        :class:`~rotation_node.registry.OutputMessage` builds its message from.
         """
         self.stats.received += 1
         if self._read is not None:   # a plain input without transforms: one sample
@@ -606,20 +436,12 @@ class ConversionPipeline:
         """
         Convert a block of at most :data:`BLOCK_SAMPLES` samples: :meth:`process_values` of each.
 
-        Returns
-        -------
-        BlockOutputs or None
-            None when the block must be converted message by message (a
-            conversion rejected a value): nothing was counted or changed then.
-
-        Raises
-        ------
-        ValueError
-            If the parameters have no block form (:attr:`block_form_missing`),
-            or the block is longer than :data:`BLOCK_SAMPLES`.
-
+        None when the block must go message by message (a conversion rejected a
+        value): nothing was counted or changed then. ValueError without a block
+        form or for a longer block.
         """
-        if self._block_plan is None:
+        plan = self._block_plan
+        if plan is None:
             raise ValueError(f'pipeline: no block form ({self.block_form_missing})')
         n = len(block.stamp_ns)
         if n > BLOCK_SAMPLES:
@@ -627,7 +449,7 @@ class ConversionPipeline:
         run = _BlockRun(self.state, n)
         try:
             with np.errstate(all='ignore'):
-                outputs, published = self._block_outputs(block, run)
+                outputs, published = self._block_outputs(block, run, plan)
         except ValueError:   # a conversion rejected a value: the per-message form says which
             return None
         self.state = run.state
@@ -641,16 +463,9 @@ class ConversionPipeline:
         return outputs
 
     def drop_message(self, reason: str, **fields: Any) -> None:
-        """
-        Count a message the caller could not give the pipeline (e.g. undecodable) as dropped.
-
-        ``reason`` is one of :data:`REASONS` and ``fields`` its text's: counted
-        as received and dropped, and reported, as the pipeline's own drops.
-        """
+        """Count and report a message the caller could not give the pipeline (undecodable)."""
         self.stats.received += 1
         self._issue(reason, **fields)
-
-    # Counting and reporting --------------------------------------------------------
 
     def _issue(self, reason, **fields):
         """Count ``reason`` where :data:`REASONS` says, and report it with its text."""
@@ -672,14 +487,8 @@ class ConversionPipeline:
         """Return the reason an unknown orientation skipped outputs: Imu's flag or all zeros."""
         return ZERO_QUATERNION if zero else ORIENTATION_UNKNOWN
 
-    # One sample ---------------------------------------------------------------------
-
     def _outputs_of(self, sample):
-        """
-        Return the outputs of one sample: every needed value once, then each output from them.
-
-        Counts the sample's outputs, or the sample as dropped (then returns none).
-        """
+        """Return the outputs of one sample: every needed value once, then each output."""
         try:
             values: Dict[str, Any] = {}
             for name, requires, compute in self._plan:
@@ -705,7 +514,8 @@ class ConversionPipeline:
                 else:
                     outputs.append((name, header, compute(params, *needed)))
         except _Dropped as drop:
-            self._issue(drop.reason, **drop.fields)
+            reason, fields = drop.args
+            self._issue(reason, **fields)
             return []
         except ValueError as exc:   # a conversion rejected a value the checks let through
             self._issue(CONVERSION_ERROR, error=exc)
@@ -716,14 +526,11 @@ class ConversionPipeline:
         self.stats.published += len(outputs)
         return outputs
 
-    # A block ------------------------------------------------------------------------
-
-    def _block_outputs(self, block, run):
+    def _block_outputs(self, block, run, plan):
         """Return the block's outputs and their count: every needed value once, then outputs."""
         params, n = self.params, len(block.stamp_ns)
         values: Dict[str, Tuple[np.ndarray, np.ndarray]] = {}
-        # process_block, the only caller, has checked that there is a block plan.
-        for name, requires, compute in cast(List[Tuple[Any, Any, Any]], self._block_plan):
+        for name, requires, compute in plan:
             rows = run.kept
             for required in requires:
                 rows = rows & values[required][0]
@@ -752,18 +559,13 @@ class ConversionPipeline:
     # The values, in the order of VALUES: each one's per-message form, then its block form.
 
     def _orientation(self, sample, values):
-        """
-        Return the input orientation as a quaternion array (any scale), or None if unknown.
-
-        Unknown: the message says so (Imu ``orientation_covariance[0] == -1``), or its
-        quaternion is (0, 0, 0, 0), the other common form of "not estimated".
-        """
+        """Return the orientation as a quaternion (any scale); None if unknown (flag, or zero)."""
         orientation = sample.orientation
         if orientation is None:
             return None
         form = self._input.orientation_form
         if not all(map(math.isfinite, orientation)):
-            raise _Dropped(NON_FINITE_ORIENTATION, form=form, values=orientation)
+            raise _Dropped(NON_FINITE_ORIENTATION, {'form': form, 'values': orientation})
         if form != registry.QUATERNION:
             q = self._quaternion_from_input_form(orientation)
         else:
@@ -818,12 +620,7 @@ class ConversionPipeline:
         return conversions.quaternion_from_rotation_vector(orientation)
 
     def _angular_velocity(self, sample, values):
-        """
-        Return the angular velocity (rad/s) in the output frame, or None if unavailable.
-
-        From the sample where it carries one, otherwise by finite difference of
-        this sample's and the previous sample's orientations.
-        """
+        """Return the sample's angular velocity in the output frame, else the differenced one."""
         frame = self.params.angular_velocity_output_frame
         q = values[ORIENTATION]
         omega = sample.angular_velocity
@@ -1016,11 +813,7 @@ class ConversionPipeline:
                 'sequence': self.params.euler_sequence}
 
     def _orientation_covariance(self, sample, values):
-        """
-        Return the input's rotation-vector covariance in the output frames, or None if unknown.
-
-        About the world axes (``covariance.frame`` fixed) or the body axes (body).
-        """
+        """Return the input's rotation-vector covariance in the output frames, or None."""
         block = sample.covariance
         if block is None or not any(block):
             self._issue(COVARIANCE_UNKNOWN)

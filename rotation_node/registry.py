@@ -1,25 +1,13 @@
 """
 The registry: what each message type the node reads and writes is, declared once.
 
-:data:`INPUTS` has one :class:`InputType` per value of the ``input_type``
-parameter: the ROS message type, the topics it is subscribed on, and where
-its header, orientation, angular velocity and orientation covariance are read.
-:data:`OUTPUTS` has one :class:`OutputType` per value allowed in ``outputs``:
-the ROS message type, the named pipeline values it is computed from, and how
-it is built as an rclpy message and CDR-encoded. The parameter table, the
-pipeline, the node, ``rotation_bag convert``, the test harness, the plot panels
-(:mod:`rotation_node.bag.plot`) and the documentation tables
-(:mod:`rotation_node.markdown_tables`) read these two tables.
-
-An input message becomes zero or more :class:`Sample` objects (header,
-orientation, optional angular velocity and covariance). A plain input type
-reads one sample from each message through the fields it names; an input type
-that needs per-stream state (several topics, a buffer) names the module of its
-stream instead (:attr:`InputType.stream`).
-
-This module imports neither rclpy nor the Python message packages: message
-classes and the CDR encoders are looked up when first used (a message is
-built only by the node; ``rotation_bag convert`` encodes without building one).
+:data:`INPUTS` has one :class:`InputType` per ``input_type`` value (message type,
+topics, the fields a :class:`Sample` is read from, or the module of a stateful
+stream); :data:`OUTPUTS` one :class:`OutputType` per ``outputs`` value (message
+type, the pipeline values it is computed from, how it is built and encoded).
+The parameters, pipeline, node, bag tools and documentation tables read them.
+Message classes and encoders are looked up when first used: this module imports
+neither rclpy nor the message packages (docs/ARCHITECTURE.md: adding a type).
 """
 from __future__ import annotations
 
@@ -67,23 +55,12 @@ PIPELINE_VALUES = (ORIENTATION, OUTPUT_QUATERNION, EULER_ANGLES, PUBLISHED_EULER
 
 class Sample(NamedTuple):
     """
-    One orientation sample read from an input message.
+    One orientation sample read from an input message; None where it has no such data.
 
-    Attributes
-    ----------
-    header : std_msgs/Header or any object with ``stamp.sec``, ``stamp.nanosec`` and ``frame_id``
-        Stamp and frame of the sample; stamped outputs carry it.
-    orientation : tuple of float or None
-        The orientation in the input type's form: ``(x, y, z, w)`` of a
-        quaternion, or ``(x, y, z)`` of Euler angles or a rotation vector.
-        None when the message says the orientation is unknown.
-    angular_velocity : tuple of float or None
-        ``(x, y, z)`` rad/s in ``angular_velocity.input_frame``; None when the
-        input carries none (the pipeline then differences orientations).
-    covariance : tuple of float or None
-        Orientation covariance, 3 x 3 row-major (rad^2, about the x, y, z axes),
-        for input types that carry one; None otherwise or when not requested.
-
+    ``header``: a std_msgs/Header or any object with ``stamp`` and ``frame_id``.
+    ``orientation`` in the input type's form: ``(x, y, z, w)``, or ``(x, y, z)``
+    of Euler angles or a rotation vector. ``angular_velocity`` in rad/s in
+    ``angular_velocity.input_frame``; ``covariance`` 3 x 3 row-major, rad^2.
     """
 
     header: Any
@@ -101,18 +78,10 @@ Report = Callable[[str, str], None]
 
 class InputTopic(NamedTuple):
     """
-    A topic an input type is subscribed on.
+    A topic an input type is subscribed on: relative (``'input'``) or absolute (``'/tf'``).
 
-    Attributes
-    ----------
-    name : str
-        Topic name, relative (``'input'``) or absolute (``'/tf'``), remappable
-        with ``-r``.
-    transient_local : bool
-        Latched data such as ``/tf_static``: subscribe reliable, keep all, with
-        transient-local durability, so that what publishers sent before the
-        subscription arrives too; volatile with the ``qos`` parameters otherwise.
-
+    ``transient_local``: latched data such as ``/tf_static``, subscribed reliable,
+    keep all, transient local (volatile with the ``qos`` parameters otherwise).
     """
 
     name: str
@@ -128,10 +97,6 @@ _XYZ = ('x', 'y', 'z')
 _XYZW = ('x', 'y', 'z', 'w')
 
 
-def _xyzw(quaternion):
-    return (quaternion.x, quaternion.y, quaternion.z, quaternion.w)
-
-
 def _xyz(vector):
     return (vector.x, vector.y, vector.z)
 
@@ -141,48 +106,21 @@ class InputType:
     """
     One value of ``input_type``: a message type and how a sample is read from it.
 
-    Attributes
-    ----------
-    name : str
-        The parameter value, e.g. ``'imu'``.
-    type_name : str
-        ROS message type, e.g. ``'sensor_msgs/msg/Imu'``.
-    orientation_form : str
-        :data:`QUATERNION`, :data:`EULER` (angles of ``euler.sequence``, in
-        degrees with ``euler.degrees``) or :data:`ROTATION_VECTOR` (rad).
-    orientation_field : str
-        Dotted path of the orientation field: a Quaternion, or a Vector3 for
-        the other forms.
-    angular_velocity_field : str, optional
-        Dotted path of a Vector3 angular velocity (rad/s); None if the type has
-        none (the angular velocity is then differenced from orientations).
-    covariance_field : str, optional
-        Dotted path of the covariance array holding the orientation covariance.
-    covariance_indices : tuple of int
-        Indices in that array of the 3 x 3 orientation block, row-major.
-    orientation_unknown_field, angular_velocity_unknown_field : str, optional
-        Dotted path of an array whose first element is -1 when the message holds
-        no orientation (angular velocity), as sensor_msgs/Imu marks it in its
-        covariances (REP 145).
-    topics : tuple of InputTopic
-        Topics subscribed; one topic ``input`` for a plain type.
-    stream : str, optional
-        For a type whose samples need per-stream state (several topics, a
-        buffer): the name of the module of its stream, which defines
-        ``sample_stream(params, report) -> SampleStream`` (called once per input
-        stream; ``report`` is a :data:`Report`) and ``DROP_REASONS`` (the reasons
-        it reports). Named, not imported: that module imports this one. None for
-        a plain type, which reads one sample per message from the fields above.
-
+    Fields are dotted paths in the message. ``orientation_form``: :data:`QUATERNION`,
+    :data:`EULER` (``euler.sequence``, degrees with ``euler.degrees``) or
+    :data:`ROTATION_VECTOR`. An ``*_unknown_field`` array whose first element is -1
+    marks the value as absent (sensor_msgs/Imu, REP 145). ``stream`` names (not
+    imports: it imports this one) the module of a stateful type, which defines
+    ``sample_stream(params, report) -> SampleStream`` and ``DROP_REASONS``.
     """
 
-    name: str
-    type_name: str
+    name: str                     # the parameter value, e.g. 'imu'
+    type_name: str                # e.g. 'sensor_msgs/msg/Imu'
     orientation_form: str
-    orientation_field: str
-    angular_velocity_field: Optional[str] = None
+    orientation_field: str        # a Quaternion, or a Vector3 for the other forms
+    angular_velocity_field: Optional[str] = None   # a Vector3 (rad/s); None: differenced
     covariance_field: Optional[str] = None
-    covariance_indices: Tuple[int, ...] = tuple(range(9))
+    covariance_indices: Tuple[int, ...] = tuple(range(9))   # the 3 x 3 block, row-major
     orientation_unknown_field: Optional[str] = None
     angular_velocity_unknown_field: Optional[str] = None
     topics: Tuple[InputTopic, ...] = (INPUT_TOPIC,)
@@ -200,18 +138,7 @@ class InputType:
 
     def sample_reader(self, *, angular_velocity: bool = True,
                       covariance: bool = False) -> Callable[[Any], Sample]:
-        """
-        Return ``read(message) -> Sample`` of a plain input type.
-
-        Parameters
-        ----------
-        angular_velocity : bool, optional
-            Read the angular velocity (None in the samples otherwise).
-        covariance : bool, optional
-            Read the orientation covariance too (only types with a
-            ``covariance_field``; None otherwise).
-
-        """
+        """Return ``read(message) -> Sample`` of a plain type; the optional fields on request."""
         new = tuple.__new__   # Sample's own __new__ is a Python function: slower
         components = _XYZW if self.orientation_form == QUATERNION else _XYZ
         orientation = operator.attrgetter(   # one C call returns the tuple
@@ -240,30 +167,15 @@ class InputType:
                       covariance: bool = False,
                       report: Optional[Report] = None) -> SampleStream:
         """
-        Return the function that turns messages of one input stream into samples.
+        Return ``(topic, message) -> samples`` of one input stream (and its state, if any).
 
-        Call it once per stream: a stateful input type keeps its state in it.
-
-        Parameters
-        ----------
-        params : rotation_node.parameters.NodeParameters
-            The parameters the stream is converted with.
-        angular_velocity, covariance : bool, optional
-            As for :meth:`sample_reader`; a stateful type may always read them.
-        report : callable, optional
-            ``report(reason, detail)`` for each message or part of one that a
-            stateful type could not use (one of :attr:`drop_reasons`).
-
+        ``report(reason, detail)``: what a stateful type could not use (:attr:`drop_reasons`).
         """
         if self.stream is not None:
             return importlib.import_module(self.stream).sample_stream(
-                params, report or _report_nothing)
+                params, report or (lambda reason, detail: None))
         read = self.sample_reader(angular_velocity=angular_velocity, covariance=covariance)
         return lambda topic, msg: (read(msg),)
-
-
-def _report_nothing(reason, detail):
-    """Discard a stream's report."""
 
 
 def _optional_getter(path):
@@ -304,9 +216,6 @@ INPUTS = {entry.name: entry for entry in _INPUT_LIST}
 """The input types by ``input_type`` value, in documentation order."""
 
 
-# Output messages -------------------------------------------------------------------
-
-
 class ArrayDimension(NamedTuple):
     """The values of a std_msgs/MultiArrayDimension."""
 
@@ -327,28 +236,16 @@ class OutputMessage:
     """
     How the numbers of an output become a message of one type, and back.
 
-    Attributes
-    ----------
-    type_name : str
-        ROS message type.
-    build : callable
-        ``build(header, numbers) -> rclpy message``.
-    numbers : callable
-        ``numbers(message) -> sequence of float``: the numbers ``build`` was given
-        (works on rclpy messages and CDR views).
-    stamped_numbers : bool
-        The type is a std_msgs/Header followed by the numbers only, which
-        :mod:`rotation_node.wire.cdr` encodes without building a message.
-    layout : ArrayLayout, optional
-        The std_msgs/MultiArrayLayout of a Float64MultiArray type, as values.
-
+    ``numbers(message)`` gives back what ``build(header, numbers)`` was given (from
+    rclpy messages and CDR views). ``stamped_numbers``: the type is a Header and the
+    numbers only, which :mod:`rotation_node.wire.cdr` encodes without a message.
     """
 
     type_name: str
     build: Callable[[Any, Sequence[float]], Any]
     numbers: Callable[[Any], Sequence[float]]
     stamped_numbers: bool = False
-    layout: Optional[ArrayLayout] = None
+    layout: Optional[ArrayLayout] = None   # of a Float64MultiArray type
 
     @property
     def message_class(self) -> type:
@@ -359,15 +256,8 @@ class OutputMessage:
         """
         Return ``encode(header, numbers) -> bytes``: the CDR of the built message.
 
-        Without building an rclpy message where the type allows it; the bytes
-        are those of ``rotation_node.wire.cdr.message_encoder`` for the built
-        message, or rclpy's serialisation for types that module cannot encode.
-
-        Raises
-        ------
-        ValueError
-            If :attr:`stamped_numbers` is set on a type without a fixed CDR layout.
-
+        Built only where the type needs it; the bytes of ``cdr.message_encoder``,
+        else rclpy's. ValueError for ``stamped_numbers`` without a fixed layout.
         """
         from rotation_node.wire import cdr
         if self.stamped_numbers:
@@ -413,7 +303,8 @@ VECTOR3_STAMPED = OutputMessage(
     lambda msg: _xyz(msg.vector), stamped_numbers=True)
 QUATERNION_STAMPED = OutputMessage(
     'geometry_msgs/msg/QuaternionStamped', _build_quaternion_stamped,
-    lambda msg: _xyzw(msg.quaternion), stamped_numbers=True)
+    lambda msg: (msg.quaternion.x, msg.quaternion.y, msg.quaternion.z, msg.quaternion.w),
+    stamped_numbers=True)
 
 
 def _build_vector3_with_covariance(header, numbers):
@@ -431,12 +322,9 @@ VECTOR3_WITH_COVARIANCE = OutputMessage(
     stamped_numbers=True)
 """A stamped 3-vector with its 3 x 3 covariance (row-major), as sensor_msgs/MagneticField.
 
-The only standard ROS message type that is exactly a header, a float64 3-vector
-and its full float64 3 x 3 covariance: fixed layout (encoded without building a
-message), mean and covariance in one message under the input's header. The
-types that carry an orientation covariance (Imu, PoseWithCovariance) are
-avoided on purpose: theirs is defined as a covariance of rotations about fixed
-axes, and an Euler-angle covariance there would be misread.
+The only standard type that is exactly a header, a 3-vector and its 3 x 3
+covariance (fixed layout). Imu and PoseWithCovariance are avoided on purpose:
+theirs is a covariance of rotations, which an Euler-angle covariance is not.
 """
 
 
@@ -444,15 +332,7 @@ def float64_multi_array(dimensions: Sequence[Tuple[str, int, int]]) -> OutputMes
     """
     Return the :class:`OutputMessage` of a std_msgs/Float64MultiArray with a fixed layout.
 
-    Parameters
-    ----------
-    dimensions : sequence of (label, size, stride)
-        The layout's dimensions, outermost first; ``data_offset`` is 0.
-
-    Notes
-    -----
-    Float64MultiArray has no header: these outputs carry no stamp or frame_id.
-
+    ``dimensions``: ``(label, size, stride)`` outermost first. No header: no stamp.
     """
     layout = ArrayLayout(tuple(ArrayDimension(*dimension) for dimension in dimensions))
 
@@ -475,27 +355,13 @@ def float64_multi_array(dimensions: Sequence[Tuple[str, int, int]]) -> OutputMes
 @dataclass(frozen=True)
 class OutputType:
     """
-    One value allowed in ``outputs``: what is published and how it is computed.
+    One value allowed in ``outputs`` (and its relative topic): what is published, and how.
 
-    Attributes
-    ----------
-    name : str
-        The value in ``outputs``, and the relative topic it is published on.
-    message : OutputMessage
-        Message type, building, encoding.
-    needs : tuple of str
-        Named pipeline values (:data:`PIPELINE_VALUES`) the output is computed
-        from; the output is skipped for a message where one is unavailable.
-    compute : callable or None
-        ``compute(params, *values) -> numbers``, ``values`` those of ``needs`` in
-        order, ``numbers`` in the order :attr:`OutputMessage.build` takes them;
-        None to publish the one value needed as it is.
-    compute_takes_blocks : bool
-        Whether ``compute`` also takes arrays of samples, one row each, and
-        returns one row of numbers per sample, each bit for bit that sample's
-        alone (tested): the output then has a block form where its values do
-        (:func:`rotation_node.pipeline.output_has_block_form`).
-
+    ``compute(params, *values of needs) -> numbers`` as ``message.build`` takes
+    them; None publishes the one value needed as it is. The output is skipped
+    where a value it ``needs`` (:data:`PIPELINE_VALUES`) is unavailable.
+    ``compute_takes_blocks``: ``compute`` also takes arrays of samples, each row
+    bit for bit that sample's alone (tested).
     """
 
     name: str
@@ -506,7 +372,7 @@ class OutputType:
 
     @property
     def type_name(self) -> str:
-        """ROS message type of the output."""
+        """Return the ROS message type of the output."""
         return self.message.type_name
 
     @property

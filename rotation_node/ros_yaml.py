@@ -1,22 +1,15 @@
 """
 The one YAML loader of the package: parameters files and scene files.
 
-Plain (unquoted) scalars are typed as rcl types them in parameters files
-(``rcl_yaml_param_parser``'s ``get_value``), so that a file means the same to
-the node, to ``rotation_bag convert`` and to ``rotation_scene``: the words
-``true``/``yes``/``on``/``y`` (and ``false``...) in lower, capitalised or upper
-case are booleans; what the C library's ``strtol`` (base 0, within its long) reads
-entirely is an integer; what its ``strtod`` reads entirely without ``ERANGE``,
-or ``.inf``/``.nan``, is a float; anything else is a string (``1_000``, and
-``1e999``). Quoted scalars are strings; an empty scalar, ``~`` and ``null`` are
-None. The C library itself reads the numbers, as rcl does: why parameters files
-are not read with rclpy's ``parameter_dict_from_yaml_file`` is the list of where
-rcl and rclpy differ, in :mod:`rotation_node.parameters`.
-
-A key given twice in one mapping is an error; parameters files may hold no
-alias (rcl refuses them). A file larger than :data:`MAX_FILE_BYTES`, a document
-whose aliases expand it beyond :data:`MAX_NODES` nodes (an alias bomb), or one
-nested deeper than :data:`MAX_DEPTH` is refused before it is built.
+Plain scalars are typed as rcl's ``rcl_yaml_param_parser`` types them, so that a
+file means the same to the node, ``rotation_bag convert`` and ``rotation_scene``:
+yes/no/on/off/y/n/true/false words are booleans; what the C library's ``strtol``
+(base 0) reads entirely is an integer, what its ``strtod`` reads entirely
+without ``ERANGE`` (or ``.inf``/``.nan``) a float; anything else a string
+(``1_000``, ``1e999``). Quoted scalars are strings; empty, ``~`` and ``null``
+are None. Duplicate keys are refused, and so are a file beyond
+:data:`MAX_FILE_BYTES`, aliases expanding beyond :data:`MAX_NODES` nodes, and
+nesting deeper than :data:`MAX_DEPTH`, before the document is built.
 """
 import ctypes
 import math
@@ -25,14 +18,9 @@ from typing import Any, Type
 
 import yaml
 
-MAX_FILE_BYTES = 1 << 20
-"""Largest file read (1 MiB); parameters files and scenes are a few kB."""
-
-MAX_NODES = 100_000
-"""Largest number of YAML nodes of a document, counting each alias as what it expands to."""
-
-MAX_DEPTH = 64
-"""Deepest nesting of collections in a document."""
+MAX_FILE_BYTES = 1 << 20   # parameters files and scenes are a few kB
+MAX_NODES = 100_000        # YAML nodes of a document, each alias counted as what it expands to
+MAX_DEPTH = 64             # nesting of collections
 
 _TRUE = frozenset(('Y', 'y', 'yes', 'Yes', 'YES', 'true', 'True', 'TRUE', 'on', 'On', 'ON'))
 _FALSE = frozenset(('N', 'n', 'no', 'No', 'NO', 'false', 'False', 'FALSE', 'off', 'Off', 'OFF'))
@@ -147,11 +135,8 @@ def load_ros_yaml(path: Any, label: str, error: Type[Exception], *,
     """
     Return the one YAML document of a file (None if empty), read with the rules of this module.
 
-    ``label`` names the file in messages (``'parameters file config/params.yaml'``);
-    ``error`` is the exception class raised, with one line starting with ``label``,
-    when the file cannot be read, is too large, is not valid YAML (with line and
-    column), repeats a key, or expands beyond the bounds. ``aliases=False``
-    refuses any alias (a ROS parameters file).
+    Any problem raises ``error`` with one line starting with ``label`` (YAML errors
+    with line and column). ``aliases=False`` refuses aliases (a parameters file).
     """
     try:
         with open(path, 'rb') as stream:

@@ -1,10 +1,9 @@
 """
-:class:`SampleBlock`: consecutive samples of one input stream as arrays.
+:class:`SampleBlock`: the samples of one stream as arrays.
 
-The array form of :class:`rotation_node.registry.Sample`: what
-:mod:`rotation_node.bag.block_codec` decodes a block of input messages into
-and :meth:`rotation_node.pipeline.ConversionPipeline.process_block` converts.
-numpy only, so that the codec and the pipeline both import it downward.
+What :mod:`rotation_node.bag.block_codec` decodes and
+:meth:`rotation_node.pipeline.ConversionPipeline.process_block` converts; numpy
+only, so that both import it downward.
 """
 from typing import NamedTuple, Optional
 
@@ -12,26 +11,10 @@ import numpy as np
 
 
 class SampleBlock(NamedTuple):
-    """
-    Consecutive samples of one input stream, one row per message.
+    """Consecutive samples of one input stream, one row per message (``Sample`` as arrays)."""
 
-    Attributes
-    ----------
-    stamp_ns : ndarray of int64, shape (n,)
-        Header stamps in integer nanoseconds.
-    orientation : ndarray, shape (n, 4) or (n, 3)
-        In the input type's form (rows where it is unknown are ignored).
-    orientation_known : ndarray of bool, shape (n,)
-        False where the message says the orientation is unknown.
-    angular_velocity : ndarray, shape (n, 3), or None
-        None when the input type carries none (or it is not read).
-    angular_velocity_known : ndarray of bool, shape (n,), or None
-        False where the message says its angular velocity is unknown.
-
-    """
-
-    stamp_ns: np.ndarray
-    orientation: np.ndarray
-    orientation_known: np.ndarray
-    angular_velocity: Optional[np.ndarray] = None
-    angular_velocity_known: Optional[np.ndarray] = None
+    stamp_ns: np.ndarray            # int64 (n,): header stamps
+    orientation: np.ndarray         # (n, 4) or (n, 3), the input type's form
+    orientation_known: np.ndarray   # bool (n,): False where the message says unknown
+    angular_velocity: Optional[np.ndarray] = None         # (n, 3); None: none or not read
+    angular_velocity_known: Optional[np.ndarray] = None   # bool (n,)

@@ -1,42 +1,15 @@
 """
 The orientation-conversion node: parameters in, the pipeline, outputs out.
 
-Subscribes the relative topic ``input`` (type chosen by the ``input_type``
-parameter; ``input_type: tf`` subscribes ``/tf`` and ``/tf_static`` instead)
-and publishes each output listed in ``outputs`` on the relative topic of the
-same name; the conversion itself is
-:class:`rotation_node.pipeline.ConversionPipeline`, the same code that
-``rotation_bag convert`` runs on bags. The subscribed topics and the message
-types come from :mod:`rotation_node.registry`. The program around it (command
-line, start-up, signals) is :mod:`rotation_node.node.program`.
-
-Parameters are declared from the table in :mod:`rotation_node.parameters`. At
-start-up the node reads its ``--params-file`` files itself with the loader
-``rotation_bag convert`` uses, so both accept and reject the same files: an
-unreadable or malformed file, a file without a section for this node, an
-unknown parameter (in a file or ``-p``) or an invalid value ends the process
-with one line on stderr and exit status 1.
-
-At runtime, ROS 2 applies parameter changes as its services define: a
-``set_parameters`` request with several parameters (``ros2 param set``, ``ros2
-param load``) checks and applies each one on its own (some may be applied while
-others are rejected), while ``set_parameters_atomically`` applies all of them or
-none. Every value is checked against the table before it is accepted; the rule
-between parameters (``input_type: tf`` needs both ``tf`` frames) is checked
-once a whole request is in, whatever the order of its parameters, and a request
-that breaks it is set back entirely. An accepted change takes effect on the next
-message. Counters and the current conventions are published on ``/diagnostics``
-once a second (:mod:`.diagnostics`).
-
-With ``qos.reliability: auto`` each input subscription adapts to the QoS its
-publishers offer (:mod:`.qos_adaptation`), a subscription is replaced (new QoS)
-without losing or repeating a message (:mod:`.handoff`), and messages the
-publishers sent but the node never got are counted from their publication
-sequence numbers (:mod:`.reception`; the numbers of a publisher that left are
-forgotten, so that a publisher restarting is counted exactly) and reported as
-``lost``. Input types with a fixed CDR layout are taken as serialized messages
-and decoded by :mod:`rotation_node.wire.cdr`; outputs are published as the bytes
-their encoders give, as ``rotation_bag convert`` writes them. See docs/node.md.
+Subscribes the input type's topics (:mod:`rotation_node.registry`), converts each
+message with :class:`rotation_node.pipeline.ConversionPipeline`, the code
+``rotation_bag convert`` runs, and publishes the bytes of each output's encoder
+on its relative topic. Fixed-layout inputs are taken serialized and decoded by
+:mod:`rotation_node.wire.cdr`. Parameters come from
+:mod:`rotation_node.parameters`, parameters files read as ``convert`` reads them;
+a ``set_parameters`` request is applied parameter by parameter and its
+combination checked once it is all in. docs/node.md describes the QoS, losses,
+parameter changes and /diagnostics.
 """
 import time
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
@@ -73,11 +46,8 @@ from rotation_node.wire.cdr import fixed_layout_codec
 from rotation_node.wire.qos import qos_profile
 
 ISSUE_LOG_PERIOD_S = 5.0
-# How often a subscription or publisher replacement is checked while one is under way.
-HANDOFF_CHECK_S = 0.05
-# Messages taken in one callback at most, beyond the one the executor took.
-DRAIN_MAX = 100
-#: What the node says first: it exists, its parameters are read, the conversions load.
+HANDOFF_CHECK_S = 0.05   # how often a replacement under way is checked
+DRAIN_MAX = 100   # messages taken in one callback at most, beyond the executor's one
 STARTING = 'starting: loading the conversions'
 
 
@@ -99,24 +69,13 @@ class RotationNode(Node):
     """
     Convert orientations and angular velocities from ``input`` to the configured outputs.
 
-    Parameters
-    ----------
-    parameters_files : sequence of str, optional
-        The node's ``--params-file`` files: each must have a section for this
-        node, setting only its parameters, to valid values.
-
-    Raises
-    ------
-    ParameterError
-        A parameters file is invalid for this node, or an initial parameter value
-        (from ``-p`` or a parameters file) is invalid.
-
+    ParameterError if one of its ``--params-file`` ``parameters_files`` or an
+    initial value is invalid for this node.
     """
 
     def __init__(self, parameters_files: Sequence[str] = (), **kwargs: Any):
-        self._inputs: List[InputTopic] = []   # one per topic of the input type; first, as
-        # destroy_node reads it, also when a parameters file is refused below
-        # The parameter services are started below, once the parameters files are read.
+        self._inputs: List[InputTopic] = []   # first: destroy_node reads it
+        # The parameter services start once the parameters files are read.
         super().__init__(NODE_NAME, start_parameter_services=False, **kwargs)
         try:
             for path in parameters_files:   # as rotation_bag convert reads them
@@ -126,34 +85,30 @@ class RotationNode(Node):
             raise
         self.get_logger().info(STARTING)
         # The conversions run interpreted until their compiled kernels, loaded in the
-        # background as each is first used, take over (a first run compiles them, and
-        # says so on one line): the node converts from its first message.
+        # background, take over: the node converts from its first message.
         load_in_background(self.get_logger().info)
         self._parameter_service = ParameterService(self)
         self.params = NodeParameters()
-        # Set by _configure, which __init__ calls below, before any callback can run.
-        self._pipeline: ConversionPipeline
+        self._pipeline: ConversionPipeline   # set by _configure below
         self._configured = False   # while declaring, parameter changes only set self.params
-        # mounting.tf_*: the lookup until /tf_static connects the frames (input dropped
-        # meanwhile), its subscription, and the rotation found (for the same frames)
+        # mounting.tf_*: the lookup until /tf_static connects the frames, its subscription,
+        # and the rotation found (for the same frames)
         self._static_mounting: Optional[StaticMountingLookup] = None
         self._tf_static: Optional[Subscription] = None
         self._mounting_found: Optional[Tuple[Tuple[str, str], Tuple[float, ...]]] = None
-        # CDR bytes -> view; None: rclpy deserialises
-        self._decode: Optional[Callable[[bytes], Any]] = None
+        self._decode: Optional[Callable[[bytes], Any]] = None   # None: rclpy deserialises
         self._outputs = OutputPublishers(self)
         self._handoff_timer: Optional[Timer] = None
         self._next_issue_log: Dict[str, float] = {}   # reason -> time of its next warning
-        # While a set_parameters request is applied: {ROS name: value} of the node's own
-        # parameters it set so far (their combination is checked once all are in).
+        # While a set_parameters request is applied: the node's own parameters it set so far.
         self._request: Optional[Dict[str, Any]] = None
         self._serve_set_parameters()
         # Registered before declaring, so the initial values pass the same checks.
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         defaults = self.params.to_ros()
-        # rclpy checks each declared parameter on its own, in this order: input_type comes
-        # last, so that the parameters of its input type (tf.*) are set when it is checked.
+        # rclpy checks each declared parameter on its own, in order: input_type last, so
+        # that the parameters of its input type (tf.*) are set when it is checked.
         in_order = sorted(PARAMETERS, key=lambda spec: spec.name == 'input_type')
         try:
             self.declare_parameters('', [
@@ -171,17 +126,11 @@ class RotationNode(Node):
         self._diagnostics = ConversionDiagnostics(self)
         self.create_timer(DIAGNOSTICS_PERIOD_S, self._on_diagnostics_timer)
 
-    # Parameters --------------------------------------------------------------------
-
     def _serve_set_parameters(self) -> None:
         """
-        Answer the ``set_parameters`` service here instead of in rclpy's parameter service.
+        Answer ``set_parameters`` here: rclpy's service checks each parameter alone.
 
-        rclpy applies a request's parameters one at a time, each checked on its own:
-        ``ros2 param load`` of a file setting ``input_type: tf`` and the frames it
-        needs in one request would have ``input_type`` refused for the order alone.
-        :meth:`_on_set_parameters` applies them as rclpy does, checks their
-        combination once all are in, and takes the request back if it is invalid.
+        ``ros2 param load`` of ``input_type: tf`` before its frames would fail for the order.
         """
         name = f'{self.get_name()}/set_parameters'
         resolved = self.resolve_service_name(name)
@@ -194,13 +143,9 @@ class RotationNode(Node):
     def _on_set_parameters(self, request: SetParameters.Request,
                            response: SetParameters.Response) -> SetParameters.Response:
         """
-        Apply a ``set_parameters`` request: each parameter, then their combination.
+        Apply each parameter of a request as rclpy does, then check their combination.
 
-        Each parameter is checked and set on its own, as rclpy's service does (one
-        may fail while others are set); the node's own parameters are then checked
-        together (``input_type: tf`` needs both frames, wherever they stand in the
-        request). An invalid combination sets every parameter of the request back:
-        each result says why, and the node is left as it was.
+        An invalid combination sets every parameter of the request back.
         """
         parameters = [Parameter.from_parameter_msg(message) for message in request.parameters]
         before = {p.name: self.get_parameter(p.name) for p in parameters
@@ -236,7 +181,7 @@ class RotationNode(Node):
         return response
 
     def _check_parameters(self, parameters: List[Parameter]) -> SetParametersResult:
-        """Validate a parameter change (all of it, or none of it, is applied)."""
+        """Validate a parameter change (applied whole or not at all)."""
         try:
             if self._request is None:
                 self._combined(_own(parameters))
@@ -247,12 +192,7 @@ class RotationNode(Node):
         return SetParametersResult(successful=True)
 
     def _combined(self, changes: Dict[str, Any]) -> NodeParameters:
-        """
-        Return the node's parameters with ``changes``, their combination checked.
-
-        Raises ParameterError for a value, or for a combination (``mounting.tf_*``: both
-        frames or neither; not while declaring, when the frames are set one by one).
-        """
+        """Return the parameters with ``changes``, combination checked (once declared)."""
         params = self.params.replaced(changes)
         problem = mounting_frames_problem(params) if self._configured else ''
         if problem:
@@ -273,11 +213,7 @@ class RotationNode(Node):
             self._configure(previous, self.params)
 
     def _configure(self, previous: Optional[NodeParameters], params: NodeParameters) -> None:
-        """
-        Create or update the pipeline, subscriptions and publishers for ``params``.
-
-        ``previous`` are the parameters configured before; None the first time.
-        """
+        """Create or update the pipeline, subscriptions and publishers (``previous``: None)."""
         stats = None if previous is None else self._pipeline.stats
         self._pipeline = ConversionPipeline(self._mounted(params), on_issue=self._log_issue,
                                             stats=stats)
@@ -290,9 +226,8 @@ class RotationNode(Node):
             self._inputs = [InputTopic(self, topic, _memory(params), self._accept, self._drain,
                                        self._on_incompatible_qos)
                             for topic in input_type.topics]
-        # A stateful input stream (input_type.stream) starts empty with the new pipeline:
-        # its latched topics are subscribed again, so that their publishers deliver what
-        # they keep once more, and accepted again.
+        # A stateful input stream starts empty with the new pipeline: its latched topics are
+        # subscribed again, so that their publishers deliver what they keep once more.
         replay = previous is not None and input_type.stream is not None
         for state in self._inputs:
             qos = self._input_qos(state, self._offered(state))
@@ -313,9 +248,7 @@ class RotationNode(Node):
         """
         Return the parameters for the pipeline: the mounting from /tf_static if asked.
 
-        Until /tf_static connects the two frames: the frames cleared, the lookup
-        kept in ``_static_mounting`` (input is dropped, ``mounting_unknown``) and
-        /tf_static subscribed (transient local: what static broadcasters latched).
+        Until /tf_static connects the frames, a placeholder (input dropped) and the lookup.
         """
         self._static_mounting = None
         if not needs_static_mounting(params):
@@ -351,17 +284,14 @@ class RotationNode(Node):
             f'mounting from /tf_static: {lookup.frames} = '
             f'{[round(c, 9) for c in found.mounting_body_rotation]} (x, y, z, w)')
 
-    # Input subscriptions and QoS ------------------------------------------------------
-
     def _input_qos(self, state: InputTopic, offered: List[QoSProfile],
                    incompatible_policy: Optional[QoSPolicyKind] = None) -> QoSProfile:
-        """Return the QoS to subscribe ``state``'s topic with (see :func:`input_qos`)."""
         return input_qos(self.params, offered, state.qos,
                          transient_local=state.topic.transient_local,
                          incompatible_policy=incompatible_policy)
 
     def _offered(self, state: InputTopic) -> List[QoSProfile]:
-        """Return the QoS profiles the publishers of ``state``'s topic offer (auto mode only)."""
+        """Return the QoS profiles ``state``'s publishers offer (auto mode only)."""
         if self.params.qos_reliability != AUTO:
             return []
         return state.offered_qos()
@@ -410,17 +340,10 @@ class RotationNode(Node):
                 f'(qos.reliability auto adapts to it)'))
 
     def destroy_node(self) -> None:
-        """
-        Destroy the node: the message-lost event handles first, then what rclpy destroys.
-
-        Each handle belongs to an input subscription, which ``Node.destroy_node``
-        destroys (see :meth:`InputTopic.destroy_events`).
-        """
+        """Destroy the node: the message-lost event handles before their subscriptions."""
         for state in self._inputs:
             state.destroy_events()
         super().destroy_node()
-
-    # Messages ----------------------------------------------------------------------
 
     def _accept(self, state: InputTopic, data: Any, info: Dict[str, Any]) -> None:
         """Convert a message not seen before and publish its outputs."""
@@ -444,27 +367,18 @@ class RotationNode(Node):
             publish[name](encoders[name](header, numbers))
 
     def _drain(self, state: InputTopic) -> None:
-        """
-        Take and convert what else is queued on ``state``'s subscription, up to a bound.
-
-        One executor wake-up then serves every message that arrived meanwhile; rclpy's
-        executor costs more per wake-up than the conversion of a message.
-        """
+        """Take what else is queued: an executor wake-up costs more than a conversion."""
         for data, info in state.waiting(DRAIN_MAX):
             self._accept(state, data, info)
 
     def _log_issue(self, reason: str, detail: str) -> None:
-        # Throttled here, once per ISSUE_LOG_PERIOD_S for each reason (so a flood of one
-        # problem cannot hide the first report of another), and not with rclpy's
-        # throttle_duration_sec: that looks up the caller on every call, milliseconds
-        # each, which a stream of bad messages at 1 kHz cannot afford.
+        # Throttled per reason (a flood of one cannot hide another), and not with rclpy's
+        # throttle_duration_sec: it looks up the caller on every call, milliseconds each.
         now = time.monotonic()
         if now < self._next_issue_log.get(reason, now):
             return
         self._next_issue_log[reason] = now + ISSUE_LOG_PERIOD_S
         self.get_logger().warning(f'{detail} [{reason}]')
-
-    # Diagnostics -------------------------------------------------------------------
 
     def _on_diagnostics_timer(self) -> None:
         if self.params.qos_reliability == AUTO:

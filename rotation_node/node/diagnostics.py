@@ -1,12 +1,8 @@
 """
 The node's status on ``/diagnostics``: its counters, and what went wrong in the last period.
 
-One ``DiagnosticStatus`` named ``<node>: orientation conversion``, published
-every :data:`DIAGNOSTICS_PERIOD_S`: OK (``converting``) or WARN with the
-messages lost, dropped and partly converted since the last one; its values
-are the input topics and their QoS, the pipeline's counters by reason, the
-losses (sequence gaps and the middleware's message-lost events) and the
-parameters (docs/node.md lists them).
+OK (``converting``), or WARN with the messages lost, dropped and partly converted
+since the last report; the values are listed in docs/node.md.
 """
 from typing import Any, Sequence
 
@@ -33,8 +29,7 @@ class ConversionDiagnostics:
     def __init__(self, node: Node):
         self._node = node
         self._reported = (0, 0, 0)   # dropped, skipped and lost totals at the last diagnostics
-        # No QoS event handlers on the diagnostics publisher: each handler is one more
-        # entity that rclpy's executor re-examines at every wake-up, i.e. every message.
+        # No QoS event handlers: each is one more entity rclpy's executor examines per wake-up.
         self._publisher = node.create_publisher(
             DiagnosticArray, '/diagnostics', 10,
             event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))

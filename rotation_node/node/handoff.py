@@ -1,19 +1,13 @@
 """
 The node's subscriptions and publishers, replaced (a new QoS) without losing a message.
 
-- :class:`InputTopic`: one topic of the input type, its subscription and what
-  it received (:class:`~rotation_node.node.reception.Reception`, the
-  middleware's message-lost events). A new subscription replaces the old one
-  only once it has delivered a message the old one delivered too (or the old
-  one has gone quiet): nothing between them is missed, nothing converted twice.
-- :class:`OutputPublishers`: the output publishers. A new publisher takes over
-  once it has matched the old one's subscribers; the old one lives until they
-  acknowledged what it sent (``Publisher.wait_for_all_acked``).
-
-Both are driven by the node: :meth:`InputTopic.on_message` from the
-subscriptions' callbacks, the ``check_handoffs`` methods from a timer that
-runs while a replacement is under way.
+:class:`InputTopic`: a new subscription replaces the old one once it has
+delivered a message the old one delivered too (or the old one went quiet).
+:class:`OutputPublishers`: a new publisher takes over once it has matched the
+old one's subscribers; the old one lives until they acknowledged what it sent.
+The node calls ``check_handoff(s)`` from a timer while a replacement is under way.
 """
+from dataclasses import dataclass
 import functools
 import time
 from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Set, Tuple
@@ -28,14 +22,10 @@ from rotation_node import registry
 from rotation_node.node.reception import Identity, message_identity, Reception
 from rotation_node.rclpy_private import message_lost_count, message_lost_event, take_waiting
 
-# Replacing a subscription: how long the old one may stay silent once the new one
-# delivers, and how long the old one lives at most.
-HANDOFF_QUIET_S = 0.25
-HANDOFF_MAX_S = 2.0
-# Replacing an output publisher: how long the new one must have matched the old one's
-# subscribers (on its side) before it takes over, so that their readers match it too.
-# The old one then lives until its subscribers acknowledged what it sent (HANDOFF_MAX_S
-# at most): a reliable writer destroyed earlier takes its unacknowledged messages along.
+HANDOFF_QUIET_S = 0.25   # the old subscription's silence once the new one delivers
+HANDOFF_MAX_S = 2.0      # the longest an old subscription or publisher lives on
+# How long a new publisher must have matched the old one's subscribers (on its side)
+# before it takes over, so that their readers match it too.
 PUBLISHER_SETTLE_S = 0.5
 
 MessageInfo = Dict[str, Any]
@@ -45,27 +35,10 @@ class InputTopic:
     """
     One topic of the input type: its subscription, QoS, and what it received.
 
-    While the subscription is being replaced (a new QoS), ``retiring`` is the
-    old one, still taken from, and ``pending`` holds the new one's messages
-    until the new one has delivered a message the old one delivered too.
-
-    Parameters
-    ----------
-    node : rclpy.node.Node
-        Creates and destroys the subscriptions.
-    topic : rotation_node.registry.InputTopic
-        The topic (relative name, latched or not).
-    memory : int
-        Messages the Reception remembers (see :class:`Reception`).
-    accept : callable
-        ``accept(input_topic, message, info)``: a message taken, maybe seen before.
-    drain : callable
-        ``drain(input_topic)``: called after a message of the current
-        subscription was accepted (outside a handoff), to take what else waits.
-    on_incompatible_qos : callable
-        ``on_incompatible_qos(input_topic, event)``: a publisher the
-        subscription cannot match.
-
+    During a handoff ``retiring`` is the old subscription, still taken from, and
+    ``pending`` holds the new one's messages. The node's callbacks:
+    ``accept(self, message, info)`` for each message taken (maybe seen before),
+    ``drain(self)`` after one of the current subscription outside a handoff.
     """
 
     def __init__(self, node: Node, topic: registry.InputTopic, memory: int,
@@ -83,13 +56,11 @@ class InputTopic:
         self.retiring: Optional[Subscription] = None
         self.retiring_heard = 0.0     # monotonic time of the old subscription's last message
         self.handoff_started = 0.0
-        # (data, info) of the new subscription during a handoff
         self.pending: List[Tuple[Any, MessageInfo]] = []
         self.pending_identities: Set[Identity] = set()
         self.reception = Reception(memory, on_new_publisher=self._publisher_started)
         self.lost_events = 0          # total_count_change of the rmw's message-lost events
-        # subscription -> its message-lost event (None: the rmw has none)
-        self.message_lost: Dict[Subscription, Any] = {}
+        self.message_lost: Dict[Subscription, Any] = {}   # None: the rmw has no such event
 
     @property
     def lost(self) -> int:
@@ -124,14 +95,7 @@ class InputTopic:
         return [info.qos_profile for info in self._node.get_publishers_info_by_topic(name)]
 
     def subscribe(self, message_type: Any, qos: QoSProfile, *, raw: bool, memory: int) -> bool:
-        """
-        Subscribe the topic with ``qos``, replacing its subscription without loss.
-
-        The old subscription stays until the new one has delivered a message the old
-        one delivered too (or the old one has gone quiet): nothing between them is
-        missed, nothing is converted twice. Returns whether a handoff started (then
-        :meth:`check_handoff` must be called until it is done).
-        """
+        """Subscribe the topic with ``qos``; return whether a handoff (of the old one) started."""
         if self.retiring is not None:
             self.finish_handoff()
         self.generation += 1
@@ -219,9 +183,7 @@ class InputTopic:
         """
         Destroy the message-lost event handles (before the node destroys the subscriptions).
 
-        ``Node.destroy_node`` destroys the subscriptions; a handle left alive would be
-        finalised later (at interpreter exit, in any order) against a subscription and
-        middleware already gone.
+        A handle left alive would be finalised at exit against a subscription already gone.
         """
         for event in self.message_lost.values():
             if event is not None:
@@ -229,28 +191,17 @@ class InputTopic:
         self.message_lost.clear()
 
 
+@dataclass
 class _PublisherReplacement:
     """An output's new publisher (a new QoS), until it takes over from the old one."""
 
-    def __init__(self, publisher: Publisher, created_at: float):
-        self.publisher = publisher
-        self.created_at = created_at   # monotonic
-        # since when it has matched the old one's subscribers
-        self.matched_since: Optional[float] = None
+    publisher: Publisher
+    created_at: float   # monotonic
+    matched_since: Optional[float] = None   # of the old one's subscribers
 
 
 class OutputPublishers:
-    """
-    The node's output publishers, by output name, replaced without loss on a new QoS.
-
-    Attributes
-    ----------
-    publish : dict
-        ``{output name: publish(message bytes)}``, the publisher that takes over.
-    encoders : dict
-        ``{output name: encode(header, numbers) -> bytes}``.
-
-    """
+    """The node's output publishers (``publish``, ``encoders`` by name), replaced without loss."""
 
     def __init__(self, node: Node):
         self._node = node
@@ -262,12 +213,7 @@ class OutputPublishers:
         self._retiring: List[Tuple[Publisher, float]] = []
 
     def configure(self, outputs: Sequence[str], qos: QoSProfile) -> bool:
-        """
-        Publish ``outputs`` with ``qos`` from now on; return whether a handoff started.
-
-        A publisher whose QoS changes publishes until its replacement has matched
-        its subscribers (:meth:`check_handoffs`).
-        """
+        """Publish ``outputs`` with ``qos`` from now on; return whether a handoff started."""
         for name in list(self._publishers):
             replacement = self._replacing.pop(name, None)
             if replacement is not None:   # superseded before it took over
@@ -276,7 +222,6 @@ class OutputPublishers:
                 self._retire(self._publishers.pop(name))
                 del self.publish[name]
             elif self._publishers[name].qos_profile != qos:
-                # The old publisher publishes until the new one has matched its subscribers.
                 self._replacing[name] = _PublisherReplacement(
                     self._create(name, qos), time.monotonic())
         for name in outputs:
@@ -300,11 +245,7 @@ class OutputPublishers:
             event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
 
     def check_handoffs(self, now: float) -> bool:
-        """
-        Let new publishers take over once matched; destroy acknowledged old ones.
-
-        Returns whether a handoff is still under way.
-        """
+        """Let matched new publishers take over, destroy acknowledged old ones; return if busy."""
         for name, replacement in list(self._replacing.items()):
             new, old = replacement.publisher, self._publishers[name]
             if new.get_subscription_count() < old.get_subscription_count():

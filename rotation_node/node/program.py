@@ -1,23 +1,11 @@
 """
 The ``rotation_node`` program: its command line, start-up and shut-down.
 
-:func:`main` checks the command line the node's own way first (its
-``--params-file`` files with the loader ``rotation_bag convert`` uses, and the
-names given with ``-p``), so that a mistake is one line on stderr and exit
-status 1, not rcl's many lines; then it initialises rclpy and creates the node
-(:class:`rotation_node.node.conversion_node.RotationNode`, imported only then),
-which says that it is starting before it loads the conversions, and spins it
-until Ctrl-C or SIGTERM.
-
-rclpy reads the ROS arguments itself (``rclpy.init``; the program's own
-arguments are what ``rclpy.utilities.remove_ros_args`` leaves). The
-``--params-file`` and ``-p`` arguments are also read here, by
-:func:`ros_arguments`: rclpy gives no access to them before it reads the
-files (a file it refuses is a multi-line rcl error).
-
-Run it with, for example::
-
-    rotation_node --ros-args -r input:=/imu/data -p outputs:='[euler, angular_velocity]'
+:func:`main` checks the ``--params-file`` files and the ``-p`` names first, the
+node's own way (:func:`ros_arguments`: rclpy gives no access to them before rcl
+reads the files, whose errors are many lines), so that a mistake is one line on
+stderr and exit status 1; then it initialises rclpy, creates the node (imported
+only then) and spins it until Ctrl-C or SIGTERM.
 """
 import gc
 import sys
@@ -43,10 +31,9 @@ _ROS_FLAGS_WITH_VALUE = frozenset((
 
 def ros_arguments(args: Sequence[str]) -> List[Tuple[str, Optional[str]]]:
     """
-    Return the ``(flag, value)`` pairs of the ROS arguments of a command line (``sys.argv``).
+    Return the ``(flag, value)`` pairs of the ROS arguments (after ``--ros-args``, up to ``--``).
 
-    ROS arguments are those after each ``--ros-args``, up to the next ``--``: e.g.
-    ``[('--params-file', 'a.yaml'), ('-p', 'qos.depth:=5'), ('--disable-stdout-logs', None)]``.
+    E.g. ``[('-p', 'qos.depth:=5'), ('--disable-rosout-logs', None)]``.
     """
     pairs: List[Tuple[str, Optional[str]]] = []
     in_ros_args, index = False, 0
@@ -105,32 +92,14 @@ def _asks_for_help(argv: Sequence[str]) -> bool:
 
 def main(args: Optional[List[str]] = None, stop_signal: Optional[StopSignal] = None) -> int:
     """
-    Run the node until Ctrl-C or SIGTERM (``--help``: print its usage).
+    Run the node until Ctrl-C or SIGTERM (``--help``: print its usage); return the exit status.
 
-    Parameters
-    ----------
-    args : list of str, optional
-        The command line (``sys.argv`` by default).
-    stop_signal : StopSignal, optional
-        The console script's, in force since the program started loading; a
-        new one otherwise.
-
-    Returns
-    -------
-    int
-        0 after Ctrl-C, SIGTERM or shutdown, at any moment (during start-up with
-        one line on stderr saying so); 1 if a parameters file or an initial
-        parameter value is invalid (one line on stderr says which).
-
-    Notes
-    -----
-    Start-up runs with SIGINT and SIGTERM only setting a flag (:class:`StopSignal`),
-    and rclpy initialised without its signal handlers: its handler shuts the
-    context down from another thread, which in the middle of the node's
-    construction surfaces as whatever rclpy call comes next
-    (``NotInitializedException``...). rclpy's handlers are installed once the node
-    exists (chained to the flag), so that a signal ends ``spin``.
-
+    0 after a stop at any moment (during start-up with one line on stderr); 1
+    with one line on stderr for an invalid parameters file or value. ``stop_signal``:
+    the console script's, in force since loading. Start-up runs with signals only
+    setting its flag: rclpy's handler, shutting the context from another thread,
+    would surface mid-construction as any rclpy error; it is installed (chained)
+    once the node exists, so that a signal ends ``spin``.
     """
     if stop_signal is None:
         with StopSignal() as stop:

@@ -1,40 +1,20 @@
 """
 What one input topic of the node has received: lost messages and duplicates.
 
-Every message a ROS 2 subscription takes comes with its message info, which
-(with rmw_fastrtps) holds the publication sequence number that the publisher
-gave it (1, 2, 3, ... per publisher) and the publisher's source timestamp.
-:class:`Reception` uses them for two things:
-
-- **loss**: a jump in a publisher's sequence numbers is messages that this
-  subscription never got, wherever they were lost (on the wire, in the
-  publisher's or the subscription's history); the rmw's message-lost events
-  see only some of them;
-- **duplicates**: while the node replaces a subscription (a new QoS), the old
-  and the new one both receive the same messages for a moment; a message
-  already accepted is recognised by its (sequence number, source timestamp).
-  The new one can also deliver, from the publisher's history, messages older
-  than the last one accepted from that publisher, which the old one skipped:
-  they were counted lost in its gap, and are not accepted (late).
-
-Which publisher sent a message: newer rclpy releases put the publisher's GID in
-the message info (``publisher_gid``) and gaps are then counted per publisher,
-exactly. Jazzy's rclpy does not; the sequence numbers are then told apart by
-continuity: each number is assigned to the publisher whose last number is the
-closest below it, a number with none below starts a new publisher (one that
-restarted or joined), and the sequences of publishers that left are forgotten
-(:meth:`Reception.retain`, with the subscription's count of matched
-publishers): a publisher that comes back or a new one is never credited with
-the numbers of one that went. Exact for one publisher at a time, however often
-it restarts; an estimate with several at once. This module does not import
-rclpy.
+From the publication sequence number and source timestamp of each message's
+info (rmw_fastrtps): a jump in a publisher's numbers is messages lost wherever
+they were; a message already accepted (while two subscriptions overlap, or
+older than the last one accepted from its publisher) is not accepted again.
+Without the publisher's GID (Jazzy's rclpy) each number continues the sequence
+whose last number is closest below it, a number with none below starts a new
+publisher, and the sequences of publishers that left are forgotten
+(:meth:`Reception.retain`): exact for one publisher at a time, however often it
+restarts. docs/node.md ("Lost messages") has the details. No rclpy import.
 """
 import collections
 from typing import Any, Callable, Deque, List, Mapping, Optional, Set, Tuple
 
-#: Publishers (sequences of publication numbers) followed per topic; a new one
-#: beyond this replaces the one heard from least recently.
-MAX_PUBLISHERS = 8
+MAX_PUBLISHERS = 8   # sequences followed per topic; beyond, the least recently heard goes
 
 Identity = Tuple[Optional[int], Optional[int]]
 
@@ -44,7 +24,7 @@ def message_identity(info: Mapping[str, Any]) -> Identity:
     return info.get('publication_sequence_number'), info.get('source_timestamp')
 
 
-def publisher_key(info: Mapping[str, Any]) -> Optional[bytes]:
+def _publisher_key(info: Mapping[str, Any]) -> Optional[bytes]:
     """Return the publisher's GID bytes of a message info, or None where rclpy gives none."""
     gid = info.get('publisher_gid')
     if gid is None:
@@ -58,32 +38,17 @@ class Reception:
     """
     Lost and duplicate messages of one input topic, from their message info.
 
-    Parameters
-    ----------
-    memory : int
-        How many recent messages are remembered to recognise duplicates: at
-        least the history depth of the subscriptions (a new subscription can be
-        handed as many already-delivered messages as the publisher keeps).
-    on_new_publisher : callable, optional
-        Called (no arguments) when a message starts a new sequence: a publisher
-        joined or restarted, and one may have left (see :meth:`retain`).
-
-    Attributes
-    ----------
-    lost : int
-        Messages skipped in the publishers' sequence numbers.
-    duplicates : int
-        Messages received a second time (and not accepted).
-
+    ``memory``: recent messages remembered, at least the subscriptions' depth (a
+    new subscription may be handed that many again). ``on_new_publisher()``: a
+    message started a new sequence (a publisher joined or restarted).
     """
 
     def __init__(self, memory: int, on_new_publisher: Optional[Callable[[], None]] = None):
-        self.lost = 0
-        self.duplicates = 0
+        self.lost = 0         # messages skipped in the publishers' sequence numbers
+        self.duplicates = 0   # messages received again (not accepted)
         self._seen: Set[Identity] = set()
         self._order: Deque[Identity] = collections.deque()   # of _seen, oldest first
-        # per publisher [GID or None, last number, its source timestamp], the most recently
-        # heard first
+        # per publisher [GID or None, last number, its source timestamp], last heard first
         self._sequences: List[list] = []
         self._on_new_publisher = on_new_publisher
         self.resize(memory)
@@ -98,17 +63,7 @@ class Reception:
         return message_identity(info) in self._seen
 
     def accept(self, info: Mapping[str, Any]) -> bool:
-        """
-        Return whether a message is new; count it, and any gap before it.
-
-        Parameters
-        ----------
-        info : mapping
-            rclpy's message info (``publication_sequence_number``,
-            ``source_timestamp``, ``publisher_gid`` where rclpy gives it); a
-            missing or None sequence number counts no gap.
-
-        """
+        """Return whether the message of an rclpy message info is new; count it, and any gap."""
         identity = message_identity(info)
         seen = self._seen
         if identity in seen:
@@ -121,7 +76,7 @@ class Reception:
             seen.discard(order.popleft())
         number, stamp = identity
         if number is not None:
-            key = publisher_key(info)
+            key = _publisher_key(info)
             if self._late(number, stamp, key):
                 return False
             self.lost += self._gap(number, key, stamp)
@@ -129,13 +84,10 @@ class Reception:
 
     def _late(self, number: int, stamp: Optional[int], key: Optional[bytes]) -> bool:
         """
-        Whether a message is older than one already accepted from its publisher.
+        Whether a message is older than one accepted from its publisher (counted lost already).
 
-        Counted lost in that publisher's gap already; accepting it would count it twice
-        (and convert it out of order). Its publisher: the one of its GID; without GIDs,
-        a sequence past its number, whose last message was sent later, within the
-        messages remembered (a restarted publisher's messages are sent later than all
-        before, a publisher far behind another is another).
+        Without GIDs its publisher is a sequence past its number whose last message
+        was sent later, within the messages remembered.
         """
         for sequence_key, last, last_stamp in self._sequences:
             if sequence_key == key and number < last and (
@@ -183,13 +135,7 @@ class Reception:
         return 0
 
     def retain(self, publishers: int) -> None:
-        """
-        Forget the sequences of publishers that left: keep the ``publishers`` heard last.
-
-        Call it with the number of publishers the subscription matches now (when
-        it changes, or from time to time): those that left are the ones not heard
-        from since, and a later publisher's gap is never credited to them.
-        """
+        """Forget the sequences of publishers that left: keep the ``publishers`` heard last."""
         del self._sequences[max(publishers, 0):]
 
     def resize(self, memory: int) -> None:
