@@ -123,17 +123,11 @@ DROP_REASONS = tuple(name for name, reason in REASONS.items() if reason.kind == 
 SKIP_REASONS = tuple(name for name, reason in REASONS.items() if reason.kind == SKIPPED)
 """The reasons counted in ``PipelineStats.skipped``."""
 
-#: Most samples in one block: below the conversions' batch schedules (see the module notes).
 BLOCK_SAMPLES = BATCH_SAMPLES - 1
 
+# Input-stage transforms: factory(params) -> transform(sample) -> sample, or None (none
+# needed); applied in order to every sample before any value. Not in the block form.
 SAMPLE_TRANSFORMS: List[Callable[[NodeParameters], Optional[Callable[[Sample], Sample]]]] = []
-"""
-Input-stage transforms: ``factory(params) -> transform(sample) -> sample``, or None.
-
-Each factory is called once per pipeline (None: the parameters need none); the
-transforms are applied in order to every sample before any value is computed.
-A transform leaves the stream to the per-message form.
-"""
 
 
 def mounting_of(params: NodeParameters) -> Optional[Mounting]:

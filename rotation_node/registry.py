@@ -29,26 +29,18 @@ QUATERNION = 'quaternion'
 EULER = 'euler'
 ROTATION_VECTOR = 'rotation_vector'
 
-# Named per-message values of the pipeline that outputs are computed from
-# (rotation_node.pipeline computes them; an output lists those it needs).
-ORIENTATION = 'orientation'
-"""Input orientation as a quaternion array (x, y, z, w), any non-zero scale."""
-OUTPUT_QUATERNION = 'output_quaternion'
-"""Unit output quaternion: w >= 0, or sign-continuous with ``quaternion.continuity``."""
-EULER_ANGLES = 'euler_angles'
-"""Euler angles of ``euler.sequence`` (array), first and third wrapped to (-pi, pi]."""
-PUBLISHED_EULER = 'published_euler'
-"""The Euler angles as published: first and third unwrapped with ``euler.unwrap``."""
-ANGULAR_VELOCITY = 'angular_velocity'
-"""Angular velocity (rad/s) in ``angular_velocity.output_frame``, measured or differenced."""
-EULER_RATES = 'euler_rates'
-"""Time derivatives of the Euler angles; unavailable near gimbal lock."""
+# The named values the pipeline computes (rotation_node.pipeline.VALUES), outputs need.
+ORIENTATION = 'orientation'                # quaternion (x, y, z, w), any non-zero scale
+OUTPUT_QUATERNION = 'output_quaternion'    # unit: w >= 0, or sign-continuous
+EULER_ANGLES = 'euler_angles'              # of euler.sequence, first and third in (-pi, pi]
+PUBLISHED_EULER = 'published_euler'        # first and third unwrapped with euler.unwrap
+ANGULAR_VELOCITY = 'angular_velocity'      # rad/s in the output frame, measured or differenced
+EULER_RATES = 'euler_rates'                # unavailable near gimbal lock
+# Rotation-vector covariance (3 x 3, rad^2) in the output frames, about covariance.frame's axes,
+# and the first-order Euler covariance (rad^2 or deg^2); unavailable near gimbal lock or past
+# covariance.max_linearisation_ratio.
 ORIENTATION_COVARIANCE = 'orientation_covariance'
-"""Rotation-vector covariance (3 x 3 array, rad^2) in the output frames, about the axes of
-``covariance.frame``; unavailable when the input carries none or it is unknown (all zeros)."""
 EULER_COVARIANCE = 'euler_covariance'
-"""First-order covariance (3 x 3 array) of the Euler angles, rad^2 or deg^2 with
-``euler.degrees``; unavailable near gimbal lock or past ``covariance.max_linearisation_ratio``."""
 PIPELINE_VALUES = (ORIENTATION, OUTPUT_QUATERNION, EULER_ANGLES, PUBLISHED_EULER,
                    ANGULAR_VELOCITY, EULER_RATES, ORIENTATION_COVARIANCE, EULER_COVARIANCE)
 

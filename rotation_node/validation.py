@@ -1,14 +1,11 @@
 """
 The checks of node parameters and scene files: dataclass fields of a kind of value.
 
-A :func:`checked_field` says its kind of value (:class:`Boolean`, :class:`Real`,
-:class:`Choice`, ..., for scenes also a nested dataclass) and, where the domain
-asks for more (a unit quaternion), a ``check(value, where)`` that returns the
-value to store or raises ``where.error(...)``. :func:`checked_arguments` checks a
-mapping against those fields: unknown keys first, with the nearest valid name,
-then missing required keys, then each value by its kind. Each problem raises the
-error type of a :class:`KeyPath`, naming the value's path (``motion.half_angle``,
-``parameter 'qos.depth'``) and showing the value by type and a bounded repr.
+A :func:`checked_field` has a kind (:class:`Real`, :class:`Choice`, a nested
+dataclass...) and optionally a ``check(value, where)`` returning the value to
+store. :func:`checked_arguments` checks a mapping: unknown keys first (with the
+nearest valid name), then missing keys, then each value. Errors are the
+:class:`KeyPath`'s type, naming the value's path and showing a bounded repr.
 """
 from __future__ import annotations
 
@@ -54,8 +51,7 @@ class KeyPath:
     """
     The path of a value in its document (``'motion.orientation[2]'``), and the errors naming it.
 
-    ``template`` is how a message names the path (``"parameter '{}'"`` gives
-    ``parameter 'qos.depth': ...``); :meth:`error` returns an ``error_type``.
+    ``template`` names the path in messages (``"parameter '{}'"``).
     """
 
     path: str = ''
@@ -149,9 +145,7 @@ class Real(_Range):
     """
     A finite number within the bounds, stored as float; a bool is never a number.
 
-    An integer stands for the real number (``rate: 100``), as in scene files,
-    except with ``integers=False``: a ROS double parameter (``0`` is refused
-    where ``0.0`` is meant).
+    ``integers=False``: a ROS double, where ``0`` is refused (a scene takes ``100``).
     """
 
     integers: bool = dataclasses.field(default=True, kw_only=True)
@@ -173,11 +167,9 @@ class Real(_Range):
 @dataclasses.dataclass(frozen=True)
 class Text(ValueKind):
     """
-    A string: any, one matching ``pattern``, or one ``parser`` accepts.
+    A string: any, one matching ``pattern``, or one ``parser`` accepts (else ValueError).
 
-    ``noun`` says what the string is in messages (``'an absolute topic name such
-    as /imu'``); ``parser(value)`` raises ValueError, saying why, for a string
-    that is not valid (e.g. :func:`rotation_node.conversions.parse_sequence`).
+    ``noun`` says what the string is in messages (``'an absolute topic name such as /imu'``).
     """
 
     noun: str = 'a string'
@@ -223,8 +215,7 @@ class ChoiceList(ValueKind):
     """
     A non-empty list of distinct strings of ``choices``, stored as a tuple in the given order.
 
-    ``item`` names an entry in messages (``'list at least one output'``). A
-    missing value (None) is an empty list: ROS gives ``outputs: []`` as no value.
+    None is an empty list (ROS gives ``outputs: []`` as no value); ``item`` names an entry.
     """
 
     choices: tuple = ()
@@ -332,15 +323,12 @@ class NestedDataclass(ValueKind):
         return dataclass_from_mapping(self.cls, value, where)
 
 
-# --- checked fields -----------------------------------------------------------
-
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class FieldSpec:
     """
     What a dataclass field accepts: its ``kind`` of value and a further ``check``.
 
-    ``name`` is its key in a mapping (the attribute name unless set);
-    :func:`field_specs` sets ``attribute`` and ``required`` (no default).
+    ``name``: its key (the attribute's unless set); :func:`field_specs` sets the rest.
     """
 
     kind: ValueKind
@@ -389,11 +377,8 @@ def checked_arguments(cls: type, data: Any, where: KeyPath, *, skip: Iterable[st
     """
     Return ``{attribute: value}`` of the checked fields of ``cls`` found in the mapping ``data``.
 
-    ``data`` None is an empty mapping; keys in ``skip`` are the caller's (a tag).
-    Raises ``where``'s error type for the first unknown key (or ``unknown(key)``'s
-    error), else the first missing required key, else the first invalid value,
-    in field order. Absent optional keys are left out (the dataclass has their
-    defaults).
+    None is an empty mapping; keys in ``skip`` are the caller's (a tag). Raises for
+    the first unknown key (``unknown(key)`` if given), missing key, or invalid value.
     """
     data = {} if data is None else data
     if not isinstance(data, Mapping):

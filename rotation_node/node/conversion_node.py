@@ -230,7 +230,7 @@ class RotationNode(Node):
         # subscribed again, so that their publishers deliver what they keep once more.
         replay = previous is not None and input_type.stream is not None
         for state in self._inputs:
-            qos = self._input_qos(state, self._offered(state))
+            qos = self._input_qos(state)[1]
             if replay and state.topic.transient_local:
                 state.finish_handoff()
                 state.reception.forget()
@@ -284,23 +284,18 @@ class RotationNode(Node):
             f'mounting from /tf_static: {lookup.frames} = '
             f'{[round(c, 9) for c in found.mounting_body_rotation]} (x, y, z, w)')
 
-    def _input_qos(self, state: InputTopic, offered: List[QoSProfile],
-                   incompatible_policy: Optional[QoSPolicyKind] = None) -> QoSProfile:
-        return input_qos(self.params, offered, state.qos,
-                         transient_local=state.topic.transient_local,
-                         incompatible_policy=incompatible_policy)
-
-    def _offered(self, state: InputTopic) -> List[QoSProfile]:
-        """Return the QoS profiles ``state``'s publishers offer (auto mode only)."""
-        if self.params.qos_reliability != AUTO:
-            return []
-        return state.offered_qos()
+    def _input_qos(self, state: InputTopic, incompatible_policy: Optional[QoSPolicyKind] = None,
+                   ) -> Tuple[List[QoSProfile], QoSProfile]:
+        """Return what ``state``'s publishers offer (auto mode only) and the QoS to take."""
+        offered = state.offered_qos() if self.params.qos_reliability == AUTO else []
+        return offered, input_qos(self.params, offered, state.qos,
+                                  transient_local=state.topic.transient_local,
+                                  incompatible_policy=incompatible_policy)
 
     def _adapt(self, state: InputTopic,
                incompatible_policy: Optional[QoSPolicyKind] = None) -> None:
         """Subscribe ``state``'s topic again if the publishers need another QoS; log it once."""
-        offered = self._offered(state)
-        qos = self._input_qos(state, offered, incompatible_policy)
+        offered, qos = self._input_qos(state, incompatible_policy)
         subscription, current_qos = state.subscribed()
         if qos == current_qos:
             return

@@ -39,11 +39,11 @@ class ConversionDiagnostics:
         """Publish the status of the node now (its losses counted up to now)."""
         for state in inputs:
             state.count_message_lost()
-            state.forget_publishers_that_left()
+            state.reception.retain(state.matched_publishers())   # forget those that left
         stats = pipeline.stats
         gaps = sum(state.reception.lost for state in inputs)
         events = sum(state.lost_events for state in inputs)
-        lost = sum(state.lost for state in inputs)
+        lost = sum(max(state.reception.lost, state.lost_events) for state in inputs)
         totals = (sum(stats.dropped.values()), sum(stats.skipped.values()), lost)
         new_dropped, new_skipped, new_lost = (
             now - before for now, before in zip(totals, self._reported))

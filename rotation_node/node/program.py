@@ -36,20 +36,14 @@ def ros_arguments(args: Sequence[str]) -> List[Tuple[str, Optional[str]]]:
     E.g. ``[('-p', 'qos.depth:=5'), ('--disable-rosout-logs', None)]``.
     """
     pairs: List[Tuple[str, Optional[str]]] = []
-    in_ros_args, index = False, 0
-    while index < len(args):
-        token = args[index]
+    in_ros_args, tokens = False, iter(args)
+    for token in tokens:
         if token == '--ros-args':
             in_ros_args = True
         elif token == '--':
             in_ros_args = False
         elif in_ros_args:
-            if token in _ROS_FLAGS_WITH_VALUE and index + 1 < len(args):
-                pairs.append((token, args[index + 1]))
-                index += 1
-            else:
-                pairs.append((token, None))
-        index += 1
+            pairs.append((token, next(tokens, None) if token in _ROS_FLAGS_WITH_VALUE else None))
     return pairs
 
 
