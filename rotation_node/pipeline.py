@@ -2,29 +2,24 @@
 Conversion pipeline shared by the live node and ``rotation_bag convert``.
 
 :class:`ConversionPipeline` turns the messages of one input stream into the
-configured outputs. Each sample passes :data:`SAMPLE_TRANSFORMS`; then the
-named values the outputs need are computed once each, in the order of
-:data:`VALUES`, each unavailable (None) when one it requires is, and each
-output is computed from its values or skipped. Bad data never raises: it is
-dropped or partly converted, counted in :class:`PipelineStats` and reported
-with its text in :data:`REASONS`.
+configured outputs: the named values they need are computed once each, in the
+order of :data:`VALUES`, each unavailable (None) when one it requires is. Bad
+data never raises: it is dropped or partly converted, counted in
+:class:`PipelineStats` and reported with its text in :data:`REASONS`.
 
-Each :class:`Value` declares its per-message form (one message: the node) and,
-beside it, its block form (a :class:`~rotation_node.sample_block.SampleBlock`,
-one library call per conversion: ``convert``). Both read and write the same
-:class:`StreamState`, counters and reports, so a stream may mix them and gets
-the same numbers bit for bit and the same reports in the same order. The
-per-message form is not a block of one: numpy's cost per call (about 150 us a
-message, against 10 us) is more than the node can spend per message.
+Each :class:`Value` declares its per-message form (the node) and beside it its
+block form (a :class:`~rotation_node.sample_block.SampleBlock`: ``convert``).
+Both share the :class:`StreamState`, counters and reports, so a stream may mix
+them and gets the same numbers bit for bit and the same reports in the same
+order. The per-message form is not a block of one: numpy's cost per call (150
+us a message, against 10 us) is more than the node can spend.
 
-Exactness of the block form: blocks stay below the conversions' batch
-schedules (:data:`BLOCK_SAMPLES`; vectorised ``atan2`` may differ in the last
-bit); a rule carried from sample to sample (sign continuity, unwrapping) is one
-scalar ``@jit`` function called in Python per message and in a kernel loop per
-block; the norm tolerance is decided by the per-message expression wherever a
-block's estimate is in doubt. The finite-difference rate is that of
-``kinematics.angular_velocity_from_quaternions`` (docs/numerics.md) over
-integer-nanosecond steps, and needs increasing stamps.
+The block form is exact: blocks stay below the conversions' batch schedules
+(:data:`BLOCK_SAMPLES`: vectorised ``atan2`` may differ in the last bit); a rule
+carried from sample to sample is one scalar ``@jit`` function, called per
+message and in a kernel loop per block; the per-message norm test decides where
+a block's estimate is in doubt. The finite-difference rate
+(``kinematics.angular_velocity_from_quaternions``) needs increasing stamps.
 """
 from collections import Counter
 import dataclasses

@@ -98,17 +98,13 @@ class InputType:
     """
     One value of ``input_type``: a message type and how a sample is read from it.
 
-    Fields are dotted paths in the message. ``orientation_form``: :data:`QUATERNION`,
-    :data:`EULER` (``euler.sequence``, degrees with ``euler.degrees``) or
-    :data:`ROTATION_VECTOR`. An ``*_unknown_field`` array whose first element is -1
-    marks the value as absent (sensor_msgs/Imu, REP 145). ``stream`` names (not
-    imports: it imports this one) the module of a stateful type, which defines
-    ``sample_stream(params, report) -> SampleStream`` and ``DROP_REASONS``.
+    ``*_field``: dotted paths in the message; an ``*_unknown_field`` array whose first
+    element is -1 marks the value as absent (REP 145). docs/ARCHITECTURE.md: adding one.
     """
 
     name: str                     # the parameter value, e.g. 'imu'
     type_name: str                # e.g. 'sensor_msgs/msg/Imu'
-    orientation_form: str
+    orientation_form: str         # QUATERNION, EULER (of euler.sequence) or ROTATION_VECTOR
     orientation_field: str        # a Quaternion, or a Vector3 for the other forms
     angular_velocity_field: Optional[str] = None   # a Vector3 (rad/s); None: differenced
     covariance_field: Optional[str] = None
@@ -116,7 +112,7 @@ class InputType:
     orientation_unknown_field: Optional[str] = None
     angular_velocity_unknown_field: Optional[str] = None
     topics: Tuple[InputTopic, ...] = (INPUT_TOPIC,)
-    stream: Optional[str] = None
+    stream: Optional[str] = None   # the module of a stateful type's sample stream
 
     @property
     def message_class(self) -> type:
@@ -349,18 +345,15 @@ class OutputType:
     """
     One value allowed in ``outputs`` (and its relative topic): what is published, and how.
 
-    ``compute(params, *values of needs) -> numbers`` as ``message.build`` takes
-    them; None publishes the one value needed as it is. The output is skipped
-    where a value it ``needs`` (:data:`PIPELINE_VALUES`) is unavailable.
-    ``compute_takes_blocks``: ``compute`` also takes arrays of samples, each row
-    bit for bit that sample's alone (tested).
+    ``compute(params, *values it needs) -> numbers`` (None: the one value as it is);
+    skipped where a value is unavailable. docs/ARCHITECTURE.md: adding one.
     """
 
     name: str
     message: OutputMessage
     needs: Tuple[str, ...]
     compute: Optional[Callable[..., ArrayLike]]
-    compute_takes_blocks: bool = False
+    compute_takes_blocks: bool = False   # also arrays of samples, rows bit for bit (tested)
 
     @property
     def type_name(self) -> str:

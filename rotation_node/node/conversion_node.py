@@ -1,15 +1,11 @@
 """
 The orientation-conversion node: parameters in, the pipeline, outputs out.
 
-Subscribes the input type's topics (:mod:`rotation_node.registry`), converts each
-message with :class:`rotation_node.pipeline.ConversionPipeline`, the code
-``rotation_bag convert`` runs, and publishes the bytes of each output's encoder
-on its relative topic. Fixed-layout inputs are taken serialized and decoded by
-:mod:`rotation_node.wire.cdr`. Parameters come from
-:mod:`rotation_node.parameters`, parameters files read as ``convert`` reads them;
-a ``set_parameters`` request is applied parameter by parameter and its
-combination checked once it is all in. docs/node.md describes the QoS, losses,
-parameter changes and /diagnostics.
+Subscribes the input type's topics, converts each message with
+:class:`rotation_node.pipeline.ConversionPipeline` (as ``rotation_bag convert``)
+and publishes the bytes of each output's encoder on its relative topic;
+fixed-layout inputs are taken serialized. docs/node.md describes the QoS,
+losses, parameter changes and /diagnostics.
 """
 import time
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple

@@ -43,7 +43,7 @@ class ConversionDiagnostics:
         stats = pipeline.stats
         gaps = sum(state.reception.lost for state in inputs)
         events = sum(state.lost_events for state in inputs)
-        lost = sum(max(state.reception.lost, state.lost_events) for state in inputs)
+        lost = sum(state.lost for state in inputs)
         totals = (sum(stats.dropped.values()), sum(stats.skipped.values()), lost)
         new_dropped, new_skipped, new_lost = (
             now - before for now, before in zip(totals, self._reported))

@@ -62,6 +62,11 @@ class InputTopic:
         self.lost_events = 0          # total_count_change of the rmw's message-lost events
         self.message_lost: Dict[Subscription, Any] = {}   # None: the rmw has no such event
 
+    @property
+    def lost(self) -> int:
+        """Messages lost: the larger of the sequence gaps and the message-lost events."""
+        return max(self.reception.lost, self.lost_events)
+
     def matched_publishers(self) -> int:
         """Return how many publishers the topic's subscriptions (current, retiring) match."""
         return max((subscription.get_publisher_count()

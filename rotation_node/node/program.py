@@ -75,15 +75,6 @@ def usage() -> str:
             + ', '.join(spec.name for spec in PARAMETERS) + '.\n')
 
 
-def _asks_for_help(argv: Sequence[str]) -> bool:
-    """Whether the program's own arguments (not the ROS ones) hold ``-h`` or ``--help``."""
-    try:
-        own = remove_ros_args(argv)[1:]
-    except RCLError:   # malformed ROS arguments: reported by the checks or by rclpy.init
-        return False
-    return bool({'-h', '--help'} & set(own))
-
-
 def main(args: Optional[List[str]] = None, stop_signal: Optional[StopSignal] = None) -> int:
     """
     Run the node until Ctrl-C or SIGTERM (``--help``: print its usage); return the exit status.
@@ -104,7 +95,11 @@ def main(args: Optional[List[str]] = None, stop_signal: Optional[StopSignal] = N
 def _run(args: Optional[List[str]], stop: StopSignal) -> int:
     """Run :func:`main` with ``stop`` in force."""
     argv = sys.argv if args is None else list(args)
-    if _asks_for_help(argv):
+    try:
+        own = remove_ros_args(argv)[1:]   # the program's own arguments
+    except RCLError:   # malformed ROS arguments: reported by the checks or by rclpy.init
+        own = []
+    if {'-h', '--help'} & set(own):
         print(usage(), end='')
         return 0
     files = parameters_files(argv)
