@@ -203,7 +203,7 @@ class FrameConversion:
         return np.where(out[..., 3:] < 0.0, -out, out) + 0.0
 
     def matrix(self, matrix: ArrayLike) -> np.ndarray:
-        """Return the body-to-world matrix (..., 3, 3) in the target frames, ``P R B`` (exact)."""
+        """Return the body-to-world matrices (..., 3, 3) in the target frames: ``P R B``, exact."""
         m = finite_array(matrix, 'matrix', (3, 3))
         (wi, ws), (bi, bs) = self._world, self._body
         return m[..., wi[:, None], bi] * (ws[:, None] * bs)

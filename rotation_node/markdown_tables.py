@@ -1,7 +1,8 @@
 """
-The README's tables of input types, outputs and parameters, rendered from the registry and
-the parameter table (a test keeps the README equal). Print them: ``python -m
-rotation_node.markdown_tables``.
+The README's tables of input types, outputs and parameters, rendered from the code.
+
+From the registry and the parameter table; a test keeps the README equal to them. Print them
+with ``python -m rotation_node.markdown_tables``.
 """
 from rotation_node import registry
 from rotation_node.parameters import PARAMETERS
