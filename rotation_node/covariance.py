@@ -17,6 +17,7 @@ Formulas and accuracy: docs/covariance.md.
 """
 from __future__ import annotations
 
+import contextlib
 import math
 from typing import Optional, Sequence, TYPE_CHECKING
 import warnings
@@ -207,22 +208,17 @@ def euler_covariance_from_rotation_vector_covariance(
     sigma = finite_array(covariance, 'covariance', (3, 3))
     # One row of angles per column of J^-1: equal leading shapes need no broadcast copy.
     rows = np.repeat(a[..., None, :], 3, axis=-2)
-    frame_name = 'world' if world else 'body'
-    near: np.ndarray | bool
     try:
-        near = (_middle_margin(a, parse_sequence(seq), degrees)
-                <= float(singularity_threshold) * (1.0 + 1e-9))
+        near = bool(np.any(_middle_margin(a, parse_sequence(seq), degrees)
+                           <= float(singularity_threshold) * (1.0 + 1e-9)))
     except (TypeError, ValueError):
         near = True   # the call below names what was wrong
-    if np.any(near):   # the warning below replaces the Euler rates' one
-        with warnings.catch_warnings():
+    # The warning below replaces the Euler rates' one (catching warnings only when needed).
+    with warnings.catch_warnings() if near else contextlib.nullcontext():
+        if near:
             warnings.simplefilter('ignore', EulerSingularityWarning)
-            columns = euler_rates_from_angular_velocity(
-                rows, _IDENTITY, seq, frame_name, degrees,
-                singularity_threshold=singularity_threshold)
-    else:
         columns = euler_rates_from_angular_velocity(
-            rows, _IDENTITY, seq, frame_name, degrees,
+            rows, _IDENTITY, seq, 'world' if world else 'body', degrees,
             singularity_threshold=singularity_threshold)
     out = _congruence(np.swapaxes(columns, -1, -2), sigma)
     singular = np.isnan(columns[..., 0, 0])
