@@ -17,15 +17,8 @@ def finite_array(x: ArrayLike, name: str, trailing: tuple[int, ...]) -> FloatArr
     """
     Return ``x`` as a float64 array whose shape ends in ``trailing``, every element finite.
 
-    The shape check and its message are those of the conversions; this adds
-    the finiteness check that the conversions make inside their kernels.
-
-    Raises
-    ------
-    ValueError
-        If ``x`` is not numeric, its shape does not end in ``trailing`` or an
-        element is NaN or infinite; the message names the argument.
-
+    The conversions' shape check, plus the finiteness check they make inside their kernels;
+    a ValueError naming ``name`` otherwise.
     """
     a = float_array(x, name, trailing)
     finite = np.isfinite(a)

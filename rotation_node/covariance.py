@@ -1,54 +1,23 @@
 """
 Orientation covariance between representations, to first order (``J Sigma J^T``).
 
-Pure numpy on top of :mod:`rotation_node.conversions` and
-:mod:`rotation_node.kinematics`; no rclpy import. Every function takes
-array_like input with any leading dimensions (broadcast between arguments),
-never modifies it, and raises ``ValueError`` naming the argument on bad input.
+The common form is the covariance of a small rotation vector ``d`` perturbing the estimate
+``R_hat`` (quaternion ``q_hat``) in one of two frames, with ``d_world = R_hat d_body``:
+``'world'`` (REP 145's fixed axes, ``R = exp([d]x) R_hat``) or ``'body'``
+(``R = R_hat exp([d]x)``).
 
-The reference representation is the rotation vector ``d`` of a small
-perturbation of the estimate ``R_hat`` (quaternion ``q_hat``), in one of two
-frames:
+- Euler angles: ``d = J(a) da``, ``J`` the matrix mapping Euler rates to angular velocity
+  (:mod:`rotation_node.kinematics`); its inverse is unbounded at gimbal lock.
+- Quaternion components ``(x, y, z, w)``: ``dq = M d / 2``, the three columns of ``M``
+  orthonormal and orthogonal to ``q_hat``.
 
-- ``'world'`` (REP 145's "rotation about fixed axes"): ``R = exp([d]x) R_hat``,
-  ``q = (d/2, 1) (x) q_hat``;
-- ``'body'``: ``R = R_hat exp([d]x)``, ``q = q_hat (x) (d/2, 1)``.
-
-They are related by ``d_world = R_hat d_body``, so
-``Sigma_world = R_hat Sigma_body R_hat^T``.
-
-Euler angles. A change ``da`` of the Euler angles ``a`` moves the orientation
-by ``d = J(a) da``, where ``J`` is exactly the matrix that maps Euler rates to
-angular velocity (``Rdot R^T = [w_world]x``, ``R^T Rdot = [w_body]x``); its
-closed form and analytic inverse are those of
-:func:`rotation_node.kinematics.angular_velocity_from_euler_rates`. Hence
-
-    Sigma_d = J Sigma_a J^T,        Sigma_a = J^-1 Sigma_d J^-T.
-
-``J^-1`` divides by the cosine (Tait-Bryan) or sine (proper Euler) of the
-middle angle: at gimbal lock the Euler covariance is unbounded, and so are
-the errors of its first-order estimate as soon as the orientation's
-uncertainty reaches the distance to the singularity. Samples whose middle angle is
-within ``singularity_threshold`` of its singular value get an all-NaN
-covariance and an :class:`~rotation_node.kinematics.EulerSingularityWarning`,
-as the Euler rates do.
-
-Quaternions. The 4x4 covariance of the components ``(x, y, z, w)`` (the order
-of the quaternion, PX4's estimators use ``(w, x, y, z)``) is
-``Sigma_q = G Sigma_d G^T`` with ``G = dq/dd = M / 2``, where the three
-columns of ``M`` are orthonormal and orthogonal to ``q_hat``:
-
-    world:  M = [[w I - [v]x], [-v^T]],     body:  M = [[w I + [v]x], [-v^T]]
-
-for ``q_hat = (v, w)`` normalised. Back, ``Sigma_d = 4 M^T Sigma_q M``: the
-component of ``Sigma_q`` along ``q_hat`` (a change of norm, not of
-orientation) is projected out. Both maps are invariant under ``q -> -q``.
-
-Round trips ``d -> a -> d`` and ``d -> q -> d`` are exact to rounding
-(``J J^-1 = I``, ``M^T M = I``); ``a -> d -> a`` too, away from gimbal lock.
+Round trips are exact to rounding. Every function takes array_like input with any leading
+dimensions (broadcast), never modifies it, and raises ``ValueError`` naming the argument.
+Formulas and accuracy: docs/covariance.md.
 """
 from __future__ import annotations
 
+import contextlib
 import math
 from typing import Optional, Sequence, TYPE_CHECKING
 import warnings
@@ -88,21 +57,11 @@ COVARIANCE_TOLERANCE = 1e-9
 
 def covariance_defect(covariance: Sequence[float]) -> Optional[str]:
     """
-    Say why a finite 3 x 3 matrix is not a covariance, or return None if it is one.
+    Say why a finite 3 x 3 matrix (9 floats, row-major) is not a covariance; None if it is.
 
-    Parameters
-    ----------
-    covariance : sequence of 9 float
-        The matrix row-major, every element finite.
-
-    Returns
-    -------
-    str or None
-        ``'a negative variance'``, ``'not symmetric'`` or ``'not positive
-        semi-definite'`` (a correlation beyond +-1, or a negative determinant),
-        each up to a relative rounding of :data:`COVARIANCE_TOLERANCE`; None for
-        a covariance. Plain float arithmetic: cheap enough for every message.
-
+    Returns ``'a negative variance'``, ``'not symmetric'`` or ``'not positive semi-definite'``
+    (a correlation beyond +-1, or a negative determinant), each beyond a relative rounding of
+    :data:`COVARIANCE_TOLERANCE`. Plain float arithmetic: cheap enough for every message.
     """
     s00, s01, s02, s10, s11, s12, s20, s21, s22 = (float(v) for v in covariance)
     variances = (s00, s11, s22)
@@ -140,6 +99,7 @@ def _congruence(a: np.ndarray, sigma: np.ndarray) -> np.ndarray:
 
 
 def _unit_quaternion(quaternion) -> np.ndarray:
+    """Return the checked quaternion normalised; a ValueError for a zero one."""
     q = finite_array(quaternion, 'quaternion', (4,))
     norm = np.linalg.norm(q, axis=-1, keepdims=True)
     if not (norm > 0.0).all():
@@ -159,7 +119,7 @@ def rotation_vector_covariance_jacobian(angles: ArrayLike, seq: str, frame: str 
     seq : str
         One of the 24 conventions of :func:`rotation_node.conversions.euler_from_quaternion`.
     frame : {'world', 'body'}, optional
-        Frame of the perturbation ``d`` (see the module docstring).
+        Frame of the perturbation ``d``.
     degrees : bool, optional
         Angles in degrees: ``J`` is then in rad per degree.
 
@@ -167,11 +127,6 @@ def rotation_vector_covariance_jacobian(angles: ArrayLike, seq: str, frame: str 
     -------
     ndarray, shape (..., 3, 3)
         ``J``, with ``d = J da``; defined everywhere (singular at gimbal lock).
-
-    Raises
-    ------
-    ValueError
-        Bad ``seq`` or ``frame``; wrong shape or NaN/Inf ``angles``.
 
     """
     world = is_world_frame(frame)
@@ -192,14 +147,11 @@ def rotation_vector_covariance_from_euler_covariance(angles: ArrayLike, covarian
     angles : array_like, shape (..., 3)
         Euler angles of the estimate, radians unless ``degrees``.
     covariance : array_like, shape (..., 3, 3)
-        Covariance of the three angles (rad^2, or deg^2 if ``degrees``);
-        leading dimensions broadcast with ``angles``'.
+        Covariance of the three angles (rad^2, or deg^2 if ``degrees``).
     seq : str
         One of the 24 conventions.
     frame : {'world', 'body'}, optional
-        Frame of the returned rotation-vector covariance: ``'world'`` (REP
-        145's rotation about fixed axes, ``R = exp([d]x) R_hat``) or ``'body'``
-        (``R = R_hat exp([d]x)``).
+        Frame of the returned rotation-vector covariance.
     degrees : bool, optional
         Angles in degrees and ``covariance`` in deg^2.
 
@@ -207,11 +159,6 @@ def rotation_vector_covariance_from_euler_covariance(angles: ArrayLike, covarian
     -------
     ndarray, shape (..., 3, 3)
         ``J Sigma_a J^T`` in rad^2, exactly symmetric. Defined everywhere.
-
-    Raises
-    ------
-    ValueError
-        Bad ``seq`` or ``frame``; wrong shape or NaN/Inf, naming the argument.
 
     """
     sigma = finite_array(covariance, 'covariance', (3, 3))
@@ -230,14 +177,11 @@ def euler_covariance_from_rotation_vector_covariance(
     angles : array_like, shape (..., 3)
         Euler angles of the estimate in ``seq``, radians unless ``degrees``.
     covariance : array_like, shape (..., 3, 3)
-        Rotation-vector covariance (rad^2) in ``frame``; leading dimensions
-        broadcast with ``angles``'.
+        Rotation-vector covariance (rad^2) in ``frame``.
     seq : str
         One of the 24 conventions.
     frame : {'world', 'body'}, optional
-        Frame of ``covariance``: ``'world'`` (REP 145's rotation about fixed
-        axes, ``R = exp([d]x) R_hat``, the default) or ``'body'``
-        (``R = R_hat exp([d]x)``).
+        Frame of ``covariance``.
     degrees : bool, optional
         Angles in degrees; the result is then in deg^2.
     singularity_threshold : float, optional
@@ -258,34 +202,23 @@ def euler_covariance_from_rotation_vector_covariance(
         Once per call if any sample was within ``singularity_threshold`` of
         gimbal lock, with their count; the mask is ``np.isnan(result[..., 0, 0])``.
 
-    Raises
-    ------
-    ValueError
-        Bad ``seq``, ``frame`` or ``singularity_threshold``; wrong shape or
-        NaN/Inf, naming the argument.
-
     """
     world = is_world_frame(frame)
     a = finite_array(angles, 'angles', (3,))
     sigma = finite_array(covariance, 'covariance', (3, 3))
     # One row of angles per column of J^-1: equal leading shapes need no broadcast copy.
     rows = np.repeat(a[..., None, :], 3, axis=-2)
-    frame_name = 'world' if world else 'body'
-    near: np.ndarray | bool
     try:
-        near = (_middle_margin(a, parse_sequence(seq), degrees)
-                <= float(singularity_threshold) * (1.0 + 1e-9))
+        near = bool(np.any(_middle_margin(a, parse_sequence(seq), degrees)
+                           <= float(singularity_threshold) * (1.0 + 1e-9)))
     except (TypeError, ValueError):
         near = True   # the call below names what was wrong
-    if np.any(near):   # the warning below replaces the Euler rates' one
-        with warnings.catch_warnings():
+    # The warning below replaces the Euler rates' one (catching warnings only when needed).
+    with warnings.catch_warnings() if near else contextlib.nullcontext():
+        if near:
             warnings.simplefilter('ignore', EulerSingularityWarning)
-            columns = euler_rates_from_angular_velocity(
-                rows, _IDENTITY, seq, frame_name, degrees,
-                singularity_threshold=singularity_threshold)
-    else:
         columns = euler_rates_from_angular_velocity(
-            rows, _IDENTITY, seq, frame_name, degrees,
+            rows, _IDENTITY, seq, 'world' if world else 'body', degrees,
             singularity_threshold=singularity_threshold)
     out = _congruence(np.swapaxes(columns, -1, -2), sigma)
     singular = np.isnan(columns[..., 0, 0])
@@ -300,7 +233,7 @@ def euler_covariance_from_rotation_vector_covariance(
 
 
 def _middle_margin(angles: np.ndarray, spec, degrees: bool) -> np.ndarray:
-    """Return the distance (rad) of the middle angle from its singular values, in [0, pi/2]."""
+    """Return the distance (rad, in [0, pi/2]) of the middle angle from its singular values."""
     middle = np.radians(angles[..., 1]) if degrees else angles[..., 1]
     c, s = np.abs(np.cos(middle)), np.abs(np.sin(middle))
     return np.arctan2(s, c) if spec.proper else np.arctan2(c, s)
@@ -311,13 +244,10 @@ def euler_linearisation_ratio(angles: ArrayLike, covariance: ArrayLike, seq: str
     """
     How far the first-order Euler covariance can be trusted: ``sigma_max / margin``.
 
-    ``sigma_max`` is the largest standard deviation of the rotation vector
-    (the square root of the largest eigenvalue of its covariance, the same in
-    the world and the body frame) and ``margin`` the distance of the middle
-    angle from its singular value (+-pi/2 Tait-Bryan, 0 or pi proper Euler).
-    Measured against Monte Carlo (``docs/covariance.md``), the first-order
-    standard deviations of the angles are within 1 % of the true ones while
-    this ratio is below about 0.1 and within 10 % below about 0.3.
+    ``sigma_max`` is the rotation vector's largest standard deviation (the same in the world
+    and the body frame), ``margin`` the middle angle's distance from its singular value
+    (+-pi/2 Tait-Bryan, 0 or pi proper Euler). Against Monte Carlo (docs/covariance.md) the
+    first-order standard deviations are within 1 % below a ratio of about 0.1, 10 % below 0.3.
 
     Parameters
     ----------
@@ -334,11 +264,6 @@ def euler_linearisation_ratio(angles: ArrayLike, covariance: ArrayLike, seq: str
     -------
     ndarray, shape (...)
         The ratio; ``inf`` at gimbal lock (unless the covariance is zero).
-
-    Raises
-    ------
-    ValueError
-        Bad ``seq``; wrong shape or NaN/Inf, naming the argument.
 
     """
     a = finite_array(angles, 'angles', (3,))
@@ -378,19 +303,13 @@ def quaternion_covariance_from_rotation_vector_covariance(quaternion: ArrayLike,
     covariance : array_like, shape (..., 3, 3)
         Rotation-vector covariance (rad^2) in ``frame``.
     frame : {'world', 'body'}, optional
-        Frame of ``covariance`` (see the module docstring).
+        Frame of ``covariance``.
 
     Returns
     -------
     ndarray, shape (..., 4, 4)
-        ``G Sigma_d G^T`` with ``G = dq/dd`` at the normalised quaternion,
-        rows and columns ordered ``(x, y, z, w)``; rank 3, ``q_hat`` in its
-        null space. The same for ``q`` and ``-q``.
-
-    Raises
-    ------
-    ValueError
-        Bad ``frame``; wrong shape, NaN/Inf or zero quaternion, naming the argument.
+        ``M Sigma_d M^T / 4`` at the normalised quaternion, rows and columns ordered
+        ``(x, y, z, w)``; rank 3, ``q_hat`` in its null space. The same for ``q`` and ``-q``.
 
     """
     m = _tangent_basis(_unit_quaternion(quaternion), is_world_frame(frame))
@@ -412,18 +331,13 @@ def rotation_vector_covariance_from_quaternion_covariance(quaternion: ArrayLike,
         ``(w, x, y, z)`` covariance ``C`` (PX4) pass ``C[..., p, :][..., :, p]``
         with ``p = [1, 2, 3, 0]``.
     frame : {'world', 'body'}, optional
-        Frame of the returned covariance (see the module docstring).
+        Frame of the returned covariance.
 
     Returns
     -------
     ndarray, shape (..., 3, 3)
         ``4 M^T Sigma_q M`` (rad^2): the tangent-space part of ``Sigma_q``;
         what lies along ``q_hat`` (uncertainty of the norm) is dropped.
-
-    Raises
-    ------
-    ValueError
-        Bad ``frame``; wrong shape, NaN/Inf or zero quaternion, naming the argument.
 
     """
     m = _tangent_basis(_unit_quaternion(quaternion), is_world_frame(frame))

@@ -1,41 +1,13 @@
 """
-World ENU <-> NED <-> NWU and body FLU <-> FRD conventions, exactly.
+World ENU <-> NED <-> NWU and body FLU <-> FRD conventions, exactly (docs/frames.md).
 
-Pure numpy; no rclpy import. ROS (REP 103) uses a world frame with x east, y
-north, z up (ENU) and body axes x forward, y left, z up (FLU); PX4, ArduPilot
-and most aerospace software use x north, y east, z down (NED) and x forward,
-y right, z down (FRD); some IMU drivers and magnetometer-based filters report
-x north, y west, z up (NWU). The changes are signed permutations of the axes:
-
-    P = NED from ENU = ENU from NED = [[0, 1, 0], [1, 0, 0], [0, 0, -1]]
-    B = FRD from FLU = FLU from FRD = diag(1, -1, -1)
-    N = NWU from ENU = [[0, 1, 0], [-1, 0, 0], [0, 0, 1]] (Rz(-90 deg)), ENU from NWU = N^T
-    NWU from NED = NED from NWU = diag(1, -1, -1) (Rx(180 deg))
-
-All are rotations (``det = +1``); P and B are their own inverses. With ``R``
-mapping body to world, an orientation, world and body vectors (angular
-velocity ``w_w = R w_b``) and rotation-vector covariances change as (``P``
-standing for whichever world change applies)
-
-    R' = P R B,   w_w' = P w_w,   w_b' = B w_b,
-    Sigma_world' = P Sigma_world P,   Sigma_body' = B Sigma_body B
-
-(``P`` or ``B`` replaced by the identity for a frame that does not change).
-For quaternions ``q' = q_P (x) q (x) q_B`` with ``q_P = (1, 1, 0, 0)/sqrt(2)``
-and ``q_B = (1, 0, 0, 0)``; written out (``s = 1/sqrt(2)``)
-
-    q (x) q_B = (w, z, -y, -x),    q_P (x) q = s (w + z, w - z, y - x, -(x + y)).
-
-and ``q_N = (0, 0, -1, 1)/sqrt(2)`` (ENU to NWU), ``(0, 0, 1, 1)/sqrt(2)``
-(NWU to ENU), ``(1, 0, 0, 0)`` (NED <-> NWU).
-
-Matrices, vectors and covariances are exact (only elements move and change
-sign); quaternions are exact for a body change and for NED <-> NWU, and within
-2 eps (of a unit quaternion) for the other world changes. Quaternions keep
-their norm and are returned with ``w >= 0``.
-
-:class:`FrameConversion` says which way a conversion goes; the two common ones
-are :data:`NED_FRD_FROM_ENU_FLU` and :data:`ENU_FLU_FROM_NED_FRD`.
+Each change is a signed permutation of the axes and a rotation: ``P`` for the world (NED from
+ENU, NWU from ENU, NWU from NED...), ``B = diag(1, -1, -1)`` for FRD <-> FLU. With ``R`` body
+to world, ``R' = P R B``, ``q' = q_P (x) q (x) q_B``, world vectors ``P v``, body vectors
+``B v``, world and body rotation-vector covariances ``P Sigma P^T`` and ``B Sigma B^T``.
+Matrices, vectors and covariances are exact (elements only move and change sign);
+quaternions are exact for a body change and NED <-> NWU, within 2 eps for the other world
+changes, keep their norm and have ``w >= 0``.
 """
 from __future__ import annotations
 
@@ -89,7 +61,7 @@ def _left_product_terms(p):
     """
     Return the terms of ``p (x) q`` for p of entries in {-1, 0, 1}: per component (sign, index).
 
-    Zero terms are left out, so the sum of the rest rounds as the written-out formula does.
+    Zero terms are left out, so that the sum rounds as the written-out formula does.
     """
     px, py, pz, pw = p
     rows = [[(pw, 0), (px, 3), (py, 2), (-pz, 1)],     # x: pw x + px w + py z - pz y
@@ -128,17 +100,18 @@ def _permute_covariance(c: np.ndarray, perm) -> np.ndarray:
     return c[..., index[:, None], index] * (sign[:, None] * sign)
 
 
-def _checked(frame: str, allowed: tuple, name: str) -> str:
+def _check(frame: str, allowed: tuple, name: str) -> None:
     if frame not in allowed:
         raise ValueError(f'Expected `{name}` to be one of {", ".join(map(repr, allowed))}, '
                          f'got {frame!r}.')
-    return frame
 
 
 @dataclass(frozen=True)
 class FrameConversion:
     """
     A change of world and body frame conventions, from ``source_*`` to ``target_*``.
+
+    Its methods raise ValueError naming the argument for a wrong shape or NaN/Inf.
 
     Parameters
     ----------
@@ -164,10 +137,10 @@ class FrameConversion:
 
     def __post_init__(self) -> None:
         """Validate the frame names."""
-        _checked(self.source_world, WORLD_FRAMES, 'source_world')
-        _checked(self.target_world, WORLD_FRAMES, 'target_world')
-        _checked(self.source_body, BODY_FRAMES, 'source_body')
-        _checked(self.target_body, BODY_FRAMES, 'target_body')
+        _check(self.source_world, WORLD_FRAMES, 'source_world')
+        _check(self.target_world, WORLD_FRAMES, 'target_world')
+        _check(self.source_body, BODY_FRAMES, 'source_body')
+        _check(self.target_body, BODY_FRAMES, 'target_body')
 
     @property
     def changes_world(self) -> bool:
@@ -212,9 +185,8 @@ class FrameConversion:
         """
         Return the orientation ``q_P (x) q (x) q_B`` (x, y, z, w) in the target frames.
 
-        ``quaternion`` (..., 4) is the body-to-world orientation in the source frames,
-        any norm; the result has the same norm and ``w >= 0``. A wrong shape or NaN/Inf
-        raises ValueError naming ``quaternion``.
+        ``quaternion`` (..., 4) is the body-to-world orientation in the source frames, any
+        norm; the result has the same norm and ``w >= 0``.
         """
         q = finite_array(quaternion, 'quaternion', (4,))
         single = q.ndim == 1   # Python floats: a tenth of the time of numpy's small arrays
@@ -231,46 +203,25 @@ class FrameConversion:
         return np.where(out[..., 3:] < 0.0, -out, out) + 0.0
 
     def matrix(self, matrix: ArrayLike) -> np.ndarray:
-        """
-        Return the body-to-world rotation matrix in the target frames, ``P R B`` (exact).
-
-        ``matrix`` (..., 3, 3) is in the source frames; a wrong shape or NaN/Inf raises
-        ValueError naming ``matrix``.
-        """
+        """Return the body-to-world matrices (..., 3, 3) in the target frames: ``P R B``, exact."""
         m = finite_array(matrix, 'matrix', (3, 3))
         (wi, ws), (bi, bs) = self._world, self._body
         return m[..., wi[:, None], bi] * (ws[:, None] * bs)
 
     def world_vector(self, vector: ArrayLike) -> np.ndarray:
-        """
-        Return ``P v`` (exact) for world-frame vectors (world angular velocity, position).
-
-        ``vector`` is (..., 3); a wrong shape or NaN/Inf raises ValueError naming ``vector``.
-        """
+        """Return ``P v`` (exact) for world-frame vectors (..., 3) (world angular velocity)."""
         return _permute_vector(finite_array(vector, 'vector', (3,)), self._world)
 
     def body_vector(self, vector: ArrayLike) -> np.ndarray:
-        """
-        Return ``B v`` (exact) for body-frame vectors (body angular velocity).
-
-        ``vector`` is (..., 3); a wrong shape or NaN/Inf raises ValueError naming ``vector``.
-        """
+        """Return ``B v`` (exact) for body-frame vectors (..., 3) (body angular velocity)."""
         return _permute_vector(finite_array(vector, 'vector', (3,)), self._body)
 
     def world_covariance(self, covariance: ArrayLike) -> np.ndarray:
-        """
-        Return ``P Sigma P^T`` (exact) for a world-frame (fixed-axes) rotation-vector covariance.
-
-        ``covariance`` is (..., 3, 3); a wrong shape or NaN/Inf raises ValueError naming it.
-        """
+        """Return ``P Sigma P^T`` (exact) of fixed-axes rotation-vector covariances (..., 3, 3)."""
         return _permute_covariance(finite_array(covariance, 'covariance', (3, 3)), self._world)
 
     def body_covariance(self, covariance: ArrayLike) -> np.ndarray:
-        """
-        Return ``B Sigma B^T`` (exact) for a body-frame (body-axes) rotation-vector covariance.
-
-        ``covariance`` is (..., 3, 3); a wrong shape or NaN/Inf raises ValueError naming it.
-        """
+        """Return ``B Sigma B^T`` (exact) of body-axes rotation-vector covariances (..., 3, 3)."""
         return _permute_covariance(finite_array(covariance, 'covariance', (3, 3)), self._body)
 
 

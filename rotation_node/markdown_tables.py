@@ -1,13 +1,8 @@
 """
 The README's tables of input types, outputs and parameters, rendered from the code.
 
-The tables are derived from :data:`rotation_node.registry.INPUTS`,
-:data:`rotation_node.registry.OUTPUTS` and
-:data:`rotation_node.parameters.PARAMETERS`, with the words of
-:data:`INPUT_NOTES` and :data:`OUTPUT_CONTENTS`; the test suite checks that the
-README holds them as rendered here. After adding an entry, print them with::
-
-    python -m rotation_node.markdown_tables
+From the registry and the parameter table; a test keeps the README equal to them. Print them
+with ``python -m rotation_node.markdown_tables``.
 """
 from rotation_node import registry
 from rotation_node.parameters import PARAMETERS

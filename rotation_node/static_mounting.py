@@ -1,17 +1,11 @@
 """
 The mounting rotation read once from ``/tf_static`` between two named frames.
 
-With ``mounting.tf_sensor_frame`` and ``mounting.tf_body_frame`` set, the
-body-side rotation ``M`` of ``R' = W R M`` (:mod:`rotation_node.mounting`) is
-the orientation of ``tf_body_frame`` in ``tf_sensor_frame`` as the static
-transforms give it: tf2's
-``lookupTransform(tf_sensor_frame, tf_body_frame)``, composed along the tree
-(e.g. ``imu_link`` -> ``base_link`` through the robot's URDF). It is looked up
-once: the live node until the transforms connect the two frames (its input is
-dropped until then, counted as ``mounting_unknown``), ``rotation_bag
-convert`` and ``export`` from the bag's ``/tf_static`` before converting. The
-parameters are then :func:`resolved`: ``mounting.body_rotation`` holds the
-quaternion found and the two frames are cleared, so every pipeline sees a
+With ``mounting.tf_sensor_frame`` and ``mounting.tf_body_frame`` set, ``M`` of ``R' = W R M``
+is tf2's ``lookupTransform(tf_sensor_frame, tf_body_frame)`` over the static transforms,
+looked up once (the node: when the frames connect, dropping input until then; ``convert`` and
+``export``: from the bag before converting). The parameters are then :func:`resolved`: the
+quaternion found in ``mounting.body_rotation``, the frames cleared, so every pipeline sees a
 plain mounting.
 """
 from __future__ import annotations
@@ -34,15 +28,7 @@ TF_STATIC_TOPIC = _TF_STATIC_INPUT.name
 
 
 def needs_static_mounting(params: NodeParameters) -> bool:
-    """
-    Tell whether the parameters ask for the mounting from ``/tf_static``.
-
-    Raises
-    ------
-    ParameterError
-        Only one of the two frames is set.
-
-    """
+    """Tell whether the parameters ask for the mounting from ``/tf_static`` (one frame: error)."""
     problem = mounting_frames_problem(params)
     if problem:
         raise ParameterError(problem)
@@ -61,15 +47,7 @@ def placeholder(params: NodeParameters) -> NodeParameters:
 
 
 class StaticMountingLookup:
-    """
-    Static transforms in, the mounting out once the two frames connect.
-
-    Parameters
-    ----------
-    params : NodeParameters
-        With ``mounting.tf_sensor_frame`` and ``mounting.tf_body_frame`` set.
-
-    """
+    """Static transforms in, the :func:`resolved` parameters out once the two frames connect."""
 
     def __init__(self, params: NodeParameters) -> None:
         self.params = params
@@ -83,16 +61,7 @@ class StaticMountingLookup:
         return f'{self.body!r} in {self.sensor!r}'
 
     def add(self, msg: Any) -> Optional[NodeParameters]:
-        """
-        Add the transforms of one ``tf2_msgs/TFMessage`` of ``/tf_static``.
-
-        Returns
-        -------
-        NodeParameters or None
-            The :func:`resolved` parameters once the frames connect; None
-            before (``problem`` says why).
-
-        """
+        """Add a ``/tf_static`` TFMessage; return the resolved parameters or None (``problem``)."""
         for exc in self.buffer.insert_transforms(msg.transforms, static=True):
             self.problem = str(exc)
         try:
@@ -105,21 +74,9 @@ class StaticMountingLookup:
 
 def resolved_from_bag(reader: Any, params: NodeParameters) -> NodeParameters:
     """
-    Return the parameters with the mounting read from the bag's ``/tf_static``, if they ask.
+    Return the parameters with the mounting read from an open bag's ``/tf_static``, if they ask.
 
-    Parameters
-    ----------
-    reader : rotation_node.bag.reading.reader.InputBag
-        The open bag.
-    params : NodeParameters
-        The node's parameters; returned as they are unless they name the frames.
-
-    Raises
-    ------
-    BagError
-        The bag has no ``/tf_static`` or its static transforms do not connect
-        the two frames; the message names them.
-
+    BagError naming the frames if the bag has no ``/tf_static`` or it does not connect them.
     """
     if not needs_static_mounting(params):
         return params

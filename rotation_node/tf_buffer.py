@@ -1,43 +1,16 @@
 """
-Orientations from a TF tree, with the semantics of tf2's ``BufferCore``.
+Orientations from a TF tree, with the semantics of tf2's ``BufferCore`` (docs/tf.md).
 
-:class:`TfOrientationBuffer` keeps the edges of a TF tree (parent -> child,
-from ``geometry_msgs/TransformStamped`` samples of ``/tf`` and ``/tf_static``)
-and answers :meth:`~TfOrientationBuffer.lookup_orientation`: the orientation of
-one frame in another, composed along the tree between them (up from the child
-to the common ancestor, down to the parent), whatever the number of edges.
+:class:`TfOrientationBuffer` is a port of tf2's lookup (``lookupTransform``,
+``walkToTopParent``, ``getLatestCommonTime``, ``TimeCache``) restricted to rotations:
+translations are checked as tf2 checks them but not stored. A "latest" lookup (time 0) is at
+the minimum over the chain's dynamic edges of their newest stamp (stamp-0 samples do not
+count; a static-only chain has time 0); dynamic edges are slerped to it and never
+extrapolated; each keeps ``cache_time_ns`` behind its newest sample. A frame may change
+parent over time; an edge that turns static (or back) starts afresh.
 
-It is a port of tf2's lookup (``BufferCore::lookupTransform``,
-``walkToTopParent``, ``getLatestCommonTime`` and ``TimeCache``), restricted to
-rotations: translations are checked as tf2 checks them (a transform tf2 would
-ignore is ignored here too) but not stored, so the buffer answers
-orientation lookups only. In particular:
-
-- A lookup at time 0 (``Time(0)``, "latest") is done at the latest time at which
-  every dynamic edge between the two frames is known, the minimum over those
-  edges of their newest stamp; each dynamic edge is interpolated to that time
-  (slerp between the two samples around it; a sample whose stamp equals the
-  time is returned as it is), static edges are used as they are. A chain of
-  static edges only has time 0. A dynamic edge's sample with stamp 0 does not
-  take part in the minimum, as in tf2.
-- A dynamic edge keeps ``cache_time_ns`` (10 s by default, tf2's) behind its
-  newest sample: before each insertion, samples older than the newest stamp
-  minus the cache time are dropped, and a sample older than that is rejected
-  (``TF_OLD_DATA``). A duplicate sample (same stamp, rotation and parent) is
-  kept once.
-- A dynamic edge with one sample answers only at that sample's stamp; a time
-  between two samples interpolates, outside them is an extrapolation error.
-  tf2 does not extrapolate and neither does this buffer.
-- A frame may change parent over time; a lookup follows the parent each edge
-  had at the lookup time, as tf2 does. An edge that turns from dynamic to
-  static (or back) starts afresh.
-
-Errors are typed (:class:`TfLookupError` and its subclasses for lookups,
-:class:`RejectedTransformError` for samples) and carry a ``reason`` for
-counters and a message naming the frames. Quaternions are ``(x, y, z, w)``; a
-sample's rotation is normalised when stored (tf2 accepts norms within 1% of one
-and uses them as given; the rotation is the same). Times are integer
-nanoseconds (as ``builtin_interfaces/Time`` ``sec * 10**9 + nanosec``).
+Errors are typed and carry a ``reason`` for counters and a message naming the frames.
+Quaternions are ``(x, y, z, w)``, normalised when stored; times are integer nanoseconds.
 """
 from bisect import bisect_right
 import math
@@ -50,42 +23,28 @@ from rotation_node.errors import RotationNodeError
 from rotation_node.kinematics import slerp
 from rotation_node.wire.stamps import seconds_text, stamp_ns as _stamp_ns
 
+#: How long a dynamic edge keeps its samples behind the newest one (tf2's default, 10 s).
 DEFAULT_CACHE_TIME_NS = 10_000_000_000
-"""How long a dynamic edge keeps its samples behind the newest one (tf2's default, 10 s)."""
-
+#: Longest walk from a frame towards the root, in edges; tf2 calls a deeper one a loop.
 MAX_GRAPH_DEPTH = 1000
-"""Longest walk from a frame towards the root, in edges; tf2 calls a deeper one a loop."""
-
+#: tf2 ignores a sample whose squared quaternion norm differs from 1 by this much or more.
 QUATERNION_NORM_TOLERANCE = 10e-3
-"""tf2 ignores a sample whose squared quaternion norm differs from 1 by this much or more."""
 
 _IDENTITY = np.array((0.0, 0.0, 0.0, 1.0))
 
 
-class TfError(RotationNodeError):
-    """
-    A TF sample or lookup could not be used; ``reason`` names the kind, for counters.
-
-    Attributes
-    ----------
-    reason : str
-        Short identifier of the kind of error, e.g. ``'not_connected'``.
-
-    """
-
-    reason = 'tf_error'
-
-
-class RejectedTransformError(TfError):
-    """A sample was ignored, as tf2 ignores it (self transform, NaN, old data...)."""
+class RejectedTransformError(RotationNodeError):
+    """A sample tf2 would ignore (self transform, NaN, old data...); ``reason`` names why."""
 
     def __init__(self, reason: str, message: str):
         super().__init__(message)
         self.reason = reason
 
 
-class TfLookupError(TfError):
-    """A lookup has no answer (base class of the lookup errors below)."""
+class TfLookupError(RotationNodeError):
+    """A lookup has no answer; each subclass's ``reason`` names why, for counters."""
+
+    reason: str
 
 
 class UnknownFrameError(TfLookupError):
@@ -113,25 +72,11 @@ class ExtrapolationError(TfLookupError):
 
 
 class TfOrientation(NamedTuple):
-    """
-    The answer of a lookup.
+    """The answer of a lookup: its time (ns) and the child's unit orientation in the parent."""
 
-    Attributes
-    ----------
-    stamp_ns : int
-        The lookup time in nanoseconds: for a "latest" lookup the latest common
-        time of the chain's dynamic edges, 0 for a chain of static edges only.
-    quaternion : ndarray, shape (4,)
-        Orientation of the child frame in the parent frame, (x, y, z, w), unit,
-        canonical (w >= 0): it maps child coordinates to parent coordinates.
+    stamp_ns: int            # for "latest", the chain's latest common time (0: static only)
+    quaternion: np.ndarray   # (x, y, z, w), w >= 0: child coordinates to parent coordinates
 
-    """
-
-    stamp_ns: int
-    quaternion: np.ndarray
-
-
-# ----------------------------------------------------------------------------- edges
 
 class _Sample(NamedTuple):
     stamp_ns: int
@@ -144,10 +89,6 @@ class _StaticEdge:
 
     def __init__(self, sample: _Sample):
         self.sample = sample
-
-    def insert(self, sample: _Sample, cache_time_ns: int) -> bool:
-        self.sample = sample
-        return True
 
     def latest(self) -> Tuple[int, str]:
         return 0, self.sample.parent
@@ -164,6 +105,7 @@ class _DynamicEdge:
         self._stamps: List[int] = [sample.stamp_ns]
 
     def insert(self, sample: _Sample, cache_time_ns: int) -> bool:
+        """Insert a sample; False if it is older than the cache time allows."""
         newest = self._stamps[-1]
         # Prune first, against the newest stamp before this sample (as tf2 does).
         keep = bisect_right(self._stamps, newest - cache_time_ns - 1)
@@ -221,24 +163,13 @@ class _DynamicEdge:
                        older.parent)
 
 
-# ---------------------------------------------------------------------------- buffer
-
 class TfOrientationBuffer:
     """
     The rotations of a TF tree over time, looked up as tf2 looks up transforms.
 
-    Parameters
-    ----------
-    cache_time_ns : int, optional
-        How long each dynamic edge keeps samples behind its newest one, in
-        nanoseconds (default 10 s, tf2's ``BUFFER_CORE_DEFAULT_CACHE_TIME``).
-
-    Notes
-    -----
-    Translations are not stored: this buffer answers orientation lookups only.
-    Frame names are used as tf2 uses them: a leading ``/`` of a sample's
-    frame is dropped, and the names are otherwise compared exactly.
-
+    ``cache_time_ns``: how long each dynamic edge keeps samples behind its newest one. A
+    leading ``/`` of a sample's frame is dropped (tf2's ``stripSlash``); names are otherwise
+    compared exactly.
     """
 
     def __init__(self, cache_time_ns: int = DEFAULT_CACHE_TIME_NS):
@@ -251,37 +182,21 @@ class TfOrientationBuffer:
         self._edges: Dict[str, Union[_StaticEdge, _DynamicEdge]] = {}
 
     def __contains__(self, frame: str) -> bool:
-        """Whether ``frame`` appears in a sample (as a parent or a child)."""
+        """Tell whether ``frame`` appears in a sample (as a parent or a child)."""
         return frame in self._frames
 
     def insert(self, parent: str, child: str, stamp_ns: int, quaternion: Sequence[float], *,
                static: bool = False,
                translation: Sequence[float] = (0.0, 0.0, 0.0)) -> None:
         """
-        Add one sample of the edge ``parent -> child`` (one TransformStamped).
+        Add one sample of the edge ``parent -> child`` (one TransformStamped's fields).
 
-        Parameters
-        ----------
-        parent, child : str
-            ``header.frame_id`` and ``child_frame_id``; a leading ``/`` is dropped.
-        stamp_ns : int
-            ``header.stamp`` in nanoseconds.
-        quaternion : sequence of 4 float
-            ``transform.rotation`` (x, y, z, w): the orientation of ``child`` in
-            ``parent``; its squared norm must be within 1% of 1, as tf2 requires.
-        static : bool, optional
-            True for ``/tf_static`` (valid at every time, replaces the previous one).
-        translation : sequence of 3 float, optional
-            ``transform.translation``, only checked for NaN (as tf2 does); not stored.
-
-        Raises
-        ------
-        RejectedTransformError
-            tf2 would ignore this sample: ``reason`` is ``self_transform``,
-            ``no_child_frame_id``, ``no_frame_id``, ``nan_input``,
-            ``denormalized_quaternion`` or ``old_data``. The edge is unchanged
-            (an old sample's frames are known from then on, as in tf2).
-
+        ``quaternion`` is the orientation of ``child`` in ``parent``; ``static`` (``/tf_static``)
+        makes it valid at every time, replacing the edge; ``translation`` is only checked for
+        NaN. RejectedTransformError where tf2 would ignore the sample (``reason``:
+        ``self_transform``, ``no_child_frame_id``, ``no_frame_id``, ``nan_input``,
+        ``denormalized_quaternion``, ``old_data``); the edge is then unchanged (an old
+        sample's frames are known from then on, as in tf2).
         """
         if not isinstance(stamp_ns, int):
             raise ValueError(f'Expected `stamp_ns` to be an int (nanoseconds), got {stamp_ns!r}.')
@@ -308,8 +223,8 @@ class TfOrientationBuffer:
         sample = _Sample(stamp_ns, conversions.canonical_quaternion((x, y, z, w)), parent)
         self._frames.update((parent, child))   # as tf2: named even if the sample is too old
         edge = self._edges.get(child)
-        if edge is None or isinstance(edge, _StaticEdge) != static:
-            self._edges[child] = (_StaticEdge if static else _DynamicEdge)(sample)
+        if static or not isinstance(edge, _DynamicEdge):
+            self._edges[child] = _StaticEdge(sample) if static else _DynamicEdge(sample)
         elif not edge.insert(sample, self.cache_time_ns):
             newest = edge.latest()[0]
             raise RejectedTransformError(
@@ -320,7 +235,7 @@ class TfOrientationBuffer:
 
     def insert_transforms(self, transforms: Sequence[Any], *,
                           static: bool = False) -> List[RejectedTransformError]:
-        """Add the ``TransformStamped`` of a TFMessage; return why tf2 would ignore any of them."""
+        """Add the ``TransformStamped`` of a TFMessage; return those tf2 would ignore, why."""
         rejected = []
         for transform in transforms:
             header, rotation = transform.header, transform.transform.rotation
@@ -335,35 +250,11 @@ class TfOrientationBuffer:
 
     def lookup_orientation(self, parent: str, child: str, stamp_ns: int = 0) -> TfOrientation:
         """
-        Orientation of ``child`` in ``parent``: tf2's ``lookupTransform(parent, child, time)``.
+        Return the orientation of ``child`` in ``parent``: tf2's ``lookupTransform``.
 
-        Parameters
-        ----------
-        parent, child : str
-            Target and source frame of tf2's lookup; different, not empty,
-            without a leading ``/``.
-        stamp_ns : int, optional
-            Lookup time in nanoseconds; 0 (default) is tf2's ``Time(0)``: the
-            latest time at which every dynamic edge between the frames is known.
-
-        Returns
-        -------
-        TfOrientation
-            The lookup time and the composed, interpolated rotation.
-
-        Raises
-        ------
-        ValueError
-            ``parent`` or ``child`` empty, starting with ``/``, or equal.
-        UnknownFrameError
-            A frame appears in no sample.
-        NotConnectedError
-            No chain of edges joins the frames.
-        CycleError
-            The tree between them loops.
-        ExtrapolationError
-            A dynamic edge of the chain has no data at the lookup time.
-
+        ``stamp_ns`` 0 is tf2's ``Time(0)``, "latest". ValueError for frame names that are
+        empty, start with ``/`` or are equal; else the lookup errors: UnknownFrameError,
+        NotConnectedError, CycleError, ExtrapolationError.
         """
         for name, value in (('parent', parent), ('child', child)):
             if not isinstance(value, str) or not value or value.startswith('/'):
@@ -471,7 +362,7 @@ class TfOrientationBuffer:
 
     @staticmethod
     def _check_depth(walked: List[str], frame: str, target: str, source: str) -> None:
-        """Record one step of a walk to ``frame``; CycleError on a loop or past the depth limit."""
+        """Record a walk's step to ``frame``; CycleError on a loop or past the depth limit."""
         if frame in walked:
             loop = walked[walked.index(frame):] + [frame]
             raise CycleError(f'the TF tree contains a loop: {" -> ".join(reversed(loop))} '
@@ -489,7 +380,7 @@ def _stripped(frame: str) -> str:
 
 
 def _earlier(common: Optional[int], stamp: int) -> Optional[int]:
-    """Return the minimum of the stamps so far; stamp 0 (a static edge) does not count."""
+    """Return the minimum of the stamps so far; stamp 0 (static) does not count."""
     if stamp == 0:
         return common
     return stamp if common is None else min(common, stamp)

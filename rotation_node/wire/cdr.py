@@ -1,52 +1,19 @@
 """
-Fast CDR encoding and decoding of fixed-layout ROS 2 messages, one message or a block of them.
+CDR encoding and decoding of fixed-layout ROS 2 messages, one message or a block of them.
 
-rclpy's ``serialize_message`` and ``deserialize_message`` spend tens of
-microseconds per message, mostly building or reading the Python message
-object (an empty ``sensor_msgs/Imu()`` alone takes ~15 us). For the types
-that ``rotation_bag convert``, the node and the scene simulator read and
-write, this module does the same work with one precompiled ``struct.Struct``
-call per message, or with numpy for a whole block of messages at once.
+rclpy's (de)serialisation spends tens of microseconds per message building Python message
+objects; here a type whose fields are, recursively, numbers, fixed arrays of them and
+unbounded strings (Header, Imu, Odometry, the ``*Stamped`` types) has every field at a fixed
+offset once its strings' lengths are known. That :class:`PayloadLayout`, computed from the
+type's installed description (no rclpy, no message package), gives both forms of the codec:
+a ``struct.Struct`` for one message and a numpy structured dtype for a block, so the two
+agree by construction.
 
-A type has a *fixed layout* when its fields, recursively, are booleans,
-integers, floats, fixed-size arrays of those, and unbounded strings: no
-sequences, bounded or wide strings. std_msgs/Header, sensor_msgs/Imu,
-nav_msgs/Odometry and the geometry_msgs ``*Stamped`` types are. Once the
-lengths of its strings are known, every field of such a message is at a
-fixed offset: a :class:`PayloadLayout`, computed once per set of string
-lengths from the type's fields as its installed type description gives them
-(:func:`rotation_node.wire.message_types.message_fields`: neither rclpy nor
-the Python message packages are imported to encode or decode), and given in the
-two forms the codec uses: a ``struct.Struct`` that packs or unpacks one
-message in one call (:meth:`FixedLayoutCodec.decode`, :meth:`~FixedLayoutCodec.encode`),
-and a numpy structured dtype that reads or writes the fields of a block of
-messages as arrays (:meth:`FixedLayoutCodec.decode_block`,
-:meth:`PayloadLayout.encode_block`). Both come from the one layout, so the
-two forms agree by construction.
-
-The CDR written by rmw_fastrtps in Jazzy (plain CDR, XCDR version 1):
-
-- a 4-byte encapsulation header, ``00 01 00 00`` for little-endian CDR;
-- then the payload, in which every primitive is aligned to its size,
-  relative to the start of the payload (after the encapsulation header);
-- a string is a uint32 length that counts a terminating NUL, then the UTF-8
-  bytes and the NUL; a fixed array is its elements; a sequence is a uint32
-  count and its elements (aligned as the element type even when empty); a
-  nested message is its fields, with no alignment of its own;
-- a message without strings or sequences (a "plain" type) is padded at the
-  end to a multiple of 4 bytes.
-
-Decoding returns read-only *views*: named tuples, one class per message
-type, with the message's field names (``view.header.stamp.sec``,
-``view.orientation.x``) and fixed arrays as tuples. They stand in for the
-rclpy message wherever fields are only read, as in
-:meth:`rotation_node.pipeline.ConversionPipeline.process_values`. Data that is
-not little-endian CDR is left to rclpy. Encoding gives rclpy's bytes, except
-that the padding is zero where rclpy leaves it uninitialised, so that equal
-messages give equal bytes and bags are reproducible. The block form reads
-exactly what the per-message decoder reads, and declines (returns None for)
-a block it cannot: data that is not little-endian CDR, a truncated message,
-a string the per-message decoder would rewrite (not NUL-terminated UTF-8).
+The format is rmw_fastrtps' plain little-endian CDR (XCDR1). Decoding returns read-only
+named-tuple *views* with the message's field names (fixed arrays as tuples), which stand in
+for rclpy messages wherever fields are only read; other encapsulations go to rclpy. Encoding
+gives rclpy's bytes with zero padding (rclpy leaves it uninitialised), so equal messages give
+equal bytes. The block decoder reads exactly what the per-message one reads, or declines.
 """
 from __future__ import annotations
 
@@ -79,23 +46,17 @@ _MAX_CACHED_LAYOUTS = 64
 
 
 def _padding(offset, alignment):
-    """Bytes of padding that align ``offset`` to a multiple of ``alignment``."""
     return -offset % alignment
 
 
 def _string_at(position, values):
-    """
-    Return the text of the string whose bytes are ``values[position]``.
-
-    As rclpy (Fast CDR) reads it: the NUL dropped if there is one, bytes that
-    are not UTF-8 replaced.
-    """
+    """Return the text of the string bytes ``values[position]`` as Fast CDR reads them."""
     raw = values[position]
     return (raw[:-1] if raw[-1:] == b'\0' else raw).decode('utf-8', 'replace')
 
 
 class _NotFixedLayout(Exception):
-    """Internal: a field whose CDR size depends on its value (a sequence...)."""
+    """A field whose CDR size depends on its value (a sequence...)."""
 
 
 class _Leaf(NamedTuple):
@@ -108,12 +69,12 @@ class _Leaf(NamedTuple):
 
 def _placed(leaves, string_lengths, offset=0):
     """
-    Return where each leaf starts and ends in the payload, ``[(start, end)]``, from ``offset``.
+    Return ``[(start, end)]`` of each leaf in the payload, from ``offset``: CDR's alignment.
 
-    The alignment rules of CDR, applied here only: a primitive (or a fixed
-    array's first element) at a multiple of its size; a string's uint32
-    length at a multiple of 4, then its bytes, ``string_lengths`` of them in
-    the order of the strings (the NUL included). A string starts at its length.
+    Offsets count from the payload start (after the 4-byte encapsulation header). A primitive
+    (or a fixed array's first element) sits at a multiple of its size; a string is its uint32
+    length at a multiple of 4, then ``string_lengths``' next count of bytes (the NUL included).
+    Nested messages add no alignment; a type without strings is padded to a multiple of 4.
     """
     places, strings = [], iter(string_lengths)
     for leaf in leaves:
@@ -131,32 +92,16 @@ def _placed(leaves, string_lengths, offset=0):
 
 class PayloadLayout:
     """
-    Where each field of a fixed-layout type is when its strings have given lengths.
+    Where each field of a fixed-layout type is when its strings have given lengths (NUL included).
 
-    Get one from :meth:`FixedLayoutCodec.layout`.
-
-    Attributes
-    ----------
-    string_lengths : tuple of int
-        Bytes of each string, in CDR order, its NUL included.
-    offsets : dict
-        ``{leaf path: payload offset}``, from the payload start (after the
-        4-byte encapsulation header): a string's is that of its uint32
-        length, a fixed array's that of its first element.
-    size : int
-        Bytes of the payload, without the end padding.
-    end_padding : int
-        Zero bytes after the payload: up to a multiple of 4 for a type
-        without strings ("plain"), none otherwise.
-    struct : struct.Struct
-        Packs and unpacks one payload: one item per value, ``count`` per
-        fixed array, two per string (its uint32 length, its bytes with the NUL).
-
+    ``offsets[path]`` is a leaf's payload offset (a string's: its uint32 length); ``size`` the
+    payload's bytes before ``end_padding``; ``struct`` packs one payload as one item per value,
+    ``count`` per fixed array and two per string (its length, its bytes with the NUL).
     """
 
     def __init__(self, leaves: Sequence[_Leaf], string_lengths: Tuple[int, ...]) -> None:
         places = _placed(leaves, string_lengths)
-        self._leaves = leaves
+        self.leaves = leaves
         self.string_lengths = string_lengths
         self.offsets = {leaf.path: start for leaf, (start, _) in zip(leaves, places)}
         self.size = places[-1][1]
@@ -171,18 +116,12 @@ class PayloadLayout:
 
     @functools.cached_property
     def dtype(self) -> np.dtype:
-        """
-        Return the numpy structured dtype of one payload, a field per leaf path.
-
-        A value is a scalar field, a fixed array a subarray field, a string
-        its bytes (the NUL included) as a uint8 subarray; its uint32 length is
-        not a field (it is in :attr:`string_lengths`).
-        """
+        """Return the structured dtype of one payload: a field per leaf, a string as its bytes."""
         names: List[str] = []
         formats: List[Any] = []
         offsets: List[int] = []
         strings = iter(self.string_lengths)
-        for leaf in self._leaves:
+        for leaf in self.leaves:
             names.append(leaf.path)
             if leaf.code == _STRING:
                 formats.append((np.uint8, (next(strings),)))
@@ -195,23 +134,10 @@ class PayloadLayout:
 
     def encode_block(self, count: int, fields: Mapping[str, Any]) -> List[bytes]:
         """
-        Return the CDR data of ``count`` messages from arrays of their fields.
+        Return the CDR data of ``count`` messages from ``{leaf path: array with a row each}``.
 
-        Parameters
-        ----------
-        count : int
-            Messages.
-        fields : mapping
-            ``{leaf path: array}`` with a row per message (as :meth:`FixedLayoutCodec.decode_block`
-            gives them): a string as its bytes with the NUL, ``string_lengths``
-            of them. Fields left out are zero.
-
-        Returns
-        -------
-        list of bytes
-            Little-endian CDR with its encapsulation header and zero padding,
-            the bytes :meth:`FixedLayoutCodec.encode` gives for each message.
-
+        Strings are given as their bytes with the NUL; fields left out are zero. Each message's
+        bytes are those :meth:`FixedLayoutCodec.encode` gives.
         """
         width = _ENCAPSULATION_SIZE + self.size + self.end_padding
         # Rows 8 bytes apart, each payload at a multiple of 8: the fields aligned
@@ -222,7 +148,7 @@ class PayloadLayout:
         out[:, :_ENCAPSULATION_SIZE] = np.frombuffer(CDR_LE, np.uint8)
         payload = out[:, _ENCAPSULATION_SIZE:_ENCAPSULATION_SIZE + self.size]
         strings = iter(self.string_lengths)
-        for leaf in self._leaves:
+        for leaf in self.leaves:
             if leaf.code == _STRING:
                 at = self.offsets[leaf.path]
                 payload[:, at:at + 4] = np.frombuffer(_UINT32.pack(next(strings)), np.uint8)
@@ -234,16 +160,10 @@ class PayloadLayout:
 
 class DecodedBlock(NamedTuple):
     """
-    The messages of a block decoded into arrays, grouped by the lengths of their strings.
+    A block's messages as arrays, grouped by their strings' lengths.
 
-    Attributes
-    ----------
-    group : ndarray of int, shape (n,)
-        Each message's group.
-    records : list of ndarray
-        Per group, its messages in block order as a structured array of its
-        :attr:`PayloadLayout.dtype`: ``records[g]['orientation.x']``. Read-only.
-
+    ``group[i]`` is message ``i``'s group; ``records[g]`` the group's messages in block order, a
+    read-only structured array of its layout's dtype (``records[g]['orientation.x']``).
     """
 
     group: np.ndarray
@@ -252,9 +172,8 @@ class DecodedBlock(NamedTuple):
 
 @functools.lru_cache(maxsize=None)
 def _view_class(type_name):
-    """Return the named tuple class that views messages of ``type_name`` (``pkg/msg/Type``)."""
+    """Return the named tuple class that views messages of ``type_name``."""
     name = split_type_name(type_name)[2]
-    # mypy cannot type a namedtuple whose fields are only known at run time.
     view = collections.namedtuple(  # type: ignore[misc]
         name, [field.name for field in _fields(type_name)])
     view.__doc__ = f'Read-only view of a decoded {type_name} (rotation_node.wire.cdr).'
@@ -262,7 +181,6 @@ def _view_class(type_name):
 
 
 def _fields(type_name):
-    """Return the fields of a type; one without an installed description has no fixed layout."""
     fields = message_fields(type_name)
     if fields is None:
         raise _NotFixedLayout(f'{type_name} has no type description installed')
@@ -271,12 +189,10 @@ def _fields(type_name):
 
 def _compile(type_name, prefix, leaves, position):
     """
-    Append the leaves of ``type_name`` to ``leaves``; return ``(build, position)``.
+    Append the leaves of ``type_name`` to ``leaves``; return ``(build, next position)``.
 
-    ``build(values)`` makes the view of the message from the tuple its type's
-    struct unpacks, whose items from ``position`` on are this message's: one per
-    value, ``count`` per array and two per string (length, bytes with the NUL).
-    The returned position is the first item after them.
+    ``build(values)`` makes the message's view from the struct's unpacked tuple, whose items
+    from ``position`` on are this message's.
     """
     new = tuple.__new__   # the named tuple's own __new__ is a Python function: slower
     view = _view_class(type_name)
@@ -314,29 +230,7 @@ def _compile(type_name, prefix, leaves, position):
 
 
 class FixedLayoutCodec:
-    """
-    CDR decoder and encoder of one fixed-layout message type.
-
-    Use :func:`fixed_layout_codec` to get one (it is cached and tells which
-    types have a fixed layout).
-
-    Parameters
-    ----------
-    type_name : str
-        ``'pkg/msg/Type'``.
-
-    Raises
-    ------
-    BagError
-        If the type is unknown or has no fixed layout.
-
-    Attributes
-    ----------
-    type_name : str
-    view_class : type
-        The named tuple class :meth:`decode` returns.
-
-    """
+    """CDR codec of one fixed-layout type (get it from :func:`fixed_layout_codec`)."""
 
     def __init__(self, type_name: str) -> None:
         self.type_name = type_name
@@ -345,12 +239,12 @@ class FixedLayoutCodec:
             self._build, _ = _compile(type_name, '', leaves, 0)
         except _NotFixedLayout as error:
             raise BagError(f'{type_name} has no fixed CDR layout: {error}') from None
-        self._leaves = tuple(leaves)
+        #: The primitive fields in CDR order.
+        self.leaves = tuple(leaves)
         self.view_class = _view_class(type_name)
         self._getters = [operator.attrgetter(leaf.path) for leaf in leaves]
-        # For each string, the bytes from the end of the previous one (or the
-        # payload start) to the end of its uint32 length, by that offset % 8:
-        # the table decode and decode_block walk to find the strings' lengths.
+        # Per string, the bytes from the end of the previous one (or the payload start) to the
+        # end of its uint32 length, by that offset % 8: how decode walks to the lengths.
         self._to_string_lengths: List[Tuple[int, ...]] = []
         run: List[_Leaf] = []
         for leaf in leaves:
@@ -364,14 +258,9 @@ class FixedLayoutCodec:
         self._end_padding = b'' if self._to_string_lengths else bytes(self.layout(()).end_padding)
 
     @property
-    def leaves(self) -> Tuple[_Leaf, ...]:
-        """Return the primitive fields in CDR order: ``path``, struct ``code``, ``count``."""
-        return self._leaves
-
-    @property
     def starts_with_header(self) -> bool:
-        """Whether the type's first field is a std_msgs/Header (:data:`HEADER_PATHS`)."""
-        return tuple(leaf.path for leaf in self._leaves[:3]) == HEADER_PATHS
+        """Tell whether the type's first field is a std_msgs/Header."""
+        return tuple(leaf.path for leaf in self.leaves[:3]) == HEADER_PATHS
 
     def layout(self, string_lengths: Tuple[int, ...]) -> PayloadLayout:
         """Return the layout of the payload when the strings have these lengths (NUL included)."""
@@ -379,30 +268,15 @@ class FixedLayoutCodec:
         if found is None:
             if len(self._layouts) >= _MAX_CACHED_LAYOUTS:
                 self._layouts.clear()
-            found = self._layouts[string_lengths] = PayloadLayout(self._leaves, string_lengths)
+            found = self._layouts[string_lengths] = PayloadLayout(self.leaves, string_lengths)
         return found
 
     def decode(self, data: bytes) -> Any:
         """
-        Decode one message.
+        Decode one message (with its encapsulation header) into a view.
 
-        Parameters
-        ----------
-        data : bytes-like
-            CDR with its encapsulation header, as in a bag or on the wire.
-
-        Returns
-        -------
-        view or rclpy message
-            A :attr:`view_class` instance for little-endian CDR; for any other
-            encapsulation, what rclpy's ``deserialize_message`` makes of it.
-
-        Raises
-        ------
-        BagError
-            If the data is too short for the message, or rclpy rejects data
-            that is not little-endian CDR.
-
+        Other encapsulations than little-endian CDR give rclpy's message. BagError if the data
+        is truncated, or rclpy rejects it.
         """
         if data[:2] != _CDR_LE_ID:
             from rclpy.serialization import deserialize_message   # loads rcl: only here
@@ -434,21 +308,11 @@ class FixedLayoutCodec:
 
     def decode_block(self, datas: Sequence[bytes]) -> Optional[DecodedBlock]:
         """
-        Decode a block of messages into arrays: :meth:`decode`'s values, as :class:`DecodedBlock`.
+        Decode a block of messages into arrays holding :meth:`decode`'s values.
 
-        Parameters
-        ----------
-        datas : sequence of bytes
-            The CDR data of each message (with the encapsulation header).
-
-        Returns
-        -------
-        DecodedBlock or None
-            None if the block is empty or a message is not one the block form
-            reads exactly as :meth:`decode` does (not little-endian CDR,
-            truncated, a string :meth:`decode` rewrites): then decode the block
-            message by message (which raises where a message is bad).
-
+        None if the block is empty or a message is one the block form does not read exactly
+        as :meth:`decode` does (not little-endian CDR, truncated, a string :meth:`decode`
+        rewrites): then decode message by message (which raises where one is bad).
         """
         n = len(datas)
         lengths = np.fromiter(map(len, datas), dtype=np.int64, count=n)
@@ -485,36 +349,20 @@ class FixedLayoutCodec:
             fields = rows.view(layout.dtype)[:, 0]
             fields.flags.writeable = False
             if not all(_canonical_strings(fields[leaf.path])
-                       for leaf in self._leaves if leaf.code == _STRING):
+                       for leaf in self.leaves if leaf.code == _STRING):
                 return None
             records.append(fields)
         return DecodedBlock(group, records)
 
     def encode(self, msg: Any) -> bytes:
         """
-        Encode one message.
+        Encode one message (an rclpy message or a view) as little-endian CDR.
 
-        Parameters
-        ----------
-        msg : object
-            Anything with the type's fields as attributes: an rclpy message of
-            the type, or a view.
-
-        Returns
-        -------
-        bytes
-            Little-endian CDR with its encapsulation header and zero padding.
-
-        Raises
-        ------
-        BagError
-            If a field holds a value its type cannot (an integer out of range,
-            an array of the wrong length...).
-
+        BagError if a field holds a value its type cannot (an integer out of range...).
         """
         values: List[Any] = []
         lengths: List[int] = []
-        for leaf, get in zip(self._leaves, self._getters):
+        for leaf, get in zip(self.leaves, self._getters):
             value = get(msg)
             if leaf.code == _STRING:
                 raw = value.encode()
@@ -532,8 +380,8 @@ class FixedLayoutCodec:
             raise BagError(f'cannot encode {self.type_name}: {self._bad_field(msg)}') from None
 
     def _bad_field(self, msg):
-        """Name the first field whose value cannot be packed, and why."""
-        for leaf, get in zip(self._leaves, self._getters):
+        """Return the first field whose value cannot be packed, and why."""
+        for leaf, get in zip(self.leaves, self._getters):
             value = get(msg)
             if leaf.code == _STRING:
                 continue
@@ -545,26 +393,12 @@ class FixedLayoutCodec:
 
     def stamped_encoder(self) -> Callable[[Any, Sequence[float]], bytes]:
         """
-        Return an encoder from a header and numbers, without a message object.
+        Return ``encode(header, numbers) -> bytes`` for a Header followed by numbers only.
 
-        For a type that is a std_msgs/Header followed by numbers only
-        (geometry_msgs/Vector3Stamped, QuaternionStamped...).
-
-        Returns
-        -------
-        callable
-            ``encode(header, numbers) -> bytes``: ``header`` has ``stamp.sec``,
-            ``stamp.nanosec`` and ``frame_id`` (an rclpy Header or a view),
-            ``numbers`` the fields after it, flattened in definition order
-            (``(x, y, z)`` for Vector3Stamped).
-
-        Raises
-        ------
-        BagError
-            If the type does not have that form.
-
+        ``numbers`` are the fields after the header, flattened in definition order (``(x, y,
+        z)`` for Vector3Stamped). BagError if the type does not have that form.
         """
-        if not self.starts_with_header or any(leaf.code == _STRING for leaf in self._leaves[3:]):
+        if not self.starts_with_header or any(leaf.code == _STRING for leaf in self.leaves[3:]):
             raise BagError(f'{self.type_name} is not a std_msgs/Header followed by numbers')
         layouts, layout = self._layouts, self.layout
 
@@ -583,13 +417,7 @@ class FixedLayoutCodec:
 
 
 def _canonical_strings(strings):
-    """
-    Whether each row of string bytes (its NUL included) reads back as the same bytes.
-
-    That is, whether :meth:`FixedLayoutCodec.encode` writes these bytes for
-    the text :meth:`FixedLayoutCodec.decode` reads from them (the text and a
-    NUL): not so without a final NUL, or with bytes that are not UTF-8.
-    """
+    """Tell whether every row of string bytes (NUL included) is what encode writes for its text."""
     if strings.shape[1] and (strings[:, -1] == 0).all() and (strings < 0x80).all():
         return True   # ASCII and a final NUL, the common case
     rows = np.unique(strings, axis=0) if strings.shape[1] else strings[:1]
@@ -613,24 +441,7 @@ def _row_slicer(count, width, stride):
 
 @functools.lru_cache(maxsize=None)
 def fixed_layout_codec(type_name: str) -> Optional[FixedLayoutCodec]:
-    """
-    Return the codec of a message type, or None if its layout is not fixed.
-
-    Parameters
-    ----------
-    type_name : str
-        ``'pkg/msg/Type'``.
-
-    Returns
-    -------
-    FixedLayoutCodec or None
-
-    Raises
-    ------
-    BagError
-        If the type name is malformed or the type is not installed.
-
-    """
+    """Return the codec of a type, None if its layout is not fixed; BagError if it is unknown."""
     if message_fields(type_name) is None:
         message_class(type_name)   # an unknown type is an error, not "no codec"
         return None   # installed without a type description: rclpy's to encode and decode
@@ -653,22 +464,7 @@ def _float64_multi_array_head(layout):
 
 
 def float64_multi_array_encoder(layout: Any) -> Callable[[Sequence[float]], bytes]:
-    """
-    Return an encoder of std_msgs/Float64MultiArray messages with a given layout.
-
-    Parameters
-    ----------
-    layout : std_msgs.msg.MultiArrayLayout or rotation_node.registry.ArrayLayout
-        Encoded once; every message gets it (read: ``dim``, each with
-        ``label``, ``size``, ``stride``; ``data_offset``).
-
-    Returns
-    -------
-    callable
-        ``encode(data) -> bytes``: little-endian CDR with its encapsulation
-        header and zero padding, ``data`` a sequence of floats.
-
-    """
+    """Return ``encode(data) -> bytes`` of std_msgs/Float64MultiArray messages with ``layout``."""
     head, padding = _float64_multi_array_head(layout)
 
     def encode(data):
@@ -680,12 +476,7 @@ def float64_multi_array_encoder(layout: Any) -> Callable[[Sequence[float]], byte
 
 def float64_multi_array_block_encoder(layout: Any, width: int
                                       ) -> Callable[[np.ndarray], List[bytes]]:
-    """
-    Return an encoder of blocks of std_msgs/Float64MultiArray messages of ``width`` numbers.
-
-    ``encode(data) -> list of bytes``, ``data`` of shape ``(messages, width)``:
-    the bytes of :func:`float64_multi_array_encoder` for each row.
-    """
+    """Return ``encode(data (messages, width)) -> list of bytes``, a message per row."""
     head, padding = _float64_multi_array_head(layout)
     prefix = np.frombuffer(head + struct.pack(f'<I{padding}x', width), np.uint8)
 
@@ -699,22 +490,7 @@ def float64_multi_array_block_encoder(layout: Any, width: int
 
 @functools.lru_cache(maxsize=None)
 def message_encoder(type_name: str) -> Optional[Callable[[Any], bytes]]:
-    """
-    Return ``encode(msg) -> bytes`` for a type this module encodes, or None.
-
-    Parameters
-    ----------
-    type_name : str
-        ``'pkg/msg/Type'``.
-
-    Returns
-    -------
-    callable or None
-        For fixed-layout types and std_msgs/Float64MultiArray: ``encode(msg)``
-        of an rclpy message of the type, giving little-endian CDR with its
-        encapsulation header and zero padding. None for other types.
-
-    """
+    """Return ``encode(msg) -> bytes`` for fixed-layout types and Float64MultiArray, else None."""
     if type_name == 'std_msgs/msg/Float64MultiArray':
         return lambda msg: float64_multi_array_encoder(msg.layout)(msg.data)
     codec = fixed_layout_codec(type_name)

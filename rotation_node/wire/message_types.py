@@ -1,14 +1,10 @@
 """
-ROS 2 message types by name: Python classes, fields, full definitions and type hashes.
+ROS 2 message types by name (``'pkg/msg/Type'``): classes, fields, definitions, type hashes.
 
-A type name is the ROS 2 resource name ``'pkg/msg/Type'`` as stored in a bag
-(``sensor_msgs/msg/Imu``). Classes come from the installed Python message
-packages (``import pkg.msg``, which imports every type of the package: only
-where a message object is built or rclpy serialises); fields, definitions and
-hashes from the ``.msg`` and ``.json`` files the packages install under
-``<prefix>/share/<pkg>/msg/``, where ``<prefix>`` is each entry of
-``AMENT_PREFIX_PATH`` and then the interpreter's own prefix (PyPI wheels
-install there without setting ``AMENT_PREFIX_PATH``).
+Classes come from the Python message packages (imported only where a message object is
+needed); fields, definitions and hashes from the ``.msg`` and ``.json`` files installed under
+``<prefix>/share/<pkg>/msg/``, ``<prefix>`` each entry of ``AMENT_PREFIX_PATH`` and then
+``sys.prefix`` (where PyPI wheels install them).
 """
 import functools
 import importlib
@@ -47,25 +43,7 @@ _EMPTY_MESSAGE_PLACEHOLDER = 'structure_needs_at_least_one_member'
 
 
 def split_type_name(type_name: str) -> tuple[str, str, str]:
-    """
-    Split a message type name into package, interface kind and type.
-
-    Parameters
-    ----------
-    type_name : str
-        ``'pkg/msg/Type'``.
-
-    Returns
-    -------
-    tuple of str
-        ``(package, kind, type)``, e.g. ``('sensor_msgs', 'msg', 'Imu')``.
-
-    Raises
-    ------
-    BagError
-        If ``type_name`` is not of the form ``'pkg/msg/Type'``.
-
-    """
+    """Return ``('sensor_msgs', 'msg', 'Imu')`` of ``'sensor_msgs/msg/Imu'``; BagError if not."""
     match = _TYPE_NAME.fullmatch(type_name) if isinstance(type_name, str) else None
     if match is None:
         raise BagError(f"invalid message type name {type_name!r}: expected 'pkg/msg/Type'")
@@ -75,25 +53,7 @@ def split_type_name(type_name: str) -> tuple[str, str, str]:
 
 @functools.lru_cache(maxsize=None)
 def message_class(type_name: str) -> type:
-    """
-    Return the Python message class of a type name.
-
-    Parameters
-    ----------
-    type_name : str
-        ``'pkg/msg/Type'``, e.g. ``'sensor_msgs/msg/Imu'``.
-
-    Returns
-    -------
-    type
-        The rosidl-generated class, usable with ``rclpy.serialization``.
-
-    Raises
-    ------
-    BagError
-        If the name is malformed or no installed package provides the type.
-
-    """
+    """Return the rosidl-generated class of a type; BagError if no installed package has it."""
     package, kind, name = split_type_name(type_name)
     try:
         module = importlib.import_module(f'{package}.{kind}')
@@ -108,24 +68,7 @@ def message_class(type_name: str) -> type:
 
 
 def type_name_of(msg_class: type) -> str:
-    """
-    Return the type name ``'pkg/msg/Type'`` of a rosidl-generated message class.
-
-    Parameters
-    ----------
-    msg_class : type
-        A message class such as ``sensor_msgs.msg.Imu``.
-
-    Returns
-    -------
-    str
-
-    Raises
-    ------
-    BagError
-        If ``msg_class`` is not a generated message class (``pkg.msg._module``).
-
-    """
+    """Return ``'pkg/msg/Type'`` of a rosidl-generated message class; BagError for another."""
     parts = getattr(msg_class, '__module__', '').split('.')
     if len(parts) < 3 or not hasattr(msg_class, '_TYPE_SUPPORT'):
         raise BagError(f'{msg_class!r} is not a ROS message class')
@@ -133,14 +76,13 @@ def type_name_of(msg_class: type) -> str:
 
 
 def _share_prefixes():
-    """Install prefixes to search, in order: ``AMENT_PREFIX_PATH``, then ``sys.prefix``."""
     prefixes = [p for p in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep) if p]
     prefixes.append(sys.prefix)
     return list(dict.fromkeys(prefixes))
 
 
 def _interface_file(package, kind, name, extension):
-    """Path of ``<prefix>/share/<package>/<kind>/<name><extension>``, or None if absent."""
+    """Return the first ``<prefix>/share/<package>/<kind>/<name><extension>``, or None."""
     for prefix in _share_prefixes():
         path = os.path.join(prefix, 'share', package, kind, name + extension)
         if os.path.isfile(path):
@@ -149,7 +91,7 @@ def _interface_file(package, kind, name, extension):
 
 
 def _definition_file(dependency_name):
-    """Path of the .msg file of a dependency named ``pkg/Type`` or ``pkg/msg/Type``."""
+    """Return the .msg file of a dependency named ``pkg/Type`` or ``pkg/msg/Type``, its package."""
     match = _SHORT_TYPE_NAME.fullmatch(dependency_name)
     package, kind, name = (
         (match[1], 'msg', match[2]) if match else split_type_name(dependency_name))
@@ -162,7 +104,7 @@ def _definition_file(dependency_name):
 
 
 def _dependencies(text, package):
-    """Sorted non-primitive field types of a .msg text, qualified with ``package``."""
+    """Return the sorted non-primitive field types of a .msg text, qualified with ``package``."""
     names = set()
     for field_type in _MSG_FIELD_TYPE.findall(text):
         if field_type not in _PRIMITIVE_TYPES:
@@ -175,31 +117,9 @@ def message_definition(type_name: str) -> str:
     """
     Return the complete ``ros2msg`` definition of a message type, as rosbag2 stores it.
 
-    The type's own .msg text comes first; then every type it depends on,
-    recursively and once each, depth first with the dependencies of one
-    definition in sorted order, each preceded by a line of 80 ``=`` and a line
-    ``MSG: <name>``, the name as it is spelt in the referring .msg file
-    (``std_msgs/Header``).
-
-    Parameters
-    ----------
-    type_name : str
-        ``'pkg/msg/Type'``.
-
-    Returns
-    -------
-    str
-
-    Raises
-    ------
-    BagError
-        If the name is malformed or a .msg file cannot be found.
-
-    References
-    ----------
-    rosbag2 ``docs/message_definition_encoding.md`` and
-    ``rosbag2_cpp/message_definitions/local_message_definition_source.cpp``.
-
+    The type's .msg text, then each type it depends on, recursively and once, depth first in
+    sorted order, each after a line of 80 ``=`` and ``MSG: <name as the .msg spells it>``
+    (rosbag2's ``local_message_definition_source.cpp``). BagError if a .msg file is missing.
     """
     split_type_name(type_name)
     seen = set()
@@ -221,7 +141,7 @@ def message_definition(type_name: str) -> str:
 
 @functools.lru_cache(maxsize=None)
 def _type_description_file(type_name):
-    """Return the contents of a type's ``share/<pkg>/msg/<Type>.json`` (REP-2011), or None."""
+    """Return a type's REP-2011 ``share/<pkg>/msg/<Type>.json``, or None if not installed."""
     package, kind, name = split_type_name(type_name)
     path = _interface_file(package, kind, name, '.json')
     if path is None:
@@ -236,82 +156,29 @@ def _type_description_file(type_name):
 
 @functools.lru_cache(maxsize=None)
 def type_hash(type_name: str) -> str:
-    """
-    Return the REP-2011 type hash (``'RIHS01_...'``) of a message type.
-
-    Parameters
-    ----------
-    type_name : str
-        ``'pkg/msg/Type'``.
-
-    Returns
-    -------
-    str
-        The hash from the type description file installed with the package,
-        or ``''`` if there is none (rosbag2 stores ``''`` then too).
-
-    """
+    """Return the REP-2011 type hash ``'RIHS01_...'``; ``''`` without a description, as rosbag2."""
     description = _type_description_file(type_name)
     hashes = [] if description is None else description.get('type_hashes', [])
     return next((h['hash_string'] for h in hashes if h.get('type_name') == type_name), '')
 
 
 class MessageField(NamedTuple):
-    """
-    One field of a message type, as its REP-2011 type description gives it.
-
-    Attributes
-    ----------
-    name : str
-        ``'orientation_covariance'``.
-    field_type : str
-        The basic type, by its REP-2011 name: ``'double'``, ``'float'``,
-        ``'int32'``, ``'uint8'``, ``'boolean'``, ``'byte'``, ``'char'``,
-        ``'string'``, ``'bounded_string'``, ``'wstring'``...; or
-        ``'nested_type'`` for a message (:attr:`nested_type_name`).
-    container : str
-        ``''`` for one value, ``'array'`` (fixed size), ``'bounded_sequence'``
-        or ``'sequence'``.
-    capacity : int
-        The elements of an array, the most a bounded sequence holds; else 0.
-    nested_type_name : str
-        The message type of a nested field, ``'std_msgs/msg/Header'``; else ``''``.
-
-    """
+    """One field of a message type, as its REP-2011 type description gives it."""
 
     name: str
-    field_type: str
-    container: str
-    capacity: int
-    nested_type_name: str
+    field_type: str         # REP-2011's name ('double', 'string'...), 'nested_type' for a message
+    container: str          # '', 'array', 'bounded_sequence' or 'sequence'
+    capacity: int           # elements of an array, most of a bounded sequence; else 0
+    nested_type_name: str   # 'std_msgs/msg/Header' for a nested field; else ''
 
 
 @functools.lru_cache(maxsize=None)
 def message_fields(type_name: str) -> Optional[Tuple[MessageField, ...]]:
     """
-    Return the fields of a message type in their order, without importing its Python package.
+    Return a type's fields in order from its REP-2011 description, without importing its package.
 
-    From the REP-2011 type description the package installs beside its
-    ``.msg`` file (``share/<pkg>/msg/<Type>.json``, generated since ROS 2 Iron).
-
-    Parameters
-    ----------
-    type_name : str
-        ``'pkg/msg/Type'``.
-
-    Returns
-    -------
-    tuple of MessageField or None
-        As the Python class has them (none for a message without fields, such
-        as std_msgs/Empty); None if the type has no type description
-        installed (a package built without one; its Python class may still exist).
-
-    Raises
-    ------
-    BagError
-        If the name is malformed, or the description file is unreadable or
-        describes another type.
-
+    ``()`` for a message without fields (std_msgs/Empty); None without an installed description.
+    BagError if the description is unreadable or describes another type.
     """
     description = _type_description_file(type_name)
     if description is None:

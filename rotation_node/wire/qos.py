@@ -1,16 +1,9 @@
 """
-QoS profiles as rosbag2 stores them, and the profiles the node, record and play use.
+QoS profiles as rclpy objects: rosbag2's ``offered_qos_profiles``; the node's, record's, play's.
 
-The node's adaptation of its input subscriptions to the publishers (``qos.reliability:
-auto``) is the node's own: :mod:`rotation_node.node.qos_adaptation`.
-
-rosbag2 (metadata version 9, Jazzy) stores the QoS profiles offered by a
-topic's publishers in the MCAP channel metadata ``offered_qos_profiles`` as a
-YAML list; each entry holds history, depth, reliability, durability, deadline,
-lifespan, liveliness, liveliness lease duration and
-avoid_ros_namespace_conventions, policies by name (``keep_last``) and durations
-as ``{sec, nsec}``. Bags written before version 9 hold the policies as
-integers; both are read.
+The YAML's shape is :mod:`rotation_node.wire.qos_yaml`'s; bags before metadata version 9 hold
+the policies as integers, also read. The node's input adaptation is
+:mod:`rotation_node.node.qos_adaptation`.
 """
 from __future__ import annotations
 
@@ -46,23 +39,9 @@ def qos_profile(params: QosParameters, *, transient_local: bool = False) -> QoSP
     """
     Return the QoS of the node's output publishers (and of its inputs unless adapted).
 
-    The policies of :func:`rotation_node.wire.qos_yaml.output_policies`, which
-    ``rotation_bag convert`` stores as the offered QoS of the topics it adds.
-
-    Parameters
-    ----------
-    params : rotation_node.wire.qos_yaml.QosParameters
-        ``qos.reliability`` and ``qos.depth`` (keep last).
-    transient_local : bool, optional
-        An input topic of latched data (``/tf_static``): reliable, keep all and
-        transient local, whatever the parameters, so that every message its
-        publishers keep for late subscribers arrives (only a reliable reader
-        gets them); volatile with the parameters' reliability and depth otherwise.
-
-    Returns
-    -------
-    rclpy.qos.QoSProfile
-
+    That of :func:`~rotation_node.wire.qos_yaml.output_policies`; ``transient_local`` (an
+    input of latched data, ``/tf_static``) is reliable, keep all and transient local whatever
+    the parameters, so that every message publishers keep for late subscribers arrives.
     """
     if transient_local:
         return QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
@@ -75,20 +54,7 @@ def qos_profile(params: QosParameters, *, transient_local: bool = False) -> QoSP
 
 
 def qos_profiles_yaml(profiles: Iterable[QoSProfile]) -> str:
-    """
-    Serialise QoS profiles to rosbag2's ``offered_qos_profiles`` YAML.
-
-    Parameters
-    ----------
-    profiles : iterable of rclpy.qos.QoSProfile
-        E.g. the ``qos_profile`` of each ``Node.get_publishers_info_by_topic`` entry.
-
-    Returns
-    -------
-    str
-        A YAML list, ``'[]'`` for no profiles.
-
-    """
+    """Return rosbag2's ``offered_qos_profiles`` YAML of QoS profiles (``'[]'`` for none)."""
     entries = [{
         'history': profile.history.short_key,
         'depth': profile.depth,
@@ -112,24 +78,9 @@ def _policy(entry, key, policy_type):
 
 def qos_profiles_from_yaml(text: str, *, topic: str = '') -> List[QoSProfile]:
     """
-    Parse rosbag2's ``offered_qos_profiles`` YAML into QoS profiles.
+    Return the profiles of rosbag2's ``offered_qos_profiles`` YAML (none for ``''``).
 
-    Parameters
-    ----------
-    text : str
-        The channel metadata value; ``''`` (no metadata) gives an empty list.
-    topic : str, optional
-        Named in the error message.
-
-    Returns
-    -------
-    list of rclpy.qos.QoSProfile
-
-    Raises
-    ------
-    BagError
-        If the text is not a list of complete QoS entries.
-
+    BagError naming ``topic`` if the text is not a list of complete entries.
     """
     if not text.strip():
         return []
@@ -153,21 +104,10 @@ def qos_profiles_from_yaml(text: str, *, topic: str = '') -> List[QoSProfile]:
 
 def matching_policies(offered: Sequence[QoSProfile]) -> Tuple[ReliabilityPolicy, DurabilityPolicy]:
     """
-    Return the reliability and durability that receive every publisher's messages.
+    Return the reliability and durability that receive every offering publisher's messages.
 
-    As rosbag2's ``adapt_request_to_offers``: reliable only if every publisher
-    offers reliable, transient local only if every publisher offers it; best
-    effort and volatile (which every publisher matches) when there is none.
-
-    Parameters
-    ----------
-    offered : list of rclpy.qos.QoSProfile
-        The publishers' offered profiles.
-
-    Returns
-    -------
-    (rclpy.qos.ReliabilityPolicy, rclpy.qos.DurabilityPolicy)
-
+    As rosbag2's ``adapt_request_to_offers``: reliable, transient local only if every publisher
+    offers it; best effort and volatile (which every publisher matches) when there is none.
     """
     def every(policy_name, value):
         return bool(offered) and all(getattr(p, policy_name) == value for p in offered)
@@ -180,23 +120,7 @@ def matching_policies(offered: Sequence[QoSProfile]) -> Tuple[ReliabilityPolicy,
 
 
 def recording_qos(offered: Sequence[QoSProfile]) -> QoSProfile:
-    """
-    Return the subscription QoS that receives every publisher's messages.
-
-    The policies of :func:`matching_policies`; the history keeps
-    ``DEEP_QUEUE_DEPTH`` samples so that bursts are not overwritten before
-    the recorder takes them.
-
-    Parameters
-    ----------
-    offered : list of rclpy.qos.QoSProfile
-        The publishers' offered profiles.
-
-    Returns
-    -------
-    rclpy.qos.QoSProfile
-
-    """
+    """Return :func:`matching_policies` keeping the last ``DEEP_QUEUE_DEPTH``: record's QoS."""
     reliability, durability = matching_policies(offered)
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=DEEP_QUEUE_DEPTH,
                       reliability=reliability, durability=durability)
@@ -204,24 +128,11 @@ def recording_qos(offered: Sequence[QoSProfile]) -> QoSProfile:
 
 def playback_qos(offered: Sequence[QoSProfile], *, lossless: bool = False) -> QoSProfile:
     """
-    Return the publisher QoS that replays a topic as it was recorded.
+    Return the publisher QoS that replays a topic as it was recorded, as rosbag2 does.
 
-    As rosbag2 does: the recorded reliability and durability if every
-    recorded publisher offered the same ones, else reliable and volatile; keep
-    last 10. ``lossless`` (``--rate 0``) makes it reliable with a
-    ``DEEP_QUEUE_DEPTH`` queue.
-
-    Parameters
-    ----------
-    offered : list of rclpy.qos.QoSProfile
-        The profiles recorded in the bag for the topic (may be empty).
-    lossless : bool, optional
-        Reliable with a deep queue, whatever was recorded (``--rate 0``).
-
-    Returns
-    -------
-    rclpy.qos.QoSProfile
-
+    The recorded reliability and durability if every recorded publisher offered the same, else
+    reliable and volatile; keep last 10. ``lossless`` (``--rate 0``): reliable, keep last
+    ``DEEP_QUEUE_DEPTH``.
     """
     same = offered and all(
         (p.reliability, p.durability) == (offered[0].reliability, offered[0].durability)

@@ -1,16 +1,10 @@
 """
 rosbag2's ``offered_qos_profiles`` YAML written without rclpy, and the node's output QoS by name.
 
-rosbag2 (metadata version 9, Jazzy) stores the QoS profiles a topic's
-publishers offer as a YAML list of entries of one fixed shape: history, depth,
-reliability, durability, deadline, lifespan, liveliness, liveliness lease
-duration, avoid_ros_namespace_conventions; policies by name (``keep_last``),
-durations as ``{sec, nsec}``. :func:`profiles_yaml` writes that shape
-directly, as PyYAML's ``safe_dump`` writes it, without PyYAML's emitter
-(most of the time of writing a small bag) and without rclpy (whose import
-loads the ROS client libraries): ``rotation_bag convert`` offers
-:func:`output_qos_yaml` for the topics it adds. Profiles as rclpy objects, and reading the YAML:
-:mod:`rotation_node.wire.qos`.
+rosbag2 (metadata version 9, Jazzy) stores a topic's offered profiles as a YAML list of
+entries of one shape (:data:`ENTRY_KEYS`; policies by name, durations as ``{sec, nsec}``).
+:func:`profiles_yaml` writes it as ``yaml.safe_dump`` does, without PyYAML's slow emitter and
+without importing rclpy. rclpy profiles and reading: :mod:`rotation_node.wire.qos`.
 """
 from __future__ import annotations
 
@@ -19,25 +13,25 @@ from typing import Any, Dict, Iterable, List, Mapping, Protocol
 
 
 class QosParameters(Protocol):
-    """The node's ``qos.*`` parameters (those of ``rotation_node.parameters.NodeParameters``)."""
+    """The node's ``qos.*`` parameters, read-only as a ``NodeParameters`` has them."""
 
     @property
     def qos_reliability(self) -> str:
-        """Return the ``qos.reliability`` parameter."""
+        ...
 
     @property
     def qos_depth(self) -> int:
-        """Return the ``qos.depth`` parameter."""
+        ...
 
 
 #: The keys of an entry, in rosbag2's order.
 ENTRY_KEYS = ('history', 'depth', 'reliability', 'durability', 'deadline', 'lifespan',
               'liveliness', 'liveliness_lease_duration', 'avoid_ros_namespace_conventions')
 _DURATION_KEYS = ('sec', 'nsec')
-#: A policy name that YAML writes plain (not a word YAML 1.1 reads as a bool or null).
+# A policy name that YAML writes plain (not a word YAML 1.1 reads as a bool or null).
 _PLAIN_NAME = re.compile(r'[a-z][a-z_]*')
 _YAML_WORDS = frozenset(('y', 'n', 'yes', 'no', 'on', 'off', 'true', 'false', 'null'))
-#: Reliabilities the node's outputs offer by that name (``auto`` offers reliable).
+# Reliabilities the node's outputs offer by that name (``auto`` offers reliable).
 _OUTPUT_RELIABILITIES = ('reliable', 'best_effort')
 _ZERO_DURATION = {'sec': 0, 'nsec': 0}
 
@@ -46,10 +40,8 @@ def output_policies(params: QosParameters) -> Dict[str, Any]:
     """
     Return the output publishers' history, depth, reliability and durability, by name.
 
-    Keep last ``qos.depth``, volatile, the ``qos.reliability`` (``auto``:
-    reliable, which every subscriber matches). The other policies are rclpy's
-    defaults. :func:`rotation_node.wire.qos.qos_profile` makes the rclpy
-    profile of these.
+    Keep last ``qos.depth``, volatile, ``qos.reliability`` (``auto``: reliable, which every
+    subscriber matches); the other policies are rclpy's defaults.
     """
     reliability = params.qos_reliability
     return {'history': 'keep_last', 'depth': params.qos_depth,
@@ -102,11 +94,9 @@ def _entry_lines(entry: Mapping[str, Any]) -> List[str]:
 
 def profiles_yaml(entries: Iterable[Mapping[str, Any]]) -> str:
     """
-    Return entries of the fixed shape as rosbag2's YAML list: ``yaml.safe_dump``'s text.
+    Return ``yaml.safe_dump(entries, sort_keys=False, default_flow_style=False)``, unterminated.
 
-    ``yaml.safe_dump(entries, sort_keys=False, default_flow_style=False)``
-    without its last newline, ``'[]'`` for none; written directly, or by
-    PyYAML for an entry of another shape or with values it would quote.
+    ``'[]'`` for none; PyYAML writes an entry of another shape or with values it would quote.
     """
     entries = list(entries)
     lines: List[str] = []
