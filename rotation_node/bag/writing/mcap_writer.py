@@ -1,27 +1,13 @@
 """
-An MCAP writer that writes a whole chunk of messages at once.
+An MCAP writer that writes a whole chunk of messages at once, as ``mcap.writer.Writer`` would.
 
-The ``mcap`` library's ``Writer.add_message`` builds a ``Message`` record
-object, updates the statistics, writes the record field by field into the
-chunk and appends a message index entry, for every message: about 3.7 us per
-message on an AMD EPYC (2 cores; CPU time), against about 0.2 us per message
-for assembling a whole chunk here. Writing with the library was 60 % of
-``rotation_bag convert``'s time (8 of 13.5 us per input message, two
-messages written for each); with this writer it is about 2 us
-(``benchmarks/bench_bag_convert.py``, "where the time goes").
-
-:class:`ChunkWriter` takes the messages of a chunk together
-(:meth:`ChunkWriter.write_chunk`): the 31-byte Message record headers
-(opcode, length, channel, sequence, log time, publish time) are one numpy
-array, the records one ``bytes.join`` of headers and data, and the message
-indexes (log time, offset in the uncompressed chunk, per channel) are numpy
-arrays too. Everything that is not per message (header, schemas, channels,
-chunk, chunk index, metadata, statistics, summary, footer) is written with the
-library's own record classes, in the library's layout: given the same calls,
-the file is the one ``mcap.writer.Writer`` writes, byte for byte (schemas and
-channels go into the next chunk that holds a message, the summary repeats
-schemas and channels and holds statistics, chunk and metadata indexes and the
-summary offsets, its CRC as the library computes it).
+The library's ``add_message`` builds and writes a record object and an index entry per
+message: about 3.7 us, 60 % of ``rotation_bag convert``'s time; a chunk assembled here costs
+about 0.2 us per message (``benchmarks/bench_bag_convert.py``). :meth:`ChunkWriter.write_chunk`
+makes the 31-byte Message record headers one numpy array, the records one ``bytes.join`` and
+the message indexes numpy arrays too. Everything not per message (header, schemas, channels,
+chunk, indexes, metadata, statistics, summary, footer) is written with the library's record
+classes in its layout: given the same calls, the file is the library's, byte for byte.
 """
 from __future__ import annotations
 
@@ -64,24 +50,14 @@ class ChunkWriter:
     """
     Write an MCAP file chunk by chunk, each chunk's messages given at once.
 
-    Indexed (message indexes, chunk indexes, statistics, summary offsets) and
-    with CRCs as ``mcap.writer.Writer`` with its defaults; the file it writes
-    is the library's for the same schemas, channels and messages, with each
-    ``write_chunk`` where the library's writer was flushed.
-
-    Parameters
-    ----------
-    stream : binary file
-        Where to write; ``tell()`` must give the position (a file opened for writing).
-    compression : str, optional
-        Chunk compression: ``'zstd'`` (default), ``'lz4'`` or ``'none'``, the
-        names of the library's ``mcap.writer.CompressionType`` (not imported:
-        that module reads the installed package metadata, tens of milliseconds).
-
+    Indexed and with CRCs as ``mcap.writer.Writer`` with its defaults: its file for the
+    same schemas, channels and messages, with each ``write_chunk`` where it was flushed.
+    ``stream`` must ``tell()`` its position; ``compression`` is ``'zstd'``, ``'lz4'`` or
+    ``'none'`` (the library's ``CompressionType`` names; that module is not imported: it
+    reads the installed package metadata, tens of milliseconds).
     """
 
-    def __init__(self, stream: IO[bytes],
-                 compression: str = 'zstd') -> None:
+    def __init__(self, stream: IO[bytes], compression: str = 'zstd') -> None:
         self._stream = stream
         self._compression, self._compress = _compressor(compression)
         self._records = RecordBuilder()     # schemas and channels for the next chunk
@@ -98,11 +74,6 @@ class ChunkWriter:
     def statistics(self) -> Statistics:
         """Return the Statistics record of what is written so far (the summary's)."""
         return self._statistics
-
-    @property
-    def chunk_indexes(self) -> List[ChunkIndex]:
-        """Return the ChunkIndex records of the chunks written so far."""
-        return self._chunk_indexes
 
     def start(self, profile: str = '', library: str = '') -> None:
         """Write the magic and the Header record."""
@@ -133,20 +104,10 @@ class ChunkWriter:
     def write_chunk(self, channel_ids: Sequence[int], log_times: Sequence[int],
                     publish_times: Sequence[int], datas: Sequence[Any]) -> None:
         """
-        Write one chunk of messages (and its message indexes), in the order given.
+        Write one chunk of messages and its message indexes; nothing for no messages.
 
-        The chunk starts with the schemas and channels registered since the
-        last chunk. Nothing is written for no messages.
-
-        Parameters
-        ----------
-        channel_ids : sequence of int
-            Each message's channel, as ``register_channel`` returned it.
-        log_times, publish_times : sequence of int
-            Nanoseconds, in [0, 2**64).
-        datas : sequence of bytes-like
-            The messages' serialised data.
-
+        The chunk starts with the schemas and channels registered since the last one; times
+        are nanoseconds in [0, 2**64), ``channel_ids`` as ``register_channel`` returned them.
         """
         count = len(datas)
         if not count:
