@@ -1,25 +1,12 @@
 """
-Compare two orientation topics of one bag or two (``rotation_bag compare``).
+Compare two orientation topics of one bag or two (``rotation_bag compare``; docs/compare.md).
 
-A reference topic (ground truth: motion capture, a reference INS) and an
-estimate topic (an IMU's filter, an odometry) of any input type the node takes
-are read as the node reads them: a :class:`~rotation_node.pipeline.ConversionPipeline`
-with the ``quaternion`` output, so the registry entry of their type
-(:data:`rotation_node.registry.INPUTS`), its sample stream (for ``/tf`` the TF
-buffer's lookup of a child frame in a parent frame, with ``T_static`` beside
-``T``) and the pipeline's rules for unknown, non-finite and zero orientations,
-fed the read-only views of :mod:`rotation_node.wire.cdr` where the type has a
-fixed layout (as ``convert`` feeds its pipelines) and rclpy messages otherwise. The samples' header
-stamps put both on one clock; then :mod:`rotation_node.comparison` estimates
-what was asked of
-
-    R_ref(t) = W R_est(t + time_offset) M
-
-(``W`` world alignment, ``M`` mounting; docs/compare.md) and the errors of
-the estimate after applying them, slerped at the reference stamps. The
-result is a :class:`ComparisonResult`: its :meth:`~ComparisonResult.as_json`
-is the ``--json`` file, :func:`summary` the printed summary and
-:func:`draw_comparison` the ``--plot`` figure.
+Both topics are read as the node reads them: a ``ConversionPipeline`` with the ``quaternion``
+output (the input type's sample stream, ``/tf`` lookups, its drop rules), fed cdr views as
+``convert`` feeds it. :mod:`rotation_node.comparison` then estimates what was asked of
+``R_ref(t) = W R_est(t + time_offset) M`` and the errors of the aligned estimate at the
+reference stamps: a :class:`ComparisonResult` (``--json``), :func:`summary` (printed) and
+:func:`draw_comparison` (``--plot``).
 """
 from __future__ import annotations
 
@@ -53,21 +40,11 @@ PLOT_SEQUENCE = 'xyz'
 @dataclass
 class StreamSource:
     """
-    Where a stream is read: a topic of a bag, and how.
+    Where a stream is read: a bag, a topic (its name in the bag or its ROS 2 name), and how.
 
-    Attributes
-    ----------
-    path : str or os.PathLike
-        The bag.
-    topic : str
-        The topic (its name in the bag or its ROS 2 name).
-    input_type : str, optional
-        A key of :data:`rotation_node.registry.INPUTS`; default the plain type
-        of the topic's message type (``tf`` for ``tf2_msgs/msg/TFMessage``).
-        Needed where types share a message (``euler``, ``rotation_vector``).
-    frames : tuple of str, optional
-        ``(parent, child)`` for ``tf``: the orientation of child in parent.
-
+    ``input_type`` (a key of :data:`rotation_node.registry.INPUTS`) is needed where types
+    share a message (``euler``, ``rotation_vector``); ``frames`` is ``(parent, child)`` for
+    ``tf``: the orientation of child in parent.
     """
 
     path: Any
@@ -115,21 +92,11 @@ def read_stream(source: StreamSource, params: Optional[NodeParameters] = None, *
     """
     Read the orientation samples of a topic with the node's sample stream of its input type.
 
-    Samples without an orientation (an Imu's ``orientation_covariance[0] ==
-    -1``), with a non-finite or zero one, or with a stamp not after the
-    previous sample's (after sorting by stamp: a repeated stamp) are dropped
-    and counted. Rates are the messages' angular velocities where every
-    sample has a finite one and not all are zero (a field never filled in),
-    else None (the comparison then differentiates the orientations).
-
-    Raises
-    ------
-    BagError
-        The bag is unreadable, the topic is not in it or cannot be read as
-        orientations, the frames of ``tf`` are missing.
-    ComparisonError
-        Fewer than 2 usable samples.
-
+    Samples without an orientation (REP 145), with a non-finite or zero one, or with a
+    repeated stamp are dropped and counted. Rates are the messages' angular velocities if
+    every sample has a finite one and not all are zero, else None (then differentiated).
+    BagError if the topic cannot be read as orientations; ComparisonError for fewer than 2
+    usable samples.
     """
     params = NodeParameters() if params is None else params
     with open_bag(source.path, strict=strict) as reader:
@@ -251,12 +218,8 @@ def compare_streams(reference: Stream, estimate: Stream, *, time_offset: Optiona
     """
     Estimate what ``time_offset`` (None: estimate it) and ``align`` ask, then the errors.
 
-    Raises
-    ------
-    ComparisonError
-        The streams do not overlap in time (after the offset) or the motion
-        does not determine what was asked (``DegenerateMotionError``).
-
+    ComparisonError if the streams do not overlap in time (after the offset) or the motion
+    does not determine what was asked (``DegenerateMotionError``).
     """
     if align not in ALIGN_CHOICES:
         raise ComparisonError(f'align must be one of {", ".join(ALIGN_CHOICES)}, not {align!r}')
@@ -330,12 +293,7 @@ def summary(result: ComparisonResult) -> str:
 
 
 def draw_comparison(result: ComparisonResult) -> Figure:
-    """
-    Return the figure of ``--plot``.
-
-    The error angle and the error about each reference body axis over time,
-    then roll, pitch and yaw of the reference and of the aligned estimate.
-    """
+    """Return ``--plot``: the errors over time, then roll, pitch, yaw of both, aligned."""
     series = result.series
     seconds = series.times - series.times[0]
     errors = np.degrees(series.errors)
@@ -381,33 +339,12 @@ def compare_bags(reference: StreamSource, estimate: StreamSource, *,
     """
     Compare two topics and write the JSON and the plot, each complete or not at all.
 
-    Parameters
-    ----------
-    reference, estimate : StreamSource
-        The two topics (of one bag or two).
-    time_offset : float, optional
-        Seconds; estimated when None.
-    align : {'none', 'world', 'mounting', 'both'}
-        Which of ``W`` and ``M`` to estimate (the others are the identity).
-    json_path, plot_path : str or os.PathLike, optional
-        Where to write the JSON document and the PNG.
-    params : NodeParameters, optional
-        Euler sequence and unit of Euler-angle inputs; ``input_type`` picks
-        among types that share a message.
-    max_gap, max_offset : float, optional
-        See :func:`rotation_node.comparison.estimate_alignment`.
-    overwrite : bool
-        Replace existing outputs (refused otherwise, before any work).
-    strict : bool
-        Refuse unfinished recordings.
-    report : callable, optional
-        Receives the inputs' notes.
-
-    Raises
-    ------
-    BagError, ComparisonError
-        One line each: what was wrong.
-
+    ``time_offset`` in seconds is estimated when None; ``align`` says which of ``W`` and
+    ``M`` to estimate (the others are the identity); ``params`` gives the Euler sequence and
+    unit of Euler inputs and the ``input_type`` among types sharing a message; ``max_gap``
+    and ``max_offset`` are :func:`rotation_node.comparison.estimate_alignment`'s. Existing
+    outputs are refused before any work unless ``overwrite``; ``strict`` refuses unfinished
+    recordings; ``report`` receives the inputs' notes. BagError, ComparisonError: one line.
     """
     with contextlib.ExitStack() as stack:   # each output committed on success, else removed
         outputs = [stack.enter_context(AtomicFile(path, overwrite=overwrite))

@@ -1,25 +1,14 @@
 """
 Publish the messages of a bag on their topics (``rotation_bag play``).
 
-Any bag :func:`rotation_node.bag.reading.reader.open_bag` reads; topics whose names
-are not valid in ROS 2 are published under their mapped names
-(:mod:`rotation_node.bag.reading.topic_names`), and topics whose type is not
-installed (or not CDR) are left out, with a note, unless asked for by name.
-
-Messages go out as stored (CDR bytes, never deserialised) in log-time order,
-spaced as they were recorded divided by the rate. Rate 0 publishes as fast as
-the subscribers acknowledge: it waits until every played topic has a
-subscriber, offers a deep reliable queue, and every ``ACK_BATCH`` messages
-waits until they are acknowledged, so the queue never overflows; a reliable
-subscriber whose own queue is deep enough (as the recorder's) then receives
-every message.
-
-A new publisher is matched by its subscribers a little after it sees them
-(discovery is not symmetric, and slow on a loaded machine), and a volatile
-subscriber misses what was published before: with ``wait_for_subscribers``
-(implied by rate 0) playback starts ``DISCOVERY_SETTLE_S`` after every played
-topic has a subscriber, and ``delay`` (``--delay``, as in ``ros2 bag play``)
-holds back the first message further.
+Messages go out as stored (CDR bytes) in log-time order, spaced as recorded divided by the
+rate, under their ROS 2 names; topics of types not installed (or not CDR) are left out with
+a note unless named. Rate 0 publishes as fast as the subscribers acknowledge: a deep
+reliable queue, waiting every ``ACK_BATCH`` messages until they are acknowledged, so a
+subscriber with a deep enough reliable queue receives every message. Publishers are
+matched a little after they see their subscribers, and a volatile subscriber misses what
+came before: ``wait_for_subscribers`` (implied by rate 0) starts ``DISCOVERY_SETTLE_S``
+after every topic has one, ``delay`` holds back the first message further.
 """
 from __future__ import annotations
 
@@ -48,10 +37,8 @@ ACK_BATCH = DEEP_QUEUE_DEPTH // 4
 ACK_TIMEOUT = Duration(seconds=30)
 _POLL_S = 0.05
 DISCOVERY_SETTLE_S = 0.5
-#: Slowest playback rate: a second of the bag then takes about 32 years.
-MIN_RATE = 1e-9
-#: Longest delay before the first message (what ``threading`` can wait for).
-MAX_DELAY_S = threading.TIMEOUT_MAX
+MIN_RATE = 1e-9                        # a second of the bag then takes about 32 years
+MAX_DELAY_S = threading.TIMEOUT_MAX    # what threading can wait for
 
 
 def _wait(stop, seconds):
@@ -67,13 +54,11 @@ def _playable_topics(reader, topics, report):
     """
     Return the topics to play: the given ones (all checked), or every topic that can be published.
 
-    A topic of a type that is not installed, or not CDR, cannot be published:
-    asked for by name it is an error, else it is left out with a note.
+    A topic of a type not installed, or not CDR, is an error if named, else left out (a note).
     """
     if topics is not None:
         topics = list(topics)
-        # A name the bag does not have (under either name) is checked as a
-        # ROS 2 name first, so that the error says what is wrong with it.
+        # A name the bag does not have is checked as a ROS 2 name first: the error says why.
         checked_topic_names(topic for topic in topics
                             if topic not in reader.topics and topic not in reader.renames)
         topics = list(dict.fromkeys(reader.topic_name(topic) for topic in topics))
@@ -162,29 +147,24 @@ def play(path: StrPath, *, rate: float = 1.0, topics: Optional[Sequence[str]] = 
     Parameters
     ----------
     path : str or os.PathLike
-        The bag: anything :func:`rotation_node.bag.reading.reader.open_bag` reads.
+        Anything :func:`rotation_node.bag.reading.reader.open_bag` reads.
     rate : float, optional
-        Speed factor on the recorded timing; 0 publishes as fast as the
-        subscribers acknowledge, after waiting for a subscriber on every topic.
+        Speed factor on the recorded timing; 0: as fast as the subscribers acknowledge.
     topics : list of str, optional
-        Only these topics (names in the bag or their ROS 2 names); by
-        default every topic whose type is installed.
+        Only these (names in the bag or ROS 2 names); default every installed type's.
     loop : bool, optional
         Start again at the end.
     delay : float, optional
-        Seconds to wait before the first message (after the subscribers, if
-        waiting for them), so that subscribers can match the new publishers.
+        Seconds to wait before the first message (after the subscribers, if waited for).
     wait_for_subscribers : bool, optional
-        Start only once every played topic has a subscriber (always at rate 0).
+        Start once every played topic has a subscriber (always at rate 0).
     ros_args : list of str, optional
-        Command line passed to ``rclpy.init`` (``--ros-args ...``).
+        Passed to ``rclpy.init`` (``--ros-args ...``).
     strict : bool, optional
-        Refuse an unfinished recording or a damaged MCAP file instead of
-        playing what it holds.
+        Refuse an unfinished recording or a damaged MCAP file.
     report : callable, optional
-        ``report(line)`` receives the input's notes (an unfinished recording,
-        a renamed topic, topics left out) before anything is published, then
-        what reading found could not be read.
+        ``report(line)`` receives the input's notes (topics left out too) before anything
+        is published, then what reading found it could not read.
 
     Returns
     -------
@@ -194,9 +174,9 @@ def play(path: StrPath, *, rate: float = 1.0, topics: Optional[Sequence[str]] = 
     Raises
     ------
     BagError
-        If the bag is unreadable, a topic is not in it or not a valid name, a
-        type is not installed, the rate is neither 0 nor in ``[MIN_RATE, inf)``
-        or the delay not in ``[0, MAX_DELAY_S]``; nothing is published then.
+        Before anything is published: the bag is unreadable, a topic is not in it or not
+        a valid name, a type is not installed, the rate is neither 0 nor in
+        ``[MIN_RATE, inf)``, or the delay not in ``[0, MAX_DELAY_S]``.
 
     """
     if not (rate == 0 or MIN_RATE <= rate < math.inf):

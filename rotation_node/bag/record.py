@@ -1,24 +1,18 @@
 """
 Record live topics into an MCAP bag (``rotation_bag record``).
 
-Types are discovered from the ROS graph: a topic is subscribed as soon as it
-has a publisher, with a QoS every publisher is compatible with, and its
-messages are stored as received (``raw=True``: CDR bytes, never deserialised).
-Log time is the node clock at reception, publish time the DDS source
-timestamp, as rosbag2 records them.
-
-The bag is crash-safe (see :mod:`rotation_node.bag.writing.writer`): it is written to
-``<output>.part``, flushed to disk at least once a second, and renamed to the
-output when recording stops; after a SIGKILL or a power loss the ``.part``
-holds everything up to the last flush. When the disk fills, recording stops
-and the bag is closed with what fitted.
+A topic is subscribed once it has a publisher, with a QoS every publisher is compatible
+with, and its messages stored as received (``raw=True``); log time is the node clock at
+reception, publish time the DDS source timestamp, as rosbag2 records them. The bag is
+crash-safe (:mod:`~rotation_node.bag.writing.writer`) and closed with what fitted when the
+disk fills.
 """
 from __future__ import annotations
 
 import functools
 import math
 import time
-from typing import Any, Dict, Iterable, List, Optional, Sequence, TYPE_CHECKING
+from typing import Dict, Iterable, List, Optional, Sequence, TYPE_CHECKING
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -44,28 +38,14 @@ _SPIN_PERIOD_S = 0.05
 
 class BagRecorder(Node):
     """
-    A node that subscribes to topics as they appear and writes them to a bag.
+    A node that subscribes to topics as they appear and writes them to ``writer``.
 
-    Parameters
-    ----------
-    writer : BagWriter
-        Receives every message; the caller closes it.
-    topics : iterable of str
-        Topic names; relative names are resolved in the node's namespace and
-        ``--ros-args -r`` remappings apply.
-    **kwargs
-        Passed to ``rclpy.node.Node`` (e.g. ``context``).
-
-    Attributes
-    ----------
-    counts : dict
-        ``{topic: messages written}`` for the subscribed topics.
-
+    Relative names are resolved in the node's namespace, remappings apply; ``counts`` is
+    ``{topic: messages written}`` of the subscribed topics.
     """
 
-    def __init__(self, writer: BagWriter, topics: Iterable[str], *, node_name: str = NODE_NAME,
-                 **kwargs: Any) -> None:
-        super().__init__(node_name, **kwargs)
+    def __init__(self, writer: BagWriter, topics: Iterable[str]) -> None:
+        super().__init__(NODE_NAME)
         self._writer = writer
         self._pending = [self.resolve_topic_name(topic) for topic in topics]
         self.counts: Dict[str, int] = {}
@@ -128,39 +108,20 @@ def record(output: StrPath, topics: Sequence[str], *, duration: Optional[float] 
     """
     Record ``topics`` into ``output`` until Ctrl-C, SIGTERM, ``duration`` or a full disk.
 
-    The bag is closed cleanly on every one of these, so it is always valid;
-    messages already received by then are written first (for at most
-    ``DRAIN_LIMIT_S``).
-
-    Parameters
-    ----------
-    output : str or os.PathLike
-        The bag: a rosbag2 directory, or a single MCAP file if it ends in ``.mcap``.
-    topics : list of str
-        The topics to record.
-    duration : float, optional
-        Seconds to record; until stopped by a signal by default.
-    overwrite : bool, optional
-        Replace an existing ``output``.
-    compression : str, optional
-        Chunk compression, ``'zstd'`` (default, as rosbag2), ``'lz4'`` or ``'none'``.
-    ros_args : list of str, optional
-        Command line passed to ``rclpy.init`` (``--ros-args ...``).
-
-    Returns
-    -------
-    dict
-        ``{topic: messages recorded}``; topics that never appeared are absent.
+    The bag is closed cleanly on each, after writing what was received by then (for at
+    most ``DRAIN_LIMIT_S``). ``output``, ``overwrite`` and ``compression`` are
+    :class:`~rotation_node.bag.writing.writer.BagWriter`'s; ``duration`` in seconds (None:
+    until a signal); ``ros_args`` are passed to ``rclpy.init``. Return ``{topic: messages
+    recorded}`` (topics that never appeared are absent).
 
     Raises
     ------
     DiskFullError
-        If the disk filled: the bag was closed with the messages that fitted
-        (``kept``); recording stopped.
+        The disk filled: recording stopped, the bag holds the messages that fitted (``kept``).
     BagError
-        If ``output`` exists (without ``overwrite``), ``duration`` is not
-        positive or a topic name is invalid, before anything is written.
-        Should writing fail otherwise, what was flushed stays in ``<output>.part``.
+        Before anything is written: ``output`` exists (without ``overwrite``), ``duration``
+        is not positive, a topic name is invalid. Should writing fail otherwise, what was
+        flushed stays in ``<output>.part``.
 
     """
     if duration is not None and not (0 < duration < math.inf):
