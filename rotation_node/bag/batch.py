@@ -110,34 +110,14 @@ def convert_bags(input_paths: Sequence[str], output_directory: str, params: Node
                  compression: Optional[str] = None,
                  on_result: Optional[Callable[[BagResult], None]] = None) -> List[BagResult]:
     """
-    Convert every input into ``output_directory``, ``jobs`` bags at a time.
+    Convert every input into ``output_directory``, ``jobs`` bags at a time; return the results.
 
-    Parameters
-    ----------
-    input_paths : sequence of str
-        Any bags :func:`rotation_node.bag.reading.reader.open_bag` reads.
-    output_directory : str
-        Created if missing; outputs are named by :func:`batch_output_path`.
-    params : rotation_node.parameters.NodeParameters
-        The node's parameters, for every bag.
-    jobs : int, optional
-        Worker processes (``1``: one after the other in this process).
-    topics, overwrite, strict, compression
-        As for :func:`convert_bag`.
-    on_result : callable, optional
-        Called with each :class:`BagResult` as soon as its bag is done.
-
-    Returns
-    -------
-    list of BagResult
-        In the order the bags finished (those done within one 50 ms poll in input order).
-
-    Raises
-    ------
-    BagError
-        Before any bag is converted: ``jobs`` is not a positive integer, two inputs would
-        share an output, or the output directory cannot be created.
-
+    ``jobs`` worker processes (1: one after the other in this process) convert each bag as
+    :func:`convert_bag` (the other arguments are its) into the directory, created if missing,
+    under :func:`batch_output_path`. ``on_result`` receives each :class:`BagResult` as soon
+    as its bag is done; the list is in that order (those done within one 50 ms poll in input
+    order). BagError before any bag is converted if ``jobs`` is not a positive integer, two
+    inputs would share an output, or the directory cannot be created.
     """
     if not (isinstance(jobs, int) and jobs >= 1):
         raise BagError(f'jobs must be a positive integer, got {jobs!r}')

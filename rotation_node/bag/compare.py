@@ -20,6 +20,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, TYPE_CH
 from matplotlib.figure import Figure
 import numpy as np
 from rotation_node import comparison, conversions, registry
+from rotation_node.bag.convert import input_streams
 from rotation_node.bag.reading.reader import open_bag
 from rotation_node.bag.writing.atomic_file import AtomicFile
 from rotation_node.command_line.stop_signal import raise_if_stopped
@@ -112,7 +113,6 @@ def read_stream(source: StreamSource, params: Optional[NodeParameters] = None, *
             values = {'input_type': entry.name, 'outputs': ['quaternion'],
                       'euler.sequence': params.euler_sequence,
                       'euler.degrees': params.euler_degrees}
-            topics = {topic: entry.topics[0].name}
             if entry.stream is not None:
                 if source.frames is None:
                     raise BagError(f'{topic} is {entry.type_name}: name the parent and child '
@@ -120,11 +120,7 @@ def read_stream(source: StreamSource, params: Optional[NodeParameters] = None, *
                                    'PARENT CHILD)')
                 values.update({'tf.parent_frame': source.frames[0],
                                'tf.child_frame': source.frames[1]})
-                first = entry.topics[0].name
-                for other in entry.topics[1:]:
-                    companion = topic + other.name[len(first):]
-                    if other.name.startswith(first) and companion in reader.topics:
-                        topics[companion] = other.name
+            topics = input_streams(reader, entry, [topic])[topic]   # with T_static for T
             pipeline = ConversionPipeline(NodeParameters().replaced(values))
             # The messages' own angular velocities (one sample per message of a plain type).
             read_rate = (entry.sample_reader() if entry.stream is None
@@ -182,7 +178,6 @@ class ComparisonResult:
     alignment: comparison.Alignment
     series: comparison.AlignedSeries
     statistics: comparison.ErrorStatistics
-    origin_ns: int
     time_offset_estimated: bool
     align: str
 
@@ -228,8 +223,12 @@ def compare_streams(reference: Stream, estimate: Stream, *, time_offset: Optiona
     t_est = (estimate.stamps_ns - origin) * 1e-9
     world, mounting = align in ('world', 'both'), align in ('mounting', 'both')
     if time_offset is None or world or mounting:
-        if time_offset is not None:
-            _check_overlap(t_ref, t_est, time_offset)
+        if time_offset is not None and (t_ref[-1] + time_offset < t_est[0]
+                                        or t_ref[0] + time_offset > t_est[-1]):
+            raise ComparisonError(
+                f'the streams do not overlap in time: reference {t_ref[0]:.3f} to '
+                f'{t_ref[-1]:.3f} s, estimate {t_est[0]:.3f} to {t_est[-1]:.3f} s, '
+                f'time offset {time_offset} s')
         alignment = comparison.estimate_alignment(
             t_ref, reference.quaternions, t_est, estimate.quaternions, time_offset=time_offset,
             world=world, mounting=mounting, rates_ref=reference.rates, rates_est=estimate.rates,
@@ -243,15 +242,8 @@ def compare_streams(reference: Stream, estimate: Stream, *, time_offset: Optiona
         time_offset=alignment.time_offset, world=alignment.world, mounting=alignment.mounting,
         max_gap=max_gap)
     return ComparisonResult(reference, estimate, alignment, series,
-                            comparison.error_statistics(series.errors), origin,
-                            time_offset is None, align)
-
-
-def _check_overlap(t_ref, t_est, time_offset):
-    if t_ref[-1] + time_offset < t_est[0] or t_ref[0] + time_offset > t_est[-1]:
-        raise ComparisonError(
-            f'the streams do not overlap in time: reference {t_ref[0]:.3f} to {t_ref[-1]:.3f} s, '
-            f'estimate {t_est[0]:.3f} to {t_est[-1]:.3f} s, time offset {time_offset} s')
+                            comparison.error_statistics(series.errors), time_offset is None,
+                            align)
 
 
 def summary(result: ComparisonResult) -> str:
@@ -337,14 +329,13 @@ def compare_bags(reference: StreamSource, estimate: StreamSource, *,
                  strict: bool = False,
                  report: Optional[Callable[[str], None]] = None) -> ComparisonResult:
     """
-    Compare two topics and write the JSON and the plot, each complete or not at all.
+    Compare two topics; write the JSON and the plot, each complete or not at all.
 
-    ``time_offset`` in seconds is estimated when None; ``align`` says which of ``W`` and
-    ``M`` to estimate (the others are the identity); ``params`` gives the Euler sequence and
-    unit of Euler inputs and the ``input_type`` among types sharing a message; ``max_gap``
-    and ``max_offset`` are :func:`rotation_node.comparison.estimate_alignment`'s. Existing
-    outputs are refused before any work unless ``overwrite``; ``strict`` refuses unfinished
-    recordings; ``report`` receives the inputs' notes. BagError, ComparisonError: one line.
+    ``time_offset`` (s) is estimated when None; ``align`` names which of ``W``, ``M`` to
+    estimate (the others: identity); ``params``: Euler inputs' sequence and unit, and the
+    ``input_type`` among types sharing a message; ``max_gap``, ``max_offset``: those of
+    ``comparison.estimate_alignment``. Existing outputs are refused before any work
+    (without ``overwrite``); ``strict``, ``report`` as for ``convert``.
     """
     with contextlib.ExitStack() as stack:   # each output committed on success, else removed
         outputs = [stack.enter_context(AtomicFile(path, overwrite=overwrite))

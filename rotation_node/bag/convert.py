@@ -12,7 +12,7 @@ it can be (:mod:`~rotation_node.bag.block_convert`), with the node's results bit
 from __future__ import annotations
 
 import os
-from typing import Callable, Dict, List, Optional, Sequence, TextIO, TYPE_CHECKING
+from typing import Any, Callable, Dict, List, Optional, Sequence, TextIO, TYPE_CHECKING
 
 from rotation_node import registry
 from rotation_node.bag.block_convert import collections_deferred, converted_blocks, TopicConverter
@@ -36,7 +36,8 @@ def output_topic(input_topic: str, output_name: str) -> str:
     return f'{input_topic.rstrip("/")}/{output_name}'
 
 
-def _input_streams(reader, input_type, topics):
+def input_streams(reader: Any, input_type: registry.InputType,
+                  topics: Optional[Sequence[str]]) -> Dict[str, Dict[str, str]]:
     """
     Return the streams to convert: ``{topic: {bag topic: the input type's topic name}}``.
 
@@ -73,7 +74,7 @@ def _input_streams(reader, input_type, topics):
     return streams
 
 
-def _check_output(input_path, output_path):
+def check_output(input_path: StrPath, output_path: StrPath) -> None:
     """Refuse an output that is the input bag, inside it, or replaces the directory holding it."""
     if os.path.exists(output_path) and os.path.samefile(input_path, output_path):
         raise BagError(f'output {output_path} is the input bag')
@@ -92,55 +93,30 @@ def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *
     """
     Write ``output_path``: the input bag plus the node's outputs for its input topics.
 
-    Parameters
-    ----------
-    input_path : str or os.PathLike
-        Any bag :func:`rotation_node.bag.reading.reader.open_bag` reads; only read.
-    output_path : str or os.PathLike
-        A rosbag2 directory, or a single MCAP file if it ends in ``.mcap``; written as
-        ``<output>.part`` and renamed when complete (a failure or a signal removes it).
-    params : rotation_node.parameters.NodeParameters
-        As loaded from the node's parameters file.
-    topics : list of str, optional
-        Topics to convert (names in the bag or ROS 2 names); by default every topic of
-        ``params.input_type``'s type (of several topics, the first: ``/tf``).
-    overwrite : bool, optional
-        Replace an existing output (atomically, once the new one is complete).
-    compression : {'zstd', 'lz4', 'none'}, optional
-        The output's chunk compression; the input's by default.
-    progress_stream : file, optional
-        Where to draw the progress bar (only on a terminal); stderr by default.
-    strict : bool, optional
-        Refuse an unfinished recording or a damaged MCAP file instead of converting
-        what it holds.
-    report : callable, optional
-        ``report(line)`` receives what the input is (``<path>: rosbag2 directory (mcap,
-        3 files), 5000 messages``) and its notes before anything is written, then what
-        reading found it could not read.
-    blocks : bool, optional
-        False converts message by message; the output is the same byte for byte.
+    ``input_path`` is any bag :func:`~rotation_node.bag.reading.reader.open_bag` reads (only
+    read); ``output_path`` a rosbag2 directory, or an MCAP file if it ends in ``.mcap``,
+    written as ``<output>.part`` and renamed when complete (a failure or a signal removes
+    it; ``overwrite`` replaces an existing one atomically). ``topics`` (names in the bag or
+    ROS 2 names) default to every topic of ``params.input_type``'s type (of several topics,
+    the first: ``/tf``). ``compression`` defaults to the input's; ``progress_stream`` (a
+    terminal only) to stderr. ``strict`` refuses an unfinished recording or a damaged MCAP
+    file. ``report(line)`` receives what the input is (``<path>: rosbag2 directory (mcap, 3
+    files), 5000 messages``) and its notes before anything is written, then what reading
+    found it could not read. ``blocks=False`` converts message by message: the same bytes.
+    Return ``{input topic: PipelineStats}``.
 
-    Returns
-    -------
-    dict
-        ``{input topic: PipelineStats}``.
-
-    Raises
-    ------
-    BagError
-        The input is unreadable or corrupt, a topic is missing or of the wrong type, an
-        output topic is in the input already, or the output exists (without
-        ``overwrite``), is being written (``<output>.part``) or is the input;
-        ``DiskFullError`` if the disk fills (no output is left then).
-
+    BagError if the input is unreadable or corrupt, a topic is missing or of the wrong type,
+    an output topic is in the input already, or the output exists (without ``overwrite``),
+    is being written (``<output>.part``) or is the input; ``DiskFullError`` if the disk
+    fills (no output is left then).
     """
     with open_bag(input_path, strict=strict) as reader:
-        _check_output(input_path, output_path)
+        check_output(input_path, output_path)
         reader.report_contents(report)
         with reader.reporting_new_notes(report):
             params = resolved_from_bag(reader, params)   # the mounting from /tf_static, if asked
             input_type = registry.INPUTS[params.input_type]
-            streams = _input_streams(reader, input_type, topics)
+            streams = input_streams(reader, input_type, topics)
             # {bag topic: (its stream's first topic, the input type's name for it)}
             routes = {bag_topic: (topic, name) for topic, stream in streams.items()
                       for bag_topic, name in stream.items()}

@@ -16,7 +16,7 @@ from typing import Any, Callable, List, Optional, Tuple, TYPE_CHECKING
 
 from rotation_node import registry
 from rotation_node.bag.block_convert import collections_deferred, message_blocks, TopicConverter
-from rotation_node.bag.convert import _check_output, _input_streams
+from rotation_node.bag.convert import check_output, input_streams
 from rotation_node.bag.reading.reader import open_bag
 from rotation_node.bag.writing.atomic_file import AtomicFile
 from rotation_node.command_line.stop_signal import raise_if_stopped
@@ -28,8 +28,6 @@ if TYPE_CHECKING:
     from rotation_node.parameters import NodeParameters
     from rotation_node.pipeline import PipelineStats
     from rotation_node.type_aliases import StrPath
-
-FORMATS = {'.csv': 'csv', '.parquet': 'parquet'}   # by the output's extension
 
 
 def output_columns(name: str, params: NodeParameters) -> List[str]:
@@ -76,9 +74,9 @@ def table_columns(params: NodeParameters) -> List[str]:
 def table_format(path: StrPath) -> str:
     """Return ``'csv'`` or ``'parquet'`` from the output's extension; BagError otherwise."""
     extension = os.path.splitext(os.fspath(path))[1].lower()
-    if extension not in FORMATS:
+    if extension not in ('.csv', '.parquet'):
         raise BagError(f'output {os.fspath(path)}: expected a .csv or .parquet file name')
-    return FORMATS[extension]
+    return extension[1:]
 
 
 class _CsvTable:
@@ -161,44 +159,23 @@ def export(input_path: StrPath, output_path: StrPath, params: NodeParameters, *,
     """
     Write the converted values of one topic of a bag as a CSV or Parquet table.
 
-    Parameters
-    ----------
-    input_path : str or os.PathLike
-        Any bag :func:`rotation_node.bag.reading.reader.open_bag` reads; only read.
-    output_path : str or os.PathLike
-        ``*.csv`` or ``*.parquet`` (needs pyarrow); appears only once complete.
-    params : rotation_node.parameters.NodeParameters
-        The node's parameters (input type, outputs, conventions).
-    topic : str, optional
-        By default the one topic of the input type (an error if the bag holds several).
-    overwrite, strict, report
-        As for :func:`rotation_node.bag.convert.convert`.
-
-    Returns
-    -------
-    rows : int
-    stats : PipelineStats
-        The topic's conversion counters.
-
-    Raises
-    ------
-    BagError
-        The input cannot be read, the topic is missing, of the wrong type or not unique,
-        the output is no .csv or .parquet, Parquet without pyarrow, the output exists
-        (without ``overwrite``) or cannot be written; nothing is left behind.
-
+    ``output_path`` (``*.csv``, or ``*.parquet`` with pyarrow) appears only once complete;
+    ``topic`` defaults to the one topic of the input type; the other arguments are
+    ``convert``'s. Return the rows written and the topic's ``PipelineStats``. BagError,
+    leaving nothing behind, for an unreadable input, a missing, mistyped or ambiguous topic,
+    a bad extension, missing pyarrow, or an output that exists or cannot be written.
     """
     kind = table_format(output_path)
     if kind == 'parquet':
         _parquet_available()
     columns = table_columns(params)
     with open_bag(input_path, strict=strict) as reader:
-        _check_output(input_path, output_path)
+        check_output(input_path, output_path)
         reader.report_contents(report)
         with reader.reporting_new_notes(report):
             params = resolved_from_bag(reader, params)   # the mounting from /tf_static, if asked
-            streams = _input_streams(reader, registry.INPUTS[params.input_type],
-                                     None if topic is None else [topic])
+            streams = input_streams(reader, registry.INPUTS[params.input_type],
+                                    None if topic is None else [topic])
             if len(streams) > 1:
                 raise BagError(f'{reader.path} has {len(streams)} {params.input_type} topics '
                                f'({", ".join(streams)}); choose one with --topic')

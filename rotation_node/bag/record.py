@@ -106,23 +106,14 @@ def record(output: StrPath, topics: Sequence[str], *, duration: Optional[float] 
            overwrite: bool = False, compression: str = DEFAULT_COMPRESSION,
            ros_args: Optional[List[str]] = None) -> Dict[str, int]:
     """
-    Record ``topics`` into ``output`` until Ctrl-C, SIGTERM, ``duration`` or a full disk.
+    Record ``topics`` into ``output`` until Ctrl-C, SIGTERM, ``duration`` s or a full disk.
 
-    The bag is closed cleanly on each, after writing what was received by then (for at
-    most ``DRAIN_LIMIT_S``). ``output``, ``overwrite`` and ``compression`` are
-    :class:`~rotation_node.bag.writing.writer.BagWriter`'s; ``duration`` in seconds (None:
-    until a signal); ``ros_args`` are passed to ``rclpy.init``. Return ``{topic: messages
-    recorded}`` (topics that never appeared are absent).
-
-    Raises
-    ------
-    DiskFullError
-        The disk filled: recording stopped, the bag holds the messages that fitted (``kept``).
-    BagError
-        Before anything is written: ``output`` exists (without ``overwrite``), ``duration``
-        is not positive, a topic name is invalid. Should writing fail otherwise, what was
-        flushed stays in ``<output>.part``.
-
+    The bag is closed cleanly on each, after writing what was received by then (for at most
+    ``DRAIN_LIMIT_S``); ``output``, ``overwrite`` and ``compression`` are ``BagWriter``'s,
+    ``ros_args`` go to ``rclpy.init``. Return ``{topic: messages recorded}`` (never-seen
+    topics absent). DiskFullError when the disk filled (the bag keeps what fitted); BagError
+    before anything is written for an existing output, a bad duration or topic name (should
+    writing fail later, what was flushed stays in ``<output>.part``).
     """
     if duration is not None and not (0 < duration < math.inf):
         raise BagError(f'duration must be a finite number of seconds > 0, got {duration}')

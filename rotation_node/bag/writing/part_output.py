@@ -154,11 +154,10 @@ class BagOutput:
     """
     The files of one bag being written: ``<path>.part``, renamed to ``path`` on ``finish()``.
 
-    ``path`` ending in ``.mcap`` is a single MCAP file, any other a rosbag2 directory
-    holding ``<name>_0.mcap`` (``storage_name``) and ``metadata.yaml``; ``stream`` is the
-    open storage file. BagError if the output exists (without ``overwrite``; checked again,
-    atomically, on ``finish()``), ``<path>.part`` exists (another writer, or a crashed one's
-    recording), or the directory cannot be written.
+    A ``.mcap`` path is one file, any other a rosbag2 directory of ``<name>_0.mcap``
+    (``storage_name``) and ``metadata.yaml``. BagError if the output exists (without
+    ``overwrite``; again, atomically, on ``finish()``), ``<path>.part`` exists, or the
+    directory cannot be written.
     """
 
     def __init__(self, path: StrPath, *, overwrite: bool = False) -> None:

@@ -15,6 +15,7 @@ Before each chunk the space to close the bag is reserved beyond it: when that fa
 """
 from __future__ import annotations
 
+import dataclasses
 import errno
 import math
 import operator
@@ -92,34 +93,17 @@ class _Channel:
 
 class BagWriter:
     """
-    Write a ROS 2 bag; a context manager.
+    Write a ROS 2 bag (a rosbag2 directory, or one MCAP file if ``path`` ends in ``.mcap``).
 
-    Written to ``<path>.part``, renamed to ``path`` on a clean ``close()`` (or end of the
-    ``with`` block). An exception in the block, or ``abort()``, removes the ``.part``, or
-    keeps it as an unfinished bag with ``keep_unfinished``; a killed process leaves it
-    holding every message up to the last chunk written.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        A rosbag2 directory, or a single MCAP file if it ends in ``.mcap``.
-    overwrite : bool, optional
-        Replace an existing bag (atomically, when closed); else an existing one is an error.
-    compression : {'zstd', 'lz4', 'none'}, optional
-        Chunk compression; zstd as rosbag2 by default.
-    keep_unfinished : bool, optional
-        On failure keep the ``.part`` (for recordings, which cannot be repeated).
-    chunk_period_s : float, optional
-        Also write a chunk when the last is this old (checked every 64 messages and by
-        ``flush_if_due()``), for live recordings. Default: by size only, so the bag
-        depends on the messages alone.
-
-    Raises
-    ------
-    BagError
-        If ``path`` exists (without ``overwrite``), ``<path>.part`` exists (another
-        writer, or a crashed one), or it cannot be created.
-
+    A context manager. Written to ``<path>.part``, renamed to ``path`` on a clean close; an
+    exception in the ``with`` block (or ``abort()``) removes the ``.part``, or keeps it as
+    an unfinished bag with ``keep_unfinished`` (for recordings, which cannot be repeated).
+    ``overwrite`` replaces an existing bag atomically when closed. ``compression``:
+    ``'zstd'`` (rosbag2's default), ``'lz4'`` or ``'none'``. ``chunk_period_s`` also writes
+    a chunk when the last is this old (checked every 64 messages and by ``flush_if_due()``),
+    for live recordings; by default chunks are cut by size only. BagError if ``path``
+    exists (without ``overwrite``), ``<path>.part`` exists (another writer, or a crashed
+    one), or it cannot be created.
     """
 
     def __init__(self, path: StrPath, *, overwrite: bool = False,
@@ -196,7 +180,7 @@ class BagWriter:
         self._add_registered(len(metadata.name) + len(metadata.offered_qos_profiles)
                              + len(topic_hash) + 128)
         self._channels[metadata.name] = _Channel(channel_id, metadata.type_name)
-        self._topics.append(metadata)
+        self._topics.append(dataclasses.replace(metadata, type_hash=topic_hash))
 
     def _add_registered(self, size):
         self._registered_bytes += size
@@ -219,17 +203,9 @@ class BagWriter:
         Serialise and write one rclpy message (its class sets the topic's type on first use).
 
         Encoded by :func:`rotation_node.wire.cdr.message_encoder` where it covers the type
-        (zero padding: the same message gives the same bytes), else by rclpy. Times are
-        integer nanoseconds; ``publish_time_ns`` defaults to ``log_time_ns``.
-
-        Raises
-        ------
-        BagError
-            If the topic holds another type or a time is not an integer in [0, 2**64).
-        DiskFullError
-            If the disk filled: the chunk in progress was dropped; ``close()`` keeps
-            everything written before.
-
+        (zero padding), else by rclpy. Times are integer ns in [0, 2**64) (else BagError);
+        ``publish_time_ns`` defaults to ``log_time_ns``. DiskFullError if the disk filled:
+        the chunk in progress was dropped, ``close()`` keeps everything written before.
         """
         channel = self._channels.get(topic)
         if channel is None or channel.msg_class is not type(msg):
@@ -407,36 +383,26 @@ class BagWriter:
         start = statistics.message_start_time if count else 0
         duration = {'nanoseconds': statistics.message_end_time - start if count else 0}
         storage_name = self._output.storage_name
+        message_counts = self.message_counts
         return {
-            'version': ROSBAG2_METADATA_VERSION,
-            'storage_identifier': 'mcap',
-            'duration': duration,
-            'starting_time': {'nanoseconds_since_epoch': start},
+            'version': ROSBAG2_METADATA_VERSION, 'storage_identifier': 'mcap',
+            'duration': duration, 'starting_time': {'nanoseconds_since_epoch': start},
             'message_count': count,
             'topics_with_message_count': [{
                 'topic_metadata': {
-                    'name': topic.name,
-                    'type': topic.type_name,
+                    'name': topic.name, 'type': topic.type_name,
                     'serialization_format': topic.serialization_format,
                     'offered_qos_profiles': metadata_yaml.load(topic.offered_qos_profiles) or [],
-                    'type_description_hash': (type_hash(topic.type_name)
-                                              if topic.type_hash is None else topic.type_hash),
-                },
-                'message_count': statistics.channel_message_counts.get(
-                    self._channels[topic.name].id, 0),
+                    'type_description_hash': topic.type_hash},
+                'message_count': message_counts[topic.name],
             } for topic in self._topics],
             # rosbag2's own (file or message) compression: none; MCAP compresses chunks.
-            'compression_format': '',
-            'compression_mode': '',
+            'compression_format': '', 'compression_mode': '',
             'relative_file_paths': [storage_name],
-            'files': [{
-                'path': storage_name,
-                'starting_time': {'nanoseconds_since_epoch': start},
-                'duration': dict(duration),   # a copy: no YAML alias
-                'message_count': count,
-            }],
-            'custom_data': {},
-            'ros_distro': os.environ.get('ROS_DISTRO', 'jazzy'),
+            'files': [{'path': storage_name, 'starting_time': {'nanoseconds_since_epoch': start},
+                       'duration': dict(duration),   # a copy: no YAML alias
+                       'message_count': count}],
+            'custom_data': {}, 'ros_distro': os.environ.get('ROS_DISTRO', 'jazzy'),
         }
 
     def close(self) -> None:
