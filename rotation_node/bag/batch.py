@@ -1,9 +1,8 @@
 """
 Convert many bags: in parallel processes on this machine, or as tasks on Dask (docs/bags.md).
 
-One bag is one task (:func:`convert_bag`), whose failure is a :class:`BagResult`: a bad bag
-never stops the others. A task that raises all the same (a bug of this package, not a bad
-bag) gets its line too, and the error is raised once every bag is done.
+Each bag is a task (:func:`convert_bag`) whose failure is a :class:`BagResult`, so a bad bag
+never stops the others; a task that raises (a bug, not a bad bag) is raised at the end.
 """
 from __future__ import annotations
 
@@ -77,9 +76,8 @@ def convert_bag(input_path: str, output_path: str, params: NodeParameters, *,
     """
     Convert one bag as ``rotation_bag convert`` does; report a failure instead of raising it.
 
-    The arguments are :func:`rotation_node.bag.convert.convert`'s. Picklable, so any task
-    runner can call it. A bag that cannot be converted (bad input, existing output...)
-    gives ``ok`` False and the error line; nothing is written then.
+    The arguments are ``convert``'s; picklable, for any task runner. A bag that cannot be
+    converted gives ``ok`` False and the error line; nothing is written then.
     """
     from rotation_node.bag.convert import convert
     notes: List[str] = []

@@ -1,12 +1,10 @@
 """
 The conversion's blocks through the CDR codec: messages into samples, numbers into messages.
 
-:class:`InputBlockDecoder` reads a block of messages of a plain input type into a
-:class:`~rotation_node.sample_block.SampleBlock` (``FixedLayoutCodec.decode_block``);
-:class:`OutputBlockEncoder` writes a block of one output's numbers under their input
-messages' headers (``PayloadLayout.encode_block``). The layouts and CDR rules are the
-codec's alone, so the bytes are the per-message path's; a block the codec declines
-(``decode`` returns None) the caller converts message by message.
+:class:`InputBlockDecoder` reads a block of a plain input type into a ``SampleBlock``,
+:class:`OutputBlockEncoder` writes a block of one output's numbers under the input's
+headers; the layouts and CDR rules are the codec's alone, so the bytes are the per-message
+path's. A block the codec declines the caller converts message by message.
 """
 from __future__ import annotations
 

@@ -1,13 +1,11 @@
 """
 ``rotation_bag convert``'s conversion of one input topic, block by block.
 
-A :class:`TopicConverter` decodes a block of messages into arrays
-(:mod:`~rotation_node.bag.block_codec`), converts them with one library call per conversion
-(``ConversionPipeline.process_block``) and encodes each output for the whole block, where
-the parameters, input type and outputs allow it (:func:`block_form_missing`) and the block
-form reads the block exactly; otherwise it runs the pipeline message by message, as the
-node does. Either way the bytes, counters and state are the per-message form's.
-:func:`converted_blocks` gives the input's messages with their outputs, one block in memory.
+A :class:`TopicConverter` decodes a block of messages into arrays (``block_codec``),
+converts them with one library call per conversion and encodes each output for the whole
+block, where the parameters allow it (:func:`block_form_missing`) and the block form reads
+the block exactly; else it runs the node's pipeline message by message. Either way the
+bytes, counters and state are the per-message form's.
 """
 from __future__ import annotations
 
@@ -25,8 +23,7 @@ if TYPE_CHECKING:
     from rotation_node.parameters import NodeParameters
 
 BLOCK_MESSAGES = BLOCK_SAMPLES   # messages read per block (of all topics together)
-#: Allocations between the cyclic collector's youngest-generation passes while converting.
-DEFERRED_COLLECTION_THRESHOLD = 50_000
+DEFERRED_COLLECTION_THRESHOLD = 50_000   # allocations between youngest-generation passes
 
 Output = Tuple[str, str, bytes]   # (output topic, type name, CDR data) of one output message
 
@@ -36,9 +33,8 @@ def collections_deferred() -> Iterator[None]:
     """
     Run the block with the cyclic garbage collector's passes made rarer; restore them after.
 
-    A bag's short-lived objects per message are freed by reference counting; the default
-    pass every 700 allocations found nothing in them and cost a sixth of the conversion
-    time (``bench_bag_convert.py``).
+    The default pass every 700 allocations found nothing in a bag's short-lived objects and
+    cost a sixth of the conversion time (``bench_bag_convert.py``).
     """
     threshold = gc.get_threshold()
     gc.set_threshold(max(threshold[0], DEFERRED_COLLECTION_THRESHOLD), *threshold[1:])
@@ -109,11 +105,11 @@ class TopicConverter:
                     result[index].append((topic, type_name, data))
             return result
         result = []
-        for record, input_topic in zip(records, self._topics(records, input_topics)):
+        for values in self._message_values(records, input_topics):
             encoded = []
-            for name, header, values in self._message_values(record, input_topic):
+            for name, header, numbers in values:
                 topic, type_name, encode = self._by_name[name]
-                encoded.append((topic, type_name, encode(header, values)))
+                encoded.append((topic, type_name, encode(header, numbers)))
             result.append(encoded)
         return result
 
@@ -126,8 +122,7 @@ class TopicConverter:
         """
         block = self._converted_block(records)
         if block is None:
-            return [self._message_values(record, topic)
-                    for record, topic in zip(records, self._topics(records, input_topics))]
+            return self._message_values(records, input_topics)
         converted = block[1]
         result: List[List[Tuple[str, Any, Any]]] = [[] for _ in records]
         headers: Dict[int, Any] = {}
@@ -150,12 +145,12 @@ class TopicConverter:
         converted = self.pipeline.process_block(decoded[0])
         return None if converted is None else (decoded[1], converted)
 
-    def _message_values(self, record, input_topic):
-        return self.pipeline.process_values(record.message(self._decode), input_topic)
-
-    @staticmethod
-    def _topics(records, input_topics):
-        return [registry.INPUT_TOPIC.name] * len(records) if input_topics is None else input_topics
+    def _message_values(self, records, input_topics):
+        """Return the pipeline's values of each record, message by message."""
+        if input_topics is None:
+            input_topics = [registry.INPUT_TOPIC.name] * len(records)
+        return [self.pipeline.process_values(record.message(self._decode), topic)
+                for record, topic in zip(records, input_topics)]
 
 
 def converted_blocks(records: Iterable, converters: Dict[str, TopicConverter],
@@ -164,9 +159,8 @@ def converted_blocks(records: Iterable, converters: Dict[str, TopicConverter],
     """
     Give the records in blocks of at most :data:`BLOCK_MESSAGES`, each with its outputs.
 
-    ``converters`` is ``{stream: TopicConverter}``, ``routes`` ``{bag topic: (stream, the
-    input type's topic name)}`` (default: each stream is the bag topic of its name, a plain
-    type's ``input``). A record of no converted stream gets None.
+    ``routes``: ``{bag topic: (stream, the input type's topic name)}``, by default each
+    ``converters`` key a plain type's bag topic; other records get None.
     """
     if routes is None:
         routes = {topic: (topic, registry.INPUT_TOPIC.name) for topic in converters}

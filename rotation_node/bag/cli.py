@@ -43,7 +43,9 @@ def _convert(args, ros_args):
     if not inputs:
         raise BagError('convert needs an input bag and an output (IN OUT, or IN1 IN2 ... OUTDIR)')
     params = parameters_from_yaml(args.params)
-    if len(inputs) > 1 or _is_output_directory(output):
+    from rotation_node.bag.reading.reader import METADATA_FILE
+    if len(inputs) > 1 or (os.path.isdir(output)   # IN OUTDIR: a directory that is no bag
+                           and not os.path.exists(os.path.join(output, METADATA_FILE))):
         _convert_many(args, inputs, output, params)
         return
     from rotation_node.bag.convert import convert, output_topic
@@ -58,18 +60,11 @@ def _convert(args, ros_args):
     _say(f'wrote {output}')
 
 
-def _is_output_directory(path):
-    """Return an existing directory that is not a rosbag2 bag (``convert IN... OUTDIR``)."""
-    from rotation_node.bag.reading.reader import METADATA_FILE
-    return os.path.isdir(path) and not os.path.exists(os.path.join(path, METADATA_FILE))
-
-
 def _convert_many(args, inputs, output_directory, params):
     from rotation_node.bag.batch import convert_bags
     results = convert_bags(inputs, output_directory, params, jobs=args.jobs, topics=args.topic,
                            overwrite=args.force, compression=args.compression,
-                           strict=args.strict,
-                           on_result=lambda result: _say(result.line))
+                           strict=args.strict, on_result=lambda result: _say(result.line))
     failed = sum(not result.ok for result in results)
     if failed:
         raise BagError(f'{failed} of {len(results)} bags failed')
@@ -272,8 +267,7 @@ def _add_compare(commands):
                     'mounting M of R_ref(t) = W R_est(t + dt) M (docs/compare.md), and the '
                     'errors of the aligned estimate at the reference stamps.')
     compare.add_argument('bags', nargs='+', metavar='BAG',
-                         help='the bag of both topics, or the reference bag then the '
-                              "estimate's")
+                         help="the bag of both topics, or the reference bag then the estimate's")
     compare.add_argument('--reference', required=True, metavar='T', help='reference topic')
     compare.add_argument('--estimate', required=True, metavar='T', help='estimate topic')
     for role in ('reference', 'estimate'):
@@ -282,8 +276,7 @@ def _add_compare(commands):
         compare.add_argument(f'--{role}-type', metavar='INPUT_TYPE',
                              help=f'input type of the {role} topic where its message type '
                                   'is shared (euler, rotation_vector); default from the type')
-    compare.add_argument('--time-offset', type=_time_offset, default=None,
-                         metavar='estimate|S',
+    compare.add_argument('--time-offset', type=_time_offset, default=None, metavar='estimate|S',
                          help='dt in seconds, or estimate it from the angular rates (default)')
     compare.add_argument('--align', choices=ALIGN_CHOICES, default='both',
                          help='estimate the world alignment W, the mounting M, both (default) '

@@ -1,12 +1,11 @@
 """
 Compare two orientation topics of one bag or two (``rotation_bag compare``; docs/compare.md).
 
-Both topics are read as the node reads them: a ``ConversionPipeline`` with the ``quaternion``
-output (the input type's sample stream, ``/tf`` lookups, its drop rules), fed cdr views as
-``convert`` feeds it. :mod:`rotation_node.comparison` then estimates what was asked of
-``R_ref(t) = W R_est(t + time_offset) M`` and the errors of the aligned estimate at the
-reference stamps: a :class:`ComparisonResult` (``--json``), :func:`summary` (printed) and
-:func:`draw_comparison` (``--plot``).
+Both are read as the node reads them (a ``ConversionPipeline`` with the ``quaternion``
+output: the input type's sample stream, its drop rules); :mod:`rotation_node.comparison`
+estimates what was asked of ``R_ref(t) = W R_est(t + time_offset) M`` and the errors of the
+aligned estimate at the reference stamps: :class:`ComparisonResult` (``--json``),
+:func:`summary`, :func:`draw_comparison` (``--plot``).
 """
 from __future__ import annotations
 
@@ -183,18 +182,15 @@ class ComparisonResult:
 
     def as_json(self) -> Dict[str, Any]:
         """Return the ``--json`` document."""
-        degrees = math.degrees
-        stats = self.statistics
+        degrees, stats, alignment = math.degrees, self.statistics, self.alignment
         return {
-            'reference': _stream_json(self.reference),
-            'estimate': _stream_json(self.estimate),
+            'reference': _stream_json(self.reference), 'estimate': _stream_json(self.estimate),
             'matched': int(self.series.times.size),
-            'time_offset_s': self.alignment.time_offset,
-            'time_offset_std_s': self.alignment.time_offset_std,
-            'world_alignment': {'quaternion': self.alignment.world.tolist(),
-                                'std_rad': self.alignment.world_std.tolist()},
-            'mounting': {'quaternion': self.alignment.mounting.tolist(),
-                         'std_rad': self.alignment.mounting_std.tolist()},
+            'time_offset_s': alignment.time_offset, 'time_offset_std_s': alignment.time_offset_std,
+            'world_alignment': {'quaternion': alignment.world.tolist(),
+                                'std_rad': alignment.world_std.tolist()},
+            'mounting': {'quaternion': alignment.mounting.tolist(),
+                         'std_rad': alignment.mounting_std.tolist()},
             'error_deg': {'rmse': degrees(stats.rmse), 'mean': degrees(stats.mean),
                           'median': degrees(stats.median), 'p95': degrees(stats.p95),
                           'max': degrees(stats.maximum)},

@@ -1,13 +1,11 @@
 """
 Convert a recorded bag offline with the node's conversions (``rotation_bag convert``).
 
-The output holds every message of the input unchanged (with its schema and metadata, under
-its ROS 2 name) plus, for each converted topic ``T``, the outputs the live node would
-publish on ``T/<output name>``: the same pipeline and parameters, one pipeline per topic fed
-in log-time order, each output with the log and publish times of its input message. An
-input type with several topics is one stream per first topic (``/tf`` with ``/tf_static``:
-``T`` with ``T_static``). The bag is streamed, never loaded, and converted in blocks where
-it can be (:mod:`~rotation_node.bag.block_convert`), with the node's results bit for bit.
+The output holds every input message unchanged (schema and metadata as stored, ROS 2 names)
+plus, for each converted topic ``T``, what the live node would publish on ``T/<output>``:
+one pipeline per topic (``T`` with ``T_static`` for ``tf``) fed in log-time order, each
+output with the times of its input message. Streamed, in blocks where it can be
+(:mod:`~rotation_node.bag.block_convert`), with the node's results bit for bit.
 """
 from __future__ import annotations
 
@@ -93,22 +91,17 @@ def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *
     """
     Write ``output_path``: the input bag plus the node's outputs for its input topics.
 
-    ``input_path`` is any bag :func:`~rotation_node.bag.reading.reader.open_bag` reads (only
-    read); ``output_path`` a rosbag2 directory, or an MCAP file if it ends in ``.mcap``,
-    written as ``<output>.part`` and renamed when complete (a failure or a signal removes
-    it; ``overwrite`` replaces an existing one atomically). ``topics`` (names in the bag or
-    ROS 2 names) default to every topic of ``params.input_type``'s type (of several topics,
-    the first: ``/tf``). ``compression`` defaults to the input's; ``progress_stream`` (a
-    terminal only) to stderr. ``strict`` refuses an unfinished recording or a damaged MCAP
-    file. ``report(line)`` receives what the input is (``<path>: rosbag2 directory (mcap, 3
-    files), 5000 messages``) and its notes before anything is written, then what reading
-    found it could not read. ``blocks=False`` converts message by message: the same bytes.
-    Return ``{input topic: PipelineStats}``.
-
-    BagError if the input is unreadable or corrupt, a topic is missing or of the wrong type,
-    an output topic is in the input already, or the output exists (without ``overwrite``),
-    is being written (``<output>.part``) or is the input; ``DiskFullError`` if the disk
-    fills (no output is left then).
+    ``output_path`` is a rosbag2 directory, or an MCAP file if it ends in ``.mcap``, written
+    as ``<output>.part`` and renamed when complete (a failure or a signal removes it;
+    ``overwrite`` replaces an existing one atomically). ``topics`` (names in the bag or ROS 2
+    names) default to every topic of ``params.input_type``'s type (the first of several:
+    ``/tf``); ``compression`` to the input's; ``progress_stream`` (a terminal) to stderr.
+    ``strict`` refuses an unfinished recording or a damaged MCAP file. ``report(line)``
+    receives what the input is and its notes before anything is written, then what reading
+    could not read. ``blocks=False`` converts message by message (the same bytes). Return
+    ``{input topic: PipelineStats}``. BagError for an unreadable input, a missing or
+    mistyped topic, an output topic already in the input, an output that exists (without
+    ``overwrite``), is being written or is the input; DiskFullError (no output left).
     """
     with open_bag(input_path, strict=strict) as reader:
         check_output(input_path, output_path)

@@ -32,16 +32,10 @@ if TYPE_CHECKING:
 
 def output_columns(name: str, params: NodeParameters) -> List[str]:
     """
-    Return the column names of the numbers of output ``name``, in the output's order.
+    Return the column names of output ``name``'s numbers, in order (README, ``export``).
 
-    ``quaternion`` qx, qy, qz, qw; ``euler`` roll, pitch, yaw (``euler.sequence``
-    ``xyz``) or ``euler_<seq>_0..2``; ``rotation_vector`` rotvec_x..z;
-    ``axis_angle`` axis_x..z, angle; ``matrix`` r11..r33 (row-major);
-    ``angular_velocity`` wx, wy, wz; ``euler_rates`` <angle>_rate;
-    ``quaternion_rate`` dqx..dqw; ``euler_stddev`` <angle>_stddev;
-    ``euler_covariance`` euler_covariance_angle_0..2 and
-    euler_covariance_00..22 (row-major), with <angle> as for ``euler``.
-    Units are the output's (radians, or degrees with ``euler.degrees``).
+    Euler angles are roll, pitch, yaw for the sequence ``xyz``, else ``euler_<seq>_0..2``;
+    units are the output's (radians, or degrees with ``euler.degrees``).
     """
     sequence = params.euler_sequence
     angles = (['roll', 'pitch', 'yaw'] if sequence == 'xyz'

@@ -3,12 +3,10 @@ Publish the messages of a bag on their topics (``rotation_bag play``).
 
 Messages go out as stored (CDR bytes) in log-time order, spaced as recorded divided by the
 rate, under their ROS 2 names; topics of types not installed (or not CDR) are left out with
-a note unless named. Rate 0 publishes as fast as the subscribers acknowledge: a deep
-reliable queue, waiting every ``ACK_BATCH`` messages until they are acknowledged, so a
-subscriber with a deep enough reliable queue receives every message. Publishers are
-matched a little after they see their subscribers, and a volatile subscriber misses what
-came before: ``wait_for_subscribers`` (implied by rate 0) starts ``DISCOVERY_SETTLE_S``
-after every topic has one, ``delay`` holds back the first message further.
+a note unless named. Rate 0 publishes as fast as the subscribers acknowledge (a deep
+reliable queue, acknowledged every ``ACK_BATCH`` messages), losing none. Publishers are
+matched a little after they see their subscribers, so ``wait_for_subscribers`` (implied by
+rate 0) starts ``DISCOVERY_SETTLE_S`` after every topic has one; ``delay`` waits further.
 """
 from __future__ import annotations
 
@@ -42,12 +40,11 @@ MAX_DELAY_S = threading.TIMEOUT_MAX    # what threading can wait for
 
 
 def _wait(stop, seconds):
-    """Sleep ``seconds`` (any length) or until a stop signal; return whether stopped."""
+    """Sleep ``seconds`` (any length) or until a stop signal."""
     deadline = time.monotonic() + seconds
-    while (remaining := deadline - time.monotonic()) > 0:
-        if stop.event.wait(min(remaining, 3600.0)):
-            return True
-    return stop.is_set()
+    while (remaining := deadline - time.monotonic()) > 0 and not stop.event.wait(
+            min(remaining, 3600.0)):
+        pass
 
 
 def _playable_topics(reader, topics, report):
@@ -125,9 +122,8 @@ def _play_once(reader, topics, publishers, rate, stop):
         if rate > 0:
             if start_bag is None:
                 start_bag = record.log_time_ns
-            delay = start_wall + (record.log_time_ns - start_bag) * 1e-9 / rate - time.monotonic()
-            if delay > 0:
-                _wait(stop, delay)
+            _wait(stop, start_wall + (record.log_time_ns - start_bag) * 1e-9 / rate
+                  - time.monotonic())
         if stop.is_set():
             break
         publishers[record.topic].publish(record.data)

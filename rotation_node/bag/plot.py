@@ -1,12 +1,10 @@
 """
 Plot a topic of a bag over time as a PNG (``rotation_bag plot``).
 
-A topic ``T/NAME`` that ``convert`` wrote for the output ``NAME`` of a topic ``T`` is drawn
-as :func:`output_panels` draws that output, in the units and sequence of the parameters it
-was converted with. A topic of a plain input type is drawn as its orientation (Euler angles
-of the parameters' sequence; a gap where unknown or invalid) and its angular velocity if it
-has one; a message type several input types share is read as the parameters'
-``input_type``. Time is the header stamp (else the log time) since the first message.
+An output topic ``T/NAME`` of ``convert`` is drawn as :func:`output_panels` draws ``NAME``
+(in the parameters' units and sequence); a plain input type's topic as its orientation in
+Euler angles (gaps where unknown or invalid) and its angular velocity if any. Time is the
+header stamp (else the log time) since the first message.
 """
 from __future__ import annotations
 
@@ -42,10 +40,6 @@ _XYZW = ('x', 'y', 'z', 'w')
 _MATRIX = tuple(f'R{row}{col}' for row in (1, 2, 3) for col in (1, 2, 3))
 
 
-def _angle_unit(params):
-    return 'deg' if params.euler_degrees else 'rad'
-
-
 def _euler_panels(title, unit_suffix):
     def panels(params):
         kind = 'intrinsic' if conversions.parse_sequence(params.euler_sequence).intrinsic \
@@ -53,15 +47,15 @@ def _euler_panels(title, unit_suffix):
         labels = tuple(f'{ordinal} ({letter})' for ordinal, letter
                        in zip(('1st', '2nd', '3rd'), params.euler_sequence))
         return [Panel(f'{title}, sequence {params.euler_sequence} ({kind})',
-                      _angle_unit(params) + unit_suffix, labels)]
+                      ('deg' if params.euler_degrees else 'rad') + unit_suffix, labels)]
     return panels
 
 
 def _euler_covariance_panels(params):
-    return [*_euler_panels('Euler angles', '')(params),
-            Panel(f'Euler angle covariance, sequence {params.euler_sequence}',
-                  _angle_unit(params) + '^2',
-                  tuple(f'C{row}{col}' for row in (1, 2, 3) for col in (1, 2, 3)), 3)]
+    euler, = _euler_panels('Euler angles', '')(params)
+    return [euler, Panel(f'Euler angle covariance, sequence {params.euler_sequence}',
+                         euler.unit + '^2',
+                         tuple(f'C{row}{col}' for row in (1, 2, 3) for col in (1, 2, 3)), 3)]
 
 
 _OUTPUT_PANELS = {
@@ -83,24 +77,6 @@ _OUTPUT_PANELS = {
 def output_panels(name: str, params: NodeParameters) -> list:
     """Return the :class:`Panel` of output ``name`` over its ``OutputMessage.numbers``."""
     return _OUTPUT_PANELS[name](params)
-
-
-def _converted_output(topics, topic):
-    """Return the output whose ``convert`` topic ``topic`` is (checked in the bag), or None."""
-    parent, _, name = topic.rpartition('/')
-    output = registry.OUTPUTS.get(name)
-    if (output is None or parent not in topics or topics[topic] != output.type_name
-            or output_topic(parent, name) != topic):
-        return None
-    return output
-
-
-def _input_type(type_name, params):
-    """Return the plain input type of a topic of ``type_name`` (``input_type`` if it is one)."""
-    candidates = [entry for entry in registry.INPUTS.values()
-                  if entry.type_name == type_name and entry.stream is None]
-    preferred = [entry for entry in candidates if entry.name == params.input_type]
-    return next(iter(preferred or candidates), None)
 
 
 def _input_orientation(entry, params):
@@ -144,10 +120,15 @@ def _input_panels(entry, params):
 
 def _panels(topics, topic, params):
     """Return ``(panels, numbers(msg))`` of a topic: the numbers of a message they index."""
-    output = _converted_output(topics, topic)
-    if output is not None:
+    parent, _, name = topic.rpartition('/')   # an output convert wrote (checked in the bag)?
+    output = registry.OUTPUTS.get(name)
+    if (output is not None and parent in topics and topics[topic] == output.type_name
+            and output_topic(parent, name) == topic):
         return output_panels(output.name, params), output.message.numbers
-    entry = _input_type(topics[topic], params)
+    plain = [entry for entry in registry.INPUTS.values()
+             if entry.type_name == topics[topic] and entry.stream is None]
+    preferred = [entry for entry in plain if entry.name == params.input_type]
+    entry = next(iter(preferred or plain), None)
     if entry is not None:
         return _input_panels(entry, params)
     plottable = sorted({e.type_name for e in registry.INPUTS.values() if e.stream is None})

@@ -2,10 +2,9 @@
 Record live topics into an MCAP bag (``rotation_bag record``).
 
 A topic is subscribed once it has a publisher, with a QoS every publisher is compatible
-with, and its messages stored as received (``raw=True``); log time is the node clock at
-reception, publish time the DDS source timestamp, as rosbag2 records them. The bag is
-crash-safe (:mod:`~rotation_node.bag.writing.writer`) and closed with what fitted when the
-disk fills.
+with; messages are stored as received, with the node clock at reception as log time and the
+DDS source timestamp as publish time, as rosbag2 does. The bag is crash-safe and closed
+with what fitted when the disk fills.
 """
 from __future__ import annotations
 
@@ -31,8 +30,7 @@ if TYPE_CHECKING:
 
 NODE_NAME = 'rotation_bag_record'
 DISCOVERY_PERIOD_S = 0.1
-#: Longest time spent writing what was already received, once stopped.
-DRAIN_LIMIT_S = 0.5
+DRAIN_LIMIT_S = 0.5   # longest time spent writing what was received, once stopped
 _SPIN_PERIOD_S = 0.05
 
 
@@ -41,25 +39,20 @@ class BagRecorder(Node):
     A node that subscribes to topics as they appear and writes them to ``writer``.
 
     Relative names are resolved in the node's namespace, remappings apply; ``counts`` is
-    ``{topic: messages written}`` of the subscribed topics.
+    ``{topic: messages written}`` of the subscribed topics, ``pending_topics`` the others.
     """
 
     def __init__(self, writer: BagWriter, topics: Iterable[str]) -> None:
         super().__init__(NODE_NAME)
         self._writer = writer
-        self._pending = [self.resolve_topic_name(topic) for topic in topics]
+        self.pending_topics = [self.resolve_topic_name(topic) for topic in topics]
         self.counts: Dict[str, int] = {}
         self._discovery = self.create_timer(DISCOVERY_PERIOD_S, self._discover)
         self._discover()
 
-    @property
-    def pending_topics(self) -> List[str]:
-        """Return the requested topics that have no publisher yet."""
-        return list(self._pending)
-
     def _discover(self):
         types = dict(self.get_topic_names_and_types())
-        for topic in [t for t in self._pending if t in types]:
+        for topic in [t for t in self.pending_topics if t in types]:
             offered = [info.qos_profile for info in self.get_publishers_info_by_topic(topic)]
             if not offered:
                 continue   # only subscribers so far: wait for a publisher's QoS
@@ -67,15 +60,14 @@ class BagRecorder(Node):
             if len(types[topic]) > 1:
                 self.get_logger().warning(
                     f'{topic} has several types {types[topic]}; recording {type_name}')
-            msg_class = message_class(type_name)
             self._writer.add_topic(TopicMetadata(topic, type_name, qos_profiles_yaml(offered)))
             self.create_subscription(
-                msg_class, topic, functools.partial(self._write, topic, type_name),
+                message_class(type_name), topic, functools.partial(self._write, topic, type_name),
                 recording_qos(offered), raw=True)
             self.counts[topic] = 0
-            self._pending.remove(topic)
+            self.pending_topics.remove(topic)
             self.get_logger().info(f'recording {topic} ({type_name})')
-        if not self._pending:
+        if not self.pending_topics:
             self._discovery.cancel()
 
     def _write(self, topic, type_name, data, info):

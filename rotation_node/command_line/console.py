@@ -2,21 +2,17 @@
 Entry points of the console scripts: a Ctrl-C while a program loads is one line too.
 
 The program's module (numpy, numba, rclpy: a second or more) is imported while SIGINT and
-SIGTERM only set a flag (an exception raised from a handler inside an import could be
-swallowed or leave a traceback). If one came, the program says so on one line and exits
-with 130 or 143 instead of running; a node exits 0 (as ``ros2 launch`` and systemd expect)
-and runs its ``main`` under the same flag, so no moment of its start-up is left to Python.
+SIGTERM only set a flag (raised inside an import, an exception could be swallowed). If one
+came, the program says so and exits 130 or 143; a node exits 0 (as ``ros2 launch`` and
+systemd expect) and runs its ``main`` under the same flag.
 """
 import importlib
 import sys
 
 from rotation_node.command_line.stop_signal import exit_status, signal_name, StopSignal
 
-_PROGRAMS = {
-    'rotation_node': 'rotation_node.node.program',
-    'rotation_bag': 'rotation_node.bag.cli',
-    'rotation_scene': 'rotation_node.scene.cli',
-}
+_PROGRAMS = {'rotation_node': 'rotation_node.node.program',
+             'rotation_bag': 'rotation_node.bag.cli', 'rotation_scene': 'rotation_node.scene.cli'}
 
 _NODES = frozenset({'rotation_node'})   # main(stop_signal=...), exit 0 when asked to stop
 

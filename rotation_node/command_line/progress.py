@@ -16,8 +16,7 @@ class ProgressBar:
     at ``total``. A context manager; ``update()`` once per item.
     """
 
-    def __init__(self, total: int, *, stream: Optional[TextIO] = None,
-                 label: str = '') -> None:
+    def __init__(self, total: int, *, stream: Optional[TextIO] = None, label: str = '') -> None:
         self.total = max(int(total), 1)
         self.stream = sys.stderr if stream is None else stream
         self.label = label

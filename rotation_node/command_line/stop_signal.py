@@ -1,13 +1,11 @@
 """
 What Ctrl-C (SIGINT) and SIGTERM do in the command-line tools: set a flag, never raise.
 
-Python runs a handler between any two bytecodes, also in a ``__del__``, a closing generator
-or a library's ``except``: an exception raised there can be swallowed ("Exception ignored
-in ...") or turned into another error. So ``record`` and ``play`` poll a
-:class:`StopSignal` between messages and close the bag (exit 0); ``convert``, ``plot`` and
-``rotation_scene`` (and ``--jobs`` workers, :func:`stop_at_checkpoints`) call
-:func:`raise_if_stopped` between blocks: ``KeyboardInterrupt`` (:class:`Terminated` for
-SIGTERM) runs the clean-up, exit 130 or 143. A signal after the last block is ignored.
+A handler runs between any two bytecodes (in a ``__del__``, a closing generator, a
+library's ``except``), where an exception can be swallowed or turned into another error.
+``record`` and ``play`` poll a :class:`StopSignal` and close the bag (exit 0); the other
+tools call :func:`raise_if_stopped` between blocks: ``KeyboardInterrupt`` (``Terminated``
+for SIGTERM) runs the clean-up, exit 130 or 143. A signal after the last block is ignored.
 """
 from __future__ import annotations
 
@@ -24,9 +22,9 @@ class StopSignal:
     """
     Context manager: while active, SIGINT and SIGTERM set ``event`` instead of raising.
 
-    ``event.wait(timeout)`` ends at once on a signal; ``signal_number`` is the first one.
-    The previous handlers are restored on exit. Use it in the main thread (Python delivers
-    signals there only), and rclpy without its handlers (``SignalHandlerOptions.NO``).
+    ``event.wait(timeout)`` ends at once on a signal, ``signal_number`` is the first one;
+    the previous handlers come back on exit. For the main thread (where Python delivers
+    signals), with rclpy's handlers off (``SignalHandlerOptions.NO``).
     """
 
     def __init__(self, signals: tuple = (signal.SIGINT, signal.SIGTERM)) -> None:

@@ -21,10 +21,8 @@ import numpy as np
 from rotation_node.bag.mcap_layout import (
     MCAP_MAGIC, MESSAGE_FIELDS, MESSAGE_HEADER, MESSAGE_RECORD_OVERHEAD)
 
-#: Bytes of a MessageIndex record besides its 16-byte entries (opcode, length, channel, size).
-MESSAGE_INDEX_OVERHEAD = 1 + 8 + 2 + 4
-#: Bytes per message in a MessageIndex record (log time, offset).
-MESSAGE_INDEX_ENTRY = 16
+MESSAGE_INDEX_OVERHEAD = 1 + 8 + 2 + 4   # a MessageIndex's opcode, length, channel, size
+MESSAGE_INDEX_ENTRY = 16                 # and per message: log time, offset
 
 _MESSAGE_INDEX_HEADER = struct.Struct('<BQHI')
 _FOOTER_PREFIX = struct.Struct('<BQQQ')

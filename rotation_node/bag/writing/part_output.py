@@ -1,12 +1,10 @@
 """
 Bag outputs that are created exclusively, survive crashes and appear whole (docs/recording.md).
 
-A bag is written as ``<output>.part``, created with ``O_EXCL`` (a file) or ``mkdir`` (a
-rosbag2 directory): of two writers of one output the second fails at once. Complete, it is
-renamed to the output, atomically: ``renameat2(RENAME_NOREPLACE)`` when the output must not
-exist, ``rename`` or ``RENAME_EXCHANGE`` when it may be replaced. The space to close the bag
-is reserved beyond the end of the storage file (``fallocate``, ``FALLOC_FL_KEEP_SIZE``), so
-a full disk fails the reservation before any write does.
+``<output>.part`` is created with ``O_EXCL`` or ``mkdir`` (a second writer fails at once)
+and renamed to the output when complete, atomically (``RENAME_NOREPLACE``, or ``rename``
+and ``RENAME_EXCHANGE`` to replace). The space to close the bag is reserved beyond the end
+of the file (``fallocate``), so a full disk fails the reservation before any write does.
 """
 from __future__ import annotations
 

@@ -44,8 +44,7 @@ ROSBAG2_METADATA_VERSION = 9   # Jazzy's
 LIBRARY = f'rotation_node bag; mcap-python/{mcap.__version__}'
 COMPRESSIONS = ('zstd', 'lz4', 'none')   # mcap's CompressionType names
 DEFAULT_COMPRESSION = 'zstd'             # rosbag2's for MCAP storage
-#: Uncompressed bytes of messages after which a chunk is written (rosbag2's MCAP default).
-CHUNK_SIZE = 768 * 1024
+CHUNK_SIZE = 768 * 1024   # message bytes that make a chunk (rosbag2's MCAP default)
 SYNC_PERIOD_S = 1.0    # longest wait of written data before fdatasync
 CHUNK_PERIOD_S = 1.0   # longest wait of a live recording's message before its chunk
 
@@ -74,11 +73,6 @@ def _all_timestamps(values):
     array = np.array(values)
     kind = array.dtype.kind
     return kind == 'u' or (kind == 'i' and (not array.size or bool(array.min() >= 0)))
-
-
-def _rclpy_serializer():   # imported on first use: it loads rcl
-    from rclpy.serialization import serialize_message
-    return serialize_message
 
 
 class _Channel:
@@ -154,10 +148,9 @@ class BagWriter:
         """
         Register a topic with its QoS profiles and, to copy a topic of any bag, its schema.
 
-        ``write`` and ``write_serialized`` register unknown topics by themselves (installed
-        definition, no QoS). A topic with its own ``definition`` keeps its type name as
-        given; others need an installed ``pkg/msg/Type``. BagError if the topic is
-        registered already or its type is invalid or not installed.
+        ``write`` and ``write_serialized`` register new topics themselves (installed
+        definition, no QoS). BagError if the topic is registered already, or, without its
+        own ``definition``, its type is not an installed ``pkg/msg/Type``.
         """
         if metadata.name in self._channels:
             raise BagError(f'topic {metadata.name} is already registered in {self.path}')
@@ -211,7 +204,10 @@ class BagWriter:
         if channel is None or channel.msg_class is not type(msg):
             channel = self._channel(topic, type_name_of(type(msg)))
             channel.msg_class = type(msg)
-            channel.encode = message_encoder(channel.type_name) or _rclpy_serializer()
+            channel.encode = message_encoder(channel.type_name)
+            if channel.encode is None:   # rclpy, imported on first use: it loads rcl
+                from rclpy.serialization import serialize_message
+                channel.encode = serialize_message
         self._add(channel.id, channel.encode(msg), log_time_ns, publish_time_ns)
 
     def write_serialized(self, topic: str, type_name: str, data: bytes, log_time_ns: int,
@@ -248,9 +244,8 @@ class BagWriter:
         """
         Write ``(topic, type name, data, log_time_ns, publish_time_ns)`` messages, in order.
 
-        The bag is the one ``write_serialized`` called for each writes, byte for byte (chunks
-        cut after the same messages), errors included (the messages before the first one it
-        raises for are written), with the per-message work done once for the block.
+        Byte for byte (and error for error) as ``write_serialized`` of each in turn, with the
+        per-message work done once for the block.
         """
         if not messages:
             return
@@ -312,9 +307,8 @@ class BagWriter:
         """
         Write the messages collected so far as one chunk (to disk, if a sync is due).
 
-        DiskFullError if the chunk and the space to close the bag do not fit: as many of
-        its first messages as fit are written, the others dropped. BagError if writing
-        failed otherwise (the bag cannot be closed then).
+        DiskFullError if the chunk and the space to close the bag do not fit: its first messages
+        that fit are written, the others dropped. BagError if writing failed otherwise.
         """
         now = time.monotonic()
         if self._chunk_period_s is not None:
