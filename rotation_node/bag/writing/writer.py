@@ -112,7 +112,7 @@ class BagWriter:
         self.part_path = self._output.part_path
         self._writer = ChunkWriter(self._output.stream, compression=compression)
         self._schema_ids: Dict[Tuple[str, str, str], int] = {}
-        self._channels: Dict[str, _Channel] = {}
+        self._channels: Dict[str, Any] = {}
         self._topics: List[TopicMetadata] = []
         self._drop_pending()
         self._registered_bytes = 0      # schemas and channels since the last chunk
