@@ -87,11 +87,8 @@ def rename_replacing(source: str, destination: str) -> None:
     A file replaces a file with ``rename``; with a directory on either side the two are
     exchanged (``RENAME_EXCHANGE``) and the old one, now at ``source``, removed.
     """
-    try:
-        rename_exclusive(source, destination)
-        return
-    except FileExistsError:
-        pass
+    with contextlib.suppress(FileExistsError):
+        return rename_exclusive(source, destination)
     if not os.path.isdir(source) and not os.path.isdir(destination):
         os.replace(source, destination)
         return
