@@ -1,16 +1,8 @@
 """
-Convert many bags: in parallel processes on this machine, or as tasks on Dask.
+Convert many bags: in parallel processes on this machine, or as tasks on Dask (docs/bags.md).
 
-One bag is one task (:func:`convert_bag`): it opens its input, converts it
-into its own output and returns a :class:`BagResult`, a failure included, so
-that a bad bag never stops the others. Should a task raise all the same (an
-error in this package, not in a bag), the other bags are still converted, the
-bag gets its line, and the error is raised once every bag is done.
-:func:`convert_bags` runs the tasks in ``jobs`` worker processes
-(``rotation_bag convert IN1 IN2 ... OUTDIR --jobs N``);
-:func:`convert_bags_on_dask` submits the same tasks to a Dask distributed
-cluster, for fleets that outgrow one machine. The outputs are
-named after the inputs (:func:`batch_output_path`).
+Each bag is a task (:func:`convert_bag`) whose failure is a :class:`BagResult`, so a bad bag
+never stops the others; a task that raises (a bug, not a bad bag) is raised at the end.
 """
 from __future__ import annotations
 
@@ -33,18 +25,7 @@ _POLL_SECONDS = 0.05   # how often the parent of the workers looks for a stop si
 
 @dataclasses.dataclass(frozen=True)
 class BagResult:
-    """
-    What converting one bag gave.
-
-    Attributes
-    ----------
-    input_path, output_path : str
-    ok : bool
-        Whether the output was written.
-    line : str
-        One line for the user: what was converted, or why it failed.
-
-    """
+    """What converting one bag gave: whether its output was written; a line saying what or why."""
 
     input_path: str
     output_path: str
@@ -56,8 +37,7 @@ def batch_output_path(input_path: str, output_directory: str) -> str:
     """
     Return the output of ``input_path`` in ``output_directory``: its name without storage suffixes.
 
-    ``runs/day1`` (a rosbag2 directory) -> ``OUT/day1``, ``a/imu.mcap`` ->
-    ``OUT/imu``, ``old.bag`` -> ``OUT/old``, ``x_0.mcap.zstd`` -> ``OUT/x_0``.
+    ``runs/day1`` -> ``OUT/day1``, ``a/imu.mcap`` -> ``OUT/imu``, ``x_0.mcap.zstd`` -> ``OUT/x_0``.
     """
     name = os.path.basename(os.path.normpath(os.fspath(input_path)))
     stripped = True
@@ -70,16 +50,7 @@ def batch_output_path(input_path: str, output_directory: str) -> str:
 
 
 def batch_output_paths(input_paths: Sequence[str], output_directory: str) -> List[str]:
-    """
-    Return :func:`batch_output_path` of every input, checked to be distinct.
-
-    Raises
-    ------
-    BagError
-        If two inputs would be written to the same output, or an input is
-        given twice.
-
-    """
+    """Return :func:`batch_output_path` of every input; BagError if two are the same."""
     outputs: Dict[str, str] = {}
     for input_path in input_paths:
         output = batch_output_path(input_path, output_directory)
@@ -105,31 +76,8 @@ def convert_bag(input_path: str, output_path: str, params: NodeParameters, *,
     """
     Convert one bag as ``rotation_bag convert`` does; report a failure instead of raising it.
 
-    The unit of work of :func:`convert_bags` and :func:`convert_bags_on_dask`;
-    importable and picklable, so any task runner can call it.
-
-    Parameters
-    ----------
-    input_path : str
-        Any bag :func:`rotation_node.bag.reading.reader.open_bag` reads.
-    output_path : str
-        The output bag (must not exist unless ``overwrite``): a rosbag2
-        directory, or a single MCAP file if it ends in ``.mcap``.
-    params : rotation_node.parameters.NodeParameters
-        The node's parameters, as for :func:`rotation_node.bag.convert.convert`.
-    topics : list of str, optional
-        As for :func:`rotation_node.bag.convert.convert`.
-    overwrite, strict : bool, optional
-        As for :func:`rotation_node.bag.convert.convert`.
-    compression : str, optional
-        As for :func:`rotation_node.bag.convert.convert` (default: the input's).
-
-    Returns
-    -------
-    BagResult
-        ``ok`` False, with the error line, if the bag could not be converted
-        (bad or unsupported input, existing output...); nothing is written then.
-
+    The arguments are ``convert``'s; picklable, for any task runner. A bag that cannot be
+    converted gives ``ok`` False and the error line; nothing is written then.
     """
     from rotation_node.bag.convert import convert
     notes: List[str] = []
@@ -160,41 +108,18 @@ def convert_bags(input_paths: Sequence[str], output_directory: str, params: Node
                  compression: Optional[str] = None,
                  on_result: Optional[Callable[[BagResult], None]] = None) -> List[BagResult]:
     """
-    Convert every input into ``output_directory``, ``jobs`` bags at a time.
+    Convert every input into ``output_directory``, ``jobs`` bags at a time; return the results.
 
-    Parameters
-    ----------
-    input_paths : sequence of str
-        The bags, any :func:`rotation_node.bag.reading.reader.open_bag` reads.
-    output_directory : str
-        Created if missing; outputs are named by :func:`batch_output_path`.
-    params : rotation_node.parameters.NodeParameters
-        The node's parameters, for every bag.
-    jobs : int, optional
-        Worker processes (``1``: one after the other in this process).
-    topics, overwrite, strict, compression
-        As for :func:`convert_bag`.
-    on_result : callable, optional
-        Called with each :class:`BagResult` as soon as its bag is done.
-
-    Returns
-    -------
-    list of BagResult
-        In the order the bags finished (those done within one poll, 50 ms,
-        in input order).
-
-    Raises
-    ------
-    BagError
-        If ``jobs`` is not a positive integer, two inputs would share an
-        output, or the output directory cannot be created (before any bag is
-        converted).
-
+    ``jobs`` worker processes (1: one after the other in this process) convert each bag as
+    :func:`convert_bag` (the other arguments are its) into the directory, created if missing,
+    under :func:`batch_output_path`. ``on_result`` receives each :class:`BagResult` as soon
+    as its bag is done; the list is in that order (those done within one 50 ms poll in input
+    order). BagError before any bag is converted if ``jobs`` is not a positive integer, two
+    inputs would share an output, or the directory cannot be created.
     """
     if not (isinstance(jobs, int) and jobs >= 1):
         raise BagError(f'jobs must be a positive integer, got {jobs!r}')
-    outputs = batch_output_paths(input_paths, output_directory)
-    _make_directory(output_directory)
+    outputs = _created_outputs(input_paths, output_directory)
     results = _Results(on_result)
     if jobs == 1 or len(input_paths) == 1:
         for input_path, output_path in zip(input_paths, outputs):
@@ -221,12 +146,7 @@ def convert_bags(input_paths: Sequence[str], output_directory: str, params: Node
         paths = dict(zip(futures, zip(input_paths, outputs)))
 
         def report_completed(failed=True):
-            """
-            Report every bag completed since the last call, in input order.
-
-            ``failed=False`` (the batch is being stopped): only the bags whose output
-            is written; a worker stopped on the way (SIGTERM, or terminated) gets no line.
-            """
+            """Report the bags done since the last call (``failed=False``: written ones only)."""
             for future in futures:
                 if future not in reported and future.done() and not future.cancelled():
                     error = future.exception()
@@ -256,13 +176,7 @@ def convert_bags(input_paths: Sequence[str], output_directory: str, params: Node
 
 
 class _Results:
-    """
-    The results of a batch as they come, each passed to ``on_result``.
-
-    A task that raised (an error of this package, not a bad bag) gets a
-    failed result; :meth:`all` raises the first such error once every bag is
-    done, so that it surfaces as itself without costing the other bags.
-    """
+    """The results of a batch as they come, each passed to ``on_result``; a task's error kept."""
 
     def __init__(self, on_result: Optional[Callable[[BagResult], None]]) -> None:
         self._on_result = on_result or (lambda result: None)
@@ -290,9 +204,8 @@ def _init_worker():
     """
     Set a worker process's signals: Ctrl-C is the parent's, SIGTERM stops the worker.
 
-    The parent, interrupted, sends SIGTERM to its workers: a conversion then
-    stops at its next check, as ``rotation_bag convert`` does on SIGTERM (its
-    unfinished output removed), and no queued bag is started.
+    The parent, interrupted, terminates its workers: a conversion stops at its next check
+    (its unfinished output removed), and no queued bag is started.
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     stop_at_checkpoints((signal.SIGTERM,))
@@ -313,35 +226,12 @@ def convert_bags_on_dask(client: Any, input_paths: Sequence[str], output_directo
     """
     Convert every input into ``output_directory`` as tasks on a Dask cluster.
 
-    Each bag is one task running :func:`convert_bag` on a worker; the paths
-    must name the same files on every worker (a shared file system).
-
-    Parameters
-    ----------
-    client : distributed.Client
-        Connected to the cluster (``Client('tcp://scheduler:8786')``, or a
-        ``LocalCluster``).
-    input_paths, output_directory, params, topics, overwrite, strict, compression, on_result
-        As for :func:`convert_bags`.
-    timeout : float, optional
-        Seconds to wait for all tasks; ``None`` waits until they finish.
-
-    Returns
-    -------
-    list of BagResult
-        As :func:`convert_bags` returns them.
-
-    Raises
-    ------
-    BagError
-        As :func:`convert_bags` raises it.
-    TimeoutError
-        If ``timeout`` passes first (the remaining tasks are cancelled).
-
+    As :func:`convert_bags`; ``client`` is a connected ``distributed.Client``, and the paths
+    must name the same files on every worker (a shared file system). ``timeout``: seconds to
+    wait for all tasks (None: until they finish), then TimeoutError, the others cancelled.
     """
     from distributed import as_completed
-    outputs = batch_output_paths(input_paths, output_directory)
-    _make_directory(output_directory)
+    outputs = _created_outputs(input_paths, output_directory)
     # pure=False: a task is a side effect (a file written), never to be deduplicated.
     futures = client.map(convert_bag, list(input_paths), outputs, params=params, topics=topics,
                          overwrite=overwrite, strict=strict, compression=compression,
@@ -361,8 +251,12 @@ def convert_bags_on_dask(client: Any, input_paths: Sequence[str], output_directo
     return results.all()
 
 
-def _make_directory(path):
+def _created_outputs(input_paths, output_directory):
+    """Return :func:`batch_output_paths`, their directory created."""
+    outputs = batch_output_paths(input_paths, output_directory)
     try:
-        os.makedirs(path, exist_ok=True)
+        os.makedirs(output_directory, exist_ok=True)
     except OSError as error:
-        raise BagError(f'cannot create output directory {path}: {error.strerror}') from None
+        raise BagError(f'cannot create output directory {output_directory}: '
+                       f'{error.strerror}') from None
+    return outputs

@@ -1,18 +1,10 @@
 """
 The conversion's blocks through the CDR codec: messages into samples, numbers into messages.
 
-For ``rotation_bag convert``: :class:`InputBlockDecoder` reads the samples of
-a block of messages of a plain input type into a
-:class:`rotation_node.sample_block.SampleBlock` from the arrays of
-:meth:`rotation_node.wire.cdr.FixedLayoutCodec.decode_block`, and
-:class:`OutputBlockEncoder` writes the numbers of a block of output messages
-under their input messages' headers with
-:meth:`rotation_node.wire.cdr.PayloadLayout.encode_block`. The layouts and
-the rules of CDR are the codec's alone, so the bytes are those of the
-per-message path (``FixedLayoutCodec.decode``, the pipeline,
-``OutputMessage.encoder``) exactly; a block the codec's block form declines
-(:meth:`InputBlockDecoder.decode` returns None) the caller converts message
-by message.
+:class:`InputBlockDecoder` reads a block of a plain input type into a ``SampleBlock``,
+:class:`OutputBlockEncoder` writes a block of one output's numbers under the input's
+headers; the layouts and CDR rules are the codec's alone, so the bytes are the per-message
+path's. A block the codec declines the caller converts message by message.
 """
 from __future__ import annotations
 
@@ -32,17 +24,8 @@ class InputBlockDecoder:
     """
     Decode blocks of CDR messages of a plain input type into sample arrays.
 
-    Parameters
-    ----------
-    input_type : rotation_node.registry.InputType
-    angular_velocity : bool
-        Read the angular velocity (and its unknown flag) too.
-
-    Raises
-    ------
-    ValueError
-        If the type has no fixed layout or does not start with a std_msgs/Header.
-
+    ``angular_velocity``: read it (and its unknown flag) too. ValueError if the type has no
+    fixed layout or does not start with a std_msgs/Header.
     """
 
     def __init__(self, input_type: registry.InputType, angular_velocity: bool):
@@ -64,21 +47,10 @@ class InputBlockDecoder:
 
     def decode(self, datas: Sequence[bytes]) -> Optional[Tuple[SampleBlock, DecodedBlock]]:
         """
-        Decode a block of messages.
+        Return the samples of CDR messages and every field (the headers for the encoder).
 
-        Parameters
-        ----------
-        datas : sequence of bytes
-            The CDR data of each message (with the encapsulation header).
-
-        Returns
-        -------
-        (SampleBlock, DecodedBlock) or None
-            The samples, and every field (the headers for
-            :meth:`OutputBlockEncoder.encode`); None if a message is not one
-            the block form reads exactly as the per-message decoder does (then
-            decode the block message by message).
-
+        None if a message is not one the block form reads exactly as the per-message
+        decoder does (then decode the block message by message).
         """
         decoded = self._codec.decode_block(datas)
         if decoded is None:
@@ -108,24 +80,11 @@ class InputBlockDecoder:
 
 
 class OutputBlockEncoder:
-    """
-    Encode the numbers of a block of one output as CDR messages, as its per-message encoder does.
-
-    Parameters
-    ----------
-    message : rotation_node.registry.OutputMessage
-
-    Raises
-    ------
-    ValueError
-        If the type has no block form (see :func:`block_encoder`).
-
-    """
+    """Encode a block of one output's numbers as its per-message encoder does (or ValueError)."""
 
     _codec: FixedLayoutCodec   # of a stamped type
 
     def __init__(self, message: registry.OutputMessage):
-        self.type_name = message.type_name
         self._encode_rows: Optional[Callable[[np.ndarray], List[bytes]]] = None
         if message.layout is not None:   # std_msgs/Float64MultiArray of a fixed size
             self._width = message.layout.dim[0].stride   # the outermost stride: every element
@@ -147,23 +106,10 @@ class OutputBlockEncoder:
 
     def encode(self, decoded: DecodedBlock, present: np.ndarray, numbers: np.ndarray) -> list:
         """
-        Return the CDR data of the messages of a block that have this output.
+        Return the CDR data of the messages of a block that have this output, in order.
 
-        Parameters
-        ----------
-        decoded : DecodedBlock
-            The whole input block (as :meth:`InputBlockDecoder.decode` gave
-            it): the output messages get its headers.
-        present : ndarray of bool, shape (n,)
-            Which messages have the output.
-        numbers : ndarray, shape (present.sum(), k)
-            Their numbers, in message order.
-
-        Returns
-        -------
-        list of bytes
-            One per message that has the output, in message order.
-
+        ``decoded`` is the whole input block (its headers are the outputs'), ``present`` (n,)
+        which messages have the output, ``numbers`` (present.sum(), k) theirs.
         """
         count = int(np.count_nonzero(present))
         if count == 0:

@@ -1,28 +1,18 @@
 """
 ``rotation_bag convert``'s conversion of one input topic, block by block.
 
-A :class:`TopicConverter` turns the messages of one converted topic into
-the CDR data of their outputs. Where the parameters, the input type and every
-output have a block form (:func:`block_form_missing`), it decodes a block of
-messages into arrays (:mod:`rotation_node.bag.block_codec`), converts them with
-one library call per conversion
-(:meth:`rotation_node.pipeline.ConversionPipeline.process_block`) and encodes
-each output for the whole block; otherwise, and for any block the block form
-cannot read exactly as the per-message path does, it runs the same pipeline
-message by message, as the live node does. Either way the output bytes, the
-counters and the per-stream state are the per-message form's.
-
-:func:`converted_blocks` reads the input in blocks of :data:`BLOCK_MESSAGES`
-messages (all topics, log-time order) and gives each message with its
-outputs, in order: the output bag is written as the per-message conversion
-writes it, and memory holds one block.
+A :class:`TopicConverter` decodes a block of messages into arrays (``block_codec``),
+converts them with one library call per conversion and encodes each output for the whole
+block, where the parameters allow it (:func:`block_form_missing`) and the block form reads
+the block exactly; else it runs the node's pipeline message by message. Either way the
+bytes, counters and state are the per-message form's.
 """
 from __future__ import annotations
 
 import contextlib
 import gc
 import itertools
-from typing import Any, Dict, Iterable, Iterator, List, NamedTuple, Optional, Tuple, TYPE_CHECKING
+from typing import Any, Dict, Iterable, Iterator, List, Optional, Tuple, TYPE_CHECKING
 
 from rotation_node import pipeline, registry
 from rotation_node.bag.block_codec import block_encoder, InputBlockDecoder, OutputBlockEncoder
@@ -32,21 +22,10 @@ from rotation_node.wire.cdr import fixed_layout_codec
 if TYPE_CHECKING:
     from rotation_node.parameters import NodeParameters
 
-#: Messages read per block (of all topics together).
-BLOCK_MESSAGES = BLOCK_SAMPLES
+BLOCK_MESSAGES = BLOCK_SAMPLES   # messages read per block (of all topics together)
+DEFERRED_COLLECTION_THRESHOLD = 50_000   # allocations between youngest-generation passes
 
-#: Allocations between the cyclic collector's youngest-generation passes while converting.
-DEFERRED_COLLECTION_THRESHOLD = 50_000
-
-#: ``(output topic, type name, CDR data)`` of one output message.
-Output = Tuple[str, str, bytes]
-
-
-class _BlockForm(NamedTuple):
-    """What a topic converted in blocks uses: the decoder, the output encoders."""
-
-    decoder: InputBlockDecoder
-    encoders: List[OutputBlockEncoder]   # one per output, in the order of ``outputs``
+Output = Tuple[str, str, bytes]   # (output topic, type name, CDR data) of one output message
 
 
 @contextlib.contextmanager
@@ -54,12 +33,8 @@ def collections_deferred() -> Iterator[None]:
     """
     Run the block with the cyclic garbage collector's passes made rarer; restore them after.
 
-    Reading and writing a bag allocates a few short-lived objects per message
-    (the mcap library's records), freed by reference counting; the collector's
-    default pass every 700 allocations found nothing to collect in them, and
-    cost a sixth of the conversion time (measured by ``bench_bag_convert.py``).
-    Garbage in reference cycles is still collected, every
-    :data:`DEFERRED_COLLECTION_THRESHOLD` allocations.
+    The default pass every 700 allocations found nothing in a bag's short-lived objects and
+    cost a sixth of the conversion time (``bench_bag_convert.py``).
     """
     threshold = gc.get_threshold()
     gc.set_threshold(max(threshold[0], DEFERRED_COLLECTION_THRESHOLD), *threshold[1:])
@@ -73,10 +48,8 @@ def block_form_missing(params: NodeParameters) -> Optional[str]:
     """
     Return why a topic of the parameters' input type is converted message by message, or None.
 
-    The one place that decides it: the pipeline's block form
-    (:func:`rotation_node.pipeline.block_form_missing`: input type, frames,
-    values, outputs), a fixed CDR layout of the input type, and a block
-    encoder for every output message type.
+    The one place that decides it: the pipeline's block form (input type, frames, values,
+    outputs), a fixed CDR layout of the input type, a block encoder for every output.
     """
     reason = pipeline.block_form_missing(params)
     if reason is not None:
@@ -94,26 +67,10 @@ class TopicConverter:
     """
     Convert the messages of one input topic into their outputs' CDR data.
 
-    Parameters
-    ----------
-    params : rotation_node.parameters.NodeParameters
-    outputs : dict
-        ``{output name: (output topic, type name, encode)}`` for every name in
-        ``params.outputs``, ``encode(header, numbers) -> bytes`` the output's
-        per-message encoder.
-    blocks : bool, optional
-        Convert in blocks where the parameters allow it (default); False
-        converts message by message (the reference the block form is checked
-        against).
-
-    Attributes
-    ----------
-    pipeline : ConversionPipeline
-        The topic's pipeline: its ``stats`` count every message, whichever way
-        it was converted.
-    block_form_missing : str or None
-        Why this topic is converted message by message (None: in blocks).
-
+    ``outputs`` is ``{output name: (output topic, type name, encode(header, numbers))}`` for
+    every name in ``params.outputs``; ``blocks=False`` converts message by message (the
+    reference the block form is checked against). ``pipeline.stats`` count every message,
+    whichever way it went; ``block_form_missing`` says why not in blocks (None: in blocks).
     """
 
     def __init__(self, params: NodeParameters, outputs: Dict[str, tuple], *, blocks: bool = True):
@@ -124,62 +81,49 @@ class TopicConverter:
         codec = fixed_layout_codec(input_type.type_name)
         self._decode = None if codec is None else codec.decode
         self.block_form_missing = block_form_missing(params) if blocks else 'blocks disabled'
-        self._blocks: Optional[_BlockForm] = None
         if self.block_form_missing is None:
-            self._blocks = _BlockForm(
-                InputBlockDecoder(input_type, self.pipeline.reads_angular_velocity),
-                [OutputBlockEncoder(registry.OUTPUTS[name].message) for name in params.outputs])
+            self._decoder = InputBlockDecoder(input_type, self.pipeline.reads_angular_velocity)
+            self._encoders = [OutputBlockEncoder(registry.OUTPUTS[name].message)
+                              for name in params.outputs]
 
     def convert(self, records: List, input_topics: Optional[List[str]] = None
                 ) -> List[List[Output]]:
         """
         Return the outputs of each record (a :class:`~rotation_node.bag.records.BagMessage`).
 
-        ``input_topics`` names, for each record, the input type's topic it came
-        on (for input types with several topics); ``input`` by default.
-
-        Raises
-        ------
-        BagError
-            If a message is not a valid message of the input type (raised
-            where the per-message conversion raises it).
-
+        ``input_topics`` names the input type's topic each came on (default ``input``).
+        BagError, where the per-message conversion raises it, for an invalid message.
         """
-        if self._blocks is not None and len(records) > 1:   # a plain type: one topic
-            converted = self._converted_block(self._blocks, records)
-            if converted is not None:
-                return converted
-        if input_topics is None:
-            input_topics = [registry.INPUT_TOPIC.name] * len(records)
-        return [self._converted_message(record, topic)
-                for record, topic in zip(records, input_topics)]
+        block = self._converted_block(records)
+        if block is not None:
+            headers, converted = block
+            result: List[List[Output]] = [[] for _ in records]
+            for (name, topic, type_name, _), encoder in zip(self._outputs, self._encoders):
+                present = converted.present[name]
+                datas = encoder.encode(headers, present, converted.numbers[name])
+                for index, data in zip(present.nonzero()[0].tolist(), datas):
+                    result[index].append((topic, type_name, data))
+            return result
+        result = []
+        for values in self._message_values(records, input_topics):
+            encoded = []
+            for name, header, numbers in values:
+                topic, type_name, encode = self._by_name[name]
+                encoded.append((topic, type_name, encode(header, numbers)))
+            result.append(encoded)
+        return result
 
     def convert_values(self, records: List, input_topics: Optional[List[str]] = None
                        ) -> List[List[Tuple[str, Any, Any]]]:
         """
-        Return the outputs of each record as numbers: ``[(output name, header, numbers)]``.
+        Return :meth:`convert`'s outputs before encoding: ``[(output name, header, numbers)]``.
 
-        What :meth:`convert` encodes, before encoding (``rotation_bag export``):
-        the same block or per-message conversion, counters and state. Outputs
-        of one sample share its ``header`` object (a read-only view).
+        Outputs of one sample share its ``header`` object (a read-only view).
         """
-        if self._blocks is not None and len(records) > 1:
-            converted = self._block_values(self._blocks, records)
-            if converted is not None:
-                return converted
-        if input_topics is None:
-            input_topics = [registry.INPUT_TOPIC.name] * len(records)
-        return [self.pipeline.process_values(record.message(self._decode), topic)
-                for record, topic in zip(records, input_topics)]
-
-    def _block_values(self, blocks: _BlockForm, records: List
-                      ) -> Optional[List[List[Tuple[str, Any, Any]]]]:
-        decoded = blocks.decoder.decode([record.data for record in records])
-        if decoded is None:
-            return None
-        converted = self.pipeline.process_block(decoded[0])
-        if converted is None:
-            return None
+        block = self._converted_block(records)
+        if block is None:
+            return self._message_values(records, input_topics)
+        converted = block[1]
         result: List[List[Tuple[str, Any, Any]]] = [[] for _ in records]
         headers: Dict[int, Any] = {}
         for name, *_ in self._outputs:
@@ -191,63 +135,36 @@ class TopicConverter:
                 result[index].append((name, header, numbers))
         return result
 
-    def _converted_message(self, record, input_topic) -> List[Output]:
-        outputs, result = self._by_name, []
-        for name, header, values in self.pipeline.process_values(
-                record.message(self._decode), input_topic):
-            topic, type_name, encode = outputs[name]
-            result.append((topic, type_name, encode(header, values)))
-        return result
-
-    def _converted_block(self, blocks: _BlockForm, records: List
-                         ) -> Optional[List[List[Output]]]:
-        decoded = blocks.decoder.decode([record.data for record in records])
+    def _converted_block(self, records):
+        """Return the block form's ``(decoded block, outputs)``, or None where it declines."""
+        if self.block_form_missing is not None or len(records) < 2:   # a plain type: one topic
+            return None
+        decoded = self._decoder.decode([record.data for record in records])
         if decoded is None:
             return None
-        block, headers = decoded
-        converted = self.pipeline.process_block(block)
-        if converted is None:
-            return None
-        result: List[List[Output]] = [[] for _ in records]
-        for (name, topic, type_name, _), encoder in zip(self._outputs, blocks.encoders):
-            present = converted.present[name]
-            datas = encoder.encode(headers, present, converted.numbers[name])
-            for index, data in zip(present.nonzero()[0].tolist(), datas):
-                result[index].append((topic, type_name, data))
-        return result
+        converted = self.pipeline.process_block(decoded[0])
+        return None if converted is None else (decoded[1], converted)
+
+    def _message_values(self, records, input_topics):
+        """Return the pipeline's values of each record, message by message."""
+        if input_topics is None:
+            input_topics = [registry.INPUT_TOPIC.name] * len(records)
+        return [self.pipeline.process_values(record.message(self._decode), topic)
+                for record, topic in zip(records, input_topics)]
 
 
 def converted_blocks(records: Iterable, converters: Dict[str, TopicConverter],
                      routes: Optional[Dict[str, Tuple[str, str]]] = None
                      ) -> Iterator[List[Tuple[Any, Optional[List[Output]]]]]:
     """
-    Give the records in blocks, each record with the outputs of its stream's converter.
+    Give the records in blocks of at most :data:`BLOCK_MESSAGES`, each with its outputs.
 
-    Parameters
-    ----------
-    records : iterable of BagMessage
-        The input, in the order it is to be written.
-    converters : dict
-        ``{stream: TopicConverter}``; records of other topics get None.
-    routes : dict, optional
-        ``{bag topic: (stream, the input type's topic name)}``; by default
-        each converter's stream is one bag topic of that name (a plain input
-        type's ``input``).
-
-    Yields
-    ------
-    list of (BagMessage, list of Output or None)
-        One block of at most :data:`BLOCK_MESSAGES` records, in input order;
-        None for a record of no converted stream.
-
+    ``routes``: ``{bag topic: (stream, the input type's topic name)}``, by default each
+    ``converters`` key a plain type's bag topic; other records get None.
     """
     if routes is None:
         routes = {topic: (topic, registry.INPUT_TOPIC.name) for topic in converters}
-    records = iter(records)
-    while True:
-        block = list(itertools.islice(records, BLOCK_MESSAGES))
-        if not block:
-            return
+    for block in message_blocks(records):
         outputs: List[Optional[List[Output]]] = [None] * len(block)
         by_stream: Dict[str, Tuple[List[int], List[str]]] = {}
         for index, record in enumerate(block):
@@ -261,3 +178,10 @@ def converted_blocks(records: Iterable, converters: Dict[str, TopicConverter],
             for index, result in zip(indices, converted):
                 outputs[index] = result
         yield list(zip(block, outputs))
+
+
+def message_blocks(records: Iterable) -> Iterator[List[Any]]:
+    """Give the records in lists of :data:`BLOCK_MESSAGES`, the last one shorter."""
+    records = iter(records)
+    while block := list(itertools.islice(records, BLOCK_MESSAGES)):
+        yield block

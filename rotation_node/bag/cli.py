@@ -1,32 +1,9 @@
 """
-Command line ``rotation_bag``: record, play, convert, plot bags and compare two topics.
+Command line ``rotation_bag``: record, play, convert, plot, export bags; compare two topics.
 
-Usage::
-
-    rotation_bag record OUT --topics /imu [/odom ...] [--duration S] [--compression C] [--force]
-    rotation_bag play IN [--rate R] [--topics T ...] [--loop] [--delay S]
-                      [--wait-for-subscribers] [--strict]
-    rotation_bag convert IN OUT --params config/params.yaml [--topic T ...]
-                         [--compression C] [--force] [--strict]
-    rotation_bag convert IN1 IN2 ... OUTDIR --params FILE [--jobs N] [...]
-    rotation_bag plot IN --topic /imu/euler [-o plot.png] [--params FILE] [--force] [--strict]
-    rotation_bag export IN OUT.csv|OUT.parquet --params FILE [--topic T] [--force] [--strict]
-    rotation_bag compare REF [EST] --reference T --estimate T [--time-offset estimate|S]
-                         [--align none|world|mounting|both] [--json FILE] [--plot PNG] [...]
-
-``IN`` is any bag :func:`rotation_node.bag.reading.reader.open_bag` reads (a rosbag2
-directory, MCAP, sqlite3, split, compressed, ROS 1, an unfinished recording;
-see docs/bags.md). An output ``OUT`` is a rosbag2 directory, or a single MCAP
-file if it ends in ``.mcap``; it is written as ``OUT.part`` and renamed when
-complete (docs/recording.md). ``record`` and ``play`` accept ``--ros-args
-...`` (remapping, namespace, ...). Every failure (a missing, unsupported,
-truncated or corrupt bag, an unknown message type, a topic not in the bag or
-not a valid name, an invalid parameters file, an existing output, a full
-disk) ends with one line on stderr naming the problem and exit status 1;
-Ctrl-C and SIGTERM with one line and 130 or 143. No output file is left
-behind (``record`` keeps what it recorded: on a full disk as a closed bag)
-and the input is never modified. With several inputs, each bag gets one line
-and the exit status is 1 if any failed.
+Each command's module is imported only when it runs, rclpy only with ``--ros-args``. Every
+failure is one line on stderr and exit status 1 (Ctrl-C, SIGTERM: 130, 143), with no output
+left behind (``record`` keeps what it recorded) and the input untouched (docs/recording.md).
 """
 from __future__ import annotations
 
@@ -40,9 +17,9 @@ from rotation_node.command_line.stop_signal import exit_status, signal_name, Sto
 from rotation_node.errors import BagError, RotationNodeError
 
 PROG = 'rotation_bag'
-EXIT_ERROR = 1
 COMPRESSION_CHOICES = ('zstd', 'lz4', 'none')
 ALIGN_CHOICES = ('none', 'world', 'mounting', 'both')   # as bag.compare's (a test checks)
+_ANY_BAG = 'any bag (rosbag2 directory, .mcap, .db3, ROS 1 .bag...)'
 
 
 def _record(args, ros_args):
@@ -66,38 +43,28 @@ def _convert(args, ros_args):
     if not inputs:
         raise BagError('convert needs an input bag and an output (IN OUT, or IN1 IN2 ... OUTDIR)')
     params = parameters_from_yaml(args.params)
-    if len(inputs) > 1 or _is_output_directory(output):
+    from rotation_node.bag.reading.reader import METADATA_FILE
+    if len(inputs) > 1 or (os.path.isdir(output)   # IN OUTDIR: a directory that is no bag
+                           and not os.path.exists(os.path.join(output, METADATA_FILE))):
         _convert_many(args, inputs, output, params)
         return
     from rotation_node.bag.convert import convert, output_topic
-    notes: List[str] = []   # printed once the bag is written: a failure stays one line
-    stats = convert(inputs[0], output, params, topics=args.topic, overwrite=args.force,
-                    compression=args.compression, strict=args.strict, report=notes.append)
-    for note in notes:
-        _say(note)
+    stats = _reporting(convert, inputs[0], output, params, topics=args.topic,
+                       overwrite=args.force, compression=args.compression, strict=args.strict)
     for topic, topic_stats in stats.items():
         outputs = ', '.join(output_topic(topic, name) for name in params.outputs)
-        notes = [f'{reason} {count}' for reason, count in
-                 sorted({**topic_stats.dropped, **topic_stats.skipped}.items())]
-        if topic_stats.near_singular:
-            notes.append(f'near gimbal lock {topic_stats.near_singular}')
+        near = topic_stats.near_singular
         _say(f'{topic}: {topic_stats.received} messages -> {outputs}: '
-             f'{topic_stats.published} messages' + ''.join(f'; {note}' for note in notes))
+             f'{topic_stats.published} messages{_dropped(topic_stats)}'
+             + (f'; near gimbal lock {near}' if near else ''))
     _say(f'wrote {output}')
-
-
-def _is_output_directory(path):
-    """Return an existing directory that is not a rosbag2 bag (``convert IN... OUTDIR``)."""
-    from rotation_node.bag.reading.reader import METADATA_FILE
-    return os.path.isdir(path) and not os.path.exists(os.path.join(path, METADATA_FILE))
 
 
 def _convert_many(args, inputs, output_directory, params):
     from rotation_node.bag.batch import convert_bags
     results = convert_bags(inputs, output_directory, params, jobs=args.jobs, topics=args.topic,
                            overwrite=args.force, compression=args.compression,
-                           strict=args.strict,
-                           on_result=lambda result: _say(result.line))
+                           strict=args.strict, on_result=lambda result: _say(result.line))
     failed = sum(not result.ok for result in results)
     if failed:
         raise BagError(f'{failed} of {len(results)} bags failed')
@@ -111,11 +78,8 @@ def _plot(args, ros_args):
     # /imu/euler -> <bag>_imu_euler.png; a relative name (groundtruth/euler) alike
     output = args.output or f"{bag_name}_{args.topic.lstrip('/').replace('/', '_')}.png"
     params = None if args.params is None else parameters_from_yaml(args.params)
-    notes: List[str] = []
-    count = plot_topic(args.input, args.topic, output, params=params, overwrite=args.force,
-                       strict=args.strict, report=notes.append)
-    for note in notes:
-        _say(note)
+    count = _reporting(plot_topic, args.input, args.topic, output, params=params,
+                       overwrite=args.force, strict=args.strict)
     _say(f'plotted {count} messages of {args.topic} to {output}')
 
 
@@ -123,15 +87,10 @@ def _export(args, ros_args):
     from rotation_node.bag.export import export
     from rotation_node.parameters import parameters_from_yaml
     params = parameters_from_yaml(args.params)
-    notes: List[str] = []   # printed once the table is written: a failure stays one line
-    rows, stats = export(args.input, args.output, params, topic=args.topic,
-                         overwrite=args.force, strict=args.strict, report=notes.append)
-    for note in notes:
-        _say(note)
-    skipped = [f'{reason} {count}' for reason, count in
-               sorted({**stats.dropped, **stats.skipped}.items())]
+    rows, stats = _reporting(export, args.input, args.output, params, topic=args.topic,
+                             overwrite=args.force, strict=args.strict)
     _say(f'wrote {rows} rows ({", ".join(params.outputs)}) of {stats.received} messages to '
-         f'{args.output}' + ''.join(f'; {note}' for note in skipped))
+         f'{args.output}{_dropped(stats)}')
 
 
 def _compare(args, ros_args):
@@ -144,13 +103,10 @@ def _compare(args, ros_args):
                              _frames(args.reference_frames))
     estimate = StreamSource(args.bags[-1], args.estimate, args.estimate_type,
                             _frames(args.estimate_frames))
-    notes: List[str] = []
-    result = compare_bags(reference, estimate, time_offset=args.time_offset, align=args.align,
-                          json_path=args.json, plot_path=args.plot, params=params,
-                          max_gap=args.max_gap, max_offset=args.max_offset,
-                          overwrite=args.force, strict=args.strict, report=notes.append)
-    for note in notes:
-        _say(note)
+    result = _reporting(compare_bags, reference, estimate, time_offset=args.time_offset,
+                        align=args.align, json_path=args.json, plot_path=args.plot,
+                        params=params, max_gap=args.max_gap, max_offset=args.max_offset,
+                        overwrite=args.force, strict=args.strict)
     print(summary(result))
     for what, path in (('JSON', args.json), ('plot', args.plot)):
         if path is not None:
@@ -161,26 +117,27 @@ def _frames(frames):
     return None if frames is None else tuple(frames)
 
 
+def _number(kind, accept, expected):
+    """Return an argparse type: ``kind(text)`` if ``accept`` takes it, else 'expected ...'."""
+    def parse(text):
+        try:
+            value = kind(text)
+        except ValueError:
+            value = None
+        if value is None or not accept(value):
+            raise argparse.ArgumentTypeError(f'expected {expected}, got {text!r}')
+        return value
+    return parse
+
+
+_positive_int = _number(int, lambda value: value >= 1, 'a positive integer')
+_positive_seconds = _number(float, lambda value: math.isfinite(value) and value > 0.0,
+                            'a positive number of seconds')
+_seconds = _number(float, math.isfinite, "'estimate' or seconds")
+
+
 def _time_offset(text):
-    if text == 'estimate':
-        return None
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"expected 'estimate' or seconds, got {text!r}")
-    return value
-
-
-def _positive_seconds(text):
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not (math.isfinite(value) and value > 0.0):
-        raise argparse.ArgumentTypeError(f'expected a positive number of seconds, got {text!r}')
-    return value
+    return None if text == 'estimate' else _seconds(text)
 
 
 def _add_strict(command, doing):
@@ -194,14 +151,19 @@ def _say(text):
     print(text, file=sys.stderr)
 
 
-def _positive_int(text):
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f'expected a positive integer, got {text!r}')
-    return value
+def _dropped(stats):
+    """``; <reason> <count>`` for each reason a pipeline dropped or skipped samples."""
+    return ''.join(f'; {reason} {count}' for reason, count in
+                   sorted({**stats.dropped, **stats.skipped}.items()))
+
+
+def _reporting(run, *args, **kwargs):
+    """Return ``run(..., report=...)``, then say its notes (so a failure stays one line)."""
+    notes: List[str] = []
+    result = run(*args, report=notes.append, **kwargs)
+    for note in notes:
+        _say(note)
+    return result
 
 
 def _add_record(commands):
@@ -219,8 +181,7 @@ def _add_record(commands):
 
 def _add_play(commands):
     play = commands.add_parser('play', help='publish the messages of a bag')
-    play.add_argument('input', metavar='IN', help='any bag (rosbag2 directory, .mcap, .db3, '
-                                                  'ROS 1 .bag...)')
+    play.add_argument('input', metavar='IN', help=_ANY_BAG)
     play.add_argument('--rate', type=float, default=1.0, metavar='R',
                       help='speed factor on the recorded timing; 0: as fast as the '
                            'subscribers acknowledge, lossless on reliable QoS (default 1)')
@@ -265,8 +226,7 @@ def _add_convert(commands):
 
 def _add_plot(commands):
     plot = commands.add_parser('plot', help='plot a topic (input or converted) over time as a PNG')
-    plot.add_argument('input', metavar='IN', help='any bag (rosbag2 directory, .mcap, .db3, '
-                                                  'ROS 1 .bag...)')
+    plot.add_argument('input', metavar='IN', help=_ANY_BAG)
     plot.add_argument('--topic', required=True, metavar='T')
     plot.add_argument('-o', '--output', metavar='PNG',
                       help='default: <bag name>_<topic with / as _>.png')
@@ -285,8 +245,7 @@ def _add_export(commands):
                     'convert computes them) as a table: stamp_ns, frame_id, then named columns '
                     'for each output (qx..qw, roll/pitch/yaw, ...). CSV, or Parquet when the '
                     'name ends in .parquet (needs pyarrow).')
-    export.add_argument('input', metavar='IN', help='any bag (rosbag2 directory, .mcap, .db3, '
-                                                    'ROS 1 .bag...)')
+    export.add_argument('input', metavar='IN', help=_ANY_BAG)
     export.add_argument('output', metavar='OUT', help='table to write: *.csv or *.parquet')
     export.add_argument('--params', required=True, metavar='FILE',
                         help="the node's parameters file (input_type, outputs, conventions)")
@@ -308,8 +267,7 @@ def _add_compare(commands):
                     'mounting M of R_ref(t) = W R_est(t + dt) M (docs/compare.md), and the '
                     'errors of the aligned estimate at the reference stamps.')
     compare.add_argument('bags', nargs='+', metavar='BAG',
-                         help='the bag of both topics, or the reference bag then the '
-                              "estimate's")
+                         help="the bag of both topics, or the reference bag then the estimate's")
     compare.add_argument('--reference', required=True, metavar='T', help='reference topic')
     compare.add_argument('--estimate', required=True, metavar='T', help='estimate topic')
     for role in ('reference', 'estimate'):
@@ -318,8 +276,7 @@ def _add_compare(commands):
         compare.add_argument(f'--{role}-type', metavar='INPUT_TYPE',
                              help=f'input type of the {role} topic where its message type '
                                   'is shared (euler, rotation_vector); default from the type')
-    compare.add_argument('--time-offset', type=_time_offset, default=None,
-                         metavar='estimate|S',
+    compare.add_argument('--time-offset', type=_time_offset, default=None, metavar='estimate|S',
                          help='dt in seconds, or estimate it from the angular rates (default)')
     compare.add_argument('--align', choices=ALIGN_CHOICES, default='both',
                          help='estimate the world alignment W, the mounting M, both (default) '
@@ -347,11 +304,7 @@ _COMMANDS = {'record': _add_record, 'play': _add_play, 'convert': _add_convert, 
 
 
 def build_parser(command: Optional[str] = None) -> argparse.ArgumentParser:
-    """
-    Return the argument parser of ``rotation_bag``: of every command, or of ``command`` only.
-
-    :func:`main` builds the one command given (with its ``--help``), not all of them.
-    """
+    """Return the argument parser of ``rotation_bag``: of every command, or of ``command``."""
     parser = argparse.ArgumentParser(
         prog=PROG, description='Record, play, convert, plot and export ROS 2 bags; compare '
                                'two orientation topics.')
@@ -373,7 +326,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             args.run(args, argv)
         except (RotationNodeError, OSError) as error:
             _error(args, error)
-            return EXIT_ERROR
+            return 1
         except KeyboardInterrupt as interrupt:
             print(f'{PROG} {args.command}: interrupted ({signal_name(interrupt)})',
                   file=sys.stderr)
@@ -382,12 +335,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 
 
 def _without_ros_args(argv):
-    """
-    Return ``argv`` without its ``--ros-args ... [--]`` sections (rclpy's parser).
-
-    rclpy (and the ROS libraries it loads) is imported only if there is one:
-    commands that do not talk to ROS start without it.
-    """
+    """Return ``argv`` without its ``--ros-args ... [--]`` sections (rclpy imported only then)."""
     if '--ros-args' not in argv:
         return list(argv)
     from rclpy.utilities import remove_ros_args

@@ -1,25 +1,11 @@
 """
-Compare two orientation topics of one bag or two (``rotation_bag compare``).
+Compare two orientation topics of one bag or two (``rotation_bag compare``; docs/compare.md).
 
-A reference topic (ground truth: motion capture, a reference INS) and an
-estimate topic (an IMU's filter, an odometry) of any input type the node takes
-are read as the node reads them: a :class:`~rotation_node.pipeline.ConversionPipeline`
-with the ``quaternion`` output, so the registry entry of their type
-(:data:`rotation_node.registry.INPUTS`), its sample stream (for ``/tf`` the TF
-buffer's lookup of a child frame in a parent frame, with ``T_static`` beside
-``T``) and the pipeline's rules for unknown, non-finite and zero orientations,
-fed the read-only views of :mod:`rotation_node.wire.cdr` where the type has a
-fixed layout (as ``convert`` feeds its pipelines) and rclpy messages otherwise. The samples' header
-stamps put both on one clock; then :mod:`rotation_node.comparison` estimates
-what was asked of
-
-    R_ref(t) = W R_est(t + time_offset) M
-
-(``W`` world alignment, ``M`` mounting; docs/compare.md) and the errors of
-the estimate after applying them, slerped at the reference stamps. The
-result is a :class:`ComparisonResult`: its :meth:`~ComparisonResult.as_json`
-is the ``--json`` file, :func:`summary` the printed summary and
-:func:`draw_comparison` the ``--plot`` figure.
+Both are read as the node reads them (a ``ConversionPipeline`` with the ``quaternion``
+output: the input type's sample stream, its drop rules); :mod:`rotation_node.comparison`
+estimates what was asked of ``R_ref(t) = W R_est(t + time_offset) M`` and the errors of the
+aligned estimate at the reference stamps: :class:`ComparisonResult` (``--json``),
+:func:`summary`, :func:`draw_comparison` (``--plot``).
 """
 from __future__ import annotations
 
@@ -33,6 +19,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, TYPE_CH
 from matplotlib.figure import Figure
 import numpy as np
 from rotation_node import comparison, conversions, registry
+from rotation_node.bag.convert import input_streams
 from rotation_node.bag.reading.reader import open_bag
 from rotation_node.bag.writing.atomic_file import AtomicFile
 from rotation_node.command_line.stop_signal import raise_if_stopped
@@ -53,21 +40,11 @@ PLOT_SEQUENCE = 'xyz'
 @dataclass
 class StreamSource:
     """
-    Where a stream is read: a topic of a bag, and how.
+    Where a stream is read: a bag, a topic (its name in the bag or its ROS 2 name), and how.
 
-    Attributes
-    ----------
-    path : str or os.PathLike
-        The bag.
-    topic : str
-        The topic (its name in the bag or its ROS 2 name).
-    input_type : str, optional
-        A key of :data:`rotation_node.registry.INPUTS`; default the plain type
-        of the topic's message type (``tf`` for ``tf2_msgs/msg/TFMessage``).
-        Needed where types share a message (``euler``, ``rotation_vector``).
-    frames : tuple of str, optional
-        ``(parent, child)`` for ``tf``: the orientation of child in parent.
-
+    ``input_type`` (a key of :data:`rotation_node.registry.INPUTS`) is needed where types
+    share a message (``euler``, ``rotation_vector``); ``frames`` is ``(parent, child)`` for
+    ``tf``: the orientation of child in parent.
     """
 
     path: Any
@@ -115,21 +92,11 @@ def read_stream(source: StreamSource, params: Optional[NodeParameters] = None, *
     """
     Read the orientation samples of a topic with the node's sample stream of its input type.
 
-    Samples without an orientation (an Imu's ``orientation_covariance[0] ==
-    -1``), with a non-finite or zero one, or with a stamp not after the
-    previous sample's (after sorting by stamp: a repeated stamp) are dropped
-    and counted. Rates are the messages' angular velocities where every
-    sample has a finite one and not all are zero (a field never filled in),
-    else None (the comparison then differentiates the orientations).
-
-    Raises
-    ------
-    BagError
-        The bag is unreadable, the topic is not in it or cannot be read as
-        orientations, the frames of ``tf`` are missing.
-    ComparisonError
-        Fewer than 2 usable samples.
-
+    Samples without an orientation (REP 145), with a non-finite or zero one, or with a
+    repeated stamp are dropped and counted. Rates are the messages' angular velocities if
+    every sample has a finite one and not all are zero, else None (then differentiated).
+    BagError if the topic cannot be read as orientations; ComparisonError for fewer than 2
+    usable samples.
     """
     params = NodeParameters() if params is None else params
     with open_bag(source.path, strict=strict) as reader:
@@ -145,7 +112,6 @@ def read_stream(source: StreamSource, params: Optional[NodeParameters] = None, *
             values = {'input_type': entry.name, 'outputs': ['quaternion'],
                       'euler.sequence': params.euler_sequence,
                       'euler.degrees': params.euler_degrees}
-            topics = {topic: entry.topics[0].name}
             if entry.stream is not None:
                 if source.frames is None:
                     raise BagError(f'{topic} is {entry.type_name}: name the parent and child '
@@ -153,11 +119,7 @@ def read_stream(source: StreamSource, params: Optional[NodeParameters] = None, *
                                    'PARENT CHILD)')
                 values.update({'tf.parent_frame': source.frames[0],
                                'tf.child_frame': source.frames[1]})
-                first = entry.topics[0].name
-                for other in entry.topics[1:]:
-                    companion = topic + other.name[len(first):]
-                    if other.name.startswith(first) and companion in reader.topics:
-                        topics[companion] = other.name
+            topics = input_streams(reader, entry, [topic])[topic]   # with T_static for T
             pipeline = ConversionPipeline(NodeParameters().replaced(values))
             # The messages' own angular velocities (one sample per message of a plain type).
             read_rate = (entry.sample_reader() if entry.stream is None
@@ -215,24 +177,20 @@ class ComparisonResult:
     alignment: comparison.Alignment
     series: comparison.AlignedSeries
     statistics: comparison.ErrorStatistics
-    origin_ns: int
     time_offset_estimated: bool
     align: str
 
     def as_json(self) -> Dict[str, Any]:
         """Return the ``--json`` document."""
-        degrees = math.degrees
-        stats = self.statistics
+        degrees, stats, alignment = math.degrees, self.statistics, self.alignment
         return {
-            'reference': _stream_json(self.reference),
-            'estimate': _stream_json(self.estimate),
+            'reference': _stream_json(self.reference), 'estimate': _stream_json(self.estimate),
             'matched': int(self.series.times.size),
-            'time_offset_s': self.alignment.time_offset,
-            'time_offset_std_s': self.alignment.time_offset_std,
-            'world_alignment': {'quaternion': self.alignment.world.tolist(),
-                                'std_rad': self.alignment.world_std.tolist()},
-            'mounting': {'quaternion': self.alignment.mounting.tolist(),
-                         'std_rad': self.alignment.mounting_std.tolist()},
+            'time_offset_s': alignment.time_offset, 'time_offset_std_s': alignment.time_offset_std,
+            'world_alignment': {'quaternion': alignment.world.tolist(),
+                                'std_rad': alignment.world_std.tolist()},
+            'mounting': {'quaternion': alignment.mounting.tolist(),
+                         'std_rad': alignment.mounting_std.tolist()},
             'error_deg': {'rmse': degrees(stats.rmse), 'mean': degrees(stats.mean),
                           'median': degrees(stats.median), 'p95': degrees(stats.p95),
                           'max': degrees(stats.maximum)},
@@ -251,12 +209,8 @@ def compare_streams(reference: Stream, estimate: Stream, *, time_offset: Optiona
     """
     Estimate what ``time_offset`` (None: estimate it) and ``align`` ask, then the errors.
 
-    Raises
-    ------
-    ComparisonError
-        The streams do not overlap in time (after the offset) or the motion
-        does not determine what was asked (``DegenerateMotionError``).
-
+    ComparisonError if the streams do not overlap in time (after the offset) or the motion
+    does not determine what was asked (``DegenerateMotionError``).
     """
     if align not in ALIGN_CHOICES:
         raise ComparisonError(f'align must be one of {", ".join(ALIGN_CHOICES)}, not {align!r}')
@@ -265,8 +219,12 @@ def compare_streams(reference: Stream, estimate: Stream, *, time_offset: Optiona
     t_est = (estimate.stamps_ns - origin) * 1e-9
     world, mounting = align in ('world', 'both'), align in ('mounting', 'both')
     if time_offset is None or world or mounting:
-        if time_offset is not None:
-            _check_overlap(t_ref, t_est, time_offset)
+        if time_offset is not None and (t_ref[-1] + time_offset < t_est[0]
+                                        or t_ref[0] + time_offset > t_est[-1]):
+            raise ComparisonError(
+                f'the streams do not overlap in time: reference {t_ref[0]:.3f} to '
+                f'{t_ref[-1]:.3f} s, estimate {t_est[0]:.3f} to {t_est[-1]:.3f} s, '
+                f'time offset {time_offset} s')
         alignment = comparison.estimate_alignment(
             t_ref, reference.quaternions, t_est, estimate.quaternions, time_offset=time_offset,
             world=world, mounting=mounting, rates_ref=reference.rates, rates_est=estimate.rates,
@@ -280,15 +238,8 @@ def compare_streams(reference: Stream, estimate: Stream, *, time_offset: Optiona
         time_offset=alignment.time_offset, world=alignment.world, mounting=alignment.mounting,
         max_gap=max_gap)
     return ComparisonResult(reference, estimate, alignment, series,
-                            comparison.error_statistics(series.errors), origin,
-                            time_offset is None, align)
-
-
-def _check_overlap(t_ref, t_est, time_offset):
-    if t_ref[-1] + time_offset < t_est[0] or t_ref[0] + time_offset > t_est[-1]:
-        raise ComparisonError(
-            f'the streams do not overlap in time: reference {t_ref[0]:.3f} to {t_ref[-1]:.3f} s, '
-            f'estimate {t_est[0]:.3f} to {t_est[-1]:.3f} s, time offset {time_offset} s')
+                            comparison.error_statistics(series.errors), time_offset is None,
+                            align)
 
 
 def summary(result: ComparisonResult) -> str:
@@ -330,12 +281,7 @@ def summary(result: ComparisonResult) -> str:
 
 
 def draw_comparison(result: ComparisonResult) -> Figure:
-    """
-    Return the figure of ``--plot``.
-
-    The error angle and the error about each reference body axis over time,
-    then roll, pitch and yaw of the reference and of the aligned estimate.
-    """
+    """Return ``--plot``: the errors over time, then roll, pitch, yaw of both, aligned."""
     series = result.series
     seconds = series.times - series.times[0]
     errors = np.degrees(series.errors)
@@ -379,35 +325,13 @@ def compare_bags(reference: StreamSource, estimate: StreamSource, *,
                  strict: bool = False,
                  report: Optional[Callable[[str], None]] = None) -> ComparisonResult:
     """
-    Compare two topics and write the JSON and the plot, each complete or not at all.
+    Compare two topics; write the JSON and the plot, each complete or not at all.
 
-    Parameters
-    ----------
-    reference, estimate : StreamSource
-        The two topics (of one bag or two).
-    time_offset : float, optional
-        Seconds; estimated when None.
-    align : {'none', 'world', 'mounting', 'both'}
-        Which of ``W`` and ``M`` to estimate (the others are the identity).
-    json_path, plot_path : str or os.PathLike, optional
-        Where to write the JSON document and the PNG.
-    params : NodeParameters, optional
-        Euler sequence and unit of Euler-angle inputs; ``input_type`` picks
-        among types that share a message.
-    max_gap, max_offset : float, optional
-        See :func:`rotation_node.comparison.estimate_alignment`.
-    overwrite : bool
-        Replace existing outputs (refused otherwise, before any work).
-    strict : bool
-        Refuse unfinished recordings.
-    report : callable, optional
-        Receives the inputs' notes.
-
-    Raises
-    ------
-    BagError, ComparisonError
-        One line each: what was wrong.
-
+    ``time_offset`` (s) is estimated when None; ``align`` names which of ``W``, ``M`` to
+    estimate (the others: identity); ``params``: Euler inputs' sequence and unit, and the
+    ``input_type`` among types sharing a message; ``max_gap``, ``max_offset``: those of
+    ``comparison.estimate_alignment``. Existing outputs are refused before any work
+    (without ``overwrite``); ``strict``, ``report`` as for ``convert``.
     """
     with contextlib.ExitStack() as stack:   # each output committed on success, else removed
         outputs = [stack.enter_context(AtomicFile(path, overwrite=overwrite))

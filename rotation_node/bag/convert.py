@@ -1,38 +1,16 @@
 """
 Convert a recorded bag offline with the node's conversions (``rotation_bag convert``).
 
-The output bag holds every message of the input, unchanged, plus for each
-converted input topic ``T`` the outputs the live node would publish, on
-``T/<output name>`` (``/imu/euler``): the same ``ConversionPipeline`` with the
-same parameters, one pipeline per input topic, fed in log-time order (the
-order of reception). Converted messages get the log and publish times of the
-input message they come from. An input type with several topics is one stream
-per first topic: ``input_type: tf`` converts ``/tf`` together with
-``/tf_static`` (``T`` with ``T_static``), and writes ``/tf/euler``...
-The bag is streamed, never loaded: memory does not grow with its length.
-The input is any bag :func:`rotation_node.bag.reading.reader.open_bag` reads (a
-rosbag2 directory, MCAP, sqlite3, split, compressed, ROS 1, an unfinished
-recording); topics that are not converted are copied unchanged, with their
-schema and metadata as stored, under their ROS 2 names
-(:mod:`rotation_node.bag.reading.topic_names`).
-
-The conversion runs in blocks (:mod:`rotation_node.bag.block_convert`): a
-block of messages of a topic is decoded into arrays, converted with one
-library call per conversion and encoded for the whole block, with the live
-node's results bit for bit (the per-message ``ConversionPipeline``'s state,
-counters and output bytes). What has no block form (some outputs, frame
-conversions, input types with several topics, a block the fast decoder
-cannot read exactly) goes message by message: input messages decoded by
-:mod:`rotation_node.wire.cdr` into read-only views where their type has a
-fixed layout, which
-:meth:`~rotation_node.pipeline.ConversionPipeline.process_values` reads as it
-reads rclpy messages, and the numbers it returns encoded by each output's
-encoder (:meth:`rotation_node.registry.OutputMessage.encoder`).
+The output holds every input message unchanged (schema and metadata as stored, ROS 2 names)
+plus, for each converted topic ``T``, what the live node would publish on ``T/<output>``:
+one pipeline per topic (``T`` with ``T_static`` for ``tf``) fed in log-time order, each
+output with the times of its input message. Streamed, in blocks where it can be
+(:mod:`~rotation_node.bag.block_convert`), with the node's results bit for bit.
 """
 from __future__ import annotations
 
 import os
-from typing import Callable, Dict, List, Optional, Sequence, TextIO, TYPE_CHECKING
+from typing import Any, Callable, Dict, List, Optional, Sequence, TextIO, TYPE_CHECKING
 
 from rotation_node import registry
 from rotation_node.bag.block_convert import collections_deferred, converted_blocks, TopicConverter
@@ -56,14 +34,14 @@ def output_topic(input_topic: str, output_name: str) -> str:
     return f'{input_topic.rstrip("/")}/{output_name}'
 
 
-def _input_streams(reader, input_type, topics):
+def input_streams(reader: Any, input_type: registry.InputType,
+                  topics: Optional[Sequence[str]]) -> Dict[str, Dict[str, str]]:
     """
     Return the streams to convert: ``{topic: {bag topic: the input type's topic name}}``.
 
-    A stream is named by its first topic: the given ones, checked, or by default
-    every topic of the input type that is not another one's companion. An input
-    type with several topics (``/tf`` and ``/tf_static``) finds the others in
-    the bag by their suffix to the first one's name: ``T`` and ``T_static``.
+    A stream is named by its first topic: the given ones, checked, or every topic of the
+    input type that is no other's companion (``T_static`` beside ``T``, by the suffix of
+    the input type's other topic names to its first).
     """
     first, *others = input_type.topics
     type_name = input_type.type_name
@@ -94,7 +72,7 @@ def _input_streams(reader, input_type, topics):
     return streams
 
 
-def _check_output(input_path, output_path):
+def check_output(input_path: StrPath, output_path: StrPath) -> None:
     """Refuse an output that is the input bag, inside it, or replaces the directory holding it."""
     if os.path.exists(output_path) and os.path.samefile(input_path, output_path):
         raise BagError(f'output {output_path} is the input bag')
@@ -113,62 +91,25 @@ def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *
     """
     Write ``output_path``: the input bag plus the node's outputs for its input topics.
 
-    Parameters
-    ----------
-    input_path : str or os.PathLike
-        Any bag :func:`rotation_node.bag.reading.reader.open_bag` reads; only read.
-    output_path : str or os.PathLike
-        The output bag, a rosbag2 directory or a single MCAP file if it ends
-        in ``.mcap``. It is written as ``<output>.part`` and renamed when
-        complete; a failure or a signal removes it.
-    params : rotation_node.parameters.NodeParameters
-        As loaded from the node's parameters file.
-    topics : list of str, optional
-        Topics to convert (their names in the bag or their ROS 2 names); by
-        default every topic of the type ``params.input_type`` names (for a type
-        with several topics, the first of each group: ``/tf``, not ``/tf_static``).
-    overwrite : bool, optional
-        Replace an existing output (atomically, once the new one is complete).
-    compression : str, optional
-        Chunk compression of the output, ``'zstd'``, ``'lz4'`` or ``'none'``;
-        the input's by default.
-    progress_stream : file, optional
-        Where to draw the progress bar (only if it is a terminal); stderr by default.
-    strict : bool, optional
-        Refuse an unfinished recording or a damaged MCAP file instead of
-        converting what it holds.
-    report : callable, optional
-        ``report(line)`` receives what the input is (``<path>: rosbag2
-        directory (mcap, 3 files), 5000 messages``) and its notes (an
-        unfinished recording, a renamed topic) once it is opened, before
-        anything is written; then what reading found could not be read.
-    blocks : bool, optional
-        Convert in blocks where the parameters allow it (the default; see
-        :mod:`rotation_node.bag.block_convert`); False converts message by
-        message. The output is the same byte for byte.
-
-    Returns
-    -------
-    dict
-        ``{input topic: PipelineStats}``.
-
-    Raises
-    ------
-    BagError
-        If the input is unreadable or corrupt, a topic is missing or of the
-        wrong type, an output topic already exists in the input, or the output
-        exists (without ``overwrite``), is being written by another process
-        (``<output>.part`` exists) or is the input; a ``DiskFullError`` if the
-        disk fills (no output is left then).
-
+    ``output_path`` is a rosbag2 directory, or an MCAP file if it ends in ``.mcap``, written
+    as ``<output>.part`` and renamed when complete (a failure or a signal removes it;
+    ``overwrite`` replaces an existing one atomically). ``topics`` (names in the bag or ROS 2
+    names) default to every topic of ``params.input_type``'s type (the first of several:
+    ``/tf``); ``compression`` to the input's; ``progress_stream`` (a terminal) to stderr.
+    ``strict`` refuses an unfinished recording or a damaged MCAP file. ``report(line)``
+    receives what the input is and its notes before anything is written, then what reading
+    could not read. ``blocks=False`` converts message by message (the same bytes). Return
+    ``{input topic: PipelineStats}``. BagError for an unreadable input, a missing or
+    mistyped topic, an output topic already in the input, an output that exists (without
+    ``overwrite``), is being written or is the input; DiskFullError (no output left).
     """
     with open_bag(input_path, strict=strict) as reader:
-        _check_output(input_path, output_path)
+        check_output(input_path, output_path)
         reader.report_contents(report)
         with reader.reporting_new_notes(report):
             params = resolved_from_bag(reader, params)   # the mounting from /tf_static, if asked
             input_type = registry.INPUTS[params.input_type]
-            streams = _input_streams(reader, input_type, topics)
+            streams = input_streams(reader, input_type, topics)
             # {bag topic: (its stream's first topic, the input type's name for it)}
             routes = {bag_topic: (topic, name) for topic, stream in streams.items()
                       for bag_topic, name in stream.items()}

@@ -1,32 +1,22 @@
 """
-The converted values of one topic of a bag as a table (``rotation_bag export``).
+The converted values of one topic of a bag as a CSV or Parquet table (``rotation_bag export``).
 
-One row per converted sample (per input message for a plain input type), in
-log-time order: ``stamp_ns`` (the header stamp, integer nanoseconds),
-``frame_id``, then the numbers of each output in ``outputs``, with named
-columns (:func:`output_columns`); an output a sample does not have (skipped:
-unknown orientation, the first finite difference...) leaves its cells empty
-(CSV) or null (Parquet). The conversion is ``rotation_bag convert``'s, bit for
-bit: the same :class:`~rotation_node.bag.block_convert.TopicConverter` (block
-pipeline where it applies, the node's per-message pipeline otherwise), the
-same parameters file.
-
-CSV numbers are written with Python's ``repr`` (the shortest text that reads
-back as the same float64). Parquet needs ``pyarrow``. The input is streamed
-(memory holds one block of messages) and the table is written to a temporary
-file renamed to the output only when complete
-(:class:`~rotation_node.bag.writing.atomic_file.AtomicFile`): a failure leaves nothing.
+One row per converted sample, in log-time order: ``stamp_ns``, ``frame_id``, then the named
+columns of each output (:func:`output_columns`), empty (CSV) or null (Parquet) where a sample
+lacks the output. The values are ``convert``'s bit for bit (the same ``TopicConverter`` and
+parameters file); CSV writes ``repr`` (the shortest text that reads back as the float64).
+The input is streamed, and the table appears only once complete (``AtomicFile``).
 """
 from __future__ import annotations
 
 import csv
 import io
 import os
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, TYPE_CHECKING
+from typing import Any, Callable, List, Optional, Tuple, TYPE_CHECKING
 
 from rotation_node import registry
-from rotation_node.bag.block_convert import BLOCK_MESSAGES, collections_deferred, TopicConverter
-from rotation_node.bag.convert import _check_output, _input_streams
+from rotation_node.bag.block_convert import collections_deferred, message_blocks, TopicConverter
+from rotation_node.bag.convert import check_output, input_streams
 from rotation_node.bag.reading.reader import open_bag
 from rotation_node.bag.writing.atomic_file import AtomicFile
 from rotation_node.command_line.stop_signal import raise_if_stopped
@@ -39,36 +29,17 @@ if TYPE_CHECKING:
     from rotation_node.pipeline import PipelineStats
     from rotation_node.type_aliases import StrPath
 
-#: Table formats by the output's extension.
-FORMATS = {'.csv': 'csv', '.parquet': 'parquet'}
-
-#: The columns before the outputs' numbers.
-LEADING_COLUMNS = ('stamp_ns', 'frame_id')
-
-_RPY = ('roll', 'pitch', 'yaw')
-
-
-def _angle_names(params: NodeParameters, prefix: str) -> List[str]:
-    """``roll, pitch, yaw`` for ROS RPY (``xyz``), else ``<prefix>_<seq>_0..2``."""
-    if params.euler_sequence == 'xyz':
-        return list(_RPY)
-    return [f'{prefix}_{params.euler_sequence}_{i}' for i in range(3)]
-
 
 def output_columns(name: str, params: NodeParameters) -> List[str]:
     """
-    Return the column names of the numbers of output ``name``, in the output's order.
+    Return the column names of output ``name``'s numbers, in order (README, ``export``).
 
-    ``quaternion`` qx, qy, qz, qw; ``euler`` roll, pitch, yaw (``euler.sequence``
-    ``xyz``) or ``euler_<seq>_0..2``; ``rotation_vector`` rotvec_x..z;
-    ``axis_angle`` axis_x..z, angle; ``matrix`` r11..r33 (row-major);
-    ``angular_velocity`` wx, wy, wz; ``euler_rates`` <angle>_rate;
-    ``quaternion_rate`` dqx..dqw; ``euler_stddev`` <angle>_stddev;
-    ``euler_covariance`` euler_covariance_angle_0..2 and
-    euler_covariance_00..22 (row-major), with <angle> as for ``euler``.
-    Units are the output's (radians, or degrees with ``euler.degrees``).
+    Euler angles are roll, pitch, yaw for the sequence ``xyz``, else ``euler_<seq>_0..2``;
+    units are the output's (radians, or degrees with ``euler.degrees``).
     """
-    angles = _angle_names(params, 'euler')
+    sequence = params.euler_sequence
+    angles = (['roll', 'pitch', 'yaw'] if sequence == 'xyz'
+              else [f'euler_{sequence}_{i}' for i in range(3)])
     columns = {
         'quaternion': ['qx', 'qy', 'qz', 'qw'],
         'euler': angles,
@@ -90,16 +61,16 @@ def output_columns(name: str, params: NodeParameters) -> List[str]:
 
 def table_columns(params: NodeParameters) -> List[str]:
     """Return every column of the table: the leading ones, then each output's."""
-    return [*LEADING_COLUMNS, *(column for name in params.outputs
-                                for column in output_columns(name, params))]
+    return ['stamp_ns', 'frame_id',
+            *(column for name in params.outputs for column in output_columns(name, params))]
 
 
 def table_format(path: StrPath) -> str:
     """Return ``'csv'`` or ``'parquet'`` from the output's extension; BagError otherwise."""
     extension = os.path.splitext(os.fspath(path))[1].lower()
-    if extension not in FORMATS:
+    if extension not in ('.csv', '.parquet'):
         raise BagError(f'output {os.fspath(path)}: expected a .csv or .parquet file name')
-    return FORMATS[extension]
+    return extension[1:]
 
 
 class _CsvTable:
@@ -158,11 +129,7 @@ def _parquet_available() -> None:
 
 
 def _rows(values_per_record, widths, positions):
-    """
-    Return the table rows of converted records: one per sample (per header object).
-
-    ``values_per_record``: for each record, ``[(output name, header, numbers)]``.
-    """
+    """Return the rows of records' values (``[(output, header, numbers)]``), one per header."""
     rows: List[Tuple[int, str, List[Optional[float]]]] = []
     total = sum(widths.values())
     for values in values_per_record:
@@ -186,51 +153,23 @@ def export(input_path: StrPath, output_path: StrPath, params: NodeParameters, *,
     """
     Write the converted values of one topic of a bag as a CSV or Parquet table.
 
-    Parameters
-    ----------
-    input_path : str or os.PathLike
-        Any bag :func:`rotation_node.bag.reading.reader.open_bag` reads; only read.
-    output_path : str or os.PathLike
-        ``*.csv`` or ``*.parquet``; appears only once complete.
-    params : rotation_node.parameters.NodeParameters
-        The node's parameters (input type, outputs, conventions).
-    topic : str, optional
-        The topic to export; by default the one topic of the input type
-        (an error if the bag holds several).
-    overwrite : bool, optional
-        Replace an existing output.
-    strict : bool, optional
-        Refuse an unfinished recording.
-    report : callable, optional
-        ``report(line)`` receives what the input is and its notes.
-
-    Returns
-    -------
-    rows : int
-        Rows written.
-    stats : PipelineStats
-        The topic's conversion counters.
-
-    Raises
-    ------
-    BagError
-        The input cannot be read, the topic is missing, of the wrong type or
-        not unique, the output's extension is not .csv or .parquet, Parquet
-        without pyarrow, the output exists (without ``overwrite``) or cannot
-        be written; nothing is left behind.
-
+    ``output_path`` (``*.csv``, or ``*.parquet`` with pyarrow) appears only once complete;
+    ``topic`` defaults to the one topic of the input type; the other arguments are
+    ``convert``'s. Return the rows written and the topic's ``PipelineStats``. BagError,
+    leaving nothing behind, for an unreadable input, a missing, mistyped or ambiguous topic,
+    a bad extension, missing pyarrow, or an output that exists or cannot be written.
     """
     kind = table_format(output_path)
     if kind == 'parquet':
         _parquet_available()
     columns = table_columns(params)
     with open_bag(input_path, strict=strict) as reader:
-        _check_output(input_path, output_path)
+        check_output(input_path, output_path)
         reader.report_contents(report)
         with reader.reporting_new_notes(report):
             params = resolved_from_bag(reader, params)   # the mounting from /tf_static, if asked
-            streams = _input_streams(reader, registry.INPUTS[params.input_type],
-                                     None if topic is None else [topic])
+            streams = input_streams(reader, registry.INPUTS[params.input_type],
+                                    None if topic is None else [topic])
             if len(streams) > 1:
                 raise BagError(f'{reader.path} has {len(streams)} {params.input_type} topics '
                                f'({", ".join(streams)}); choose one with --topic')
@@ -243,28 +182,16 @@ def export(input_path: StrPath, output_path: StrPath, params: NodeParameters, *,
             count = 0
             with AtomicFile(output_path, overwrite=overwrite) as output, collections_deferred():
                 table = (_CsvTable if kind == 'csv' else _ParquetTable)(output.stream, columns)
-                block: List[Any] = []
                 try:
-                    for record in reader.messages(list(routes)):
-                        block.append(record)
-                        if len(block) == BLOCK_MESSAGES:
-                            count += _write_block(table, converter, block, routes, widths,
-                                                  positions)
-                            block = []
-                    count += _write_block(table, converter, block, routes, widths, positions)
+                    for block in message_blocks(reader.messages(list(routes))):
+                        raise_if_stopped()
+                        values = converter.convert_values(
+                            block, [routes[record.topic] for record in block])
+                        rows = _rows(values, widths, positions)
+                        table.write(rows)
+                        count += len(rows)
                 except BagError as error:   # a message that cannot be decoded names no file
                     raise reader.naming_this_bag(error) from None
                 table.close()
                 raise_if_stopped()   # the last chance before the table is committed
     return count, converter.pipeline.stats
-
-
-def _write_block(table, converter: TopicConverter, block: Sequence, routes: Dict[str, str],
-                 widths, positions) -> int:
-    raise_if_stopped()
-    if not block:
-        return 0
-    values = converter.convert_values(list(block), [routes[record.topic] for record in block])
-    rows = _rows(values, widths, positions)
-    table.write(rows)
-    return len(rows)

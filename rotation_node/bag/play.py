@@ -1,25 +1,12 @@
 """
 Publish the messages of a bag on their topics (``rotation_bag play``).
 
-Any bag :func:`rotation_node.bag.reading.reader.open_bag` reads; topics whose names
-are not valid in ROS 2 are published under their mapped names
-(:mod:`rotation_node.bag.reading.topic_names`), and topics whose type is not
-installed (or not CDR) are left out, with a note, unless asked for by name.
-
-Messages go out as stored (CDR bytes, never deserialised) in log-time order,
-spaced as they were recorded divided by the rate. Rate 0 publishes as fast as
-the subscribers acknowledge: it waits until every played topic has a
-subscriber, offers a deep reliable queue, and every ``ACK_BATCH`` messages
-waits until they are acknowledged, so the queue never overflows; a reliable
-subscriber whose own queue is deep enough (as the recorder's) then receives
-every message.
-
-A new publisher is matched by its subscribers a little after it sees them
-(discovery is not symmetric, and slow on a loaded machine), and a volatile
-subscriber misses what was published before: with ``wait_for_subscribers``
-(implied by rate 0) playback starts ``DISCOVERY_SETTLE_S`` after every played
-topic has a subscriber, and ``delay`` (``--delay``, as in ``ros2 bag play``)
-holds back the first message further.
+Messages go out as stored (CDR bytes) in log-time order, spaced as recorded divided by the
+rate, under their ROS 2 names; topics of types not installed (or not CDR) are left out with
+a note unless named. Rate 0 publishes as fast as the subscribers acknowledge (a deep
+reliable queue, acknowledged every ``ACK_BATCH`` messages), losing none. Publishers are
+matched a little after they see their subscribers, so ``wait_for_subscribers`` (implied by
+rate 0) starts ``DISCOVERY_SETTLE_S`` after every topic has one; ``delay`` waits further.
 """
 from __future__ import annotations
 
@@ -48,32 +35,27 @@ ACK_BATCH = DEEP_QUEUE_DEPTH // 4
 ACK_TIMEOUT = Duration(seconds=30)
 _POLL_S = 0.05
 DISCOVERY_SETTLE_S = 0.5
-#: Slowest playback rate: a second of the bag then takes about 32 years.
-MIN_RATE = 1e-9
-#: Longest delay before the first message (what ``threading`` can wait for).
-MAX_DELAY_S = threading.TIMEOUT_MAX
+MIN_RATE = 1e-9                        # a second of the bag then takes about 32 years
+MAX_DELAY_S = threading.TIMEOUT_MAX    # what threading can wait for
 
 
 def _wait(stop, seconds):
-    """Sleep ``seconds`` (any length) or until a stop signal; return whether stopped."""
+    """Sleep ``seconds`` (any length) or until a stop signal."""
     deadline = time.monotonic() + seconds
-    while (remaining := deadline - time.monotonic()) > 0:
-        if stop.event.wait(min(remaining, 3600.0)):
-            return True
-    return stop.is_set()
+    while (remaining := deadline - time.monotonic()) > 0 and not stop.event.wait(
+            min(remaining, 3600.0)):
+        pass
 
 
 def _playable_topics(reader, topics, report):
     """
     Return the topics to play: the given ones (all checked), or every topic that can be published.
 
-    A topic of a type that is not installed, or not CDR, cannot be published:
-    asked for by name it is an error, else it is left out with a note.
+    A topic of a type not installed, or not CDR, is an error if named, else left out (a note).
     """
     if topics is not None:
         topics = list(topics)
-        # A name the bag does not have (under either name) is checked as a
-        # ROS 2 name first, so that the error says what is wrong with it.
+        # A name the bag does not have is checked as a ROS 2 name first: the error says why.
         checked_topic_names(topic for topic in topics
                             if topic not in reader.topics and topic not in reader.renames)
         topics = list(dict.fromkeys(reader.topic_name(topic) for topic in topics))
@@ -140,9 +122,8 @@ def _play_once(reader, topics, publishers, rate, stop):
         if rate > 0:
             if start_bag is None:
                 start_bag = record.log_time_ns
-            delay = start_wall + (record.log_time_ns - start_bag) * 1e-9 / rate - time.monotonic()
-            if delay > 0:
-                _wait(stop, delay)
+            _wait(stop, start_wall + (record.log_time_ns - start_bag) * 1e-9 / rate
+                  - time.monotonic())
         if stop.is_set():
             break
         publishers[record.topic].publish(record.data)
@@ -159,45 +140,17 @@ def play(path: StrPath, *, rate: float = 1.0, topics: Optional[Sequence[str]] = 
     """
     Publish the messages of a bag until it ends (or forever with ``loop``) or Ctrl-C.
 
-    Parameters
-    ----------
-    path : str or os.PathLike
-        The bag: anything :func:`rotation_node.bag.reading.reader.open_bag` reads.
-    rate : float, optional
-        Speed factor on the recorded timing; 0 publishes as fast as the
-        subscribers acknowledge, after waiting for a subscriber on every topic.
-    topics : list of str, optional
-        Only these topics (names in the bag or their ROS 2 names); by
-        default every topic whose type is installed.
-    loop : bool, optional
-        Start again at the end.
-    delay : float, optional
-        Seconds to wait before the first message (after the subscribers, if
-        waiting for them), so that subscribers can match the new publishers.
-    wait_for_subscribers : bool, optional
-        Start only once every played topic has a subscriber (always at rate 0).
-    ros_args : list of str, optional
-        Command line passed to ``rclpy.init`` (``--ros-args ...``).
-    strict : bool, optional
-        Refuse an unfinished recording or a damaged MCAP file instead of
-        playing what it holds.
-    report : callable, optional
-        ``report(line)`` receives the input's notes (an unfinished recording,
-        a renamed topic, topics left out) before anything is published, then
-        what reading found could not be read.
+    ``rate`` is a speed factor on the recorded timing (0: as fast as the subscribers
+    acknowledge); ``topics`` (names in the bag or ROS 2 names) default to every installed
+    type's; ``delay`` seconds are waited before the first message, after the subscribers if
+    ``wait_for_subscribers`` (always at rate 0); ``ros_args`` go to ``rclpy.init``;
+    ``strict`` refuses an unfinished recording or a damaged MCAP file; ``report(line)``
+    receives the input's notes (topics left out too) before anything is published, then
+    what reading found it could not read. Return the messages published.
 
-    Returns
-    -------
-    int
-        Messages published.
-
-    Raises
-    ------
-    BagError
-        If the bag is unreadable, a topic is not in it or not a valid name, a
-        type is not installed, the rate is neither 0 nor in ``[MIN_RATE, inf)``
-        or the delay not in ``[0, MAX_DELAY_S]``; nothing is published then.
-
+    BagError, before anything is published, if the bag is unreadable, a topic is not in it
+    or not a valid name, a type is not installed, the rate is neither 0 nor in
+    ``[MIN_RATE, inf)``, or the delay not in ``[0, MAX_DELAY_S]``.
     """
     if not (rate == 0 or MIN_RATE <= rate < math.inf):
         raise BagError(f'rate must be 0 or a finite number >= {MIN_RATE:g}, got {rate}')

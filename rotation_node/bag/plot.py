@@ -1,27 +1,17 @@
 """
 Plot a topic of a bag over time as a PNG (``rotation_bag plot``).
 
-Meant for converted topics: a topic that ``rotation_bag convert`` wrote for
-the output ``NAME`` of an input topic ``T`` (``T/NAME``, ``T`` in the bag,
-the type the output's) is drawn as :func:`output_panels` draws that output
-of :data:`rotation_node.registry.OUTPUTS` (Euler angles in the units and
-sequence of the parameters the bag was converted with). A topic of any input
-type (Imu, Odometry, the Pose and Transform types, QuaternionStamped...) is
-drawn as its orientation, as Euler angles of the parameters' sequence, and its
-angular velocity where it has one; where the orientation is unknown (an Imu's
-``orientation_covariance[0] == -1``) or invalid (NaN, a zero quaternion) the
-plot has a gap. A type several input types share (Vector3Stamped) is read as
-``input_type`` of the parameters. The time axis is the header stamp where the
-message has one, else the log time, in seconds since the first message.
+An output topic ``T/NAME`` of ``convert`` is drawn as :func:`output_panels` draws ``NAME``
+(in the parameters' units and sequence); a plain input type's topic as its orientation in
+Euler angles (gaps where unknown or invalid) and its angular velocity if any. Time is the
+header stamp (else the log time) since the first message.
 """
 from __future__ import annotations
 
 import math
 from typing import Any, Callable, NamedTuple, Optional, Tuple, TYPE_CHECKING
 
-# A bare Figure renders PNG with the Agg backend and never touches pyplot's
-# global state or a display.
-from matplotlib.figure import Figure
+from matplotlib.figure import Figure   # Agg, without pyplot's global state or a display
 import numpy as np
 from rotation_node import conversions, registry
 from rotation_node.bag.convert import output_topic
@@ -37,18 +27,7 @@ if TYPE_CHECKING:
 
 
 class Panel(NamedTuple):
-    """
-    One panel of a ``rotation_bag plot`` figure.
-
-    Attributes
-    ----------
-    title, unit : str
-    labels : tuple of str
-        One per line drawn.
-    start : int
-        Index of the first number drawn in the message's numbers; ``len(labels)`` follow.
-
-    """
+    """One panel of a plot: a line per label, of the numbers from ``start`` on of a message."""
 
     title: str
     unit: str
@@ -61,10 +40,6 @@ _XYZW = ('x', 'y', 'z', 'w')
 _MATRIX = tuple(f'R{row}{col}' for row in (1, 2, 3) for col in (1, 2, 3))
 
 
-def _angle_unit(params):
-    return 'deg' if params.euler_degrees else 'rad'
-
-
 def _euler_panels(title, unit_suffix):
     def panels(params):
         kind = 'intrinsic' if conversions.parse_sequence(params.euler_sequence).intrinsic \
@@ -72,15 +47,15 @@ def _euler_panels(title, unit_suffix):
         labels = tuple(f'{ordinal} ({letter})' for ordinal, letter
                        in zip(('1st', '2nd', '3rd'), params.euler_sequence))
         return [Panel(f'{title}, sequence {params.euler_sequence} ({kind})',
-                      _angle_unit(params) + unit_suffix, labels)]
+                      ('deg' if params.euler_degrees else 'rad') + unit_suffix, labels)]
     return panels
 
 
 def _euler_covariance_panels(params):
-    return [*_euler_panels('Euler angles', '')(params),
-            Panel(f'Euler angle covariance, sequence {params.euler_sequence}',
-                  _angle_unit(params) + '^2',
-                  tuple(f'C{row}{col}' for row in (1, 2, 3) for col in (1, 2, 3)), 3)]
+    euler, = _euler_panels('Euler angles', '')(params)
+    return [euler, Panel(f'Euler angle covariance, sequence {params.euler_sequence}',
+                         euler.unit + '^2',
+                         tuple(f'C{row}{col}' for row in (1, 2, 3) for col in (1, 2, 3)), 3)]
 
 
 _OUTPUT_PANELS = {
@@ -100,41 +75,12 @@ _OUTPUT_PANELS = {
 
 
 def output_panels(name: str, params: NodeParameters) -> list:
-    """
-    Return how ``plot`` draws the output ``name`` of :data:`rotation_node.registry.OUTPUTS`.
-
-    Each :class:`Panel` indexes the numbers of the output's message
-    (``OutputMessage.numbers``), in the sequence, units and frame of ``params``.
-    """
+    """Return the :class:`Panel` of output ``name`` over its ``OutputMessage.numbers``."""
     return _OUTPUT_PANELS[name](params)
 
 
-def _converted_output(topics, topic):
-    """Return the output whose ``convert`` topic ``topic`` is (checked in the bag), or None."""
-    parent, _, name = topic.rpartition('/')
-    output = registry.OUTPUTS.get(name)
-    if (output is None or parent not in topics or topics[topic] != output.type_name
-            or output_topic(parent, name) != topic):
-        return None
-    return output
-
-
-def _input_type(type_name, params):
-    """Return the plain input type of a topic of ``type_name`` (``input_type`` if it is one)."""
-    candidates = [entry for entry in registry.INPUTS.values()
-                  if entry.type_name == type_name and entry.stream is None]
-    preferred = [entry for entry in candidates if entry.name == params.input_type]
-    return next(iter(preferred or candidates), None)
-
-
 def _input_orientation(entry, params):
-    """
-    ``euler(orientation) -> 3 angles`` of an input type's orientation form, NaN if unusable.
-
-    The Euler angles of the parameters' sequence and unit, computed by the
-    library's conversions as the node computes its ``euler`` output; NaN
-    where the orientation is unknown (None), not finite, or a zero quaternion.
-    """
+    """Return ``euler(orientation)`` as the ``euler`` output; NaN if unknown, non-finite, zero."""
     sequence, degrees = params.euler_sequence, params.euler_degrees
     unknown = (math.nan,) * 3
     if entry.orientation_form == registry.EULER:
@@ -157,12 +103,7 @@ def _input_orientation(entry, params):
 
 
 def _input_panels(entry, params):
-    """
-    ``(panels, numbers)`` of a topic of a plain input type.
-
-    Its orientation as Euler angles (the ``euler`` output's panel), then its
-    angular velocity where the type has one (NaN where unknown).
-    """
+    """Return ``(panels, numbers)``: orientation as Euler angles, angular velocity if any."""
     euler, read = _input_orientation(entry, params), entry.sample_reader()
     panels = [panel._replace(title=f'Orientation as {panel.title}')
               for panel in output_panels('euler', params)]
@@ -178,16 +119,16 @@ def _input_panels(entry, params):
 
 
 def _panels(topics, topic, params):
-    """
-    Return what to draw for a topic: ``(panels, numbers)``.
-
-    ``panels`` are :class:`Panel`; ``numbers(msg)`` gives the
-    numbers of one message that they index.
-    """
-    output = _converted_output(topics, topic)
-    if output is not None:
+    """Return ``(panels, numbers(msg))`` of a topic: the numbers of a message they index."""
+    parent, _, name = topic.rpartition('/')   # an output convert wrote (checked in the bag)?
+    output = registry.OUTPUTS.get(name)
+    if (output is not None and parent in topics and topics[topic] == output.type_name
+            and output_topic(parent, name) == topic):
         return output_panels(output.name, params), output.message.numbers
-    entry = _input_type(topics[topic], params)
+    plain = [entry for entry in registry.INPUTS.values()
+             if entry.type_name == topics[topic] and entry.stream is None]
+    preferred = [entry for entry in plain if entry.name == params.input_type]
+    entry = next(iter(preferred or plain), None)
     if entry is not None:
         return _input_panels(entry, params)
     plottable = sorted({e.type_name for e in registry.INPUTS.values() if e.stream is None})
@@ -199,50 +140,17 @@ def _panels(topics, topic, params):
                    f'rotation_bag convert writes and topics of {", ".join(plottable)}')
 
 
-def _time_ns(record, msg):
-    header = getattr(msg, 'header', None)
-    if header is None:
-        return record.log_time_ns
-    return header_stamp_ns(header)
-
-
 def plot_topic(bag_path: StrPath, topic: str, output_path: StrPath, *,
                params: Optional[NodeParameters] = None, overwrite: bool = False,
                strict: bool = False, report: Optional[Callable[[str], None]] = None) -> int:
     """
-    Draw ``topic`` of ``bag_path`` over time into the PNG ``output_path``.
+    Draw ``topic`` of ``bag_path`` over time into the PNG ``output_path``; return the messages.
 
-    Parameters
-    ----------
-    bag_path : str or os.PathLike
-        The bag to read.
-    topic : str
-        Its name in the bag or its ROS 2 name.
-    output_path : str or os.PathLike
-        Written to a temporary file and renamed, so never half-written.
-    params : rotation_node.parameters.NodeParameters, optional
-        The parameters the bag was converted with: Euler sequence, units and
-        frame for the labels. The node's defaults if omitted.
-    overwrite : bool, optional
-        Replace an existing ``output_path``.
-    strict : bool, optional
-        Refuse an unfinished recording or a damaged MCAP file instead of
-        plotting what it holds.
-    report : callable, optional
-        ``report(line)`` receives the input's notes (an unfinished recording,
-        a renamed topic), then what reading found could not be read.
-
-    Returns
-    -------
-    int
-        The number of messages plotted.
-
-    Raises
-    ------
-    BagError
-        If the bag is unreadable, the topic is not in it or has no messages,
-        or its type cannot be plotted.
-
+    ``topic`` is its name in the bag or its ROS 2 name; ``params`` those the bag was converted
+    with (the node's defaults if omitted); the PNG appears whole or not at all, replacing one
+    only with ``overwrite``; ``strict`` refuses an unfinished recording or a damaged MCAP file;
+    ``report(line)`` receives the input's notes. BagError if the bag is unreadable, the topic
+    is not in it or has no messages, or its type cannot be plotted.
     """
     params = NodeParameters() if params is None else params
     with open_bag(bag_path, strict=strict) as reader, \
@@ -261,32 +169,10 @@ def plot_topic(bag_path: StrPath, topic: str, output_path: StrPath, *,
 def plot_series(reader: Any, topic: str,
                 params: NodeParameters) -> Tuple[np.ndarray, list, list]:
     """
-    Return what ``plot`` draws for a topic: ``(times_ns, panels, values)``.
+    Return what ``plot`` draws for a topic of an open bag: ``(times_ns, panels, values)``.
 
-    Parameters
-    ----------
-    reader : rotation_node.bag.reading.reader.InputBag
-        The open bag.
-    topic : str
-        Its name in the bag or its ROS 2 name.
-    params : rotation_node.parameters.NodeParameters
-        Euler sequence and units (of the plotted Euler angles, and for reading
-        Euler-angle inputs).
-
-    Returns
-    -------
-    times_ns : numpy.ndarray of int64
-        Header stamp (log time for messages without header) of each message.
-    panels : list of Panel
-    values : list of numpy.ndarray
-        Per panel, shape ``(messages, len(panel.labels))``; NaN where a value
-        is unknown or invalid (left as a gap in the plot).
-
-    Raises
-    ------
-    BagError
-        If the topic is not in the bag, has no messages or cannot be plotted.
-
+    ``times_ns``: int64 stamps; ``values``: per panel, ``(messages, len(panel.labels))``, NaN
+    where unknown or invalid. BagError if the topic is missing, empty or cannot be plotted.
     """
     topic = reader.topic_name(topic)
     records = reader.messages([topic])
@@ -298,7 +184,8 @@ def plot_series(reader: Any, topic: str,
             msg = record.message()
         except BagError as error:   # a message that cannot be decoded names no file
             raise reader.naming_this_bag(error) from None
-        times.append(_time_ns(record, msg))
+        header = getattr(msg, 'header', None)
+        times.append(record.log_time_ns if header is None else header_stamp_ns(header))
         rows.append(numbers(msg))
     if not times:
         raise BagError(f'topic {topic} in {reader.path} has no messages to plot')
@@ -308,7 +195,7 @@ def plot_series(reader: Any, topic: str,
 
 
 def _draw(topic, times_ns, values, panels):
-    """Return a figure with one panel per entry of ``panels``, time in seconds since the first."""
+    """Return a figure of one panel per :class:`Panel`, time in seconds since the first."""
     seconds = (times_ns - times_ns[0]) * 1e-9
     figure = Figure(figsize=(10, 3.2 * len(panels) + 0.6), layout='constrained')
     axes = figure.subplots(len(panels), 1, sharex=True, squeeze=False)

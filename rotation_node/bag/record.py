@@ -1,24 +1,17 @@
 """
 Record live topics into an MCAP bag (``rotation_bag record``).
 
-Types are discovered from the ROS graph: a topic is subscribed as soon as it
-has a publisher, with a QoS every publisher is compatible with, and its
-messages are stored as received (``raw=True``: CDR bytes, never deserialised).
-Log time is the node clock at reception, publish time the DDS source
-timestamp, as rosbag2 records them.
-
-The bag is crash-safe (see :mod:`rotation_node.bag.writing.writer`): it is written to
-``<output>.part``, flushed to disk at least once a second, and renamed to the
-output when recording stops; after a SIGKILL or a power loss the ``.part``
-holds everything up to the last flush. When the disk fills, recording stops
-and the bag is closed with what fitted.
+A topic is subscribed once it has a publisher, with a QoS every publisher is compatible
+with; messages are stored as received, with the node clock at reception as log time and the
+DDS source timestamp as publish time, as rosbag2 does. The bag is crash-safe and closed
+with what fitted when the disk fills.
 """
 from __future__ import annotations
 
 import functools
 import math
 import time
-from typing import Any, Dict, Iterable, List, Optional, Sequence, TYPE_CHECKING
+from typing import Dict, Iterable, List, Optional, Sequence, TYPE_CHECKING
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -37,49 +30,29 @@ if TYPE_CHECKING:
 
 NODE_NAME = 'rotation_bag_record'
 DISCOVERY_PERIOD_S = 0.1
-#: Longest time spent writing what was already received, once stopped.
-DRAIN_LIMIT_S = 0.5
+DRAIN_LIMIT_S = 0.5   # longest time spent writing what was received, once stopped
 _SPIN_PERIOD_S = 0.05
 
 
 class BagRecorder(Node):
     """
-    A node that subscribes to topics as they appear and writes them to a bag.
+    A node that subscribes to topics as they appear and writes them to ``writer``.
 
-    Parameters
-    ----------
-    writer : BagWriter
-        Receives every message; the caller closes it.
-    topics : iterable of str
-        Topic names; relative names are resolved in the node's namespace and
-        ``--ros-args -r`` remappings apply.
-    **kwargs
-        Passed to ``rclpy.node.Node`` (e.g. ``context``).
-
-    Attributes
-    ----------
-    counts : dict
-        ``{topic: messages written}`` for the subscribed topics.
-
+    Relative names are resolved in the node's namespace, remappings apply; ``counts`` is
+    ``{topic: messages written}`` of the subscribed topics, ``pending_topics`` the others.
     """
 
-    def __init__(self, writer: BagWriter, topics: Iterable[str], *, node_name: str = NODE_NAME,
-                 **kwargs: Any) -> None:
-        super().__init__(node_name, **kwargs)
+    def __init__(self, writer: BagWriter, topics: Iterable[str]) -> None:
+        super().__init__(NODE_NAME)
         self._writer = writer
-        self._pending = [self.resolve_topic_name(topic) for topic in topics]
+        self.pending_topics = [self.resolve_topic_name(topic) for topic in topics]
         self.counts: Dict[str, int] = {}
         self._discovery = self.create_timer(DISCOVERY_PERIOD_S, self._discover)
         self._discover()
 
-    @property
-    def pending_topics(self) -> List[str]:
-        """Return the requested topics that have no publisher yet."""
-        return list(self._pending)
-
     def _discover(self):
         types = dict(self.get_topic_names_and_types())
-        for topic in [t for t in self._pending if t in types]:
+        for topic in [t for t in self.pending_topics if t in types]:
             offered = [info.qos_profile for info in self.get_publishers_info_by_topic(topic)]
             if not offered:
                 continue   # only subscribers so far: wait for a publisher's QoS
@@ -87,15 +60,14 @@ class BagRecorder(Node):
             if len(types[topic]) > 1:
                 self.get_logger().warning(
                     f'{topic} has several types {types[topic]}; recording {type_name}')
-            msg_class = message_class(type_name)
             self._writer.add_topic(TopicMetadata(topic, type_name, qos_profiles_yaml(offered)))
             self.create_subscription(
-                msg_class, topic, functools.partial(self._write, topic, type_name),
+                message_class(type_name), topic, functools.partial(self._write, topic, type_name),
                 recording_qos(offered), raw=True)
             self.counts[topic] = 0
-            self._pending.remove(topic)
+            self.pending_topics.remove(topic)
             self.get_logger().info(f'recording {topic} ({type_name})')
-        if not self._pending:
+        if not self.pending_topics:
             self._discovery.cancel()
 
     def _write(self, topic, type_name, data, info):
@@ -126,42 +98,14 @@ def record(output: StrPath, topics: Sequence[str], *, duration: Optional[float] 
            overwrite: bool = False, compression: str = DEFAULT_COMPRESSION,
            ros_args: Optional[List[str]] = None) -> Dict[str, int]:
     """
-    Record ``topics`` into ``output`` until Ctrl-C, SIGTERM, ``duration`` or a full disk.
+    Record ``topics`` into ``output`` until Ctrl-C, SIGTERM, ``duration`` s or a full disk.
 
-    The bag is closed cleanly on every one of these, so it is always valid;
-    messages already received by then are written first (for at most
-    ``DRAIN_LIMIT_S``).
-
-    Parameters
-    ----------
-    output : str or os.PathLike
-        The bag: a rosbag2 directory, or a single MCAP file if it ends in ``.mcap``.
-    topics : list of str
-        The topics to record.
-    duration : float, optional
-        Seconds to record; until stopped by a signal by default.
-    overwrite : bool, optional
-        Replace an existing ``output``.
-    compression : str, optional
-        Chunk compression, ``'zstd'`` (default, as rosbag2), ``'lz4'`` or ``'none'``.
-    ros_args : list of str, optional
-        Command line passed to ``rclpy.init`` (``--ros-args ...``).
-
-    Returns
-    -------
-    dict
-        ``{topic: messages recorded}``; topics that never appeared are absent.
-
-    Raises
-    ------
-    DiskFullError
-        If the disk filled: the bag was closed with the messages that fitted
-        (``kept``); recording stopped.
-    BagError
-        If ``output`` exists (without ``overwrite``), ``duration`` is not
-        positive or a topic name is invalid, before anything is written.
-        Should writing fail otherwise, what was flushed stays in ``<output>.part``.
-
+    The bag is closed cleanly on each, after writing what was received by then (for at most
+    ``DRAIN_LIMIT_S``); ``output``, ``overwrite`` and ``compression`` are ``BagWriter``'s,
+    ``ros_args`` go to ``rclpy.init``. Return ``{topic: messages recorded}`` (never-seen
+    topics absent). DiskFullError when the disk filled (the bag keeps what fitted); BagError
+    before anything is written for an existing output, a bad duration or topic name (should
+    writing fail later, what was flushed stays in ``<output>.part``).
     """
     if duration is not None and not (0 < duration < math.inf):
         raise BagError(f'duration must be a finite number of seconds > 0, got {duration}')

@@ -1,10 +1,8 @@
 """
-What every bag format is read into and written from: topics and messages.
+What every bag format is read into and written from: :class:`TopicMetadata`, :class:`BagMessage`.
 
-:class:`TopicMetadata` is what a bag records about one topic, :class:`BagMessage`
-one message as CDR bytes with its times. The readers of ``reading`` yield them
-and the writer of ``writing`` takes them, so both import this module and
-neither imports the other.
+The readers of ``reading`` yield them and the writer of ``writing`` takes them, so both
+import this module and neither imports the other.
 """
 from __future__ import annotations
 
@@ -15,61 +13,24 @@ from typing import Any, Callable, Optional, Tuple, Type
 from rotation_node.errors import BagError
 from rotation_node.wire.message_types import message_class
 
-#: How ROS 2 messages are serialized in a bag.
-MESSAGE_ENCODING = 'cdr'
+MESSAGE_ENCODING = 'cdr'   # how ROS 2 messages are serialized in a bag
 
 
 @dataclasses.dataclass(frozen=True)
 class TopicMetadata:
-    """
-    What a bag records about one topic.
+    """What a bag records about one topic (None: the installed type's definition, hash)."""
 
-    Attributes
-    ----------
-    name : str
-        The topic, e.g. ``'/imu'``.
-    type_name : str
-        ``'pkg/msg/Type'``.
-    offered_qos_profiles : str
-        The publishers' QoS profiles as rosbag2's YAML (``'[]'`` if unknown).
-    definition : str or None
-        The schema text; None means the installed definition of ``type_name``.
-    definition_encoding : str
-        ``'ros2msg'`` or ``'ros2idl'``.
-    type_hash : str or None
-        REP-2011 hash; None means the installed type's hash.
-    serialization_format : str
-        How the messages are serialized: ``'cdr'`` for ROS 2 (other values
-        only in bags of other recorders, whose topics are copied as they are).
-
-    """
-
-    name: str
-    type_name: str
-    offered_qos_profiles: str = '[]'
-    definition: Optional[str] = None
-    definition_encoding: str = 'ros2msg'
-    type_hash: Optional[str] = None
-    serialization_format: str = MESSAGE_ENCODING
+    name: str                                  # '/imu'
+    type_name: str                             # 'pkg/msg/Type'
+    offered_qos_profiles: str = '[]'           # rosbag2's YAML of the publishers' QoS
+    definition: Optional[str] = None           # the schema text
+    definition_encoding: str = 'ros2msg'       # or 'ros2idl'
+    type_hash: Optional[str] = None            # REP-2011
+    serialization_format: str = MESSAGE_ENCODING   # other recorders' bags: copied as is
 
 
 class BagMessage:
-    """
-    One message read from a bag.
-
-    Attributes
-    ----------
-    topic : str
-    type_name : str
-        ``'pkg/msg/Type'``.
-    data : bytes
-        The CDR-serialised message.
-    log_time_ns : int
-        Receive time, nanoseconds.
-    publish_time_ns : int
-        Publish time, nanoseconds.
-
-    """
+    """One message read from a bag: its CDR ``data``, receive and publish times in ns."""
 
     __slots__ = ('topic', 'type_name', 'data', 'log_time_ns', 'publish_time_ns')
 
@@ -83,28 +44,11 @@ class BagMessage:
 
     def message(self, decode: Optional[Callable[[bytes], Any]] = None) -> Any:
         """
-        Deserialise the message.
+        Return the message deserialised by rclpy, or by ``decode(data)`` (a cdr codec's).
 
-        Parameters
-        ----------
-        decode : callable, optional
-            ``decode(data) -> message`` to use instead of rclpy, e.g. the
-            ``decode`` of a :func:`rotation_node.wire.cdr.fixed_layout_codec`.
-
-        Returns
-        -------
-        object
-            An instance of the rclpy message class of ``type_name``, or what
-            ``decode`` returns.
-
-        Raises
-        ------
-        BagError
-            If the type is not installed or the bytes are not a valid message.
-
+        BagError if the type is not installed or the bytes are not a valid message.
         """
-        # a decode's own error (rotation_node.wire.cdr)
-        errors: Tuple[Type[BaseException], ...] = (BagError,)
+        errors: Tuple[Type[BaseException], ...] = (BagError,)   # a cdr codec's own
         if decode is None:   # rclpy, imported only here: reading bags does not need it
             from rclpy.serialization import deserialize_message
             from rotation_node.rclpy_private import RMWError

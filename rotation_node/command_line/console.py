@@ -1,30 +1,20 @@
 """
 Entry points of the console scripts: a Ctrl-C while a program loads is one line too.
 
-Loading numpy, numba and rclpy takes a second or more. Each script starts
-here instead, with nothing heavy imported: the program's module is imported
-while SIGINT and SIGTERM only set a flag (:class:`StopSignal`; an exception
-raised from a handler in the middle of an import could be swallowed or leave
-a traceback). If one came, the program says so on one line and exits with
-130 (143 for SIGTERM) instead of running its ``main``; the node exits with 0,
-as ``ros2 launch`` and systemd expect of a node asked to stop, and runs its
-``main`` under the same flag, so that no moment of its start-up is left to
-Python's default handlers.
+The program's module (numpy, numba, rclpy: a second or more) is imported while SIGINT and
+SIGTERM only set a flag (raised inside an import, an exception could be swallowed). If one
+came, the program says so and exits 130 or 143; a node exits 0 (as ``ros2 launch`` and
+systemd expect) and runs its ``main`` under the same flag.
 """
 import importlib
 import sys
 
 from rotation_node.command_line.stop_signal import exit_status, signal_name, StopSignal
 
-_PROGRAMS = {
-    'rotation_node': 'rotation_node.node.program',
-    'rotation_bag': 'rotation_node.bag.cli',
-    'rotation_scene': 'rotation_node.scene.cli',
-}
+_PROGRAMS = {'rotation_node': 'rotation_node.node.program',
+             'rotation_bag': 'rotation_node.bag.cli', 'rotation_scene': 'rotation_node.scene.cli'}
 
-#: Programs whose ``main(stop_signal=...)`` runs under the loading's StopSignal and that
-#: exit with 0 after a stop request (a node); the others exit with 128 + the signal.
-_NODES = frozenset({'rotation_node'})
+_NODES = frozenset({'rotation_node'})   # main(stop_signal=...), exit 0 when asked to stop
 
 
 def _run(program):

@@ -10,24 +10,13 @@ _WIDTH = 30
 
 class ProgressBar:
     """
-    ``[#########.....]  61%  122000/200000 messages  3.1 s`` redrawn in place.
+    ``label[#########.....]  61%  122000/200000 messages  3.1 s``, redrawn in place.
 
-    Drawn only when ``stream`` is a terminal, so pipes, logs and CI output stay
-    clean. Use as a context manager, call ``update()`` once per item.
-
-    Parameters
-    ----------
-    total : int
-        Number of items expected (the bar is clipped at 100 %).
-    stream : file, optional
-        Where to draw; ``sys.stderr`` by default.
-    label : str, optional
-        Printed before the bar.
-
+    Drawn only on a terminal (stderr by default), so pipes, logs and CI stay clean; clipped
+    at ``total``. A context manager; ``update()`` once per item.
     """
 
-    def __init__(self, total: int, *, stream: Optional[TextIO] = None,
-                 label: str = '') -> None:
+    def __init__(self, total: int, *, stream: Optional[TextIO] = None, label: str = '') -> None:
         self.total = max(int(total), 1)
         self.stream = sys.stderr if stream is None else stream
         self.label = label

@@ -1,32 +1,17 @@
 """
-What Ctrl-C (SIGINT) and SIGTERM do in the command-line tools.
+What Ctrl-C (SIGINT) and SIGTERM do in the command-line tools: set a flag, never raise.
 
-A signal handler never raises. Python runs a handler between any two
-bytecodes of the main thread, also inside a ``__del__`` method, a generator
-being closed or a library's ``except`` clause: an exception raised there can
-be printed and swallowed ("Exception ignored in ..."), or turned into another
-error (numpy reports one as a ``TypeError`` from a comparison), and the
-program then goes on or dies with a traceback. So a signal only sets a flag,
-and the programs look at it where stopping is safe:
-
-- ``record`` and ``play`` poll a :class:`StopSignal` between messages, close
-  the bag cleanly and exit 0;
-- ``convert``, ``plot`` and ``rotation_scene`` run under one (their ``main``;
-  a ``--jobs`` worker process under :func:`stop_at_checkpoints`) and call
-  :func:`raise_if_stopped` between blocks of messages. It raises
-  ``KeyboardInterrupt`` for SIGINT or :class:`Terminated` (a
-  ``KeyboardInterrupt``) for SIGTERM, the clean-up of the unfinished output
-  runs, and the tools exit with ``128 + signal number`` (130, 143). A signal
-  that arrives after the last block is noted and ignored: the output is
-  complete, the program finishes and exits 0.
+A handler runs between any two bytecodes (in a ``__del__``, a closing generator, a
+library's ``except``), where an exception can be swallowed or turned into another error.
+``record`` and ``play`` poll a :class:`StopSignal` and close the bag (exit 0); the other
+tools call :func:`raise_if_stopped` between blocks: ``KeyboardInterrupt`` (``Terminated``
+for SIGTERM) runs the clean-up, exit 130 or 143. A signal after the last block is ignored.
 """
 from __future__ import annotations
 
 import signal
 import threading
 from typing import Any, Dict, List, Optional
-
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 class Terminated(KeyboardInterrupt):
@@ -37,21 +22,12 @@ class StopSignal:
     """
     Context manager: while active, SIGINT and SIGTERM set ``event`` instead of raising.
 
-    The previous handlers are restored on exit. Use it in the main thread (Python
-    delivers signals there only) and initialise rclpy without its own handlers
-    (``signal_handler_options=SignalHandlerOptions.NO``).
-
-    Attributes
-    ----------
-    event : threading.Event
-        Set once a stop signal arrived; ``event.wait(timeout)`` sleeps until
-        then, so waits end at once on Ctrl-C.
-    signal_number : int or None
-        The first signal that arrived.
-
+    ``event.wait(timeout)`` ends at once on a signal, ``signal_number`` is the first one;
+    the previous handlers come back on exit. For the main thread (where Python delivers
+    signals), with rclpy's handlers off (``SignalHandlerOptions.NO``).
     """
 
-    def __init__(self, signals: tuple = STOP_SIGNALS) -> None:
+    def __init__(self, signals: tuple = (signal.SIGINT, signal.SIGTERM)) -> None:
         self.event = threading.Event()
         self.signal_number: Optional[int] = None
         self._signals = signals
@@ -87,14 +63,8 @@ class StopSignal:
 _active: List[StopSignal] = []   # the StopSignals in force, the innermost last
 
 
-def stop_at_checkpoints(signals: tuple = STOP_SIGNALS) -> StopSignal:
-    """
-    Make ``signals`` set a flag for the rest of the process; return its :class:`StopSignal`.
-
-    For a worker process: its work then stops where it calls
-    :func:`raise_if_stopped`, and a signal between two tasks is kept for
-    the next one's first check.
-    """
+def stop_at_checkpoints(signals: tuple) -> StopSignal:
+    """Make ``signals`` set a flag for the rest of a worker process; return its StopSignal."""
     return StopSignal(signals).__enter__()
 
 
@@ -102,9 +72,7 @@ def raise_if_stopped() -> None:
     """
     Raise ``KeyboardInterrupt`` or :class:`Terminated` if a stop signal arrived; else nothing.
 
-    Call it where a long computation may stop: between blocks of messages,
-    before a commit. Without a :class:`StopSignal` in force (a library caller)
-    it does nothing, and Ctrl-C behaves as Python's default.
+    Without a :class:`StopSignal` in force (a library caller) Ctrl-C is Python's default.
     """
     if _active:
         interrupt = _active[-1].interrupt()

@@ -1,10 +1,6 @@
 """
-Writing bags and result files that survive crashes and appear whole.
+Bags and result files written crash-safe and appearing whole.
 
-``writer`` writes a bag the way rosbag2 does (``BagWriter``: a rosbag2
-directory or one ``.mcap`` file, compression, a full disk), ``mcap_writer``
-the MCAP chunks it is made of; ``part_output`` keeps a bag under an exclusive
-``<output>.part`` until it is complete (a crash leaves it for recovery), and
-``atomic_file`` writes other result files (JSON, CSV, PNG) through a hidden
-temporary file renamed into place.
+``writer`` (``BagWriter``) on ``mcap_writer``'s chunks and ``part_output``'s ``.part``;
+``atomic_file`` for JSON, CSV and PNG outputs.
 """

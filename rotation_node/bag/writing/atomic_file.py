@@ -1,19 +1,13 @@
 """
-Output files that appear complete or not at all.
+Output files (JSON, CSV, PNG) that appear complete or not at all.
 
-The data goes to a hidden temporary file in the destination's directory, which
-is renamed to the destination only when writing finished cleanly; on failure
-(or Ctrl-C, SIGTERM) it is removed. The rename is atomic: without
-``overwrite`` it fails if the destination appeared meanwhile
-(``RENAME_NOREPLACE``), with it the destination is replaced. A reader of the
-destination therefore never sees a half-written file, and an existing file is
-replaced only when asked to.
-
-(Bags are written differently, by :mod:`rotation_node.bag.writing.part_output`: under a
-visible ``.part`` name that a crash leaves for recovery.)
+Written to a hidden temporary file beside the destination and renamed to it once complete
+(atomically: ``RENAME_NOREPLACE`` without ``overwrite``); removed on failure or a signal.
+Bags differ: :mod:`~rotation_node.bag.writing.part_output` leaves a crash's ``.part``.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import secrets
 from typing import Optional, TYPE_CHECKING
@@ -29,25 +23,11 @@ if TYPE_CHECKING:
 
 class AtomicFile:
     """
-    A binary file written to a temporary name and renamed on commit.
+    A binary file (``stream``) written to a temporary name and renamed on ``commit()``.
 
-    Use as a context manager (commit on success, discard on exception) or call
-    ``commit()`` / ``discard()`` explicitly.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        The destination.
-    overwrite : bool, optional
-        Replace an existing destination. Without it an existing destination is
-        an error, raised here, before anything is written.
-
-    Raises
-    ------
-    BagError
-        If the destination exists (and ``overwrite`` is false), is a directory,
-        or its directory cannot be written.
-
+    As a context manager it commits on success and discards on an exception. BagError,
+    before anything is written, if the destination is a directory, exists (without
+    ``overwrite``) or its directory cannot be written.
     """
 
     def __init__(self, path: StrPath, *, overwrite: bool = False) -> None:
@@ -96,10 +76,8 @@ class AtomicFile:
     def discard(self) -> None:
         """Close and remove the temporary file; the destination is untouched."""
         self.stream.close()
-        try:
+        with contextlib.suppress(FileNotFoundError):
             os.unlink(self.temporary_path)
-        except FileNotFoundError:
-            pass
 
     def __enter__(self) -> AtomicFile:
         return self

@@ -1,27 +1,10 @@
 """
-An MCAP writer that writes a whole chunk of messages at once.
+An MCAP writer that writes a whole chunk of messages at once, as ``mcap.writer.Writer`` would.
 
-The ``mcap`` library's ``Writer.add_message`` builds a ``Message`` record
-object, updates the statistics, writes the record field by field into the
-chunk and appends a message index entry, for every message: about 3.7 us per
-message on an AMD EPYC (2 cores; CPU time), against about 0.2 us per message
-for assembling a whole chunk here. Writing with the library was 60 % of
-``rotation_bag convert``'s time (8 of 13.5 us per input message, two
-messages written for each); with this writer it is about 2 us
-(``benchmarks/bench_bag_convert.py``, "where the time goes").
-
-:class:`ChunkWriter` takes the messages of a chunk together
-(:meth:`ChunkWriter.write_chunk`): the 31-byte Message record headers
-(opcode, length, channel, sequence, log time, publish time) are one numpy
-array, the records one ``bytes.join`` of headers and data, and the message
-indexes (log time, offset in the uncompressed chunk, per channel) are numpy
-arrays too. Everything that is not per message (header, schemas, channels,
-chunk, chunk index, metadata, statistics, summary, footer) is written with the
-library's own record classes, in the library's layout: given the same calls,
-the file is the one ``mcap.writer.Writer`` writes, byte for byte (schemas and
-channels go into the next chunk that holds a message, the summary repeats
-schemas and channels and holds statistics, chunk and metadata indexes and the
-summary offsets, its CRC as the library computes it).
+The library's ``add_message`` costs about 3.7 us a message (60 % of ``convert``'s time); a
+chunk assembled here with numpy (record headers, message indexes) about 0.2 us. The rest is
+written with the library's record classes in its layout: the same calls give its file,
+byte for byte.
 """
 from __future__ import annotations
 
@@ -38,10 +21,8 @@ import numpy as np
 from rotation_node.bag.mcap_layout import (
     MCAP_MAGIC, MESSAGE_FIELDS, MESSAGE_HEADER, MESSAGE_RECORD_OVERHEAD)
 
-#: Bytes of a MessageIndex record besides its 16-byte entries (opcode, length, channel, size).
-MESSAGE_INDEX_OVERHEAD = 1 + 8 + 2 + 4
-#: Bytes per message in a MessageIndex record (log time, offset).
-MESSAGE_INDEX_ENTRY = 16
+MESSAGE_INDEX_OVERHEAD = 1 + 8 + 2 + 4   # a MessageIndex's opcode, length, channel, size
+MESSAGE_INDEX_ENTRY = 16                 # and per message: log time, offset
 
 _MESSAGE_INDEX_HEADER = struct.Struct('<BQHI')
 _FOOTER_PREFIX = struct.Struct('<BQQQ')
@@ -62,26 +43,13 @@ def _compressor(compression: str):
 
 class ChunkWriter:
     """
-    Write an MCAP file chunk by chunk, each chunk's messages given at once.
+    Write an MCAP file chunk by chunk, indexed and with CRCs as ``mcap.writer.Writer``.
 
-    Indexed (message indexes, chunk indexes, statistics, summary offsets) and
-    with CRCs as ``mcap.writer.Writer`` with its defaults; the file it writes
-    is the library's for the same schemas, channels and messages, with each
-    ``write_chunk`` where the library's writer was flushed.
-
-    Parameters
-    ----------
-    stream : binary file
-        Where to write; ``tell()`` must give the position (a file opened for writing).
-    compression : str, optional
-        Chunk compression: ``'zstd'`` (default), ``'lz4'`` or ``'none'``, the
-        names of the library's ``mcap.writer.CompressionType`` (not imported:
-        that module reads the installed package metadata, tens of milliseconds).
-
+    ``compression``: ``'zstd'``, ``'lz4'`` or ``'none'`` (the library's ``CompressionType``
+    names; that module is not imported: it reads package metadata, tens of milliseconds).
     """
 
-    def __init__(self, stream: IO[bytes],
-                 compression: str = 'zstd') -> None:
+    def __init__(self, stream: IO[bytes], compression: str = 'zstd') -> None:
         self._stream = stream
         self._compression, self._compress = _compressor(compression)
         self._records = RecordBuilder()     # schemas and channels for the next chunk
@@ -89,20 +57,10 @@ class ChunkWriter:
         self._channels: Dict[int, Channel] = {}
         self._chunk_indexes: List[ChunkIndex] = []
         self._metadata_indexes: List[MetadataIndex] = []
-        self._statistics = Statistics(
+        self.statistics = Statistics(   # of what is written so far (the summary's)
             attachment_count=0, channel_count=0, channel_message_counts={}, chunk_count=0,
             message_count=0, message_end_time=0, message_start_time=0, metadata_count=0,
             schema_count=0)
-
-    @property
-    def statistics(self) -> Statistics:
-        """Return the Statistics record of what is written so far (the summary's)."""
-        return self._statistics
-
-    @property
-    def chunk_indexes(self) -> List[ChunkIndex]:
-        """Return the ChunkIndex records of the chunks written so far."""
-        return self._chunk_indexes
 
     def start(self, profile: str = '', library: str = '') -> None:
         """Write the magic and the Header record."""
@@ -115,7 +73,7 @@ class ChunkWriter:
         schema_id = len(self._schemas) + 1
         schema = Schema(id=schema_id, data=data, encoding=encoding, name=name)
         self._schemas[schema_id] = schema
-        self._statistics.schema_count += 1
+        self.statistics.schema_count += 1
         schema.write(self._records)
         return schema_id
 
@@ -126,27 +84,17 @@ class ChunkWriter:
         channel = Channel(id=channel_id, topic=topic, message_encoding=message_encoding,
                           schema_id=schema_id, metadata=metadata)
         self._channels[channel_id] = channel
-        self._statistics.channel_count += 1
+        self.statistics.channel_count += 1
         channel.write(self._records)
         return channel_id
 
     def write_chunk(self, channel_ids: Sequence[int], log_times: Sequence[int],
                     publish_times: Sequence[int], datas: Sequence[Any]) -> None:
         """
-        Write one chunk of messages (and its message indexes), in the order given.
+        Write one chunk of messages and its message indexes; nothing for no messages.
 
-        The chunk starts with the schemas and channels registered since the
-        last chunk. Nothing is written for no messages.
-
-        Parameters
-        ----------
-        channel_ids : sequence of int
-            Each message's channel, as ``register_channel`` returned it.
-        log_times, publish_times : sequence of int
-            Nanoseconds, in [0, 2**64).
-        datas : sequence of bytes-like
-            The messages' serialised data.
-
+        The chunk starts with the schemas and channels registered since the last one; times
+        are nanoseconds in [0, 2**64), ``channel_ids`` as ``register_channel`` returned them.
         """
         count = len(datas)
         if not count:
@@ -213,7 +161,7 @@ class ChunkWriter:
             compression=self._compression, compressed_size=len(compressed),
             uncompressed_size=len(chunk_data)))
 
-        statistics = self._statistics
+        statistics = self.statistics
         message_counts = statistics.channel_message_counts
         per_channel = np.bincount(channels, minlength=0)
         for channel_id in order:
@@ -236,7 +184,7 @@ class ChunkWriter:
         record = builder.end()
         self._metadata_indexes.append(
             MetadataIndex(offset=self._stream.tell(), length=len(record), name=name))
-        self._statistics.metadata_count += 1
+        self.statistics.metadata_count += 1
         self._stream.write(record)
 
     def finish(self) -> None:
@@ -258,7 +206,7 @@ class ChunkWriter:
 
         group(Opcode.SCHEMA, self._schemas.values())
         group(Opcode.CHANNEL, self._channels.values())
-        group(Opcode.STATISTICS, [self._statistics])
+        group(Opcode.STATISTICS, [self.statistics])
         group(Opcode.CHUNK_INDEX, self._chunk_indexes)
         group(Opcode.ATTACHMENT_INDEX, [])
         group(Opcode.METADATA_INDEX, self._metadata_indexes)

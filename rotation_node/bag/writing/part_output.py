@@ -1,25 +1,14 @@
 """
-Bag outputs that are created exclusively, survive crashes and appear whole.
+Bag outputs that are created exclusively, survive crashes and appear whole (docs/recording.md).
 
-A bag is written under an obviously named ``<output>.part`` beside the
-requested output, created with ``O_EXCL`` (a file) or ``mkdir`` (a rosbag2
-directory), so two writers of the same output never share it: the second one
-fails at once. The storage file is flushed to disk (``fdatasync``) in small
-chunks, so after a crash (SIGKILL, power loss) the ``.part`` holds everything
-up to the last flush and can be read as an unfinished recording. When the bag
-is complete it is renamed to the output: with ``renameat2(RENAME_NOREPLACE)``
-when the output must not exist (atomic: of two writers one fails), with
-``rename`` or ``renameat2(RENAME_EXCHANGE)`` when it may be replaced (atomic:
-a reader sees the old bag or the new one, never a mix).
-
-Disk space for closing the bag (the MCAP summary and ``metadata.yaml``) is
-reserved beyond the end of the storage file (``fallocate`` with
-``FALLOC_FL_KEEP_SIZE``) before each chunk is written: when the disk fills,
-the reservation fails before any write does, and the bag can still be closed
-as a valid bag holding every chunk written so far.
+``<output>.part`` is created with ``O_EXCL`` or ``mkdir`` (a second writer fails at once)
+and renamed to the output when complete, atomically (``RENAME_NOREPLACE``, or ``rename``
+and ``RENAME_EXCHANGE`` to replace). The space to close the bag is reserved beyond the end
+of the file (``fallocate``), so a full disk fails the reservation before any write does.
 """
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import errno
 import os
@@ -41,15 +30,11 @@ _RENAME_EXCHANGE = 2
 _FALLOC_FL_KEEP_SIZE = 1
 _UNSUPPORTED = (errno.EOPNOTSUPP, errno.ENOSYS, errno.EINVAL)
 
-
-def _load_libc():
-    try:   # the C library the interpreter runs on (no ctypes.util.find_library: ldconfig)
-        return ctypes.CDLL(None, use_errno=True)
-    except OSError:
-        return None
-
-
-_LIBC = _load_libc()
+_LIBC: Optional[ctypes.CDLL]
+try:   # the C library the interpreter runs on (no ctypes.util.find_library: ldconfig)
+    _LIBC = ctypes.CDLL(None, use_errno=True)
+except OSError:
+    _LIBC = None
 
 
 def _libc_function(name, *argtypes):
@@ -67,7 +52,7 @@ _fallocate = _libc_function('fallocate', ctypes.c_int, ctypes.c_int, ctypes.c_in
 
 
 def _rename2(source, destination, flags):
-    """``renameat2``; raises OSError, with ENOSYS when the C library lacks it."""
+    """``renameat2``; OSError, ENOSYS when the C library lacks it."""
     if _renameat2 is None:
         raise OSError(errno.ENOSYS, os.strerror(errno.ENOSYS))
     if _renameat2(_AT_FDCWD, os.fsencode(source), _AT_FDCWD, os.fsencode(destination),
@@ -77,17 +62,7 @@ def _rename2(source, destination, flags):
 
 
 def rename_exclusive(source: str, destination: str) -> None:
-    """
-    Rename ``source`` to ``destination`` only if ``destination`` does not exist, atomically.
-
-    Raises
-    ------
-    FileExistsError
-        If ``destination`` exists (a file, directory or dangling symlink).
-    OSError
-        Any other failure of the rename.
-
-    """
+    """Rename ``source`` to ``destination`` atomically; FileExistsError if it exists at all."""
     try:
         _rename2(source, destination, _RENAME_NOREPLACE)
         return
@@ -109,15 +84,11 @@ def rename_replacing(source: str, destination: str) -> None:
     """
     Rename ``source`` to ``destination``, atomically replacing whatever is there.
 
-    A file replaces a file with ``rename``; otherwise (a directory on either
-    side) the two are exchanged with ``RENAME_EXCHANGE`` and the old one,
-    now at ``source``, is removed.
+    A file replaces a file with ``rename``; with a directory on either side the two are
+    exchanged (``RENAME_EXCHANGE``) and the old one, now at ``source``, removed.
     """
-    try:
-        rename_exclusive(source, destination)
-        return
-    except FileExistsError:
-        pass
+    with contextlib.suppress(FileExistsError):
+        return rename_exclusive(source, destination)
     if not os.path.isdir(source) and not os.path.isdir(destination):
         os.replace(source, destination)
         return
@@ -136,27 +107,15 @@ def _remove(path):
     if os.path.isdir(path) and not os.path.islink(path):
         shutil.rmtree(path, ignore_errors=True)
     else:
-        try:
+        with contextlib.suppress(FileNotFoundError):
             os.unlink(path)
-        except FileNotFoundError:
-            pass
 
 
 def allocate(descriptor: int, offset: int, length: int) -> bool:
     """
-    Allocate disk space for ``[offset, offset + length)`` of a file without changing its size.
+    Allocate ``[offset, offset + length)`` of a file on disk without changing its size.
 
-    Returns
-    -------
-    bool
-        False if the file system cannot do it (no ``fallocate`` support): no
-        space is reserved then.
-
-    Raises
-    ------
-    OSError
-        ``ENOSPC`` when the space is not available.
-
+    False if the file system cannot (nothing reserved); OSError ``ENOSPC`` without space.
     """
     if _fallocate is None:
         return False
@@ -186,49 +145,20 @@ def _part_exists_message(path):
             'one was killed and left its unfinished bag there (read it, or move it away)')
 
 
-def is_single_file(path: str) -> bool:
-    """Whether ``path`` names a single MCAP file (``*.mcap``) rather than a rosbag2 directory."""
-    return os.fspath(path).endswith(STORAGE_SUFFIX)
-
-
 class BagOutput:
     """
     The files of one bag being written: ``<path>.part``, renamed to ``path`` on ``finish()``.
 
-    ``path`` ending in ``.mcap`` is a single MCAP file; any other path is a
-    rosbag2 directory holding ``<name>_0.mcap`` and ``metadata.yaml``.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        The output the user asked for.
-    overwrite : bool, optional
-        Replace an existing output on ``finish()``. Without it an existing
-        output is an error, here and again (atomically) on ``finish()``.
-
-    Attributes
-    ----------
-    path : str
-    part_path : str
-        Where the bag is while it is written.
-    storage_name : str
-        The MCAP file's name inside the bag (``relative_file_paths``).
-    stream : file
-        The open MCAP storage file (binary, buffered).
-
-    Raises
-    ------
-    BagError
-        If the output exists (without ``overwrite``), or ``<path>.part``
-        exists (another writer, or a crashed one whose recording is there),
-        or the directory cannot be written.
-
+    A ``.mcap`` path is one file, any other a rosbag2 directory of ``<name>_0.mcap``
+    (``storage_name``) and ``metadata.yaml``. BagError if the output exists (without
+    ``overwrite``; again, atomically, on ``finish()``), ``<path>.part`` exists, or the
+    directory cannot be written.
     """
 
     def __init__(self, path: StrPath, *, overwrite: bool = False) -> None:
         self.path = os.fspath(path).rstrip(os.sep) or os.fspath(path)
         self.overwrite = overwrite
-        self.single_file = is_single_file(self.path)
+        self.single_file = self.path.endswith(STORAGE_SUFFIX)
         self.part_path = self.path + PART_SUFFIX
         self.check_absent(self.path, overwrite=overwrite)
         name = os.path.basename(self.path)
@@ -257,12 +187,7 @@ class BagOutput:
 
     @staticmethod
     def check_absent(path: StrPath, *, overwrite: bool = False) -> None:
-        """
-        Raise ``BagError`` if ``path`` exists (without ``overwrite``) or is being written.
-
-        A check before a long computation; the creation itself is exclusive
-        whatever happens between the two.
-        """
+        """Raise BagError if ``path`` exists (without ``overwrite``) or has a ``.part``."""
         path = os.fspath(path)
         if not overwrite and os.path.lexists(path):
             raise BagError(f'output {path} already exists (--force, overwrite=True, replaces it)')
@@ -270,16 +195,7 @@ class BagOutput:
             raise BagError(_part_exists_message(path))
 
     def reserve(self, length: int) -> None:
-        """
-        Make sure ``length`` bytes beyond what is written are allocated on disk.
-
-        Raises
-        ------
-        OSError
-            ``ENOSPC`` if they are not available. File systems without
-            ``fallocate`` reserve nothing (and raise nothing).
-
-        """
+        """Allocate ``length`` bytes beyond what is written (OSError ENOSPC), where it can."""
         if self._can_reserve:
             self._can_reserve = allocate(self.stream.fileno(), self.stream.tell(), length)
 
@@ -288,28 +204,20 @@ class BagOutput:
         self.stream.flush()
         os.fdatasync(self.stream.fileno())
 
-    def _close_storage(self):
-        self.stream.flush()
-        # Frees the reservation beyond the end of the file.
-        os.ftruncate(self.stream.fileno(), self.stream.tell())
-        os.fsync(self.stream.fileno())
-        self.stream.close()
-
     def finish(self, metadata_yaml: Optional[str] = None) -> None:
         """
         Close the storage file, write ``metadata.yaml`` (directories) and rename to ``path``.
 
-        Raises
-        ------
-        BagError
-            If the output appeared meanwhile (without ``overwrite``), or
-            writing failed; the ``.part`` is left for ``keep()`` or ``discard()``.
-
+        BagError if the output appeared meanwhile (without ``overwrite``) or writing failed;
+        the ``.part`` is left for ``keep()`` or ``discard()``.
         """
         if self.closed:
             return
         try:
-            self._close_storage()
+            self.stream.flush()
+            os.ftruncate(self.stream.fileno(), self.stream.tell())   # frees the reservation
+            os.fsync(self.stream.fileno())
+            self.stream.close()
             if not self.single_file:
                 if metadata_yaml is not None:
                     with open(os.path.join(self.part_path, METADATA_FILE), 'x') as stream:
@@ -340,7 +248,5 @@ class BagOutput:
 
     def _close_quietly(self):
         self.closed = True
-        try:
+        with contextlib.suppress(OSError):
             self.stream.close()   # flushes what is buffered, and closes the file even if not
-        except OSError:
-            pass

@@ -1,43 +1,21 @@
 """
-Write ROS 2 bags as ``ros2 bag record`` does: crash-safe, exclusive, closed even on a full disk.
+Write ROS 2 bags as ``ros2 bag record -s mcap`` does: crash-safe, exclusive, closed on a full disk.
 
-The output is a rosbag2 directory (``metadata.yaml`` and one MCAP storage file
-``<name>_0.mcap``), or a single MCAP file when its path ends in ``.mcap``. The
-MCAP file is what ``ros2 bag record -s mcap`` writes: profile ``ros2``; one
-schema per message type, named ``pkg/msg/Type`` with encoding ``ros2msg`` and
-the complete concatenated definition; one channel per topic with message
-encoding ``cdr`` and the metadata ``offered_qos_profiles`` and
-``topic_type_hash``; chunks compressed with zstd (rosbag2's default), lz4 or
-not at all, with message indexes and a summary; and a ``rosbag2`` metadata
-record holding the version 9 bag metadata, also written to ``metadata.yaml``.
-
-Crash safety (see :mod:`rotation_node.bag.writing.part_output`): the bag is written to
-``<output>.part`` and renamed to the output when closed. Messages are collected
-into a chunk that is written when it reaches ``CHUNK_SIZE`` bytes (or, for a
-live recording, ``chunk_period_s`` after the last one); what is written is
-flushed to disk (``fdatasync``) at least every ``SYNC_PERIOD_S``. So a SIGKILL
-or a power loss loses at most about the last second: the ``.part`` is an
-unfinished MCAP file whose complete chunks a linear scan reads back. Chunks cut
-by size only make the bag depend on the messages alone: the same messages give
-the same bytes. Before each chunk is written, the space to close the bag
-(summary and metadata) is reserved beyond it; when that fails the disk is
-full, ``DiskFullError`` says so, the chunk is dropped, and ``close()`` still
-writes a valid bag of everything written before.
-
-Each chunk is written whole by :class:`rotation_node.bag.writing.mcap_writer.ChunkWriter`
-(the file the ``mcap`` library's writer would write, without its per-message
-cost); ``write_serialized_block`` takes a block of serialised messages at once
-(what ``rotation_bag convert`` uses) and writes the same bytes as writing them
-one by one.
-
-``BagWriter.write`` encodes messages with :mod:`rotation_node.wire.cdr` where it
-can (fixed-layout types such as sensor_msgs/Imu, and
-std_msgs/Float64MultiArray): rclpy's bytes, with the alignment padding zeroed
-instead of uninitialised, so that the same messages give the same bag; other
-types with ``rclpy.serialization``.
+The output is a rosbag2 directory (``metadata.yaml`` and ``<name>_0.mcap``) or one ``.mcap``
+file: profile ``ros2``, one ``ros2msg`` schema per type, one ``cdr`` channel per topic with
+``offered_qos_profiles`` and ``topic_type_hash``, zstd/lz4/no chunk compression, indexes, and
+the version 9 rosbag2 metadata (docs/recording.md). It is written as ``<output>.part``
+(:mod:`~rotation_node.bag.writing.part_output`) and renamed when closed. Chunks are cut at
+``CHUNK_SIZE`` bytes (a live recording also ``chunk_period_s`` after the last) and written
+whole by :class:`~rotation_node.bag.writing.mcap_writer.ChunkWriter`; data is synced at least
+every ``SYNC_PERIOD_S``. Cut by size only, the same messages give the same bytes (``write``
+encodes with :mod:`rotation_node.wire.cdr` where it can, zeroing the padding rclpy leaves).
+Before each chunk the space to close the bag is reserved beyond it: when that fails,
+``DiskFullError``, and ``close()`` still writes a valid bag of what was written before.
 """
 from __future__ import annotations
 
+import dataclasses
 import errno
 import math
 import operator
@@ -62,32 +40,24 @@ if TYPE_CHECKING:
     from rotation_node.type_aliases import StrPath
 
 PROFILE = 'ros2'
-#: Version of the rosbag2 metadata written (Jazzy's).
-ROSBAG2_METADATA_VERSION = 9
+ROSBAG2_METADATA_VERSION = 9   # Jazzy's
 LIBRARY = f'rotation_node bag; mcap-python/{mcap.__version__}'
-#: Chunk compressions, by their ``--compression`` name (mcap's ``CompressionType`` names).
-COMPRESSIONS = ('zstd', 'lz4', 'none')
-#: rosbag2's default for ``ros2 bag record`` with MCAP storage.
-DEFAULT_COMPRESSION = 'zstd'
-#: Uncompressed bytes of messages after which a chunk is written (rosbag2's MCAP default).
-CHUNK_SIZE = 768 * 1024
-#: Longest time written data waits before it is flushed to disk (fdatasync).
-SYNC_PERIOD_S = 1.0
-#: Longest time a live recording's message waits in memory before its chunk is written.
-CHUNK_PERIOD_S = 1.0
+COMPRESSIONS = ('zstd', 'lz4', 'none')   # mcap's CompressionType names
+DEFAULT_COMPRESSION = 'zstd'             # rosbag2's for MCAP storage
+CHUNK_SIZE = 768 * 1024   # message bytes that make a chunk (rosbag2's MCAP default)
+SYNC_PERIOD_S = 1.0    # longest wait of written data before fdatasync
+CHUNK_PERIOD_S = 1.0   # longest wait of a live recording's message before its chunk
 
 _MAX_TIMESTAMP = 2**64 - 1
 _CHECK_CLOCK_EVERY = 64              # messages between clock reads (a power of two)
 _MESSAGE_OVERHEAD = MESSAGE_RECORD_OVERHEAD + MESSAGE_INDEX_ENTRY
 _CHUNK_OVERHEAD = 4096               # chunk record, compression frame, page rounding
-_SUMMARY_PER_CHUNK = 96              # chunk index record (77 bytes with 'zstd'), besides
-#                                      its per-channel entries
+_SUMMARY_PER_CHUNK = 96              # chunk index record (77 bytes with 'zstd'), w/o entries
 _SUMMARY_PER_CHANNEL_IN_CHUNK = 10
 _SUMMARY_FIXED = 64 * 1024           # statistics, offsets, footer, metadata.yaml's block
 
 
 def _timestamp(value, name):
-    """Validate a timestamp argument: an integer in [0, 2**64)."""
     try:
         value = operator.index(value)
     except TypeError:
@@ -99,21 +69,10 @@ def _timestamp(value, name):
 
 
 def _all_timestamps(values):
-    """Whether every value is an integer in [0, 2**64), for a block (False: ask _timestamp)."""
+    """Whether every value is an integer in [0, 2**64) (False: let _timestamp say why not)."""
     array = np.array(values)
     kind = array.dtype.kind
     return kind == 'u' or (kind == 'i' and (not array.size or bool(array.min() >= 0)))
-
-
-def _rclpy_serializer():   # imported on first use: it loads rcl
-    from rclpy.serialization import serialize_message
-    return serialize_message
-
-
-def _checked_compression(name: str) -> str:
-    if isinstance(name, str) and name in COMPRESSIONS:
-        return name
-    raise BagError(f'compression must be one of {", ".join(COMPRESSIONS)}, got {name!r}')
 
 
 class _Channel:
@@ -122,80 +81,40 @@ class _Channel:
     def __init__(self, channel_id, type_name):
         self.id = channel_id
         self.type_name = type_name
-        self.msg_class = None   # of the messages given to write(), with their encode(msg)
+        self.msg_class = None   # of the messages given to write(), and their encode(msg)
         self.encode = None
 
 
 class BagWriter:
     """
-    Write a ROS 2 bag; a context manager.
+    Write a ROS 2 bag (a rosbag2 directory, or one MCAP file if ``path`` ends in ``.mcap``).
 
-    The bag is written to ``<path>.part`` and renamed to ``path`` when the
-    writer is closed cleanly (end of the ``with`` block or ``close()``). An
-    exception in the ``with`` block (or ``abort()``) removes the ``.part``, or
-    with ``keep_unfinished`` leaves it as an unfinished bag that a linear scan
-    reads. A process killed while writing leaves the ``.part`` holding every
-    message up to the last chunk written.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        The bag: a rosbag2 directory, or a single MCAP file if it ends in ``.mcap``.
-    overwrite : bool, optional
-        Replace an existing bag (atomically, when closed). Default False: an
-        existing bag is an error.
-    compression : str, optional
-        Chunk compression: ``'zstd'`` (default, as rosbag2), ``'lz4'`` or ``'none'``.
-    keep_unfinished : bool, optional
-        On failure, keep the ``.part`` instead of removing it (for recordings,
-        which cannot be repeated).
-    chunk_period_s : float, optional
-        Also write a chunk when the last one is this old (checked every 64
-        messages and by ``flush_if_due()``): for live recordings. Default:
-        chunks by size only, so the bag depends on the messages alone.
-
-    Attributes
-    ----------
-    path : str
-    part_path : str
-        Where the bag is until it is closed.
-    message_count : int
-        Messages written to the file so far (not those still collected in
-        memory, nor those dropped on a full disk).
-
-    Raises
-    ------
-    BagError
-        If ``path`` exists and ``overwrite`` is false, ``<path>.part`` exists
-        (another writer, or a crashed one), or it cannot be created.
-
-    Examples
-    --------
-    >>> with BagWriter('out.mcap') as writer:                  # doctest: +SKIP
-    ...     writer.write('/imu', Imu(), log_time_ns=1_700_000_000_000_000_000)
-
+    A context manager. Written to ``<path>.part``, renamed to ``path`` on a clean close; an
+    exception in the ``with`` block (or ``abort()``) removes the ``.part``, or keeps it as
+    an unfinished bag with ``keep_unfinished`` (for recordings, which cannot be repeated).
+    ``overwrite`` replaces an existing bag atomically when closed. ``compression``:
+    ``'zstd'`` (rosbag2's default), ``'lz4'`` or ``'none'``. ``chunk_period_s`` also writes
+    a chunk when the last is this old (checked every 64 messages and by ``flush_if_due()``),
+    for live recordings; by default chunks are cut by size only. BagError if ``path``
+    exists (without ``overwrite``), ``<path>.part`` exists (another writer, or a crashed
+    one), or it cannot be created.
     """
 
     def __init__(self, path: StrPath, *, overwrite: bool = False,
                  compression: str = DEFAULT_COMPRESSION, keep_unfinished: bool = False,
                  chunk_period_s: Optional[float] = None) -> None:
         self.path = os.fspath(path)
-        self.compression = compression
-        chunk_compression = _checked_compression(compression)
+        if not (isinstance(compression, str) and compression in COMPRESSIONS):
+            raise BagError(
+                f'compression must be one of {", ".join(COMPRESSIONS)}, got {compression!r}')
         self.keep_unfinished = keep_unfinished
         self._output = BagOutput(self.path, overwrite=overwrite)
         self.part_path = self._output.part_path
-        # Chunks are cut here (flush()) and written whole.
-        self._writer = ChunkWriter(self._output.stream, compression=chunk_compression)
+        self._writer = ChunkWriter(self._output.stream, compression=compression)
         self._schema_ids: Dict[Tuple[str, str, str], int] = {}
         self._channels: Dict[str, Any] = {}
         self._topics: List[TopicMetadata] = []
-        # The chunk in progress: each message's channel id, log and publish times, data.
-        self._pending_channels: List[int] = []
-        self._pending_log_times: List[int] = []
-        self._pending_publish_times: List[int] = []
-        self._pending_datas: List[Any] = []
-        self._pending_bytes = 0
+        self._drop_pending()
         self._registered_bytes = 0      # schemas and channels since the last chunk
         self._summary_bytes = 0         # schemas and channels repeated in the summary
         self._chunk_count = 0
@@ -216,7 +135,7 @@ class BagWriter:
 
     @property
     def message_count(self) -> int:
-        """Messages flushed to disk so far."""
+        """Messages written to the file so far (not those in memory, nor those dropped)."""
         return self._writer.statistics.message_count
 
     @property
@@ -227,31 +146,14 @@ class BagWriter:
 
     def add_topic(self, metadata: TopicMetadata) -> None:
         """
-        Register a topic with explicit metadata (QoS, definition).
+        Register a topic with its QoS profiles and, to copy a topic of any bag, its schema.
 
-        ``write`` and ``write_serialized`` register unknown topics by
-        themselves, with the installed definition and no QoS profiles; call
-        this first to record the publishers' QoS, or to copy a topic from
-        another bag with its own schema.
-
-        Parameters
-        ----------
-        metadata : TopicMetadata
-            The topic's name, type, QoS profiles and (optionally) definition.
-
-        Raises
-        ------
-        BagError
-            If the topic is already registered or the type name is invalid or
-            (with ``definition=None``) not installed. A topic with its own
-            ``definition`` is registered with its type name as given, for
-            copying topics of any bag unchanged.
-
+        ``write`` and ``write_serialized`` register new topics themselves (installed
+        definition, no QoS). BagError if the topic is registered already, or, without its
+        own ``definition``, its type is not an installed ``pkg/msg/Type``.
         """
         if metadata.name in self._channels:
             raise BagError(f'topic {metadata.name} is already registered in {self.path}')
-        # A topic copied with its own schema keeps its type name as stored
-        # (even a short or unknown one); others need an installed 'pkg/msg/Type'.
         definition = (message_definition(metadata.type_name) if metadata.definition is None
                       else metadata.definition)
         schema_key = (metadata.type_name, metadata.definition_encoding, definition)
@@ -266,15 +168,12 @@ class BagWriter:
                       else metadata.type_hash)
         channel_id = self._writer.register_channel(
             topic=metadata.name, message_encoding=metadata.serialization_format,
-            schema_id=schema_id,
-            metadata={
-                'offered_qos_profiles': metadata.offered_qos_profiles,
-                'topic_type_hash': topic_hash,
-            })
+            schema_id=schema_id, metadata={'offered_qos_profiles': metadata.offered_qos_profiles,
+                                           'topic_type_hash': topic_hash})
         self._add_registered(len(metadata.name) + len(metadata.offered_qos_profiles)
                              + len(topic_hash) + 128)
         self._channels[metadata.name] = _Channel(channel_id, metadata.type_name)
-        self._topics.append(metadata)
+        self._topics.append(dataclasses.replace(metadata, type_hash=topic_hash))
 
     def _add_registered(self, size):
         self._registered_bytes += size
@@ -294,66 +193,30 @@ class BagWriter:
     def write(self, topic: str, msg: Any, log_time_ns: int,
               publish_time_ns: Optional[int] = None) -> None:
         """
-        Serialise and write one message.
+        Serialise and write one rclpy message (its class sets the topic's type on first use).
 
-        Types that :func:`rotation_node.wire.cdr.message_encoder` covers are
-        encoded by it (zero padding: the same message gives the same bytes),
-        others by ``rclpy.serialization``.
-
-        Parameters
-        ----------
-        topic : str
-            The topic to write on.
-        msg : rclpy message
-            Its class decides the topic's type on first use.
-        log_time_ns : int
-            Receive time, nanoseconds (e.g. since the Unix epoch).
-        publish_time_ns : int, optional
-            Publish time; defaults to ``log_time_ns``.
-
-        Raises
-        ------
-        BagError
-            If the topic already holds another type or a time is not a
-            non-negative integer.
-        DiskFullError
-            If the disk filled: the chunk in progress was dropped, ``close()``
-            keeps everything written before.
-
+        Encoded by :func:`rotation_node.wire.cdr.message_encoder` where it covers the type
+        (zero padding), else by rclpy. Times are integer ns in [0, 2**64) (else BagError);
+        ``publish_time_ns`` defaults to ``log_time_ns``. DiskFullError if the disk filled:
+        the chunk in progress was dropped, ``close()`` keeps everything written before.
         """
         channel = self._channels.get(topic)
         if channel is None or channel.msg_class is not type(msg):
             channel = self._channel(topic, type_name_of(type(msg)))
             channel.msg_class = type(msg)
-            channel.encode = message_encoder(channel.type_name) or _rclpy_serializer()
+            channel.encode = message_encoder(channel.type_name)
+            if channel.encode is None:   # rclpy, imported on first use: it loads rcl
+                from rclpy.serialization import serialize_message
+                channel.encode = serialize_message
         self._add(channel.id, channel.encode(msg), log_time_ns, publish_time_ns)
 
     def write_serialized(self, topic: str, type_name: str, data: bytes, log_time_ns: int,
                          publish_time_ns: Optional[int] = None) -> None:
         """
-        Write one message that is already CDR-serialised.
+        Write one CDR-serialised message of ``type_name`` (``pkg/msg/Type``); as ``write``.
 
-        Parameters
-        ----------
-        topic : str
-            The topic to write on.
-        type_name : str
-            ``'pkg/msg/Type'``; decides the topic's type on first use.
-        data : bytes
-            The serialized (CDR) message.
-        log_time_ns : int
-            Receive time, nanoseconds.
-        publish_time_ns : int, optional
-            Defaults to ``log_time_ns``.
-
-        Raises
-        ------
-        BagError
-            As ``write``; also if the type is not installed on first use of a
-            topic not registered with ``add_topic``.
-        DiskFullError
-            As ``write``.
-
+        On first use of a topic not registered with ``add_topic``, BagError if the type
+        is not installed.
         """
         channel = self._channels.get(topic)
         if channel is None or channel.type_name != type_name:
@@ -379,26 +242,10 @@ class BagWriter:
     def write_serialized_block(self, messages: Sequence[Tuple[str, str, Any, int, int]]
                                ) -> None:
         """
-        Write messages that are already CDR-serialised, in order; as ``write_serialized`` each.
+        Write ``(topic, type name, data, log_time_ns, publish_time_ns)`` messages, in order.
 
-        The bag is the one ``write_serialized`` called for each message in
-        turn writes, byte for byte (chunks are cut after the same messages),
-        with the per-message work done for the whole block where it can be:
-        the topics' channels looked up once, the times checked as one array.
-
-        Parameters
-        ----------
-        messages : sequence of tuple
-            ``(topic, type name, data, log_time_ns, publish_time_ns)`` each.
-
-        Raises
-        ------
-        BagError
-            As ``write_serialized``, for the first message it would raise it
-            for; the messages before it are written.
-        DiskFullError
-            As ``write``.
-
+        Byte for byte (and error for error) as ``write_serialized`` of each in turn, with the
+        per-message work done once for the block.
         """
         if not messages:
             return
@@ -460,15 +307,8 @@ class BagWriter:
         """
         Write the messages collected so far as one chunk (to disk, if a sync is due).
 
-        Raises
-        ------
-        DiskFullError
-            If the chunk and the space needed to close the bag do not fit on
-            the disk: as many of its first messages as fit are written, the
-            others dropped.
-        BagError
-            If writing failed otherwise (the bag cannot be closed then).
-
+        DiskFullError if the chunk and the space to close the bag do not fit: its first messages
+        that fit are written, the others dropped. BagError if writing failed otherwise.
         """
         now = time.monotonic()
         if self._chunk_period_s is not None:
@@ -518,10 +358,11 @@ class BagWriter:
         return 0
 
     def _drop_pending(self):
-        self._pending_channels = []
-        self._pending_log_times = []
-        self._pending_publish_times = []
-        self._pending_datas = []
+        """Start an empty chunk: each message's channel id, log and publish time, data."""
+        self._pending_channels: List[int] = []
+        self._pending_log_times: List[int] = []
+        self._pending_publish_times: List[int] = []
+        self._pending_datas: List[Any] = []
         self._pending_bytes = 0
 
     def _fail(self, error):
@@ -536,51 +377,34 @@ class BagWriter:
         start = statistics.message_start_time if count else 0
         duration = {'nanoseconds': statistics.message_end_time - start if count else 0}
         storage_name = self._output.storage_name
+        message_counts = self.message_counts
         return {
-            'version': ROSBAG2_METADATA_VERSION,
-            'storage_identifier': 'mcap',
-            'duration': duration,
-            'starting_time': {'nanoseconds_since_epoch': start},
+            'version': ROSBAG2_METADATA_VERSION, 'storage_identifier': 'mcap',
+            'duration': duration, 'starting_time': {'nanoseconds_since_epoch': start},
             'message_count': count,
             'topics_with_message_count': [{
                 'topic_metadata': {
-                    'name': topic.name,
-                    'type': topic.type_name,
+                    'name': topic.name, 'type': topic.type_name,
                     'serialization_format': topic.serialization_format,
                     'offered_qos_profiles': metadata_yaml.load(topic.offered_qos_profiles) or [],
-                    'type_description_hash': (type_hash(topic.type_name)
-                                              if topic.type_hash is None else topic.type_hash),
-                },
-                'message_count': statistics.channel_message_counts.get(
-                    self._channels[topic.name].id, 0),
+                    'type_description_hash': topic.type_hash},
+                'message_count': message_counts[topic.name],
             } for topic in self._topics],
             # rosbag2's own (file or message) compression: none; MCAP compresses chunks.
-            'compression_format': '',
-            'compression_mode': '',
+            'compression_format': '', 'compression_mode': '',
             'relative_file_paths': [storage_name],
-            'files': [{
-                'path': storage_name,
-                'starting_time': {'nanoseconds_since_epoch': start},
-                'duration': dict(duration),   # a copy: no YAML alias
-                'message_count': count,
-            }],
-            'custom_data': {},
-            'ros_distro': os.environ.get('ROS_DISTRO', 'jazzy'),
+            'files': [{'path': storage_name, 'starting_time': {'nanoseconds_since_epoch': start},
+                       'duration': dict(duration),   # a copy: no YAML alias
+                       'message_count': count}],
+            'custom_data': {}, 'ros_distro': os.environ.get('ROS_DISTRO', 'jazzy'),
         }
 
     def close(self) -> None:
         """
         Write what is collected, finish the bag and rename it to ``path``; idempotent.
 
-        After a ``DiskFullError`` this still closes the bag, with the messages
-        written before it.
-
-        Raises
-        ------
-        BagError
-            If the bag cannot be finished; the ``.part`` is removed, or kept
-            with ``keep_unfinished``.
-
+        After a ``DiskFullError`` it still closes the bag with what was written before.
+        BagError if it cannot: the ``.part`` is removed, or kept with ``keep_unfinished``.
         """
         if self._output.closed:
             return
