@@ -1,16 +1,10 @@
 """
 Attitude integration: orientations from angular velocity.
 
-Solves ``qdot = 1/2 q (x) (w_b(t), 0)`` from ``q(t_0) = q0`` (body frame; the
-world frame ``qdot = 1/2 (w_w, 0) (x) q`` is the body problem of ``q*`` with
-rate ``-w_w``). The equation is linear in ``q`` and the rate multiplies from
-the right, so every method below advances a step as
-
-    q_{k+1} = normalise(q_k (x) dq_k),
-
-with an increment ``dq_k`` that depends only on the rates within the step.
-Normalising the product equals normalising ``dq_k`` first (norms multiply),
-so "forward Euler + normalise" and "RK4 + normalise" are exactly that.
+Solves ``qdot = 1/2 q (x) (w_b(t), 0)`` from ``q(t_0) = q0`` (the world frame is the body
+problem of ``q*`` with rate ``-w_w``). The rate multiplies from the right, so every method
+steps as ``q_{k+1} = normalise(q_k (x) dq_k)`` with an increment ``dq_k`` made of the rates
+within the step (normalising the product equals normalising ``dq_k`` first):
 
 ==================  =====  ========================  ========================================
 method              order  rates per step, at t_k +  increment ``dq``
@@ -25,13 +19,9 @@ method              order  rates per step, at t_k +  increment ``dq``
                            half step                 ``d2`` the half-step angle increments
 ==================  =====  ========================  ========================================
 
-``exp(v)`` is the exponential map (rotation vector to quaternion). Magnus-4 is
-the fourth-order Magnus expansion with the two-point Gauss rule [1]_ (the sign
-of its commutator term is that of right multiplication, ``Y' = Y A``). The
-two-sample coning algorithm [2]_ is fourth order when the angle
-increments are exact; here they come from the rate by Gauss quadrature (exact
-for cubic rates). On coning motion, halving the step divides the error by
-about 2, 4, 16, 16, 16 (tested).
+``exp`` is the rotation-vector-to-quaternion map. Magnus-4 uses the two-point Gauss rule [1]_
+(its commutator's sign is that of right multiplication, ``Y' = Y A``); the two-sample coning
+algorithm [2]_ gets its angle increments by Gauss quadrature (exact for cubic rates).
 
 References
 ----------
@@ -150,40 +140,32 @@ def integrate_angular_velocity(q0: ArrayLike,
     Parameters
     ----------
     q0 : array_like, shape (..., 4)
-        Orientation (x, y, z, w), scalar last, body-to-world, at ``t[0]``;
-        any non-zero norm.
+        Orientation (x, y, z, w), body-to-world, at ``t[0]``; any non-zero norm.
     omega : callable or array_like
-        Angular velocity (rad/s) in ``frame``, either
-
-        - a function ``omega(times)``: called once with all the stage times
-          of all steps, a non-decreasing array of shape (M,), it returns
-          shape (..., M, 3); evaluated exactly where each method needs it;
-        - samples of shape (..., N, 3) at the times ``t`` (e.g. a gyro):
-          rates between samples come from the local cubic through the four
-          nearest samples (``O(h^4)``), so each method keeps its order on
-          smooth data.
+        Angular velocity (rad/s) in ``frame``: a function ``omega(times)``, called once with
+        the stage times of all steps (non-decreasing, shape (M,)) and returning shape
+        (..., M, 3); or samples of shape (..., N, 3) at ``t`` (a gyro), read between samples
+        off the local cubic through the four nearest (``O(h^4)``: every method keeps its
+        order on smooth data).
     t : array_like, shape (N,)
-        Times (s), strictly increasing, N >= 2: the integration steps and the
-        output times.
+        Times (s), strictly increasing, N >= 2: the steps and the output times.
     method : {'magnus4', 'rk4', 'coning2', 'midpoint_exp', 'euler'}, optional
-        See the table in the module docstring: orders 4, 4, 4, 2, 1 with 2, 3,
-        4, 1, 1 rate evaluations per step. ``'magnus4'`` (the default) is the
-        most accurate per rate evaluation.
+        See the module docstring: orders 4, 4, 4, 2, 1 with 2, 3, 4, 1, 1 rate evaluations
+        per step. ``'magnus4'`` (default) is the most accurate per rate evaluation.
     frame : {'body', 'world'}, optional
         Frame of ``omega``: ``qdot = 1/2 q (x) (w_b, 0)`` or ``1/2 (w_w, 0) (x) q``.
 
     Returns
     -------
     ndarray, shape (..., N, 4)
-        Unit canonical (``w >= 0``) orientations at ``t``; the first is
-        ``q0`` normalised. Leading dimensions are those of ``q0`` and ``omega``
-        broadcast together.
+        Unit canonical (``w >= 0``) orientations at ``t``, the first ``q0`` normalised;
+        leading dimensions those of ``q0`` and ``omega`` broadcast.
 
     Raises
     ------
     ValueError
-        Unknown ``method`` or ``frame``; bad ``q0``, ``t`` or ``omega``
-        (wrong shape, NaN/Inf, zero quaternion, times not increasing).
+        Unknown ``method`` or ``frame``; bad ``q0``, ``t`` or ``omega`` (wrong shape,
+        NaN/Inf, zero quaternion, times not increasing).
 
     """
     try:

@@ -1,13 +1,10 @@
 """
-Angular velocity at the stage times of an integration method.
+Angular velocity at the stage times ``t_k + c h_k`` of an integration method.
 
-A method evaluates the rate at fixed fractions ``c`` of each step
-(``t_k + c h_k``). The rate comes either from a function, called once with all
-those times, or from samples at the step boundaries ``t``, read between samples
-off the local cubic through the four nearest samples (Lagrange form, one-sided
-at the ends): its error is ``O(h^4)``, so no method of order <= 4 loses its order
-on smooth sampled data. With fewer than four samples the polynomial through all
-of them is used.
+From a function, called once with all those times, or from samples at the step boundaries
+read off the local cubic through the four nearest samples (Lagrange form, one-sided at the
+ends; all samples when fewer than four): its error is ``O(h^4)``, so no method of order <= 4
+loses its order on smooth sampled data.
 """
 from __future__ import annotations
 
@@ -24,12 +21,7 @@ if TYPE_CHECKING:
 
 
 def _lagrange_stencils(t, h, nodes):
-    """
-    Return the stencils ``(K, P)`` and Lagrange weights ``(K, S, P)`` of the local cubics.
-
-    Step ``k`` uses samples ``stencil[k]`` (``P = min(N, 4)``); the rate at
-    ``t_k + nodes[s] h_k`` is ``sum_p weights[k, s, p] omega[stencil[k, p]]``.
-    """
+    """Return the stencils (K, P = min(N, 4)) and Lagrange weights (K, S, P) of the cubics."""
     n = t.shape[0]
     points = min(n, 4)
     start = np.clip(np.arange(n - 1) - 1, 0, n - points)
@@ -46,9 +38,9 @@ def _lagrange_stencils(t, h, nodes):
     return stencil, weights
 
 
-def _first_non_finite(values, trailing_ndim):
-    """Index (leading dimensions) of the first sample with a NaN or Inf, or None."""
-    bad = ~np.isfinite(values).all(axis=tuple(range(-trailing_ndim, 0)))
+def _first_non_finite(values):
+    """Index (leading dimensions) of the first vector with a NaN or Inf, or None."""
+    bad = ~np.isfinite(values).all(axis=-1)
     if not bad.any():
         return None
     return tuple(int(i) for i in np.unravel_index(np.flatnonzero(bad)[0], bad.shape))
@@ -59,10 +51,8 @@ def stage_rates(omega: ArrayLike | Callable[[FloatArray], ArrayLike], t: FloatAr
     """
     Return the angular velocity at ``t_k + nodes[s] h_k``, shape (..., N - 1, S, 3), all finite.
 
-    ``omega`` is ``omega(times)`` (``times`` of shape (M,) -> shape (..., M, 3)) or
-    samples of shape (..., N, 3) at the validated times ``t`` (steps ``h``),
-    interpolated by local cubics. A ValueError names a wrong shape or a NaN/Inf
-    (for a function, the time at which it returned one).
+    ``omega`` is a function or samples at the validated times ``t`` (steps ``h``). A
+    ValueError names a wrong shape or a NaN/Inf (for a function, the time it returned one at).
     """
     steps, stages = h.shape[0], nodes.shape[0]
     if callable(omega):
@@ -73,7 +63,7 @@ def stage_rates(omega: ArrayLike | Callable[[FloatArray], ArrayLike], t: FloatAr
                 f'Expected `omega(t)` to return shape (..., {times.shape[0]}, 3) for t of shape '
                 f'({times.shape[0]},), got {rates.shape} (a constant w: '
                 f'np.broadcast_to(w, t.shape + (3,))).')
-        bad = _first_non_finite(rates, 1)
+        bad = _first_non_finite(rates)
         if bad is not None:
             raise ValueError(f'`omega(t)` returned a NaN or Inf at t = {float(times[bad[-1]])!r}.')
         return rates.reshape(rates.shape[:-2] + (steps, stages, 3))
@@ -81,7 +71,7 @@ def stage_rates(omega: ArrayLike | Callable[[FloatArray], ArrayLike], t: FloatAr
     if samples.ndim < 2 or samples.shape[-2] != t.shape[0]:
         raise ValueError(f'Expected `omega` samples of shape (..., {t.shape[0]}, 3) to match `t`, '
                          f'got {samples.shape}.')
-    bad = _first_non_finite(samples, 1)
+    bad = _first_non_finite(samples)
     if bad is not None:
         raise ValueError(f'`omega` at index {bad} has a NaN or Inf component.')
     stencil, weights = _lagrange_stencils(t, h, nodes)
