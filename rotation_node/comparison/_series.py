@@ -1,6 +1,4 @@
-"""
-Two orientation series side by side: slerp at the other's stamps, error rotations, statistics.
-"""
+"""Two orientation series side by side: slerp at the other's stamps, errors, statistics."""
 from __future__ import annotations
 
 from typing import NamedTuple, Optional, Tuple, TYPE_CHECKING

@@ -142,11 +142,6 @@ def quaternion_derivative(q: ArrayLike, omega: ArrayLike, frame: str = 'body') -
     ndarray, shape (..., 4)
         ``qdot`` (1/s) of the unit quaternion ``q / |q|``; orthogonal to it.
 
-    Raises
-    ------
-    ValueError
-        Bad ``frame``; wrong shape, NaN/Inf or zero quaternion (naming argument and sample).
-
     """
     return call_binary(_quaternion_derivative_kernel, q, omega, ('q', 'omega'), ((4,), (3,)), (4,),
                        is_world_frame(frame))
@@ -173,11 +168,6 @@ def angular_velocity_from_quaternion_derivative(q: ArrayLike, q_dot: ArrayLike,
         ignored (least squares for a noisy ``q_dot``); inverts :func:`quaternion_derivative`
         to rounding.
 
-    Raises
-    ------
-    ValueError
-        Bad ``frame``; wrong shape, NaN/Inf, zero ``q``.
-
     """
     return call_binary(_angular_velocity_from_quaternion_derivative_kernel, q, q_dot,
                        ('q', 'q_dot'), ((4,), (4,)), (3,), is_world_frame(frame))
@@ -200,11 +190,6 @@ def matrix_derivative(R: ArrayLike, omega: ArrayLike, frame: str = 'body') -> Fl
     -------
     ndarray, shape (..., 3, 3)
         ``Rdot`` (1/s).
-
-    Raises
-    ------
-    ValueError
-        Bad ``frame``; wrong shape, NaN/Inf, ``det(R) <= 0``.
 
     """
     return call_binary(_matrix_derivative_kernel, R, omega, ('R', 'omega'), ((3, 3), (3,)), (3, 3),
@@ -232,11 +217,6 @@ def angular_velocity_from_matrix_derivative(R: ArrayLike, R_dot: ArrayLike,
         Angular velocity (rad/s) in ``frame``: the vee of the skew-symmetric part of
         ``R^T Rdot`` (``Rdot R^T``); the symmetric part is ignored (least squares for a noisy
         ``R_dot``).
-
-    Raises
-    ------
-    ValueError
-        Bad ``frame``; wrong shape, NaN/Inf, ``det(R) <= 0``.
 
     """
     return call_binary(_angular_velocity_from_matrix_derivative_kernel, R, R_dot,

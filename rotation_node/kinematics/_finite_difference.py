@@ -75,12 +75,6 @@ def angular_velocity_from_quaternions(q: ArrayLike, t: ArrayLike,
         give one value: ``angular_velocity_from_quaternions([q_prev, q], [t_prev, t])[0]``.
         A rotation of pi or more per step aliases to the shorter way round.
 
-    Raises
-    ------
-    ValueError
-        Bad ``frame``; ``q`` not (..., N, 4) or with a NaN/Inf or zero sample; ``t`` of the
-        wrong shape, non-finite or not strictly increasing.
-
     """
     world = is_world_frame(frame)
     a = float_array(q, 'q', (4,))

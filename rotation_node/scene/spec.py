@@ -85,6 +85,7 @@ _FRAME_ID = Text('a tf2 frame id such as imu_link (non-empty, no leading /, no s
 _PROBABILITY = Real(0.0, 1.0)
 _VECTOR = Vector(3)
 
+
 @dataclasses.dataclass(frozen=True)
 class ConstantRate:
     """A constant body angular velocity: ``q(t) = orientation (x) exp(angular_velocity t)``."""
@@ -132,6 +133,7 @@ Motion = Union[ConstantRate, Coning, TorqueFree, EulerSweep]
 
 #: Motion classes by their scene ``type``.
 MOTIONS = {cls.type: cls for cls in (ConstantRate, Coning, TorqueFree, EulerSweep)}
+
 
 @dataclasses.dataclass(frozen=True)
 class GyroNoise:
