@@ -44,7 +44,7 @@ class TimeOffset(NamedTuple):
 
 
 def default_rate_bandwidth(step_ref: float, step_est: float) -> float:
-    """Return the Gaussian smoothing rate magnitudes: 20 ms, or 3 steps of the slower stream."""
+    """Return the bandwidth (s) smoothing rate magnitudes: 20 ms, or 3 steps of the slower one."""
     return max(0.02, 3.0 * max(step_ref, step_est))
 
 

@@ -10,21 +10,11 @@ Every other case reduces to this ``J``: extrinsic ``'ijk'`` with ``(a1, a2, a3)`
 ``'KJI'`` with ``(a3, a2, a1)``; in the world frame, ``R^T`` is the intrinsic sequence
 ``(e3, e2, e1)`` at ``(-b3, -b2, -b1)`` with body angular velocity ``-w_w``. So a convention
 and frame select three axis indices, whether the angle order is reversed and whether the
-angles are negated; one kernel does the rest. With ``(i, j, n)`` the axes of ``e1``, ``e2``
-and the remaining one, ``p = +1`` if ``(i, j, n)`` is cyclic else ``-1``, and ``c``, ``s``
-the cosine and sine of the middle (2) and last (3) angle, ``w = J r`` along
-``(e_i, e_j, e_n)`` and its inverse are
-
-    Tait-Bryan (e3 = e_n):  w_i = c2 c3 r1 + p s3 r2,  w_j = c3 r2 - p c2 s3 r1,
-                            w_n = r3 + p s2 r1
-                            r1 = (c3 w_i - p s3 w_j) / c2,  r2 = p s3 w_i + c3 w_j,
-                            r3 = w_n - p s2 r1
-    proper (e3 = e_i):      w_i = c2 r1 + r3,  w_j = s2 s3 r1 + c3 r2,
-                            w_n = p (s2 c3 r1 - s3 r2)
-                            r1 = (s3 w_j + p c3 w_n) / s2,  r2 = c3 w_j - p s3 w_n,
-                            r3 = w_i - c2 r1
-
-dividing by ``c2`` or ``s2`` only: singular exactly where the Euler angles are (gimbal lock).
+angles are negated; one kernel each way does the rest. It writes ``w = J r`` along
+``(e_i, e_j, e_n)``, the axes of ``e1``, ``e2`` and the remaining one, with ``p = +1`` if
+``(i, j, n)`` is cyclic, else ``-1``; ``c2, s2, c3, s3`` are the cosine and sine of the middle
+and last angle. Tait-Bryan (``e3 = e_n``) inverses divide by ``c2``, proper Euler
+(``e3 = e_i``) ones by ``s2``, nothing else: singular exactly at gimbal lock.
 
 References
 ----------

@@ -71,15 +71,12 @@ def _isotropic_covariance(n, std):
 def add_gyro_bias(stream: SensorStream, params: GyroBias, rng: Generator,
                   state: dict[str, Any]) -> Changed:
     """Add ``constant`` plus a walk from 0 stepping by N(0, random_walk^2 dt) per axis."""
-    if 'time' in state:   # a later block: the walk goes on from the last sample
-        time = np.concatenate(([state['time']], stream.time))
-    else:
-        time = stream.time
+    later = 'time' in state   # a later block: the walk goes on from its last sample
+    time = np.concatenate(([state['time']], stream.time)) if later else stream.time
     steps = rng.standard_normal((len(time) - 1, 3))
     steps *= params.random_walk * np.sqrt(np.diff(time))[:, np.newaxis]
     walk = np.cumsum(np.concatenate((state.get('walk', np.zeros((1, 3))), steps)), axis=0)
-    if 'time' in state:
-        walk = walk[1:]
+    walk = walk[1:] if later else walk
     state['time'], state['walk'] = stream.time[-1], walk[-1:].copy()
     bias = np.asarray(params.constant) + walk
     changed = np.any(bias != 0, axis=1)
