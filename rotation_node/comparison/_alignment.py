@@ -127,7 +127,7 @@ def inverse_right_jacobian(r: FloatArray) -> FloatArray:
 class _Problem:
     """The residuals of the selected reference samples and their Jacobian."""
 
-    def __init__(self, t_ref, q_ref, t_est, q_est, bandwidth, max_gap, rates_est=None):
+    def __init__(self, t_ref, q_ref, t_est, q_est, bandwidth, max_gap, rates_est):
         self.t_ref, self.q_ref, self.t_est, self.q_est = t_ref, q_ref, t_est, q_est
         self.rates_est = rates_est
         self.rate_bandwidth = default_rate_bandwidth(median_step(t_ref), bandwidth)
@@ -190,8 +190,6 @@ def _check_determined(information, columns, count):
             raise DegenerateMotionError(
                 f'too little motion to estimate the time offset: root mean square angular '
                 f'rate {rms_rate:.3f} rad/s < {MIN_RMS_RATE}')
-    if not names:
-        return
     scale = 1.0 / np.sqrt(np.diag(information))
     values, vectors = np.linalg.eigh(information * np.outer(scale, scale))
     if values[0] >= MIN_INFORMATION:
@@ -274,8 +272,7 @@ def _best_start(problem, starts, world, mounting, rates_ref, rates_est):
     """
     Return the start ``dt`` at which the closed-form ``W``, ``M`` leave the smallest residual.
 
-    Another start as good (a motion repeating itself up to a rotation) is a
-    DegenerateMotionError naming the candidates.
+    Another as good (a motion repeating itself up to a rotation) is a DegenerateMotionError.
     """
     scored, refused = [], []
     for start in starts:

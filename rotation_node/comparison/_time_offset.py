@@ -181,9 +181,8 @@ def time_offset_candidates(t_ref: ArrayLike, q_ref: ArrayLike, t_est: ArrayLike,
                  f'in [{searched.min():.3f}, {searched.max():.3f}] s')
         raise DegenerateMotionError(
             f'the angular rates of the two streams do not match at any time offset {where} '
-            '(peak correlation '
-            f'{max(pearson[peak], -1.0):.2f} < {MIN_CORRELATION}): different motions, too '
-            'little motion, or a larger offset')
+            f'(peak correlation {max(pearson[peak], -1.0):.2f} < {MIN_CORRELATION}): different '
+            'motions, too little motion, or a larger offset')
     if (peak == 0 or peak == pearson.size - 1 or not np.isfinite(pearson[peak - 1])
             or not np.isfinite(pearson[peak + 1])):
         raise DegenerateMotionError(

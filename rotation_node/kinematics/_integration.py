@@ -125,12 +125,7 @@ def _integrate_kernel(q0, rates, h, out, method):
 
 
 def _lagrange_stencils(t, h, nodes):
-    """
-    Return the stencils (K, P = min(N, 4)) and Lagrange weights (K, S, P) of the local cubics.
-
-    Through the four nearest samples, one-sided at the ends: ``O(h^4)``, so no method of order
-    <= 4 loses its order on smooth sampled data.
-    """
+    """Return the stencils (K, P = min(N, 4)) and weights (K, S, P) of the local cubics."""
     n = t.shape[0]
     points = min(n, 4)
     start = np.clip(np.arange(n - 1) - 1, 0, n - points)
@@ -157,12 +152,7 @@ def _first_non_finite(values):
 
 def _stage_rates(omega: ArrayLike | Callable[[FloatArray], ArrayLike], t: FloatArray,
                  h: FloatArray, nodes: FloatArray) -> FloatArray:
-    """
-    Return the angular velocity at ``t_k + nodes[s] h_k``, shape (..., N - 1, S, 3), all finite.
-
-    ``omega`` is a function or samples at the validated times ``t`` (steps ``h``). A
-    ValueError names a wrong shape or a NaN/Inf (for a function, the time it returned one at).
-    """
+    """Return ``omega`` at ``t_k + nodes[s] h_k``, (..., N - 1, S, 3), else a ValueError."""
     steps, stages = h.shape[0], nodes.shape[0]
     if callable(omega):
         times = (t[:-1, None] + nodes[None, :] * h[:, None]).ravel()

@@ -26,11 +26,7 @@ if TYPE_CHECKING:
 
 
 def _continue_signs(q, previous, previous_sign):
-    """
-    Return ``q`` with continuous signs after ``previous`` (the unsigned sample before, or None).
-
-    Also returns the last unsigned quaternion and its sign, to continue with.
-    """
+    """Return ``q`` signed to continue ``previous`` (or None), and the state to continue with."""
     linked = q if previous is None else np.concatenate((previous[np.newaxis], q))
     steps = np.sign(np.einsum('ij,ij->i', linked[1:], linked[:-1]))
     steps[steps == 0] = 1.0
@@ -92,7 +88,7 @@ class _TorqueFree:
     def truth(self, t):
         t = np.ascontiguousarray(t, dtype=np.float64)
         first = self.time is None
-        times = t if self.time is None else np.concatenate(([self.time], t))
+        times = t if first else np.concatenate(([self.time], t))
         q, momentum = _free_rigid_body.integrate(
             self.q, self.momentum, self.momentum_norm, self.inverse_inertia, times,
             self.substeps, _free_rigid_body.AXES, _free_rigid_body.FRACTIONS)
