@@ -88,7 +88,7 @@ class _TorqueFree:
     def truth(self, t):
         t = np.ascontiguousarray(t, dtype=np.float64)
         first = self.time is None
-        times = t if first else np.concatenate(([self.time], t))
+        times = t if self.time is None else np.concatenate(([self.time], t))
         q, momentum = _free_rigid_body.integrate(
             self.q, self.momentum, self.momentum_norm, self.inverse_inertia, times,
             self.substeps, _free_rigid_body.AXES, _free_rigid_body.FRACTIONS)
