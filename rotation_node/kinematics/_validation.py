@@ -32,9 +32,7 @@ def sample_times(t: ArrayLike, n_samples: Optional[int] = None,
     """
     Return the validated times ``t`` (float64) and their steps ``t[1:] - t[:-1]``, all > 0.
 
-    ``n_samples`` is the time axis length of the series argument ``series_name`` (default
-    ``t``'s own). A ValueError names fewer than two samples, a shape, a NaN/Inf or the first
-    pair that is not strictly increasing.
+    ``n_samples``: the time axis length of the series argument ``series_name`` (default ``t``'s).
     """
     try:
         t = np.asarray(t, dtype=np.float64)

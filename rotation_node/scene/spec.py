@@ -272,8 +272,7 @@ def sample_count(duration: float, rate: float) -> int:
     """
     Return the number of samples ``t_k = k / rate`` with ``t_k <= duration``.
 
-    ``duration * rate`` within 1e-9 (relative) of an integer counts as that
-    integer, so 4 s at 100 Hz gives 401 samples whatever the rounding.
+    ``duration * rate`` within 1e-9 of an integer counts as it: 4 s at 100 Hz gives 401.
     """
     n = duration * rate
     return math.floor(n + 1e-9 * max(1.0, n)) + 1
