@@ -1,36 +1,12 @@
 """
 The world alignment ``W``, mounting ``M`` and time offset ``dt`` of two orientation streams.
 
-Model (``R`` body to world)::
-
-    R_ref(t) = W R_est(t + dt) M
-
-``W`` takes the estimate's world frame to the reference's, ``M`` the
-reference body frame to the estimate's body frame (a vector ``v`` in the
-reference body is ``M v`` in the estimate body). Least squares on SO(3) of the
-residual rotation vectors ``r_i = log(R_ref(t_i)^T W R_est(t_i + dt) M)``,
-the errors about the reference body axes, over the reference samples:
-
-1. ``dt`` from the angular rate magnitudes (:mod:`._time_offset`), unless given;
-2. a closed-form start: with both rotations, ``M`` from the body rates
-   (``w_est = M w_ref``, Kabsch/Wahba by SVD), then ``W`` as the chordal mean
-   of ``R_ref M^T R_est^T``; with one, the chordal mean of what it must be;
-3. Gauss-Newton on the manifold (``W exp(a)``, ``M exp(b)``, ``dt + c``) with
-   the exact Jacobians ``J_r^-1(r) (R_est M)^T`` and ``J_r^-1(r)`` and, in
-   ``dt``, ``J_r^-1(r) M^T w_est(t + dt)`` with the estimate's smoothed body
-   rate (not a difference of the noisy fit, whose noise derivative would
-   decorrelate ``dt`` from ``W``), the estimate evaluated by a Gaussian local
-   quadratic fit of bandwidth 3 estimate steps (:mod:`._smoothing`) so that the
-   noise of the interpolated stream does not bias ``dt``;
-4. the covariance ``(J^T J)^-1 S (J^T J)^-1``, ``S`` summing the products of
-   the samples' terms of ``J^T r`` within the reach of the estimate's fit (their
-   residuals share its noise).
-
-Degenerate motion is found in ``J^T J`` before any step is taken: its
-smallest eigenvalue once normalised to a unit diagonal is below 1e-3 when
-``W`` and ``M`` cannot be told apart (rotation about one axis only) or ``dt``
-from a rotation (a constant rate about one axis), and the root mean square
-rate is below 0.05 rad/s when there is too little motion to time.
+Least squares on SO(3) of the residuals ``r_i = log(R_ref(t_i)^T W R_est(t_i + dt) M)`` over
+the reference samples (``docs/compare.md``, "How they are estimated"): ``dt`` from the rate
+magnitudes unless given, a closed-form start (Kabsch on the body rates, chordal means),
+Gauss-Newton on ``W exp(a)``, ``M exp(b)``, ``dt + c`` with the estimate evaluated by a
+Gaussian local fit, and a covariance that counts the residuals sharing that fit's noise.
+Degenerate motion is refused from ``J^T J`` before any step is taken.
 """
 from __future__ import annotations
 
@@ -74,10 +50,9 @@ class Alignment(NamedTuple):
     time_offset, time_offset_std : float
         ``dt`` (s) and its standard deviation (0 when given).
     world, mounting : ndarray, shape (4,)
-        ``W`` and ``M`` as unit quaternions (x, y, z, w), ``w >= 0``.
+        ``W`` and ``M``, unit quaternions (x, y, z, w), ``w >= 0``.
     world_std, mounting_std : ndarray, shape (3,)
-        Standard deviations (rad) about the axes of the perturbations
-        ``W exp(a)``, ``M exp(b)`` (0 when fixed to the identity).
+        Standard deviations (rad) of ``a``, ``b`` in ``W exp(a)``, ``M exp(b)`` (0 when fixed).
     matched : int
         Reference samples used.
     residual_rms : float
@@ -101,14 +76,12 @@ class AlignedSeries(NamedTuple):
 
     Attributes
     ----------
-    reference_index : ndarray of int
+    reference_index : ndarray of int, shape (n,)
         Indices of the matched reference samples.
-    times : ndarray
+    times : ndarray, shape (n,)
         Their times (s).
-    reference : ndarray, shape (n, 4)
-        Their orientations.
-    estimate : ndarray, shape (n, 4)
-        ``W q_est(t + dt) M``: the estimate slerped at ``t + dt`` and aligned.
+    reference, estimate : ndarray, shape (n, 4)
+        Their orientations, and ``W q_est(t + dt) M`` (the estimate slerped at ``t + dt``).
     errors : ndarray, shape (n, 3)
         :func:`orientation_errors` of the two (rad, reference body axes).
 
@@ -152,9 +125,9 @@ def inverse_right_jacobian(r: FloatArray) -> FloatArray:
 
 
 class _Problem:
-    """The residuals of the reference samples ``selected`` and their Jacobian."""
+    """The residuals of the selected reference samples and their Jacobian."""
 
-    def __init__(self, t_ref, q_ref, t_est, q_est, bandwidth, max_gap, rates_est=None):
+    def __init__(self, t_ref, q_ref, t_est, q_est, bandwidth, max_gap, rates_est):
         self.t_ref, self.q_ref, self.t_est, self.q_est = t_ref, q_ref, t_est, q_est
         self.rates_est = rates_est
         self.rate_bandwidth = default_rate_bandwidth(median_step(t_ref), bandwidth)
@@ -192,31 +165,18 @@ class _Problem:
         return smoothed_rates(self.t_est, self.q_est, self.rates_est, query,
                               self.rate_bandwidth, 'estimate')
 
-    def residuals(self, world, mounting, dt, estimate=None):
-        estimate = self.estimate_at(dt) if estimate is None else estimate
-        aligned = conversions.quaternion_product(
-            conversions.quaternion_product(world, estimate), mounting)
-        return orientation_errors(self.q_ref[self.index], aligned)
-
-    def solved(self, world, mounting, dt, columns):
-        """Return :func:`_least_squares`, residuals correlated within the estimate fit's reach."""
-        return _least_squares(self.linearised, world, mounting, dt, columns,
-                              lambda: self.t_ref[self.index],
-                              2.0 * WINDOW_BANDWIDTHS * self.bandwidth)
-
     def linearised(self, world, mounting, dt, columns):
         """``(r (3n,), J (3n, p))`` for the parameter blocks ``columns``."""
         if self.selected_at is None or abs(dt - self.selected_at) > 0.5 * self.margin:
             self.select(dt)
         estimate = self.estimate_at(dt)
-        r = self.residuals(world, mounting, dt, estimate)
+        r = _residuals(self.q_ref[self.index], estimate, world, mounting)
         blocks = [_rotation_jacobian(r, estimate, mounting, columns)]
         if 'time_offset' in columns:
             # R_est(t + dt + c) = R_est(t + dt) exp(w_est c): dr/dc = J_r^-1(r) M^T w_est.
             _, rates = self._rates_at(self.t_ref[self.index] + dt)
             body = conversions.rotate_vector(conversions.quaternion_conjugate(mounting), rates)
-            derivative = inverse_right_jacobian(r) @ body[:, :, None]
-            blocks.append(derivative)
+            blocks.append(inverse_right_jacobian(r) @ body[:, :, None])
         jacobian = np.concatenate(blocks, axis=2)
         return r.reshape(-1), jacobian.reshape(-1, jacobian.shape[-1])
 
@@ -230,8 +190,6 @@ def _check_determined(information, columns, count):
             raise DegenerateMotionError(
                 f'too little motion to estimate the time offset: root mean square angular '
                 f'rate {rms_rate:.3f} rad/s < {MIN_RMS_RATE}')
-    if not names:
-        return
     scale = 1.0 / np.sqrt(np.diag(information))
     values, vectors = np.linalg.eigh(information * np.outer(scale, scale))
     if values[0] >= MIN_INFORMATION:
@@ -264,15 +222,15 @@ def estimate_alignment(t_ref: ArrayLike, q_ref: ArrayLike, t_est: ArrayLike, q_e
     q_ref, q_est : array_like, shape (N, 4), (K, 4)
         Orientations (x, y, z, w), body to world.
     time_offset : float, optional
-        ``dt`` if known (s); estimated when None.
+        ``dt`` (s) if known; estimated when None.
     world, mounting : bool, optional
-        Estimate ``W`` (``M``); fixed to the identity when False.
+        Estimate ``W`` (``M``); the identity when False.
     rates_ref, rates_est : array_like, shape (N, 3), (K, 3), optional
-        Body angular rates (rad/s) at the sample times, for the first estimate
-        of ``dt`` and ``M``; differentiated from the orientations if not given.
+        Body angular rates (rad/s) at the sample times, for the first ``dt`` and ``M``;
+        differentiated from the orientations if not given.
     max_gap : float, optional
-        Reference samples whose estimate neighbours (at ``t + dt``) are further
-        apart than this (s) are left out; default 5 median steps of the estimate.
+        Leave out reference samples whose estimate neighbours (at ``t + dt``) are further
+        apart (s); default 5 median steps of the estimate.
     max_offset : float, optional
         Largest ``|dt|`` searched (s), see :func:`estimate_time_offset`.
 
@@ -301,26 +259,20 @@ def estimate_alignment(t_ref: ArrayLike, q_ref: ArrayLike, t_est: ArrayLike, q_e
                                          ('time_offset', time_offset is None)) if wanted]
     problem = _Problem(t_ref, q_ref, t_est, q_est, FIT_STEPS * step_est,
                        5.0 * step_est if max_gap is None else float(max_gap), rates_est)
-    dt, residual_rms = _best_start(problem, starts, world, mounting, rates_ref, rates_est)
+    dt = _best_start(problem, starts, world, mounting, rates_ref, rates_est)
     problem.select(dt)   # (the last start scored may have chosen other samples)
     w, m = _initial_rotations(problem, dt, world, mounting, rates_ref, rates_est)
-    w, m, dt, std, r = problem.solved(w, m, dt, columns)
-    residual_rms = float(np.sqrt(np.mean(np.sum(r.reshape(-1, 3) ** 2, axis=1))))
-    return Alignment(
-        time_offset=float(dt), time_offset_std=float(std.get('time_offset', [0.0])[0]),
-        world=w, world_std=std.get('world', np.zeros(3)), mounting=m,
-        mounting_std=std.get('mounting', np.zeros(3)), matched=r.size // 3,
-        residual_rms=residual_rms)
+    # Residuals are correlated within the reach of the estimate's local fit.
+    return _least_squares(problem.linearised, w, m, dt, columns,
+                          lambda: problem.t_ref[problem.index],
+                          2.0 * WINDOW_BANDWIDTHS * problem.bandwidth)
 
 
 def _best_start(problem, starts, world, mounting, rates_ref, rates_est):
     """
-    Return the start ``dt`` (of the correlation peaks) at which the orientations agree best.
+    Return the start ``dt`` at which the closed-form ``W``, ``M`` leave the smallest residual.
 
-    Each is scored by the residual of its closed-form ``W``, ``M``. A motion that
-    repeats itself up to a rotation (a free body after a period of its rate) agrees
-    as well at another peak: then the offset is ambiguous and DegenerateMotionError
-    names the candidates.
+    Another as good (a motion repeating itself up to a rotation) is a DegenerateMotionError.
     """
     scored, refused = [], []
     for start in starts:
@@ -330,8 +282,8 @@ def _best_start(problem, starts, world, mounting, rates_ref, rates_est):
             refused.append(error)
             continue
         w, m = _initial_rotations(problem, start, world, mounting, rates_ref, rates_est)
-        residuals = problem.residuals(w, m, start)
-        scored.append((float(np.sqrt(np.mean(np.sum(residuals ** 2, axis=1)))), start))
+        residuals = _residuals(problem.q_ref[problem.index], problem.estimate_at(start), w, m)
+        scored.append((_rms_angle(residuals), start))
     if not scored:
         raise refused[0]
     scored.sort()
@@ -344,18 +296,16 @@ def _best_start(problem, starts, world, mounting, rates_ref, rates_est):
             f'the time offset is ambiguous: the motion repeats itself, and the orientations '
             f'agree as well at {offsets} s; give the offset, or bound the search (max_offset, '
             '--max-offset)')
-    return dt, best
+    return dt
 
 
 def _least_squares(linearised, w, m, dt, columns, times=None, span=0.0):
     """
-    Gauss-Newton from ``(w, m, dt)``: ``(W, M, dt, {block: std}, residuals)``.
+    Gauss-Newton from ``(w, m, dt)`` to the :class:`Alignment` of the solution.
 
-    ``linearised(w, m, dt, columns) -> (r, J)``. Checks ``J^T J`` for
-    degenerate motion at the start and at the solution. The variances are those
-    of ``s^2 (J^T J)^-1``; given ``times() ->`` the times of the samples of the
-    last ``linearised``, their residuals correlated within ``span`` (s) of each
-    other, those of :func:`_correlated_covariance` where larger.
+    ``linearised(w, m, dt, columns) -> (r, J)``; ``J^T J`` is checked for degenerate motion
+    at the start and at the solution. The variances are those of ``s^2 (J^T J)^-1`` or, given
+    ``times()`` of the last linearised samples, of :func:`_correlated_covariance` where larger.
     """
     count = None
     for iteration in range(_MAX_ITERATIONS + 1):
@@ -379,19 +329,30 @@ def _least_squares(linearised, w, m, dt, columns, times=None, span=0.0):
             variance = np.maximum(variance, np.diag(_correlated_covariance(
                 information, jacobian, r, times(), span, r.size / dof)))
         std = np.sqrt(variance)
-    return (conversions.canonical_quaternion(w), conversions.canonical_quaternion(m), float(dt),
-            _blocks(std, columns), r)
+    std = _blocks(std, columns)
+    return Alignment(float(dt), float(std.get('time_offset', [0.0])[0]),
+                     conversions.canonical_quaternion(w), std.get('world', np.zeros(3)),
+                     conversions.canonical_quaternion(m), std.get('mounting', np.zeros(3)),
+                     r.size // 3, _rms_angle(r))
+
+
+def _residuals(q_ref, q_est, w, m):
+    """Rotation vectors ``log(R_ref^T W R_est M)`` of matched samples."""
+    return orientation_errors(
+        q_ref, conversions.quaternion_product(conversions.quaternion_product(w, q_est), m))
+
+
+def _rms_angle(r):
+    """Root mean square of the angles of rotation vectors ``r`` (flat or (n, 3))."""
+    return float(np.sqrt(np.mean(np.sum(r.reshape(-1, 3) ** 2, axis=1))))
 
 
 def _correlated_covariance(information, jacobian, r, times, span, scale):
     """
     ``(J^T J)^-1 S (J^T J)^-1``: ``S`` the sum of ``g_i g_j^T`` over ``|t_i - t_j| <= span``.
 
-    ``g_i = J_i^T r_i`` is what sample ``i`` adds to the normal equations
-    (its three rows). Residuals of samples closer than ``span`` share noise
-    (the estimate's local fit reaches ``WINDOW_BANDWIDTHS`` bandwidths either side):
-    ``s^2 (J^T J)^-1`` counts them as independent, and the smoothing shrinks
-    ``s^2`` while the time offset still sees every estimate sample's noise.
+    ``g_i = J_i^T r_i``. Samples closer than ``span`` share the estimate fit's noise, which
+    ``s^2 (J^T J)^-1`` would count as independent (and the smoothing shrinks ``s^2``).
     """
     p = jacobian.shape[1]
     score = np.einsum('ikp,ik->ip', jacobian.reshape(-1, 3, p), r.reshape(-1, 3))
@@ -408,8 +369,7 @@ def _correlated_covariance(information, jacobian, r, times, span, scale):
 def _pair_linearised(q_ref, q_est):
     """``linearised(w, m, dt, columns)`` of matched pairs (``dt`` unused)."""
     def linearised(w, m, dt, columns):
-        aligned = conversions.quaternion_product(conversions.quaternion_product(w, q_est), m)
-        r = orientation_errors(q_ref, aligned)
+        r = _residuals(q_ref, q_est, w, m)
         jacobian = _rotation_jacobian(r, q_est, m, columns)
         return r.reshape(-1), jacobian.reshape(-1, jacobian.shape[-1])
     return linearised
@@ -433,9 +393,8 @@ def align_pairs(q_ref: ArrayLike, q_est: ArrayLike, *, world: bool = True,
     """
     ``W`` and ``M`` minimising ``sum |log(R_ref_i^T W R_est_i M)|^2`` over matched pairs.
 
-    The least squares on SO(3) of :func:`estimate_alignment` without time:
-    the same start (``M`` by Kabsch on the relative rotations between
-    consecutive pairs where both are estimated) and Gauss-Newton steps.
+    :func:`estimate_alignment` without time: the same start (``M`` by Kabsch on the relative
+    rotations of consecutive pairs when both are estimated) and Gauss-Newton steps.
 
     Parameters
     ----------
@@ -467,10 +426,7 @@ def align_pairs(q_ref: ArrayLike, q_est: ArrayLike, *, world: bool = True,
         m = kabsch(orientation_errors(q_ref[:-1], q_ref[1:]),
                    orientation_errors(q_est[:-1], q_est[1:]))
     w, m = _closed_form(q_ref, q_est, w, m, world, mounting)
-    w, m, _, std, r = _least_squares(_pair_linearised(q_ref, q_est), w, m, 0.0, columns)
-    return Alignment(0.0, 0.0, w, std.get('world', np.zeros(3)), m,
-                     std.get('mounting', np.zeros(3)), int(q_ref.shape[0]),
-                     float(np.sqrt(np.mean(np.sum(r.reshape(-1, 3) ** 2, axis=1)))))
+    return _least_squares(_pair_linearised(q_ref, q_est), w, m, 0.0, columns)
 
 
 def _blocks(vector, columns):
@@ -539,7 +495,7 @@ def aligned_series(t_ref: ArrayLike, q_ref: ArrayLike, t_est: ArrayLike, q_est: 
     world, mounting : array_like, shape (4,), optional
         ``W`` and ``M`` (x, y, z, w); the identity by default.
     max_gap : float, optional
-        As for :func:`rotation_node.comparison.interpolate_orientations`.
+        As for :func:`interpolate_orientations`.
 
     Returns
     -------

@@ -1,10 +1,4 @@
-"""
-Two orientation series side by side: slerp at the other's stamps, error rotations, statistics.
-
-Quaternions ``(x, y, z, w)``, body to world, as in :mod:`rotation_node.conversions`,
-whose exact kernels (product, conjugate, exponential and logarithm maps) every
-formula here is made of.
-"""
+"""Two orientation series side by side: slerp at the other's stamps, errors, statistics."""
 from __future__ import annotations
 
 from typing import NamedTuple, Optional, Tuple, TYPE_CHECKING
@@ -25,16 +19,7 @@ GAP_STEPS = 5.0
 
 
 def checked_series(t: ArrayLike, q: ArrayLike, name: str) -> Tuple[FloatArray, FloatArray]:
-    """
-    Return ``(t, q)`` as float64 arrays, ``q`` unit and canonical, after checking them.
-
-    Raises
-    ------
-    ComparisonError
-        ``t`` not a strictly increasing finite vector of at least 2 times, or
-        ``q`` not of shape ``(len(t), 4)`` with finite non-zero quaternions.
-
-    """
+    """Return ``(t, q)`` checked (ComparisonError) as float64 arrays, ``q`` unit and canonical."""
     times = np.asarray(t, dtype=np.float64)
     if times.ndim != 1 or times.size < 2:
         raise ComparisonError(f'{name}: expected at least 2 sample times, got shape {times.shape}')
@@ -69,16 +54,15 @@ def interpolate_orientations(t: ArrayLike, q: ArrayLike, t_query: ArrayLike, *,
     t_query : array_like, shape (K,)
         Where to interpolate.
     max_gap : float, optional
-        A query whose two neighbouring samples are further apart than this (s)
-        is dropped; default :data:`GAP_STEPS` median steps of ``t``.
+        Drop a query whose two neighbouring samples are further apart (s); default
+        :data:`GAP_STEPS` median steps of ``t``.
 
     Returns
     -------
     valid : ndarray of bool, shape (K,)
         The queries inside ``[t[0], t[-1]]`` and not in a gap.
     quaternions : ndarray, shape (valid.sum(), 4)
-        The interpolated orientations at ``t_query[valid]``; a query on a
-        sample time gives that sample exactly.
+        The orientations at ``t_query[valid]``; on a sample time, that sample exactly.
 
     """
     t, q = checked_series(t, q, 'series')
@@ -95,10 +79,9 @@ def orientation_errors(q_reference: ArrayLike, q_estimate: ArrayLike) -> FloatAr
     """
     Rotation vectors of the error rotations between two orientation series.
 
-    The error ``E`` is the rotation with ``R_est = R_ref E``:
-    ``E = q_ref* (x) q_est``, a rotation of the reference body frame, so its
-    rotation vector's components are the errors about the reference body's
-    x, y and z axes and its norm the error angle (the geodesic distance).
+    ``E = q_ref* (x) q_est`` (``R_est = R_ref E``) turns the reference body frame: its
+    rotation vector holds the errors about the reference body's x, y and z axes, its norm the
+    error angle (the geodesic distance).
 
     Parameters
     ----------
@@ -139,9 +122,8 @@ def error_statistics(errors: ArrayLike) -> ErrorStatistics:
     Returns
     -------
     ErrorStatistics
-        Of the angles ``|e|``: root mean square, mean, median, 95th percentile
-        (linear interpolation, as ``numpy.percentile``), maximum; per axis: the
-        root mean square and the maximum of ``|e_x|``, ``|e_y|``, ``|e_z|``.
+        Of the angles ``|e|``: root mean square, mean, median, 95th percentile (as
+        ``numpy.percentile``), maximum; per axis: root mean square and maximum of ``|e_i|``.
 
     """
     e = np.asarray(errors, dtype=np.float64)

@@ -1,14 +1,11 @@
 """
 Gaussian-weighted local polynomial fits of a stamped series, at any times.
 
-Slerp of noisy samples at a fraction ``u`` between two samples has a noise
-variance that depends on ``u`` (``(1 - u)^2 + u^2`` times a sample's), which
-pulls a least-squares time offset towards half a step. A fit with Gaussian
-weights of standard deviation at least one sample step has a variance that is
-the same at every ``u`` to ~1e-9, and a symmetric window: it shifts nothing in
-time. Orientations are fitted in the tangent space of the sample nearest to
-each query (a quadratic: the value is unbiased to fourth order in the
-bandwidth), vectors (angular rates) directly.
+Slerp between noisy samples has a noise variance that depends on the fraction ``u`` between
+them, which pulls a least-squares time offset towards half a step; a Gaussian fit of
+bandwidth >= one step has the same variance at every ``u`` (to ~1e-9) and a symmetric window.
+Orientations are fitted (quadratic) in the tangent space of the sample nearest each query,
+vectors (angular rates) directly (linear).
 """
 from __future__ import annotations
 
@@ -80,7 +77,7 @@ def smoothed_vectors(t: FloatArray, v: FloatArray, query: FloatArray,
     """
     Local linear fit of vectors ``v (N, m)`` at ``query``: ``(valid (K,), values (k, m))``.
 
-    Only queries with samples on both sides within three bandwidths (four at least) are valid.
+    Valid: queries with samples on both sides within three bandwidths (four at least).
     """
     def fit(chunk):
         window = _windows(t, chunk, bandwidth)
@@ -93,8 +90,7 @@ def smoothed_orientations(t: FloatArray, q: FloatArray, query: FloatArray,
     """
     Local quadratic fit of unit quaternions ``q (N, 4)`` at ``query``: ``(valid, quaternions)``.
 
-    In the tangent space of the sample nearest to each query: ``q_c exp(a)``
-    with ``a`` the fitted value of ``log(q_c* q_j)`` over the window.
+    ``q_c exp(a)``, ``q_c`` the nearest sample, ``a`` the fitted ``log(q_c* q_j)``.
     """
     def fit(chunk):
         window = _windows(t, chunk, bandwidth)

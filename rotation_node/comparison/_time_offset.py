@@ -1,20 +1,12 @@
 """
-The time offset between two orientation streams, from their angular rates.
+The time offset between two orientation streams, from their angular rate magnitudes.
 
-The magnitude of the body angular rate does not depend on a fixed mounting or
-world rotation: ``|w_ref(t)| = |w_est(t + dt)|`` when
-``R_ref(t) = W R_est(t + dt) M``. Both magnitudes, from given rates or
-differentiated orientations (:func:`rotation_node.kinematics.angular_velocity_from_quaternions`),
-are smoothed with the same Gaussian on a common uniform grid; the lag of the
-highest normalised cross-correlation (over lags where the two overlap by at
-least half of the shorter) is refined to a fraction of a grid step with a
-parabola, then by least squares of ``|w_ref(t)| - a |w_est(t + dt)| - b`` in
-continuous ``dt``, whose curvature gives the standard deviation.
-
-A motion whose rate magnitude repeats (a free body's rate is periodic in its
-body frame) correlates almost as well one period away: :func:`time_offset_candidates`
-returns the best few peaks, and :func:`rotation_node.comparison.estimate_alignment`
-keeps the one at which the orientations themselves agree best.
+``|w_ref(t)| = |w_est(t + dt)|`` whatever ``W`` and ``M``. Both magnitudes, smoothed with
+one Gaussian on a uniform grid, are cross-correlated (over lags where they overlap by half
+the shorter); a peak is refined with a parabola, then by least squares in continuous ``dt``,
+whose curvature gives the standard deviation. A motion whose rate magnitude repeats has a
+peak every period: :func:`time_offset_candidates` returns the best few, and
+:func:`~rotation_node.comparison.estimate_alignment` keeps the one where the orientations agree.
 """
 from __future__ import annotations
 
@@ -52,18 +44,13 @@ class TimeOffset(NamedTuple):
 
 
 def default_rate_bandwidth(step_ref: float, step_est: float) -> float:
-    """Return the Gaussian smoothing rate magnitudes: 20 ms, or 3 steps of the slower stream."""
+    """Return the bandwidth (s) smoothing rate magnitudes: 20 ms, or 3 steps of the slower one."""
     return max(0.02, 3.0 * max(step_ref, step_est))
 
 
 def smoothed_rates(t: FloatArray, q: FloatArray, rates: Optional[ArrayLike], query: FloatArray,
                    bandwidth: float, name: str) -> Tuple[np.ndarray, FloatArray]:
-    """
-    Body angular rates of a stream smoothed at ``query``: ``(valid, rates (k, 3))``.
-
-    ``rates`` at ``t`` where given, else the finite differences of ``q``
-    (at the midpoints of the steps).
-    """
+    """Body angular rates (given, else differentiated from ``q``) smoothed at ``query``."""
     if rates is None:
         times = 0.5 * (t[1:] + t[:-1])
         values = kinematics.angular_velocity_from_quaternions(q, t)
@@ -104,9 +91,8 @@ def estimate_time_offset(t_ref: ArrayLike, q_ref: ArrayLike, t_est: ArrayLike, q
     """
     Estimate ``dt`` with ``|w_ref(t)| = |w_est(t + dt)|`` from the two streams' angular rates.
 
-    The highest peak of the rate magnitudes' correlation: for a motion whose rate
-    magnitude repeats, :func:`estimate_alignment` (which also compares the
-    orientations) decides between the peaks.
+    The highest correlation peak; where the rate magnitude repeats,
+    :func:`estimate_alignment` decides between the peaks by the orientations.
 
     Parameters
     ----------
@@ -118,11 +104,11 @@ def estimate_time_offset(t_ref: ArrayLike, q_ref: ArrayLike, t_est: ArrayLike, q
         Body angular rates (rad/s) at the sample times; differentiated from the
         orientations where not given.
     max_offset : float, optional
-        Search ``|dt| <= max_offset`` (s); default every lag at which the
-        streams overlap by at least half the shorter one.
+        Search ``|dt| <= max_offset`` (s); default every lag at which the streams overlap
+        by at least half the shorter one.
     bandwidth : float, optional
-        Standard deviation (s) of the Gaussian smoothing the rate magnitudes;
-        default :func:`default_rate_bandwidth`.
+        Standard deviation (s) of the Gaussian smoothing the rate magnitudes; default
+        :func:`default_rate_bandwidth`.
 
     Returns
     -------
@@ -133,12 +119,10 @@ def estimate_time_offset(t_ref: ArrayLike, q_ref: ArrayLike, t_est: ArrayLike, q
     Raises
     ------
     DegenerateMotionError
-        A stream's rate magnitude hardly varies (less than 0.02 rad/s standard
-        deviation: no motion, or a constant rate), or the two do not correlate
-        (peak below 0.5), or the peak lies on the edge of the searched lags.
+        A stream's rate magnitude varies by less than 0.02 rad/s (standard deviation), the
+        two do not correlate (peak below 0.5), or the peak is on the edge of the searched lags.
     ComparisonError
-        Bad arrays, or the streams together span more than 20 million grid steps
-        (stamps of different clocks).
+        Bad arrays, or the streams span more than 20 million grid steps (different clocks).
 
     """
     return time_offset_candidates(t_ref, q_ref, t_est, q_est, rates_ref=rates_ref,
@@ -155,9 +139,8 @@ def time_offset_candidates(t_ref: ArrayLike, q_ref: ArrayLike, t_est: ArrayLike,
     """
     Return up to ``count`` offsets at the highest correlation peaks, the highest first.
 
-    Arguments, errors and each offset's refinement as in :func:`estimate_time_offset`
-    (whose answer is the first); the others are the next local maxima of the
-    correlation above its threshold, inside the searched range.
+    As :func:`estimate_time_offset` (whose answer is the first); the others are the next
+    local maxima above the correlation threshold, inside the searched range.
     """
     t_ref, q_ref = checked_series(t_ref, q_ref, 'reference')
     t_est, q_est = checked_series(t_est, q_est, 'estimate')
@@ -198,9 +181,8 @@ def time_offset_candidates(t_ref: ArrayLike, q_ref: ArrayLike, t_est: ArrayLike,
                  f'in [{searched.min():.3f}, {searched.max():.3f}] s')
         raise DegenerateMotionError(
             f'the angular rates of the two streams do not match at any time offset {where} '
-            '(peak correlation '
-            f'{max(pearson[peak], -1.0):.2f} < {MIN_CORRELATION}): different motions, too '
-            'little motion, or a larger offset')
+            f'(peak correlation {max(pearson[peak], -1.0):.2f} < {MIN_CORRELATION}): different '
+            'motions, too little motion, or a larger offset')
     if (peak == 0 or peak == pearson.size - 1 or not np.isfinite(pearson[peak - 1])
             or not np.isfinite(pearson[peak + 1])):
         raise DegenerateMotionError(

@@ -1,22 +1,11 @@
 """
 Angular velocity <-> time derivative of a quaternion or of a rotation matrix.
 
-Conventions (``docs/numerics.md``): ``q = (x, y, z, w)``, scalar last, Hamilton
-product; ``R = R(q)`` maps body coordinates to world coordinates; the body and
-world angular velocities ``w_b`` and ``w_w = R w_b`` are defined by
-
-    Rdot = R [w_b]x = [w_w]x R,        qdot = 1/2 q (x) (w_b, 0) = 1/2 (w_w, 0) (x) q.
-
-Expanding the products: body ``dq_v/dt = 1/2 (q_s w_b + q_v x w_b)``, world
-``dq_v/dt = 1/2 (q_s w_w - q_v x w_w)``, and ``dq_s/dt = -1/2 q_v . w`` in both.
-The textbook ``dq_v/dt = 1/2 (q_s w - q_v x w)`` is labelled "omega_Body"
-but is the WORLD-frame formula; likewise its ``Omega = dR/dt R^T`` is
-``[w_w]x``. Both frames are tested against finite differences.
-
-The inverses project onto the tangent space: ``w_b = 2 vec(q* (x) qdot)`` and
-``w_b = vee(skew(R^T Rdot))`` discard the component of the derivative that a
-rotation cannot have (``q . qdot`` and the symmetric part of ``R^T Rdot``), so
-they are the least-squares angular velocity for a noisy derivative.
+Conventions as in the package docstring. Expanded, ``dq_v/dt = 1/2 (q_s w_b + q_v x w_b)``
+(body) or ``1/2 (q_s w_w - q_v x w_w)`` (world), and ``dq_s/dt = -1/2 q_v . w`` in both.
+The inverses ``w_b = 2 vec(q* (x) qdot)`` and ``w_b = vee(skew(R^T Rdot))`` drop the part of
+the derivative a rotation cannot have (``q . qdot``, the symmetric part of ``R^T Rdot``), so
+they are the least-squares angular velocity of a noisy derivative.
 """
 from __future__ import annotations
 
@@ -34,10 +23,8 @@ if TYPE_CHECKING:
 
     from ..type_aliases import FloatArray
 
-# ----------------------------------------------------------------- kernels
-# As in conversions: validated C-contiguous inputs with a common leading shape,
-# a preallocated output; the return value is the status of the first bad
-# sample, or -1.
+# Kernels as in conversions: validated inputs, a preallocated output, the status of the first
+# bad sample returned (-1 when all are fine).
 
 
 @jit
@@ -135,8 +122,6 @@ def _angular_velocity_from_matrix_derivative_kernel(R, R_dot, out, world):
     return -1
 
 
-# ------------------------------------------------------------ public API
-
 def quaternion_derivative(q: ArrayLike, omega: ArrayLike, frame: str = 'body') -> FloatArray:
     """
     Time derivative of a unit quaternion rotating with angular velocity ``omega``.
@@ -144,29 +129,18 @@ def quaternion_derivative(q: ArrayLike, omega: ArrayLike, frame: str = 'body') -
     Parameters
     ----------
     q : array_like, shape (..., 4)
-        Orientations (x, y, z, w), scalar last, body-to-world; any non-zero
-        norm (normalised first, sign kept: ``-q`` gives ``-qdot``).
+        Orientations (x, y, z, w), body-to-world, any non-zero norm (normalised first, sign
+        kept: ``-q`` gives ``-qdot``).
     omega : array_like, shape (..., 3)
-        Angular velocities (rad/s) in ``frame``; leading dimensions broadcast
-        with ``q``'s.
+        Angular velocities (rad/s) in ``frame``; broadcast with ``q``.
     frame : {'body', 'world'}, optional
-        ``'body'``: ``qdot = 1/2 q (x) (w_b, 0)``, i.e.
-        ``dq_v/dt = 1/2 (q_s w_b + q_v x w_b)``.
-        ``'world'``: ``qdot = 1/2 (w_w, 0) (x) q``, i.e.
-        ``dq_v/dt = 1/2 (q_s w_w - q_v x w_w)``: this is the textbook
-        formula, which labels the vector "omega_Body" but is the world one.
-        ``dq_s/dt = -1/2 q_v . w`` in both frames.
+        ``'body'``: ``qdot = 1/2 q (x) (w_b, 0)``. ``'world'``: ``qdot = 1/2 (w_w, 0) (x) q``,
+        the textbook formula that labels its vector "omega_Body".
 
     Returns
     -------
     ndarray, shape (..., 4)
         ``qdot`` (1/s) of the unit quaternion ``q / |q|``; orthogonal to it.
-
-    Raises
-    ------
-    ValueError
-        Bad ``frame``; wrong shape, NaN/Inf or zero quaternion, naming the
-        argument and the sample.
 
     """
     return call_binary(_quaternion_derivative_kernel, q, omega, ('q', 'omega'), ((4,), (3,)), (4,),
@@ -181,27 +155,18 @@ def angular_velocity_from_quaternion_derivative(q: ArrayLike, q_dot: ArrayLike,
     Parameters
     ----------
     q : array_like, shape (..., 4)
-        Orientations (x, y, z, w), scalar last, body-to-world; any non-zero
-        norm (normalised first, sign kept).
+        Orientations (x, y, z, w), body-to-world, any non-zero norm (normalised, sign kept).
     q_dot : array_like, shape (..., 4)
-        Time derivative (1/s) of the unit quaternion ``q / |q|``; leading
-        dimensions broadcast with ``q``'s.
+        Time derivative (1/s) of the unit quaternion ``q / |q|``; broadcast with ``q``.
     frame : {'body', 'world'}, optional
-        ``'body'``: ``w_b = 2 vec(q* (x) qdot)``; ``'world'``:
-        ``w_w = 2 vec(qdot (x) q*)``.
+        ``'body'``: ``w_b = 2 vec(q* (x) qdot)``; ``'world'``: ``w_w = 2 vec(qdot (x) q*)``.
 
     Returns
     -------
     ndarray, shape (..., 3)
-        Angular velocity (rad/s) in ``frame``. The component of ``q_dot``
-        along ``q`` (which would change the norm) is ignored, so this is the
-        least-squares angular velocity when ``q_dot`` is noisy; it inverts
-        :func:`quaternion_derivative` exactly (to rounding).
-
-    Raises
-    ------
-    ValueError
-        Bad ``frame``; wrong shape, NaN/Inf, zero ``q``.
+        Angular velocity (rad/s) in ``frame``. The component of ``q_dot`` along ``q`` is
+        ignored (least squares for a noisy ``q_dot``); inverts :func:`quaternion_derivative`
+        to rounding.
 
     """
     return call_binary(_angular_velocity_from_quaternion_derivative_kernel, q, q_dot,
@@ -215,11 +180,9 @@ def matrix_derivative(R: ArrayLike, omega: ArrayLike, frame: str = 'body') -> Fl
     Parameters
     ----------
     R : array_like, shape (..., 3, 3)
-        Rotation matrices, body-to-world. Used as given (not re-orthonormalised);
-        ``det(R) <= 0`` is rejected.
+        Rotation matrices, body-to-world, used as given (not re-orthonormalised).
     omega : array_like, shape (..., 3)
-        Angular velocities (rad/s) in ``frame``; leading dimensions broadcast
-        with ``R``'s.
+        Angular velocities (rad/s) in ``frame``; broadcast with ``R``.
     frame : {'body', 'world'}, optional
         ``'body'``: ``Rdot = R [w_b]x``; ``'world'``: ``Rdot = [w_w]x R``.
 
@@ -227,11 +190,6 @@ def matrix_derivative(R: ArrayLike, omega: ArrayLike, frame: str = 'body') -> Fl
     -------
     ndarray, shape (..., 3, 3)
         ``Rdot`` (1/s).
-
-    Raises
-    ------
-    ValueError
-        Bad ``frame``; wrong shape, NaN/Inf, ``det(R) <= 0``.
 
     """
     return call_binary(_matrix_derivative_kernel, R, omega, ('R', 'omega'), ((3, 3), (3,)), (3, 3),
@@ -246,26 +204,19 @@ def angular_velocity_from_matrix_derivative(R: ArrayLike, R_dot: ArrayLike,
     Parameters
     ----------
     R : array_like, shape (..., 3, 3)
-        Rotation matrices, body-to-world, used as given; ``det(R) <= 0`` is
-        rejected.
+        Rotation matrices, body-to-world, used as given.
     R_dot : array_like, shape (..., 3, 3)
-        Their time derivatives (1/s); leading dimensions broadcast with ``R``'s.
+        Their time derivatives (1/s); broadcast with ``R``.
     frame : {'body', 'world'}, optional
-        ``'body'``: ``[w_b]x = R^T Rdot``; ``'world'``: ``[w_w]x = Rdot R^T``
-        (the textbook ``Omega``).
+        ``'body'``: ``[w_b]x = R^T Rdot``; ``'world'``: ``[w_w]x = Rdot R^T`` (the textbook
+        ``Omega``).
 
     Returns
     -------
     ndarray, shape (..., 3)
-        Angular velocity (rad/s) in ``frame``: the vee of the skew-symmetric
-        part of ``R^T Rdot`` (or ``Rdot R^T``). The symmetric part, which a
-        rotation's derivative cannot have, is ignored, so this is the
-        least-squares angular velocity for a noisy ``R_dot``.
-
-    Raises
-    ------
-    ValueError
-        Bad ``frame``; wrong shape, NaN/Inf, ``det(R) <= 0``.
+        Angular velocity (rad/s) in ``frame``: the vee of the skew-symmetric part of
+        ``R^T Rdot`` (``Rdot R^T``); the symmetric part is ignored (least squares for a noisy
+        ``R_dot``).
 
     """
     return call_binary(_angular_velocity_from_matrix_derivative_kernel, R, R_dot,

@@ -6,34 +6,15 @@ For an intrinsic sequence with axes ``e1, e2, e3`` and angles ``(b1, b2, b3)``
 
     w_b = R3^T R2^T e1 b1' + R3^T e2 b2' + e3 b3' = J(b2, b3) b'.
 
-Every other case reduces to this one ``J``:
-
-- extrinsic ``'ijk'`` with ``(a1, a2, a3)`` is intrinsic ``'KJI'`` with
-  ``(a3, a2, a1)``;
-- world frame: ``R^T = R3(-b3) R2(-b2) R1(-b1)`` is the intrinsic sequence
-  ``(e3, e2, e1)`` with angles ``(-b3, -b2, -b1)``, and its body angular
-  velocity is ``-w_w``; so ``w_w`` is the ``J`` of the reversed axes at the
-  negated angles ``(-b2, -b1)``, applied to ``(b3', b2', b1')``.
-
-So a convention and frame select three axis indices, whether the angle order
-is reversed and whether the angles are negated; one kernel does the rest.
-Writing ``(i, j, n)`` for the axes of ``e1``, ``e2`` and the remaining one,
-``p = +1`` if ``(i, j, n)`` is cyclic, else ``-1``, ``c`` and ``s`` for the
-cosine and sine of the middle (2) and last (3) angle, the components of
-``w = J r`` along ``(e_i, e_j, e_n)`` are
-
-    Tait-Bryan (e3 = e_n):  w_i = c2 c3 r1 + p s3 r2,  w_j = c3 r2 - p c2 s3 r1,
-                            w_n = r3 + p s2 r1
-    proper (e3 = e_i):      w_i = c2 r1 + r3,  w_j = s2 s3 r1 + c3 r2,
-                            w_n = p (s2 c3 r1 - s3 r2)
-
-and the inverses ``r = J^-1 w`` are
-
-    Tait-Bryan:  r1 = (c3 w_i - p s3 w_j) / c2,   r2 = p s3 w_i + c3 w_j,   r3 = w_n - p s2 r1
-    proper:      r1 = (s3 w_j + p c3 w_n) / s2,   r2 = c3 w_j - p s3 w_n,   r3 = w_i - c2 r1
-
-They divide by ``c2`` (Tait-Bryan) or ``s2`` (proper Euler) and nothing else:
-singular exactly where the Euler angles themselves are (gimbal lock).
+Every other case reduces to this ``J``: extrinsic ``'ijk'`` with ``(a1, a2, a3)`` is intrinsic
+``'KJI'`` with ``(a3, a2, a1)``; in the world frame, ``R^T`` is the intrinsic sequence
+``(e3, e2, e1)`` at ``(-b3, -b2, -b1)`` with body angular velocity ``-w_w``. So a convention
+and frame select three axis indices, whether the angle order is reversed and whether the
+angles are negated; one kernel each way does the rest. It writes ``w = J r`` along
+``(e_i, e_j, e_n)``, the axes of ``e1``, ``e2`` and the remaining one, with ``p = +1`` if
+``(i, j, n)`` is cyclic, else ``-1``; ``c2, s2, c3, s3`` are the cosine and sine of the middle
+and last angle. Tait-Bryan (``e3 = e_n``) inverses divide by ``c2``, proper Euler
+(``e3 = e_i``) ones by ``s2``, nothing else: singular exactly at gimbal lock.
 
 References
 ----------
@@ -72,10 +53,8 @@ class EulerSingularityWarning(RuntimeWarning):
     """
     Euler rates were requested at (or within ``singularity_threshold`` of) gimbal lock.
 
-    The affected samples are NaN in the result (all three rates); the mask is
-    ``np.isnan(rates[..., 0])``. Silence it with
-    ``warnings.simplefilter('ignore', EulerSingularityWarning)`` when the
-    caller counts the NaNs itself.
+    The affected samples are NaN (all three rates; mask ``np.isnan(rates[..., 0])``). Silence
+    it with ``warnings.simplefilter('ignore', EulerSingularityWarning)`` when counting them.
     """
 
 
@@ -166,28 +145,20 @@ def angular_velocity_from_euler_rates(angles: ArrayLike, rates: ArrayLike, seq: 
     angles : array_like, shape (..., 3)
         Euler angles (first, second, third of ``seq``), radians unless ``degrees``.
     rates : array_like, shape (..., 3)
-        Their time derivatives, rad/s (deg/s if ``degrees``); leading
-        dimensions broadcast with ``angles``'.
+        Their time derivatives, rad/s (deg/s if ``degrees``); broadcast with ``angles``.
     seq : str
-        One of the 24 conventions: three of x, y, z, no two consecutive alike;
-        upper case intrinsic (``R = R1 R2 R3``), lower case extrinsic
-        (``R = R3 R2 R1``). ROS roll-pitch-yaw is ``'xyz'``.
+        One of the 24 conventions: three of x, y, z, no two consecutive alike; upper case
+        intrinsic (``R = R1 R2 R3``), lower case extrinsic (``R = R3 R2 R1``). ROS
+        roll-pitch-yaw is ``'xyz'``.
     frame : {'body', 'world'}, optional
-        Frame of the result: ``w_b``, or ``w_w = R w_b`` with ``R``
-        body-to-world.
+        Frame of the result: ``w_b``, or ``w_w = R w_b`` with ``R`` body-to-world.
     degrees : bool, optional
         Angles in degrees and rates in deg/s. The angular velocity is always rad/s.
 
     Returns
     -------
     ndarray, shape (..., 3)
-        Angular velocity (rad/s) in ``frame``. Defined everywhere, including
-        gimbal lock (where the map is not invertible).
-
-    Raises
-    ------
-    ValueError
-        Bad ``seq`` or ``frame``; wrong shape or NaN/Inf, naming the argument.
+        Angular velocity (rad/s) in ``frame``; defined everywhere, gimbal lock included.
 
     """
     return call_binary(_angular_velocity_kernel, angles, rates, ('angles', 'rates'), ((3,), (3,)),
@@ -207,8 +178,7 @@ def euler_rates_from_angular_velocity(
     angles : array_like, shape (..., 3)
         Euler angles (first, second, third of ``seq``), radians unless ``degrees``.
     omega : array_like, shape (..., 3)
-        Angular velocity (rad/s) in ``frame``; leading dimensions broadcast
-        with ``angles``'.
+        Angular velocity (rad/s) in ``frame``; broadcast with ``angles``.
     seq : str
         One of the 24 conventions, as in :func:`angular_velocity_from_euler_rates`.
     frame : {'body', 'world'}, optional
@@ -216,28 +186,20 @@ def euler_rates_from_angular_velocity(
     degrees : bool, optional
         Angles in degrees and the returned rates in deg/s. ``omega`` is always rad/s.
     singularity_threshold : float, optional
-        Radians, whatever ``degrees``; in [0, pi/2]. Samples whose middle angle
-        is within this distance of its singular value (+-pi/2 for Tait-Bryan,
-        0 or pi for proper Euler: gimbal lock) get NaN rates.
+        Radians whatever ``degrees``, in [0, pi/2]: samples whose middle angle is this close
+        to its singular value (+-pi/2 Tait-Bryan, 0 or pi proper Euler) get NaN rates.
 
     Returns
     -------
     ndarray, shape (..., 3)
-        Rates of the three angles, rad/s (deg/s if ``degrees``). NaN for the
-        near-singular samples; elsewhere finite, even if large (they grow as
-        ``|omega| / margin``).
+        Rates of the three angles, rad/s (deg/s if ``degrees``): NaN for the near-singular
+        samples, elsewhere finite even if large (they grow as ``|omega| / margin``).
 
     Warns
     -----
     EulerSingularityWarning
-        Once per call if any sample was near-singular, with their count. The
-        mask of those samples is ``np.isnan(rates[..., 0])``.
-
-    Raises
-    ------
-    ValueError
-        Bad ``seq``, ``frame`` or ``singularity_threshold``; wrong shape or
-        NaN/Inf, naming the argument.
+        Once per call if any sample was near-singular, with their count (mask:
+        ``np.isnan(rates[..., 0])``).
 
     """
     axes = _jacobian_axes(seq, frame)

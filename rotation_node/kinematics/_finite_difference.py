@@ -1,16 +1,9 @@
 """
-Angular velocity from a time series of orientations, by finite differences.
+Angular velocity from a time series of orientations by finite differences, and slerp.
 
-Between consecutive samples the relative rotation is ``q_k^-1 q_{k+1}`` (body)
-or ``q_{k+1} q_k^-1`` (world); its rotation vector (log map, ``atan2`` form,
-sign-independent: the shorter way round) divided by the step is the mean
-angular velocity over the step. By the Magnus expansion
-``log(q_k^-1 q_{k+1}) = h w_b(t_k + h/2) + O(h^3)``, so it is a second-order
-estimate at the midpoint time, and exact for a constant angular velocity.
-It aliases when the true rotation per step reaches pi (``|w| h >= pi``).
-
-:func:`slerp` goes the other way: the orientation a fraction of the way along
-that constant-rate rotation between two samples.
+The rotation vector (``atan2`` log map, the shorter way round) of ``q_k^-1 q_{k+1}`` (body) or
+``q_{k+1} q_k^-1`` (world) over the step is, by the Magnus expansion, ``h w(t_k + h/2) +
+O(h^3)``: second order at the midpoint, exact for a constant rate, aliased once ``|w| h >= pi``.
 """
 from __future__ import annotations
 
@@ -65,13 +58,11 @@ def angular_velocity_from_quaternions(q: ArrayLike, t: ArrayLike,
     Parameters
     ----------
     q : array_like, shape (..., N, 4)
-        Orientations (x, y, z, w), scalar last, body-to-world, at the times
-        ``t``; any non-zero norm and either sign per sample (``q`` and ``-q``
-        are the same rotation, so sign flips between samples do no harm).
+        Orientations (x, y, z, w), body-to-world, at the times ``t``; any non-zero norm and
+        either sign per sample (sign flips between samples do no harm).
     t : array_like, shape (N,)
-        Sample times in seconds, strictly increasing, N >= 2. The steps are
-        ``t[1:] - t[:-1]`` in float64: pass times relative to a recent origin
-        (not ~1.7e9 s since the epoch, whose rounding is ~2e-7 s).
+        Sample times (s), strictly increasing, N >= 2. The steps are computed in float64:
+        pass times from a recent origin (seconds since the epoch round to ~2e-7 s).
     frame : {'body', 'world'}, optional
         ``'body'``: ``w_b = log(q_k^-1 q_{k+1}) / h_k``; ``'world'``:
         ``w_w = log(q_{k+1} q_k^-1) / h_k``.
@@ -79,18 +70,10 @@ def angular_velocity_from_quaternions(q: ArrayLike, t: ArrayLike,
     Returns
     -------
     ndarray, shape (..., N - 1, 3)
-        Angular velocity (rad/s) in ``frame`` over each step, referring to the
-        midpoint times ``(t[:-1] + t[1:]) / 2``: second-order accurate there,
-        exact for a constant angular velocity. Two samples give one value:
-        ``angular_velocity_from_quaternions([q_prev, q], [t_prev, t])[0]``.
-        A rotation of pi or more per step cannot be told from the shorter
-        way round (aliasing).
-
-    Raises
-    ------
-    ValueError
-        Bad ``frame``; ``q`` not (..., N, 4) or with a NaN/Inf or zero
-        sample; ``t`` of the wrong shape, non-finite or not strictly increasing.
+        Angular velocity (rad/s) in ``frame`` over each step, at the midpoint times
+        ``(t[:-1] + t[1:]) / 2``: second order there, exact for a constant rate. Two samples
+        give one value: ``angular_velocity_from_quaternions([q_prev, q], [t_prev, t])[0]``.
+        A rotation of pi or more per step aliases to the shorter way round.
 
     """
     world = is_world_frame(frame)
@@ -109,9 +92,8 @@ def slerp(q0: ArrayLike, q1: ArrayLike, fraction: ArrayLike) -> FloatArray:
     """
     Spherical linear interpolation, the shorter way: ``q0 (x) exp(u log(q0* (x) q1))``.
 
-    Through the library's exponential and logarithm maps (``atan2`` forms): stable
-    for nearly equal quaternions, where ``acos`` of the dot product loses half the
-    digits.
+    Through the ``atan2`` exponential and logarithm maps: stable for nearly equal quaternions,
+    where ``acos`` of the dot product loses half the digits.
 
     Parameters
     ----------

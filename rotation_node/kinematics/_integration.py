@@ -1,16 +1,10 @@
 """
 Attitude integration: orientations from angular velocity.
 
-Solves ``qdot = 1/2 q (x) (w_b(t), 0)`` from ``q(t_0) = q0`` (body frame; the
-world frame ``qdot = 1/2 (w_w, 0) (x) q`` is the body problem of ``q*`` with
-rate ``-w_w``). The equation is linear in ``q`` and the rate multiplies from
-the right, so every method below advances a step as
-
-    q_{k+1} = normalise(q_k (x) dq_k),
-
-with an increment ``dq_k`` that depends only on the rates within the step.
-Normalising the product equals normalising ``dq_k`` first (norms multiply),
-so "forward Euler + normalise" and "RK4 + normalise" are exactly that.
+Solves ``qdot = 1/2 q (x) (w_b(t), 0)`` from ``q(t_0) = q0`` (the world frame is the body
+problem of ``q*`` with rate ``-w_w``). The rate multiplies from the right, so every method
+steps as ``q_{k+1} = normalise(q_k (x) dq_k)`` with an increment ``dq_k`` made of the rates
+within the step (normalising the product equals normalising ``dq_k`` first):
 
 ==================  =====  ========================  ========================================
 method              order  rates per step, at t_k +  increment ``dq``
@@ -25,13 +19,9 @@ method              order  rates per step, at t_k +  increment ``dq``
                            half step                 ``d2`` the half-step angle increments
 ==================  =====  ========================  ========================================
 
-``exp(v)`` is the exponential map (rotation vector to quaternion). Magnus-4 is
-the fourth-order Magnus expansion with the two-point Gauss rule [1]_ (the sign
-of its commutator term is that of right multiplication, ``Y' = Y A``). The
-two-sample coning algorithm [2]_ is fourth order when the angle
-increments are exact; here they come from the rate by Gauss quadrature (exact
-for cubic rates). On coning motion, halving the step divides the error by
-about 2, 4, 16, 16, 16 (tested).
+``exp`` is the rotation-vector-to-quaternion map. Magnus-4 uses the two-point Gauss rule [1]_
+(its commutator's sign is that of right multiplication, ``Y' = Y A``); the two-sample coning
+algorithm [2]_ gets its angle increments by Gauss quadrature (exact for cubic rates).
 
 References
 ----------
@@ -48,7 +38,6 @@ from typing import Callable, TYPE_CHECKING
 
 import numpy as np
 
-from ._stage_rates import stage_rates
 from ._validation import is_world_frame, sample_times
 from ..conversions.kernels import (
     array_type, canonical_kernel, canonical_unit_quaternion, FLAT_IN, float_array, INT, jit,
@@ -135,6 +124,59 @@ def _integrate_kernel(q0, rates, h, out, method):
             out[b, k + 1, 0], out[b, k + 1, 1], out[b, k + 1, 2], out[b, k + 1, 3] = x, y, z, w
 
 
+def _lagrange_stencils(t, h, nodes):
+    """Return the stencils (K, P = min(N, 4)) and weights (K, S, P) of the local cubics."""
+    n = t.shape[0]
+    points = min(n, 4)
+    start = np.clip(np.arange(n - 1) - 1, 0, n - points)
+    stencil = start[:, None] + np.arange(points)
+    # Times relative to t_k: exact zeros at the stencil's own nodes, no epoch rounding.
+    offsets = t[stencil] - t[:-1, None]                                # (K, P)
+    x = nodes[None, :] * h[:, None]                                   # (K, S)
+    weights = np.ones(x.shape + (points,))
+    for m in range(points):
+        for other in range(points):
+            if other != m:
+                weights[:, :, m] *= ((x - offsets[:, None, other])
+                                     / (offsets[:, None, m] - offsets[:, None, other]))
+    return stencil, weights
+
+
+def _first_non_finite(values):
+    """Index (leading dimensions) of the first vector with a NaN or Inf, or None."""
+    bad = ~np.isfinite(values).all(axis=-1)
+    if not bad.any():
+        return None
+    return tuple(int(i) for i in np.unravel_index(np.flatnonzero(bad)[0], bad.shape))
+
+
+def _stage_rates(omega: ArrayLike | Callable[[FloatArray], ArrayLike], t: FloatArray,
+                 h: FloatArray, nodes: FloatArray) -> FloatArray:
+    """Return ``omega`` at ``t_k + nodes[s] h_k``, (..., N - 1, S, 3), else a ValueError."""
+    steps, stages = h.shape[0], nodes.shape[0]
+    if callable(omega):
+        times = (t[:-1, None] + nodes[None, :] * h[:, None]).ravel()
+        rates = np.asarray(omega(times), dtype=np.float64)
+        if rates.shape[-2:] != (times.shape[0], 3):
+            raise ValueError(
+                f'Expected `omega(t)` to return shape (..., {times.shape[0]}, 3) for t of shape '
+                f'({times.shape[0]},), got {rates.shape} (a constant w: '
+                f'np.broadcast_to(w, t.shape + (3,))).')
+        bad = _first_non_finite(rates)
+        if bad is not None:
+            raise ValueError(f'`omega(t)` returned a NaN or Inf at t = {float(times[bad[-1]])!r}.')
+        return rates.reshape(rates.shape[:-2] + (steps, stages, 3))
+    samples = float_array(omega, 'omega', (3,))
+    if samples.ndim < 2 or samples.shape[-2] != t.shape[0]:
+        raise ValueError(f'Expected `omega` samples of shape (..., {t.shape[0]}, 3) to match `t`, '
+                         f'got {samples.shape}.')
+    bad = _first_non_finite(samples)
+    if bad is not None:
+        raise ValueError(f'`omega` at index {bad} has a NaN or Inf component.')
+    stencil, weights = _lagrange_stencils(t, h, nodes)
+    return np.einsum('ksp,...kpd->...ksd', weights, samples[..., stencil, :])
+
+
 def _broadcast(a, shape):
     """Return ``a`` broadcast to ``shape``, C-contiguous and writable: a copy only where needed."""
     return kernel_ready(a if a.shape == shape else np.broadcast_to(a, shape))
@@ -150,40 +192,26 @@ def integrate_angular_velocity(q0: ArrayLike,
     Parameters
     ----------
     q0 : array_like, shape (..., 4)
-        Orientation (x, y, z, w), scalar last, body-to-world, at ``t[0]``;
-        any non-zero norm.
+        Orientation (x, y, z, w), body-to-world, at ``t[0]``; any non-zero norm.
     omega : callable or array_like
-        Angular velocity (rad/s) in ``frame``, either
-
-        - a function ``omega(times)``: called once with all the stage times
-          of all steps, a non-decreasing array of shape (M,), it returns
-          shape (..., M, 3); evaluated exactly where each method needs it;
-        - samples of shape (..., N, 3) at the times ``t`` (e.g. a gyro):
-          rates between samples come from the local cubic through the four
-          nearest samples (``O(h^4)``), so each method keeps its order on
-          smooth data.
+        Angular velocity (rad/s) in ``frame``: a function ``omega(times)``, called once with
+        the stage times of all steps (non-decreasing, shape (M,)) and returning shape
+        (..., M, 3); or samples of shape (..., N, 3) at ``t`` (a gyro), read between samples
+        off the local cubic through the four nearest (``O(h^4)``: every method keeps its
+        order on smooth data).
     t : array_like, shape (N,)
-        Times (s), strictly increasing, N >= 2: the integration steps and the
-        output times.
+        Times (s), strictly increasing, N >= 2: the steps and the output times.
     method : {'magnus4', 'rk4', 'coning2', 'midpoint_exp', 'euler'}, optional
-        See the table in the module docstring: orders 4, 4, 4, 2, 1 with 2, 3,
-        4, 1, 1 rate evaluations per step. ``'magnus4'`` (the default) is the
-        most accurate per rate evaluation.
+        See the module docstring: orders 4, 4, 4, 2, 1 with 2, 3, 4, 1, 1 rate evaluations
+        per step. ``'magnus4'`` (default) is the most accurate per rate evaluation.
     frame : {'body', 'world'}, optional
         Frame of ``omega``: ``qdot = 1/2 q (x) (w_b, 0)`` or ``1/2 (w_w, 0) (x) q``.
 
     Returns
     -------
     ndarray, shape (..., N, 4)
-        Unit canonical (``w >= 0``) orientations at ``t``; the first is
-        ``q0`` normalised. Leading dimensions are those of ``q0`` and ``omega``
-        broadcast together.
-
-    Raises
-    ------
-    ValueError
-        Unknown ``method`` or ``frame``; bad ``q0``, ``t`` or ``omega``
-        (wrong shape, NaN/Inf, zero quaternion, times not increasing).
+        Unit canonical (``w >= 0``) orientations at ``t``, the first ``q0`` normalised;
+        leading dimensions those of ``q0`` and ``omega`` broadcast.
 
     """
     try:
@@ -198,7 +226,7 @@ def integrate_angular_velocity(q0: ArrayLike,
     if bad >= 0:
         raise_sample_error(bad, ('q0',), (q0,), ((4,),))
     t, h = sample_times(t)
-    rates = stage_rates(omega, t, h, np.asarray(nodes))
+    rates = _stage_rates(omega, t, h, np.asarray(nodes))
     if world:  # the body problem of q*: rate -w_w
         q, rates = q * np.array([-1.0, -1.0, -1.0, 1.0]), -rates
     try:

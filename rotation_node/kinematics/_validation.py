@@ -1,11 +1,7 @@
 """
-Argument checks shared by the kinematics functions.
+The argument checks only kinematics needs: the frame of an angular velocity, sample times.
 
-Arrays are validated with the helpers of :mod:`rotation_node.conversions.kernels`
-(``float_array``, ``call_binary``, ``raise_sample_error``: one contract for
-shapes, broadcasting, kernel status codes and error messages across the
-package). This module adds what only kinematics needs: the reference frame of
-an angular velocity and a strictly increasing vector of sample times.
+Arrays are checked with :mod:`rotation_node.conversions.kernels`, the package's one contract.
 """
 from __future__ import annotations
 
@@ -36,9 +32,7 @@ def sample_times(t: ArrayLike, n_samples: Optional[int] = None,
     """
     Return the validated times ``t`` (float64) and their steps ``t[1:] - t[:-1]``, all > 0.
 
-    ``n_samples`` is the time axis length of the series argument ``series_name``
-    (default: ``t``'s own length). A ValueError names what is wrong: fewer than two
-    samples, a shape or a NaN/Inf, or the first pair that is not strictly increasing.
+    ``n_samples``: the time axis length of the series argument ``series_name`` (default ``t``'s).
     """
     try:
         t = np.asarray(t, dtype=np.float64)
@@ -68,11 +62,7 @@ def sample_times(t: ArrayLike, n_samples: Optional[int] = None,
 
 @kernel(FLAT_IN, FLAT_OUT)
 def _steps_kernel(t, h):
-    """
-    Fill ``h`` with ``t[1:] - t[:-1]`` and return the index of the first bad time, or -1.
-
-    A time is bad if it is NaN/Inf or not after its predecessor (which is finite).
-    """
+    """Fill ``h`` with the steps; return the first bad (NaN/Inf, not increasing) index or -1."""
     if not math.isfinite(t[0]):
         return 0
     for k in range(1, t.shape[0]):

@@ -1,16 +1,13 @@
 """
 Free rigid body integrator: Lie-Poisson splitting, fourth order.
 
-The kinetic energy of a free rigid body splits into one term per principal
-axis, ``T = sum_i L_i^2 / (2 I_i)`` with ``L = I w`` the body angular
-momentum. The flow of one term alone is exact and cheap: ``L_i`` stays
-constant, the body turns about its axis ``e_i`` at the constant rate
-``L_i / I_i``, so ``L`` rotates by ``-L_i t / I_i`` about ``e_i`` in the body
-and the attitude becomes ``q (x) exp(e_i L_i t / I_i)``. Every sub-flow
-therefore preserves ``|L|`` and the world angular momentum ``R L`` exactly (to
-round-off), and the composition is symplectic, so the energy error stays
-bounded instead of drifting. The symmetric (Strang) composition of the three
-axis flows is second order; Yoshida's triple jump makes it fourth order.
+The kinetic energy splits into one term per principal axis, ``T = sum_i L_i^2 / (2 I_i)``
+(``L = I w``, the body angular momentum). The flow of one term alone is exact: ``L_i`` stays
+constant, ``L`` rotates by ``-L_i t / I_i`` about ``e_i`` in the body and the attitude becomes
+``q (x) exp(e_i L_i t / I_i)``. So every sub-flow keeps ``|L|`` and the world angular
+momentum ``R L`` exactly (to round-off), and the composition is symplectic: the energy error
+stays bounded. The Strang composition of the three axis flows is second order; Yoshida's
+triple jump makes it fourth order.
 
 References
 ----------
@@ -44,7 +41,7 @@ def _yoshida_axis_flows():
     Return the axis flows of one fourth-order step as (axes, fractions of the step).
 
     Strang ``X0(h/2) X1(h/2) X2(h) X1(h/2) X0(h/2)`` composed as Yoshida's
-    ``S(c1 h) S(c0 h) S(c1 h)``; adjacent half flows about axis 0 merged.
+    ``S(c1 h) S(c0 h) S(c1 h)``, adjacent flows about axis 0 merged.
     """
     c1 = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
     c0 = 1.0 - 2.0 * c1
@@ -66,27 +63,16 @@ AXES, FRACTIONS = _yoshida_axis_flows()
 @numba.njit(cache=True)
 def _axis_flow(q, momentum, inverse_inertia, axis, duration):
     """Advance (q, L) in place by the exact flow of ``L_axis^2 / (2 I_axis)``."""
-    j = (axis + 1) % 3
-    k = (axis + 2) % 3
+    j, k = (axis + 1) % 3, (axis + 2) % 3
     angle = momentum[axis] * inverse_inertia[axis] * duration
     # Body angular momentum turns by -angle about e_axis.
-    c = math.cos(angle)
-    s = math.sin(angle)
-    lj = momentum[j]
-    lk = momentum[k]
-    momentum[j] = c * lj + s * lk
-    momentum[k] = c * lk - s * lj
-    # Attitude: q (x) (sin(angle/2) e_axis, cos(angle/2)), quaternions (x, y, z, w).
-    c = math.cos(0.5 * angle)
-    s = math.sin(0.5 * angle)
-    qi = q[axis]
-    qj = q[j]
-    qk = q[k]
-    qw = q[3]
-    q[axis] = c * qi + s * qw
-    q[j] = c * qj + s * qk
-    q[k] = c * qk - s * qj
-    q[3] = c * qw - s * qi
+    c, s = math.cos(angle), math.sin(angle)
+    lj, lk = momentum[j], momentum[k]
+    momentum[j], momentum[k] = c * lj + s * lk, c * lk - s * lj
+    # Attitude: q (x) (sin(angle/2) e_axis, cos(angle/2)).
+    c, s = math.cos(0.5 * angle), math.sin(0.5 * angle)
+    qi, qj, qk, qw = q[axis], q[j], q[k], q[3]
+    q[axis], q[j], q[k], q[3] = c * qi + s * qw, c * qj + s * qk, c * qk - s * qj, c * qw - s * qi
 
 
 @numba.njit(cache=True)
@@ -96,12 +82,9 @@ def integrate(q0: FloatArray, momentum0: FloatArray, momentum_norm: float,
     """
     Return a free rigid body's unit quaternions (n, 4) and body angular momenta (n, 3) at ``t``.
 
-    It starts from ``q0`` (body-to-world) and ``momentum0 = I w`` at ``t[0]``
-    (``inverse_inertia = 1 / I_i`` along the body axes) and takes ``substeps`` steps
-    of the flows ``axes``, ``fractions`` (``AXES``, ``FRACTIONS``) between samples.
-    ``momentum_norm`` is ``|L|`` at the start of the motion, held exactly: passed on,
-    so that integrating in pieces, each from the last state of the one before, gives
-    the same result as at once.
+    From ``q0`` and ``momentum0 = I w`` at ``t[0]``, ``substeps`` steps of the flows
+    ``axes``, ``fractions`` (``AXES``, ``FRACTIONS``) between samples. ``momentum_norm``, the
+    ``|L|`` of the motion's start, is held exactly: integrating in pieces gives the same result.
     """
     n = t.shape[0]
     q_out = np.empty((n, 4))

@@ -1,11 +1,8 @@
 """
-``rotation_scene SCENE.yaml OUT.mcap [--seed N] [--force]``: simulate a scene file into a bag.
+``rotation_scene SCENE.yaml OUT [--seed N] [--force]``: simulate a scene file into a bag.
 
-The output is a rosbag2 directory, or a single MCAP file if it ends in
-``.mcap``, written as ``OUT.part`` and renamed when complete. On any failure
-(scene file, seed, existing output, full disk) it prints one line,
-``rotation_scene: error: ...``, exits with status 1 and leaves no output file;
-on Ctrl-C or SIGTERM one line, status 130 or 143, no output file.
+Any failure prints one line, ``rotation_scene: error: ...``, exits 1 and leaves no output;
+Ctrl-C or SIGTERM one line, status 130 or 143, no output.
 """
 import argparse
 import sys
@@ -57,7 +54,6 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             # Checked again when the bag is opened; here it saves loading the scene for nothing.
             BagOutput.check_absent(args.output, overwrite=args.force)
             scene = load_scene(args.scene)
-            # Streamed: memory does not grow with the scene's length.
             n, published = write_scene_bag(scene, args.output, seed=args.seed,
                                            overwrite=args.force)
         except (RotationNodeError, OSError) as exc:

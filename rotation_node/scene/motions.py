@@ -1,23 +1,12 @@
 """
 Ground-truth motions: orientation and body angular velocity at given times.
 
-:func:`motion_truth` returns ``(q, w)`` of a scene's motion for times ``t``
-(seconds since the first sample, shape ``(n,)``):
-
-- ``q``, shape (n, 4): unit quaternions (x, y, z, w), active, body-to-world,
-  continuous in sign (``q[k] . q[k-1] >= 0``), so that a sign flip in a sensor
-  stream comes only from the ``quaternion_sign_flips`` effect;
-- ``w``, shape (n, 3): body angular velocity, rad/s
-  (``q' = 1/2 q (x) (w, 0)``).
-
-``constant_rate``, ``coning`` and ``euler_sweep`` are exact (closed form);
-``torque_free`` integrates Euler's equations with a structure-preserving
-splitting (:mod:`rotation_node.scene._free_rigid_body`).
-
-:class:`MotionStream` computes the same truth block by block of consecutive
-samples, carrying the sign continuity and the integrator's state across
-blocks, with results bit-identical to :func:`motion_truth` over all samples at
-once: the simulator streams scenes of any length in bounded memory.
+``q`` (n, 4) unit, body-to-world and continuous in sign (``q[k] . q[k-1] >= 0``: a sign flip
+in a sensor stream comes only from the ``quaternion_sign_flips`` effect); ``w`` (n, 3) the
+body angular velocity, rad/s (``q' = 1/2 q (x) (w, 0)``). ``constant_rate``, ``coning`` and
+``euler_sweep`` are closed forms; ``torque_free`` integrates Euler's equations
+(:mod:`._free_rigid_body`). :class:`MotionStream` computes the truth block by block, bit for
+bit as :func:`motion_truth` over all samples at once.
 """
 from __future__ import annotations
 
@@ -37,55 +26,24 @@ if TYPE_CHECKING:
 
 
 def _continue_signs(q, previous, previous_sign):
-    """
-    Return ``q`` with continuous signs after ``previous`` (the unsigned sample before, or None).
-
-    Also returns the last unsigned quaternion and its sign, to continue with.
-    """
-    if previous is None:
-        linked, first = q, 1.0
-    else:
-        linked, first = np.concatenate((previous[np.newaxis], q)), previous_sign
+    """Return ``q`` signed to continue ``previous`` (or None), and the state to continue with."""
+    linked = q if previous is None else np.concatenate((previous[np.newaxis], q))
     steps = np.sign(np.einsum('ij,ij->i', linked[1:], linked[:-1]))
     steps[steps == 0] = 1.0
+    signs = previous_sign * np.cumprod(steps)
     if previous is None:
-        signs = np.concatenate(([1.0], np.cumprod(steps)))
-    else:
-        signs = first * np.cumprod(steps)
+        signs = np.concatenate(([1.0], signs))
     return q * signs[:, np.newaxis], q[-1].copy(), float(signs[-1])
-
-
-def _constant_rate_unsigned(orientation, angular_velocity, t):
-    """Return ``q0 (x) exp(w t)`` and ``w``; exp comes back canonical (scalar >= 0), unsigned."""
-    t = np.asarray(t, dtype=np.float64)
-    w = np.broadcast_to(np.asarray(angular_velocity, dtype=np.float64), (t.size, 3))
-    q = quaternion_product(orientation, quaternion_from_rotation_vector(w * t[:, np.newaxis]))
-    return q, w.copy()
 
 
 def coning_truth(half_angle: float, frequency: float,
                  t: FloatArray) -> tuple[FloatArray, FloatArray]:
     """
-    Return classical coning motion, phase 0 at ``t = 0`` (docs/numerics.md).
+    Return ``(q (n, 4), w (n, 3))`` of classical coning at times ``t`` (s), phase 0 at t = 0.
 
-    With half angle ``a`` and cone rate ``W``, scalar last:
-    ``q = (sin(a/2) cos(W t), sin(a/2) sin(W t), 0, cos(a/2))`` and
+    Half angle ``a`` (rad), cone rate ``W`` (rad/s), scalar last (docs/numerics.md):
+    ``q = (sin(a/2) cos(W t), sin(a/2) sin(W t), 0, cos(a/2))``,
     ``w = (-W sin a sin(W t), W sin a cos(W t), -W (1 - cos a))``.
-
-    Parameters
-    ----------
-    half_angle : float
-        ``a``, rad.
-    frequency : float
-        ``W``, rad/s.
-    t : array_like, shape (n,)
-        Times, s.
-
-    Returns
-    -------
-    q : ndarray, shape (n, 4)
-    w : ndarray, shape (n, 3)
-
     """
     phase = frequency * np.asarray(t, dtype=np.float64)
     cos_phase, sin_phase = np.cos(phase), np.sin(phase)
@@ -108,14 +66,10 @@ class _TorqueFree:
     """
     The torque-free integration, resumable: each ``truth(t)`` continues the previous one.
 
-    A fourth-order Lie-Poisson splitting (:mod:`rotation_node.scene._free_rigid_body`)
-    with internal steps of at most ``MAX_STEP_ANGLE`` rad: ``|I w|`` and the world
-    angular momentum ``R I w`` stay constant to round-off, the kinetic energy within
-    ~1e-14 (relative), with no secular drift. The trajectory itself is as accurate as
-    the motion is well-conditioned: ~1e-12 of a tight DOP853 reference for a generic
-    spin, but a spin started near the intermediate axis amplifies round-off at every
-    flip, and the tumbling-box scene's truth is reproducible only to ~3e-9 rad (two
-    different time grids differ by that; see docs/accuracy.md).
+    Internal steps turn the fastest axis flow by at most ``MAX_STEP_ANGLE``: ``|I w|`` and
+    ``R I w`` stay constant to round-off, the energy within ~1e-14 without drift. A spin near
+    the intermediate axis amplifies round-off at every flip: the tumbling box's truth is
+    reproducible to ~3e-9 rad only (docs/accuracy.md).
     """
 
     def __init__(self, inertia, orientation, angular_velocity, longest):
@@ -144,43 +98,9 @@ class _TorqueFree:
         return q, momentum * self.inverse_inertia
 
 
-def _euler_sweep_unsigned(sequence, start, end, duration, t):
-    """
-    Return the Euler angles' rotation moving linearly from ``start`` (t = 0) to ``end``.
-
-    The body angular velocity follows from the constant Euler rates; that map is
-    defined everywhere, gimbal lock included (only its inverse is singular).
-    """
-    t = np.asarray(t, dtype=np.float64)
-    start = np.asarray(start, dtype=np.float64)
-    rates = (np.asarray(end, dtype=np.float64) - start) / duration
-    angles = start + rates * t[:, np.newaxis]
-    q = quaternion_from_euler(angles, sequence)
-    w = angular_velocity_from_euler_rates(angles, np.broadcast_to(rates, angles.shape),
-                                          sequence, frame='body')
-    return q, w
-
-
 def motion_truth(motion: Motion, t: FloatArray,
                  duration: float) -> tuple[FloatArray, FloatArray]:
-    """
-    Return the truth ``(q, w)`` of a scene's motion at times ``t``.
-
-    Parameters
-    ----------
-    motion : ConstantRate or Coning or TorqueFree or EulerSweep
-        The scene's validated ``motion``.
-    t : ndarray, shape (n,)
-        Times since the first sample, s.
-    duration : float
-        The scene's duration, s (the end of an Euler sweep).
-
-    Returns
-    -------
-    q : ndarray, shape (n, 4)
-    w : ndarray, shape (n, 3)
-
-    """
+    """Return ``(q (n, 4), w (n, 3))`` of a scene's motion at ``t`` (s since the first sample)."""
     t = np.asarray(t, dtype=np.float64)
     return MotionStream(motion, duration, longest_interval(t)).truth(t)
 
@@ -189,31 +109,12 @@ class MotionStream:
     """
     The truth of a motion over consecutive blocks of samples.
 
-    ``truth(t)`` called on consecutive pieces of a time series returns, piece
-    by piece, exactly (bit for bit) what :func:`motion_truth` returns for the
-    whole series: sign continuity and the torque-free integrator's state carry
-    over from one block to the next.
-
-    Parameters
-    ----------
-    motion : ConstantRate or Coning or TorqueFree or EulerSweep
-        The scene's validated ``motion``.
-    duration : float
-        The scene's duration, s (the end of an Euler sweep).
-    longest : float
-        The longest interval between consecutive times of the whole series,
-        s (:func:`longest_interval`); sets the torque-free integrator's step.
-
-    Raises
-    ------
-    TypeError
-        If ``motion`` is not a scene motion.
-
+    ``duration`` is the scene's (the end of an Euler sweep), ``longest`` the longest interval
+    of the whole series (:func:`longest_interval`; it sets the torque-free step). Sign
+    continuity and the integrator's state carry over from one ``truth(t)`` to the next.
     """
 
     def __init__(self, motion: Motion, duration: float, longest: float) -> None:
-        if not isinstance(motion, (ConstantRate, Coning, TorqueFree, EulerSweep)):
-            raise TypeError(f'motion_truth: not a scene motion: {motion!r}')
         self._motion = motion
         self._duration = duration
         self._torque_free = (
@@ -229,12 +130,21 @@ class MotionStream:
             return coning_truth(motion.half_angle, motion.frequency, t)
         if self._torque_free is not None:
             return self._torque_free.truth(t)
-        if isinstance(motion, ConstantRate):
-            q, w = _constant_rate_unsigned(motion.orientation, motion.angular_velocity, t)
-        else:
+        t = np.asarray(t, dtype=np.float64)
+        if isinstance(motion, ConstantRate):   # q0 (x) exp(w t), exp canonical: unsigned
+            w = np.broadcast_to(np.asarray(motion.angular_velocity, dtype=np.float64),
+                                (t.size, 3))
+            q = quaternion_product(motion.orientation,
+                                   quaternion_from_rotation_vector(w * t[:, np.newaxis]))
+            w = w.copy()
+        else:   # constant Euler rates: their angular velocity is defined even at gimbal lock
             assert isinstance(motion, EulerSweep)
-            q, w = _euler_sweep_unsigned(motion.sequence, motion.start, motion.end,
-                                         self._duration, t)
+            start = np.asarray(motion.start, dtype=np.float64)
+            rates = (np.asarray(motion.end, dtype=np.float64) - start) / self._duration
+            angles = start + rates * t[:, np.newaxis]
+            q = quaternion_from_euler(angles, motion.sequence)
+            w = angular_velocity_from_euler_rates(angles, np.broadcast_to(rates, angles.shape),
+                                                  motion.sequence, frame='body')
         q, self._previous, self._previous_sign = _continue_signs(
             q, self._previous, self._previous_sign)
         return q, w

@@ -1,25 +1,11 @@
 """
 A scene's reference stream: the same motion seen by a second system, and its truth file.
 
-Convention (the one of ``rotation_bag compare``; R maps body to world)::
-
-    R_ref(t) = W . R_est(t + time_offset_s) . M
-
-``R_est`` is the scene's sensor stream without its effects (the truth at the
-sensor's stamps), ``R_ref`` the reference stream at its own stamps ``t``
-(seconds since the epoch), ``W = world_alignment`` (the sensor's world frame
-in the reference's world frame) and ``M = mounting`` (the reference body in
-the sensor's body frame). A positive ``time_offset_s`` means the reference's
-stamps are late: the reference at ``t`` shows the motion the sensor shows at
-``t + time_offset_s``. With quaternions (x, y, z, w):
-``q_ref(t) = q_W (x) q(t + dt) (x) q_M``, then the reference's own
-orientation noise ``q_ref (x) exp(v)``, ``v ~ N(0, std^2 I)`` in the
-reference's body frame.
-
-:class:`ReferenceStream` computes the stream block by block of the sensor's
-stamps, so that the simulator writes both streams interleaved in stamp order in
-bounded memory; :func:`truth_record` is what ``<bag>.truth.json`` holds
-(:func:`truth_path`).
+``q_ref(t) = q_W (x) q(t + dt) (x) q_M (x) exp(v)``: the convention of ``rotation_bag
+compare`` (``R_ref(t) = W R_est(t + dt) M``, README "A second stream of the same motion")
+with the reference's own body-frame noise ``v``. :class:`ReferenceStream` computes it block by
+block of the sensor's stamps, so that both streams are written interleaved in bounded memory;
+:func:`truth_record` is what ``<bag>.truth.json`` (:func:`truth_path`) holds.
 """
 from __future__ import annotations
 
@@ -59,12 +45,7 @@ def truth_path(bag_path: StrPath) -> str:
 
 
 def reference_index_range(scene: Scene) -> tuple[int, int]:
-    """
-    Return ``(first, stop)``: the reference samples ``k`` are ``first <= k < stop``.
-
-    Sample ``k`` is stamped ``start_time + k / rate`` and shows the motion at
-    ``k / rate + time_offset``; both lie in ``[0, duration]`` of the scene.
-    """
+    """Return ``(first, stop)``: the samples ``k`` with ``k / rate`` and ``+ dt`` in the scene."""
     reference = _reference(scene)
     dt, rate, duration = reference.time_offset, reference.rate, scene.duration
     low, high = max(0.0, -dt), min(duration, duration - dt)
@@ -86,48 +67,20 @@ def reference_stamps_ns(scene: Scene, start: int, stop: int) -> np.ndarray:
 
 @dataclasses.dataclass(frozen=True)
 class ReferenceBlock:
-    """
-    Consecutive samples of the reference stream.
+    """Consecutive samples of the reference stream."""
 
-    Attributes
-    ----------
-    stamp_ns : ndarray of int64, shape (n,)
-        ``header.stamp`` (and log time) of each message.
-    motion_time : ndarray, shape (n,)
-        The times the motion was evaluated at: stamp since ``start_time``, plus
-        ``time_offset``, s.
-    orientation : ndarray, shape (n, 4)
-        ``q_W (x) q(motion_time) (x) q_M (x) exp(noise)``, (x, y, z, w).
-    angular_velocity : ndarray, shape (n, 3)
-        The reference body's angular velocity ``M^T w(motion_time)``, rad/s.
-    orientation_covariance : ndarray, shape (9,)
-        ``std^2 I`` row-major (zeros without noise).
-
-    """
-
-    stamp_ns: np.ndarray
-    motion_time: np.ndarray
-    orientation: np.ndarray
-    angular_velocity: np.ndarray
-    orientation_covariance: np.ndarray
+    stamp_ns: np.ndarray                # (n,) header.stamp and log time
+    motion_time: np.ndarray             # (n,) s since start_time, plus time_offset
+    orientation: np.ndarray             # (n, 4) q_W (x) q(motion_time) (x) q_M (x) exp(noise)
+    angular_velocity: np.ndarray        # (n, 3) the reference body's, M^T w(motion_time)
+    orientation_covariance: np.ndarray  # (9,) std^2 I row-major
 
     def __len__(self) -> int:
         return len(self.stamp_ns)
 
 
 class ReferenceStream:
-    """
-    The reference stream of a scene, in blocks: ``until(stamp_ns)`` returns the next samples.
-
-    Parameters
-    ----------
-    scene : Scene
-        A validated scene with a ``reference``.
-    seed : int
-        The scene seed: the noise draws from its own generator
-        (``effect_rng(seed, 'reference.orientation_noise')``).
-
-    """
+    """A scene's reference stream in blocks; its noise has its own generator (``seed``)."""
 
     def __init__(self, scene: Scene, seed: int) -> None:
         self.reference: Reference = _reference(scene)
@@ -137,13 +90,6 @@ class ReferenceStream:
         self._motion = MotionStream(scene.motion, scene.duration, 1.0 / self.reference.rate)
         self._rng = effect_rng(seed, 'reference.orientation_noise')
         self._started = False
-
-    def _pre_roll(self, first_time):
-        """Run the motion from 0 to just before ``first_time`` (the integrator starts at 0)."""
-        step = 1.0 / self.reference.rate
-        times = np.arange(0.0, first_time, step)
-        for start in range(0, len(times), _PRE_ROLL_SAMPLES):
-            self._motion.truth(times[start:start + _PRE_ROLL_SAMPLES])
 
     def until(self, limit_ns: int) -> ReferenceBlock:
         """Return the next samples stamped at or before ``limit_ns`` (at most all remaining)."""
@@ -160,10 +106,11 @@ class ReferenceStream:
         if n == 0:
             return ReferenceBlock(stamp_ns, motion_time, np.zeros((0, 4)), np.zeros((0, 3)),
                                   np.zeros(9))
-        if not self._started:
+        if not self._started:   # run the motion from 0 (where the integrator starts) up to it
             self._started = True
-            if motion_time[0] > 0.0:
-                self._pre_roll(float(motion_time[0]))
+            times = np.arange(0.0, float(motion_time[0]), 1.0 / reference.rate)
+            for first in range(0, len(times), _PRE_ROLL_SAMPLES):
+                self._motion.truth(times[first:first + _PRE_ROLL_SAMPLES])
         q, w = self._motion.truth(motion_time)
         std = reference.orientation_noise
         q = quaternion_product(quaternion_product(reference.world_alignment, q),
@@ -178,12 +125,7 @@ class ReferenceStream:
 
 def truth_record(scene: Scene, seed: int, reference_messages: int,
                  estimate_messages: int) -> dict[str, Any]:
-    """
-    Return what ``<bag>.truth.json`` holds: the convention, both streams, dt, W, M, noise.
-
-    ``time_offset_s``, ``mounting.quaternion`` and ``world_alignment.quaternion``
-    are keyed as ``rotation_bag compare --json`` writes its estimates.
-    """
+    """Return ``<bag>.truth.json``, keyed as ``rotation_bag compare --json`` writes estimates."""
     reference = _reference(scene)
     noise = scene.effects.get('orientation_noise')
     gyro = scene.effects.get('gyro_noise')

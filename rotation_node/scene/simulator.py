@@ -1,32 +1,12 @@
 """
 Simulate a scene: truth and sensor arrays (:func:`simulate`), then an MCAP bag (:func:`write_bag`).
 
-:func:`write_scene_bag` does both in blocks of samples (:func:`simulate_blocks`),
-so that a scene of any length is written in bounded memory, byte for byte as
-the two steps would write it.
-
-The bag holds, for every sample ``k`` at the nominal stamp
-``start_time + k / rate`` (rounded to ns):
-
-- ``sensor_msgs/Imu`` on the scene's topic, unless ``dropped_messages``
-  dropped it: orientation, body angular velocity and their covariances from
-  the sensor stream; ``header.stamp`` is the sensor stamp (jittered by
-  ``timestamp_jitter``); linear acceleration is not simulated: zeros with
-  ``linear_acceleration_covariance[0] = -1`` ("no estimate").
-- ``geometry_msgs/QuaternionStamped`` on ``/truth/orientation`` and
-  ``geometry_msgs/Vector3Stamped`` (body angular velocity, rad/s) on
-  ``/truth/angular_velocity``, always, with the nominal stamp.
-
-Every message has ``header.frame_id`` = the scene's ``frame_id`` and log time
-= the nominal stamp, so a bag replays in sample order; the same scene and
-seed give a byte-identical bag (``BagWriter.write`` encodes these types with
-zero padding, see :mod:`rotation_node.wire.cdr`).
-
-A scene with a ``reference`` also gets its second stream
-(:mod:`rotation_node.scene.reference`) on the reference's topic, with the
-reference's ``frame_id``, log time = its stamp, interleaved in stamp order
-(a sensor sample first on a tie), and its truth in ``<bag>.truth.json``,
-which :func:`write_scene_bag` writes beside the bag when the bag is complete.
+:func:`write_scene_bag` does both in blocks of samples (:func:`simulate_blocks`), in bounded
+memory and byte for byte as the two steps would. The bag's contents are the README's "Bag
+contents": per sample the ``sensor_msgs/Imu`` (unless dropped) and the truth, log time the
+nominal stamp; with a reference, its stream interleaved in stamp order (a sensor sample first
+on a tie) and ``<bag>.truth.json`` once the bag is complete. The same scene and seed give a
+byte-identical bag (``BagWriter.write`` encodes with zero padding).
 """
 from __future__ import annotations
 
@@ -55,42 +35,17 @@ if TYPE_CHECKING:
 
 @dataclasses.dataclass(frozen=True)
 class Simulation:
-    """
-    A simulated scene: the truth, what the sensor reports, and what each effect changed.
-
-    Attributes
-    ----------
-    scene : Scene
-    seed : int
-    stamp_ns : ndarray of int64, shape (n,)
-        Nominal sample stamps, ns since the Unix epoch: the truth's
-        ``header.stamp`` and every message's log time.
-    time : ndarray, shape (n,)
-        ``(stamp_ns - stamp_ns[0]) / 1e9``, s: the times the motion was evaluated at.
-    truth_orientation : ndarray, shape (n, 4)
-        Unit quaternions (x, y, z, w), body-to-world, continuous in sign.
-    truth_angular_velocity : ndarray, shape (n, 3)
-        Body angular velocity, rad/s.
-    sensor : SensorStream
-        The sensor's stamps, orientation, angular velocity, covariances and
-        ``published`` mask; equal to the truth when the scene has no effects.
-    effect_masks : Mapping[str, ndarray of bool, shape (n,)]
-        For each effect of the scene, the samples it changed.
-    reference : ReferenceBlock or None
-        The reference stream's samples stamped up to this block's last stamp
-        (after the previous block's), to the end of the stream in the last
-        block; None when the scene has no reference.
-
-    """
+    """A simulated scene (or a block of it): the truth, the sensor, what each effect changed."""
 
     scene: Scene
     seed: int
-    stamp_ns: np.ndarray
-    time: np.ndarray
-    truth_orientation: np.ndarray
-    truth_angular_velocity: np.ndarray
+    stamp_ns: np.ndarray                   # (n,) int64 nominal stamps, ns since the epoch
+    time: np.ndarray                       # (n,) (stamp_ns - first stamp) / 1e9, s
+    truth_orientation: np.ndarray          # (n, 4) unit, continuous in sign
+    truth_angular_velocity: np.ndarray     # (n, 3) body, rad/s
     sensor: SensorStream
-    effect_masks: Mapping[str, np.ndarray]
+    effect_masks: Mapping[str, np.ndarray]  # (n,) bool per effect: the samples it changed
+    # The reference samples stamped up to this block's last stamp (all remaining in the last).
     reference: Optional[ReferenceBlock] = None
 
 
@@ -101,11 +56,6 @@ BLOCK_SAMPLES = 20_000
 def sample_stamps_ns(scene: Scene) -> IntArray:
     """Return the nominal stamps ``start_time + k / rate``, k = 0 .. n-1, in ns since the epoch."""
     return stamps_ns(scene.start_time, scene.rate, 0, scene.sample_count)
-
-
-def _block_bounds(scene, block_samples):
-    n = scene.sample_count
-    return [(start, min(start + block_samples, n)) for start in range(0, n, block_samples)]
 
 
 def _longest_interval(scene, bounds):
@@ -129,34 +79,15 @@ def _check_seed(seed):
 def simulate_blocks(scene: Scene, seed: int = 0,
                     block_samples: int = BLOCK_SAMPLES) -> Iterator[Simulation]:
     """
-    Yield the simulation of a scene in consecutive blocks of samples.
+    Yield the :class:`Simulation` of a scene in blocks of up to ``block_samples`` samples.
 
-    Each block is a :class:`Simulation` of up to ``block_samples`` consecutive
-    samples; taken together they are bit for bit what :func:`simulate`
-    returns (the motion's and the effects' state carries over from block to
-    block), so memory does not depend on the scene's length.
-
-    Parameters
-    ----------
-    scene : Scene
-        A validated scene.
-    seed : int, optional
-        Seed of the effects' random draws, >= 0. Default 0.
-    block_samples : int, optional
-        Samples per block (the last block may be shorter).
-
-    Yields
-    ------
-    Simulation
-
-    Raises
-    ------
-    ValueError
-        If ``seed`` is not a non-negative integer.
-
+    Together they are bit for bit what :func:`simulate` returns (the motion's and effects'
+    state carries over), in memory independent of the scene's length. ``seed`` (>= 0, else
+    ValueError) seeds the effects' random draws.
     """
     seed = _check_seed(seed)
-    bounds = _block_bounds(scene, max(int(block_samples), 1))
+    n, block_samples = scene.sample_count, max(int(block_samples), 1)
+    bounds = [(start, min(start + block_samples, n)) for start in range(0, n, block_samples)]
     longest = _longest_interval(scene, bounds) if len(bounds) > 1 else None
     first_ns = start_stamp_ns(scene.start_time)
     motion: Optional[MotionStream] = None
@@ -181,13 +112,7 @@ def simulate_blocks(scene: Scene, seed: int = 0,
 
 
 def simulate(scene: Scene, seed: int = 0) -> Simulation:
-    """
-    Return the truth and the sensor stream of a whole scene, as arrays.
-
-    :func:`simulate_blocks` in one block: ``scene`` validated
-    (:func:`rotation_node.scene.spec.load_scene`), ``seed`` (>= 0, else ValueError)
-    seeding the effects' random draws.
-    """
+    """Return the truth and the sensor stream of a whole scene: :func:`simulate_blocks` in one."""
     simulation, = simulate_blocks(scene, seed, block_samples=scene.sample_count)
     return simulation
 
@@ -215,23 +140,10 @@ def _imu_message(sensor, k, frame_id):
 
 def write_bag(simulation: Simulation, path: StrPath, *, overwrite: bool = False) -> None:
     """
-    Write a simulation as a ROS 2 MCAP bag (the layout in this module's docstring).
+    Write a simulation as a bag: a rosbag2 directory, or one MCAP file if ``path`` ends in .mcap.
 
-    Parameters
-    ----------
-    simulation : Simulation
-        What :func:`simulate` returned.
-    path : str or os.PathLike
-        A rosbag2 directory, or a single MCAP file if it ends in ``.mcap``;
-        it appears only once completely written.
-    overwrite : bool, optional
-        Replace an existing file. Default False.
-
-    Raises
-    ------
-    BagError
-        If ``path`` exists (and not ``overwrite``) or cannot be written.
-
+    It appears only once complete; a BagError if it exists (unless ``overwrite``) or cannot
+    be written.
     """
     _write_simulations(simulation.scene, [simulation], path, overwrite)
 
@@ -239,44 +151,11 @@ def write_bag(simulation: Simulation, path: StrPath, *, overwrite: bool = False)
 def write_scene_bag(scene: Scene, path: StrPath, *, seed: int = 0, overwrite: bool = False,
                     block_samples: int = BLOCK_SAMPLES) -> tuple[int, int]:
     """
-    Simulate a scene and write it as a bag, streaming: memory does not grow with its length.
+    Simulate a scene and write it as a bag in blocks: ``write_bag(simulate(scene, seed), path)``.
 
-    The bag is byte for byte what ``write_bag(simulate(scene, seed), path)`` writes.
-
-    Parameters
-    ----------
-    scene : Scene
-        A validated scene.
-    path : str or os.PathLike
-        A rosbag2 directory, or a single MCAP file if it ends in ``.mcap``;
-        it appears only once completely written.
-    seed : int, optional
-        Seed of the effects' random draws, >= 0. Default 0.
-    overwrite : bool, optional
-        Replace an existing bag. Default False.
-    block_samples : int, optional
-        Samples simulated at a time.
-
-    A scene with a ``reference`` also gets its stream in the bag and its truth
-    in ``<path>.truth.json`` (:func:`rotation_node.scene.reference.truth_path`),
-    which appears once the bag is complete.
-
-    Returns
-    -------
-    samples : int
-        Samples simulated (messages on each truth topic).
-    published : int
-        Sensor messages written.
-
-    Raises
-    ------
-    BagError
-        If ``path`` (or the truth file) exists (and not ``overwrite``) or
-        cannot be written (``DiskFullError`` when the disk fills); nothing is
-        left behind.
-    ValueError
-        If ``seed`` is not a non-negative integer.
-
+    Returns the samples simulated (messages on each truth topic) and the sensor messages
+    written. A BagError if the bag or its truth file exists (unless ``overwrite``) or cannot
+    be written (``DiskFullError``), nothing left behind; a ValueError for a bad ``seed``.
     """
     return _write_simulations(scene, simulate_blocks(scene, _check_seed(seed), block_samples),
                               path, overwrite)
@@ -325,12 +204,7 @@ def _reference_message(scene, block, j):
 
 
 def _write_samples(writer, simulation):
-    """
-    Write every sample of ``simulation`` (one block or all) in sample order.
-
-    With a block of the reference stream, its messages are interleaved by
-    stamp, each before the first sensor sample stamped later than it.
-    """
+    """Write a block's samples in order, each reference message before the next later sample."""
     sensor = simulation.sensor
     scene = simulation.scene
     frame_id = scene.frame_id

@@ -1,20 +1,12 @@
 """
-Scene files: load a YAML scene and validate it into frozen dataclasses.
+Scene files: a YAML scene validated into frozen dataclasses (the README's "Scene file").
 
-A scene says what moves (``motion``), how the sensor sees it (``effects``),
-and when and where it is published (``duration``, ``rate``, ``topic``,
-``frame_id``, ``start_time``). The format is documented in the README; the
-dataclasses below are its schema: each field is declared with its kind of value
-(:mod:`rotation_node.validation`) and what the domain adds (a unit quaternion,
-moments of inertia of a rigid body), so the accepted keys, their defaults and
-their checks live in one place.
-
-Every problem raises :class:`~rotation_node.errors.SceneError` naming the key
-path (``motion.half_angle``, ``effects.nan_bursts.length``): unknown keys
-first, then missing fields, then invalid values.
-
-Conventions: quaternions (x, y, z, w), scalar last, active, body-to-world;
-angular velocities in the body frame, rad/s; angles in radians.
+The dataclasses are the schema: each field declares its kind of value
+(:mod:`rotation_node.validation`) and what the domain adds (a unit quaternion, the moments
+of inertia of a rigid body), so keys, defaults and checks live in one place. Every problem
+is a :class:`~rotation_node.errors.SceneError` naming the key path (``motion.half_angle``):
+unknown keys first, then missing fields, then invalid values. Quaternions (x, y, z, w),
+body-to-world; angular velocities in the body frame, rad/s; angles in radians.
 """
 from __future__ import annotations
 
@@ -26,7 +18,7 @@ from typing import ClassVar, Mapping, Optional, Tuple, TYPE_CHECKING, Union
 import numpy as np
 from rotation_node.conversions import parse_sequence
 from rotation_node.errors import SceneError
-from rotation_node.mounting import normalised_unit_quaternion
+from rotation_node.mounting import IDENTITY, normalised_unit_quaternion
 from rotation_node.ros_yaml import load_ros_yaml
 from rotation_node.validation import (
     checked_field, Choice, ChoiceList, dataclass_from_mapping, DataclassByTag, DataclassesByName,
@@ -50,7 +42,7 @@ TRUTH_ORIENTATION_TOPIC = '/truth/orientation'
 TRUTH_ANGULAR_VELOCITY_TOPIC = '/truth/angular_velocity'
 
 
-# --- what the domain adds to the kinds: (value, where) -> stored value -----------
+# What the domain adds to the kinds: (value, where) -> stored value.
 
 def _unit_quaternion(q, where):
     """Check: [x, y, z, w] of unit norm within the mountings' tolerance; stored normalised."""
@@ -94,21 +86,9 @@ _PROBABILITY = Real(0.0, 1.0)
 _VECTOR = Vector(3)
 
 
-# --- motions ------------------------------------------------------------------
-
 @dataclasses.dataclass(frozen=True)
 class ConstantRate:
-    """
-    Rotation at a constant body angular velocity: ``q(t) = q0 (x) exp(w t)``.
-
-    Attributes
-    ----------
-    orientation : tuple of float, shape (4,)
-        Initial orientation ``q0`` (x, y, z, w), unit, body-to-world.
-    angular_velocity : tuple of float, shape (3,)
-        Body angular velocity ``w``, rad/s.
-
-    """
+    """A constant body angular velocity: ``q(t) = orientation (x) exp(angular_velocity t)``."""
 
     type: ClassVar[str] = 'constant_rate'  # noqa: A003
     orientation: Tuple[float, ...] = checked_field(Vector(4), check=_unit_quaternion)
@@ -118,18 +98,9 @@ class ConstantRate:
 @dataclasses.dataclass(frozen=True)
 class Coning:
     """
-    Classical coning motion, analytic (docs/numerics.md, phase 0 at the first sample).
+    Coning (docs/numerics.md): the body z axis sweeps a cone about the world z axis.
 
-    The body z axis sweeps a cone of half angle ``half_angle`` about the world
-    z axis at ``frequency`` rad/s.
-
-    Attributes
-    ----------
-    half_angle : float
-        Cone half angle ``a`` in [0, pi], rad.
-    frequency : float
-        Cone rate ``W``, rad/s (negative reverses the sense).
-
+    ``half_angle`` in [0, pi] rad, ``frequency`` the cone rate in rad/s (negative reverses it).
     """
 
     type: ClassVar[str] = 'coning'  # noqa: A003
@@ -139,20 +110,7 @@ class Coning:
 
 @dataclasses.dataclass(frozen=True)
 class TorqueFree:
-    """
-    Free rigid body: Euler's equations ``I w' = (I w) x w`` with attitude.
-
-    Attributes
-    ----------
-    inertia : tuple of float, shape (3,)
-        Principal moments of inertia (I1, I2, I3) about the body x, y, z axes,
-        kg m^2 (only their ratios matter).
-    orientation : tuple of float, shape (4,)
-        Initial orientation (x, y, z, w), unit, body-to-world.
-    angular_velocity : tuple of float, shape (3,)
-        Initial body angular velocity, rad/s.
-
-    """
+    """A free rigid body, ``I w' = (I w) x w``: principal moments (only their ratios matter)."""
 
     type: ClassVar[str] = 'torque_free'  # noqa: A003
     inertia: Tuple[float, ...] = checked_field(_VECTOR, check=_principal_moments)
@@ -162,19 +120,7 @@ class TorqueFree:
 
 @dataclasses.dataclass(frozen=True)
 class EulerSweep:
-    """
-    Euler angles moving linearly in time from ``start`` (first sample) to ``end`` (t = duration).
-
-    Attributes
-    ----------
-    sequence : str
-        Euler sequence (``'ZYX'`` intrinsic, ``'xyz'`` extrinsic, ...).
-    start, end : tuple of float, shape (3,)
-        First, second, third angle of ``sequence``, rad. Put the middle
-        angles on both sides of its singular value (+-pi/2 Tait-Bryan, 0 or pi
-        proper Euler) to sweep through gimbal lock.
-
-    """
+    """Euler angles of ``sequence`` going linearly from ``start`` (t = 0) to ``end``."""
 
     type: ClassVar[str] = 'euler_sweep'  # noqa: A003
     sequence: str = checked_field(_EULER_SEQUENCE)
@@ -189,8 +135,6 @@ Motion = Union[ConstantRate, Coning, TorqueFree, EulerSweep]
 MOTIONS = {cls.type: cls for cls in (ConstantRate, Coning, TorqueFree, EulerSweep)}
 
 
-# --- effects ------------------------------------------------------------------
-
 @dataclasses.dataclass(frozen=True)
 class GyroNoise:
     """White noise on the angular velocity, each axis N(0, std^2), rad/s."""
@@ -201,18 +145,7 @@ class GyroNoise:
 
 @dataclasses.dataclass(frozen=True)
 class GyroBias:
-    """
-    Gyro bias ``b_k = constant + random walk``, added to the angular velocity.
-
-    Attributes
-    ----------
-    constant : tuple of float, shape (3,)
-        Initial bias, rad/s.
-    random_walk : float
-        Rate random walk density, rad/s/sqrt(s): each axis steps by
-        N(0, random_walk^2 dt) between samples dt apart.
-
-    """
+    """Gyro bias: ``constant`` (rad/s) plus a random walk, ``random_walk`` in rad/s/sqrt(s)."""
 
     name: ClassVar[str] = 'gyro_bias'
     constant: Tuple[float, ...] = checked_field(_VECTOR, (0.0, 0.0, 0.0))
@@ -272,19 +205,7 @@ NAN_BURST_FIELDS = ('orientation', 'angular_velocity')
 
 @dataclasses.dataclass(frozen=True)
 class NanBursts:
-    """
-    Bursts of NaN: each sample starts a burst of ``length`` samples with ``probability``.
-
-    Attributes
-    ----------
-    probability : float
-        Probability that a burst starts at a sample, in [0, 1].
-    length : int
-        Samples per burst, >= 1 (overlapping bursts merge).
-    fields : tuple of str
-        Which of ``orientation``, ``angular_velocity`` turn NaN (all components).
-
-    """
+    """Each sample starts a burst of ``length`` samples of NaN ``fields`` with ``probability``."""
 
     name: ClassVar[str] = 'nan_bursts'
     probability: float = checked_field(_PROBABILITY)
@@ -299,89 +220,36 @@ EFFECT_PARAMETERS = {cls.name: cls for cls in (
     DroppedMessages, TimestampJitter, OrientationUnknown, NanBursts)}
 
 
-# --- the reference stream -----------------------------------------------------
-
-#: Message types of a reference stream: ``geometry_msgs/PoseStamped`` or ``sensor_msgs/Imu``.
-REFERENCE_MESSAGES = ('pose', 'imu')
-
-_IDENTITY_QUATERNION = (0.0, 0.0, 0.0, 1.0)
-
-
 @dataclasses.dataclass(frozen=True)
 class Reference:
     """
     A second stream of the scene's motion, as a reference system (mocap, an INS) sees it.
 
-    Its orientation at its own stamp ``t`` is
-    ``R_ref(t) = W . R(t + time_offset) . M`` (body-to-world matrices), with
-    ``R`` the scene's truth, ``W = world_alignment`` and ``M = mounting``: the
-    convention of ``rotation_bag compare`` with the scene's sensor stream as
-    the estimate (``R_est = R`` without its effects). Samples are at
-    ``start_time + k / rate`` for every ``k`` whose ``t + time_offset`` lies in
-    ``[0, duration]`` of the scene.
-
-    Attributes
-    ----------
-    rate : float
-        Samples per second (> 0).
-    topic : str
-        Absolute topic of the stream; not the sensor's or a truth topic.
-    frame_id : str
-        ``header.frame_id`` of its messages (the reference's world frame for a pose).
-    message : str
-        ``pose`` (``geometry_msgs/PoseStamped``, position zero) or ``imu``
-        (``sensor_msgs/Imu`` with the body angular velocity ``M^T w(t + time_offset)``).
-    time_offset : float
-        ``dt``, s: the reference at ``t`` shows the motion at ``t + dt``.
-    mounting : tuple of float, shape (4,)
-        ``M`` (x, y, z, w), unit: the reference body's orientation in the sensor's body frame.
-    world_alignment : tuple of float, shape (4,)
-        ``W`` (x, y, z, w), unit: the sensor's world frame's orientation in the
-        reference's world frame.
-    orientation_noise : float
-        Standard deviation (rad) of a body-frame rotation vector ``v``: each
-        orientation is ``q_ref (x) exp(v)``.
-
+    ``R_ref(t) = W R(t + time_offset) M`` at its own stamps ``t`` (``W = world_alignment``,
+    ``M = mounting``, ``R`` the truth): the convention of ``rotation_bag compare`` with the
+    sensor stream as the estimate; ``orientation_noise`` (rad) turns each sample by
+    ``exp(v)`` in its body frame. ``message`` ``pose`` is ``geometry_msgs/PoseStamped``,
+    ``imu`` a ``sensor_msgs/Imu`` also carrying the body rate ``M^T w(t + time_offset)``.
     """
 
     rate: float = checked_field(Real(positive=True))
     topic: str = checked_field(_TOPIC, '/reference/pose')
     frame_id: str = checked_field(_FRAME_ID, 'mocap')
-    message: str = checked_field(Choice(REFERENCE_MESSAGES), 'pose')
+    message: str = checked_field(Choice(('pose', 'imu')), 'pose')
     time_offset: float = checked_field(Real(), 0.0)
-    mounting: Tuple[float, ...] = checked_field(Vector(4), _IDENTITY_QUATERNION,
-                                                check=_unit_quaternion)
-    world_alignment: Tuple[float, ...] = checked_field(Vector(4), _IDENTITY_QUATERNION,
+    mounting: Tuple[float, ...] = checked_field(Vector(4), IDENTITY, check=_unit_quaternion)
+    world_alignment: Tuple[float, ...] = checked_field(Vector(4), IDENTITY,
                                                        check=_unit_quaternion)
     orientation_noise: float = checked_field(Real(0.0), 0.0)
 
 
-# --- the scene ----------------------------------------------------------------
-
 @dataclasses.dataclass(frozen=True)
 class Scene:
     """
-    A validated scene.
+    A validated scene: samples at ``start_time + k / rate`` (s since the epoch) up to ``duration``.
 
-    Attributes
-    ----------
-    duration : float
-        Length of the scene, s (> 0): samples at ``k / rate`` up to and including it.
-    rate : float
-        Samples per second (> 0).
-    motion : ConstantRate or Coning or TorqueFree or EulerSweep
-        What moves.
-    effects : Mapping[str, object]
-        Effect parameters by effect name; only these effects are simulated.
-    topic : str
-        Absolute topic of the ``sensor_msgs/Imu`` stream.
-    frame_id : str
-        ``header.frame_id`` of every message.
-    start_time : float
-        Stamp of the first sample, seconds since the Unix epoch.
-    reference : Reference or None
-        A second stream of the same motion, only when the scene asks for one.
-
+    ``effects`` holds the parameters of the effects to simulate, by name; ``reference`` is
+    None unless the scene asks for a second stream.
     """
 
     duration: float = checked_field(Real(positive=True))
@@ -404,8 +272,7 @@ def sample_count(duration: float, rate: float) -> int:
     """
     Return the number of samples ``t_k = k / rate`` with ``t_k <= duration``.
 
-    ``duration * rate`` within 1e-9 (relative) of an integer counts as that
-    integer, so 4 s at 100 Hz gives 401 samples whatever the rounding.
+    ``duration * rate`` within 1e-9 of an integer counts as it: 4 s at 100 Hz gives 401.
     """
     n = duration * rate
     return math.floor(n + 1e-9 * max(1.0, n)) + 1
@@ -424,24 +291,7 @@ def stamps_ns(start_time: float, rate: float, start: int, stop: int) -> np.ndarr
 
 
 def scene_from_dict(data: object) -> Scene:
-    """
-    Validate a scene given as parsed YAML.
-
-    Parameters
-    ----------
-    data : dict
-        The scene's top-level mapping.
-
-    Returns
-    -------
-    Scene
-
-    Raises
-    ------
-    SceneError
-        Naming the key path of the first unknown key, missing field or bad value.
-
-    """
+    """Validate a scene's parsed YAML mapping; a SceneError names the key path of the problem."""
     if not isinstance(data, dict):
         raise SceneError(f'scene: expected a mapping of keys, got {type_and_repr(data)}')
     scene = dataclass_from_mapping(Scene, data, _SCENE)
@@ -467,25 +317,7 @@ def scene_from_dict(data: object) -> Scene:
 
 
 def load_scene(path: StrPath) -> Scene:
-    """
-    Load and validate a YAML scene file.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        The scene file.
-
-    Returns
-    -------
-    Scene
-
-    Raises
-    ------
-    SceneError
-        If the file cannot be read, is not YAML, or is not a valid scene; the
-        message starts with the file name and names the key that is wrong.
-
-    """
+    """Load and validate a YAML scene file; a SceneError starts with the file name."""
     data = load_ros_yaml(path, str(path), SceneError)
     try:
         return scene_from_dict(data)
