@@ -96,6 +96,16 @@ def checked_topics(topics: Iterable[str], available: Collection[str], path: str)
     return topics
 
 
+def add_topic(topic_metadata: Dict[str, TopicMetadata], message_counts: Dict[str, int],
+              topic: str, metadata: TopicMetadata, count: int, path: str) -> None:
+    """Add a topic's metadata and ``count`` messages; BagError if it already has another type."""
+    known = topic_metadata.setdefault(topic, metadata)
+    if known.type_name != metadata.type_name:
+        raise BagError(f'topic {topic} in {path} has two types: '
+                       f'{known.type_name} and {metadata.type_name}')
+    message_counts[topic] = message_counts.get(topic, 0) + count
+
+
 class _Damage(Exception):
     """A part of an MCAP file that cannot be read: what is wrong with it, at which offset."""
 
@@ -869,15 +879,11 @@ class BagReader:
         self._channels: Dict[int, Channel] = {}
         for channel in channels:
             metadata = self._topic_metadata(channel, schemas.get(channel.schema_id))
-            known = self.topic_metadata.setdefault(channel.topic, metadata)
-            if known.type_name != metadata.type_name:
-                raise BagError(f'topic {channel.topic} in {self.path} has two types: '
-                               f'{known.type_name} and {metadata.type_name}')
+            add_topic(self.topic_metadata, self.message_counts, channel.topic, metadata,
+                      counts.get(channel.id, 0), self.path)
             self._type_names[channel.id] = metadata.type_name
             self._channel_topics[channel.id] = channel.topic
             self._channels[channel.id] = channel
-            self.message_counts[channel.topic] = (
-                self.message_counts.get(channel.topic, 0) + counts.get(channel.id, 0))
         self.topics = {topic: m.type_name for topic, m in self.topic_metadata.items()}
 
     def _topic_metadata(self, channel, schema):
