@@ -173,7 +173,7 @@ class InputBag:
 
     @contextlib.contextmanager
     def reporting_new_notes(self, report: Optional[Callable[[str], None]]) -> Iterator[None]:
-        """Pass to ``report``, after the block, the notes reading added in it (none if it raises)."""
+        """Pass to ``report``, after the block, the notes added in it (none if it raises)."""
         noted = len(self.notes)
         yield
         if report is not None:
@@ -181,7 +181,7 @@ class InputBag:
                 report(note)
 
     def naming_this_bag(self, error: BagError) -> BagError:
-        """Return ``error`` if it names this bag (or one of its files), else ``<path>: <error>``."""
+        """Return ``error`` if it names this bag (or one of its files), else ``<path>: error``."""
         text = str(error)
         named = re.search(rf'(^|\s){re.escape(self.path)}(\W|$)', text) is not None
         return error if named else BagError(f'{self.path}: {text}')

@@ -27,7 +27,7 @@ import apsw
 from rosbags.interfaces import QosDurability, QosHistory, QosLiveliness, QosReliability
 from rotation_node.bag import metadata_yaml
 from rotation_node.bag.reading.compression import decompressed_message, is_zstd, ZstdError
-from rotation_node.bag.reading.rosbags_input import RosbagsInput
+from rotation_node.bag.reading.rosbags_input import is_installed, RosbagsInput
 from rotation_node.bag.records import TopicMetadata
 from rotation_node.errors import BagError
 from rotation_node.wire.message_types import message_definition
@@ -399,8 +399,6 @@ def _definition(type_name, msgdef):
     encoding, text = msgdef
     if encoding is not None:
         return {'definition': text, 'definition_encoding': encoding}
-    try:
-        message_definition(type_name)
-    except BagError:
+    if not is_installed(type_name):
         return {'definition': '', 'definition_encoding': 'unknown'}
     return {'definition': None, 'definition_encoding': 'ros2msg'}

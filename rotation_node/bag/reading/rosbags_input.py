@@ -11,6 +11,16 @@ from typing import Any, Callable, Dict, Iterable, Iterator, List, Optional, Tupl
 from rotation_node.bag.reading.mcap_reader import add_topic, checked_topics
 from rotation_node.bag.records import BagMessage, TopicMetadata
 from rotation_node.errors import BagError
+from rotation_node.wire.message_types import message_definition
+
+
+def is_installed(type_name: str) -> bool:
+    """Whether the definition of ``type_name`` is installed (not its class: that imports more)."""
+    try:
+        message_definition(type_name)
+    except BagError:
+        return False
+    return True
 
 
 class RosbagsInput:
