@@ -1,25 +1,13 @@
 """
-Read ROS 2 bags stored as single MCAP files, the way rosbag2 writes them.
+Read one MCAP file as rosbag2 writes it (``ros2 bag record -s mcap``), or any other layout.
 
-A bag is what ``ros2 bag record -s mcap`` writes: profile ``ros2``; one schema
-per message type, named ``pkg/msg/Type`` with encoding ``ros2msg`` and the
-complete concatenated definition (see ``message_types.message_definition``);
-one channel per topic with message encoding ``cdr`` and the metadata
-``offered_qos_profiles`` (QoS YAML, see ``qos``) and ``topic_type_hash``.
-:mod:`rotation_node.bag.writing.writer` writes such bags (``BagWriter``);
-:mod:`rotation_node.bag.reading.reader` reads every other kind of bag.
-
-Messages are stored as CDR bytes, which reading returns unchanged, so a bag
-round trip is byte-exact. Reading streams chunk by chunk: memory does not grow
-with the length of the bag. A chunk's Message records are read as arrays
-(:func:`chunk_records`), without the mcap library's record object per
-message: 1.0 instead of 2.9 us per message on an AMD EPYC (2 cores).
-
-The file's layout (records, chunks, summary, footer) is walked here with
-every length checked against the end of its record or of the file before
-anything is read or decompressed, so that a damaged length field is a note or
-one error line, never a huge allocation; the mcap library parses the fields of
-each record (``Schema``, ``Channel``, ``ChunkIndex``...) from its checked bytes.
+The CDR bytes are returned unchanged (a bag round trip is byte-exact), chunk by chunk: memory
+does not grow with the length of the bag. A chunk's Message records are read as arrays
+(:func:`chunk_records`), without the mcap library's object per message (1.0 instead of 2.9 us
+per message). The file's layout is walked here with every length checked against the end of
+its record or of the file before anything is read or decompressed, so that a damaged length
+is a note or one error line, never a huge allocation; the mcap library parses each record's
+fields from its checked bytes. What is read and how damage is reported: docs/bags.md.
 """
 from __future__ import annotations
 
@@ -79,15 +67,7 @@ def _described(error):
 
 
 def checked_topics(topics: Iterable[str], available: Collection[str], path: str) -> List[str]:
-    """
-    Return ``topics`` as a list, each checked to be one of ``available`` (the topics of a bag).
-
-    Raises
-    ------
-    BagError
-        Naming the missing topics, the bag ``path`` and the topics it has.
-
-    """
+    """Return ``topics`` as a list; BagError naming those not in ``available`` (bag ``path``)."""
     topics = list(topics)
     missing = [topic for topic in topics if topic not in available]
     if missing:
@@ -181,10 +161,10 @@ class _File:
 
 def _bounded(read, size, offset):
     """
-    Join the pieces ``read(max_length)`` returns until it returns none: at most ``size`` bytes.
+    Join what ``read(max_length)`` returns until it returns nothing: at most ``size`` bytes.
 
-    A decompressor that gives more than the ``size`` its chunk states is damage: it is
-    never asked for more than one byte past it.
+    A decompressor that gives more than the ``size`` its chunk states is damage: it is never
+    asked for more than one byte past it.
     """
     pieces, total = [], 0
     while True:
@@ -200,7 +180,7 @@ def _bounded(read, size, offset):
 
 
 def _unzstd(stored, size, offset):
-    """Decompress a zstd chunk that says it holds ``size`` bytes, never holding more than that."""
+    """Decompress a zstd chunk stating ``size`` bytes, never holding more than that."""
     try:
         with zstandard.ZstdDecompressor().stream_reader(stored) as reader:
             return _bounded(reader.read, size, offset)
@@ -209,7 +189,7 @@ def _unzstd(stored, size, offset):
 
 
 def _unlz4(stored, size, offset):
-    """Decompress an lz4 chunk that says it holds ``size`` bytes, never holding more than that."""
+    """Decompress an lz4 chunk stating ``size`` bytes, never holding more than that."""
     import lz4.frame   # only for lz4 chunks
     decompressor = lz4.frame.LZ4FrameDecompressor()
     pending = [stored]   # the frame, given to the decompressor once
@@ -230,30 +210,11 @@ def _unlz4(stored, size, offset):
 
 def chunk_data(body: Union[bytes, memoryview], offset: int = 0) -> tuple:
     """
-    Return the compression and the uncompressed records of a Chunk record.
+    Return the compression (``'zstd'``, ``'lz4'``, ``''``) and the records of a Chunk record.
 
-    Parameters
-    ----------
-    body : bytes or memoryview
-        The record after its opcode and length.
-    offset : int
-        Where the record is in its file (for the error).
-
-    Returns
-    -------
-    compression : str
-        ``'zstd'``, ``'lz4'`` or ``''``.
-    data : bytes
-        The chunk's records, decompressed and checked against the chunk's CRC
-        (unless it has none: 0).
-
-    Raises
-    ------
-    _Damage
-        If a length runs past the record, the chunk does not decompress to the
-        size it states, or fails its CRC. Memory never exceeds what the data
-        really decompresses to, whatever the lengths say.
-
+    ``body``: the record after its opcode and length; ``offset``: where it is in its file. _Damage
+    if a length runs past the record, or the chunk does not decompress to the size it states, or
+    fails its CRC (unless 0); memory never exceeds what the data really decompresses to.
     """
     if len(body) < _CHUNK_FIELDS.size:
         raise _Damage(offset, f'chunk of {len(body)} bytes, shorter than its fixed fields')
@@ -287,11 +248,7 @@ def chunk_data(body: Union[bytes, memoryview], offset: int = 0) -> tuple:
 
 
 def _chunk_data_by_index(body, index):
-    """
-    Return the records of a chunk whose own lengths are damaged, by its chunk index's.
-
-    Only where the chunk's CRC vouches for the result; None otherwise.
-    """
+    """Return the records of a chunk with damaged lengths, by its index's, if its CRC vouches."""
     crc = _CHUNK_FIELDS.unpack_from(body)[3] if len(body) >= _CHUNK_FIELDS.size else 0
     start = _CHUNK_FIELDS.size + len(index.compression.encode()) + 8
     stored = body[start:start + index.compressed_size]
@@ -322,15 +279,11 @@ class ChunkRecords(NamedTuple):
 
 def chunk_records(data: bytes) -> ChunkRecords:
     """
-    Find the records of an uncompressed chunk (``chunk_data``), in file order.
+    Find the records of an uncompressed chunk in one walk, the Message records' fields as arrays.
 
-    The records are walked once; the Message records' fixed fields are read
-    for all of them at once, without a record object per message (which is
-    where the mcap library's ``breakup_chunk`` spends its time). Unknown
-    records are skipped. The walk stops at the first record that cannot be
-    one (opcode 0, as zeroed bytes read; a length past the end of the chunk;
-    a Message record shorter than its fixed fields): the records before it
-    are returned, and ``damage`` says what stopped it.
+    Unknown records are skipped. The walk stops at the first record that cannot be one (opcode 0,
+    as zeroed bytes read; a length past the end; a Message record shorter than its fixed fields):
+    the records before it are returned, and ``damage`` says what stopped it.
     """
     offsets: List[int] = []
     definitions: List[Tuple[int, int, int]] = []
@@ -399,14 +352,11 @@ class _Summary:
 
 def _chunks_in_order(chunk_indexes):
     """
-    Return the chunk indexes in log-time order, if their messages can be read chunk by chunk.
+    Return the chunk indexes in log-time order if their messages can be read chunk by chunk.
 
-    Messages are ordered by (log time, chunk offset, place in the chunk), as
-    the mcap library's ``iter_messages`` orders them. When no later chunk
-    holds a message that sorts before the end of an earlier one (a
-    recording's chunks never overlap in time), that order is each chunk's
-    messages sorted by log time, chunk after chunk, without a heap. None when
-    chunks overlap: then they are merged through a heap.
+    The order is the mcap library's (log time, chunk offset, place in the chunk): chunk after chunk
+    when no later chunk holds a message sorting before the end of an earlier one (a recording's
+    chunks never overlap). None when chunks overlap: they are then merged through a heap.
     """
     chunks = sorted(chunk_indexes,
                     key=lambda index: (index.message_start_time, index.chunk_start_offset))
@@ -424,14 +374,11 @@ class _LinearScan:
     """
     A linear scan of an MCAP file's data section, record by record, as its writer wrote them.
 
-    Iterating yields ``(channel, log time, publish time, data)`` for every
-    message whose channel is known, in file order, and collects the schemas
-    and channels it passes. A chunk that cannot be read (it fails its CRC, does
-    not decompress, its records do not parse) yields what could be read of it
-    and adds a :class:`_Loss`, counted by the message index records that
-    follow it; the scan goes on with the next record. A record whose length
-    runs past the end ends the scan: for an unfinished recording (``cut_ok``)
-    that is where the writer stopped; otherwise it is a loss too.
+    Yields ``(channel, log time, publish time, data)`` of every message of a known channel, in
+    file order, collecting schemas and channels on the way. A chunk that cannot be read yields what
+    could be read of it and adds a :class:`_Loss`, counted by the message indexes after it. A
+    record running past the end ends the scan: where the writer stopped if ``cut_ok`` (an
+    unfinished recording), else a loss too.
     """
 
     def __init__(self, file, end, cut_ok, summary=None):
@@ -590,60 +537,20 @@ def _message_index_count(body, offset):
 
 class BagReader:
     """
-    Read one MCAP file (``rotation_node.bag.reading.reader`` reads every other kind of bag).
+    Read one MCAP file: every valid layout, unfinished recordings, damage skipped and noted.
 
-    Every valid MCAP file is read: chunked (zstd, lz4 or uncompressed chunks)
-    or not, with or without a summary, statistics, message indexes, chunk
-    indexes, summary offsets, and with Schema and Channel records repeated in
-    the summary or only in the data section. A file whose summary lists its
-    channels and chunks (as rosbag2 and the mcap writers write by default) is
-    read chunk by chunk in log-time order, through that index. Any other file
-    is read by a linear scan, in the order it was written (sorted by log time
-    in memory if that is not log-time order); so is an unfinished recording
-    (no summary and no footer, as a writer killed mid-recording leaves it), up
-    to its last complete record (unless ``strict``). Channels of any schema and
-    encoding are listed (bags of other recorders); only decoding a message
-    needs a ROS 2 type.
+    A file whose summary indexes its channels and chunks (as rosbag2 and the mcap writers write by
+    default) is read through that index, chunk by chunk in log-time order; any other file by a
+    linear scan in the order it was written (sorted by log time in memory if that is not log-time
+    order), an unfinished recording up to its last complete record. Channels of any schema and
+    encoding are listed; only decoding a message needs a ROS 2 type. What cannot be read is said on
+    one line in ``notes`` (once a scan has opened the file, or once ``messages`` has read an
+    indexed one); ``strict`` makes it, and an unfinished recording, a BagError.
 
-    Damage never stops reading nor goes unsaid: a chunk that fails its CRC or
-    does not decompress, records that do not parse, fewer messages than the
-    file's message indexes or statistics count are skipped and said on one
-    line in ``notes`` (how many messages of which topics, at which offsets),
-    once a linear scan has opened the file or once ``messages`` has read an
-    indexed one; ``strict`` makes it an error. No length field is trusted
-    beyond the end of the file or its record: memory stays bounded.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-    strict : bool, optional
-        Refuse an unfinished recording or a damaged file instead of reading
-        what it holds.
-
-    Attributes
-    ----------
-    path : str
-    topics : dict
-        ``{topic: type name as stored}``, normally ``'pkg/msg/Type'``.
-    topic_metadata : dict
-        ``{topic: TopicMetadata}`` as stored (schema text, QoS YAML, hash).
-    message_counts : dict
-        ``{topic: number of messages}``: as the file's statistics or message
-        indexes count them, or as many as a linear scan read.
-    compression : str
-        The chunk compression: ``'zstd'``, ``'lz4'`` or ``'none'``.
-    recovered : int or None
-        For an unfinished recording, the number of messages recovered; None
-        for a complete file.
-    notes : list of str
-        The line saying what could not be read, if anything.
-
-    Raises
-    ------
-    BagError
-        If the file does not exist, is empty, is not MCAP, or is an unfinished
-        recording or damaged and ``strict`` is set.
-
+    ``topics`` (``{topic: type name as stored}``), ``topic_metadata`` and ``message_counts`` (as
+    the file's statistics or message indexes count, or as a scan read); ``compression``: the
+    chunks' (``'zstd'``, ``'lz4'``, ``'none'``); ``recovered``: the messages recovered from an
+    unfinished recording, else None.
     """
 
     def __init__(self, path: StrPath, *, strict: bool = False) -> None:
@@ -718,9 +625,9 @@ class BagReader:
         """
         Whether the summary indexes the whole file: read it through the index, not a scan.
 
-        That takes chunk indexes, each pointing into the data section, the
-        message counts (statistics or message indexes) and a Channel record
-        (and its Schema) for every channel they count.
+        That takes chunk indexes pointing into the data section at the chunks, message counts
+        (statistics or message indexes) and a Channel record (and Schema) for every channel
+        counted.
         """
         if summary.damage is not None or not summary.chunk_indexes:
             return False
@@ -759,11 +666,9 @@ class BagReader:
 
     def _moved(self, index, end):
         """
-        Whether a chunk index points at another whole record than its chunk.
+        Whether a chunk index points at another whole record than its chunk (moved: a scan).
 
-        Records were moved: a scan finds them. A chunk damaged in place (zeroed
-        bytes, a length field that runs past the data section) is read
-        through the index, which skips it.
+        A chunk damaged in place (zeroed, a length past the data section) is read by the index.
         """
         opcode, length = _RECORD_PREFIX.unpack(self._file.read(
             index.chunk_start_offset, _RECORD_PREFIX.size, 'chunk'))
@@ -835,11 +740,9 @@ class BagReader:
         """
         Say what could not be read, on one line in ``notes`` (a BagError with ``strict``).
 
-        ``losses`` are the chunks and records that could not be read; ``read``
-        is ``{channel id: messages read}``; ``counted`` what the file's
-        statistics or indexes count (None if they do not); ``wanted`` the
-        channels read (None: all). Messages counted but neither read nor in a
-        loss are lost outside any chunk the file indexes.
+        ``read``: ``{channel id: messages read}``; ``counted``: what the statistics or indexes
+        count (None if nothing); ``wanted``: the channels read (None: all). Messages counted but
+        neither read nor in a loss are lost outside any chunk the file indexes.
         """
         losses = list(losses)
         if counted is not None:
@@ -904,30 +807,11 @@ class BagReader:
 
     def messages(self, topics: Optional[Iterable[str]] = None) -> Iterator[BagMessage]:
         """
-        Iterate over the messages in log-time order (ties in file order).
+        Iterate over the messages of ``topics`` (default all) in log-time order (ties: file order).
 
-        A file read by a linear scan is read in the order it was written,
-        which is log-time order for a recorder; if it is not, its messages are
-        sorted in memory first. Messages compressed by rosbag2
-        (``--compression-mode message``) are decompressed. What cannot be read
-        is skipped and said in ``notes`` once the last message is read.
-
-        Parameters
-        ----------
-        topics : iterable of str, optional
-            Only these topics; all by default.
-
-        Yields
-        ------
-        BagMessage
-
-        Raises
-        ------
-        BagError
-            If a requested topic is not in the bag (raised at once), or a part
-            of the file cannot be read and ``strict`` is set (raised when it is
-            reached).
-
+        Messages compressed by rosbag2 (``message`` mode) are decompressed. What cannot be read
+        is skipped and said in ``notes`` once the last message is read. BagError at once if a
+        topic is not in the bag; with ``strict``, when a damaged part is reached.
         """
         if topics is not None:
             topics = checked_topics(topics, self.topics, self.path)

@@ -1,20 +1,12 @@
 """
-rosbag2's ``sqlite3`` storage files (``.db3``), read with ``apsw``.
+rosbag2's ``sqlite3`` storage files (``.db3``) read with ``apsw``, as ``rosbags`` reads them.
 
-:class:`Sqlite3Storage` reads what the ``rosbags`` package's sqlite3 reader
-reads (``rosbags.rosbag2.storage_sqlite3.Sqlite3Reader``), the same way,
-without importing rosbags' rosbag2 modules (a twentieth of a second): the
-``topics`` (and ``message_definitions``) tables when it opens the file, the
-QoS profiles normalised as rosbags normalises them, and the ``messages``
-table row by row. A damaged file surfaces from several layers: SQLite's own
-errors (``apsw.CorruptError`` for a damaged page, met only when a query
-reaches it), text that is not UTF-8, QoS profiles that are not what rosbag2
-writes, a message row whose ``data`` is not a BLOB or whose ``timestamp`` is
-not a time (a non-negative integer). :class:`Sqlite3Storage` turns each into
-a :class:`DamagedStorage` naming the table and the row (``messages`` rows by
-their ``id``), so that a bag read through
-:class:`~rotation_node.bag.reading.rosbags_input.RosbagsInput` fails with one line.
-The file is opened read-only and immutable: it is never changed.
+:class:`Sqlite3Storage` reads what rosbags' ``Sqlite3Reader`` reads, the same way, without
+importing rosbags' rosbag2 modules (a twentieth of a second). Damage surfaces from several
+layers (SQLite's errors, met only when a query reaches a damaged page; text that is not UTF-8;
+QoS profiles that are not rosbag2's; a ``data`` that is not a BLOB, a ``timestamp`` that is not
+an integer >= 0): each becomes a :class:`DamagedStorage` naming the table and the row id, so
+that reading fails with one line. The file is opened read-only and immutable.
 """
 import contextlib
 import os
@@ -48,17 +40,7 @@ class DamagedStorage(Exception):
 
 
 def sqlite_tables(path: str, shown: Optional[str] = None) -> set:
-    """
-    Return the table names of a SQLite database, read-only (the file is never changed).
-
-    ``shown`` is the path named in errors (default ``path``).
-
-    Raises
-    ------
-    BagError
-        If the file is not a readable SQLite database.
-
-    """
+    """Return the table names of a SQLite database, read-only; BagError naming ``shown``."""
     uri = f'file:{urllib.parse.quote(os.path.abspath(path))}?mode=ro&immutable=1'
     try:
         with contextlib.closing(sqlite3.connect(uri, uri=True)) as database:
@@ -98,16 +80,8 @@ def qos_profiles_yaml(stored: Any) -> str:
     """
     Return a topic's ``offered_qos_profiles`` as rosbags reads and then writes them (version 9).
 
-    ``stored``: the YAML text (or whatever the column holds). Policies given
-    by number or by name, unknown ones ``unknown``; the rest as stored.
-
-    Raises
-    ------
-    DamagedStorage
-        If the text is not YAML.
-    KeyError, TypeError, AttributeError
-        If it is not a list of QoS profiles.
-
+    Policies given by number or by name, unknown ones ``unknown``. DamagedStorage if the text is
+    not YAML; KeyError, TypeError or AttributeError if it is not a list of QoS profiles.
     """
     if not stored:
         return profiles_yaml([])
@@ -133,17 +107,8 @@ class Sqlite3Storage:
     """
     A rosbag2 sqlite3 storage file: its topics, and its messages by time.
 
-    Parameters
-    ----------
-    path : pathlib.Path
-
-    Attributes
-    ----------
-    connections : list of StoredTopic
-        The ``topics`` table, by ``id``; ``msgcount`` counts each topic's rows.
-    message_count : int
-        Rows of the ``messages`` table (also those of no topic).
-
+    ``connections``: the ``topics`` table by ``id``, ``msgcount`` counting each topic's rows;
+    ``message_count``: the rows of the ``messages`` table (also those of no topic).
     """
 
     def __init__(self, path: Path) -> None:
@@ -153,15 +118,7 @@ class Sqlite3Storage:
         self.message_count = 0
 
     def open(self) -> None:  # noqa: A003  (rosbags names it so)
-        """
-        Open the database and read its topics.
-
-        Raises
-        ------
-        DamagedStorage
-            If it cannot be opened or its topics or message definitions are damaged.
-
-        """
+        """Open the database and read its topics; DamagedStorage if they are damaged."""
         try:
             self.dbconn = apsw.Connection(f'file:{self.path}?immutable=1',
                                           flags=apsw.SQLITE_OPEN_READONLY | apsw.SQLITE_OPEN_URI)
@@ -179,9 +136,8 @@ class Sqlite3Storage:
 
     def _read_topics(self, database: apsw.Connection) -> None:
         """Read the topics as rosbags' reader does, by the schema version of the file."""
-        tables, = _one_row(database,
-                           "SELECT count(*) FROM sqlite_master WHERE type = 'table' "
-                           "AND name IN ('messages', 'topics')")
+        tables, = database.execute("SELECT count(*) FROM sqlite_master WHERE type = 'table' "
+                                   "AND name IN ('messages', 'topics')").fetchone()
         if tables != 2:
             raise DamagedStorage(f'Cannot open database {self.path} or database missing tables.')
         if database.execute('PRAGMA table_info(schema)').fetchall():
@@ -215,8 +171,8 @@ class Sqlite3Storage:
                 topic_id, topic, type_name, (encoding, text), more[1] if schema >= 4 else '',
                 count, serialization_format,
                 qos_profiles_yaml(more[0]) if schema >= 2 else profiles_yaml([])))
-        _, _, self.message_count = _one_row(
-            database, 'SELECT MIN(timestamp), MAX(timestamp) + 1, COUNT(*) FROM messages')
+        _, _, self.message_count = database.execute(
+            'SELECT MIN(timestamp), MAX(timestamp) + 1, COUNT(*) FROM messages').fetchone()
 
     def close(self) -> None:
         """Close the database."""
@@ -224,41 +180,25 @@ class Sqlite3Storage:
         if database is not None:
             database.close()
 
-    def messages(self, connections: Collection[StoredTopic], start: Optional[int] = None,
-                 stop: Optional[int] = None
+    def messages(self, connections: Collection[StoredTopic]
                  ) -> Generator[Tuple[StoredTopic, int, bytes], None, None]:
         """
-        Yield ``(connection, timestamp, data)`` of the messages of ``connections`` by time.
+        Yield ``(connection, timestamp, data)`` of the messages of ``connections`` as rosbags.
 
-        What rosbags' reader yields, in the same order (by ``timestamp``),
-        ``data`` always ``bytes`` and ``timestamp`` always an ``int`` >= 0.
-
-        Raises
-        ------
-        DamagedStorage
-            When a damaged page or row is reached: ``messages table, row id
-            12: data is TEXT, not a BLOB``; ``... after row id 40: database
-            disk image is malformed``.
-
+        By ``timestamp``; ``data`` always ``bytes``, ``timestamp`` always an int >= 0.
+        DamagedStorage when a damaged page or row is reached (``messages table, row id 12: data
+        is TEXT, not a BLOB``; ``... after row id 40: database disk image is malformed``).
         """
-        if self.dbconn is None:
-            raise DamagedStorage('Rosbag is not open.')
+        assert self.dbconn is not None
         ids = sorted({connection.id for connection in connections})
         query = ('SELECT messages.id, topics.id, messages.timestamp, messages.data '
                  'FROM messages JOIN topics ON messages.topic_id = topics.id '
                  f'WHERE topics.id IN ({",".join("?" * len(ids))})')
-        arguments: list = list(ids)
-        if start is not None:
-            query += ' AND messages.timestamp >= ?'
-            arguments.append(start)
-        if stop is not None:
-            query += ' AND messages.timestamp < ?'
-            arguments.append(stop)
         by_id = {connection.id: connection for connection in self.connections}
         row_id = None
         try:
             for row_id, topic_id, timestamp, data in self.dbconn.execute(
-                    query + ' ORDER BY timestamp', arguments):
+                    query + ' ORDER BY timestamp', ids):
                 if type(data) is not bytes:
                     raise DamagedStorage(f'messages table, row id {row_id}: data is '
                                          f'{_sqlite_type(data)}, not a BLOB')
@@ -275,8 +215,7 @@ def _damaged_table(path: object) -> str:
     """
     Say where SQLite met damage: ``' (messages table, after row id 199)'``, or ``''``.
 
-    Each rosbag2 table is read whole (not through an index), in row id order, until
-    its damaged page.
+    Each table is read whole (not through an index), in row id order, until its damaged page.
     """
     try:
         database = apsw.Connection(f'file:{path}?immutable=1',
@@ -299,27 +238,15 @@ def _damaged_table(path: object) -> str:
         database.close()
 
 
-def _one_row(database: apsw.Connection, query: str) -> tuple:
-    """Return the row of a query that gives one (an aggregate)."""
-    row = database.execute(query).fetchone()
-    assert row is not None
-    return row
-
-
 def _sqlite_type(value: Any) -> str:
     """Return the SQLite storage class of a value apsw read: ``'TEXT'``, ``'NULL'``..."""
     return {str: 'TEXT', int: 'INTEGER', float: 'REAL', bytes: 'BLOB'}.get(type(value), 'NULL')
 
 
 def _rows_without_topic(reader: Sqlite3Storage, path: str) -> Optional[str]:
-    """
-    Say which message rows name no topic of the ``topics`` table, or None if none does.
-
-    Such rows cannot be read as messages of any topic: the table counts every
-    row but the topics only theirs.
-    """
+    """Say how many message rows name no topic of the ``topics`` table (None if none)."""
     lost = reader.message_count - sum(c.msgcount for c in reader.connections)
-    if lost <= 0 or reader.dbconn is None:
+    if lost <= 0:
         return None
     row_id, topic_id = next(iter(reader.dbconn.execute(
         'SELECT id, topic_id FROM messages WHERE topic_id NOT IN (SELECT id FROM topics) '
@@ -331,8 +258,6 @@ def _rows_without_topic(reader: Sqlite3Storage, path: str) -> Optional[str]:
 
 def _message_compression(reader: Sqlite3Storage) -> Optional[str]:
     """Return ``'zstd'`` if the first message is a zstd frame (rosbag2's ``message`` mode)."""
-    if reader.dbconn is None:
-        return None
     first, = next(iter(reader.dbconn.execute('SELECT data FROM messages ORDER BY id LIMIT 1')),
                   (None,))
     return 'zstd' if isinstance(first, bytes) and is_zstd(first) else None
@@ -343,16 +268,8 @@ def open_sqlite3_file(path: str, *, shown: Optional[str] = None,
     """
     Open one rosbag2 sqlite3 storage file (named ``shown`` in errors and notes, default ``path``).
 
-    Messages compressed by rosbag2 (``message`` mode) are decompressed (and
-    ``message_compression`` says so, also without ``metadata.yaml``).
-    Messages whose ``topic_id`` is not a topic cannot be read: a note
-    (``notes``) says how many, or with ``strict`` an error.
-
-    Raises
-    ------
-    BagError
-        If the database has no rosbag2 tables or cannot be read.
-
+    Messages compressed by rosbag2 (``message`` mode) are decompressed. Messages whose
+    ``topic_id`` is not a topic cannot be read: a note says how many (with ``strict``, a BagError).
     """
     shown = shown or path
     if not _ROSBAG2_TABLES <= sqlite_tables(path, shown):
@@ -392,9 +309,7 @@ def _definition(type_name, msgdef):
     """
     ``definition`` and ``definition_encoding`` of a topic from its ``message_definitions`` row.
 
-    A bag without definitions (sqlite3 before Iron) gets the installed one;
-    if the type is not installed either, the encoding ``unknown`` that rosbag2
-    records then.
+    Without one (before Iron): the installed definition, else encoding ``unknown`` as rosbag2.
     """
     encoding, text = msgdef
     if encoding is not None:
