@@ -25,7 +25,7 @@ import zlib
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import EndOfFile, McapError
 from mcap.opcode import Opcode
-from mcap.records import Channel, ChunkIndex, Message, Schema, Statistics
+from mcap.records import Channel, ChunkIndex, Schema, Statistics
 import numpy as np
 from rotation_node.bag.mcap_layout import MCAP_MAGIC, MESSAGE_FIELDS, MESSAGE_HEADER
 from rotation_node.bag.reading.compression import decompressed_message, ZSTD_MAGIC
@@ -58,12 +58,6 @@ _SUMMARY_ONLY = (Opcode.CHUNK_INDEX, Opcode.ATTACHMENT_INDEX, Opcode.METADATA_IN
 _LOSSES_SHOWN = 3   # places named in the loss note
 _HEADER_BYTES = np.arange(MESSAGE_HEADER.itemsize)
 _ZSTD_MAGIC = np.frombuffer(ZSTD_MAGIC, np.uint8)
-
-
-def _described(error):
-    """``'Type: message'`` of an exception (some mcap errors have an empty repr)."""
-    text = str(error)
-    return f'{type(error).__name__}: {text}' if text else type(error).__name__
 
 
 def checked_topics(topics: Iterable[str], available: Collection[str], path: str) -> List[str]:
@@ -110,16 +104,12 @@ class _RecordStream(ReadDataStream):
 
 def _parsed(record_class, body, offset):
     """Parse the body of one record with the mcap library; _Damage if it does not parse."""
-    stream = _RecordStream(io.BytesIO(body))
     try:
-        if record_class is Message:
-            if len(body) < MESSAGE_FIELDS:
-                raise EndOfFile()
-            return Message.read(stream, len(body))
-        return record_class.read(stream)
+        return record_class.read(_RecordStream(io.BytesIO(body)))
     except (McapError, struct.error, UnicodeDecodeError) as error:
+        described = f'{type(error).__name__}: {error}' if str(error) else type(error).__name__
         raise _Damage(offset, f'{record_class.__name__} record that does not parse '
-                              f'({_described(error)})') from None
+                              f'({described})') from None
 
 
 class _File:
@@ -208,6 +198,10 @@ def _unlz4(stored, size, offset):
     return data
 
 
+#: ``decompressed(stored, size, offset)`` by chunk compression name.
+_DECOMPRESSED = {'zstd': _unzstd, 'lz4': _unlz4, '': lambda stored, size, offset: bytes(stored)}
+
+
 def chunk_data(body: Union[bytes, memoryview], offset: int = 0) -> tuple:
     """
     Return the compression (``'zstd'``, ``'lz4'``, ``''``) and the records of a Chunk record.
@@ -229,15 +223,10 @@ def chunk_data(body: Union[bytes, memoryview], offset: int = 0) -> tuple:
     if records_length > len(body) - position:
         raise _Damage(offset, f'chunk whose records length ({records_length}) runs past the '
                               'chunk')
-    stored = body[position:position + records_length]
-    if compression == b'zstd':
-        data = _unzstd(stored, size, offset)
-    elif compression == b'lz4':
-        data = _unlz4(stored, size, offset)
-    elif compression == b'':
-        data = bytes(stored)
-    else:
+    decompressed = _DECOMPRESSED.get(compression.decode('latin-1'))
+    if decompressed is None:
         raise _Damage(offset, f'chunk of unknown compression {compression[:16]!r}')
+    data = decompressed(body[position:position + records_length], size, offset)
     if crc != 0 and zlib.crc32(data) != crc:
         raise _Damage(offset, f'chunk that fails its CRC (stored {crc:#010x}, computed '
                               f'{zlib.crc32(data):#010x})')
@@ -255,9 +244,8 @@ def _chunk_data_by_index(body, index):
     if crc == 0 or len(stored) != index.compressed_size:
         return None
     try:
-        data = {'zstd': _unzstd, 'lz4': _unlz4}.get(
-            index.compression, lambda stored, *_: bytes(stored))(
-                stored, index.uncompressed_size, index.chunk_start_offset)
+        data = _DECOMPRESSED.get(index.compression, _DECOMPRESSED[''])(
+            stored, index.uncompressed_size, index.chunk_start_offset)
     except _Damage:
         return None
     return data if zlib.crc32(data) == crc else None
@@ -430,18 +418,16 @@ class _LinearScan:
                   {channel_id: count})
             for channel_id, (offset, count) in sorted(self._orphans.items()))
 
-    def _define(self, record):
-        if isinstance(record, Schema):
-            self.schemas[record.id] = record
-        else:
-            self.channels[record.id] = record
+    def _define(self, opcode, body, offset):
+        """Keep a Schema or Channel record; _Damage if it does not parse."""
+        record = _parsed(Schema if opcode == Opcode.SCHEMA else Channel, body, offset)
+        (self.schemas if opcode == Opcode.SCHEMA else self.channels)[record.id] = record
 
     def _record(self, offset, opcode, length):
         body = self._file.read(offset + _RECORD_PREFIX.size, length, 'record')
         if opcode != Opcode.MESSAGE:
             try:
-                self._define(_parsed(Schema if opcode == Opcode.SCHEMA else Channel, body,
-                                     offset))
+                self._define(opcode, body, offset)
             except _Damage:   # its messages are on an unknown channel: lost, counted there
                 pass
             return
@@ -483,8 +469,7 @@ class _LinearScan:
         for position, opcode, record_length in records.definitions:
             start = position + _RECORD_PREFIX.size
             try:
-                self._define(_parsed(Schema if opcode == Opcode.SCHEMA else Channel,
-                                     data[start:start + record_length], offset))
+                self._define(opcode, data[start:start + record_length], offset)
             except _Damage as damage:
                 pending[2] = f'{damage.what} at {position} of the chunk'
         read = pending[1]
@@ -572,14 +557,16 @@ class BagReader:
                 raise BagError(f'{self.path} is not a valid MCAP file: invalid magic {magic!r}')
             summary = self._summary()
             if summary is not None and self._indexable(summary):
-                self._open_indexed(summary)
+                self._summary_section = summary
+                self._scan_end: Optional[int] = None
+                self.compression = _compression_name({index.compression
+                                                      for index in summary.chunk_indexes})
+                self._set_topics(summary.channels.values(), summary.schemas, self._counted)
             else:
                 self._open_scan(summary)
         except BaseException:
             self._stream.close()
             raise
-
-    # Opening
 
     def _summary(self):
         """Return the summary section, None if the file has no footer (an unfinished recording)."""
@@ -609,14 +596,13 @@ class BagReader:
                     continue
                 record = _parsed(record_class, self._file.read(
                     offset + _RECORD_PREFIX.size, length, 'record'), offset)
-                if isinstance(record, Schema):
-                    summary.schemas[record.id] = record
-                elif isinstance(record, Channel):
-                    summary.channels[record.id] = record
-                elif isinstance(record, ChunkIndex):
+                if record_class is ChunkIndex:
                     summary.chunk_indexes.append(record)
-                else:
+                elif record_class is Statistics:
                     summary.statistics = record
+                else:
+                    (summary.schemas if record_class is Schema else summary.channels)[
+                        record.id] = record
         except _Damage as damage:
             return _Summary(summary_start, damage=damage)
         return summary
@@ -693,13 +679,6 @@ class BagReader:
         except _Damage:
             return None
         return counts if counts.keys() == offsets.keys() else None
-
-    def _open_indexed(self, summary):
-        self._summary_section = summary
-        self._scan_end: Optional[int] = None
-        self.compression = _compression_name({index.compression
-                                              for index in summary.chunk_indexes})
-        self._set_topics(summary.channels.values(), summary.schemas, self._counted)
 
     def _open_scan(self, summary):
         """Index a file by reading it once; decide how much to recover, say what is lost."""
@@ -802,8 +781,6 @@ class BagReader:
             definition=definition, definition_encoding='' if schema is None else schema.encoding,
             type_hash=channel.metadata.get('topic_type_hash', ''),
             serialization_format=channel.message_encoding)
-
-    # Reading
 
     def messages(self, topics: Optional[Iterable[str]] = None) -> Iterator[BagMessage]:
         """

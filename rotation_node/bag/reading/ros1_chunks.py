@@ -248,10 +248,6 @@ class ChunkedReader(Reader):
             raise ReaderError('Reader is not open.')
         return self.bio
 
-    def decompressed_chunk(self, i: int) -> bytes:
-        """Return chunk ``i`` decompressed; ReaderError if it is cut short or damaged."""
-        return _decompressed(self, i, self.stored_chunk(i))
-
     def stored_chunk(self, i: int) -> bytes:
         """Return chunk ``i`` as stored (compressed); ReaderError if it is cut short."""
         pos = self.chunk_infos[i].pos
@@ -419,7 +415,7 @@ class _ChunksAhead:
         if self._ahead is not None and self._ahead[0] == i:
             ahead, self._ahead = self._ahead[1], None
             return ahead.result()
-        return self._reader.decompressed_chunk(i)
+        return _decompressed(self._reader, i, self._reader.stored_chunk(i))
 
     def keep_only(self, needed: Collection[int]) -> None:
         """Forget the chunk read ahead unless it is ``needed`` (its thread ends by itself)."""
