@@ -311,31 +311,12 @@ class _Opener:
 
 def open_bag(path: Union[str, os.PathLike], *, strict: bool = False) -> InputBag:
     """
-    Open any bag for reading: a rosbag2 directory, a storage file, a ROS 1 bag.
+    Open any bag for reading: a rosbag2 directory, a storage file, a ROS 1 bag; only read.
 
-    Parameters
-    ----------
-    path : str or os.PathLike
-        A rosbag2 directory or a storage file (MCAP, sqlite3, ROS 1, zstd).
-    strict : bool, optional
-        Refuse an unfinished recording (``--strict``) instead of reading what
-        it holds.
-
-    Returns
-    -------
-    InputBag
-
-    Raises
-    ------
-    BagError
-        With one line naming what the input is when it cannot be read:
-        ``<path>: empty file (0 bytes)...``, ``<path>: text file, not a
-        bag...``, ``<path>: sqlite3 database without rosbag2 tables``,
-        ``<path>: ROS 1 bag, version 1.2 (supported: 2.0)``, ``<path>:
-        zstd-compressed file that does not hold a bag...``, ``<path>: rosbag2
-        storage plugin 'x' is not installed...``; or if it is damaged. The
-        input is only ever read.
-
+    ``strict`` refuses an unfinished recording (``--strict``) instead of reading what it holds.
+    BagError with one line naming what the input is if it cannot be read (``<path>: text file,
+    not a bag...``, ``<path>: ROS 1 bag, version 1.2 (supported: 2.0)``...; docs/bags.md lists
+    them), or if it is damaged.
     """
     path = os.fspath(path)
     opener = _Opener(strict)
@@ -350,18 +331,22 @@ def open_bag(path: Union[str, os.PathLike], *, strict: bool = False) -> InputBag
             if layout.storage and any(s != layout.storage for s in storages):
                 raise BagError(f'{path}: {METADATA_FILE} names storage {layout.storage!r}, '
                                f'but the files hold {", ".join(sorted(set(storages)))}')
-            files, mode, note = layout.files, layout.compression_mode, layout.note
-            details = [layout.storage or storages[0],
-                       f'{len(files)} file{"s" if len(files) != 1 else ""}']
+            mode, note, count = layout.compression_mode, layout.note, len(layout.files)
+            details = [layout.storage or storages[0], f'{count} file{"s" if count != 1 else ""}']
         else:
             _, storage = opener.open_file(path)
-            files, mode, note, details = [path], '', None, []
-        # Without metadata.yaml, the files say it.
-        mode = mode or ('file' if any(os.path.isfile(file) and _starts_with(file, ZSTD_MAGIC)
-                                      for file in files) else _message_compression(opener.sources))
+            mode, note, details = '', None, []
+        if not mode:   # without metadata.yaml, the files say it
+            mode = ('file' if opener.tmpdir is not None else 'message' if any(
+                getattr(source, 'message_compression', None) for source in opener.sources)
+                else '')
         if mode:
             details.append(f'zstd {mode} compression')
-        details.extend(_chunk_compression(opener.sources))
+        # A ROS 1 bag says what it stores (bz2) apart from what its copy gets (zstd).
+        chunks = sorted({getattr(source, 'stored_compression', source.compression)
+                         for source in opener.sources} - {'none'})
+        if chunks:
+            details.append(f'{"/".join(chunks)} chunks')
         if directory:
             description = f'rosbag2 directory ({", ".join(details)})'
         else:
@@ -373,22 +358,3 @@ def open_bag(path: Union[str, os.PathLike], *, strict: bool = False) -> InputBag
     except BaseException:
         opener.close()
         raise
-
-
-def _chunk_compression(sources):
-    """``['zstd chunks']`` (or lz4, bz2...) if the storage files compress their chunks."""
-    # A ROS 1 bag says what it stores (bz2) apart from what its copy gets (zstd).
-    names = sorted({getattr(source, 'stored_compression', source.compression)
-                    for source in sources} - {'none'})
-    return [f'{"/".join(names)} chunks'] if names else []
-
-
-def _message_compression(sources):
-    """``'message'`` if a storage file's messages are compressed one by one, else ``''``."""
-    return 'message' if any(getattr(source, 'message_compression', None) for source in sources) \
-        else ''
-
-
-def _starts_with(path, magic):
-    with open(path, 'rb') as stream:
-        return stream.read(len(magic)) == magic

@@ -22,7 +22,6 @@ from rotation_node.bag.reading.compression import decompressed_message, is_zstd,
 from rotation_node.bag.reading.rosbags_input import is_installed, RosbagsInput
 from rotation_node.bag.records import TopicMetadata
 from rotation_node.errors import BagError
-from rotation_node.wire.message_types import message_definition
 from rotation_node.wire.qos_yaml import profiles_yaml
 
 _ROSBAG2_TABLES = {'topics', 'messages'}
