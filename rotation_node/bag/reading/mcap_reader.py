@@ -1,13 +1,11 @@
 """
-Read one MCAP file as rosbag2 writes it (``ros2 bag record -s mcap``), or any other layout.
+Read one MCAP file, every layout, as rosbag2 writes it (``ros2 bag record -s mcap``) or not.
 
-The CDR bytes are returned unchanged (a bag round trip is byte-exact), chunk by chunk: memory
-does not grow with the length of the bag. A chunk's Message records are read as arrays
-(:func:`chunk_records`), without the mcap library's object per message (1.0 instead of 2.9 us
-per message). The file's layout is walked here with every length checked against the end of
-its record or of the file before anything is read or decompressed, so that a damaged length
-is a note or one error line, never a huge allocation; the mcap library parses each record's
-fields from its checked bytes. What is read and how damage is reported: docs/bags.md.
+CDR bytes are returned unchanged, chunk by chunk (memory does not grow with the bag); a chunk's
+Message records are read as arrays (:func:`chunk_records`: 1.0 instead of the mcap library's 2.9
+us per message). The layout is walked here with every length checked against the end of its
+record or of the file before anything is read or decompressed: a damaged length is a note or
+one error line, never a huge allocation. The mcap library parses the records' fields.
 """
 from __future__ import annotations
 
@@ -153,8 +151,7 @@ def _bounded(read, size, offset):
     """
     Join what ``read(max_length)`` returns until it returns nothing: at most ``size`` bytes.
 
-    A decompressor that gives more than the ``size`` its chunk states is damage: it is never
-    asked for more than one byte past it.
+    A decompressor is never asked for more than one byte past what its chunk states.
     """
     pieces, total = [], 0
     while True:
@@ -206,9 +203,8 @@ def chunk_data(body: Union[bytes, memoryview], offset: int = 0) -> tuple:
     """
     Return the compression (``'zstd'``, ``'lz4'``, ``''``) and the records of a Chunk record.
 
-    ``body``: the record after its opcode and length; ``offset``: where it is in its file. _Damage
-    if a length runs past the record, or the chunk does not decompress to the size it states, or
-    fails its CRC (unless 0); memory never exceeds what the data really decompresses to.
+    ``body``: the record after opcode and length. _Damage if a length runs past the record, it does
+    not decompress to the size it states, or fails its CRC; memory never exceeds the real data.
     """
     if len(body) < _CHUNK_FIELDS.size:
         raise _Damage(offset, f'chunk of {len(body)} bytes, shorter than its fixed fields')
@@ -269,9 +265,8 @@ def chunk_records(data: bytes) -> ChunkRecords:
     """
     Find the records of an uncompressed chunk in one walk, the Message records' fields as arrays.
 
-    Unknown records are skipped. The walk stops at the first record that cannot be one (opcode 0,
-    as zeroed bytes read; a length past the end; a Message record shorter than its fixed fields):
-    the records before it are returned, and ``damage`` says what stopped it.
+    The walk stops at the first record that cannot be one (opcode 0, a length past the end, a
+    Message record shorter than its fixed fields); ``damage`` says what stopped it.
     """
     offsets: List[int] = []
     definitions: List[Tuple[int, int, int]] = []
@@ -342,9 +337,7 @@ def _chunks_in_order(chunk_indexes):
     """
     Return the chunk indexes in log-time order if their messages can be read chunk by chunk.
 
-    The order is the mcap library's (log time, chunk offset, place in the chunk): chunk after chunk
-    when no later chunk holds a message sorting before the end of an earlier one (a recording's
-    chunks never overlap). None when chunks overlap: they are then merged through a heap.
+    As the mcap library orders them (log time, chunk offset, place); None if chunks overlap.
     """
     chunks = sorted(chunk_indexes,
                     key=lambda index: (index.message_start_time, index.chunk_start_offset))
@@ -360,13 +353,11 @@ def _chunks_in_order(chunk_indexes):
 
 class _LinearScan:
     """
-    A linear scan of an MCAP file's data section, record by record, as its writer wrote them.
+    A scan of an MCAP file's data section, yielding ``(channel, log time, publish time, data)``.
 
-    Yields ``(channel, log time, publish time, data)`` of every message of a known channel, in
-    file order, collecting schemas and channels on the way. A chunk that cannot be read yields what
-    could be read of it and adds a :class:`_Loss`, counted by the message indexes after it. A
-    record running past the end ends the scan: where the writer stopped if ``cut_ok`` (an
-    unfinished recording), else a loss too.
+    In file order, collecting schemas and channels. What cannot be read adds a :class:`_Loss`,
+    counted by the message indexes after it; a record running past ``end`` ends the scan (where the
+    writer stopped if ``cut_ok``, else a loss too).
     """
 
     def __init__(self, file, end, cut_ok, summary=None):
@@ -524,18 +515,13 @@ class BagReader:
     """
     Read one MCAP file: every valid layout, unfinished recordings, damage skipped and noted.
 
-    A file whose summary indexes its channels and chunks (as rosbag2 and the mcap writers write by
-    default) is read through that index, chunk by chunk in log-time order; any other file by a
-    linear scan in the order it was written (sorted by log time in memory if that is not log-time
-    order), an unfinished recording up to its last complete record. Channels of any schema and
-    encoding are listed; only decoding a message needs a ROS 2 type. What cannot be read is said on
-    one line in ``notes`` (once a scan has opened the file, or once ``messages`` has read an
-    indexed one); ``strict`` makes it, and an unfinished recording, a BagError.
-
-    ``topics`` (``{topic: type name as stored}``), ``topic_metadata`` and ``message_counts`` (as
-    the file's statistics or message indexes count, or as a scan read); ``compression``: the
-    chunks' (``'zstd'``, ``'lz4'``, ``'none'``); ``recovered``: the messages recovered from an
-    unfinished recording, else None.
+    A file whose summary indexes its channels and chunks is read through that index, chunk by chunk
+    in log-time order; any other by a linear scan in the order it was written (sorted in memory if
+    that is not log-time order), an unfinished recording up to its last complete record. What
+    cannot be read is one line in ``notes`` (after the opening scan, or once ``messages`` has read
+    an indexed file); ``strict`` makes it, and an unfinished recording, a BagError.
+    ``message_counts`` are the file's own (statistics, message indexes) or what a scan read;
+    ``recovered``: the messages of an unfinished recording, else None.
     """
 
     def __init__(self, path: StrPath, *, strict: bool = False) -> None:
@@ -611,9 +597,8 @@ class BagReader:
         """
         Whether the summary indexes the whole file: read it through the index, not a scan.
 
-        That takes chunk indexes pointing into the data section at the chunks, message counts
-        (statistics or message indexes) and a Channel record (and Schema) for every channel
-        counted.
+        Chunk indexes pointing at the chunks, counts (statistics or message indexes), and a Channel
+        record (and Schema) for every channel counted.
         """
         if summary.damage is not None or not summary.chunk_indexes:
             return False
@@ -651,11 +636,7 @@ class BagReader:
                    for channel_id in counted)
 
     def _moved(self, index, end):
-        """
-        Whether a chunk index points at another whole record than its chunk (moved: a scan).
-
-        A chunk damaged in place (zeroed, a length past the data section) is read by the index.
-        """
+        """Whether a chunk index points at another whole record (moved: a scan; else the index)."""
         opcode, length = _RECORD_PREFIX.unpack(self._file.read(
             index.chunk_start_offset, _RECORD_PREFIX.size, 'chunk'))
         return (opcode in _OPCODES
@@ -719,9 +700,8 @@ class BagReader:
         """
         Say what could not be read, on one line in ``notes`` (a BagError with ``strict``).
 
-        ``read``: ``{channel id: messages read}``; ``counted``: what the statistics or indexes
-        count (None if nothing); ``wanted``: the channels read (None: all). Messages counted but
-        neither read nor in a loss are lost outside any chunk the file indexes.
+        ``read``, ``counted`` (None: unknown): ``{channel id: messages}``; ``wanted``: None: all.
+        Messages counted but neither read nor in a loss are lost outside the chunks indexed.
         """
         losses = list(losses)
         if counted is not None:
@@ -786,9 +766,9 @@ class BagReader:
         """
         Iterate over the messages of ``topics`` (default all) in log-time order (ties: file order).
 
-        Messages compressed by rosbag2 (``message`` mode) are decompressed. What cannot be read
-        is skipped and said in ``notes`` once the last message is read. BagError at once if a
-        topic is not in the bag; with ``strict``, when a damaged part is reached.
+        rosbag2's message compression is undone. What cannot be read is skipped and said in
+        ``notes`` at the end; BagError at once for a topic not in the bag, with ``strict`` at
+        damage.
         """
         if topics is not None:
             topics = checked_topics(topics, self.topics, self.path)

@@ -1,12 +1,10 @@
 """
 ROS 1 bags (format 2.0) read as ROS 2 CDR messages, as ``rosbags-convert`` converts them.
 
-Read one chunk at a time (:mod:`~rotation_node.bag.reading.ros1_chunks`), each message is
-converted to the ROS 2 type of the same name (``tf/tfMessage`` -> ``tf2_msgs/msg/TFMessage``):
-``std_msgs/Header`` loses its ``seq``, every other field keeps its value. The ROS 2 type is the
-installed one (:func:`ros2_typestore`), else rosbags' Jazzy type, else the bag's definition.
-:class:`Ros1ToCdr` converts a chunk's messages of one type and layout at once, byte for byte
-as rosbags does; other types go through rosbags. docs/bags.md says the rest (QoS, times).
+Each message becomes the ROS 2 type of its name (``tf/tfMessage`` -> ``tf2_msgs/msg/TFMessage``;
+``std_msgs/Header`` loses its ``seq``): the installed type (:func:`ros2_typestore`), else rosbags'
+Jazzy type, else the bag's definition. :class:`Ros1ToCdr` converts a chunk's messages of one
+type and layout at once, byte for byte as rosbags does; other types go through rosbags.
 """
 import contextlib
 import io
@@ -72,11 +70,10 @@ def open_ros1_bag(path: Union[str, os.PathLike]) -> RosbagsInput:
 
 def bag_typestore(connections: Sequence[Connection]) -> Any:
     """
-    Return a rosbags typestore of the types the connections' stored definitions give.
+    Return a typestore of the connections' stored definitions, as rosbags' ``AnyReader`` builds it.
 
-    As rosbags' ``AnyReader`` builds it (without importing its rosbag2 modules): every
-    definition parsed (TypesysError if one cannot be), the MD5 sum of each type checked against
-    its connection's (ReaderError ``Message type 'pkg/msg/T' hash mismatch ...``).
+    TypesysError if a definition does not parse, ReaderError if a type's MD5 sum is not its
+    connection's.
     """
     types: Dict[str, Any] = {}
     digests: Dict[str, str] = {}
@@ -144,10 +141,9 @@ def _block_cdrs(batch: MessageBatch, blocks: Dict[int, Callable[..., list]]
 
 def ros2_typestore(type_names: Collection[str]) -> Any:
     """
-    Return a rosbags typestore of ROS 2 types with at least ``type_names`` ('pkg/msg/Type').
+    Return a typestore of ROS 2 types with at least ``type_names``, as ``rosbags-convert`` does.
 
-    The installed definitions (as the output's schemas are written) if all are installed (a few
-    ms per type), else rosbags' Jazzy types (a tenth of a second), as ``rosbags-convert`` does.
+    The installed definitions if all are (a few ms per type), else rosbags' Jazzy types (0.1 s).
     """
     store = get_typestore(Stores.EMPTY)
     try:
@@ -161,10 +157,9 @@ def ros2_typestore(type_names: Collection[str]) -> Any:
 
 def same_wire_format(ros1: Any, ros2: Any, ros1_type: str, type_name: str) -> bool:
     """
-    Whether a ROS 1 and a ROS 2 type (in typestores ``ros1``, ``ros2``) have the same fields.
+    Whether a ROS 1 and a ROS 2 type have the same fields, the header's seq aside.
 
-    As rosbags-convert's ``is_same_wireformat``: the header's seq aside, field by field the same
-    kinds and primitive types, nested types alike; the ROS 1 data is then the CDR values, packed.
+    As rosbags-convert's ``is_same_wireformat``: the ROS 1 data is then the CDR values, packed.
     """
     if ros1_type == 'std_msgs/msg/Header':
         return True
@@ -237,11 +232,10 @@ _SKIP, _RUN, _STRING, _SEQUENCE = range(4)
 
 def _leaves(fielddefs, type_name, leaves):
     """
-    Append the leaves of ``type_name`` in wire order; return False if there is no fast converter.
+    Append the leaves of ``type_name`` in wire order; False if there is no fast converter.
 
-    A leaf is ``(_SKIP, 4)`` (a ROS 1 header's seq), ``(_RUN, size)`` (a primitive),
-    ``(_STRING, 0)`` or ``(_SEQUENCE, (element steps, least ROS 1 bytes of an element))``. An
-    empty structure (``structure_needs_at_least_one_member``) has no fast converter.
+    ``(_SKIP, 4)`` (a header's seq), ``(_RUN, size)``, ``(_STRING, 0)`` or ``(_SEQUENCE, (element
+    steps, least ROS 1 bytes of an element))``.
     """
     if type_name == 'std_msgs/msg/Header':
         leaves.append((_SKIP, 4))
@@ -254,7 +248,8 @@ def _leaves(fielddefs, type_name, leaves):
             element_kind, element_desc = desc[0]
             if not _leaves_of(fielddefs, element_kind, element_desc, element):
                 return False
-            leaves.append((_SEQUENCE, (_steps(element), max(1, _least_size(element)))))
+            least = sum(size if leaf in (_RUN, _SKIP) else 4 for leaf, size in element)
+            leaves.append((_SEQUENCE, (_steps(element), max(1, least))))
             continue
         if kind == Nodetype.ARRAY:
             (kind, desc), count = desc
@@ -277,17 +272,11 @@ def _leaves_of(fielddefs, kind, desc, leaves):
     return True
 
 
-def _least_size(leaves):
-    """Return the fewest ROS 1 bytes the leaves take (strings and sequences empty)."""
-    return sum(size if kind in (_RUN, _SKIP) else 4 for kind, size in leaves)
-
-
 def _run_layouts(sizes):
     """
     Return ``(segments, CDR bytes)`` of a run of primitives for each CDR start offset modulo 8.
 
     A segment ``(padding, start, end)``: zero padding, then the run's ROS 1 bytes ``start:end``.
-    ROS 1 packs the primitives; CDR aligns each to its size.
     """
     layouts = []
     for start in range(8):
@@ -324,9 +313,8 @@ def _converted(steps, data, source, offset, emit, length_fields):
     """
     Emit the CDR parts of ``data`` from ``source`` (CDR ``offset``); return both after.
 
-    ``emit(constant, start, end)``: the bytes ``constant``, then ``data[start:end]``. The positions
-    of the lengths read (strings, sequences) go to ``length_fields``: the parts depend on
-    ``len(data)`` and their values alone.
+    ``emit(constant, start, end)``: the bytes ``constant``, then ``data[start:end]``. The parts
+    depend on ``len(data)`` and the values at ``length_fields`` alone.
     """
     for kind, layout, size in steps:
         if kind == _RUN:
@@ -370,9 +358,8 @@ class Ros1ToCdr:
     """
     ROS 1 messages of one type to CDR: one message (call) or a block of them (``block``).
 
-    Byte for byte rosbags' ``Typestore.ros1_to_cdr`` for a type of the same wire format in ROS 1
-    and ROS 2. A message not exactly as long as its type says goes to ``fallback`` (rosbags'
-    conversion), which says what is wrong.
+    Byte for byte rosbags' ``ros1_to_cdr`` for a type of the same wire format in ROS 1 and ROS 2; a
+    message not as long as its type says goes to ``fallback`` (rosbags), which says what is wrong.
     """
 
     def __init__(self, steps: tuple, fallback: Callable[[bytes], bytes]) -> None:
@@ -403,11 +390,9 @@ class Ros1ToCdr:
     def block(self, chunk: bytes, starts: np.ndarray, lengths: np.ndarray
               ) -> List[Optional[bytes]]:
         """
-        Return the CDR data of the messages ``chunk[starts[k]:starts[k] + lengths[k]]``.
+        Return the CDR of ``chunk[starts[k]:starts[k] + lengths[k]]``, None where not in a block.
 
-        Messages of one length whose strings and sequences have the lengths of the first of
-        them are converted as that one is, by one numpy copy; None for the others (convert
-        them one by one).
+        A block: messages of one length whose strings and sequences have the lengths of the first.
         """
         result: List[Optional[bytes]] = [None] * len(starts)
         buffer = np.frombuffer(chunk, np.uint8)
@@ -462,10 +447,9 @@ class Ros1ToCdr:
 def ros1_to_cdr_converter(fielddefs: Dict[str, Any], type_name: str,
                           fallback: Callable[[bytes], bytes]) -> Optional[Ros1ToCdr]:
     """
-    Return a :class:`Ros1ToCdr` for ``type_name`` in ROS 2 ``fielddefs``, None if it has none.
+    Return a :class:`Ros1ToCdr` of ``type_name`` in ROS 2 ``fielddefs``, None if it has none.
 
-    A quarter of rosbags' time for sensor_msgs/Imu one message at a time, a fraction in blocks;
-    ``fallback(data) -> bytes`` is rosbags' conversion.
+    A quarter of rosbags' time for sensor_msgs/Imu one message at a time, a fraction in blocks.
     """
     leaves: List[Tuple[int, Any]] = []
     if not _leaves(fielddefs, type_name, leaves):

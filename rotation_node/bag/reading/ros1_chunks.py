@@ -1,16 +1,11 @@
 """
 ROS 1 bags read one chunk group at a time, in the order of rosbags' reader (docs/bags.md).
 
-rosbags' ROS 1 reader reads every chunk's index data into one Python tuple per message when it
-opens a bag. :class:`ChunkedReader` opens the bag with the same code but keeps only what does
-not grow with the number of messages (header, connections, chunk infos, chunk headers); a
-chunk's index data records are read as numpy arrays when the messages reach it, and the next
-chunk is decompressed in another thread meanwhile (:class:`_ChunksAhead`). Chunks whose time
-ranges overlap are read together (:func:`overlapping_chunk_groups`). The messages come in the
-order of rosbags' ``Reader.messages``: by time; at equal times by the place of their connection
-in the ``connections`` asked for; then in the order rosbags indexes them. A damaged bag raises
-``ReaderError`` naming the byte where the damage is; no read asks for more than the file holds
-(:class:`BoundedReads`).
+rosbags' reader holds a Python tuple per message of the bag from the moment it opens it;
+:class:`ChunkedReader` keeps only what does not grow with the number of messages, reads a
+chunk's index data as numpy arrays when the messages reach it, and decompresses the next chunk
+in another thread meanwhile. Chunks whose time ranges overlap are read together. A damaged bag
+raises ``ReaderError`` naming the byte where it is; no read asks for more than the file holds.
 """
 import ast
 from collections import Counter, OrderedDict
@@ -40,10 +35,9 @@ _DECOMPRESSION_ERRORS = (OSError, ValueError, EOFError, RuntimeError)
 
 class BoundedReads(io.BufferedReader):
     """
-    A file whose reads never ask for more bytes than remain in it.
+    A file whose reads never ask for more bytes than remain in it; ``read_at``: the last's start.
 
-    rosbags reads a record with its own length field: a damaged one (up to 4 GiB) would allocate
-    that much before the short read is noticed. ``read_at``: where the last read started.
+    rosbags reads a record with its own length field: a damaged one would allocate up to 4 GiB.
     """
 
     def __init__(self, path: 'os.PathLike[str] | str') -> None:
@@ -85,11 +79,9 @@ class _BoundedPath:
 
 def overlapping_chunk_groups(chunk_infos: Sequence[ChunkInfo]) -> List[List[int]]:
     """
-    Return the chunks that must be read together (their time ranges overlap), as indices.
+    Return the indices of the chunks to read together (time ranges overlapping), in time order.
 
-    The groups are in time order (every message of a group is earlier than every message of the
-    next), each group in the order of ``chunk_infos`` (rosbags' ``ChunkInfo``: ``end_time`` one
-    nanosecond after the last message); chunks without messages are left out.
+    Each group in the order of ``chunk_infos``; chunks without messages are left out.
     """
     by_start = sorted((i for i, info in enumerate(chunk_infos) if info.connection_counts),
                       key=lambda i: chunk_infos[i].start_time)
@@ -140,10 +132,9 @@ class ChunkedReader(Reader):
                  stop: Optional[int] = None
                  ) -> Generator[Tuple[Connection, int, bytes], None, None]:
         """
-        Yield ``(connection, time_ns, data)`` in the order of rosbags' ``Reader.messages``.
+        Yield ``(connection, time_ns, data)`` as rosbags' ``Reader.messages`` does, in its order.
 
-        ``connections`` (default all) decide, by their order, between messages of equal times;
-        ``start`` and ``stop`` (ns) bound the times. ReaderError if the bag is damaged.
+        By time; at equal times, by the order of ``connections`` (default all); then as indexed.
         """
         by_id = {c.id: c for c in self.connections}
         for batch in self.message_batches(connections, start, stop):
@@ -159,8 +150,8 @@ class ChunkedReader(Reader):
         """
         Yield the messages of :meth:`messages`, in its order, as :class:`MessageBatch` es.
 
-        A batch is the next plain message records of one chunk (:func:`plain_message_records`); a
-        message stored otherwise is a batch of its own, read as rosbags reads it.
+        A batch: the next plain message records of one chunk (:func:`plain_message_records`), or
+        one message stored otherwise, read as rosbags reads it.
         """
         self._check_open()
         ranks: Dict[int, int] = {}
@@ -185,9 +176,7 @@ class ChunkedReader(Reader):
         """
         Return the index entries of the connections ``ranks`` in the chunks ``group``, as rosbags'.
 
-        A structured array: ``time`` (ns), ``connection``, ``chunk`` (into ``chunk_infos``),
-        ``offset`` (in the decompressed chunk). ReaderError if an index data record is damaged or
-        has a time outside its chunk info's range.
+        ``time`` (ns), ``connection``, ``chunk`` (into ``chunk_infos``), ``offset`` (in the chunk).
         """
         parts = [(i, connection, times, offsets) for i in group
                  for connection, times, offsets in self._chunk_index(i, ranks)]
@@ -263,8 +252,7 @@ class ChunkedReader(Reader):
         """
         Yield the batches of one chunk group; ``following``: the chunk to decompress after it.
 
-        A chunk is let go after its last message, and the least recently read ones when more than
-        ``CHUNK_BYTES_HELD`` are held (read again if needed).
+        Chunks are let go after their last message, and beyond ``CHUNK_BYTES_HELD`` (read again).
         """
         index = self.group_index(group, ranks)
         if start is not None:
@@ -304,15 +292,14 @@ class ChunkedReader(Reader):
         chunk = stream.getvalue()   # the chunk's bytes themselves, not a copy
         connections, times, offsets = entries['connection'], entries['time'], entries['offset']
         plain, starts, lengths = plain_message_records(chunk, offsets, connections, times)
-        if plain.all():
-            yield MessageBatch(connections, times, chunk, starts, lengths)
-            return
         done = 0
-        for k in np.flatnonzero(~plain).tolist():
+        for k in [*np.flatnonzero(~plain).tolist(), len(entries)]:   # runs of plain records
             if k > done:
                 part = slice(done, k)
                 yield MessageBatch(connections[part], times[part], chunk, starts[part],
                                    lengths[part])
+            if k == len(entries):
+                return
             offset, connection, time = offsets[k].item(), connections[k].item(), times[k].item()
             data = message_data(chunk, offset, connection, time)
             if data is None:   # anything but a plain message record: rosbags' reading
@@ -330,10 +317,6 @@ class ChunkedReader(Reader):
             yield MessageBatch(connections[part], times[part], data, _ZERO_START,
                                np.array([len(data)], np.int64))
             done = k + 1
-        if done < len(entries):
-            part = slice(done, None)
-            yield MessageBatch(connections[part], times[part], chunk, starts[part],
-                               lengths[part])
 
 
 class MessageBatch(NamedTuple):
@@ -446,8 +429,7 @@ def plain_record_layout(chunk: bytes, offset: int) -> Optional[Tuple[int, int, i
     """
     Return ``(header length, conn offset, time offset)`` of a plain message record, else None.
 
-    Plain: a header of exactly ``op`` (message data), ``conn`` (4 bytes or more) and ``time`` (8
-    bytes) in any order, then the data's length, all within the chunk.
+    Plain: exactly the header fields ``op`` (message data), ``conn`` and ``time``, in the chunk.
     """
     unpack = _UINT32.unpack_from
     try:
@@ -479,9 +461,7 @@ def message_data(chunk: bytes, offset: int, connection: int, time: int) -> Optio
     """
     Return the data of the plain message record of ``connection`` and ``time`` at ``offset``.
 
-    The fast path of :func:`_message_record`: None for anything else (a connection record
-    before it, another field, a damaged length, another connection or time), which rosbags'
-    code then reads.
+    None for anything else (a connection record before it, a damaged length...): rosbags reads it.
     """
     layout = plain_record_layout(chunk, offset)
     if layout is None:
@@ -506,10 +486,8 @@ def plain_message_records(chunk: bytes, offsets: np.ndarray, connections: np.nda
     """
     Find what :func:`message_data` finds for many index entries of a chunk at once.
 
-    Returns ``(plain, starts, lengths)``: which entries are plain message records of their
-    connection and time, where their data starts and how long it is (0 for the others). Records
-    laid out as one before them are found by comparing their bytes (all but ``conn``, ``time`` and
-    the data length), all at once.
+    Returns ``(plain, starts, lengths)`` (0 where not plain): records laid out as one before them
+    are found by comparing their bytes but ``conn``, ``time`` and the data length.
     """
     n = len(offsets)
     plain = np.zeros(n, bool)
