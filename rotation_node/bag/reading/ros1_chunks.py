@@ -346,59 +346,48 @@ def _decompressed(reader: ChunkedReader, i: int, data: bytes) -> bytes:
                           f'decompressed: {error}') from None
 
 
-class _Decompression(threading.Thread):
-    """One chunk decompressed in a thread of its own (bz2 and lz4 release the GIL meanwhile)."""
-
-    def __init__(self, reader: ChunkedReader, i: int) -> None:
-        super().__init__(name=f'ROS 1 chunk {i}', daemon=True)
-        self._reader, self._i = reader, i
-        self._result: Optional[bytes] = None
-        self._error: Optional[BaseException] = None
-        try:   # read here: the file is not shared with the thread
-            self._data = reader.stored_chunk(i)
-        except ReaderError as error:   # raised where the chunk is used
-            self._error = error
-        else:
-            self.start()
-
-    def run(self) -> None:
-        try:
-            self._result = _decompressed(self._reader, self._i, self._data)
-        except BaseException as error:   # noqa: B902  (raised where the chunk is used)
-            self._error = error
-        finally:
-            self._data = b''
-
-    def result(self) -> bytes:
-        """Return the decompressed chunk; raise what reading or decompressing it raised."""
-        if self.ident is not None:
-            self.join()
-        if self._error is not None:
-            raise self._error
-        assert self._result is not None
-        return self._result
-
-
 class _ChunksAhead:
-    """At most one chunk decompressed ahead of the one read (none stored uncompressed)."""
+    """At most one chunk decompressed ahead, in a thread (bz2, lz4 free the GIL)."""
 
     def __init__(self, reader: ChunkedReader) -> None:
         self._reader = reader
-        self._ahead: Optional[Tuple[int, _Decompression]] = None
+        #: The chunk read ahead, its thread (None if reading it failed) and its outcome.
+        self._ahead: Optional[Tuple[int, Optional[threading.Thread], dict]] = None
 
     def start(self, i: int) -> None:
         """Start decompressing chunk ``i`` unless a chunk is being decompressed already."""
         reader = self._reader
-        decompressor = reader.chunks[reader.chunk_infos[i].pos].decompressor
-        if self._ahead is None and decompressor is not _NO_DECOMPRESSION:
-            self._ahead = i, _Decompression(reader, i)
+        if (self._ahead is not None
+                or reader.chunks[reader.chunk_infos[i].pos].decompressor is _NO_DECOMPRESSION):
+            return
+        outcome: dict = {}
+        try:   # read here: the file is not shared with the thread
+            stored = reader.stored_chunk(i)
+        except ReaderError as error:   # raised where the chunk is used
+            self._ahead = i, None, {'error': error}
+            return
+
+        def decompress() -> None:
+            try:
+                outcome['chunk'] = _decompressed(reader, i, stored)
+            except BaseException as error:   # noqa: B902  (raised where the chunk is used)
+                outcome['error'] = error
+
+        thread = threading.Thread(target=decompress, name=f'ROS 1 chunk {i}', daemon=True)
+        thread.start()
+        self._ahead = i, thread, outcome
 
     def take(self, i: int) -> bytes:
         """Return chunk ``i`` decompressed: the one read ahead, or read now."""
-        if self._ahead is not None and self._ahead[0] == i:
-            ahead, self._ahead = self._ahead[1], None
-            return ahead.result()
-        return _decompressed(self._reader, i, self._reader.stored_chunk(i))
+        if self._ahead is None or self._ahead[0] != i:
+            return _decompressed(self._reader, i, self._reader.stored_chunk(i))
+        _, thread, outcome = self._ahead
+        self._ahead = None
+        if thread is not None:
+            thread.join()
+        if 'error' in outcome:
+            raise outcome['error']
+        return outcome['chunk']
 
     def keep_only(self, needed: Collection[int]) -> None:
         """Forget the chunk read ahead unless it is ``needed`` (its thread ends by itself)."""

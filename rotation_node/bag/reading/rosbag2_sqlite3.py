@@ -25,10 +25,8 @@ from rotation_node.errors import BagError
 from rotation_node.wire.qos_yaml import profiles_yaml
 
 _ROSBAG2_TABLES = {'topics', 'messages'}
-# What reading the topics and message_definitions tables raises for damaged text: a name or
-# definition that is not UTF-8 (apsw decodes TEXT), an unknown definition encoding
-# (KeyError), QoS profiles that are YAML but not a list of mappings (TypeError,
-# AttributeError, KeyError).
+# Damaged text in the topics and message_definitions tables: not UTF-8, an unknown definition
+# encoding (KeyError), QoS profiles that are YAML but not a list of mappings.
 _DAMAGED_TABLE_ERRORS = (UnicodeDecodeError, KeyError, TypeError, AttributeError, ValueError)
 #: Definition encodings rosbag2 writes.
 _ENCODINGS = ('ros2msg', 'ros2idl')
@@ -38,7 +36,7 @@ class DamagedStorage(Exception):
     """A sqlite3 storage file that cannot be read as rosbag2 storage, and where."""
 
 
-def sqlite_tables(path: str, shown: Optional[str] = None) -> set:
+def sqlite_tables(path: str, shown: str) -> set:
     """Return the table names of a SQLite database, read-only; BagError naming ``shown``."""
     uri = f'file:{urllib.parse.quote(os.path.abspath(path))}?mode=ro&immutable=1'
     try:
@@ -46,7 +44,7 @@ def sqlite_tables(path: str, shown: Optional[str] = None) -> set:
             return {row[0] for row in database.execute(
                 "SELECT name FROM sqlite_master WHERE type = 'table'")}
     except sqlite3.DatabaseError as error:
-        raise BagError(f'{shown or path}: damaged sqlite3 database: {error}') from None
+        raise BagError(f'{shown}: damaged sqlite3 database: {error}') from None
 
 
 class StoredTopic(NamedTuple):
@@ -255,13 +253,6 @@ def _rows_without_topic(reader: Sqlite3Storage, path: str) -> Optional[str]:
     return f'{path}: {rows} no topic (the first: row id {row_id}, topic_id {topic_id!r})'
 
 
-def _message_compression(reader: Sqlite3Storage) -> Optional[str]:
-    """Return ``'zstd'`` if the first message is a zstd frame (rosbag2's ``message`` mode)."""
-    first, = next(iter(reader.dbconn.execute('SELECT data FROM messages ORDER BY id LIMIT 1')),
-                  (None,))
-    return 'zstd' if isinstance(first, bytes) and is_zstd(first) else None
-
-
 def open_sqlite3_file(path: str, *, shown: Optional[str] = None,
                       strict: bool = False) -> RosbagsInput:
     """
@@ -281,7 +272,8 @@ def open_sqlite3_file(path: str, *, shown: Optional[str] = None,
                        f'{str(error).replace(path, shown)}') from None
     try:
         lost = _rows_without_topic(reader, shown)
-        first_message_compression = _message_compression(reader)
+        first, = next(iter(reader.dbconn.execute('SELECT data FROM messages ORDER BY id LIMIT 1')),
+                      (None,))
         if lost is not None and strict:
             raise BagError(f'{lost}; refused (--strict)')
         source = RosbagsInput(shown, reader, (DamagedStorage, ZstdError), [
@@ -300,7 +292,8 @@ def open_sqlite3_file(path: str, *, shown: Optional[str] = None,
         raise
     if lost is not None:
         source.notes.append(f'{lost}, not read')
-    source.message_compression = first_message_compression
+    # A zstd frame: rosbag2's message compression, also without metadata.yaml.
+    source.message_compression = 'zstd' if isinstance(first, bytes) and is_zstd(first) else None
     return source
 
 
