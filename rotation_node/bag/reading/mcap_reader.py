@@ -35,22 +35,16 @@ if TYPE_CHECKING:
     from rotation_node.type_aliases import StrPath
 
 _MAGIC_SIZE = len(MCAP_MAGIC)
-_RECORD_PREFIX = struct.Struct('<BQ')   # opcode, length of what follows
-# Footer record: opcode, length, summary start, summary offset start, summary CRC.
-_FOOTER = struct.Struct('<BQQQI')
-# Chunk fields before the compression name: message start and end time,
-# uncompressed size, uncompressed CRC, length of the compression name.
-_CHUNK_FIELDS = struct.Struct('<QQQII')
+_RECORD_PREFIX = struct.Struct('<BQ')    # opcode, length of what follows
+_FOOTER = struct.Struct('<BQQQI')        # opcode, length, summary (offset) start, summary CRC
+_CHUNK_FIELDS = struct.Struct('<QQQII')  # start and end time, size, CRC, compression name length
 _MESSAGE_FIELDS = struct.Struct('<HIQQ')       # channel id, sequence, log and publish time
 _MESSAGE_INDEX_FIELDS = struct.Struct('<HI')   # channel id, length of the entries
 _MESSAGE_INDEX_ENTRY = 16                      # log time, offset
-# Chunks are decompressed in pieces of at most this size, checked against the
-# size the chunk states: memory never exceeds what the data holds.
-_DECOMPRESS_PIECE = 1 << 24
+_DECOMPRESS_PIECE = 1 << 24   # bytes asked of a decompressor at a time
 _SUMMARY_RECORDS = {Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channel,
                     Opcode.CHUNK_INDEX: ChunkIndex, Opcode.STATISTICS: Statistics}
 _OPCODES = frozenset(Opcode)
-# Records that belong in the summary section only.
 _SUMMARY_ONLY = (Opcode.CHUNK_INDEX, Opcode.ATTACHMENT_INDEX, Opcode.METADATA_INDEX,
                  Opcode.STATISTICS, Opcode.SUMMARY_OFFSET)
 _LOSSES_SHOWN = 3   # places named in the loss note
@@ -248,16 +242,17 @@ def _chunk_data_by_index(body, index):
 
 
 class ChunkRecords(NamedTuple):
-    """The records of an uncompressed chunk, as :func:`chunk_records` finds them."""
+    """
+    The records of an uncompressed chunk, as :func:`chunk_records` finds them.
 
-    #: One :data:`~rotation_node.bag.mcap_layout.MESSAGE_HEADER` per Message record.
+    ``headers``: a ``MESSAGE_HEADER`` per Message record; ``starts``: where their data starts
+    (``headers['length'] - 22`` bytes); ``definitions``: ``(position, opcode, length)`` of the
+    Schema and Channel records; ``damage``: what stopped the walk early, or None.
+    """
+
     headers: np.ndarray
-    #: Where each message's data starts (int64); it is ``headers['length'] - 22`` bytes long.
     starts: np.ndarray
-    #: ``(position, opcode, length)`` of each Schema and Channel record.
     definitions: List[Tuple[int, int, int]]
-    #: What stopped the walk before the end of the chunk (a record cut short,
-    #: zeroed bytes), None if every record was read.
     damage: Optional[str]
 
 
@@ -545,7 +540,7 @@ class BagReader:
             if summary is not None and self._indexable(summary):
                 self._summary_section = summary
                 self._scan_end: Optional[int] = None
-                self.compression = _compression_name({index.compression
+                self.compression = compression_name({index.compression
                                                       for index in summary.chunk_indexes})
                 self._set_topics(summary.channels.values(), summary.schemas, self._counted)
             else:
@@ -680,7 +675,7 @@ class BagReader:
                                f'footer), {total} messages recoverable; refused (--strict)')
             self.recovered = total
         self._scan_end = end
-        self.compression = _compression_name(scan.compressions)
+        self.compression = compression_name(scan.compressions)
         read = dict(counts)
         self._channel_topics: Dict[int, str] = {
             channel.id: channel.topic for channel in scan.channels.values()}
@@ -869,7 +864,7 @@ class BagReader:
                             map(self._type_names.__getitem__, channel_ids),
                             map(data.__getitem__, map(slice, starts.tolist(), ends.tolist())),
                             headers['log_time'].tolist(), headers['publish_time'].tolist()))
-        # Messages that rosbag2 compressed (--compression-mode message) are decompressed.
+        # rosbag2's message compression
         long_enough = np.nonzero(ends - starts >= _ZSTD_MAGIC.size)[0]
         first_bytes = np.frombuffer(data, np.uint8)[
             starts[long_enough, None] + np.arange(_ZSTD_MAGIC.size)]
@@ -926,6 +921,6 @@ def _loss_summary(losses, topics, wanted):
             + ': ' + '; '.join(places))
 
 
-def _compression_name(compressions):
-    """Return the chunk compression of a file: ``'zstd'``, ``'lz4'`` or ``'none'``."""
+def compression_name(compressions: Collection[str]) -> str:
+    """Return the one name for chunks compressed as ``compressions``: zstd, else lz4, else none."""
     return next((name for name in ('zstd', 'lz4') if name in compressions), 'none')

@@ -20,7 +20,8 @@ from typing import Callable, Dict, Iterable, Iterator, List, NamedTuple, Optiona
 from rotation_node.bag import metadata_yaml
 from rotation_node.bag.reading.compression import (
     decompress_file, LZ4_MAGIC, stored_name, ZSTD_MAGIC, zstd_prefix, ZstdError)
-from rotation_node.bag.reading.mcap_reader import add_topic, BagReader, checked_topics
+from rotation_node.bag.reading.mcap_reader import (
+    add_topic, BagReader, checked_topics, compression_name)
 from rotation_node.bag.reading.topic_names import topic_renames
 from rotation_node.bag.records import BagMessage, TopicMetadata
 from rotation_node.errors import BagError
@@ -138,16 +139,11 @@ class InputBag:
         self._source_topics = [set(source.topic_metadata) for source in sources]
         self.renames = topic_renames(topic_metadata)
         self._original = {self.renames.get(topic, topic): topic for topic in topic_metadata}
-        self.topic_metadata = {
-            self.renames.get(topic, topic): dataclasses.replace(
-                metadata, name=self.renames.get(topic, topic))
-            for topic, metadata in topic_metadata.items()}
-        self.message_counts = {self.renames.get(topic, topic): count
-                               for topic, count in message_counts.items()}
+        self.topic_metadata = {new: dataclasses.replace(topic_metadata[old], name=new)
+                               for new, old in self._original.items()}
+        self.message_counts = {new: message_counts[old] for new, old in self._original.items()}
         self.topics = {topic: m.type_name for topic, m in self.topic_metadata.items()}
-        self.compression = compression or next(
-            (name for name in ('zstd', 'lz4') if any(s.compression == name for s in sources)),
-            'none')
+        self.compression = compression or compression_name({s.compression for s in sources})
         unfinished = note is not None or any(s.recovered is not None for s in sources)
         self.recovered = sum(self.message_counts.values()) if unfinished else None
         self.notes = []

@@ -26,8 +26,7 @@ from rosbags.rosbag1.reader import decompressors as ros1_decompressors
 
 #: One entry of an index data record (version 1): the message's time and its offset in the chunk.
 INDEX_ENTRY = np.dtype([('sec', '<u4'), ('nsec', '<u4'), ('offset', '<u4')])
-#: At most this many bytes of decompressed chunks are held while the messages of overlapping
-#: chunks are read (besides the chunk being read); a chunk let go is decompressed again if needed.
+#: Bytes of decompressed overlapping chunks held besides the one read (others read again).
 CHUNK_BYTES_HELD = 64 * 2**20
 # What the chunk decompressors (bz2, lz4) raise for data they cannot decompress.
 _DECOMPRESSION_ERRORS = (OSError, ValueError, EOFError, RuntimeError)
