@@ -77,8 +77,7 @@ class _Damage(Exception):
 
     def __init__(self, offset: int, what: str) -> None:
         super().__init__(offset, what)
-        self.offset = offset
-        self.what = what
+        self.offset, self.what = offset, what
 
     def __str__(self) -> str:
         return f'{self.what} at offset {self.offset}'
@@ -328,22 +327,20 @@ class _Summary:
     damage: Optional[_Damage] = None
 
 
-def _chunks_in_order(chunk_indexes):
+def _overlapping(chunks):
     """
-    Return the chunk indexes in log-time order if their messages can be read chunk by chunk.
+    Whether chunks (sorted by start time, offset) must be merged to be read in the right order.
 
-    As the mcap library orders them (log time, chunk offset, place); None if chunks overlap.
+    The mcap library's: log time, chunk offset, place in the chunk. Recordings' never overlap.
     """
-    chunks = sorted(chunk_indexes,
-                    key=lambda index: (index.message_start_time, index.chunk_start_offset))
     for position, chunk in enumerate(chunks):
         for later in chunks[position + 1:]:
             if later.message_start_time > chunk.message_end_time:
                 break
             if not (later.message_start_time == chunk.message_end_time
                     and later.chunk_start_offset > chunk.chunk_start_offset):
-                return None
-    return chunks
+                return True
+    return False
 
 
 class _LinearScan:
@@ -522,7 +519,6 @@ class BagReader:
     def __init__(self, path: StrPath, *, strict: bool = False) -> None:
         self.path = os.fspath(path)
         self.recovered: Optional[int] = None
-        self.compression = 'none'
         self.notes: List[str] = []
         self._strict = strict
         try:
@@ -541,7 +537,7 @@ class BagReader:
                 self._summary_section = summary
                 self._scan_end: Optional[int] = None
                 self.compression = compression_name({index.compression
-                                                      for index in summary.chunk_indexes})
+                                                     for index in summary.chunk_indexes})
                 self._set_topics(summary.channels.values(), summary.schemas, self._counted)
             else:
                 self._open_scan(summary)
@@ -789,20 +785,18 @@ class BagReader:
         losses: List[_Loss] = []
         read: Dict[int, int] = {}
         wanted_ids = np.array(sorted(wanted), np.uint16)
-        chunk_indexes = self._summary_section.chunk_indexes
-        chunks = _chunks_in_order(chunk_indexes)
-        if chunks is None:
-            yield from self._merged(chunk_indexes, wanted_ids, losses, read)
+        chunks = sorted(self._summary_section.chunk_indexes,
+                        key=lambda index: (index.message_start_time, index.chunk_start_offset))
+        if _overlapping(chunks):
+            yield from self._merged(chunks, wanted_ids, losses, read)
         else:
             for index in chunks:
                 yield from self._chunk_messages(index, wanted_ids, losses, read)
         self._report(losses, read, {channel_id: count for channel_id, count
                                     in self._counted.items() if channel_id in wanted}, wanted)
 
-    def _merged(self, chunk_indexes, wanted_ids, losses, read):
+    def _merged(self, chunks, wanted_ids, losses, read):
         """Merge overlapping chunks by (log time, chunk offset, place), loading them as needed."""
-        chunks = sorted(chunk_indexes,
-                        key=lambda index: (index.message_start_time, index.chunk_start_offset))
         heap: List[tuple] = []
         loaded = 0
         while True:
@@ -882,7 +876,6 @@ class BagReader:
 
     def _scanned_messages(self, wanted):
         """Return the messages the opening scan read, no more (the file may still grow)."""
-        assert self._scan_end is not None   # set by the opening scan
         scan = _LinearScan(self._file, self._scan_end, cut_ok=self.recovered is not None,
                            summary=self._scan_summary)
         for channel, log_time, publish_time, data in scan:

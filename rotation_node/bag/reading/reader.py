@@ -1,13 +1,10 @@
 """
 Every input bag as one stream of ROS 2 messages (:func:`open_bag`; the formats: docs/bags.md).
 
-A rosbag2 directory or any storage file in or out of one (MCAP, sqlite3, zstd file or
-message compression), a ROS 1 bag, an unfinished recording. Inputs are recognised by their
-first bytes, not their names; anything else is refused with one line naming what it is. The
-storage files of a split bag are merged in log-time order (ties in file order), so that one
-pipeline per topic runs across the splits. Topics whose names are not valid in ROS 2 are
-renamed (:mod:`~rotation_node.bag.reading.topic_names`); topics that cannot be decoded are
-listed and read as stored (copied unchanged). The input is only ever read.
+Inputs are recognised by their first bytes, not their names. The storage files of a split bag
+are merged in log-time order (ties in file order), so that one pipeline per topic runs across
+the splits. Topics whose names are not valid in ROS 2 are renamed (``topic_names``); topics
+that cannot be decoded are listed and read as stored. The input is only ever read.
 """
 import contextlib
 import dataclasses
@@ -18,6 +15,7 @@ import re
 from typing import Callable, Dict, Iterable, Iterator, List, NamedTuple, Optional, Union
 
 from rotation_node.bag import metadata_yaml
+from rotation_node.bag.mcap_layout import MCAP_MAGIC
 from rotation_node.bag.reading.compression import (
     decompress_file, LZ4_MAGIC, stored_name, ZSTD_MAGIC, zstd_prefix, ZstdError)
 from rotation_node.bag.reading.mcap_reader import (
@@ -29,31 +27,25 @@ from rotation_node.errors import BagError
 METADATA_FILE = 'metadata.yaml'
 #: rosbag2 storage plugins this package reads.
 STORAGE_PLUGINS = ('mcap', 'sqlite3')
-_MCAP_MAGIC = b'\x89MCAP0\r\n'
 _SQLITE_MAGIC = b'SQLite format 3\x00'
 _ROS1_MAGIC = re.compile(rb'#ROSBAG V(\d+\.\d+)\n')
 _SNIFF_SIZE = 64
 _STORAGE_SUFFIXES = ('.mcap', '.db3', '.mcap.zstd', '.db3.zstd')
+_KINDS = ((LZ4_MAGIC, 'lz4-compressed file (rosbag2 compresses files with zstd)'),
+          (b'\x1f\x8b', 'gzip-compressed file'), (b'BZh', 'bzip2-compressed file'),
+          (b'PK\x03\x04', 'zip archive'))
 
 
 def _file_kind(prefix: bytes) -> str:
     """Say what a file that is not a bag is, from its first bytes (for the error line)."""
-    if prefix.startswith(LZ4_MAGIC):
-        return 'lz4-compressed file (rosbag2 compresses files with zstd)'
-    if prefix.startswith(b'\x1f\x8b'):
-        return 'gzip-compressed file'
-    if prefix.startswith(b'BZh'):
-        return 'bzip2-compressed file'
-    if prefix.startswith(b'PK\x03\x04'):
-        return 'zip archive'
+    for magic, kind in _KINDS:
+        if prefix.startswith(magic):
+            return kind
     try:
         text = prefix.decode('utf-8')
-    except UnicodeDecodeError:
-        # A multi-byte character cut at the end of the prefix is still text.
+    except UnicodeDecodeError:   # a multi-byte character cut at the end is still text
         text = prefix[:-3].decode('utf-8', 'ignore') if len(prefix) > 3 else ''
-        if not text:
-            return 'binary file of unknown format'
-    if all(c.isprintable() or c in '\t\r\n' for c in text):
+    if text and all(c.isprintable() or c in '\t\r\n' for c in text):
         return 'text file'
     return 'binary file of unknown format'
 
@@ -244,7 +236,7 @@ class _Opener:
             raise BagError(f'cannot open bag {shown}: {error.strerror}') from None
         if not prefix:
             raise BagError(f'{shown}: empty file (0 bytes), not a bag')
-        if prefix.startswith(_MCAP_MAGIC):
+        if prefix.startswith(MCAP_MAGIC):
             return self._add(BagReader(path, strict=self.strict)), 'mcap'
         if prefix.startswith(_SQLITE_MAGIC):   # apsw, imported only for sqlite3
             from rotation_node.bag.reading.rosbag2_sqlite3 import open_sqlite3_file
@@ -276,7 +268,7 @@ class _Opener:
                 inner = zstd_prefix(stream, _SNIFF_SIZE)
         except ZstdError as error:
             raise BagError(f'{shown}: damaged zstd file: {error}') from None
-        if not inner.startswith((_MCAP_MAGIC, _SQLITE_MAGIC)):
+        if not inner.startswith((MCAP_MAGIC, _SQLITE_MAGIC)):
             kind = 'nothing (empty)' if not inner else 'a ' + _file_kind(inner)
             raise BagError(f'{shown}: zstd-compressed file that does not hold a bag '
                            f'(it holds {kind})')
