@@ -1,9 +1,8 @@
 """
 rosbag2's zstd compression: ``file`` mode (``bag_0.mcap.zstd``) and ``message`` mode.
 
-A message is recognised as compressed without the bag's metadata: a zstd frame starts with
-``28 b5 2f fd``, CDR data never does (its first byte is zero). MCAP chunk compression is
-undone by the MCAP reader.
+A zstd frame starts with ``28 b5 2f fd``, CDR data never does (its first byte is zero): a
+compressed message is recognised without the bag's metadata.
 """
 import os
 import shutil

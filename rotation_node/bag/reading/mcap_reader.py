@@ -1,11 +1,10 @@
 """
 Read one MCAP file, every layout, as rosbag2 writes it (``ros2 bag record -s mcap``) or not.
 
-CDR bytes are returned unchanged, chunk by chunk (memory does not grow with the bag); a chunk's
-Message records are read as arrays (:func:`chunk_records`: 1.0 instead of the mcap library's 2.9
-us per message). The layout is walked here with every length checked against the end of its
-record or of the file before anything is read or decompressed: a damaged length is a note or
-one error line, never a huge allocation. The mcap library parses the records' fields.
+CDR bytes are returned unchanged, chunk by chunk; a chunk's Message records are read as arrays
+(:func:`chunk_records`: 1.0 instead of the mcap library's 2.9 us per message). Every length is
+checked against the end of its record or of the file before anything is read or decompressed:
+a damaged length is a note or one error line, never a huge allocation.
 """
 from __future__ import annotations
 
@@ -507,13 +506,12 @@ class BagReader:
     """
     Read one MCAP file: every valid layout, unfinished recordings, damage skipped and noted.
 
-    A file whose summary indexes its channels and chunks is read through that index, chunk by chunk
-    in log-time order; any other by a linear scan in the order it was written (sorted in memory if
-    that is not log-time order), an unfinished recording up to its last complete record. What
-    cannot be read is one line in ``notes`` (after the opening scan, or once ``messages`` has read
-    an indexed file); ``strict`` makes it, and an unfinished recording, a BagError.
-    ``message_counts`` are the file's own (statistics, message indexes) or what a scan read;
-    ``recovered``: the messages of an unfinished recording, else None.
+    A file whose summary indexes it is read chunk by chunk in log-time order; any other by a linear
+    scan in file order (sorted in memory if that is not log-time order), an unfinished recording up
+    to its last complete record. What cannot be read is one line in ``notes`` (after the scan, or
+    once ``messages`` has read an indexed file); ``strict`` makes it, and an unfinished recording,
+    a BagError. ``message_counts``: the file's own, or what a scan read; ``recovered``: the
+    messages of an unfinished recording, else None.
     """
 
     def __init__(self, path: StrPath, *, strict: bool = False) -> None:

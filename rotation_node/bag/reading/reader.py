@@ -105,15 +105,12 @@ class InputBag:
     """
     One input bag (a file, a rosbag2 directory, a ROS 1 bag) read as one stream; closes it.
 
-    Made by :func:`open_bag`. ``description`` says what was read (``'rosbag2 directory (mcap,
-    3 files, zstd message compression)'``). ``topics`` (``{topic: type name}``, ROS 2 names
-    except for topics that cannot be decoded), ``topic_metadata`` and ``message_counts`` use
-    the topic names of ``renames`` (``{name in the bag: name used}``). ``compression`` is the
-    input's as MCAP chunk compression (``'zstd'``, ``'lz4'``, ``'none'``; rosbag2's
-    compression is zstd, a ROS 1 bag's bz2 counts as zstd). ``recovered``: the messages
-    recovered from an unfinished recording, else None. ``notes``: one line for each thing the
-    user should know (an unfinished recording, a renamed topic, messages that could not be
-    read: for an MCAP file read through its index, once ``messages`` has read it to the end).
+    Made by :func:`open_bag`; ``description`` says what it is (``'MCAP file (zstd chunks)'``).
+    ``topics``, ``topic_metadata`` and ``message_counts`` use the names of ``renames`` (``{name
+    in the bag: name used}``); ``compression`` is the input's as MCAP chunk compression
+    (rosbag2's and ROS 1's bz2 count as zstd); ``recovered``: the messages of an unfinished
+    recording, else None; ``notes``: one line for each thing the user should know (an MCAP
+    file read through its index adds what it could not read once read to the end).
     """
 
     def __init__(self, path: str, description: str, opener: '_Opener', *,

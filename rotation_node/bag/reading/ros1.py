@@ -177,11 +177,13 @@ def same_wire_format(ros1: Any, ros2: Any, ros1_type: str, type_name: str) -> bo
     return True
 
 
-def _rosbags_converter(ros1: Any, ros2: Any, ros1_type: str, type_name: str
-                       ) -> Callable[[bytes], bytes]:
-    """Return rosbags-convert's conversion of a ROS 1 type's messages to the ROS 2 type's CDR."""
+def _converter(ros1: Any, ros2: Any, ros1_type: str, type_name: str) -> Callable[[bytes], bytes]:
+    """Return the conversion of a ROS 1 type's messages to the ROS 2 type's CDR, as rosbags'."""
     if same_wire_format(ros1, ros2, ros1_type, type_name):   # without importing rosbags.convert
-        return lambda data: bytes(ros2.ros1_to_cdr(data, type_name))
+        def converted(data: bytes) -> bytes:
+            return bytes(ros2.ros1_to_cdr(data, type_name))
+
+        return ros1_to_cdr_converter(ros2.fielddefs, type_name, converted) or converted
     from rosbags.convert.converter import generate_message_converter
     with contextlib.redirect_stdout(io.StringIO()):   # it prints its plans
         convert = generate_message_converter(ros1, ros2, ros1_type, type_name, {},
@@ -203,11 +205,7 @@ def _converted_topics(path, connections, ros1):
                 types.pop('std_msgs/msg/Header', None)
                 ros2.register(types)
             if ros1_type not in converters:
-                converter = _rosbags_converter(ros1, ros2, ros1_type, type_name)
-                if same_wire_format(ros1, ros2, ros1_type, type_name):
-                    converter = (ros1_to_cdr_converter(ros2.fielddefs, type_name, converter)
-                                 or converter)
-                converters[ros1_type] = converter
+                converters[ros1_type] = _converter(ros1, ros2, ros1_type, type_name)
         except _FORMAT_ERRORS + (KeyError,) as error:   # KeyError: a type left undefined
             raise BagError(f'{path}: cannot convert ROS 1 type {ros1_type} to ROS 2: '
                            f'{error}') from None

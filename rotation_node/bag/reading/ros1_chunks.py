@@ -1,11 +1,10 @@
 """
 ROS 1 bags read one chunk group at a time, in the order of rosbags' reader (docs/bags.md).
 
-rosbags' reader holds a Python tuple per message of the bag from the moment it opens it;
-:class:`ChunkedReader` keeps only what does not grow with the number of messages, reads a
-chunk's index data as numpy arrays when the messages reach it, and decompresses the next chunk
-in another thread meanwhile. Chunks whose time ranges overlap are read together. A damaged bag
-raises ``ReaderError`` naming the byte where it is; no read asks for more than the file holds.
+rosbags' reader holds a Python tuple per message from the moment it opens a bag;
+:class:`ChunkedReader` reads a chunk's index data (as numpy arrays) when the messages reach it,
+and decompresses the next chunk in another thread meanwhile. A damaged bag raises
+``ReaderError`` naming the byte where it is; no read asks for more than the file holds.
 """
 import ast
 from collections import Counter, OrderedDict

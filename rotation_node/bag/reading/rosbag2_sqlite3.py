@@ -1,12 +1,9 @@
 """
 rosbag2's ``sqlite3`` storage files (``.db3``) read with ``apsw``, as ``rosbags`` reads them.
 
-:class:`Sqlite3Storage` reads what rosbags' ``Sqlite3Reader`` reads, the same way, without
-importing rosbags' rosbag2 modules (a twentieth of a second). Damage surfaces from several
-layers (SQLite's errors, met only when a query reaches a damaged page; text that is not UTF-8;
-QoS profiles that are not rosbag2's; a ``data`` that is not a BLOB, a ``timestamp`` that is not
-an integer >= 0): each becomes a :class:`DamagedStorage` naming the table and the row id, so
-that reading fails with one line. The file is opened read-only and immutable.
+Without importing rosbags' rosbag2 modules (a twentieth of a second). Damage met in any layer
+(a damaged page, text not UTF-8, QoS profiles not rosbag2's, a row of the wrong types) becomes
+a :class:`DamagedStorage` naming the table and the row id. The file is opened read-only.
 """
 import contextlib
 import os
@@ -102,10 +99,9 @@ def qos_profiles_yaml(stored: Any) -> str:
 
 class Sqlite3Storage:
     """
-    A rosbag2 sqlite3 storage file: its topics, and its messages by time.
+    A rosbag2 sqlite3 storage file: its topics (``connections``), and its messages by time.
 
-    ``connections``: the ``topics`` table by ``id``, ``msgcount`` counting each topic's rows;
-    ``message_count``: the rows of the ``messages`` table (also those of no topic).
+    ``message_count``: the rows of the ``messages`` table, also those of no topic.
     """
 
     def __init__(self, path: Path) -> None:

@@ -1,10 +1,8 @@
 """
-Bags read with a ``rosbags``-style reader (sqlite3, ROS 1) behind ``BagReader``'s interface.
+sqlite3 storage and ROS 1 bags, read with a ``rosbags``-style reader, as ``BagReader`` reads.
 
-The reader yields ``(connection, time, data)`` in time order; each connection comes with its
-topic's :class:`~rotation_node.bag.records.TopicMetadata` and a function turning its stored data
-into CDR. Both formats store one time per message (when the recorder received it): it is the
-log time and the publish time.
+Both formats store one time per message (when the recorder received it): the log time and the
+publish time.
 """
 from typing import Any, Callable, Dict, Iterable, Iterator, List, Optional, Tuple
 
@@ -25,13 +23,11 @@ def is_installed(type_name: str) -> bool:
 
 class RosbagsInput:
     """
-    A bag opened with a rosbags reader, read as :class:`~.mcap_reader.BagReader` reads; closes it.
+    A bag opened with a rosbags reader yielding ``(connection, time, data)`` in time order.
 
-    ``errors``: what the reader (and ``to_cdr``) raise for damaged data. ``topics``: every
-    connection with its topic's metadata and its ``to_cdr``. ``compression``: the chunk
-    compression its copy gets, as MCAP names it; ``stored_compression``: the bag's own, as its
-    format names it (a ROS 1 bag's ``'bz2'``). A topic with connections of two types is a
-    BagError.
+    ``topics``: every connection, its topic's metadata and its ``to_cdr``; ``errors``: what they
+    raise for damaged data. ``compression``: its copy's, as MCAP names it; ``stored_compression``:
+    the bag's own (a ROS 1 bag's ``'bz2'``).
     """
 
     def __init__(self, path: str, reader: Any, errors: tuple,
