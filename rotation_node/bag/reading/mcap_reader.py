@@ -8,6 +8,7 @@ a damaged length is a note or one error line, never a huge allocation.
 """
 from __future__ import annotations
 
+from collections import Counter
 import dataclasses
 import heapq
 import io
@@ -611,10 +612,9 @@ class BagReader:
             if counted is None:
                 return False
         else:
-            totals: Dict[int, int] = {}
+            totals: Counter = Counter()
             for counts in self._indexed.values():
-                for channel_id, count in counts.items():
-                    totals[channel_id] = totals.get(channel_id, 0) + count
+                totals.update(counts)
             if counted is not None and ({c: n for c, n in counted.items() if n}
                                         != {c: n for c, n in totals.items() if n}):
                 return False   # messages outside the indexed chunks
@@ -656,18 +656,17 @@ class BagReader:
         end = self._file.size if unfinished else summary.end
         self._scan_summary = summary
         scan = _LinearScan(self._file, end, cut_ok=unfinished, summary=summary)
-        counts: Dict[int, int] = {}
-        total, previous, self._scan_ordered = 0, -1, True
+        counts: Counter = Counter()
+        previous, self._scan_ordered = -1, True
         for channel, log_time, _, _ in scan:
-            counts[channel.id] = counts.get(channel.id, 0) + 1
-            total += 1
+            counts[channel.id] += 1
             self._scan_ordered = self._scan_ordered and log_time >= previous
             previous = log_time
         if unfinished:
             if self._strict:
-                raise BagError(f'{self.path}: unfinished recording (no MCAP summary or '
-                               f'footer), {total} messages recoverable; refused (--strict)')
-            self.recovered = total
+                raise BagError(f'{self.path}: unfinished recording (no MCAP summary or footer), '
+                               f'{sum(counts.values())} messages recoverable; refused (--strict)')
+            self.recovered = sum(counts.values())
         self._scan_end = end
         self.compression = compression_name(scan.compressions)
         read = dict(counts)
@@ -681,8 +680,7 @@ class BagReader:
         self._report(scan.losses, read, counted, None)
         if not unfinished:   # counted as the file holds them, as through an index
             for loss in scan.losses:
-                for channel_id, count in (loss.counts or {}).items():
-                    counts[channel_id] = counts.get(channel_id, 0) + count
+                counts.update(loss.counts or {})
         self._set_topics(scan.channels.values(), scan.schemas, counts)
 
     def _report(self, losses, read, counted, wanted):
@@ -694,10 +692,9 @@ class BagReader:
         """
         losses = list(losses)
         if counted is not None:
-            known: Dict[int, int] = {}
+            known: Counter = Counter()
             for loss in losses:
-                for channel_id, count in (loss.counts or {}).items():
-                    known[channel_id] = known.get(channel_id, 0) + count
+                known.update(loss.counts or {})
             missing = {channel_id: count - read.get(channel_id, 0) - known.get(channel_id, 0)
                        for channel_id, count in counted.items()
                        if wanted is None or channel_id in wanted}

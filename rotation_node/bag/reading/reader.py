@@ -12,7 +12,7 @@ import heapq
 import operator
 import os
 import re
-from typing import Callable, Dict, Iterable, Iterator, List, NamedTuple, Optional, Union
+from typing import Callable, Dict, Iterable, Iterator, List, Optional, Tuple, Union
 
 from rotation_node.bag import metadata_yaml
 from rotation_node.bag.mcap_layout import MCAP_MAGIC
@@ -55,17 +55,8 @@ def _natural_key(name):
     return [int(part) if part.isdigit() else part for part in re.split(r'(\d+)', name)]
 
 
-class _DirectoryLayout(NamedTuple):
-    """What a rosbag2 directory's ``metadata.yaml`` (or its file names) say."""
-
-    files: List[str]
-    storage: str
-    compression_mode: str
-    note: Optional[str] = None
-
-
-def _directory_layout(path: str) -> _DirectoryLayout:
-    """Read the storage files, storage plugin and compression of a rosbag2 directory."""
+def _directory_layout(path: str) -> Tuple[List[str], str, str, Optional[str]]:
+    """Return a rosbag2 directory's storage files, storage plugin, compression mode and note."""
     metadata_path = os.path.join(path, METADATA_FILE)
     if not os.path.exists(metadata_path):
         files = sorted((name for name in os.listdir(path) if name.endswith(_STORAGE_SUFFIXES)),
@@ -73,8 +64,7 @@ def _directory_layout(path: str) -> _DirectoryLayout:
         if not files:
             raise BagError(f'{path}: directory without {METADATA_FILE} or storage files '
                            f'({", ".join("*" + s for s in _STORAGE_SUFFIXES)}), not a bag')
-        return _DirectoryLayout([os.path.join(path, name) for name in files], '', '',
-                                note=f'no {METADATA_FILE}')
+        return [os.path.join(path, name) for name in files], '', '', f'no {METADATA_FILE}'
     try:
         with open(metadata_path, encoding='utf-8') as stream:
             info = metadata_yaml.load(stream)['rosbag2_bagfile_information']
@@ -97,8 +87,8 @@ def _directory_layout(path: str) -> _DirectoryLayout:
     if missing:
         raise BagError(f'{path}: storage file {", ".join(missing)} listed in {METADATA_FILE} '
                        'is missing')
-    return _DirectoryLayout([os.path.join(path, name) for name in names], storage,
-                            '' if mode == 'none' else mode)
+    return ([os.path.join(path, name) for name in names], storage,
+            '' if mode == 'none' else mode, None)
 
 
 class InputBag:
@@ -308,16 +298,15 @@ def open_bag(path: Union[str, os.PathLike], *, strict: bool = False) -> InputBag
     directory = os.path.isdir(path)
     try:
         if directory:
-            layout = _directory_layout(path)
-            if layout.note and strict:
-                raise BagError(f'{path}: unfinished recording ({layout.note}); '
-                               'refused (--strict)')
-            storages = [opener.open_file(file)[1] for file in layout.files]
-            if layout.storage and any(s != layout.storage for s in storages):
-                raise BagError(f'{path}: {METADATA_FILE} names storage {layout.storage!r}, '
+            files, storage, mode, note = _directory_layout(path)
+            if note and strict:
+                raise BagError(f'{path}: unfinished recording ({note}); refused (--strict)')
+            storages = [opener.open_file(file)[1] for file in files]
+            if storage and any(s != storage for s in storages):
+                raise BagError(f'{path}: {METADATA_FILE} names storage {storage!r}, '
                                f'but the files hold {", ".join(sorted(set(storages)))}')
-            mode, note, count = layout.compression_mode, layout.note, len(layout.files)
-            details = [layout.storage or storages[0], f'{count} file{"s" if count != 1 else ""}']
+            count = len(files)
+            details = [storage or storages[0], f'{count} file{"s" if count != 1 else ""}']
         else:
             _, storage = opener.open_file(path)
             mode, note, details = '', None, []

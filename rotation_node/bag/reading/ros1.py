@@ -1,10 +1,9 @@
 """
 ROS 1 bags (format 2.0) read as ROS 2 CDR messages, as ``rosbags-convert`` converts them.
 
-Each message becomes the ROS 2 type of its name (``tf/tfMessage`` -> ``tf2_msgs/msg/TFMessage``;
-``std_msgs/Header`` loses its ``seq``): the installed type (:func:`ros2_typestore`), else rosbags'
-Jazzy type, else the bag's definition. :class:`Ros1ToCdr` converts a chunk's messages of one
-type and layout at once, byte for byte as rosbags does; other types go through rosbags.
+Each message becomes the ROS 2 type of its name (installed, else rosbags' Jazzy type, else the
+bag's definition); :class:`Ros1ToCdr` converts a chunk's messages of one type and layout at
+once, byte for byte as rosbags does.
 """
 import contextlib
 import io
@@ -307,18 +306,18 @@ class _Damaged(Exception):
     """The data is not what its type says (rosbags' conversion then says what is wrong)."""
 
 
-def _converted(steps, data, source, offset, emit, length_fields):
+def _converted(steps, data, source, offset, parts, length_fields):
     """
     Emit the CDR parts of ``data`` from ``source`` (CDR ``offset``); return both after.
 
-    ``emit(constant, start, end)``: the bytes ``constant``, then ``data[start:end]``. The parts
+    A part ``(constant, start, end)``: the bytes ``constant``, then ``data[start:end]``. The parts
     depend on ``len(data)`` and the values at ``length_fields`` alone.
     """
     for kind, layout, size in steps:
         if kind == _RUN:
             segments, cdr_size = layout[offset & 7]
             for padding, start, end in segments:
-                emit(padding, source + start, source + end)
+                parts.append((padding, source + start, source + end))
             source += size
             offset += cdr_size
         elif kind == _STRING:
@@ -326,8 +325,8 @@ def _converted(steps, data, source, offset, emit, length_fields):
             length, = _UINT32.unpack_from(data, source)
             end = source + 4 + length
             padding = -offset & 3
-            emit(_ZEROS[padding] + _UINT32.pack(length + 1), source + 4, end)
-            emit(b'\0', end, end)
+            parts.append((_ZEROS[padding] + _UINT32.pack(length + 1), source + 4, end))
+            parts.append((b'\0', end, end))
             offset += padding + length + 5
             source = end
         elif kind == _SKIP:
@@ -339,11 +338,11 @@ def _converted(steps, data, source, offset, emit, length_fields):
             if source + 4 + count * least > len(data):
                 raise _Damaged
             padding = -offset & 3
-            emit(_ZEROS[padding], source, source + 4)
+            parts.append((_ZEROS[padding], source, source + 4))
             source += 4
             offset += padding + 4
             for _ in range(count):
-                source, offset = _converted(element, data, source, offset, emit, length_fields)
+                source, offset = _converted(element, data, source, offset, parts, length_fields)
     return source, offset
 
 
@@ -368,11 +367,8 @@ class Ros1ToCdr:
         parts: List[Tuple[bytes, int, int]] = []
         length_fields: List[int] = []
 
-        def emit(constant: bytes, start: int, end: int) -> None:
-            parts.append((constant, start, end))
-
         try:
-            source, _ = _converted(self._steps, data, 0, 0, emit, length_fields)
+            source, _ = _converted(self._steps, data, 0, 0, parts, length_fields)
         except (struct.error, _Damaged):
             return None
         return (parts, length_fields) if source == len(data) else None

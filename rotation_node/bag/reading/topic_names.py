@@ -1,12 +1,9 @@
 """
 The one rule that maps input topic names not valid in ROS 2 to valid ones (docs/bags.md).
 
-Valid names (ASCII letters, digits, ``_`` and ``/``, no empty token, no token starting with a
-digit) are kept, fully qualified or relative, unless a relative one resolves in the root
-namespace to another topic of the bag (``c`` beside ``/c``). Every other name is mapped
-(:func:`ros2_topic_name`): other characters become ``_``; a leading ``/`` is added; empty
-tokens are dropped; a token starting with a digit gets a ``_`` in front; an empty name becomes
-``/_``. A mapped name already taken gets ``_2``, ``_3``... (:func:`topic_renames`).
+Valid names are kept, fully qualified or relative, unless a relative one resolves in the root
+namespace to another topic of the bag (``c`` beside ``/c``); every other name is mapped
+(:func:`ros2_topic_name`), ``_2``, ``_3``... appended where taken (:func:`topic_renames`).
 """
 import re
 from typing import Dict, Iterable
@@ -29,8 +26,8 @@ def ros2_topic_name(name: str) -> str:
     """
     Return ``name`` if it is a valid ROS 2 topic name, else its mapped name, fully qualified.
 
-    ``'ORB-SLAM'`` -> ``'/ORB_SLAM'``, ``'/imu-raw'`` -> ``'/imu_raw'``, ``'/2d/scan/'`` ->
-    ``'/_2d/scan'``.
+    Other characters than ASCII letters, digits, ``_`` and ``/`` become ``_``; empty tokens go; a
+    token starting with a digit gets a ``_`` in front: ``'/2d/scan/'`` -> ``'/_2d/scan'``.
     """
     if is_valid_topic_name(name):
         return name
