@@ -141,11 +141,7 @@ class _File:
 
 
 def _bounded(read, size, offset):
-    """
-    Join what ``read(max_length)`` returns until it returns nothing: at most ``size`` bytes.
-
-    A decompressor is never asked for more than one byte past what its chunk states.
-    """
+    """Join what ``read(max_length)`` returns; _Damage once it exceeds the chunk's ``size``."""
     pieces, total = [], 0
     while True:
         piece = read(min(_DECOMPRESS_PIECE, size + 1 - total))
@@ -302,8 +298,7 @@ class _Loss:
     offset: Optional[int]    # of the chunk or record; None: not in any chunk the index lists
     what: str
     counts: Optional[Dict[int, int]]   # {channel id: messages lost}; None if unknown
-    #: Only fewer messages than the message index that follows the chunk lists
-    #: (which a misplaced chunk also gives): no loss if the statistics agree.
+    #: Only fewer messages than the chunk's message index (a misplaced chunk's too).
     index_only: bool = False
 
 
@@ -356,8 +351,7 @@ class _LinearScan:
         self._file = file
         self._end = end
         self._cut_ok = cut_ok
-        # A readable summary's schemas and channels are known from the start (a chunk
-        # moved before the one defining its channels is read too).
+        # A readable summary's channels are known before a chunk moved ahead uses them.
         known = summary is not None and summary.damage is None
         self.schemas: Dict[int, Schema] = dict(summary.schemas) if known else {}
         self.channels: Dict[int, Channel] = dict(summary.channels) if known else {}

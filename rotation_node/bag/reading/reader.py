@@ -25,7 +25,6 @@ from rotation_node.bag.records import BagMessage, TopicMetadata
 from rotation_node.errors import BagError
 
 METADATA_FILE = 'metadata.yaml'
-#: rosbag2 storage plugins this package reads.
 STORAGE_PLUGINS = ('mcap', 'sqlite3')
 _SQLITE_MAGIC = b'SQLite format 3\x00'
 _ROS1_MAGIC = re.compile(rb'#ROSBAG V(\d+\.\d+)\n')

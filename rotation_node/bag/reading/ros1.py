@@ -26,7 +26,6 @@ from rotation_node.errors import BagError
 from rotation_node.wire.message_types import message_definition
 from rotation_node.wire.qos_yaml import profiles_yaml
 
-#: The one ROS 1 bag format version there is a reader for.
 SUPPORTED_VERSION = '2.0'
 # What rosbags raises for a bag it cannot read or a message it cannot convert.
 _FORMAT_ERRORS = (ReaderError, SerdeError, TypesysError, struct.error)
@@ -45,14 +44,11 @@ def open_ros1_bag(path: Union[str, os.PathLike]) -> RosbagsInput:
     path = str(path)
     reader = ChunkedReader(Path(path))
     try:
-        reader.open()
+        reader.open()   # closes the file if it fails
     except _FORMAT_ERRORS as error:
         raise BagError(f'{path}: cannot read ROS 1 bag: {error}') from None
     try:
-        try:
-            typestore = bag_typestore(reader.connections)
-        except _FORMAT_ERRORS as error:
-            raise BagError(f'{path}: cannot read ROS 1 bag: {error}') from None
+        typestore = bag_typestore(reader.connections)
         names = {decompress: name for name, decompress in ros1_decompressors.items()}
         compressions = {names.get(chunk.decompressor, 'unknown')
                         for chunk in reader.chunks.values()}
@@ -62,8 +58,10 @@ def open_ros1_bag(path: Union[str, os.PathLike]) -> RosbagsInput:
         return Ros1Input(path, reader, _FORMAT_ERRORS + (ValueError, IndexError),
                          _converted_topics(path, reader.connections, typestore), compression,
                          stored_compression='/'.join(sorted(compressions - {'none'})) or 'none')
-    except BaseException:
+    except BaseException as error:
         reader.close()
+        if isinstance(error, _FORMAT_ERRORS):   # bag_typestore's (the converters say theirs)
+            raise BagError(f'{path}: cannot read ROS 1 bag: {error}') from None
         raise
 
 
@@ -97,14 +95,7 @@ class Ros1Input(RosbagsInput):
         blocks = {id_: self._to_cdr[id_].block for id_ in by_id
                   if isinstance(self._to_cdr[id_], Ros1ToCdr)}
         type_names = self.topics
-        batches = self._reader.message_batches(connections)
-        while True:
-            try:
-                batch = next(batches)
-            except StopIteration:
-                return
-            except self._errors as error:   # the reader names where
-                raise self.corrupt(error) from None
+        for batch in self._read(self._reader.message_batches(connections)):
             chunk, starts, lengths = batch.chunk, batch.starts, batch.lengths
             for k, (connection_id, time_ns, cdr) in enumerate(zip(
                     batch.connections.tolist(), batch.times.tolist(), _block_cdrs(batch, blocks))):
@@ -346,8 +337,7 @@ def _converted(steps, data, source, offset, parts, length_fields):
     return source, offset
 
 
-#: Message layouts (the lengths of their strings and sequences) converted as one block each,
-#: for the messages of one length in one call of ``Ros1ToCdr.block``; the rest one by one.
+#: Layouts (string and sequence lengths) ``Ros1ToCdr.block`` converts per message length.
 _BLOCK_LAYOUTS_TRIED = 4
 
 

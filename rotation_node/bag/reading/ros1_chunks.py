@@ -191,8 +191,7 @@ class ChunkedReader(Reader):
             index['offset'][part] = offsets
             rank[part] = ranks[connection]
             end = part.stop
-        # rosbags: each connection's entries stably sorted by time, then merged by time
-        # with ties going to the connection asked for first.
+        # rosbags: each connection's entries by time, merged by time, ties by connection rank
         return index[np.lexsort((np.arange(len(index)), rank, index['time']))]
 
     def _chunk_index(self, i, ranks):
@@ -463,8 +462,7 @@ def message_data(chunk: bytes, offset: int, connection: int, time: int) -> Optio
     return data if len(data) == length else None
 
 
-#: Layouts of plain message records tried on one run of a chunk's messages before the rest
-#: is read one message at a time.
+#: Plain record layouts tried on a chunk's messages before the rest are read one by one.
 _RECORD_LAYOUTS_TRIED = 8
 
 

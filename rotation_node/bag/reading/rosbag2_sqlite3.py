@@ -22,8 +22,7 @@ from rotation_node.errors import BagError
 from rotation_node.wire.qos_yaml import profiles_yaml
 
 _ROSBAG2_TABLES = {'topics', 'messages'}
-# Damaged text in the topics and message_definitions tables: not UTF-8, an unknown definition
-# encoding (KeyError), QoS profiles that are YAML but not a list of mappings.
+# Damaged topics and message_definitions: not UTF-8, unknown encoding, QoS YAML not profiles.
 _DAMAGED_TABLE_ERRORS = (UnicodeDecodeError, KeyError, TypeError, AttributeError, ValueError)
 #: Definition encodings rosbag2 writes.
 _ENCODINGS = ('ros2msg', 'ros2idl')
@@ -205,11 +204,7 @@ class Sqlite3Storage:
 
 
 def _damaged_table(path: object) -> str:
-    """
-    Say where SQLite met damage: ``' (messages table, after row id 199)'``, or ``''``.
-
-    Each table is read whole (not through an index), in row id order, until its damaged page.
-    """
+    """Say where SQLite met damage, reading each table in row order: ``' (messages table...)'``."""
     try:
         database = apsw.Connection(f'file:{path}?immutable=1',
                                    flags=apsw.SQLITE_OPEN_READONLY | apsw.SQLITE_OPEN_URI)
@@ -294,11 +289,7 @@ def open_sqlite3_file(path: str, *, shown: Optional[str] = None,
 
 
 def _definition(type_name, msgdef):
-    """
-    ``definition`` and ``definition_encoding`` of a topic from its ``message_definitions`` row.
-
-    Without one (before Iron): the installed definition, else encoding ``unknown`` as rosbag2.
-    """
+    """Return ``definition`` and ``definition_encoding``: the row's, the installed, or unknown."""
     encoding, text = msgdef
     if encoding is not None:
         return {'definition': text, 'definition_encoding': encoding}

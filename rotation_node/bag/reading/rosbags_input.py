@@ -60,20 +60,20 @@ class RosbagsInput:
 
     def _messages(self, connections):
         type_names = self.topics
-        stored = self._reader.messages(connections)
-        while True:
-            try:
-                connection, time_ns, data = next(stored)
-            except StopIteration:
-                return
-            except self._errors as error:   # the reader names where
-                raise self.corrupt(error) from None
+        for connection, time_ns, data in self._read(self._reader.messages(connections)):
             yield BagMessage(connection.topic, type_names[connection.topic],
                              self.cdr(connection, time_ns, data), time_ns, time_ns)
 
-    def corrupt(self, error: Exception) -> BagError:
-        """Return the error to raise for one of ``errors`` that the reader raised."""
-        return BagError(f'{self.path} is corrupt: {error}')
+    def _read(self, items: Iterator[Any]) -> Iterator[Any]:
+        """Yield what the reader yields; BagError for what it raises for damage (it says where)."""
+        while True:
+            try:
+                item = next(items)
+            except StopIteration:
+                return
+            except self._errors as error:
+                raise BagError(f'{self.path} is corrupt: {error}') from None
+            yield item
 
     def cdr(self, connection: Any, time_ns: int, data: bytes) -> bytes:
         """Return the CDR data of a message stored as ``data``; BagError naming it if it fails."""
