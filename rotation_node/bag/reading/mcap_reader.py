@@ -570,9 +570,10 @@ class BagReader:
                     summary.chunk_indexes.append(record)
                 elif record_class is Statistics:
                     summary.statistics = record
+                elif record_class is Schema:
+                    summary.schemas[record.id] = record
                 else:
-                    (summary.schemas if record_class is Schema else summary.channels)[
-                        record.id] = record
+                    summary.channels[record.id] = record
         except _Damage as damage:
             return _Summary(summary_start, damage=damage)
         return summary
