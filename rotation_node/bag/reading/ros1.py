@@ -92,8 +92,8 @@ class Ros1Input(RosbagsInput):
 
     def _messages(self, connections):
         by_id = {connection.id: connection for connection in connections}
-        blocks = {id_: self._to_cdr[id_].block for id_ in by_id
-                  if isinstance(self._to_cdr[id_], Ros1ToCdr)}
+        blocks = {id_: converter.block for id_, converter in self._to_cdr.items()
+                  if id_ in by_id and isinstance(converter, Ros1ToCdr)}
         type_names = self.topics
         for batch in self._read(self._reader.message_batches(connections)):
             chunk, starts, lengths = batch.chunk, batch.starts, batch.lengths

@@ -128,8 +128,8 @@ class Sqlite3Storage:
 
     def _read_topics(self, database: apsw.Connection) -> None:
         """Read the topics as rosbags' reader does, by the schema version of the file."""
-        tables, = database.execute("SELECT count(*) FROM sqlite_master WHERE type = 'table' "
-                                   "AND name IN ('messages', 'topics')").fetchone()
+        tables = next(database.execute("SELECT count(*) FROM sqlite_master WHERE type = 'table' "
+                                       "AND name IN ('messages', 'topics')"))[0]
         if tables != 2:
             raise DamagedStorage(f'Cannot open database {self.path} or database missing tables.')
         if database.execute('PRAGMA table_info(schema)').fetchall():
@@ -163,8 +163,8 @@ class Sqlite3Storage:
                 topic_id, topic, type_name, (encoding, text), more[1] if schema >= 4 else '',
                 count, serialization_format,
                 qos_profiles_yaml(more[0]) if schema >= 2 else profiles_yaml([])))
-        _, _, self.message_count = database.execute(
-            'SELECT MIN(timestamp), MAX(timestamp) + 1, COUNT(*) FROM messages').fetchone()
+        _, _, self.message_count = next(database.execute(
+            'SELECT MIN(timestamp), MAX(timestamp) + 1, COUNT(*) FROM messages'))
 
     def close(self) -> None:
         """Close the database."""
@@ -234,7 +234,7 @@ def _sqlite_type(value: Any) -> str:
 def _rows_without_topic(reader: Sqlite3Storage, path: str) -> Optional[str]:
     """Say how many message rows name no topic of the ``topics`` table (None if none)."""
     lost = reader.message_count - sum(c.msgcount for c in reader.connections)
-    if lost <= 0:
+    if lost <= 0 or reader.dbconn is None:
         return None
     row_id, topic_id = next(iter(reader.dbconn.execute(
         'SELECT id, topic_id FROM messages WHERE topic_id NOT IN (SELECT id FROM topics) '
@@ -262,6 +262,7 @@ def open_sqlite3_file(path: str, *, shown: Optional[str] = None,
         raise BagError(f'{shown}: cannot read rosbag2 sqlite3 storage: '
                        f'{str(error).replace(path, shown)}') from None
     try:
+        assert reader.dbconn is not None   # open
         lost = _rows_without_topic(reader, shown)
         first, = next(iter(reader.dbconn.execute('SELECT data FROM messages ORDER BY id LIMIT 1')),
                       (None,))
