@@ -66,14 +66,10 @@ class RosbagsInput:
 
     def _read(self, items: Iterator[Any]) -> Iterator[Any]:
         """Yield what the reader yields; BagError for what it raises for damage (it says where)."""
-        while True:
-            try:
-                item = next(items)
-            except StopIteration:
-                return
-            except self._errors as error:
-                raise BagError(f'{self.path} is corrupt: {error}') from None
-            yield item
+        try:
+            yield from items
+        except self._errors as error:
+            raise BagError(f'{self.path} is corrupt: {error}') from None
 
     def cdr(self, connection: Any, time_ns: int, data: bytes) -> bytes:
         """Return the CDR data of a message stored as ``data``; BagError naming it if it fails."""
