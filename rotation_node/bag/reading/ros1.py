@@ -88,7 +88,7 @@ def bag_typestore(connections: Sequence[Connection]) -> Any:
 
 
 class Ros1Input(RosbagsInput):
-    """A ROS 1 bag read a chunk's batch at a time, converted in blocks by :class:`Ros1ToCdr` s."""
+    """A ROS 1 bag read a chunk's batch at a time, converted in blocks by a :class:`Ros1ToCdr`."""
 
     def _messages(self, connections):
         by_id = {connection.id: connection for connection in connections}

@@ -146,7 +146,7 @@ class ChunkedReader(Reader):
                         start: Optional[int] = None, stop: Optional[int] = None
                         ) -> Generator['MessageBatch', None, None]:
         """
-        Yield the messages of :meth:`messages`, in its order, as :class:`MessageBatch` es.
+        Yield the messages of :meth:`messages`, in its order, in batches (:class:`MessageBatch`).
 
         A batch: the next plain message records of one chunk (:func:`plain_message_records`), or
         one message stored otherwise, read as rosbags reads it.
