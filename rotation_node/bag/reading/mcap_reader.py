@@ -1,28 +1,14 @@
 """
-Read ROS 2 bags stored as single MCAP files, the way rosbag2 writes them.
+Read one MCAP file, every layout, as rosbag2 writes it (``ros2 bag record -s mcap``) or not.
 
-A bag is what ``ros2 bag record -s mcap`` writes: profile ``ros2``; one schema
-per message type, named ``pkg/msg/Type`` with encoding ``ros2msg`` and the
-complete concatenated definition (see ``message_types.message_definition``);
-one channel per topic with message encoding ``cdr`` and the metadata
-``offered_qos_profiles`` (QoS YAML, see ``qos``) and ``topic_type_hash``.
-:mod:`rotation_node.bag.writing.writer` writes such bags (``BagWriter``);
-:mod:`rotation_node.bag.reading.reader` reads every other kind of bag.
-
-Messages are stored as CDR bytes, which reading returns unchanged, so a bag
-round trip is byte-exact. Reading streams chunk by chunk: memory does not grow
-with the length of the bag. A chunk's Message records are read as arrays
-(:func:`chunk_records`), without the mcap library's record object per
-message: 1.0 instead of 2.9 us per message on an AMD EPYC (2 cores).
-
-The file's layout (records, chunks, summary, footer) is walked here with
-every length checked against the end of its record or of the file before
-anything is read or decompressed, so that a damaged length field is a note or
-one error line, never a huge allocation; the mcap library parses the fields of
-each record (``Schema``, ``Channel``, ``ChunkIndex``...) from its checked bytes.
+CDR bytes are returned unchanged, chunk by chunk; a chunk's Message records are read as arrays
+(:func:`chunk_records`: 1.0 instead of the mcap library's 2.9 us per message). Every length is
+checked against the end of its record or of the file before anything is read or decompressed:
+a damaged length is a note or one error line, never a huge allocation.
 """
 from __future__ import annotations
 
+from collections import Counter
 import dataclasses
 import heapq
 import io
@@ -37,7 +23,7 @@ import zlib
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import EndOfFile, McapError
 from mcap.opcode import Opcode
-from mcap.records import Channel, ChunkIndex, Message, Schema, Statistics
+from mcap.records import Channel, ChunkIndex, Schema, Statistics
 import numpy as np
 from rotation_node.bag.mcap_layout import MCAP_MAGIC, MESSAGE_FIELDS, MESSAGE_HEADER
 from rotation_node.bag.reading.compression import decompressed_message, ZSTD_MAGIC
@@ -49,22 +35,16 @@ if TYPE_CHECKING:
     from rotation_node.type_aliases import StrPath
 
 _MAGIC_SIZE = len(MCAP_MAGIC)
-_RECORD_PREFIX = struct.Struct('<BQ')   # opcode, length of what follows
-# Footer record: opcode, length, summary start, summary offset start, summary CRC.
-_FOOTER = struct.Struct('<BQQQI')
-# Chunk fields before the compression name: message start and end time,
-# uncompressed size, uncompressed CRC, length of the compression name.
-_CHUNK_FIELDS = struct.Struct('<QQQII')
+_RECORD_PREFIX = struct.Struct('<BQ')    # opcode, length of what follows
+_FOOTER = struct.Struct('<BQQQI')        # opcode, length, summary (offset) start, summary CRC
+_CHUNK_FIELDS = struct.Struct('<QQQII')  # start and end time, size, CRC, compression name length
 _MESSAGE_FIELDS = struct.Struct('<HIQQ')       # channel id, sequence, log and publish time
 _MESSAGE_INDEX_FIELDS = struct.Struct('<HI')   # channel id, length of the entries
 _MESSAGE_INDEX_ENTRY = 16                      # log time, offset
-# Chunks are decompressed in pieces of at most this size, checked against the
-# size the chunk states: memory never exceeds what the data holds.
-_DECOMPRESS_PIECE = 1 << 24
+_DECOMPRESS_PIECE = 1 << 24   # bytes asked of a decompressor at a time
 _SUMMARY_RECORDS = {Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channel,
                     Opcode.CHUNK_INDEX: ChunkIndex, Opcode.STATISTICS: Statistics}
 _OPCODES = frozenset(Opcode)
-# Records that belong in the summary section only.
 _SUMMARY_ONLY = (Opcode.CHUNK_INDEX, Opcode.ATTACHMENT_INDEX, Opcode.METADATA_INDEX,
                  Opcode.STATISTICS, Opcode.SUMMARY_OFFSET)
 _LOSSES_SHOWN = 3   # places named in the loss note
@@ -72,22 +52,8 @@ _HEADER_BYTES = np.arange(MESSAGE_HEADER.itemsize)
 _ZSTD_MAGIC = np.frombuffer(ZSTD_MAGIC, np.uint8)
 
 
-def _described(error):
-    """``'Type: message'`` of an exception (some mcap errors have an empty repr)."""
-    text = str(error)
-    return f'{type(error).__name__}: {text}' if text else type(error).__name__
-
-
 def checked_topics(topics: Iterable[str], available: Collection[str], path: str) -> List[str]:
-    """
-    Return ``topics`` as a list, each checked to be one of ``available`` (the topics of a bag).
-
-    Raises
-    ------
-    BagError
-        Naming the missing topics, the bag ``path`` and the topics it has.
-
-    """
+    """Return ``topics`` as a list; BagError naming those not in ``available`` (bag ``path``)."""
     topics = list(topics)
     missing = [topic for topic in topics if topic not in available]
     if missing:
@@ -96,13 +62,22 @@ def checked_topics(topics: Iterable[str], available: Collection[str], path: str)
     return topics
 
 
+def add_topic(topic_metadata: Dict[str, TopicMetadata], message_counts: Dict[str, int],
+              topic: str, metadata: TopicMetadata, count: int, path: str) -> None:
+    """Add a topic's metadata and ``count`` messages; BagError if it already has another type."""
+    known = topic_metadata.setdefault(topic, metadata)
+    if known.type_name != metadata.type_name:
+        raise BagError(f'topic {topic} in {path} has two types: '
+                       f'{known.type_name} and {metadata.type_name}')
+    message_counts[topic] = message_counts.get(topic, 0) + count
+
+
 class _Damage(Exception):
     """A part of an MCAP file that cannot be read: what is wrong with it, at which offset."""
 
     def __init__(self, offset: int, what: str) -> None:
         super().__init__(offset, what)
-        self.offset = offset
-        self.what = what
+        self.offset, self.what = offset, what
 
     def __str__(self) -> str:
         return f'{self.what} at offset {self.offset}'
@@ -120,16 +95,12 @@ class _RecordStream(ReadDataStream):
 
 def _parsed(record_class, body, offset):
     """Parse the body of one record with the mcap library; _Damage if it does not parse."""
-    stream = _RecordStream(io.BytesIO(body))
     try:
-        if record_class is Message:
-            if len(body) < MESSAGE_FIELDS:
-                raise EndOfFile()
-            return Message.read(stream, len(body))
-        return record_class.read(stream)
+        return record_class.read(_RecordStream(io.BytesIO(body)))
     except (McapError, struct.error, UnicodeDecodeError) as error:
+        described = f'{type(error).__name__}: {error}' if str(error) else type(error).__name__
         raise _Damage(offset, f'{record_class.__name__} record that does not parse '
-                              f'({_described(error)})') from None
+                              f'({described})') from None
 
 
 class _File:
@@ -170,12 +141,7 @@ class _File:
 
 
 def _bounded(read, size, offset):
-    """
-    Join the pieces ``read(max_length)`` returns until it returns none: at most ``size`` bytes.
-
-    A decompressor that gives more than the ``size`` its chunk states is damage: it is
-    never asked for more than one byte past it.
-    """
+    """Join what ``read(max_length)`` returns; _Damage once it exceeds the chunk's ``size``."""
     pieces, total = [], 0
     while True:
         piece = read(min(_DECOMPRESS_PIECE, size + 1 - total))
@@ -190,7 +156,7 @@ def _bounded(read, size, offset):
 
 
 def _unzstd(stored, size, offset):
-    """Decompress a zstd chunk that says it holds ``size`` bytes, never holding more than that."""
+    """Decompress a zstd chunk stating ``size`` bytes, never holding more than that."""
     try:
         with zstandard.ZstdDecompressor().stream_reader(stored) as reader:
             return _bounded(reader.read, size, offset)
@@ -199,7 +165,7 @@ def _unzstd(stored, size, offset):
 
 
 def _unlz4(stored, size, offset):
-    """Decompress an lz4 chunk that says it holds ``size`` bytes, never holding more than that."""
+    """Decompress an lz4 chunk stating ``size`` bytes, never holding more than that."""
     import lz4.frame   # only for lz4 chunks
     decompressor = lz4.frame.LZ4FrameDecompressor()
     pending = [stored]   # the frame, given to the decompressor once
@@ -218,32 +184,16 @@ def _unlz4(stored, size, offset):
     return data
 
 
+#: ``decompressed(stored, size, offset)`` by chunk compression name.
+_DECOMPRESSED = {'zstd': _unzstd, 'lz4': _unlz4, '': lambda stored, size, offset: bytes(stored)}
+
+
 def chunk_data(body: Union[bytes, memoryview], offset: int = 0) -> tuple:
     """
-    Return the compression and the uncompressed records of a Chunk record.
+    Return the compression (``'zstd'``, ``'lz4'``, ``''``) and the records of a Chunk record.
 
-    Parameters
-    ----------
-    body : bytes or memoryview
-        The record after its opcode and length.
-    offset : int
-        Where the record is in its file (for the error).
-
-    Returns
-    -------
-    compression : str
-        ``'zstd'``, ``'lz4'`` or ``''``.
-    data : bytes
-        The chunk's records, decompressed and checked against the chunk's CRC
-        (unless it has none: 0).
-
-    Raises
-    ------
-    _Damage
-        If a length runs past the record, the chunk does not decompress to the
-        size it states, or fails its CRC. Memory never exceeds what the data
-        really decompresses to, whatever the lengths say.
-
+    ``body``: the record after opcode and length. _Damage if a length runs past the record, it does
+    not decompress to the size it states, or fails its CRC; memory never exceeds the real data.
     """
     if len(body) < _CHUNK_FIELDS.size:
         raise _Damage(offset, f'chunk of {len(body)} bytes, shorter than its fixed fields')
@@ -258,15 +208,10 @@ def chunk_data(body: Union[bytes, memoryview], offset: int = 0) -> tuple:
     if records_length > len(body) - position:
         raise _Damage(offset, f'chunk whose records length ({records_length}) runs past the '
                               'chunk')
-    stored = body[position:position + records_length]
-    if compression == b'zstd':
-        data = _unzstd(stored, size, offset)
-    elif compression == b'lz4':
-        data = _unlz4(stored, size, offset)
-    elif compression == b'':
-        data = bytes(stored)
-    else:
+    decompressed = _DECOMPRESSED.get(compression.decode('latin-1'))
+    if decompressed is None:
         raise _Damage(offset, f'chunk of unknown compression {compression[:16]!r}')
+    data = decompressed(body[position:position + records_length], size, offset)
     if crc != 0 and zlib.crc32(data) != crc:
         raise _Damage(offset, f'chunk that fails its CRC (stored {crc:#010x}, computed '
                               f'{zlib.crc32(data):#010x})')
@@ -277,50 +222,41 @@ def chunk_data(body: Union[bytes, memoryview], offset: int = 0) -> tuple:
 
 
 def _chunk_data_by_index(body, index):
-    """
-    Return the records of a chunk whose own lengths are damaged, by its chunk index's.
-
-    Only where the chunk's CRC vouches for the result; None otherwise.
-    """
+    """Return the records of a chunk with damaged lengths, by its index's, if its CRC vouches."""
     crc = _CHUNK_FIELDS.unpack_from(body)[3] if len(body) >= _CHUNK_FIELDS.size else 0
     start = _CHUNK_FIELDS.size + len(index.compression.encode()) + 8
     stored = body[start:start + index.compressed_size]
     if crc == 0 or len(stored) != index.compressed_size:
         return None
     try:
-        data = {'zstd': _unzstd, 'lz4': _unlz4}.get(
-            index.compression, lambda stored, *_: bytes(stored))(
-                stored, index.uncompressed_size, index.chunk_start_offset)
+        data = _DECOMPRESSED.get(index.compression, _DECOMPRESSED[''])(
+            stored, index.uncompressed_size, index.chunk_start_offset)
     except _Damage:
         return None
     return data if zlib.crc32(data) == crc else None
 
 
 class ChunkRecords(NamedTuple):
-    """The records of an uncompressed chunk, as :func:`chunk_records` finds them."""
+    """
+    The records of an uncompressed chunk, as :func:`chunk_records` finds them.
 
-    #: One :data:`~rotation_node.bag.mcap_layout.MESSAGE_HEADER` per Message record.
+    ``headers``: a ``MESSAGE_HEADER`` per Message record; ``starts``: where their data starts
+    (``headers['length'] - 22`` bytes); ``definitions``: ``(position, opcode, length)`` of the
+    Schema and Channel records; ``damage``: what stopped the walk early, or None.
+    """
+
     headers: np.ndarray
-    #: Where each message's data starts (int64); it is ``headers['length'] - 22`` bytes long.
     starts: np.ndarray
-    #: ``(position, opcode, length)`` of each Schema and Channel record.
     definitions: List[Tuple[int, int, int]]
-    #: What stopped the walk before the end of the chunk (a record cut short,
-    #: zeroed bytes), None if every record was read.
     damage: Optional[str]
 
 
 def chunk_records(data: bytes) -> ChunkRecords:
     """
-    Find the records of an uncompressed chunk (``chunk_data``), in file order.
+    Find the records of an uncompressed chunk in one walk, the Message records' fields as arrays.
 
-    The records are walked once; the Message records' fixed fields are read
-    for all of them at once, without a record object per message (which is
-    where the mcap library's ``breakup_chunk`` spends its time). Unknown
-    records are skipped. The walk stops at the first record that cannot be
-    one (opcode 0, as zeroed bytes read; a length past the end of the chunk;
-    a Message record shorter than its fixed fields): the records before it
-    are returned, and ``damage`` says what stopped it.
+    The walk stops at the first record that cannot be one (opcode 0, a length past the end, a
+    Message record shorter than its fixed fields); ``damage`` says what stopped it.
     """
     offsets: List[int] = []
     definitions: List[Tuple[int, int, int]] = []
@@ -362,8 +298,7 @@ class _Loss:
     offset: Optional[int]    # of the chunk or record; None: not in any chunk the index lists
     what: str
     counts: Optional[Dict[int, int]]   # {channel id: messages lost}; None if unknown
-    #: Only fewer messages than the message index that follows the chunk lists
-    #: (which a misplaced chunk also gives): no loss if the statistics agree.
+    #: Only fewer messages than the chunk's message index (a misplaced chunk's too).
     index_only: bool = False
 
 
@@ -387,49 +322,36 @@ class _Summary:
     damage: Optional[_Damage] = None
 
 
-def _chunks_in_order(chunk_indexes):
+def _overlapping(chunks):
     """
-    Return the chunk indexes in log-time order, if their messages can be read chunk by chunk.
+    Whether chunks (sorted by start time, offset) must be merged to be read in the right order.
 
-    Messages are ordered by (log time, chunk offset, place in the chunk), as
-    the mcap library's ``iter_messages`` orders them. When no later chunk
-    holds a message that sorts before the end of an earlier one (a
-    recording's chunks never overlap in time), that order is each chunk's
-    messages sorted by log time, chunk after chunk, without a heap. None when
-    chunks overlap: then they are merged through a heap.
+    The mcap library's: log time, chunk offset, place in the chunk. Recordings' never overlap.
     """
-    chunks = sorted(chunk_indexes,
-                    key=lambda index: (index.message_start_time, index.chunk_start_offset))
     for position, chunk in enumerate(chunks):
         for later in chunks[position + 1:]:
             if later.message_start_time > chunk.message_end_time:
                 break
             if not (later.message_start_time == chunk.message_end_time
                     and later.chunk_start_offset > chunk.chunk_start_offset):
-                return None
-    return chunks
+                return True
+    return False
 
 
 class _LinearScan:
     """
-    A linear scan of an MCAP file's data section, record by record, as its writer wrote them.
+    A scan of an MCAP file's data section, yielding ``(channel, log time, publish time, data)``.
 
-    Iterating yields ``(channel, log time, publish time, data)`` for every
-    message whose channel is known, in file order, and collects the schemas
-    and channels it passes. A chunk that cannot be read (it fails its CRC, does
-    not decompress, its records do not parse) yields what could be read of it
-    and adds a :class:`_Loss`, counted by the message index records that
-    follow it; the scan goes on with the next record. A record whose length
-    runs past the end ends the scan: for an unfinished recording (``cut_ok``)
-    that is where the writer stopped; otherwise it is a loss too.
+    In file order, collecting schemas and channels. What cannot be read adds a :class:`_Loss`,
+    counted by the message indexes after it; a record running past ``end`` ends the scan (where the
+    writer stopped if ``cut_ok``, else a loss too).
     """
 
     def __init__(self, file, end, cut_ok, summary=None):
         self._file = file
         self._end = end
         self._cut_ok = cut_ok
-        # A readable summary's schemas and channels are known from the start (a chunk
-        # moved before the one defining its channels is read too).
+        # A readable summary's channels are known before a chunk moved ahead uses them.
         known = summary is not None and summary.damage is None
         self.schemas: Dict[int, Schema] = dict(summary.schemas) if known else {}
         self.channels: Dict[int, Channel] = dict(summary.channels) if known else {}
@@ -473,18 +395,16 @@ class _LinearScan:
                   {channel_id: count})
             for channel_id, (offset, count) in sorted(self._orphans.items()))
 
-    def _define(self, record):
-        if isinstance(record, Schema):
-            self.schemas[record.id] = record
-        else:
-            self.channels[record.id] = record
+    def _define(self, opcode, body, offset):
+        """Keep a Schema or Channel record; _Damage if it does not parse."""
+        record = _parsed(Schema if opcode == Opcode.SCHEMA else Channel, body, offset)
+        (self.schemas if opcode == Opcode.SCHEMA else self.channels)[record.id] = record
 
     def _record(self, offset, opcode, length):
         body = self._file.read(offset + _RECORD_PREFIX.size, length, 'record')
         if opcode != Opcode.MESSAGE:
             try:
-                self._define(_parsed(Schema if opcode == Opcode.SCHEMA else Channel, body,
-                                     offset))
+                self._define(opcode, body, offset)
             except _Damage:   # its messages are on an unknown channel: lost, counted there
                 pass
             return
@@ -526,8 +446,7 @@ class _LinearScan:
         for position, opcode, record_length in records.definitions:
             start = position + _RECORD_PREFIX.size
             try:
-                self._define(_parsed(Schema if opcode == Opcode.SCHEMA else Channel,
-                                     data[start:start + record_length], offset))
+                self._define(opcode, data[start:start + record_length], offset)
             except _Damage as damage:
                 pending[2] = f'{damage.what} at {position} of the chunk'
         read = pending[1]
@@ -580,66 +499,19 @@ def _message_index_count(body, offset):
 
 class BagReader:
     """
-    Read one MCAP file (``rotation_node.bag.reading.reader`` reads every other kind of bag).
+    Read one MCAP file: every valid layout, unfinished recordings, damage skipped and noted.
 
-    Every valid MCAP file is read: chunked (zstd, lz4 or uncompressed chunks)
-    or not, with or without a summary, statistics, message indexes, chunk
-    indexes, summary offsets, and with Schema and Channel records repeated in
-    the summary or only in the data section. A file whose summary lists its
-    channels and chunks (as rosbag2 and the mcap writers write by default) is
-    read chunk by chunk in log-time order, through that index. Any other file
-    is read by a linear scan, in the order it was written (sorted by log time
-    in memory if that is not log-time order); so is an unfinished recording
-    (no summary and no footer, as a writer killed mid-recording leaves it), up
-    to its last complete record (unless ``strict``). Channels of any schema and
-    encoding are listed (bags of other recorders); only decoding a message
-    needs a ROS 2 type.
-
-    Damage never stops reading nor goes unsaid: a chunk that fails its CRC or
-    does not decompress, records that do not parse, fewer messages than the
-    file's message indexes or statistics count are skipped and said on one
-    line in ``notes`` (how many messages of which topics, at which offsets),
-    once a linear scan has opened the file or once ``messages`` has read an
-    indexed one; ``strict`` makes it an error. No length field is trusted
-    beyond the end of the file or its record: memory stays bounded.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-    strict : bool, optional
-        Refuse an unfinished recording or a damaged file instead of reading
-        what it holds.
-
-    Attributes
-    ----------
-    path : str
-    topics : dict
-        ``{topic: type name as stored}``, normally ``'pkg/msg/Type'``.
-    topic_metadata : dict
-        ``{topic: TopicMetadata}`` as stored (schema text, QoS YAML, hash).
-    message_counts : dict
-        ``{topic: number of messages}``: as the file's statistics or message
-        indexes count them, or as many as a linear scan read.
-    compression : str
-        The chunk compression: ``'zstd'``, ``'lz4'`` or ``'none'``.
-    recovered : int or None
-        For an unfinished recording, the number of messages recovered; None
-        for a complete file.
-    notes : list of str
-        The line saying what could not be read, if anything.
-
-    Raises
-    ------
-    BagError
-        If the file does not exist, is empty, is not MCAP, or is an unfinished
-        recording or damaged and ``strict`` is set.
-
+    A file whose summary indexes it is read chunk by chunk in log-time order; any other by a linear
+    scan in file order (sorted in memory if that is not log-time order), an unfinished recording up
+    to its last complete record. What cannot be read is one line in ``notes`` (after the scan, or
+    once ``messages`` has read an indexed file); ``strict`` makes it, and an unfinished recording,
+    a BagError. ``message_counts``: the file's own, or what a scan read; ``recovered``: the
+    messages of an unfinished recording, else None.
     """
 
     def __init__(self, path: StrPath, *, strict: bool = False) -> None:
         self.path = os.fspath(path)
         self.recovered: Optional[int] = None
-        self.compression = 'none'
         self.notes: List[str] = []
         self._strict = strict
         try:
@@ -655,14 +527,16 @@ class BagReader:
                 raise BagError(f'{self.path} is not a valid MCAP file: invalid magic {magic!r}')
             summary = self._summary()
             if summary is not None and self._indexable(summary):
-                self._open_indexed(summary)
+                self._summary_section = summary
+                self._scan_end: Optional[int] = None
+                self.compression = compression_name({index.compression
+                                                     for index in summary.chunk_indexes})
+                self._set_topics(summary.channels.values(), summary.schemas, self._counted)
             else:
                 self._open_scan(summary)
         except BaseException:
             self._stream.close()
             raise
-
-    # Opening
 
     def _summary(self):
         """Return the summary section, None if the file has no footer (an unfinished recording)."""
@@ -692,14 +566,14 @@ class BagReader:
                     continue
                 record = _parsed(record_class, self._file.read(
                     offset + _RECORD_PREFIX.size, length, 'record'), offset)
-                if isinstance(record, Schema):
-                    summary.schemas[record.id] = record
-                elif isinstance(record, Channel):
-                    summary.channels[record.id] = record
-                elif isinstance(record, ChunkIndex):
+                if record_class is ChunkIndex:
                     summary.chunk_indexes.append(record)
-                else:
+                elif record_class is Statistics:
                     summary.statistics = record
+                elif record_class is Schema:
+                    summary.schemas[record.id] = record
+                else:
+                    summary.channels[record.id] = record
         except _Damage as damage:
             return _Summary(summary_start, damage=damage)
         return summary
@@ -708,9 +582,8 @@ class BagReader:
         """
         Whether the summary indexes the whole file: read it through the index, not a scan.
 
-        That takes chunk indexes, each pointing into the data section, the
-        message counts (statistics or message indexes) and a Channel record
-        (and its Schema) for every channel they count.
+        Chunk indexes pointing at the chunks, counts (statistics or message indexes), and a Channel
+        record (and Schema) for every channel counted.
         """
         if summary.damage is not None or not summary.chunk_indexes:
             return False
@@ -734,10 +607,9 @@ class BagReader:
             if counted is None:
                 return False
         else:
-            totals: Dict[int, int] = {}
+            totals: Counter = Counter()
             for counts in self._indexed.values():
-                for channel_id, count in counts.items():
-                    totals[channel_id] = totals.get(channel_id, 0) + count
+                totals.update(counts)
             if counted is not None and ({c: n for c, n in counted.items() if n}
                                         != {c: n for c, n in totals.items() if n}):
                 return False   # messages outside the indexed chunks
@@ -748,13 +620,7 @@ class BagReader:
                    for channel_id in counted)
 
     def _moved(self, index, end):
-        """
-        Whether a chunk index points at another whole record than its chunk.
-
-        Records were moved: a scan finds them. A chunk damaged in place (zeroed
-        bytes, a length field that runs past the data section) is read
-        through the index, which skips it.
-        """
+        """Whether a chunk index points at another whole record (moved: a scan; else the index)."""
         opcode, length = _RECORD_PREFIX.unpack(self._file.read(
             index.chunk_start_offset, _RECORD_PREFIX.size, 'chunk'))
         return (opcode in _OPCODES
@@ -779,33 +645,25 @@ class BagReader:
             return None
         return counts if counts.keys() == offsets.keys() else None
 
-    def _open_indexed(self, summary):
-        self._summary_section = summary
-        self._scan_end: Optional[int] = None
-        self.compression = _compression_name({index.compression
-                                              for index in summary.chunk_indexes})
-        self._set_topics(summary.channels.values(), summary.schemas, self._counted)
-
     def _open_scan(self, summary):
         """Index a file by reading it once; decide how much to recover, say what is lost."""
         unfinished = summary is None
         end = self._file.size if unfinished else summary.end
         self._scan_summary = summary
         scan = _LinearScan(self._file, end, cut_ok=unfinished, summary=summary)
-        counts: Dict[int, int] = {}
-        total, previous, self._scan_ordered = 0, -1, True
+        counts: Counter = Counter()
+        previous, self._scan_ordered = -1, True
         for channel, log_time, _, _ in scan:
-            counts[channel.id] = counts.get(channel.id, 0) + 1
-            total += 1
+            counts[channel.id] += 1
             self._scan_ordered = self._scan_ordered and log_time >= previous
             previous = log_time
         if unfinished:
             if self._strict:
-                raise BagError(f'{self.path}: unfinished recording (no MCAP summary or '
-                               f'footer), {total} messages recoverable; refused (--strict)')
-            self.recovered = total
+                raise BagError(f'{self.path}: unfinished recording (no MCAP summary or footer), '
+                               f'{sum(counts.values())} messages recoverable; refused (--strict)')
+            self.recovered = sum(counts.values())
         self._scan_end = end
-        self.compression = _compression_name(scan.compressions)
+        self.compression = compression_name(scan.compressions)
         read = dict(counts)
         self._channel_topics: Dict[int, str] = {
             channel.id: channel.topic for channel in scan.channels.values()}
@@ -817,26 +675,21 @@ class BagReader:
         self._report(scan.losses, read, counted, None)
         if not unfinished:   # counted as the file holds them, as through an index
             for loss in scan.losses:
-                for channel_id, count in (loss.counts or {}).items():
-                    counts[channel_id] = counts.get(channel_id, 0) + count
+                counts.update(loss.counts or {})
         self._set_topics(scan.channels.values(), scan.schemas, counts)
 
     def _report(self, losses, read, counted, wanted):
         """
         Say what could not be read, on one line in ``notes`` (a BagError with ``strict``).
 
-        ``losses`` are the chunks and records that could not be read; ``read``
-        is ``{channel id: messages read}``; ``counted`` what the file's
-        statistics or indexes count (None if they do not); ``wanted`` the
-        channels read (None: all). Messages counted but neither read nor in a
-        loss are lost outside any chunk the file indexes.
+        ``read``, ``counted`` (None: unknown): ``{channel id: messages}``; ``wanted``: None: all.
+        Messages counted but neither read nor in a loss are lost outside the chunks indexed.
         """
         losses = list(losses)
         if counted is not None:
-            known: Dict[int, int] = {}
+            known: Counter = Counter()
             for loss in losses:
-                for channel_id, count in (loss.counts or {}).items():
-                    known[channel_id] = known.get(channel_id, 0) + count
+                known.update(loss.counts or {})
             missing = {channel_id: count - read.get(channel_id, 0) - known.get(channel_id, 0)
                        for channel_id, count in counted.items()
                        if wanted is None or channel_id in wanted}
@@ -869,15 +722,11 @@ class BagReader:
         self._channels: Dict[int, Channel] = {}
         for channel in channels:
             metadata = self._topic_metadata(channel, schemas.get(channel.schema_id))
-            known = self.topic_metadata.setdefault(channel.topic, metadata)
-            if known.type_name != metadata.type_name:
-                raise BagError(f'topic {channel.topic} in {self.path} has two types: '
-                               f'{known.type_name} and {metadata.type_name}')
+            add_topic(self.topic_metadata, self.message_counts, channel.topic, metadata,
+                      counts.get(channel.id, 0), self.path)
             self._type_names[channel.id] = metadata.type_name
             self._channel_topics[channel.id] = channel.topic
             self._channels[channel.id] = channel
-            self.message_counts[channel.topic] = (
-                self.message_counts.get(channel.topic, 0) + counts.get(channel.id, 0))
         self.topics = {topic: m.type_name for topic, m in self.topic_metadata.items()}
 
     def _topic_metadata(self, channel, schema):
@@ -894,34 +743,13 @@ class BagReader:
             type_hash=channel.metadata.get('topic_type_hash', ''),
             serialization_format=channel.message_encoding)
 
-    # Reading
-
     def messages(self, topics: Optional[Iterable[str]] = None) -> Iterator[BagMessage]:
         """
-        Iterate over the messages in log-time order (ties in file order).
+        Iterate over the messages of ``topics`` (default all) in log-time order (ties: file order).
 
-        A file read by a linear scan is read in the order it was written,
-        which is log-time order for a recorder; if it is not, its messages are
-        sorted in memory first. Messages compressed by rosbag2
-        (``--compression-mode message``) are decompressed. What cannot be read
-        is skipped and said in ``notes`` once the last message is read.
-
-        Parameters
-        ----------
-        topics : iterable of str, optional
-            Only these topics; all by default.
-
-        Yields
-        ------
-        BagMessage
-
-        Raises
-        ------
-        BagError
-            If a requested topic is not in the bag (raised at once), or a part
-            of the file cannot be read and ``strict`` is set (raised when it is
-            reached).
-
+        rosbag2's message compression is undone. What cannot be read is skipped and said in
+        ``notes`` at the end; BagError at once for a topic not in the bag, with ``strict`` at
+        damage.
         """
         if topics is not None:
             topics = checked_topics(topics, self.topics, self.path)
@@ -947,20 +775,18 @@ class BagReader:
         losses: List[_Loss] = []
         read: Dict[int, int] = {}
         wanted_ids = np.array(sorted(wanted), np.uint16)
-        chunk_indexes = self._summary_section.chunk_indexes
-        chunks = _chunks_in_order(chunk_indexes)
-        if chunks is None:
-            yield from self._merged(chunk_indexes, wanted_ids, losses, read)
+        chunks = sorted(self._summary_section.chunk_indexes,
+                        key=lambda index: (index.message_start_time, index.chunk_start_offset))
+        if _overlapping(chunks):
+            yield from self._merged(chunks, wanted_ids, losses, read)
         else:
             for index in chunks:
                 yield from self._chunk_messages(index, wanted_ids, losses, read)
         self._report(losses, read, {channel_id: count for channel_id, count
                                     in self._counted.items() if channel_id in wanted}, wanted)
 
-    def _merged(self, chunk_indexes, wanted_ids, losses, read):
+    def _merged(self, chunks, wanted_ids, losses, read):
         """Merge overlapping chunks by (log time, chunk offset, place), loading them as needed."""
-        chunks = sorted(chunk_indexes,
-                        key=lambda index: (index.message_start_time, index.chunk_start_offset))
         heap: List[tuple] = []
         loaded = 0
         while True:
@@ -1022,7 +848,7 @@ class BagReader:
                             map(self._type_names.__getitem__, channel_ids),
                             map(data.__getitem__, map(slice, starts.tolist(), ends.tolist())),
                             headers['log_time'].tolist(), headers['publish_time'].tolist()))
-        # Messages that rosbag2 compressed (--compression-mode message) are decompressed.
+        # rosbag2's message compression
         long_enough = np.nonzero(ends - starts >= _ZSTD_MAGIC.size)[0]
         first_bytes = np.frombuffer(data, np.uint8)[
             starts[long_enough, None] + np.arange(_ZSTD_MAGIC.size)]
@@ -1040,7 +866,6 @@ class BagReader:
 
     def _scanned_messages(self, wanted):
         """Return the messages the opening scan read, no more (the file may still grow)."""
-        assert self._scan_end is not None   # set by the opening scan
         scan = _LinearScan(self._file, self._scan_end, cut_ok=self.recovered is not None,
                            summary=self._scan_summary)
         for channel, log_time, publish_time, data in scan:
@@ -1079,6 +904,6 @@ def _loss_summary(losses, topics, wanted):
             + ': ' + '; '.join(places))
 
 
-def _compression_name(compressions):
-    """Return the chunk compression of a file: ``'zstd'``, ``'lz4'`` or ``'none'``."""
+def compression_name(compressions: Collection[str]) -> str:
+    """Return the one name for chunks compressed as ``compressions``: zstd, else lz4, else none."""
     return next((name for name in ('zstd', 'lz4') if name in compressions), 'none')

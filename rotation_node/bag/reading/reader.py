@@ -1,34 +1,10 @@
 """
-Read every bag a ROS user has, as one stream of ROS 2 messages (``open_bag``).
+Every input bag as one stream of ROS 2 messages (:func:`open_bag`; the formats: docs/bags.md).
 
-What ``rotation_bag convert``, ``play`` and ``plot`` accept as input:
-
-- a rosbag2 directory (``metadata.yaml`` and the storage files it lists, as
-  ``ros2 bag record`` writes it), or any single storage file, inside or
-  outside one;
-- storage ``mcap`` (read with the mcap library, chunk by chunk, the CDR bytes
-  passed on unchanged: :class:`rotation_node.bag.reading.mcap_reader.BagReader`) and
-  ``sqlite3`` (``.db3``, read with ``apsw`` as the ``rosbags`` package reads it:
-  :mod:`rotation_node.bag.reading.rosbag2_sqlite3`);
-- split bags (several storage files): read as one stream, merged in log-time
-  order (ties in file order), so that one pipeline per topic runs across the
-  splits and gives what the same messages in one file give;
-- rosbag2's compression: ``file`` (``bag_0.mcap.zstd``, decompressed to a
-  temporary file that closing removes), ``message`` (each message
-  decompressed as it is read) and MCAP chunk compression (zstd, lz4);
-- ROS 1 bags (format 2.0), converted message by message to the ROS 2 type of
-  the same name (:mod:`rotation_node.bag.reading.ros1`);
-- unfinished recordings (an MCAP file without summary and footer, a rosbag2
-  directory without ``metadata.yaml``): what a linear scan recovers, with a
-  note, or an error with ``strict``.
-
-Input files are recognised by their content (their first bytes), not their
-names. Anything else is refused with one line naming what the file is
-(:func:`open_bag`). Topics whose names are not valid in ROS 2 are renamed
-(:mod:`rotation_node.bag.reading.topic_names`); topics whose type or schema cannot
-be decoded (encoding ``unknown``, a short type name, another serialization)
-are listed and read as stored, so that they can be copied unchanged: only
-decoding their messages fails.
+Inputs are recognised by their first bytes, not their names. The storage files of a split bag
+are merged in log-time order (ties in file order), so that one pipeline per topic runs across
+the splits. Topics whose names are not valid in ROS 2 are renamed (``topic_names``); topics
+that cannot be decoded are listed and read as stored. The input is only ever read.
 """
 import contextlib
 import dataclasses
@@ -36,44 +12,39 @@ import heapq
 import operator
 import os
 import re
-from typing import Callable, Dict, Iterable, Iterator, List, Optional, Union
+from typing import Callable, Dict, Iterable, Iterator, List, Optional, Tuple, Union
 
 from rotation_node.bag import metadata_yaml
+from rotation_node.bag.mcap_layout import MCAP_MAGIC
 from rotation_node.bag.reading.compression import (
     decompress_file, LZ4_MAGIC, stored_name, ZSTD_MAGIC, zstd_prefix, ZstdError)
-from rotation_node.bag.reading.mcap_reader import BagReader, checked_topics
+from rotation_node.bag.reading.mcap_reader import (
+    add_topic, BagReader, checked_topics, compression_name)
 from rotation_node.bag.reading.topic_names import topic_renames
 from rotation_node.bag.records import BagMessage, TopicMetadata
 from rotation_node.errors import BagError
 
 METADATA_FILE = 'metadata.yaml'
-#: rosbag2 storage plugins this package reads.
 STORAGE_PLUGINS = ('mcap', 'sqlite3')
-_MCAP_MAGIC = b'\x89MCAP0\r\n'
 _SQLITE_MAGIC = b'SQLite format 3\x00'
 _ROS1_MAGIC = re.compile(rb'#ROSBAG V(\d+\.\d+)\n')
 _SNIFF_SIZE = 64
 _STORAGE_SUFFIXES = ('.mcap', '.db3', '.mcap.zstd', '.db3.zstd')
+_KINDS = ((LZ4_MAGIC, 'lz4-compressed file (rosbag2 compresses files with zstd)'),
+          (b'\x1f\x8b', 'gzip-compressed file'), (b'BZh', 'bzip2-compressed file'),
+          (b'PK\x03\x04', 'zip archive'))
 
 
 def _file_kind(prefix: bytes) -> str:
     """Say what a file that is not a bag is, from its first bytes (for the error line)."""
-    if prefix.startswith(LZ4_MAGIC):
-        return 'lz4-compressed file (rosbag2 compresses files with zstd)'
-    if prefix.startswith(b'\x1f\x8b'):
-        return 'gzip-compressed file'
-    if prefix.startswith(b'BZh'):
-        return 'bzip2-compressed file'
-    if prefix.startswith(b'PK\x03\x04'):
-        return 'zip archive'
+    for magic, kind in _KINDS:
+        if prefix.startswith(magic):
+            return kind
     try:
         text = prefix.decode('utf-8')
-    except UnicodeDecodeError:
-        # A multi-byte character cut at the end of the prefix is still text.
+    except UnicodeDecodeError:   # a multi-byte character cut at the end is still text
         text = prefix[:-3].decode('utf-8', 'ignore') if len(prefix) > 3 else ''
-        if not text:
-            return 'binary file of unknown format'
-    if all(c.isprintable() or c in '\t\r\n' for c in text):
+    if text and all(c.isprintable() or c in '\t\r\n' for c in text):
         return 'text file'
     return 'binary file of unknown format'
 
@@ -83,18 +54,8 @@ def _natural_key(name):
     return [int(part) if part.isdigit() else part for part in re.split(r'(\d+)', name)]
 
 
-@dataclasses.dataclass
-class _DirectoryLayout:
-    """What a rosbag2 directory's ``metadata.yaml`` (or its file names) say."""
-
-    files: List[str]
-    storage: str
-    compression_mode: str
-    note: Optional[str] = None
-
-
-def _directory_layout(path: str) -> _DirectoryLayout:
-    """Read the storage files, storage plugin and compression of a rosbag2 directory."""
+def _directory_layout(path: str) -> Tuple[List[str], str, str, Optional[str]]:
+    """Return a rosbag2 directory's storage files, storage plugin, compression mode and note."""
     metadata_path = os.path.join(path, METADATA_FILE)
     if not os.path.exists(metadata_path):
         files = sorted((name for name in os.listdir(path) if name.endswith(_STORAGE_SUFFIXES)),
@@ -102,8 +63,7 @@ def _directory_layout(path: str) -> _DirectoryLayout:
         if not files:
             raise BagError(f'{path}: directory without {METADATA_FILE} or storage files '
                            f'({", ".join("*" + s for s in _STORAGE_SUFFIXES)}), not a bag')
-        return _DirectoryLayout([os.path.join(path, name) for name in files], '', '',
-                                note=f'no {METADATA_FILE}')
+        return [os.path.join(path, name) for name in files], '', '', f'no {METADATA_FILE}'
     try:
         with open(metadata_path, encoding='utf-8') as stream:
             info = metadata_yaml.load(stream)['rosbag2_bagfile_information']
@@ -126,102 +86,54 @@ def _directory_layout(path: str) -> _DirectoryLayout:
     if missing:
         raise BagError(f'{path}: storage file {", ".join(missing)} listed in {METADATA_FILE} '
                        'is missing')
-    return _DirectoryLayout([os.path.join(path, name) for name in names], storage,
-                            '' if mode == 'none' else mode)
+    return ([os.path.join(path, name) for name in names], storage,
+            '' if mode == 'none' else mode, None)
 
 
 class InputBag:
     """
-    One input bag (a file, a rosbag2 directory, a ROS 1 bag) read as one stream.
+    One input bag (a file, a rosbag2 directory, a ROS 1 bag) read as one stream; closes it.
 
-    Made by :func:`open_bag`; a context manager.
-
-    Attributes
-    ----------
-    path : str
-    description : str
-        What was read, e.g. ``'rosbag2 directory (mcap, 3 files, zstd message
-        compression)'``.
-    topics : dict
-        ``{topic: type name}``; ROS 2 type names (``'pkg/msg/Type'``) except
-        for topics that cannot be decoded, whose name is kept as stored.
-    topic_metadata : dict
-        ``{topic: TopicMetadata}``: schema text and encoding, serialization
-        format, offered QoS profiles (YAML), type hash.
-    message_counts : dict
-        ``{topic: number of messages}``.
-    compression : str
-        The input's compression as MCAP chunk compression: ``'zstd'``,
-        ``'lz4'`` or ``'none'`` (rosbag2's file and message compression are
-        zstd; a ROS 1 bag's bz2 counts as zstd).
-    recovered : int or None
-        Messages recovered from an unfinished recording; None if complete.
-    renames : dict
-        ``{name in the bag: name used}`` for topic names not valid in ROS 2.
-    notes : list of str
-        One line for each thing the user should know: an unfinished
-        recording, a renamed topic, messages that could not be read (an MCAP
-        file read through its index says so once ``messages`` has read it
-        to the end).
-
+    Made by :func:`open_bag`; ``description`` says what it is (``'MCAP file (zstd chunks)'``).
+    ``topics``, ``topic_metadata`` and ``message_counts`` use the names of ``renames`` (``{name
+    in the bag: name used}``); ``compression`` is the input's as MCAP chunk compression
+    (rosbag2's and ROS 1's bz2 count as zstd); ``recovered``: the messages of an unfinished
+    recording, else None; ``notes``: one line for each thing the user should know (an MCAP
+    file read through its index adds what it could not read once read to the end).
     """
 
-    def __init__(self, path: str, description: str, sources: list, *,
+    def __init__(self, path: str, description: str, opener: '_Opener', *,
                  compression: Optional[str] = None, note: Optional[str] = None) -> None:
         self.path = path
         self.description = description
-        self._sources = sources
-        self.topic_metadata: Dict[str, TopicMetadata] = {}
-        self.message_counts: Dict[str, int] = {}
-        self._source_topics = []   # per source, its topics
+        self._opener = opener
+        sources = opener.sources
+        topic_metadata: Dict[str, TopicMetadata] = {}
+        message_counts: Dict[str, int] = {}
         for source in sources:
             for topic, metadata in source.topic_metadata.items():
-                known = self.topic_metadata.setdefault(topic, metadata)
-                if known.type_name != metadata.type_name:
-                    raise BagError(f'topic {topic} in {path} has two types: '
-                                   f'{known.type_name} and {metadata.type_name}')
-                self.message_counts[topic] = (self.message_counts.get(topic, 0)
-                                              + source.message_counts.get(topic, 0))
-            self._source_topics.append(set(source.topic_metadata))
-        self.renames = topic_renames(self.topic_metadata)
-        self._original = {self.renames.get(topic, topic): topic for topic in self.topic_metadata}
-        self.topic_metadata = {
-            self.renames.get(topic, topic): dataclasses.replace(
-                metadata, name=self.renames.get(topic, topic))
-            for topic, metadata in self.topic_metadata.items()}
-        self.message_counts = {self.renames.get(topic, topic): count
-                               for topic, count in self.message_counts.items()}
+                add_topic(topic_metadata, message_counts, topic, metadata,
+                          source.message_counts.get(topic, 0), path)
+        self._source_topics = [set(source.topic_metadata) for source in sources]
+        self.renames = topic_renames(topic_metadata)
+        self._original = {self.renames.get(topic, topic): topic for topic in topic_metadata}
+        self.topic_metadata = {new: dataclasses.replace(topic_metadata[old], name=new)
+                               for new, old in self._original.items()}
+        self.message_counts = {new: message_counts[old] for new, old in self._original.items()}
         self.topics = {topic: m.type_name for topic, m in self.topic_metadata.items()}
-        self.compression = compression or next(
-            (name for name in ('zstd', 'lz4') if any(s.compression == name for s in sources)),
-            'none')
+        self.compression = compression or compression_name({s.compression for s in sources})
         unfinished = note is not None or any(s.recovered is not None for s in sources)
         self.recovered = sum(self.message_counts.values()) if unfinished else None
         self.notes = []
         if self.recovered is not None:
             self.notes.append(f'{path}: unfinished recording, recovered {self.recovered} messages'
                               + (f' ({note})' if note else ''))
-        self.notes.extend(note for source in sources for note in getattr(source, 'notes', ()))
+        self.notes.extend(note for source in sources for note in source.notes)
         self.notes.extend(f'{path}: topic {original!r} is not a valid ROS 2 name; using {new}'
                           for original, new in sorted(self.renames.items()))
-        self._add_source_notes()
-
-    def _add_source_notes(self):
-        """Add the notes of the storage files (what an MCAP file could not read) not yet added."""
-        for source in self._sources:
-            self.notes.extend(note for note in getattr(source, 'notes', ())
-                              if note not in self.notes)
 
     def topic_name(self, name: str) -> str:
-        """
-        Return the name a topic has here: ``name`` itself, or its ROS 2 name if renamed.
-
-        Raises
-        ------
-        BagError
-            If the bag has no such topic (under either name).
-
-        """
+        """Return the name a topic (named here or in the bag) has here; BagError if none."""
         name, = checked_topics([self.renames.get(name, name)], self.topics, self.path)
         return name
 
@@ -235,12 +147,7 @@ class InputBag:
 
     @contextlib.contextmanager
     def reporting_new_notes(self, report: Optional[Callable[[str], None]]) -> Iterator[None]:
-        """
-        Pass to ``report`` the notes that reading adds within (what could not be read).
-
-        The notes are passed when the block completes, after the messages read in it;
-        none if it raises (the error is then the one line).
-        """
+        """Pass to ``report``, after the block, the notes added in it (none if it raises)."""
         noted = len(self.notes)
         yield
         if report is not None:
@@ -248,34 +155,25 @@ class InputBag:
                 report(note)
 
     def naming_this_bag(self, error: BagError) -> BagError:
-        """
-        Return ``error`` naming this bag: a message that cannot be decoded does not know it.
-
-        ``error`` itself if it names the bag (or one of its files) already,
-        else a BagError ``<path>: <error>``.
-        """
+        """Return ``error`` if it names this bag (or one of its files), else ``<path>: error``."""
         text = str(error)
         named = re.search(rf'(^|\s){re.escape(self.path)}(\W|$)', text) is not None
         return error if named else BagError(f'{self.path}: {text}')
 
     def messages(self, topics: Optional[Iterable[str]] = None) -> Iterator[BagMessage]:
         """
-        Iterate over the messages in log-time order, across all storage files.
+        Iterate over the messages in log-time order across all storage files, as CDR.
 
-        Ties keep the order of the files, then the order within a file; topic
-        names are the ones used here (``renames``); message data is CDR
-        (decompressed, converted from ROS 1), except for topics of another
-        serialization format, which are as stored.
-
-        ``topics`` (their names here or in the bag) selects topics, as for
-        :meth:`rotation_node.bag.reading.mcap_reader.BagReader.messages`, which also
-        says what is raised.
+        Ties keep the order of the files, then the order within a file. Topic names are the
+        ones used here; ``topics`` (named here or in the bag) selects topics, as
+        :meth:`~rotation_node.bag.reading.mcap_reader.BagReader.messages` does. Topics of
+        another serialization format are as stored.
         """
         wanted = (set(self._original) if topics is None
                   else {self.topic_name(topic) for topic in topics})
         originals = {self._original[topic] for topic in wanted}
         streams = [source.messages(sorted(originals & source_topics))
-                   for source, source_topics in zip(self._sources, self._source_topics)
+                   for source, source_topics in zip(self._opener.sources, self._source_topics)
                    if originals & source_topics]
         if len(streams) <= 1:
             merged = streams[0] if streams else iter(())
@@ -292,18 +190,12 @@ class InputBag:
     def _noted(self, records):
         """Yield ``records``; then add to ``notes`` what reading them found could not be read."""
         yield from records
-        self._add_source_notes()
+        for source in self._opener.sources:
+            self.notes.extend(note for note in source.notes if note not in self.notes)
 
     def close(self) -> None:
         """Close every storage file and remove decompressed temporary copies."""
-        for source in self._sources:
-            source.close()
-        self._sources = []
-        if self._tmpdir is not None:
-            self._tmpdir.cleanup()
-            self._tmpdir = None
-
-    _tmpdir = None
+        self._opener.close()
 
     def __enter__(self) -> 'InputBag':
         return self
@@ -330,14 +222,18 @@ class _Opener:
             raise BagError(f'cannot open bag {shown}: {error.strerror}') from None
         if not prefix:
             raise BagError(f'{shown}: empty file (0 bytes), not a bag')
-        if prefix.startswith(_MCAP_MAGIC):
+        if prefix.startswith(MCAP_MAGIC):
             return self._add(BagReader(path, strict=self.strict)), 'mcap'
         if prefix.startswith(_SQLITE_MAGIC):   # apsw, imported only for sqlite3
             from rotation_node.bag.reading.rosbag2_sqlite3 import open_sqlite3_file
             return self._add(open_sqlite3_file(path, shown=shown, strict=self.strict)), 'sqlite3'
         version = _ROS1_MAGIC.match(prefix)
         if version is not None:
-            return self._open_ros1(path, shown, version[1].decode()), 'ROS 1'
+            from rotation_node.bag.reading.ros1 import open_ros1_bag, SUPPORTED_VERSION
+            if version[1].decode() != SUPPORTED_VERSION:
+                raise BagError(f'{shown}: ROS 1 bag, version {version[1].decode()} '
+                               f'(supported: {SUPPORTED_VERSION})')
+            return self._add(open_ros1_bag(path)), 'ROS 1'
         if prefix.startswith(ZSTD_MAGIC) and not compressed:
             return self._open_zstd(path, shown)
         kind = _file_kind(prefix)
@@ -351,13 +247,6 @@ class _Opener:
         self.sources.append(source)
         return source
 
-    def _open_ros1(self, path, shown, version):
-        from rotation_node.bag.reading.ros1 import open_ros1_bag, SUPPORTED_VERSION
-        if version != SUPPORTED_VERSION:
-            raise BagError(f'{shown}: ROS 1 bag, version {version} (supported: '
-                           f'{SUPPORTED_VERSION})')
-        return self._add(open_ros1_bag(path))
-
     def _open_zstd(self, path, shown):
         """rosbag2's file compression: decompress to a temporary file, then open that."""
         try:
@@ -365,12 +254,12 @@ class _Opener:
                 inner = zstd_prefix(stream, _SNIFF_SIZE)
         except ZstdError as error:
             raise BagError(f'{shown}: damaged zstd file: {error}') from None
-        if not inner.startswith((_MCAP_MAGIC, _SQLITE_MAGIC)):
+        if not inner.startswith((MCAP_MAGIC, _SQLITE_MAGIC)):
             kind = 'nothing (empty)' if not inner else 'a ' + _file_kind(inner)
             raise BagError(f'{shown}: zstd-compressed file that does not hold a bag '
                            f'(it holds {kind})')
         if self.tmpdir is None:
-            import tempfile   # (and shutil): only for zstd-compressed files
+            import tempfile   # only for zstd-compressed files
             self.tmpdir = tempfile.TemporaryDirectory(prefix='rotation_bag.')
         target = os.path.join(self.tmpdir.name, f'{len(self.sources)}_{stored_name(path)}')
         try:
@@ -385,96 +274,60 @@ class _Opener:
         return source, storage
 
     def close(self):
+        """Close every storage file and remove the temporary directory; again does nothing."""
         for source in self.sources:
             source.close()
+        self.sources = []
         if self.tmpdir is not None:
             self.tmpdir.cleanup()
+            self.tmpdir = None
 
 
 def open_bag(path: Union[str, os.PathLike], *, strict: bool = False) -> InputBag:
     """
-    Open any bag for reading: a rosbag2 directory, a storage file, a ROS 1 bag.
+    Open any bag for reading: a rosbag2 directory, a storage file, a ROS 1 bag; only read.
 
-    Parameters
-    ----------
-    path : str or os.PathLike
-        A rosbag2 directory or a storage file (MCAP, sqlite3, ROS 1, zstd).
-    strict : bool, optional
-        Refuse an unfinished recording (``--strict``) instead of reading what
-        it holds.
-
-    Returns
-    -------
-    InputBag
-
-    Raises
-    ------
-    BagError
-        With one line naming what the input is when it cannot be read:
-        ``<path>: empty file (0 bytes)...``, ``<path>: text file, not a
-        bag...``, ``<path>: sqlite3 database without rosbag2 tables``,
-        ``<path>: ROS 1 bag, version 1.2 (supported: 2.0)``, ``<path>:
-        zstd-compressed file that does not hold a bag...``, ``<path>: rosbag2
-        storage plugin 'x' is not installed...``; or if it is damaged. The
-        input is only ever read.
-
+    ``strict`` refuses an unfinished recording (``--strict``) instead of reading what it holds.
+    BagError with one line naming what the input is if it cannot be read (``<path>: text file,
+    not a bag...``, ``<path>: ROS 1 bag, version 1.2 (supported: 2.0)``...; docs/bags.md lists
+    them), or if it is damaged.
     """
     path = os.fspath(path)
     opener = _Opener(strict)
+    directory = os.path.isdir(path)
     try:
-        if os.path.isdir(path):
-            layout = _directory_layout(path)
-            if layout.note and strict:
-                raise BagError(f'{path}: unfinished recording ({layout.note}); '
-                               'refused (--strict)')
-            storages = [opener.open_file(file)[1] for file in layout.files]
-            if layout.storage and any(s != layout.storage for s in storages):
-                raise BagError(f'{path}: {METADATA_FILE} names storage {layout.storage!r}, '
+        if directory:
+            files, storage, mode, note = _directory_layout(path)
+            if note and strict:
+                raise BagError(f'{path}: unfinished recording ({note}); refused (--strict)')
+            storages = [opener.open_file(file)[1] for file in files]
+            if storage and any(s != storage for s in storages):
+                raise BagError(f'{path}: {METADATA_FILE} names storage {storage!r}, '
                                f'but the files hold {", ".join(sorted(set(storages)))}')
-            storage = layout.storage or storages[0]
-            # Without metadata.yaml, the files say it.
-            mode = layout.compression_mode or (
-                'file' if any(_starts_with(file, ZSTD_MAGIC) for file in layout.files)
-                else _message_compression(opener.sources))
-            compression = 'zstd' if mode else None
-            details = [storage, f'{len(layout.files)} file{"s" if len(layout.files) != 1 else ""}']
-            if mode:
-                details.append(f'zstd {mode} compression')
-            details.extend(_chunk_compression(opener.sources))
-            description = f'rosbag2 directory ({", ".join(details)})'
-            bag = InputBag(path, description, opener.sources, compression=compression,
-                           note=layout.note)
+            count = len(files)
+            details = [storage or storages[0], f'{count} file{"s" if count != 1 else ""}']
         else:
             _, storage = opener.open_file(path)
-            compressed = os.path.isfile(path) and _starts_with(path, ZSTD_MAGIC)
-            mode = 'file' if compressed else _message_compression(opener.sources)
-            details = [f'zstd {mode} compression'] if mode else []
-            details.extend(_chunk_compression(opener.sources))
+            mode, note, details = '', None, []
+        if not mode:   # without metadata.yaml, the files say it
+            mode = ('file' if opener.tmpdir is not None else 'message' if any(
+                getattr(source, 'message_compression', None) for source in opener.sources)
+                else '')
+        if mode:
+            details.append(f'zstd {mode} compression')
+        # A ROS 1 bag says what it stores (bz2) apart from what its copy gets (zstd).
+        chunks = sorted({getattr(source, 'stored_compression', source.compression)
+                         for source in opener.sources} - {'none'})
+        if chunks:
+            details.append(f'{"/".join(chunks)} chunks')
+        if directory:
+            description = f'rosbag2 directory ({", ".join(details)})'
+        else:
             description = {'mcap': 'MCAP file', 'sqlite3': 'sqlite3 file',
                            'ROS 1': 'ROS 1 bag'}[storage] + (
                 f' ({", ".join(details)})' if details else '')
-            bag = InputBag(path, description, opener.sources, compression='zstd' if mode else None)
+        return InputBag(path, description, opener, compression='zstd' if mode else None,
+                        note=note)
     except BaseException:
         opener.close()
         raise
-    bag._tmpdir = opener.tmpdir
-    return bag
-
-
-def _chunk_compression(sources):
-    """``['zstd chunks']`` (or lz4, bz2...) if the storage files compress their chunks."""
-    # A ROS 1 bag says what it stores (bz2) apart from what its copy gets (zstd).
-    names = sorted({getattr(source, 'stored_compression', source.compression)
-                    for source in sources} - {'none'})
-    return [f'{"/".join(names)} chunks'] if names else []
-
-
-def _message_compression(sources):
-    """``'message'`` if a storage file's messages are compressed one by one, else ``''``."""
-    return 'message' if any(getattr(source, 'message_compression', None) for source in sources) \
-        else ''
-
-
-def _starts_with(path, magic):
-    with open(path, 'rb') as stream:
-        return stream.read(len(magic)) == magic

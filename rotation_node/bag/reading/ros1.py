@@ -1,44 +1,31 @@
 """
-ROS 1 bags (format version 2.0) read as ROS 2 messages.
+ROS 1 bags (format 2.0) read as ROS 2 CDR messages, as ``rosbags-convert`` converts them.
 
-The ``rosbags`` package's ROS 1 reader reads the bag (every chunk compression
-of ROS 1: none, bz2, lz4), one chunk at a time, a chunk's messages as one
-batch (:mod:`rotation_node.bag.reading.ros1_chunks`), with the message types
-the definitions stored in it give; each message is then converted, as
-``rosbags-convert`` converts a ROS 1 bag to ROS 2, to the ROS 2 type of the
-same name (``sensor_msgs/Imu`` -> ``sensor_msgs/msg/Imu``, ``tf/tfMessage``
--> ``tf2_msgs/msg/TFMessage``) and serialized as CDR: ``std_msgs/Header``
-loses its ``seq``, times keep their seconds and nanoseconds, everything else
-keeps its value (:class:`Ros1ToCdr`: a batch's messages of one type and
-layout at once). The ROS 2 type is the one installed here
-(:func:`ros2_typestore`); one not installed is rosbags' Jazzy type, and a
-type that ROS 2 (Jazzy) does not have keeps the bag's own definition. A
-latched topic is given the QoS rosbags gives it (reliable, transient local);
-the log time is the time the ROS 1 recorder received the message, also used
-as the publish time.
+Each message becomes the ROS 2 type of its name (installed, else rosbags' Jazzy type, else the
+bag's definition); :class:`Ros1ToCdr` converts a chunk's messages of one type and layout at
+once, byte for byte as rosbags does.
 """
 import contextlib
 import io
 import os
 from pathlib import Path
 import struct
-from typing import Any, Callable, Collection, Dict, List, Optional, Tuple, Union
+from typing import Any, Callable, Collection, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
-from rosbags.interfaces import Nodetype
+from rosbags.interfaces import Connection, MessageDefinitionFormat, Nodetype
 from rosbags.rosbag1 import ReaderError
 from rosbags.rosbag1.reader import decompressors as ros1_decompressors
 from rosbags.serde import SerdeError
 from rosbags.typesys import get_types_from_msg, get_typestore, Stores
 from rosbags.typesys.base import TypesysError
-from rotation_node.bag.reading.ros1_chunks import ChunkedAnyReader, MessageBatch
-from rotation_node.bag.reading.rosbags_input import RosbagsInput
+from rotation_node.bag.reading.ros1_chunks import ChunkedReader, MessageBatch
+from rotation_node.bag.reading.rosbags_input import is_installed, RosbagsInput
 from rotation_node.bag.records import BagMessage, TopicMetadata
 from rotation_node.errors import BagError
 from rotation_node.wire.message_types import message_definition
 from rotation_node.wire.qos_yaml import profiles_yaml
 
-#: The one ROS 1 bag format version there is a reader for.
 SUPPORTED_VERSION = '2.0'
 # What rosbags raises for a bag it cannot read or a message it cannot convert.
 _FORMAT_ERRORS = (ReaderError, SerdeError, TypesysError, struct.error)
@@ -52,81 +39,63 @@ LATCHED_QOS_YAML = profiles_yaml([{
     'liveliness_lease_duration': _INFINITE, 'avoid_ros_namespace_conventions': False}])
 
 
-def _installed(type_name):
-    """
-    Whether the definition of ``type_name`` is installed: the one the writer then writes.
-
-    (Not its Python class: importing a message package imports all its modules.)
-    """
-    try:
-        message_definition(type_name)
-    except BagError:
-        return False
-    return True
-
-
 def open_ros1_bag(path: Union[str, os.PathLike]) -> RosbagsInput:
-    """
-    Open a ROS 1 bag to read it as ROS 2 CDR messages.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        A ROS 1 bag, format version 2.0.
-
-    Returns
-    -------
-    rotation_node.bag.reading.rosbags_input.RosbagsInput
-        With ROS 2 type names, each message converted when it is read.
-
-    Raises
-    ------
-    BagError
-        If the bag cannot be read or its types cannot be converted.
-
-    """
+    """Open a ROS 1 bag (format 2.0) to read it as ROS 2 CDR messages; BagError if it cannot."""
     path = str(path)
-    reader = ChunkedAnyReader(Path(path))
+    reader = ChunkedReader(Path(path))
     try:
-        reader.open()
+        reader.open()   # closes the file if it fails
     except _FORMAT_ERRORS as error:
         raise BagError(f'{path}: cannot read ROS 1 bag: {error}') from None
     try:
-        compressions = _chunk_compressions(reader)
+        typestore = bag_typestore(reader.connections)
+        names = {decompress: name for name, decompress in ros1_decompressors.items()}
+        compressions = {names.get(chunk.decompressor, 'unknown')
+                        for chunk in reader.chunks.values()}
+        # lz4 stays lz4, bz2 (not in MCAP) becomes zstd.
+        compression = ('lz4' if 'lz4' in compressions
+                       else 'zstd' if 'bz2' in compressions else 'none')
         return Ros1Input(path, reader, _FORMAT_ERRORS + (ValueError, IndexError),
-                         _converted_topics(path, reader), _output_compression(compressions),
+                         _converted_topics(path, reader.connections, typestore), compression,
                          stored_compression='/'.join(sorted(compressions - {'none'})) or 'none')
-    except BaseException:
+    except BaseException as error:
         reader.close()
+        if isinstance(error, _FORMAT_ERRORS):   # bag_typestore's (the converters say theirs)
+            raise BagError(f'{path}: cannot read ROS 1 bag: {error}') from None
         raise
 
 
-class Ros1Input(RosbagsInput):
+def bag_typestore(connections: Sequence[Connection]) -> Any:
     """
-    A ROS 1 bag read as ROS 2 CDR messages, a chunk's batch of messages at a time.
+    Return a typestore of the connections' stored definitions, as rosbags' ``AnyReader`` builds it.
 
-    The messages of :meth:`ChunkedReader.message_batches
-    <rotation_node.bag.reading.ros1_chunks.ChunkedReader.message_batches>`,
-    converted in blocks where the type has a :class:`Ros1ToCdr` (and one by one
-    otherwise, where a message is converted by rosbags, or fails, as
-    ``RosbagsInput`` converts it).
+    TypesysError if a definition does not parse, ReaderError if a type's MD5 sum is not its
+    connection's.
     """
+    types: Dict[str, Any] = {}
+    digests: Dict[str, str] = {}
+    for connection in connections:
+        if connection.msgdef.format == MessageDefinitionFormat.MSG:
+            types.update(get_types_from_msg(connection.msgdef.data, connection.msgtype))
+        if connection.digest:
+            digests[connection.msgtype] = connection.digest
+    typestore = get_typestore(Stores.EMPTY)
+    typestore.register(types)
+    for type_name, digest in digests.items():
+        if (have := typestore.generate_msgdef(type_name)[1]) != digest:
+            raise ReaderError(f'Message type {type_name!r} hash mismatch {have} != {digest}')
+    return typestore
+
+
+class Ros1Input(RosbagsInput):
+    """A ROS 1 bag read a chunk's batch at a time, converted in blocks by a :class:`Ros1ToCdr`."""
 
     def _messages(self, connections):
-        reader = self._reader.readers[0]
         by_id = {connection.id: connection for connection in connections}
-        converters = {connection.id: self._to_cdr[connection.id] for connection in connections}
-        blocks = {id_: converter.block for id_, converter in converters.items()
-                  if isinstance(converter, Ros1ToCdr)}
+        blocks = {id_: converter.block for id_, converter in self._to_cdr.items()
+                  if id_ in by_id and isinstance(converter, Ros1ToCdr)}
         type_names = self.topics
-        batches = reader.message_batches(connections)
-        while True:
-            try:
-                batch = next(batches)
-            except StopIteration:
-                return
-            except self._errors as error:   # the reader names where
-                raise self.corrupt(error) from None
+        for batch in self._read(self._reader.message_batches(connections)):
             chunk, starts, lengths = batch.chunk, batch.starts, batch.lengths
             for k, (connection_id, time_ns, cdr) in enumerate(zip(
                     batch.connections.tolist(), batch.times.tolist(), _block_cdrs(batch, blocks))):
@@ -162,12 +131,9 @@ def _block_cdrs(batch: MessageBatch, blocks: Dict[int, Callable[..., list]]
 
 def ros2_typestore(type_names: Collection[str]) -> Any:
     """
-    Return a rosbags typestore of ROS 2 types with at least ``type_names`` ('pkg/msg/Type').
+    Return a typestore of ROS 2 types with at least ``type_names``, as ``rosbags-convert`` does.
 
-    The types from their definitions installed here (``message_definition``),
-    as the output's schemas are written, if every one is installed; else
-    rosbags' Jazzy types (as ``rosbags-convert`` converts). The first costs a
-    few milliseconds per type, the second a tenth of a second.
+    The installed definitions if all are (a few ms per type), else rosbags' Jazzy types (0.1 s).
     """
     store = get_typestore(Stores.EMPTY)
     try:
@@ -179,18 +145,11 @@ def ros2_typestore(type_names: Collection[str]) -> Any:
     return store
 
 
-def _ros2_type_name(ros1_type: str) -> str:
-    """Return the ROS 2 type a ROS 1 type is converted to (``tf/tfMessage`` is renamed)."""
-    return _RENAMED_TYPES.get(ros1_type, ros1_type)
-
-
 def same_wire_format(ros1: Any, ros2: Any, ros1_type: str, type_name: str) -> bool:
     """
-    Whether a ROS 1 type and a ROS 2 type have the same fields (the header's seq aside).
+    Whether a ROS 1 and a ROS 2 type have the same fields, the header's seq aside.
 
-    Field by field the same kinds and primitive types, nested types alike
-    (rosbags-convert's ``is_same_wireformat``): the ROS 1 data is then the
-    CDR data's values, packed. ``ros1``, ``ros2``: rosbags typestores.
+    As rosbags-convert's ``is_same_wireformat``: the ROS 1 data is then the CDR values, packed.
     """
     if ros1_type == 'std_msgs/msg/Header':
         return True
@@ -208,48 +167,39 @@ def same_wire_format(ros1: Any, ros2: Any, ros1_type: str, type_name: str) -> bo
     return True
 
 
-def _rosbags_converter(ros1: Any, ros2: Any, ros1_type: str, type_name: str
-                       ) -> Callable[[bytes], bytes]:
-    """Return rosbags-convert's conversion of a ROS 1 type's messages to the ROS 2 type, as CDR."""
+def _converter(ros1: Any, ros2: Any, ros1_type: str, type_name: str) -> Callable[[bytes], bytes]:
+    """Return the conversion of a ROS 1 type's messages to the ROS 2 type's CDR, as rosbags'."""
     if same_wire_format(ros1, ros2, ros1_type, type_name):   # without importing rosbags.convert
         def converted(data: bytes) -> bytes:
             return bytes(ros2.ros1_to_cdr(data, type_name))
 
-        return converted
+        return ros1_to_cdr_converter(ros2.fielddefs, type_name, converted) or converted
     from rosbags.convert.converter import generate_message_converter
     with contextlib.redirect_stdout(io.StringIO()):   # it prints its plans
         convert = generate_message_converter(ros1, ros2, ros1_type, type_name, {},
                                              src_is2=False, dst_is2=True)
-
-    def migrated(data: bytes) -> bytes:
-        return bytes(convert(data))
-
-    return migrated
+    return lambda data: bytes(convert(data))
 
 
-def _converted_topics(path, reader):
+def _converted_topics(path, connections, ros1):
     """Yield ``(connection, ROS 2 TopicMetadata, ROS 1 data -> CDR)`` of every connection."""
-    ros2 = ros2_typestore({_ros2_type_name(c.msgtype) for c in reader.connections})
+    ros2 = ros2_typestore({_RENAMED_TYPES.get(c.msgtype, c.msgtype) for c in connections})
     converters: Dict[str, Callable[[bytes], bytes]] = {}
-    for connection in reader.connections:
+    for connection in connections:
         ros1_type = connection.msgtype
-        type_name = _ros2_type_name(ros1_type)
+        type_name = _RENAMED_TYPES.get(ros1_type, ros1_type)
         try:
             if type_name not in ros2.fielddefs:   # as rosbags-convert: the bag's definition
                 types = get_types_from_msg(
-                    reader.typestore.generate_msgdef(ros1_type, ros_version=2)[0], type_name)
+                    ros1.generate_msgdef(ros1_type, ros_version=2)[0], type_name)
                 types.pop('std_msgs/msg/Header', None)
                 ros2.register(types)
             if ros1_type not in converters:
-                converter = _rosbags_converter(reader.typestore, ros2, ros1_type, type_name)
-                if same_wire_format(reader.typestore, ros2, ros1_type, type_name):
-                    converter = (ros1_to_cdr_converter(ros2.fielddefs, type_name, converter)
-                                 or converter)
-                converters[ros1_type] = converter
+                converters[ros1_type] = _converter(ros1, ros2, ros1_type, type_name)
         except _FORMAT_ERRORS + (KeyError,) as error:   # KeyError: a type left undefined
             raise BagError(f'{path}: cannot convert ROS 1 type {ros1_type} to ROS 2: '
                            f'{error}') from None
-        installed = _installed(type_name)
+        installed = is_installed(type_name)
         yield connection, TopicMetadata(
             name=connection.topic, type_name=type_name,
             offered_qos_profiles=(LATCHED_QOS_YAML if connection.ext.latching
@@ -270,12 +220,10 @@ _SKIP, _RUN, _STRING, _SEQUENCE = range(4)
 
 def _leaves(fielddefs, type_name, leaves):
     """
-    Append the leaves of ``type_name`` in wire order; return False if there is no fast converter.
+    Append the leaves of ``type_name`` in wire order; False if there is no fast converter.
 
-    A leaf is ``(_SKIP, 4)`` (a ROS 1 header's seq, which ROS 2 does not
-    have), ``(_RUN, size)`` (a primitive), ``(_STRING, 0)`` or ``(_SEQUENCE,
-    (element steps, least ROS 1 bytes of an element))``. An empty structure
-    (ROS 2's ``structure_needs_at_least_one_member``) has no fast converter.
+    ``(_SKIP, 4)`` (a header's seq), ``(_RUN, size)``, ``(_STRING, 0)`` or ``(_SEQUENCE, (element
+    steps, least ROS 1 bytes of an element))``.
     """
     if type_name == 'std_msgs/msg/Header':
         leaves.append((_SKIP, 4))
@@ -288,7 +236,8 @@ def _leaves(fielddefs, type_name, leaves):
             element_kind, element_desc = desc[0]
             if not _leaves_of(fielddefs, element_kind, element_desc, element):
                 return False
-            leaves.append((_SEQUENCE, (_steps(element), max(1, _least_size(element)))))
+            least = sum(size if leaf in (_RUN, _SKIP) else 4 for leaf, size in element)
+            leaves.append((_SEQUENCE, (_steps(element), max(1, least))))
             continue
         if kind == Nodetype.ARRAY:
             (kind, desc), count = desc
@@ -311,18 +260,11 @@ def _leaves_of(fielddefs, kind, desc, leaves):
     return True
 
 
-def _least_size(leaves):
-    """Return the fewest ROS 1 bytes the leaves take (strings and sequences empty)."""
-    return sum(size if kind in (_RUN, _SKIP) else 4 for kind, size in leaves)
-
-
 def _run_layouts(sizes):
     """
-    Return how a run of primitives is laid out in CDR for each start offset modulo 8.
+    Return ``(segments, CDR bytes)`` of a run of primitives for each CDR start offset modulo 8.
 
-    For ``offset % 8`` = 0..7: ``(segments, CDR bytes)``, a segment ``(padding, start,
-    end)`` being zero padding then the ROS 1 bytes ``start:end`` of the run: each
-    primitive aligned to its size, as CDR aligns it (ROS 1 packs them).
+    A segment ``(padding, start, end)``: zero padding, then the run's ROS 1 bytes ``start:end``.
     """
     layouts = []
     for start in range(8):
@@ -355,19 +297,18 @@ class _Damaged(Exception):
     """The data is not what its type says (rosbags' conversion then says what is wrong)."""
 
 
-def _converted(steps, data, source, offset, emit, length_fields):
+def _converted(steps, data, source, offset, parts, length_fields):
     """
     Emit the CDR parts of ``data`` from ``source`` (CDR ``offset``); return both after.
 
-    ``emit(constant, start, end)``: the bytes ``constant``, then ``data[start:end]``.
-    The positions of the lengths read (strings, sequences) are appended to
-    ``length_fields``: the parts depend on ``len(data)`` and their values alone.
+    A part ``(constant, start, end)``: the bytes ``constant``, then ``data[start:end]``. The parts
+    depend on ``len(data)`` and the values at ``length_fields`` alone.
     """
     for kind, layout, size in steps:
         if kind == _RUN:
             segments, cdr_size = layout[offset & 7]
             for padding, start, end in segments:
-                emit(padding, source + start, source + end)
+                parts.append((padding, source + start, source + end))
             source += size
             offset += cdr_size
         elif kind == _STRING:
@@ -375,8 +316,8 @@ def _converted(steps, data, source, offset, emit, length_fields):
             length, = _UINT32.unpack_from(data, source)
             end = source + 4 + length
             padding = -offset & 3
-            emit(_ZEROS[padding] + _UINT32.pack(length + 1), source + 4, end)
-            emit(b'\0', end, end)
+            parts.append((_ZEROS[padding] + _UINT32.pack(length + 1), source + 4, end))
+            parts.append((b'\0', end, end))
             offset += padding + length + 5
             source = end
         elif kind == _SKIP:
@@ -388,29 +329,24 @@ def _converted(steps, data, source, offset, emit, length_fields):
             if source + 4 + count * least > len(data):
                 raise _Damaged
             padding = -offset & 3
-            emit(_ZEROS[padding], source, source + 4)
+            parts.append((_ZEROS[padding], source, source + 4))
             source += 4
             offset += padding + 4
             for _ in range(count):
-                source, offset = _converted(element, data, source, offset, emit, length_fields)
+                source, offset = _converted(element, data, source, offset, parts, length_fields)
     return source, offset
 
 
-#: Message layouts (the lengths of their strings and sequences) converted as one block each,
-#: for the messages of one length in one call of ``Ros1ToCdr.block``; the rest one by one.
+#: Layouts (string and sequence lengths) ``Ros1ToCdr.block`` converts per message length.
 _BLOCK_LAYOUTS_TRIED = 4
 
 
 class Ros1ToCdr:
     """
-    ROS 1 messages of one type to CDR by slices: one message (call) or a block of them (``block``).
+    ROS 1 messages of one type to CDR: one message (call) or a block of them (``block``).
 
-    What rosbags' ``Typestore.ros1_to_cdr`` gives, byte for byte, for a type
-    of the same wire format in ROS 1 and ROS 2 (``is_same_wireformat``):
-    the header's seq dropped, primitives aligned, strings given their NUL,
-    sequences their CDR alignment. A message that is not exactly as long as
-    its type says is given to ``fallback`` (rosbags' conversion), which says
-    what is wrong. Made by :func:`ros1_to_cdr_converter`.
+    Byte for byte rosbags' ``ros1_to_cdr`` for a type of the same wire format in ROS 1 and ROS 2; a
+    message not as long as its type says goes to ``fallback`` (rosbags), which says what is wrong.
     """
 
     def __init__(self, steps: tuple, fallback: Callable[[bytes], bytes]) -> None:
@@ -421,11 +357,8 @@ class Ros1ToCdr:
         parts: List[Tuple[bytes, int, int]] = []
         length_fields: List[int] = []
 
-        def emit(constant: bytes, start: int, end: int) -> None:
-            parts.append((constant, start, end))
-
         try:
-            source, _ = _converted(self._steps, data, 0, 0, emit, length_fields)
+            source, _ = _converted(self._steps, data, 0, 0, parts, length_fields)
         except (struct.error, _Damaged):
             return None
         return (parts, length_fields) if source == len(data) else None
@@ -441,12 +374,9 @@ class Ros1ToCdr:
     def block(self, chunk: bytes, starts: np.ndarray, lengths: np.ndarray
               ) -> List[Optional[bytes]]:
         """
-        Return the CDR data of the messages ``chunk[starts[k]:starts[k] + lengths[k]]``.
+        Return the CDR of ``chunk[starts[k]:starts[k] + lengths[k]]``, None where not in a block.
 
-        Messages of one length whose strings and sequences have the lengths
-        of the first of them are converted together, as that one is, by one
-        copy of their bytes through numpy; None for the others (convert them
-        one by one: the call, which falls back to rosbags).
+        A block: messages of one length whose strings and sequences have the lengths of the first.
         """
         result: List[Optional[bytes]] = [None] * len(starts)
         buffer = np.frombuffer(chunk, np.uint8)
@@ -501,34 +431,11 @@ class Ros1ToCdr:
 def ros1_to_cdr_converter(fielddefs: Dict[str, Any], type_name: str,
                           fallback: Callable[[bytes], bytes]) -> Optional[Ros1ToCdr]:
     """
-    Return a converter of ROS 1 messages of a type to CDR, or None for types it does not cover.
+    Return a :class:`Ros1ToCdr` of ``type_name`` in ROS 2 ``fielddefs``, None if it has none.
 
-    See :class:`Ros1ToCdr` (a quarter of rosbags' time for sensor_msgs/Imu one
-    message at a time, a fraction of that in blocks).
-
-    Parameters
-    ----------
-    fielddefs : dict
-        The ROS 2 typestore's ``fielddefs`` (rosbags).
-    type_name : str
-        ``'pkg/msg/Type'``.
-    fallback : callable
-        ``fallback(data) -> bytes``: rosbags' conversion.
-
+    A quarter of rosbags' time for sensor_msgs/Imu one message at a time, a fraction in blocks.
     """
     leaves: List[Tuple[int, Any]] = []
     if not _leaves(fielddefs, type_name, leaves):
         return None
     return Ros1ToCdr(_steps(leaves), fallback)
-
-
-def _chunk_compressions(reader):
-    """Return the compressions of the bag's chunks as ROS 1 names them: ``{'bz2', 'none'}``..."""
-    names = {decompress: name for name, decompress in ros1_decompressors.items()}
-    return {names.get(chunk.decompressor, 'unknown')
-            for bag in reader.readers for chunk in bag.chunks.values()}
-
-
-def _output_compression(compressions):
-    """Return the output's chunk compression: lz4 stays lz4, bz2 (not in MCAP) becomes zstd."""
-    return 'lz4' if 'lz4' in compressions else 'zstd' if 'bz2' in compressions else 'none'

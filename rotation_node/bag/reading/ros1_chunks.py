@@ -1,29 +1,10 @@
 """
-ROS 1 bags read one chunk at a time, in the order of rosbags' reader.
+ROS 1 bags read one chunk group at a time, in the order of rosbags' reader (docs/bags.md).
 
-rosbags' ROS 1 reader (:class:`rosbags.rosbag1.reader.Reader`) reads, when it
-opens a bag, the index data records of every chunk into one Python tuple per
-message: its memory grows with the bag's length. :class:`ChunkedReader` opens
-the bag with the same code but keeps only what does not grow with the number
-of messages: the bag header, the connection records, the chunk info records
-(their per-connection message counts give each connection's count) and the
-chunk records' headers (position, size, compression). A chunk's index data
-records, which follow the chunk in the file, are read (as numpy arrays) when
-the messages reach the chunk, and the chunk is decompressed then: in another
-thread while the chunk before it is used (:class:`_ChunksAhead`). The
-messages of a chunk come as one batch (:meth:`ChunkedReader.message_batches`):
-their records found for all of them at once (:func:`plain_message_records`).
-
-Chunks whose time ranges overlap are read together, as one group
-(:func:`overlapping_chunk_groups`): a recording whose chunks follow each other
-in time holds one chunk at a time; a bag whose chunks all overlap holds them
-all, as rosbags does. The messages come in the order of rosbags'
-``Reader.messages``: by time; at equal times by the place of their connection
-in the ``connections`` asked for; then in the order rosbags indexes them
-(chunk info records in file order, index entries in record order). A
-damaged bag raises :class:`rosbags.rosbag1.ReaderError` when the damage is
-reached, naming the byte where it is; whatever a damaged length field says, a
-read never asks for more than the file holds (:class:`BoundedReads`).
+rosbags' reader holds a Python tuple per message from the moment it opens a bag;
+:class:`ChunkedReader` reads a chunk's index data (as numpy arrays) when the messages reach it,
+and decompresses the next chunk in another thread meanwhile. A damaged bag raises
+``ReaderError`` naming the byte where it is; no read asks for more than the file holds.
 """
 import ast
 from collections import Counter, OrderedDict
@@ -33,22 +14,18 @@ import os
 from pathlib import Path
 import struct
 import threading
-from typing import (Any, BinaryIO, Collection, Dict, Generator, List, NamedTuple, Optional,
+from typing import (BinaryIO, Collection, Dict, Generator, List, NamedTuple, Optional,
                     Sequence, Tuple)
 
 import numpy as np
-from rosbags.interfaces import Connection, MessageDefinitionFormat
+from rosbags.interfaces import Connection
 from rosbags.rosbag1 import ReaderError
 from rosbags.rosbag1.reader import ChunkInfo, Header, read_bytes, read_uint32, Reader, RecordType
 from rosbags.rosbag1.reader import decompressors as ros1_decompressors
-from rosbags.typesys import get_types_from_msg, get_typestore, Stores
 
 #: One entry of an index data record (version 1): the message's time and its offset in the chunk.
 INDEX_ENTRY = np.dtype([('sec', '<u4'), ('nsec', '<u4'), ('offset', '<u4')])
-#: What ``messages`` yields: the connection, the time (ns) and the message's ROS 1 data.
-Message = Tuple[Connection, int, bytes]
-#: At most this many bytes of decompressed chunks are held while the messages of overlapping
-#: chunks are read (besides the chunk being read); a chunk let go is decompressed again if needed.
+#: Bytes of decompressed overlapping chunks held besides the one read (others read again).
 CHUNK_BYTES_HELD = 64 * 2**20
 # What the chunk decompressors (bz2, lz4) raise for data they cannot decompress.
 _DECOMPRESSION_ERRORS = (OSError, ValueError, EOFError, RuntimeError)
@@ -56,13 +33,9 @@ _DECOMPRESSION_ERRORS = (OSError, ValueError, EOFError, RuntimeError)
 
 class BoundedReads(io.BufferedReader):
     """
-    A file whose reads never ask for more bytes than remain in it.
+    A file whose reads never ask for more bytes than remain in it; ``read_at``: the last's start.
 
-    rosbags reads a record as ``read(length)`` with the record's own length
-    field: a damaged length (up to 4 GiB) would allocate that much before the
-    short read is noticed. Here it gets the rest of the file, and rosbags
-    reports the short read. ``read_at`` is where the last read started (for
-    the error line), also once the file is closed.
+    rosbags reads a record with its own length field: a damaged one would allocate up to 4 GiB.
     """
 
     def __init__(self, path: 'os.PathLike[str] | str') -> None:
@@ -78,15 +51,7 @@ class BoundedReads(io.BufferedReader):
         return super().read(size)
 
     def seek(self, offset: int, whence: int = os.SEEK_SET) -> int:
-        """
-        Move to a position in the file, never past its end.
-
-        Raises
-        ------
-        rosbags.rosbag1.ReaderError
-            If the position (a damaged record position or size) is outside the file.
-
-        """
+        """Move to a position in the file; ReaderError if it is outside the file."""
         if whence in (os.SEEK_SET, os.SEEK_CUR):
             target = offset + (self.tell() if whence == os.SEEK_CUR else 0)
             if not 0 <= target <= self._size:
@@ -112,21 +77,9 @@ class _BoundedPath:
 
 def overlapping_chunk_groups(chunk_infos: Sequence[ChunkInfo]) -> List[List[int]]:
     """
-    Return the chunks that must be read together: those whose time ranges overlap.
+    Return the indices of the chunks to read together (time ranges overlapping), in time order.
 
-    Parameters
-    ----------
-    chunk_infos : sequence of rosbags.rosbag1.reader.ChunkInfo
-        As rosbags reads them: ``end_time`` one nanosecond after the chunk's
-        last message; a chunk without messages is left out.
-
-    Returns
-    -------
-    list of list of int
-        Indices into ``chunk_infos``: the groups in time order (every message
-        of a group is earlier than every message of the next), each group in
-        the order of ``chunk_infos``.
-
+    Each group in the order of ``chunk_infos``; chunks without messages are left out.
     """
     by_start = sorted((i for i, info in enumerate(chunk_infos) if info.connection_counts),
                       key=lambda i: chunk_infos[i].start_time)
@@ -147,21 +100,11 @@ class ChunkedReader(Reader):
     """
     rosbags' ROS 1 reader that reads the message index one chunk group at a time.
 
-    Its ``indexes`` stay empty; each connection's ``msgcount`` is the sum of
-    the chunk infos' counts. ``messages`` yields what rosbags' ``messages``
-    yields, in the same order.
+    Its ``indexes`` stay empty; each connection's ``msgcount`` is the sum of the chunk infos'.
     """
 
     def open(self) -> None:  # noqa: A003  (rosbags names it so)
-        """
-        Open the bag and read its header, connections, chunk infos and chunk headers.
-
-        Raises
-        ------
-        rosbags.rosbag1.ReaderError
-            If they are damaged, naming the byte where the read that failed started.
-
-        """
+        """Open the bag: its header, connections, chunk infos and headers (ReaderError: where)."""
         path = self.path
         bounded = _BoundedPath(Path(str(path)))
         # rosbags opens self.path: its reads are bounded by the file.
@@ -184,23 +127,12 @@ class ChunkedReader(Reader):
         """Skip at open: a chunk's index data records are read when it is reached."""
 
     def messages(self, connections: Collection[Connection] = (), start: Optional[int] = None,
-                 stop: Optional[int] = None) -> Generator[Message, None, None]:
+                 stop: Optional[int] = None
+                 ) -> Generator[Tuple[Connection, int, bytes], None, None]:
         """
-        Yield ``(connection, time_ns, data)`` in the order of rosbags' ``Reader.messages``.
+        Yield ``(connection, time_ns, data)`` as rosbags' ``Reader.messages`` does, in its order.
 
-        Parameters
-        ----------
-        connections : collection of rosbags.interfaces.Connection, optional
-            Those to read (default: all), their order deciding between
-            messages of equal times.
-        start, stop : int, optional
-            Only messages at or after ``start`` and before ``stop`` (ns).
-
-        Raises
-        ------
-        rosbags.rosbag1.ReaderError
-            If the bag is not open or its data are damaged.
-
+        By time; at equal times, by the order of ``connections`` (default all); then as indexed.
         """
         by_id = {c.id: c for c in self.connections}
         for batch in self.message_batches(connections, start, stop):
@@ -214,15 +146,10 @@ class ChunkedReader(Reader):
                         start: Optional[int] = None, stop: Optional[int] = None
                         ) -> Generator['MessageBatch', None, None]:
         """
-        Yield the messages of :meth:`messages`, in its order, as batches of one chunk's messages.
+        Yield the messages of :meth:`messages`, in its order, in batches (:class:`MessageBatch`).
 
-        A batch is the next messages of one chunk that are plain message
-        records, found in the chunk's bytes for all of them at once
-        (:func:`plain_message_records`); a message stored otherwise is a batch
-        of its own, read as rosbags reads it. While a batch is used, the
-        next chunk is decompressed beside it (:class:`_Decompression`).
-
-        Parameters and errors as :meth:`messages`.
+        A batch: the next plain message records of one chunk (:func:`plain_message_records`), or
+        one message stored otherwise, read as rosbags reads it.
         """
         self._check_open()
         ranks: Dict[int, int] = {}
@@ -245,28 +172,9 @@ class ChunkedReader(Reader):
 
     def group_index(self, group: Sequence[int], ranks: Dict[int, int]) -> np.ndarray:
         """
-        Return the index entries of the connections ``ranks`` in the chunks ``group``, in order.
+        Return the index entries of the connections ``ranks`` in the chunks ``group``, as rosbags'.
 
-        Parameters
-        ----------
-        group : sequence of int
-            Indices into ``chunk_infos``, in increasing order.
-        ranks : dict of int to int
-            The place of each connection (by id) in the order asked for.
-
-        Returns
-        -------
-        numpy.ndarray
-            Structured: ``time`` (ns), ``connection`` (id), ``chunk`` (index
-            into ``chunk_infos``), ``offset`` (in the decompressed chunk),
-            sorted as rosbags sorts its index.
-
-        Raises
-        ------
-        rosbags.rosbag1.ReaderError
-            If an index data record is damaged or has a time outside the time
-            range of its chunk info.
-
+        ``time`` (ns), ``connection``, ``chunk`` (into ``chunk_infos``), ``offset`` (in the chunk).
         """
         parts = [(i, connection, times, offsets) for i in group
                  for connection, times, offsets in self._chunk_index(i, ranks)]
@@ -283,8 +191,7 @@ class ChunkedReader(Reader):
             index['offset'][part] = offsets
             rank[part] = ranks[connection]
             end = part.stop
-        # rosbags: each connection's entries stably sorted by time, then merged by time
-        # with ties going to the connection asked for first.
+        # rosbags: each connection's entries by time, merged by time, ties by connection rank
         return index[np.lexsort((np.arange(len(index)), rank, index['time']))]
 
     def _chunk_index(self, i, ranks):
@@ -327,28 +234,8 @@ class ChunkedReader(Reader):
             raise ReaderError('Reader is not open.')
         return self.bio
 
-    def decompressed_chunk(self, i: int) -> bytes:
-        """
-        Return the decompressed data of chunk ``i`` (an index into ``chunk_infos``).
-
-        Raises
-        ------
-        rosbags.rosbag1.ReaderError
-            If the chunk is cut short or cannot be decompressed.
-
-        """
-        return _decompressed(self, i, self.stored_chunk(i))
-
     def stored_chunk(self, i: int) -> bytes:
-        """
-        Return the data of chunk ``i`` as stored (compressed).
-
-        Raises
-        ------
-        rosbags.rosbag1.ReaderError
-            If the chunk is cut short.
-
-        """
+        """Return chunk ``i`` as stored (compressed); ReaderError if it is cut short."""
         pos = self.chunk_infos[i].pos
         chunk = self.chunks[pos]
         bio = self._file()
@@ -362,9 +249,7 @@ class ChunkedReader(Reader):
         """
         Yield the batches of one chunk group; ``following``: the chunk to decompress after it.
 
-        A chunk is freed after its last message, and the least recently read
-        ones when more than ``CHUNK_BYTES_HELD`` are held (read again if
-        needed).
+        Chunks are let go after their last message, and beyond ``CHUNK_BYTES_HELD`` (read again).
         """
         index = self.group_index(group, ranks)
         if start is not None:
@@ -404,15 +289,14 @@ class ChunkedReader(Reader):
         chunk = stream.getvalue()   # the chunk's bytes themselves, not a copy
         connections, times, offsets = entries['connection'], entries['time'], entries['offset']
         plain, starts, lengths = plain_message_records(chunk, offsets, connections, times)
-        if plain.all():
-            yield MessageBatch(connections, times, chunk, starts, lengths)
-            return
         done = 0
-        for k in np.flatnonzero(~plain).tolist():
+        for k in [*np.flatnonzero(~plain).tolist(), len(entries)]:   # runs of plain records
             if k > done:
                 part = slice(done, k)
                 yield MessageBatch(connections[part], times[part], chunk, starts[part],
                                    lengths[part])
+            if k == len(entries):
+                return
             offset, connection, time = offsets[k].item(), connections[k].item(), times[k].item()
             data = message_data(chunk, offset, connection, time)
             if data is None:   # anything but a plain message record: rosbags' reading
@@ -430,18 +314,13 @@ class ChunkedReader(Reader):
             yield MessageBatch(connections[part], times[part], data, _ZERO_START,
                                np.array([len(data)], np.int64))
             done = k + 1
-        if done < len(entries):
-            part = slice(done, None)
-            yield MessageBatch(connections[part], times[part], chunk, starts[part],
-                               lengths[part])
 
 
 class MessageBatch(NamedTuple):
     """
     Messages read together: message ``k`` is ``chunk[starts[k]:starts[k] + lengths[k]]``.
 
-    ``connections`` (ids), ``times`` (ns), ``starts`` and ``lengths`` are
-    int64 arrays, one element per message, in reading order.
+    ``connections`` (ids), ``times`` (ns), ``starts`` and ``lengths``: int64, in reading order.
     """
 
     connections: np.ndarray
@@ -464,65 +343,48 @@ def _decompressed(reader: ChunkedReader, i: int, data: bytes) -> bytes:
                           f'decompressed: {error}') from None
 
 
-class _Decompression(threading.Thread):
-    """One chunk decompressed in a thread of its own (bz2 and lz4 release the GIL meanwhile)."""
-
-    def __init__(self, reader: ChunkedReader, i: int) -> None:
-        super().__init__(name=f'ROS 1 chunk {i}', daemon=True)
-        self._reader, self._i = reader, i
-        self._result: Optional[bytes] = None
-        self._error: Optional[BaseException] = None
-        try:   # read here: the file is not shared with the thread
-            self._data = reader.stored_chunk(i)
-        except ReaderError as error:   # raised where the chunk is used
-            self._error = error
-        else:
-            self.start()
-
-    def run(self) -> None:
-        try:
-            self._result = _decompressed(self._reader, self._i, self._data)
-        except BaseException as error:   # noqa: B902  (raised where the chunk is used)
-            self._error = error
-        finally:
-            self._data = b''
-
-    def result(self) -> bytes:
-        """Return the decompressed chunk; raise what reading or decompressing it raised."""
-        if self.ident is not None:
-            self.join()
-        if self._error is not None:
-            raise self._error
-        assert self._result is not None
-        return self._result
-
-
 class _ChunksAhead:
-    """
-    At most one chunk decompressed ahead of the one being read, in a thread.
-
-    Its stored bytes are read in the reading thread (the file is not shared),
-    what fails raised where the chunk is used; a chunk stored uncompressed is
-    not read ahead.
-    """
+    """At most one chunk decompressed ahead, in a thread (bz2, lz4 free the GIL)."""
 
     def __init__(self, reader: ChunkedReader) -> None:
         self._reader = reader
-        self._ahead: Optional[Tuple[int, _Decompression]] = None
+        #: The chunk read ahead, its thread (None if reading it failed) and its outcome.
+        self._ahead: Optional[Tuple[int, Optional[threading.Thread], dict]] = None
 
     def start(self, i: int) -> None:
         """Start decompressing chunk ``i`` unless a chunk is being decompressed already."""
         reader = self._reader
-        decompressor = reader.chunks[reader.chunk_infos[i].pos].decompressor
-        if self._ahead is None and decompressor is not _NO_DECOMPRESSION:
-            self._ahead = i, _Decompression(reader, i)
+        if (self._ahead is not None
+                or reader.chunks[reader.chunk_infos[i].pos].decompressor is _NO_DECOMPRESSION):
+            return
+        outcome: dict = {}
+        try:   # read here: the file is not shared with the thread
+            stored = reader.stored_chunk(i)
+        except ReaderError as error:   # raised where the chunk is used
+            self._ahead = i, None, {'error': error}
+            return
+
+        def decompress() -> None:
+            try:
+                outcome['chunk'] = _decompressed(reader, i, stored)
+            except BaseException as error:   # noqa: B902  (raised where the chunk is used)
+                outcome['error'] = error
+
+        thread = threading.Thread(target=decompress, name=f'ROS 1 chunk {i}', daemon=True)
+        thread.start()
+        self._ahead = i, thread, outcome
 
     def take(self, i: int) -> bytes:
         """Return chunk ``i`` decompressed: the one read ahead, or read now."""
-        if self._ahead is not None and self._ahead[0] == i:
-            ahead, self._ahead = self._ahead[1], None
-            return ahead.result()
-        return self._reader.decompressed_chunk(i)
+        if self._ahead is None or self._ahead[0] != i:
+            return _decompressed(self._reader, i, self._reader.stored_chunk(i))
+        _, thread, outcome = self._ahead
+        self._ahead = None
+        if thread is not None:
+            thread.join()
+        if 'error' in outcome:
+            raise outcome['error']
+        return outcome['chunk']
 
     def keep_only(self, needed: Collection[int]) -> None:
         """Forget the chunk read ahead unless it is ``needed`` (its thread ends by itself)."""
@@ -551,13 +413,9 @@ _MESSAGE_DATA_OP = bytes([RecordType.MSGDATA])
 
 def plain_record_layout(chunk: bytes, offset: int) -> Optional[Tuple[int, int, int]]:
     """
-    Return where a plain message record's fields are, or None if it is not one.
+    Return ``(header length, conn offset, time offset)`` of a plain message record, else None.
 
-    A plain message record: a header of exactly the fields ``op`` (message
-    data), ``conn`` (at least 4 bytes) and ``time`` (8 bytes), in any order,
-    then the data's length, all within the chunk. Returned: the header's
-    length and the offsets (from the record's start) of the ``conn`` and
-    ``time`` values.
+    Plain: exactly the header fields ``op`` (message data), ``conn`` and ``time``, in the chunk.
     """
     unpack = _UINT32.unpack_from
     try:
@@ -587,14 +445,9 @@ def plain_record_layout(chunk: bytes, offset: int) -> Optional[Tuple[int, int, i
 
 def message_data(chunk: bytes, offset: int, connection: int, time: int) -> Optional[bytes]:
     """
-    Return the data of the message record at ``offset`` of a chunk, or None to read it as rosbags.
+    Return the data of the plain message record of ``connection`` and ``time`` at ``offset``.
 
-    The fast path of :func:`_message_record` and the index check after it:
-    the data of a plain message record (:func:`plain_record_layout`) of the
-    connection and time its index entry gives, with nothing cut short.
-    Anything else (a connection record before it, another field, a damaged
-    length, another connection or time) gives None: rosbags' reading then
-    says what it is, as it did.
+    None for anything else (a connection record before it, a damaged length...): rosbags reads it.
     """
     layout = plain_record_layout(chunk, offset)
     if layout is None:
@@ -609,33 +462,17 @@ def message_data(chunk: bytes, offset: int, connection: int, time: int) -> Optio
     return data if len(data) == length else None
 
 
-#: Layouts of plain message records tried on one run of a chunk's messages before the rest
-#: is read one message at a time.
+#: Plain record layouts tried on a chunk's messages before the rest are read one by one.
 _RECORD_LAYOUTS_TRIED = 8
 
 
 def plain_message_records(chunk: bytes, offsets: np.ndarray, connections: np.ndarray,
                           times: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
-    Find many messages' data in a chunk at once: what :func:`message_data` finds of each.
+    Find what :func:`message_data` finds for many index entries of a chunk at once.
 
-    Parameters
-    ----------
-    chunk : bytes
-        A decompressed chunk.
-    offsets, connections, times : ndarray of int64
-        Index entries: where each record starts, the connection and time it must have.
-
-    Returns
-    -------
-    (ndarray of bool, ndarray of int64, ndarray of int64)
-        Which entries are plain message records of their connection and time
-        (those :func:`message_data` returns the data of), and where their data
-        starts and how long it is (the others' starts and lengths are 0).
-        Records laid out as one before them are found by comparing their
-        bytes, all at once: the same header length and bytes except the
-        ``conn`` and ``time`` values, which must be the index entry's.
-
+    Returns ``(plain, starts, lengths)`` (0 where not plain): records laid out as one before them
+    are found by comparing their bytes but ``conn``, ``time`` and the data length.
     """
     n = len(offsets)
     plain = np.zeros(n, bool)
@@ -689,91 +526,3 @@ def _message_record(stream):
     if op != RecordType.MSGDATA:
         raise ReaderError('Expected to find message data.')
     return header, read_bytes(stream, read_uint32(stream))
-
-
-class ChunkedAnyReader:
-    """
-    One ROS 1 bag read by :class:`ChunkedReader`, with the message types its definitions give.
-
-    What rosbags' ``AnyReader`` gives for one ROS 1 bag (``readers``,
-    ``connections``, ``typestore``; ``open`` and ``close``), without importing
-    it (its rosbag2 modules take a twentieth of a second): the ``typestore``
-    holds the types of the definitions stored in the bag (ROS 2 names), their
-    MD5 sums checked; whatever its name, the file is read as a ROS 1 bag.
-
-    Parameters
-    ----------
-    path : pathlib.Path
-        A ROS 1 bag, format version 2.0.
-
-    """
-
-    def __init__(self, path: Path) -> None:
-        self.paths = [path]
-        self.readers = [ChunkedReader(path)]
-        self.connections: List[Connection] = []
-        self.typestore = get_typestore(Stores.EMPTY)
-
-    def open(self) -> None:  # noqa: A003  (rosbags names it so)
-        """
-        Open the bag and build its types.
-
-        Raises
-        ------
-        rosbags.rosbag1.ReaderError
-            If the bag is damaged, or a definition does not have the MD5 sum
-            its connection gives.
-        rosbags.typesys.base.TypesysError
-            If a definition cannot be parsed.
-
-        """
-        reader = self.readers[0]
-        reader.open()
-        try:
-            self.typestore = bag_typestore(reader.connections)
-        except BaseException:
-            reader.close()
-            raise
-        self.connections = list(reader.connections)
-
-    def close(self) -> None:
-        """Close the bag."""
-        self.readers[0].close()
-        self.connections = []
-
-    def __enter__(self) -> 'ChunkedAnyReader':
-        self.open()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-
-def bag_typestore(connections: Sequence[Connection]) -> Any:
-    """
-    Return a rosbags typestore of the types the connections' stored definitions give.
-
-    As ``AnyReader`` builds it: every definition parsed, the MD5 sum of each
-    type checked against its connection's.
-
-    Raises
-    ------
-    rosbags.rosbag1.ReaderError
-        ``Message type 'pkg/msg/T' hash mismatch ...``.
-    rosbags.typesys.base.TypesysError
-        If a definition cannot be parsed.
-
-    """
-    types: Dict[str, Any] = {}
-    digests: Dict[str, str] = {}
-    for connection in connections:
-        if connection.msgdef.format == MessageDefinitionFormat.MSG:
-            types.update(get_types_from_msg(connection.msgdef.data, connection.msgtype))
-        if connection.digest:
-            digests[connection.msgtype] = connection.digest
-    typestore = get_typestore(Stores.EMPTY)
-    typestore.register(types)
-    for type_name, digest in digests.items():
-        if (have := typestore.generate_msgdef(type_name)[1]) != digest:
-            raise ReaderError(f'Message type {type_name!r} hash mismatch {have} != {digest}')
-    return typestore

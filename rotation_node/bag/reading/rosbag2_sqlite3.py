@@ -1,20 +1,9 @@
 """
-rosbag2's ``sqlite3`` storage files (``.db3``), read with ``apsw``.
+rosbag2's ``sqlite3`` storage files (``.db3``) read with ``apsw``, as ``rosbags`` reads them.
 
-:class:`Sqlite3Storage` reads what the ``rosbags`` package's sqlite3 reader
-reads (``rosbags.rosbag2.storage_sqlite3.Sqlite3Reader``), the same way,
-without importing rosbags' rosbag2 modules (a twentieth of a second): the
-``topics`` (and ``message_definitions``) tables when it opens the file, the
-QoS profiles normalised as rosbags normalises them, and the ``messages``
-table row by row. A damaged file surfaces from several layers: SQLite's own
-errors (``apsw.CorruptError`` for a damaged page, met only when a query
-reaches it), text that is not UTF-8, QoS profiles that are not what rosbag2
-writes, a message row whose ``data`` is not a BLOB or whose ``timestamp`` is
-not a time (a non-negative integer). :class:`Sqlite3Storage` turns each into
-a :class:`DamagedStorage` naming the table and the row (``messages`` rows by
-their ``id``), so that a bag read through
-:class:`~rotation_node.bag.reading.rosbags_input.RosbagsInput` fails with one line.
-The file is opened read-only and immutable: it is never changed.
+Without importing rosbags' rosbag2 modules (a twentieth of a second). Damage met in any layer
+(a damaged page, text not UTF-8, QoS profiles not rosbag2's, a row of the wrong types) becomes
+a :class:`DamagedStorage` naming the table and the row id. The file is opened read-only.
 """
 import contextlib
 import os
@@ -27,17 +16,13 @@ import apsw
 from rosbags.interfaces import QosDurability, QosHistory, QosLiveliness, QosReliability
 from rotation_node.bag import metadata_yaml
 from rotation_node.bag.reading.compression import decompressed_message, is_zstd, ZstdError
-from rotation_node.bag.reading.rosbags_input import RosbagsInput
+from rotation_node.bag.reading.rosbags_input import is_installed, RosbagsInput
 from rotation_node.bag.records import TopicMetadata
 from rotation_node.errors import BagError
-from rotation_node.wire.message_types import message_definition
 from rotation_node.wire.qos_yaml import profiles_yaml
 
 _ROSBAG2_TABLES = {'topics', 'messages'}
-# What reading the topics and message_definitions tables raises for damaged text: a name or
-# definition that is not UTF-8 (apsw decodes TEXT), an unknown definition encoding
-# (KeyError), QoS profiles that are YAML but not a list of mappings (TypeError,
-# AttributeError, KeyError).
+# Damaged topics and message_definitions: not UTF-8, unknown encoding, QoS YAML not profiles.
 _DAMAGED_TABLE_ERRORS = (UnicodeDecodeError, KeyError, TypeError, AttributeError, ValueError)
 #: Definition encodings rosbag2 writes.
 _ENCODINGS = ('ros2msg', 'ros2idl')
@@ -47,25 +32,15 @@ class DamagedStorage(Exception):
     """A sqlite3 storage file that cannot be read as rosbag2 storage, and where."""
 
 
-def sqlite_tables(path: str, shown: Optional[str] = None) -> set:
-    """
-    Return the table names of a SQLite database, read-only (the file is never changed).
-
-    ``shown`` is the path named in errors (default ``path``).
-
-    Raises
-    ------
-    BagError
-        If the file is not a readable SQLite database.
-
-    """
+def sqlite_tables(path: str, shown: str) -> set:
+    """Return the table names of a SQLite database, read-only; BagError naming ``shown``."""
     uri = f'file:{urllib.parse.quote(os.path.abspath(path))}?mode=ro&immutable=1'
     try:
         with contextlib.closing(sqlite3.connect(uri, uri=True)) as database:
             return {row[0] for row in database.execute(
                 "SELECT name FROM sqlite_master WHERE type = 'table'")}
     except sqlite3.DatabaseError as error:
-        raise BagError(f'{shown or path}: damaged sqlite3 database: {error}') from None
+        raise BagError(f'{shown}: damaged sqlite3 database: {error}') from None
 
 
 class StoredTopic(NamedTuple):
@@ -98,16 +73,8 @@ def qos_profiles_yaml(stored: Any) -> str:
     """
     Return a topic's ``offered_qos_profiles`` as rosbags reads and then writes them (version 9).
 
-    ``stored``: the YAML text (or whatever the column holds). Policies given
-    by number or by name, unknown ones ``unknown``; the rest as stored.
-
-    Raises
-    ------
-    DamagedStorage
-        If the text is not YAML.
-    KeyError, TypeError, AttributeError
-        If it is not a list of QoS profiles.
-
+    Policies given by number or by name, unknown ones ``unknown``. DamagedStorage if the text is
+    not YAML; KeyError, TypeError or AttributeError if it is not a list of QoS profiles.
     """
     if not stored:
         return profiles_yaml([])
@@ -131,19 +98,9 @@ def qos_profiles_yaml(stored: Any) -> str:
 
 class Sqlite3Storage:
     """
-    A rosbag2 sqlite3 storage file: its topics, and its messages by time.
+    A rosbag2 sqlite3 storage file: its topics (``connections``), and its messages by time.
 
-    Parameters
-    ----------
-    path : pathlib.Path
-
-    Attributes
-    ----------
-    connections : list of StoredTopic
-        The ``topics`` table, by ``id``; ``msgcount`` counts each topic's rows.
-    message_count : int
-        Rows of the ``messages`` table (also those of no topic).
-
+    ``message_count``: the rows of the ``messages`` table, also those of no topic.
     """
 
     def __init__(self, path: Path) -> None:
@@ -153,15 +110,7 @@ class Sqlite3Storage:
         self.message_count = 0
 
     def open(self) -> None:  # noqa: A003  (rosbags names it so)
-        """
-        Open the database and read its topics.
-
-        Raises
-        ------
-        DamagedStorage
-            If it cannot be opened or its topics or message definitions are damaged.
-
-        """
+        """Open the database and read its topics; DamagedStorage if they are damaged."""
         try:
             self.dbconn = apsw.Connection(f'file:{self.path}?immutable=1',
                                           flags=apsw.SQLITE_OPEN_READONLY | apsw.SQLITE_OPEN_URI)
@@ -179,9 +128,8 @@ class Sqlite3Storage:
 
     def _read_topics(self, database: apsw.Connection) -> None:
         """Read the topics as rosbags' reader does, by the schema version of the file."""
-        tables, = _one_row(database,
-                           "SELECT count(*) FROM sqlite_master WHERE type = 'table' "
-                           "AND name IN ('messages', 'topics')")
+        tables = next(database.execute("SELECT count(*) FROM sqlite_master WHERE type = 'table' "
+                                       "AND name IN ('messages', 'topics')"))[0]
         if tables != 2:
             raise DamagedStorage(f'Cannot open database {self.path} or database missing tables.')
         if database.execute('PRAGMA table_info(schema)').fetchall():
@@ -215,8 +163,8 @@ class Sqlite3Storage:
                 topic_id, topic, type_name, (encoding, text), more[1] if schema >= 4 else '',
                 count, serialization_format,
                 qos_profiles_yaml(more[0]) if schema >= 2 else profiles_yaml([])))
-        _, _, self.message_count = _one_row(
-            database, 'SELECT MIN(timestamp), MAX(timestamp) + 1, COUNT(*) FROM messages')
+        _, _, self.message_count = next(database.execute(
+            'SELECT MIN(timestamp), MAX(timestamp) + 1, COUNT(*) FROM messages'))
 
     def close(self) -> None:
         """Close the database."""
@@ -224,41 +172,25 @@ class Sqlite3Storage:
         if database is not None:
             database.close()
 
-    def messages(self, connections: Collection[StoredTopic], start: Optional[int] = None,
-                 stop: Optional[int] = None
+    def messages(self, connections: Collection[StoredTopic]
                  ) -> Generator[Tuple[StoredTopic, int, bytes], None, None]:
         """
-        Yield ``(connection, timestamp, data)`` of the messages of ``connections`` by time.
+        Yield ``(connection, timestamp, data)`` of the messages of ``connections`` as rosbags.
 
-        What rosbags' reader yields, in the same order (by ``timestamp``),
-        ``data`` always ``bytes`` and ``timestamp`` always an ``int`` >= 0.
-
-        Raises
-        ------
-        DamagedStorage
-            When a damaged page or row is reached: ``messages table, row id
-            12: data is TEXT, not a BLOB``; ``... after row id 40: database
-            disk image is malformed``.
-
+        By ``timestamp``; ``data`` always ``bytes``, ``timestamp`` always an int >= 0.
+        DamagedStorage when a damaged page or row is reached (``messages table, row id 12: data
+        is TEXT, not a BLOB``; ``... after row id 40: database disk image is malformed``).
         """
-        if self.dbconn is None:
-            raise DamagedStorage('Rosbag is not open.')
+        assert self.dbconn is not None
         ids = sorted({connection.id for connection in connections})
         query = ('SELECT messages.id, topics.id, messages.timestamp, messages.data '
                  'FROM messages JOIN topics ON messages.topic_id = topics.id '
                  f'WHERE topics.id IN ({",".join("?" * len(ids))})')
-        arguments: list = list(ids)
-        if start is not None:
-            query += ' AND messages.timestamp >= ?'
-            arguments.append(start)
-        if stop is not None:
-            query += ' AND messages.timestamp < ?'
-            arguments.append(stop)
         by_id = {connection.id: connection for connection in self.connections}
         row_id = None
         try:
             for row_id, topic_id, timestamp, data in self.dbconn.execute(
-                    query + ' ORDER BY timestamp', arguments):
+                    query + ' ORDER BY timestamp', ids):
                 if type(data) is not bytes:
                     raise DamagedStorage(f'messages table, row id {row_id}: data is '
                                          f'{_sqlite_type(data)}, not a BLOB')
@@ -272,12 +204,7 @@ class Sqlite3Storage:
 
 
 def _damaged_table(path: object) -> str:
-    """
-    Say where SQLite met damage: ``' (messages table, after row id 199)'``, or ``''``.
-
-    Each rosbag2 table is read whole (not through an index), in row id order, until
-    its damaged page.
-    """
+    """Say where SQLite met damage, reading each table in row order: ``' (messages table...)'``."""
     try:
         database = apsw.Connection(f'file:{path}?immutable=1',
                                    flags=apsw.SQLITE_OPEN_READONLY | apsw.SQLITE_OPEN_URI)
@@ -299,25 +226,13 @@ def _damaged_table(path: object) -> str:
         database.close()
 
 
-def _one_row(database: apsw.Connection, query: str) -> tuple:
-    """Return the row of a query that gives one (an aggregate)."""
-    row = database.execute(query).fetchone()
-    assert row is not None
-    return row
-
-
 def _sqlite_type(value: Any) -> str:
     """Return the SQLite storage class of a value apsw read: ``'TEXT'``, ``'NULL'``..."""
     return {str: 'TEXT', int: 'INTEGER', float: 'REAL', bytes: 'BLOB'}.get(type(value), 'NULL')
 
 
 def _rows_without_topic(reader: Sqlite3Storage, path: str) -> Optional[str]:
-    """
-    Say which message rows name no topic of the ``topics`` table, or None if none does.
-
-    Such rows cannot be read as messages of any topic: the table counts every
-    row but the topics only theirs.
-    """
+    """Say how many message rows name no topic of the ``topics`` table (None if none)."""
     lost = reader.message_count - sum(c.msgcount for c in reader.connections)
     if lost <= 0 or reader.dbconn is None:
         return None
@@ -329,30 +244,13 @@ def _rows_without_topic(reader: Sqlite3Storage, path: str) -> Optional[str]:
     return f'{path}: {rows} no topic (the first: row id {row_id}, topic_id {topic_id!r})'
 
 
-def _message_compression(reader: Sqlite3Storage) -> Optional[str]:
-    """Return ``'zstd'`` if the first message is a zstd frame (rosbag2's ``message`` mode)."""
-    if reader.dbconn is None:
-        return None
-    first, = next(iter(reader.dbconn.execute('SELECT data FROM messages ORDER BY id LIMIT 1')),
-                  (None,))
-    return 'zstd' if isinstance(first, bytes) and is_zstd(first) else None
-
-
 def open_sqlite3_file(path: str, *, shown: Optional[str] = None,
                       strict: bool = False) -> RosbagsInput:
     """
     Open one rosbag2 sqlite3 storage file (named ``shown`` in errors and notes, default ``path``).
 
-    Messages compressed by rosbag2 (``message`` mode) are decompressed (and
-    ``message_compression`` says so, also without ``metadata.yaml``).
-    Messages whose ``topic_id`` is not a topic cannot be read: a note
-    (``notes``) says how many, or with ``strict`` an error.
-
-    Raises
-    ------
-    BagError
-        If the database has no rosbag2 tables or cannot be read.
-
+    Messages compressed by rosbag2 (``message`` mode) are decompressed. Messages whose
+    ``topic_id`` is not a topic cannot be read: a note says how many (with ``strict``, a BagError).
     """
     shown = shown or path
     if not _ROSBAG2_TABLES <= sqlite_tables(path, shown):
@@ -364,8 +262,10 @@ def open_sqlite3_file(path: str, *, shown: Optional[str] = None,
         raise BagError(f'{shown}: cannot read rosbag2 sqlite3 storage: '
                        f'{str(error).replace(path, shown)}') from None
     try:
+        assert reader.dbconn is not None   # open
         lost = _rows_without_topic(reader, shown)
-        first_message_compression = _message_compression(reader)
+        first, = next(iter(reader.dbconn.execute('SELECT data FROM messages ORDER BY id LIMIT 1')),
+                      (None,))
         if lost is not None and strict:
             raise BagError(f'{lost}; refused (--strict)')
         source = RosbagsInput(shown, reader, (DamagedStorage, ZstdError), [
@@ -384,23 +284,16 @@ def open_sqlite3_file(path: str, *, shown: Optional[str] = None,
         raise
     if lost is not None:
         source.notes.append(f'{lost}, not read')
-    source.message_compression = first_message_compression
+    # A zstd frame: rosbag2's message compression, also without metadata.yaml.
+    source.message_compression = 'zstd' if isinstance(first, bytes) and is_zstd(first) else None
     return source
 
 
 def _definition(type_name, msgdef):
-    """
-    ``definition`` and ``definition_encoding`` of a topic from its ``message_definitions`` row.
-
-    A bag without definitions (sqlite3 before Iron) gets the installed one;
-    if the type is not installed either, the encoding ``unknown`` that rosbag2
-    records then.
-    """
+    """Return ``definition`` and ``definition_encoding``: the row's, the installed, or unknown."""
     encoding, text = msgdef
     if encoding is not None:
         return {'definition': text, 'definition_encoding': encoding}
-    try:
-        message_definition(type_name)
-    except BagError:
+    if not is_installed(type_name):
         return {'definition': '', 'definition_encoding': 'unknown'}
     return {'definition': None, 'definition_encoding': 'ros2msg'}

@@ -1,53 +1,33 @@
 """
-Bags read with a reader of the ``rosbags`` package, behind the interface of ``BagReader``.
+sqlite3 storage and ROS 1 bags, read with a ``rosbags``-style reader, as ``BagReader`` reads.
 
-rosbag2 sqlite3 storage files (:mod:`rotation_node.bag.reading.reader`) and ROS 1 bags
-(:mod:`rotation_node.bag.reading.ros1`) are read this way: the rosbags reader yields
-``(connection, time, data)`` in time order; each topic's connections get their
-:class:`~rotation_node.bag.records.TopicMetadata` and a function that turns
-the stored data into the ROS 2 CDR bytes passed on. Both formats store one
-time per message, the time the recorder received it: it is the log time and
-the publish time.
+Both formats store one time per message (when the recorder received it): the log time and the
+publish time.
 """
 from typing import Any, Callable, Dict, Iterable, Iterator, List, Optional, Tuple
 
-from rotation_node.bag.reading.mcap_reader import checked_topics
-
+from rotation_node.bag.reading.mcap_reader import add_topic, checked_topics
 from rotation_node.bag.records import BagMessage, TopicMetadata
 from rotation_node.errors import BagError
+from rotation_node.wire.message_types import message_definition
+
+
+def is_installed(type_name: str) -> bool:
+    """Whether the definition of ``type_name`` is installed (not its class: that imports more)."""
+    try:
+        message_definition(type_name)
+    except BagError:
+        return False
+    return True
 
 
 class RosbagsInput:
     """
-    A bag opened with a rosbags reader; a context manager.
+    A bag opened with a rosbags reader yielding ``(connection, time, data)`` in time order.
 
-    The interface of :class:`rotation_node.bag.reading.mcap_reader.BagReader`:
-    ``topics``, ``topic_metadata``, ``message_counts``, ``compression``,
-    ``recovered`` (always None) and ``messages``; and ``notes``.
-
-    Parameters
-    ----------
-    path : str
-        Named in errors.
-    reader : rosbags reader
-        Open; ``messages(connections)`` yields ``(connection, time_ns, data)``.
-    errors : tuple of exception types
-        What the reader (and ``to_cdr``) raise for damaged data.
-    topics : iterable of (connection, TopicMetadata, to_cdr)
-        Every connection of the bag with the metadata of its topic and the
-        function that turns its stored data into CDR bytes.
-    compression : str, optional
-        The chunk compression its copy gets, as MCAP names it (``'zstd'``,
-        ``'lz4'``, ``'none'``).
-    stored_compression : str, optional
-        The compression of the bag itself, as its format names it (a ROS 1
-        bag's ``'bz2'``); default ``compression``.
-
-    Raises
-    ------
-    BagError
-        If a topic has connections of two types.
-
+    ``topics``: every connection, its topic's metadata and its ``to_cdr``; ``errors``: what they
+    raise for damaged data. ``compression``: its copy's, as MCAP names it; ``stored_compression``:
+    the bag's own (a ROS 1 bag's ``'bz2'``).
     """
 
     def __init__(self, path: str, reader: Any, errors: tuple,
@@ -58,9 +38,7 @@ class RosbagsInput:
         self.recovered: Optional[int] = None
         self.compression = compression
         self.stored_compression = stored_compression or compression
-        #: One line for each thing the user should know (messages that cannot be read).
         self.notes: List[str] = []
-        #: ``'zstd'`` if the messages are compressed one by one (rosbag2's ``message`` mode).
         self.message_compression: Optional[str] = None
         self._reader, self._errors = reader, errors
         self.topic_metadata: Dict[str, TopicMetadata] = {}
@@ -68,54 +46,33 @@ class RosbagsInput:
         self._connections: Dict[str, List[Any]] = {}
         self._to_cdr: Dict[int, Callable[[bytes], bytes]] = {}
         for connection, metadata, to_cdr in topics:
-            known = self.topic_metadata.setdefault(connection.topic, metadata)
-            if known.type_name != metadata.type_name:
-                raise BagError(f'topic {connection.topic} in {path} has two types: '
-                               f'{known.type_name} and {metadata.type_name}')
-            self.message_counts[connection.topic] = (
-                self.message_counts.get(connection.topic, 0) + connection.msgcount)
+            add_topic(self.topic_metadata, self.message_counts, connection.topic, metadata,
+                      connection.msgcount, path)
             self._connections.setdefault(connection.topic, []).append(connection)
             self._to_cdr[connection.id] = to_cdr
         self.topics = {topic: m.type_name for topic, m in self.topic_metadata.items()}
 
     def messages(self, topics: Optional[Iterable[str]] = None) -> Iterator[BagMessage]:
-        """
-        Iterate over the messages of the given topics (default all) in time order, as CDR.
-
-        As :meth:`rotation_node.bag.reading.mcap_reader.BagReader.messages`; a message
-        that cannot be read or converted raises BagError when it is reached.
-        """
+        """Iterate as ``BagReader.messages``; a message that cannot be read raises BagError."""
         topics = checked_topics(self.topics if topics is None else topics, self.topics, self.path)
         connections = [c for topic in topics for c in self._connections[topic]]
         return self._messages(connections) if connections else iter(())
 
     def _messages(self, connections):
         type_names = self.topics
-        stored = self._reader.messages(connections)
-        while True:
-            try:
-                connection, time_ns, data = next(stored)
-            except StopIteration:
-                return
-            except self._errors as error:   # the reader names where
-                raise self.corrupt(error) from None
+        for connection, time_ns, data in self._read(self._reader.messages(connections)):
             yield BagMessage(connection.topic, type_names[connection.topic],
                              self.cdr(connection, time_ns, data), time_ns, time_ns)
 
-    def corrupt(self, error: Exception) -> BagError:
-        """Return the error to raise for one of ``errors`` that the reader raised."""
-        return BagError(f'{self.path} is corrupt: {error}')
+    def _read(self, items: Iterator[Any]) -> Iterator[Any]:
+        """Yield what the reader yields; BagError for what it raises for damage (it says where)."""
+        try:
+            yield from items
+        except self._errors as error:
+            raise BagError(f'{self.path} is corrupt: {error}') from None
 
     def cdr(self, connection: Any, time_ns: int, data: bytes) -> bytes:
-        """
-        Return the CDR data of a message of ``connection`` stored as ``data``.
-
-        Raises
-        ------
-        BagError
-            If it cannot be converted, naming its topic and log time.
-
-        """
+        """Return the CDR data of a message stored as ``data``; BagError naming it if it fails."""
         try:
             return self._to_cdr[connection.id](data)
         except self._errors as error:
