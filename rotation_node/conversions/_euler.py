@@ -82,7 +82,11 @@ def _wrap(angle):
 
 @jit
 def _working_axes(i, j, k, intrinsic):
-    """Axes ``(i, j, k)`` in extrinsic working order (proper: ``k`` the third), sign, proper."""
+    """
+    Axes ``(i, j, k)`` in extrinsic working order, the permutation sign, and whether proper.
+
+    An intrinsic sequence is the extrinsic one reversed; a proper one uses the third axis as k.
+    """
     if intrinsic:
         i, k = k, i
     proper = i == k
@@ -125,7 +129,11 @@ def euler_atan2_arguments(x: float, y: float, z: float, w: float, i: int, j: int
 @jit
 def euler_from_half_angles(half_middle: float, half_sum: float, half_diff: float, h_ab: float,
                            i: int, j: int, k: int, intrinsic: bool) -> Vector3:
-    """Euler angles from the ``atan2`` of :func:`euler_atan2_arguments`; ``h_ab == 0``: at pi."""
+    """
+    Euler angles from the ``atan2`` of :func:`euler_atan2_arguments`.
+
+    ``half_middle == 0`` and ``h_ab == 0`` (the first ``x`` argument) are the exact degeneracies.
+    """
     _, _, _, sign, proper = _working_axes(i, j, k, intrinsic)
     middle = 2.0 * half_middle
     # Exact degeneracy: only the sum (middle 0) or difference (middle pi) of the
@@ -157,7 +165,11 @@ def euler_from_quaternion_scalar(x: float, y: float, z: float, w: float, i: int,
 @jit
 def singularity_margin_scalar(x: float, y: float, z: float, w: float, i: int, j: int, k: int,
                               intrinsic: bool) -> float:
-    """Distance (rad) of the middle angle from its singular values, to an ulp (even at 1e-300)."""
+    """
+    Distance (rad) of the middle angle from its nearest singular value, to an ulp (even 1e-300).
+
+    ``2 atan2(h_cd, h_ab)`` in [0, pi] is singular at 0 and pi for every convention.
+    """
     _, _, _, _, h_ab, h_cd = _bernardes_viollet_terms(x, y, z, w, i, j, k, intrinsic)
     return 2.0 * math.atan2(min(h_ab, h_cd), max(h_ab, h_cd))
 

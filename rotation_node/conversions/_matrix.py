@@ -1,10 +1,10 @@
 """
 Rotation matrices: quaternion <-> matrix, and the nearest rotation of a noisy matrix.
 
-Matrix to quaternion uses Markley's pivot [1]_ (exact to an ulp or two, rotations by pi
-included); a matrix not orthonormal to rounding is first replaced by its nearest rotation
-(Frobenius norm): Newton-Schulz iteration [4]_ when close, else the dominant eigenvector of
-Bar-Itzhack's symmetric 4x4 matrix [3]_ (docs/numerics.md).
+Matrix to quaternion uses Markley's form [1]_ of Shepperd's pivot [2]_ (exact to an ulp or
+two, rotations by pi included); a matrix not orthonormal to rounding is first replaced by
+its nearest rotation (Frobenius norm): Newton-Schulz iteration [4]_ when close, else the
+dominant eigenvector of Bar-Itzhack's symmetric 4x4 matrix [3]_ (docs/numerics.md).
 
 References
 ----------

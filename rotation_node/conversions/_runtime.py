@@ -86,11 +86,9 @@ _loading = threading.RLock()
 
 def jit(py_func: Callable[..., Any]) -> Callable[..., Any]:
     """
-    Declare a helper of kernels: returned as it is, compiled inlined into the kernels calling it.
+    Declare a helper of kernels: returned as it is, compiled inlined (numba IR) into its callers.
 
-    Inlined in numba IR, not left to LLVM: a called helper costs a call and an atomic
-    reference count per sample when an array is live across it, 2-4x most kernels'
-    whole per-sample cost (measured). Inlined callees cannot take ``*args``.
+    A called helper costs a call and an atomic reference count per sample: 2-4x most kernels.
     """
     _HELPERS[id(py_func)] = py_func
     return py_func
@@ -110,11 +108,7 @@ def compiled_form(py_func: Callable[..., Any]) -> Callable[[Callable[[], Any]], 
 
 
 def _compiled_namespace(module_globals: dict[str, Any]) -> dict[str, Any]:
-    """
-    Return the globals of the compiled copies of a module's functions: every helper compiled.
-
-    numba resolves globals when it compiles; the Python functions keep the Python helpers.
-    """
+    """Return the globals of the compiled copies of a module's functions: its helpers compiled."""
     name = module_globals['__name__']
     namespace = _NAMESPACES.get(name)
     if namespace is None:
@@ -205,9 +199,8 @@ def typed_first_call(dispatcher: Any) -> Callable[..., Any]:
     """
     Return the first ``call_unchecked`` of a kernel: a typed call that installs the unchecked one.
 
-    ``call_unchecked`` is the compiled code without numba's typing (~100 ns less): the
-    caller guarantees the declared array types, or reads out of bounds. Typing the first
-    call makes a call site that breaks the contract raise ``TypeError``.
+    Unchecked (~100 ns less), arrays of other types read out of bounds; the typed first call
+    makes a call site breaking that contract raise ``TypeError``.
     """
     def call(*args):
         status_ = dispatcher(*args)
@@ -331,11 +324,7 @@ class Kernel:
 
 
 def _is_cached(dispatcher: Any, signature: Any) -> bool:
-    """
-    Whether numba's disk cache holds ``dispatcher``'s code for ``signature``.
-
-    Asked as ``Dispatcher.compile`` asks its private ``_cache`` (without one: not cached).
-    """
+    """Whether numba's disk cache (``_cache``) holds ``dispatcher``'s code for ``signature``."""
     from numba.core.compiler_lock import global_compiler_lock
     cache = getattr(dispatcher, '_cache', None)
     if cache is None:
@@ -371,11 +360,7 @@ _loading_forced = os.environ.get('ROTATION_NODE_COMPILED', '') not in ('', '0')
 
 def kernel(*argument_types: ArgumentType,
            returns: Optional[ArgumentType] = STATUS) -> Callable[[Callable[..., Any]], Kernel]:
-    """
-    Declare a kernel of one signature (e.g. ``FLAT_IN, FLAT_OUT, INT``), returning ``returns``.
-
-    Once loaded, a call with other types raises ``TypeError`` rather than compiling again.
-    """
+    """Declare a kernel of one signature (``FLAT_IN, FLAT_OUT, INT``); others raise TypeError."""
     def decorate(py_func):
         declared = Kernel(py_func, argument_types, returns)
         KERNELS.append(declared)
@@ -482,10 +467,6 @@ def kernel_layout(a: FloatArray, trailing: tuple[int, ...]) -> FloatArray:
     if len(trailing) <= 1:
         return a.reshape(-1)
     return a.reshape((-1,) + trailing[1:])
-
-
-def _rows_per_sample(trailing: tuple[int, ...]) -> int:
-    return trailing[0] if trailing else 1
 
 
 def samples(a: FloatArray, width: int) -> Any:
@@ -698,7 +679,7 @@ def batch_threads(n: int) -> int:
 def _run(kernel_: Any, inputs: Sequence[FloatArray], trailings: Sequence[tuple[int, ...]],
          out: FloatArray, out_trailing: tuple[int, ...], args: tuple[Any, ...]) -> int:
     """Run ``kernel_(*inputs, out, *args)`` on canonical arrays, in threads for large batches."""
-    n = out.shape[0] // _rows_per_sample(out_trailing)
+    n = out.shape[0] // (out_trailing[0] if out_trailing else 1)
     threads = batch_threads(n)
     if threads == 1:
         return kernel_(*inputs, out, *args)
@@ -709,7 +690,7 @@ def _run(kernel_: Any, inputs: Sequence[FloatArray], trailings: Sequence[tuple[i
     if kernel_.dispatcher is None:
         kernel_.load()   # once, here, rather than in each thread
     arrays = tuple(inputs) + (out,)   # split into whole samples of r rows each
-    rows = [_rows_per_sample(t) for t in tuple(trailings) + (out_trailing,)]
+    rows = [t[0] if t else 1 for t in tuple(trailings) + (out_trailing,)]
     bounds = np.linspace(0, n, threads + 1).astype(int)
     jobs = [_pool.submit(kernel_, *[a[lo * r:hi * r] for a, r in zip(arrays, rows)], *args)
             for lo, hi in zip(bounds[:-1], bounds[1:])]
@@ -726,7 +707,8 @@ def _run(kernel_: Any, inputs: Sequence[FloatArray], trailings: Sequence[tuple[i
 # checks what typing would and calls the compiled code (``call_unchecked``) with the
 # caller's array as it is, or a list, tuple or message (``_messages``) as a tuple to the
 # tuple form (``call_tuple``; numba unboxes it in ~20 ns), or before that copied into a
-# scratch array of the thread's own. Module globals: ``np.empty`` costs ~30 ns more.
+# scratch array of the thread's own. The path's names are module globals (``np.empty``
+# looked up through the module costs ~30 ns).
 _FLOAT64 = np.dtype(np.float64)
 _NDARRAY = np.ndarray
 _ONE = (1,)
@@ -819,9 +801,7 @@ def single_sample(x: object, trailing: tuple[int, ...], argument: int = 0) -> Op
     """
     Return ``x`` as one sample in a float64 array ``call_unchecked`` takes, or None.
 
-    A float64 array of exactly the sample's shape (``carray``: C-contiguous, aligned,
-    writable) as it is; a list sample or message copied into argument ``argument``'s
-    scratch array.
+    An array of exactly the kernel's type as it is, a list or message copied to scratch.
     """
     kind = type(x)
     if kind is _NDARRAY:
@@ -913,8 +893,8 @@ def call_binary(kernel_: Any, x: ArrayLike, y: ArrayLike, names: tuple[str, str]
     """
     scalar_y = not trailings[1]
     if scalar_y and type(y) is not float and (isinstance(y, _NUMBERS) or (
-            type(y) is _NDARRAY and y.shape == () and y.dtype is _FLOAT64  # type: ignore
-            and y.flags.carray)):  # type: ignore
+            type(y) is _NDARRAY and y.shape == () and y.dtype is _FLOAT64
+            and y.flags.carray)):
         y = float(y)
     xv: Any = x   # the arguments as they came; mypy: any object
     yv: Any = y

@@ -38,20 +38,15 @@ def warm_up() -> int:
     from ._runtime import compile_kernels, compiling_tuple_forms
     count = compile_kernels()
     with compiling_tuple_forms():
-        for module in (conversions, kinematics):
-            for name in module.__all__:
-                _call_with_tuples(getattr(module, name))
+        for function in (getattr(module, name) for module in (conversions, kinematics)
+                         for name in module.__all__):
+            if not inspect.isfunction(function):
+                continue
+            parameters = inspect.signature(function).parameters.values()
+            required = [p.name for p in parameters if p.default is inspect.Parameter.empty]
+            if required and all(name in _TUPLE_ARGUMENTS for name in required):
+                function(*(_TUPLE_ARGUMENTS[name] for name in required))
     return count
-
-
-def _call_with_tuples(function: object) -> None:
-    """Call ``function`` with a tuple for each required argument, if all are named in the table."""
-    if not inspect.isfunction(function):
-        return
-    required = [parameter.name for parameter in inspect.signature(function).parameters.values()
-                if parameter.default is inspect.Parameter.empty]
-    if required and all(name in _TUPLE_ARGUMENTS for name in required):
-        function(*(_TUPLE_ARGUMENTS[name] for name in required))
 
 
 @contextmanager
