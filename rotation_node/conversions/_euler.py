@@ -310,8 +310,7 @@ def quaternion_from_euler(angles: ArrayLike, seq: str, *, degrees: bool = False)
     Parameters
     ----------
     angles : array_like, shape (..., 3)
-        First, second and third angle of ``seq``, in radians (degrees if
-        ``degrees``).
+        First, second and third angle of ``seq``, in radians (degrees if ``degrees``).
     seq : str
         Axis sequence: three of x, y, z, no two consecutive alike; upper case
         intrinsic (``R = R1 R2 R3``), lower case extrinsic (``R = R3 R2 R1``).
@@ -374,11 +373,10 @@ def euler_from_quaternion(q: ArrayLike, seq: str, *, degrees: bool = False) -> F
     Returns
     -------
     ndarray, shape (..., 3)
-        First, second and third angle of ``seq``. First and third in
-        (-pi, pi]; the middle in [-pi/2, pi/2] for Tait-Bryan sequences
-        (three different axes) and in [0, pi] for proper Euler sequences.
-        At exact gimbal lock the third angle is 0; near it the angles are
-        exact (compare rotations, not angles: they are ill-conditioned there).
+        First, second and third angle of ``seq``. First and third in (-pi, pi]; the middle
+        in [-pi/2, pi/2] for Tait-Bryan sequences (three different axes) and in [0, pi] for
+        proper Euler sequences. At exact gimbal lock the third angle is 0; near it the
+        angles are exact (compare rotations, not angles: they are ill-conditioned there).
 
     Raises
     ------

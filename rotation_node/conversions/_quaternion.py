@@ -326,9 +326,8 @@ def quaternion_product(p: ArrayLike, q: ArrayLike) -> FloatArray:
     Returns
     -------
     ndarray, shape (..., 4)
-        ``p (x) q``: the rotation ``q`` followed by ``p`` (``R(p) R(q)``). Not
-        normalised, so that the product of unit quaternions stays exact to
-        rounding.
+        ``p (x) q``: the rotation ``q`` followed by ``p`` (``R(p) R(q)``). Not normalised,
+        so that the product of unit quaternions stays exact to rounding.
 
     Raises
     ------
@@ -369,9 +368,8 @@ def canonical_quaternion(q: ArrayLike) -> FloatArray:
     Returns
     -------
     ndarray, shape (..., 4)
-        ``q / |q|`` with the sign chosen so that ``w > 0``; where ``w == 0``
-        the first non-zero of x, y, z is positive. ``q`` and ``-q`` give the
-        same result.
+        ``q / |q|`` with the sign chosen so that ``w > 0``; where ``w == 0`` the first
+        non-zero of x, y, z is positive. ``q`` and ``-q`` give the same result.
 
     """
     return call_unary(canonical_kernel, q, 'q', (4,), (4,))
