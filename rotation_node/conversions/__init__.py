@@ -33,7 +33,7 @@ across threads (:func:`set_threads`, environment variable ``ROTATION_NODE_THREAD
 from . import _axis_angle, _euler, _matrix, _quaternion
 from ._runtime import set_threads
 from ._scalar_first import scalar_first_adapter
-from ._validation import EulerSequence, parse_sequence
+from ._validation import EulerSequence, parse_sequence, SEQUENCES
 
 # Every public function that takes or returns quaternions, with the keyword scalar_first:
 # adapt(function, its quaternion parameters, whether it returns quaternions).
@@ -59,10 +59,6 @@ matrix_from_rotation_vector = _axis_angle.matrix_from_rotation_vector
 rotation_vector_from_matrix = _axis_angle.rotation_vector_from_matrix
 euler_from_matrix = _euler.euler_from_matrix
 matrix_from_euler = _euler.matrix_from_euler
-
-_LOWER = ('xyz', 'xzy', 'yxz', 'yzx', 'zxy', 'zyx', 'xyx', 'xzx', 'yxy', 'yzy', 'zxz', 'zyz')
-#: The 24 conventions: 12 extrinsic (lower case) and 12 intrinsic (upper case).
-SEQUENCES = _LOWER + tuple(s.upper() for s in _LOWER)
 
 __all__ = [
     'EulerSequence', 'SEQUENCES',

@@ -1,15 +1,10 @@
 """
 Axis-angle and rotation vectors: the exponential and logarithm maps.
 
-A rotation by ``angle`` about the unit ``axis`` n is the quaternion
-``(n sin(angle/2), cos(angle/2))`` and the rotation vector ``angle * n``.
-
-The textbook ``theta = 2 acos(q_s)`` and ``n = q_v / sqrt(1 - q_s^2)`` lose half
-the digits near 0 (and all of them below ~2e-8 rad) and break for a quaternion
-slightly off unit length; here the angle is ``2 atan2(|q_v|, |q_s|)`` and the
-axis ``q_v / |q_v|``, exact to ~1 ulp for every angle and every norm. Matrix
-forms go through the quaternion (never ``acos`` of the trace, which is
-useless near pi).
+A rotation by ``angle`` about the unit axis ``n`` is the quaternion
+``(n sin(angle/2), cos(angle/2))`` and the rotation vector ``angle * n``. The angle is
+``2 atan2(|q_v|, |q_s|)`` and the axis ``q_v / |q_v|`` (~1 ulp for every angle and norm,
+where ``2 acos(q_s)`` fails below ~2e-8 rad); matrices go through the quaternion.
 """
 from __future__ import annotations
 
@@ -49,12 +44,7 @@ def rotation_quaternion(ux: float, uy: float, uz: float, k: float,
 @jit
 def rotation_vector_quaternion(vx: float, vy: float, vz: float, theta: float,
                                half_angle_sin: float, half_angle_cos: float) -> Quaternion4:
-    """
-    Exponential map from ``sin`` and ``cos`` of half the norm ``theta = |v|``.
-
-    Below 2e-8, ``sin(theta/2) / theta`` is 1/2 to within an ulp; the guard
-    also keeps ``theta = 0`` and subnormal ``theta`` exact.
-    """
+    """Exponential map from ``sin``, ``cos`` of ``|v| / 2`` (``sin(t/2) / t``: 1/2 below 2e-8)."""
     k = 0.5 if theta < 2e-8 else half_angle_sin / theta
     return rotation_quaternion(vx, vy, vz, k, half_angle_cos)
 
@@ -104,10 +94,8 @@ def rotation_vector_from_quaternion_scalar(x: float, y: float, z: float, w: floa
 
 
 # ----------------------------------------------------------------- kernels
-# The exponential maps have two schedules with the same formulas: one fused
-# loop for small inputs, and for batches a staged one that collects the half
-# angles of a chunk, takes their sines and cosines in one vectorised loop
-# (``sin_cos_in_place_kernel``) and then builds the rotations.
+# The exponential maps have two schedules, the same formulas: one fused loop, and for
+# batches a staged one taking a chunk's sines and cosines in one vectorised loop.
 
 @jit
 def _axis_angle_status(ax, ay, az, angle, s):
@@ -135,7 +123,7 @@ def _rotations_from_axis_angle(fa, ft, angle, fo):
 
 @jit
 def _rotations_from_axis_angle_staged(fa, ft, fo):
-    """Return the batch schedule of :func:`_rotations_from_axis_angle` (``ft``: angle per axis)."""
+    """Return the batch schedule of :func:`_rotations_from_axis_angle`."""
     n = fa.shape[0]
     half_sin, half_cos = np.empty(min(n, STAGE_CHUNK)), np.empty(min(n, STAGE_CHUNK))
     for start in range(0, n, STAGE_CHUNK):
@@ -153,9 +141,7 @@ def _rotations_from_axis_angle_staged(fa, ft, fo):
     return -1
 
 
-# Each public function has its own kernels (one signature each): the
-# quaternion and the matrix forms differ in the layout of their output. The
-# scalar ``angle`` is a single sample's angle (``angles`` then empty).
+# One kernel per output layout (one signature each); ``angle``: one sample's (``angles`` empty).
 
 @kernel(FLAT_IN, FLAT_IN, FLAT_OUT, FLOAT)
 def _quaternion_from_axis_angle_kernel(axis, angles, out, angle):
@@ -230,39 +216,29 @@ def _matrix_from_rotation_vector_batch_kernel(v, out):
     return _rotations_from_rotation_vectors_staged(samples(v, 3), samples(out, 9))
 
 
-@jit
-def _store_axis_angle(fo, s, x, y, z, w):
-    """``(axis, angle)`` of ``q`` into row ``s`` of ``fo`` (n, 4)."""
-    fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3] = axis_angle_from_quaternion_scalar(x, y, z, w)
-
-
-@jit
-def _store_rotation_vector(fo, s, x, y, z, w):
-    """Return the rotation vector of ``q`` into row ``s`` of ``fo`` (n, 3)."""
-    fo[s, 0], fo[s, 1], fo[s, 2] = rotation_vector_from_quaternion_scalar(x, y, z, w)
-
-
 @kernel(FLAT_IN, FLAT_OUT)
 def axis_angle_kernel(q: FloatArray, out: FloatArray) -> int:
-    """``(x, y, z, angle)`` of quaternions into ``out`` (4 n); returns the status."""
+    """``(x, y, z, angle)`` of quaternions into ``out`` (4 n)."""
     fq, fo = samples(q, 4), samples(out, 4)
     for s in range(fq.shape[0]):
         bad = quaternion_status(fq, s, 0)
         if bad >= 0:
             return bad
-        _store_axis_angle(fo, s, fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3])
+        fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3] = axis_angle_from_quaternion_scalar(
+            fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3])
     return -1
 
 
 @kernel(FLAT_IN, FLAT_OUT)
 def rotation_vector_kernel(q: FloatArray, out: FloatArray) -> int:
-    """Rotation vectors of quaternions into ``out`` (3 n); returns the status."""
+    """Rotation vectors of quaternions into ``out`` (3 n)."""
     fq, fo = samples(q, 4), samples(out, 3)
     for s in range(fq.shape[0]):
         bad = quaternion_status(fq, s, 0)
         if bad >= 0:
             return bad
-        _store_rotation_vector(fo, s, fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3])
+        fo[s, 0], fo[s, 1], fo[s, 2] = rotation_vector_from_quaternion_scalar(
+            fq[s, 0], fq[s, 1], fq[s, 2], fq[s, 3])
     return -1
 
 
@@ -276,7 +252,7 @@ def _axis_angle_from_matrix_kernel(m, out, tolerance):
         if bad >= 0:
             return bad
         pending += bad == EIGENVECTOR_PENDING
-        _store_axis_angle(fo, s, x, y, z, w)
+        fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3] = axis_angle_from_quaternion_scalar(x, y, z, w)
     return -1 - pending
 
 
@@ -290,7 +266,7 @@ def _rotation_vector_from_matrix_kernel(m, out, tolerance):
         if bad >= 0:
             return bad
         pending += bad == EIGENVECTOR_PENDING
-        _store_rotation_vector(fo, s, x, y, z, w)
+        fo[s, 0], fo[s, 1], fo[s, 2] = rotation_vector_from_quaternion_scalar(x, y, z, w)
     return -1 - pending
 
 

@@ -1,19 +1,10 @@
 """
 Euler angles in all 24 conventions (12 axis sequences, intrinsic or extrinsic).
 
-Upper-case ``seq`` is intrinsic (rotations about the moving body axes:
-``R = R1(a1) R2(a2) R3(a3)``, the textbook ``R_WB``), lower case extrinsic
-(about the fixed axes: ``R = R3(a3) R2(a2) R1(a1)``). ROS roll-pitch-yaw
-(REP 103, tf2 ``setRPY``) is ``'xyz'`` with (roll, pitch, yaw).
-
-Quaternion to angles follows Bernardes and Viollet [1]_ directly from the
-quaternion: every step is a ratio fed to ``atan2``/``hypot``, so the
-quaternion's norm does not matter, and nothing is snapped near gimbal lock.
-Only at exact degeneracy (the middle angle exactly at its singular value, where
-the first and third angles are not unique) is the third angle set to 0 and the
-whole rotation about that axis given to the first. Round trips stay within a
-few ulps right up to the singularity (scipy's 1e-7 snap loses ~7e-8 rad there;
-the ``asin`` pitch formula of tf2 ~1e-8).
+Quaternion to angles follows Bernardes and Viollet [1]_: ratios fed to ``atan2``, so the
+norm does not matter, and nothing is snapped near gimbal lock. Only at exact degeneracy
+(middle angle exactly singular) is the third angle set to 0, the first carrying the
+whole rotation about that axis (docs/numerics.md).
 
 References
 ----------
@@ -38,7 +29,7 @@ from ._runtime import (
     call_unary, FLAT_IN, FLAT_OUT, FLOAT, INT, jit, kernel, matrix_samples, ROWS_IN, ROWS_OUT,
     samples, STAGE_CHUNK)
 from ._trigonometry import atan2_in_place_kernel, sin_cos
-from ._validation import EulerSequence, parse_sequence, SEQUENCE_TABLE
+from ._validation import parse_sequence, SEQUENCE_TABLE
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
@@ -94,8 +85,7 @@ def _working_axes(i, j, k, intrinsic):
     """
     Axes ``(i, j, k)`` in extrinsic working order, the permutation sign, and whether proper.
 
-    The algorithm works in extrinsic order; an intrinsic sequence is the
-    extrinsic one reversed. Proper sequences use the missing axis as ``k``.
+    An intrinsic sequence is the extrinsic one reversed; a proper one uses the third axis as k.
     """
     if intrinsic:
         i, k = k, i
@@ -110,10 +100,8 @@ def _bernardes_viollet_terms(x, y, z, w, i, j, k, intrinsic):
     """
     Return the quantities (a, b, c, d) of [1]_ and ``h_ab = |(a, b)|``, ``h_cd = |(c, d)|``.
 
-    The quaternion is first rescaled exactly into the range where
-    ``sqrt(a^2 + b^2)`` cannot overflow; where it underflows, ``a`` and ``b``
-    are below 1e-150 of the quaternion's norm and the split of the outer angles
-    they decide moves the rotation by less than that.
+    Rescaled so that the norms cannot overflow; where they underflow, the split of the
+    outer angles they decide moves the rotation by less than 1e-150 of the norm.
     """
     x, y, z, w = scaled_quaternion(x, y, z, w)
     i, j, k, sign, proper = _working_axes(i, j, k, intrinsic)
@@ -130,10 +118,9 @@ def _bernardes_viollet_terms(x, y, z, w, i, j, k, intrinsic):
 def euler_atan2_arguments(x: float, y: float, z: float, w: float, i: int, j: int, k: int,
                           intrinsic: bool) -> tuple[Vector3, Vector3]:
     """
-    Return the three ``atan2`` argument pairs of the conversion: ``(y1, y2, y3), (x1, x2, x3)``.
+    Return the three ``atan2`` argument pairs: ``(y1, y2, y3), (x1, x2, x3)``.
 
-    ``atan2(y1, x1)`` is half the middle angle (in [0, pi/2]), ``atan2(y2, x2)``
-    and ``atan2(y3, x3)`` the half sum and half difference of the outer angles.
+    Their ``atan2`` are half the middle angle and the half sum and difference of the outer.
     """
     a, b, c, d, h_ab, h_cd = _bernardes_viollet_terms(x, y, z, w, i, j, k, intrinsic)
     return (h_cd, b, d), (h_ab, a, c)
@@ -143,10 +130,9 @@ def euler_atan2_arguments(x: float, y: float, z: float, w: float, i: int, j: int
 def euler_from_half_angles(half_middle: float, half_sum: float, half_diff: float, h_ab: float,
                            i: int, j: int, k: int, intrinsic: bool) -> Vector3:
     """
-    Euler angles from the three ``atan2`` results of :func:`euler_atan2_arguments`.
+    Euler angles from the ``atan2`` of :func:`euler_atan2_arguments`.
 
-    ``h_ab`` (the first ``x`` argument) tells the degeneracy at pi;
-    ``half_middle == 0`` is exactly the degeneracy at 0.
+    ``half_middle == 0`` and ``h_ab == 0`` (the first ``x`` argument) are the exact degeneracies.
     """
     _, _, _, sign, proper = _working_axes(i, j, k, intrinsic)
     middle = 2.0 * half_middle
@@ -180,11 +166,9 @@ def euler_from_quaternion_scalar(x: float, y: float, z: float, w: float, i: int,
 def singularity_margin_scalar(x: float, y: float, z: float, w: float, i: int, j: int, k: int,
                               intrinsic: bool) -> float:
     """
-    Distance (rad) of the middle angle from its nearest singular value.
+    Distance (rad) of the middle angle from its nearest singular value, to an ulp (even 1e-300).
 
-    With ``m' = 2 atan2(h_cd, h_ab)`` in [0, pi] singular at 0 and pi for every
-    convention, the margin is ``2 atan2(min(h_ab, h_cd), max(h_ab, h_cd))``:
-    exact to an ulp even for margins of 1e-300.
+    ``2 atan2(h_cd, h_ab)`` in [0, pi] is singular at 0 and pi for every convention.
     """
     _, _, _, _, h_ab, h_cd = _bernardes_viollet_terms(x, y, z, w, i, j, k, intrinsic)
     return 2.0 * math.atan2(min(h_ab, h_cd), max(h_ab, h_cd))
@@ -194,7 +178,7 @@ def singularity_margin_scalar(x: float, y: float, z: float, w: float, i: int, j:
 
 @jit
 def unpack_convention(convention: int) -> tuple[int, int, int, bool, bool]:
-    """Axes ``(i, j, k)``, intrinsic flag and degrees flag packed by :func:`convention_code`."""
+    """Axes ``(i, j, k)``, intrinsic flag and degrees flag of a convention code."""
     return (convention & 3, (convention >> 2) & 3, (convention >> 4) & 3,
             (convention >> 6) & 1 == 1, (convention >> 7) == 1)
 
@@ -247,15 +231,9 @@ def _euler_from_quaternion_kernel(q, out, convention):
 @kernel(FLAT_IN, FLAT_OUT, INT)
 def _euler_from_quaternion_batch_kernel(q, out, convention):
     """
-    Batch schedule of ``_euler_from_quaternion_kernel``: the ``atan2`` in one SIMD loop.
+    Batch schedule of ``_euler_from_quaternion_kernel``: each chunk's ``atan2`` in one SIMD loop.
 
-    Chunk by chunk (the intermediates stay in cache): a loop validates the
-    quaternions and forms the three ``atan2`` argument pairs of each, one
-    vectorised loop evaluates them all (:func:`atan2_in_place_kernel`), and a
-    last loop turns the half angles into Euler angles. The formulas are the
-    fused kernel's; only ``atan2`` is the branch-free one (0.8 ulp against
-    the C library's 0.5), so results may differ from the single-sample path
-    in the last bit.
+    The branch-free ``atan2`` (0.8 ulp, the C library's 0.5) may differ in the last bit.
     """
     i, j, k, intrinsic, degrees = unpack_convention(convention)
     scale = _DEGREES_PER_RADIAN if degrees else 1.0
@@ -310,16 +288,10 @@ def _singularity_margin_kernel(q, out, convention):
 
 # ------------------------------------------------------------ public API
 
-def convention_code(spec: EulerSequence) -> int:
-    """Return the kernels' code: ``i | j << 2 | k << 4 | intrinsic << 6`` (degrees: ``| 128``)."""
-    i, j, k = spec.axes
-    return i | j << 2 | k << 4 | int(spec.intrinsic) << 6
-
-
-_DEGREES_FLAG = 1 << 7   # angles in degrees rather than radians
-# The codes of every sequence, for angles in radians and in degrees.
-_RADIAN_CODES = {name: convention_code(spec) for name, spec in SEQUENCE_TABLE.items()}
-_DEGREE_CODES = {name: code | _DEGREES_FLAG for name, code in _RADIAN_CODES.items()}
+# The kernels' code of every sequence: i | j << 2 | k << 4 | intrinsic << 6 (| 128: degrees).
+_RADIAN_CODES = {name: spec.axes[0] | spec.axes[1] << 2 | spec.axes[2] << 4
+                 | int(spec.intrinsic) << 6 for name, spec in SEQUENCE_TABLE.items()}
+_DEGREE_CODES = {name: code | 1 << 7 for name, code in _RADIAN_CODES.items()}
 
 
 def _convention(seq: str, degrees: bool = False) -> int:
@@ -331,13 +303,6 @@ def _convention(seq: str, degrees: bool = False) -> int:
         raise
 
 
-def _from_angles(angles: ArrayLike, seq: str, degrees: bool,
-                 out_trailing: tuple[int, ...]) -> FloatArray:
-    matrices = out_trailing == (3, 3)
-    kernel_ = _matrix_from_euler_kernel if matrices else _quaternion_from_euler_kernel
-    return call_unary(kernel_, angles, 'angles', (3,), out_trailing, _convention(seq, degrees))
-
-
 def quaternion_from_euler(angles: ArrayLike, seq: str, *, degrees: bool = False) -> FloatArray:
     """
     Quaternions of Euler angles.
@@ -345,8 +310,7 @@ def quaternion_from_euler(angles: ArrayLike, seq: str, *, degrees: bool = False)
     Parameters
     ----------
     angles : array_like, shape (..., 3)
-        First, second and third angle of ``seq``, in radians (degrees if
-        ``degrees``).
+        First, second and third angle of ``seq``, in radians (degrees if ``degrees``).
     seq : str
         Axis sequence: three of x, y, z, no two consecutive alike; upper case
         intrinsic (``R = R1 R2 R3``), lower case extrinsic (``R = R3 R2 R1``).
@@ -365,7 +329,8 @@ def quaternion_from_euler(angles: ArrayLike, seq: str, *, degrees: bool = False)
         Wrong shape, NaN/Inf, or an invalid ``seq``.
 
     """
-    return _from_angles(angles, seq, degrees, (4,))
+    return call_unary(_quaternion_from_euler_kernel, angles, 'angles', (3,), (4,),
+                      _convention(seq, degrees))
 
 
 def matrix_from_euler(angles: ArrayLike, seq: str, *, degrees: bool = False) -> FloatArray:
@@ -388,7 +353,8 @@ def matrix_from_euler(angles: ArrayLike, seq: str, *, degrees: bool = False) -> 
         Body-to-world rotation matrices.
 
     """
-    return _from_angles(angles, seq, degrees, (3, 3))
+    return call_unary(_matrix_from_euler_kernel, angles, 'angles', (3,), (3, 3),
+                      _convention(seq, degrees))
 
 
 def euler_from_quaternion(q: ArrayLike, seq: str, *, degrees: bool = False) -> FloatArray:
@@ -407,11 +373,10 @@ def euler_from_quaternion(q: ArrayLike, seq: str, *, degrees: bool = False) -> F
     Returns
     -------
     ndarray, shape (..., 3)
-        First, second and third angle of ``seq``. First and third in
-        (-pi, pi]; the middle in [-pi/2, pi/2] for Tait-Bryan sequences
-        (three different axes) and in [0, pi] for proper Euler sequences.
-        At exact gimbal lock the third angle is 0; near it the angles are
-        exact (compare rotations, not angles: they are ill-conditioned there).
+        First, second and third angle of ``seq``. First and third in (-pi, pi]; the middle
+        in [-pi/2, pi/2] for Tait-Bryan sequences (three different axes) and in [0, pi] for
+        proper Euler sequences. At exact gimbal lock the third angle is 0; near it the
+        angles are exact (compare rotations, not angles: they are ill-conditioned there).
 
     Raises
     ------

@@ -1,15 +1,10 @@
 """
-Rotation matrices: quaternion <-> matrix and the nearest rotation of a noisy matrix.
+Rotation matrices: quaternion <-> matrix, and the nearest rotation of a noisy matrix.
 
-``R`` maps body coordinates to world coordinates; ``R = matrix_from_quaternion(q)``
-is the textbook ``(2 q_s^2 - 1) I + 2 q_s [q_v]x + 2 q_v q_v^T``.
-
-Matrix to quaternion uses Markley's pivot (the largest of trace, R00, R11, R22
-selects the best-conditioned column of the symmetric 4x4 matrix), exact to an
-ulp or two everywhere, including rotations by pi, where the textbook trace
-formula returns NaN. A matrix that is not orthonormal to rounding is replaced
-by its nearest rotation (Frobenius norm): by Newton-Schulz iteration when it is
-close, else as the dominant eigenvector of Bar-Itzhack's symmetric 4x4 matrix.
+Matrix to quaternion uses Markley's form [1]_ of Shepperd's pivot [2]_ (exact to an ulp or
+two, rotations by pi included); a matrix not orthonormal to rounding is first replaced by
+its nearest rotation (Frobenius norm): Newton-Schulz iteration [4]_ when close, else the
+dominant eigenvector of Bar-Itzhack's symmetric 4x4 matrix [3]_ (docs/numerics.md).
 
 References
 ----------
@@ -64,9 +59,7 @@ def matrix_entries(x: float, y: float, z: float, w: float) -> Matrix9:
 
 @jit
 def store_matrix(fo: FloatArray, s: int, x: float, y: float, z: float, w: float) -> None:
-    """Write ``R(q)`` into row ``s`` of ``fo`` (shape (n, 9), row-major matrices)."""
-    # One unpacking assignment: indexing the tuple in a loop would spill it
-    # to the stack and cost ~2x the whole kernel.
+    """Write ``R(q)`` into row ``s`` of ``fo`` (n, 9), in one assignment (a loop: ~2x slower)."""
     (fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3], fo[s, 4], fo[s, 5],
      fo[s, 6], fo[s, 7], fo[s, 8]) = matrix_entries(x, y, z, w)
 
@@ -80,18 +73,15 @@ def store_rotation(fo: FloatArray, s: int, x: float, y: float, z: float, w: floa
         fo[s, 0], fo[s, 1], fo[s, 2], fo[s, 3] = x, y, z, w
 
 
-# Deviation from orthonormality below which a matrix is used as it is: at this
-# level Markley's quaternion is within rounding of the nearest rotation's.
+# Below this deviation from orthonormality Markley's quaternion is within rounding of the
+# nearest rotation's.
 EXACT_ORTHONORMAL = 1e-15
-# Newton-Schulz converges for deviations below 1 (singular values in (0, sqrt 3));
-# beyond this the eigenvector method is used instead.
+# Newton-Schulz converges below 1; beyond this the eigenvector method takes over.
 NEWTON_SCHULZ_LIMIT = 0.5
 # Status of a matrix left for the eigenvector method (see quaternion_of_matrix).
 EIGENVECTOR_PENDING = -2
 
-# The per-matrix functions take a matrix as a 9-tuple of its row-major
-# entries: a single matrix then lives in registers, with no scratch array and
-# no view per step.
+# The per-matrix functions take 9-tuples of row-major entries: a matrix lives in registers.
 
 
 @jit
@@ -163,14 +153,7 @@ def newton_schulz_step(m: Matrix9, g: tuple[float, float, float, float, float, f
 
 @jit
 def newton_schulz_orthonormalized(m: Matrix9) -> tuple[bool, Matrix9]:
-    """
-    ``(converged, x)``: the orthogonal polar factor of ``m`` (9-tuple) by Newton-Schulz.
-
-    The iteration converges quadratically from any deviation below 1 (the
-    nearest rotation when det > 0); ``converged`` says whether the deviation
-    fell to rounding level within the iteration budget. Each step uses the
-    Gram matrix its convergence test computed.
-    """
+    """``(converged, x)``: the orthogonal polar factor of ``m`` by Newton-Schulz (<= 12 steps)."""
     for _ in range(12):
         g = gram_entries(m)
         if gram_deviation(g) <= EXACT_ORTHONORMAL:
@@ -201,12 +184,8 @@ def quaternion_of_matrix(fm: FloatArray, s: int,
     """
     ``(bad, x, y, z, w)``: the quaternion of the rotation nearest to matrix ``s`` of ``fm``.
 
-    ``bad`` is -1 when the quaternion is there, the status of the matrix's
-    defect (NaN/Inf, det <= 0, deviation from orthonormality beyond
-    ``tolerance``), or ``EIGENVECTOR_PENDING`` (the quaternion is NaN) for a
-    matrix too far from orthonormal for Newton-Schulz, left for
-    :func:`nearest_rotation_quaternions`. A matrix deviating by more than
-    rounding is replaced by its nearest rotation before Markley's formula.
+    ``bad``: -1, a defect's status, or ``EIGENVECTOR_PENDING`` (NaN quaternion) for a matrix
+    too far from orthonormal for Newton-Schulz (:func:`nearest_rotation_quaternions`).
     """
     nan = math.nan
     m = matrix_at(fm, s)
@@ -239,14 +218,7 @@ def _matrix_from_quaternion_kernel(q, out):
 
 @kernel(ROWS_IN, FLAT_OUT, FLOAT)
 def quaternion_from_matrix_kernel(m: FloatArray, out: FloatArray, tolerance: float) -> int:
-    """
-    Quaternions of the matrices ``m`` (3 n, 3) into ``out`` (4 n).
-
-    Returns the status of the first bad sample, or ``-1 - pending`` where
-    ``pending`` rows of ``out`` are NaN: matrices left for the eigenvector
-    method (see :func:`quaternion_of_matrix`; ``tolerance`` ``inf`` accepts
-    every deviation).
-    """
+    """Quaternions of the matrices ``m`` into ``out``; ``-1 - pending``: rows left NaN."""
     fm, fo = matrix_samples(m), samples(out, 4)
     pending = 0
     for s in range(fm.shape[0]):
@@ -260,22 +232,10 @@ def quaternion_from_matrix_kernel(m: FloatArray, out: FloatArray, tolerance: flo
 
 def nearest_rotation_quaternions(m: FloatArray) -> FloatArray:
     """
-    Quaternions of the rotations nearest (Frobenius norm) to matrices with det > 0.
+    Canonical quaternions (n, 4) of the rotations nearest to finite matrices (n, 3, 3), det > 0.
 
-    The maximiser of ``trace(R(q)^T M)`` is the eigenvector of the largest
-    eigenvalue of Bar-Itzhack's symmetric matrix ``K(M)`` [3]_: the same
-    rotation as the orthogonal Procrustes (SVD) solution.
-
-    Parameters
-    ----------
-    m : ndarray, shape (n, 3, 3)
-        Finite matrices with positive determinant.
-
-    Returns
-    -------
-    ndarray, shape (n, 4)
-        Unit quaternions (x, y, z, w), canonical.
-
+    The maximiser of ``trace(R(q)^T M)``: the eigenvector of the largest eigenvalue of
+    Bar-Itzhack's ``K(M)`` [3]_, the orthogonal Procrustes (SVD) rotation.
     """
     m00, m01, m02 = m[:, 0, 0], m[:, 0, 1], m[:, 0, 2]
     m10, m11, m12 = m[:, 1, 0], m[:, 1, 1], m[:, 1, 2]
@@ -348,36 +308,10 @@ def convert_matrices(R: ArrayLike, orthonormal_tolerance: float, non_orthonormal
     """
     Return the body of every ``*_from_matrix`` conversion: a kernel on the quaternions of ``R``.
 
-    Parameters
-    ----------
-    R : array_like, shape (..., 3, 3)
-        The public argument.
-    orthonormal_tolerance, non_orthonormal
-        As in :func:`quaternion_from_matrix` (validated here).
-    out_trailing : tuple of int
-        Trailing shape of the output per matrix.
-    fused_kernel : callable
-        ``fused_kernel(m, out, tolerance[, convention])``: both steps in one loop
-        (:func:`quaternion_of_matrix`, then the conversion of each quaternion
-        in registers), for inputs below ``BATCH_SAMPLES`` matrices, such as a
-        single matrix. Returns a status like ``quaternion_from_matrix_kernel``'s;
-        below -1 (some matrix needs the eigenvector method) the two-step route
-        takes over.
-    quaternion_kernel : callable or None
-        ``quaternion_kernel(q, out[, convention])`` on the flat quaternions;
-        None returns the quaternions.
-    convention : int, optional
-        The Euler kernels' convention code, passed on to both kernels (a
-        named argument rather than ``*args``: unpacking those costs ~50 ns of
-        a ~1.2 us single-sample call).
-    batch_kernel : callable, optional
-        Used instead of ``quaternion_kernel`` for ``BATCH_SAMPLES`` matrices or more.
-
-    Returns
-    -------
-    ndarray
-        ``R``'s leading shape followed by ``out_trailing``.
-
+    Below ``BATCH_SAMPLES`` matrices ``fused_kernel(m, out, tolerance[, convention])`` does
+    both steps in one loop; where it returns below -1 (the eigenvector method) or for a
+    batch, the quaternions go to ``quaternion_kernel`` (``batch_kernel``; None: the
+    quaternions are the result). ``convention`` is named, not ``*args`` (~50 ns a call).
     """
     if (orthonormal_tolerance is DEFAULT_ORTHONORMAL_TOLERANCE
             and non_orthonormal is DEFAULT_NON_ORTHONORMAL):
@@ -392,8 +326,7 @@ def convert_matrices(R: ArrayLike, orthonormal_tolerance: float, non_orthonormal
         else:
             bad = fused_kernel.call_unchecked(single, out, tolerance, convention)
         if bad == -1:
-            return out
-        # A defect, or the eigenvector method: the general path takes over.
+            return out   # else the general path raises or takes the eigenvector method
     a = float_array(R, 'R', (3, 3))
     m = kernel_layout(a, (3, 3))
     shape, batch = a.shape[:-2] + out_trailing, is_batch(a, (3, 3))
@@ -420,11 +353,7 @@ def convert_matrices(R: ArrayLike, orthonormal_tolerance: float, non_orthonormal
 
 
 def _flat_quaternions(a, m, tolerance):
-    """
-    Quaternions (n, 4) of the validated matrices ``a``, eigenvector method included.
-
-    ``m`` is ``a`` in the canonical layout (3 n, 3).
-    """
+    """Quaternions (n, 4) of the matrices ``a`` (canonical layout ``m``), eigenvectors included."""
     q = np.empty((m.shape[0] // 3, 4))
     bad = quaternion_from_matrix_kernel(m, q.reshape(-1), tolerance)
     if bad >= 0:
@@ -453,14 +382,6 @@ def quaternion_from_matrix(R: ArrayLike, *,
         uses the nearest rotation in the Frobenius norm (the SVD / orthogonal
         Procrustes answer); ``'raise'`` raises ``ValueError``.
 
-    Notes
-    -----
-    The result is the quaternion of the rotation nearest to ``R``, to
-    rounding, for every accepted matrix: one that is orthonormal to within
-    1e-15 is used as it is (Markley's pivot); any other is first replaced by
-    its nearest rotation, by Newton-Schulz (Bjorck) iteration when it deviates
-    by less than 0.5, else by Bar-Itzhack's eigenvector method.
-
     Returns
     -------
     ndarray, shape (..., 4)
@@ -471,6 +392,13 @@ def quaternion_from_matrix(R: ArrayLike, *,
     ValueError
         Wrong shape, NaN/Inf, ``det(R) <= 0`` (never a rotation), or a
         non-orthonormal matrix with ``non_orthonormal='raise'``.
+
+    Notes
+    -----
+    The quaternion of the rotation nearest to ``R``, to rounding, for every accepted
+    matrix: within 1e-15 of orthonormal, Markley's pivot as it is; else the nearest
+    rotation first, by Newton-Schulz (Bjorck) iteration below a deviation of 0.5, else
+    by Bar-Itzhack's eigenvector method.
 
     References
     ----------

@@ -1,29 +1,18 @@
 """
 Samples given as objects with attributes: ROS message fields, by duck typing.
 
-The rule, defined here once: an object with attributes ``x``, ``y``, ``z``
-and ``w`` *is* the tuple ``(x, y, z, w)`` (``geometry_msgs/Quaternion``: the
-library's order), one with ``x``, ``y``, ``z`` and no ``w`` the tuple
-``(x, y, z)`` (``Vector3``, ``Point``); the tuple is then taken as any tuple
-is, its items as numpy's float64 conversion takes them. So a Vector3 where
-a quaternion is needed, or a Quaternion where a 3-vector is (never cut
-short), is a sample of the wrong shape, refused with a message naming what
-it lacks or has (:func:`refusal`). Nothing of ROS is imported: the
-attributes decide. Sequences, arrays and numbers are never read by
-attribute (numpy's conversion decides), and only quaternion and 3-vector
-arguments take such objects.
-
-How objects of a type are read is decided once per type
-(:data:`message_readers`): by the type where it decides (no instance
-``__dict__``, no ``__getattr__``: the classes rosidl generates, whose fields
-are slots), else object by object. For a rosidl class, whose field ``x`` is
-a property returning the slot ``_x`` (checked on its code), the reader reads
-the slots: a Python property call costs ~45 ns a field, a quaternion's four
-~0.15 us of a ~1 us single-sample call (measured).
+The rule, defined here once: an object with attributes x, y, z and w *is* the tuple
+``(x, y, z, w)`` (``geometry_msgs/Quaternion``), one with x, y, z and no w the tuple
+``(x, y, z)`` (``Vector3``, ``Point``), taken as any tuple is; a wrong kind is refused
+naming what it lacks or has (:func:`refusal`). Nothing of ROS is imported; sequences,
+arrays and numbers are never read by attribute. How a type is read is decided once
+(:data:`message_readers`); a rosidl class, whose field ``x`` is a property returning the
+slot ``_x`` (checked on its code), is read from its slots (~0.15 us less a quaternion).
 """
 from __future__ import annotations
 
 from inspect import getattr_static
+from operator import attrgetter
 from types import MemberDescriptorType
 from typing import Any, Callable, Optional
 
@@ -33,20 +22,9 @@ _QUATERNION, _VECTOR = (4,), (3,)
 _NOT_SAMPLES = ('__len__', '__iter__', '__array__', '__float__', '__index__')
 
 
-def _slot_quaternion(m: Any) -> Any:
-    return (m._x, m._y, m._z, m._w)
-
-
-def _slot_vector(m: Any) -> Any:
-    return (m._x, m._y, m._z)
-
-
-def _quaternion(m: Any) -> Any:
-    return (m.x, m.y, m.z, m.w)
-
-
-def _vector(m: Any) -> Any:
-    return (m.x, m.y, m.z)
+# Readers of a type's objects: attributes, or for rosidl classes their slots.
+_quaternion, _vector = attrgetter(*QUATERNION_FIELDS), attrgetter(*VECTOR_FIELDS)
+_slot_quaternion, _slot_vector = attrgetter('_x', '_y', '_z', '_w'), attrgetter('_x', '_y', '_z')
 
 
 def _returns_slot(self: Any) -> Any:
@@ -98,11 +76,9 @@ def _new_reader(kind: type) -> Callable[[Any], Any]:
     return _slot_vector if _reads_slots(kind, VECTOR_FIELDS) else _vector
 
 
-#: ``message_readers[type(x)](x)``: the tuple (x.x, x.y, x.z, x.w), or (x.x, x.y, x.z) for an
-#: object without ``w``, or None for an object without x, y, z (or a sequence, array or number).
-#: A type seen for the first time raises KeyError (:func:`message_sample` adds it); a reader
-#: may raise AttributeError (a slot never set: no sample either). A plain dict, looked up
-#: inline by the single-sample path: ~25 ns, where a call to message_sample costs ~100 ns more.
+#: ``message_readers[type(x)](x)``: x's tuple, or None (no x, y, z; a sequence or number).
+#: A new type raises KeyError (:func:`message_sample` adds it), a slot never set
+#: AttributeError. Looked up inline by the single-sample path (~100 ns less than a call).
 message_readers: dict[type, Callable[[Any], Any]] = {}
 
 
@@ -120,13 +96,7 @@ def message_sample(x: Any, kind: type) -> Any:
 
 
 def message_values(x: Any, trailing: tuple[int, ...]) -> tuple[Any, bool]:
-    """
-    Return ``x`` with every object holding a sample replaced by its tuple, and whether any was.
-
-    For the general path, after numpy's conversion refused ``x``: a (nested)
-    list or tuple of messages becomes lists of tuples. Anything else is left
-    as it is, for numpy to refuse with its reason.
-    """
+    """Return ``x`` with each message in (nested) lists as its tuple, and whether any was."""
     kind = type(x)
     if kind is list or kind is tuple:
         items = [message_values(item, trailing) for item in x]
@@ -137,13 +107,10 @@ def message_values(x: Any, trailing: tuple[int, ...]) -> tuple[Any, bool]:
 
 def refusal(x: Any, trailing: tuple[int, ...]) -> str:
     """
-    Return why ``x`` (a message or a nested sequence of them) gives no samples, or ''.
+    Return why ``x`` (a message or nested sequences of them) gives no samples, or ''.
 
-    For the general path's error message, after numpy refused ``x`` and the
-    tuples of its messages: the first object (depth first) lacking an
-    attribute the sample needs, or with a ``w`` where a 3-vector is needed,
-    with its index; '' where every object has its attributes (a value is what
-    is wrong: numpy says which) or none has any.
+    The first object (depth first) lacking an attribute, or with a ``w`` where a 3-vector
+    is needed, with its index; '' where every object or none has its attributes.
     """
     found = _first_refused(x, trailing, ())
     if found is None:

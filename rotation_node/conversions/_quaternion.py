@@ -1,16 +1,10 @@
 """
-Quaternion algebra: the scalar formulas every other module builds on.
+Quaternion algebra: the scalar formulas every other module builds on, and their kernels.
 
-Convention: ``q = (x, y, z, w)``, scalar last, Hamilton product, active
-rotation mapping body coordinates to world coordinates. Any non-zero scale of a
-quaternion represents the same rotation; every formula here either works on
-ratios or rescales by a power of two first (exact), so quaternions scaled by
-1e-160 or 1e+160 are handled without under- or overflow.
-
-The scalar functions (tuples in, tuples out) are compiled with numba and
-called from the loop kernels of every module; they assume finite, non-zero
-input (the kernels check with :func:`quaternion_defect` first). How kernels
-are declared, compiled and called is :mod:`._runtime`'s business.
+Any non-zero scale of a quaternion is the same rotation: every formula works on ratios
+or rescales by an exact power of two first, so norms of 1e+-160 neither under- nor
+overflow. The scalar helpers (tuples in, tuples out) assume finite, non-zero input; the
+kernels check it first (:func:`quaternion_defect`).
 """
 from __future__ import annotations
 
@@ -61,12 +55,7 @@ def binary_exponent(m: float) -> int:
 
 @jit
 def scaled_quaternion(x: float, y: float, z: float, w: float) -> Quaternion4:
-    """
-    Return the quaternion rescaled exactly so that sums of squares neither over- nor underflow.
-
-    Unchanged when the largest component is within [2^-500, 2^500]; otherwise
-    scaled by a power of two (exact, subnormals included) to [0.5, 1).
-    """
+    """Return ``q`` unchanged within [2^-500, 2^500], else scaled exactly to a max in [0.5, 1)."""
     m = max(abs(x), abs(y), abs(z), abs(w))
     if _SAFE_LOW < m < _SAFE_HIGH:
         return x, y, z, w
@@ -89,12 +78,7 @@ def vector_norm(x: float, y: float, z: float) -> float:
 
 @jit
 def needs_sign_flip(x: float, y: float, z: float, w: float) -> bool:
-    """
-    Whether ``-q`` is the canonical sign of ``q``.
-
-    Canonical: w > 0, or w == 0 and the first non-zero of x, y, z > 0. The rule
-    makes the output unique: q and -q map to the same result.
-    """
+    """Whether ``-q`` is canonical: w > 0, or w == 0 and the first non-zero of x, y, z > 0."""
     return w < 0.0 or (w == 0.0 and (
         x < 0.0 or (x == 0.0 and (y < 0.0 or (y == 0.0 and z < 0.0)))))
 
@@ -113,10 +97,8 @@ def divided_by_norm(x: float, y: float, z: float, w: float) -> Quaternion4:
     """
     ``q / |q|`` for a quaternion that needs no rescaling (:func:`scaled_quaternion`).
 
-    Compiled: the four divisions. Interpreted, a zero norm (a zero quaternion,
-    or one too small to square, which a branch-free loop divides before it
-    checks and then redoes) gives what the divisions give compiled, where
-    Python's division raises ``ZeroDivisionError``.
+    Interpreted, a zero norm (which a branch-free loop divides by before it checks) gives
+    what IEEE division gives compiled, where Python's raises ``ZeroDivisionError``.
     """
     n = math.sqrt(x * x + y * y + z * z + w * w)
     if n == 0.0:
@@ -165,13 +147,7 @@ def product(px: float, py: float, pz: float, pw: float,
 @jit
 def conjugate_product(px: float, py: float, pz: float, pw: float,
                       qx: float, qy: float, qz: float, qw: float) -> Quaternion4:
-    """
-    ``p* (x) q``, the rotation from ``p`` to ``q``, with each cancelling pair grouped.
-
-    The vector part is ``(p_s q_v - q_s p_v) - p_v x q_v``: each bracket is a
-    difference of the same two products when ``q = +-p``, so the vector part of
-    a rotation relative to itself is exactly zero.
-    """
+    """``p* (x) q`` with each cancelling pair grouped: exactly zero vector part for ``q = +-p``."""
     return ((pw * qx - px * qw) - (py * qz - pz * qy),
             (pw * qy - py * qw) - (pz * qx - px * qz),
             (pw * qz - pz * qw) - (px * qy - py * qx),
@@ -193,12 +169,7 @@ def rotated_by_unit(x: float, y: float, z: float, w: float,
 @jit
 def rotated_vector(x: float, y: float, z: float, w: float,
                    vx: float, vy: float, vz: float) -> Vector3:
-    """
-    ``R(q) v`` for a unit quaternion (:func:`rotated_by_unit`), any finite ``v``.
-
-    A vector beyond 2^500 is rotated at an exactly rescaled size, so that
-    ``t`` cannot overflow where ``R v`` itself does not.
-    """
+    """``R(q) v`` for a unit quaternion, any finite ``v`` (beyond 2^500 rescaled exactly)."""
     m = max(abs(vx), abs(vy), abs(vz))
     e = binary_exponent(m) if m > _SAFE_HIGH else 0
     vx, vy, vz = math.ldexp(vx, -e), math.ldexp(vy, -e), math.ldexp(vz, -e)
@@ -226,21 +197,15 @@ def vector_status(fv: FloatArray, s: int, argument: int) -> int:
     return -1 if code == OK else status(s, argument, code)
 
 
-# Sums of absolute values within these bounds: no component needs rescaling.
-# A sum above _PLAIN_LOW has a component above a quarter of it, above _SAFE_LOW.
+# Sums of absolute values within these bounds need no rescaling (a sum above _PLAIN_LOW has
+# a component above a quarter of it, above _SAFE_LOW).
 _PLAIN_LOW = 4.0 * _SAFE_LOW
 _PLAIN_HIGH = _SAFE_HIGH
 
 
 @jit
 def is_plain_quaternion(x: float, y: float, z: float, w: float) -> bool:
-    """
-    Whether ``q`` is finite, non-zero and needs no rescaling (:func:`scaled_quaternion`).
-
-    Without a branch, so that a loop over samples vectorises: a NaN fails
-    both comparisons, as does a quaternion within 2^-498 of zero or beyond
-    2^500 (True is sufficient, not necessary, for a sample to be plain).
-    """
+    """Whether ``q`` is finite, non-zero and needs no rescaling (sufficient, not necessary)."""
     m = abs(x) + abs(y) + abs(z) + abs(w)
     return (m > _PLAIN_LOW) & (m < _PLAIN_HIGH)
 
@@ -252,21 +217,12 @@ def is_plain_vector(x: float, y: float, z: float) -> bool:
 
 
 # ----------------------------------------------------------------- kernels
-# Kernels take validated inputs and a preallocated output in the canonical
-# layout (see ``_runtime``), fill the output and return the status of the
-# first bad sample, or -1. Allocating in Python and returning an int keeps a
-# single-sample call near numba's dispatch floor.
-#
-# The product and the rotation run chunk by chunk: a loop without branches
-# (which LLVM vectorises) computes every sample of a chunk with the formulas
-# for plain inputs and counts the plain ones (:func:`is_plain_quaternion`,
-# :func:`is_plain_vector`); only a chunk holding another sample is checked
-# sample by sample, for its first bad one, and, where the formulas for plain
-# inputs would not be exact, computed again with the rescaling ones. Results
-# are the same, bit for bit, as those of the sample-by-sample formulas.
+# The product and the rotation run chunk by chunk: a loop without branches (LLVM vectorises
+# it) computes every sample with the formulas for plain inputs and counts the plain ones;
+# only a chunk holding another sample is checked for its first bad one and computed again
+# with the rescaling formulas. The results are those of the per-sample formulas, bit for bit.
 
-# Samples per chunk: its inputs stay in the L1 cache until a second loop
-# looks at them again.
+# Samples per chunk: its inputs stay in the L1 cache for the second loop.
 PLAIN_CHUNK = 256
 
 
@@ -304,7 +260,7 @@ def _conjugate_kernel(q, out):
 
 @kernel(FLAT_IN, FLAT_OUT)
 def canonical_kernel(q: FloatArray, out: FloatArray) -> int:
-    """Canonical unit quaternions of ``q`` into ``out``; returns the status."""
+    """Canonical unit quaternions of ``q`` into ``out``."""
     fq, fo = samples(q, 4), samples(out, 4)
     for s in range(fq.shape[0]):
         bad = quaternion_status(fq, s, 0)
@@ -329,14 +285,6 @@ def _distance_kernel(p, q, out):
     return -1
 
 
-@jit
-def _store_rotated(fo: FloatArray, s: int, x: float, y: float, z: float, w: float,
-                   vx: float, vy: float, vz: float) -> None:
-    """``fo[s] = R(q) v``, q canonical unit (any non-zero finite q, any finite v)."""
-    x, y, z, w = canonical_unit_quaternion(x, y, z, w)
-    fo[s, 0], fo[s, 1], fo[s, 2] = rotated_vector(x, y, z, w, vx, vy, vz)
-
-
 @kernel(FLAT_IN, FLAT_IN, FLAT_OUT)
 def _rotate_kernel(q, v, out):
     fq, fv, fo = samples(q, 4), samples(v, 3), samples(out, 3)
@@ -358,8 +306,9 @@ def _rotate_kernel(q, v, out):
                 bad = first_status(quaternion_status(fq, k, 0), vector_status(fv, k, 1))
                 if bad >= 0:
                     return bad
-                _store_rotated(fo, k, fq[k, 0], fq[k, 1], fq[k, 2], fq[k, 3],
-                               fv[k, 0], fv[k, 1], fv[k, 2])
+                x, y, z, w = canonical_unit_quaternion(fq[k, 0], fq[k, 1], fq[k, 2], fq[k, 3])
+                fo[k, 0], fo[k, 1], fo[k, 2] = rotated_vector(x, y, z, w,
+                                                              fv[k, 0], fv[k, 1], fv[k, 2])
     return -1
 
 
@@ -377,9 +326,8 @@ def quaternion_product(p: ArrayLike, q: ArrayLike) -> FloatArray:
     Returns
     -------
     ndarray, shape (..., 4)
-        ``p (x) q``: the rotation ``q`` followed by ``p`` (``R(p) R(q)``). Not
-        normalised, so that the product of unit quaternions stays exact to
-        rounding.
+        ``p (x) q``: the rotation ``q`` followed by ``p`` (``R(p) R(q)``). Not normalised,
+        so that the product of unit quaternions stays exact to rounding.
 
     Raises
     ------
@@ -420,9 +368,8 @@ def canonical_quaternion(q: ArrayLike) -> FloatArray:
     Returns
     -------
     ndarray, shape (..., 4)
-        ``q / |q|`` with the sign chosen so that ``w > 0``; where ``w == 0``
-        the first non-zero of x, y, z is positive. ``q`` and ``-q`` give the
-        same result.
+        ``q / |q|`` with the sign chosen so that ``w > 0``; where ``w == 0`` the first
+        non-zero of x, y, z is positive. ``q`` and ``-q`` give the same result.
 
     """
     return call_unary(canonical_kernel, q, 'q', (4,), (4,))

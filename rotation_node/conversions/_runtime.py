@@ -1,79 +1,17 @@
 """
-The kernel machinery of the library: from public arguments to kernels, interpreted or compiled.
+The kernel machinery: from public arguments to kernels, interpreted or compiled.
 
-A *kernel* is a loop over samples. It takes its array arguments in one
-canonical layout, fills a preallocated output and returns the status of the
-first bad sample (see :func:`status`), or -1. This module holds what every
-kernel shares:
-
-- the declarations (:data:`jit` for helpers, :func:`kernel` for kernels,
-  :func:`compiled_form` for a helper whose compiled form differs from its
-  Python one): they record Python functions and import nothing of numba;
-- when a kernel runs interpreted and when compiled (below);
-- the canonical layout (:func:`kernel_layout`) and the views of it
-  (:func:`samples`, :func:`matrix_samples`);
-- status packing (:func:`status`, :func:`first_status`);
-- batch schedules: the chunk size and the thread pool (:func:`set_threads`);
-- the one Python-side path from public arguments to kernels
-  (:func:`call_unary`, :func:`call_binary`), with its single-sample fast path
-  for float64 arrays, lists, tuples, numbers and objects with attributes
-  x, y, z(, w) such as ROS messages (:func:`single_sample`, and
-  each kernel's tuple form: :meth:`Kernel.load_tuple_form`).
-
-Interpreted or compiled
------------------------
-Importing the library imports numpy only. Every kernel and every helper is a
-plain Python function, and the same source is also compiled by numba (with
-the helpers inlined), so that a kernel has two runs of one code: interpreted
-(the Python function itself, on ``memoryview`` s of its arrays, whose items are
-Python floats) and compiled. Both compute every sample with the same IEEE
-double operations in the same order, and the library's formulas call only
-correctly rounded or exact functions (``sqrt``, ``frexp``, ``ldexp``), the C
-library's ``atan2``, ``sin`` and ``cos`` (the same in both), or its own
-(``_trigonometry``; the fused multiply-add is exact in both): the results
-are the same bit for bit (``test/test_conversions_runtime.py`` checks every
-kernel both ways).
-
-The policy, per kernel:
-
-- once the kernel is loaded (compiled, or loaded from numba's disk cache),
-  every call runs the compiled code;
-- before that, a call with at most :data:`INTERPRETED_VALUES` values in each
-  array argument (a few thousand samples) runs interpreted (~5-20 us a
-  sample, against ~1 s to import numba and load the kernels: a program
-  converting a few samples never pays for it);
-- a larger call loads the kernel first (importing numba the first time), as
-  does a kernel that has spent :data:`INTERPRETED_SECONDS` interpreted in all
-  (a long-running caller of small conversions then pays the load once, after
-  at most as much time interpreted as the load costs);
-- a loaded kernel called with single samples given as lists or tuples loads
-  its tuple form (the same source compiled for tuples of floats, see
-  :meth:`Kernel.load_tuple_form`) once it has copied :data:`TUPLE_COPIES`
-  of them into arrays: from the disk cache only (``warm_up`` puts it there;
-  a call never compiles one unasked), or by the background loader where
-  there is one;
-- :func:`compile_kernels` loads kernels explicitly (``warm_up`` all of them),
-  and ``warm_up.load_in_background`` loads each kernel in a background thread
-  as soon as it is first used, while calls run interpreted until it is ready
-  (the node: outputs from the first message, the same numbers either way).
-
-Each kernel is compiled for exactly one signature, on its load, and cached on
-disk, so no later call compiles, whatever the caller's leading shape, dtype,
-memory layout or writability (its tuple form, in a dispatcher of its own, for
-one more); :class:`KernelCompilation` tells compilations from cache loads.
-
-The canonical layout: every array argument is a C-contiguous float64 array
-holding its samples one after the other along the first axis. Samples of
-shape ``()`` or ``(k,)`` are a 1-D array of ``n`` or ``n k`` values; 3 x 3
-matrices a 2-D array of shape ``(3 n, 3)``. A single sample in its natural
-shape, ``(4,)`` or ``(3, 3)``, is already in that layout, so a single-sample
-call passes the caller's array as it is. Arrays are writable: a read-only input
-is copied (as is one of another dtype, order or alignment).
-
-Compiled kernels are cached next to the package; where that directory is not
-writable (a system-wide ROS install), numba caches them in the user's cache
-directory instead (``$XDG_CACHE_HOME/numba``, by default ``~/.cache/numba``),
-or wherever ``NUMBA_CACHE_DIR`` says.
+A *kernel* is a loop over samples: it takes its arrays in the canonical layout (every
+argument C-contiguous, aligned, writable float64, samples one after the other along the
+first axis; 3 x 3 matrices as ``(3 n, 3)``), fills a preallocated output and returns the
+status of the first bad sample (:func:`status`) or -1. Declarations (:data:`jit`,
+:func:`kernel`, :func:`compiled_form`) record Python functions and import nothing of
+numba. Each kernel runs interpreted (the Python function on ``memoryview`` s, items
+Python floats) until loaded, then compiled for exactly one signature and cached on disk;
+both runs do the same IEEE operations in the same order, so the results agree bit for
+bit (the policy, the cache and the single-sample paths: docs/library.md).
+:func:`call_unary` and :func:`call_binary` are the one path from public arguments to
+kernels, with single-sample fast paths and threads for large batches.
 """
 from __future__ import annotations
 
@@ -86,7 +24,7 @@ import sys
 import threading
 import time
 from typing import (
-    Any, Callable, Iterator, NamedTuple, Optional, Sequence, TYPE_CHECKING, TypeGuard)
+    Any, Callable, Iterator, NamedTuple, Optional, Sequence, TYPE_CHECKING)
 
 import numpy as np
 
@@ -124,41 +62,33 @@ def array_type(ndim: int, dtype: ArgumentType = FLOAT) -> ArgumentType:
     return ArgumentType(dtype.scalar, ndim)
 
 
-# Inputs are typed writable like outputs: numba accepts a writable array for a
-# read-only parameter only by converting its type at every call, which costs
-# ~20 ns of a ~1 us single-sample call; read-only inputs are copied instead.
-#: Inputs in the canonical layout: samples of shape () or (k,), and matrices (3 n, 3).
+# Inputs are typed writable like outputs: numba would convert a writable array to a
+# read-only parameter type at every call (~20 ns of ~1 us); read-only inputs are copied.
+#: Samples of shape () or (k,), and matrices (3 n, 3); inputs and outputs alike.
 FLAT_IN, ROWS_IN = array_type(1), array_type(2)
-#: Outputs in the canonical layout (the same types; the names say the role).
-FLAT_OUT, ROWS_OUT = array_type(1), array_type(2)
+FLAT_OUT, ROWS_OUT = FLAT_IN, ROWS_IN
 
 #: Every kernel declared with :func:`kernel`, in declaration order.
 KERNELS: list[Kernel] = []
 
-# id of a helper declared with jit -> the helper; of a compiled_form's function -> its factory.
+# By id: the helpers declared with jit, the factories of compiled_form, and what compiled
+# code calls instead of each (made when a kernel loads); by module name, the globals of
+# the compiled copies of its functions.
 _HELPERS: dict[int, Callable[..., Any]] = {}
 _COMPILED_FORMS: dict[int, Callable[[], Any]] = {}
-# id of a Python function -> what compiled code calls instead (made when a kernel loads),
-# and module name -> the namespace the compiled copies of its functions see.
 _COMPILED: dict[int, Any] = {}
 _NAMESPACES: dict[str, dict[str, Any]] = {}
 _numba_loaded = False
-# Held while numba is set up and while a kernel loads: the threads of one large
-# batch, or a background loader and a large call, may all want the same kernel.
+# Held while numba is set up and a kernel loads: the threads of one batch, or a background
+# loader and a large call, may want the same kernel.
 _loading = threading.RLock()
 
 
 def jit(py_func: Callable[..., Any]) -> Callable[..., Any]:
     """
-    Declare a helper of kernels: returned as it is, compiled inlined into the kernels calling it.
+    Declare a helper of kernels: returned as it is, compiled inlined (numba IR) into its callers.
 
-    Every compiled helper is inlined into its callers (numba IR inlining, not
-    left to LLVM). A helper that is called rather than inlined costs a call per
-    sample and, when an array is live across it (the kernels' inputs and
-    outputs always are), an atomic reference-count increment and decrement per
-    call: 2-4x the whole per-sample cost of most kernels, measured.
-    (Inlined callees cannot be called with ``*args``.) In Python the helper is
-    the function itself: the interpreted run of a kernel calls it directly.
+    A called helper costs a call and an atomic reference count per sample: 2-4x most kernels.
     """
     _HELPERS[id(py_func)] = py_func
     return py_func
@@ -166,12 +96,9 @@ def jit(py_func: Callable[..., Any]) -> Callable[..., Any]:
 
 def compiled_form(py_func: Callable[..., Any]) -> Callable[[Callable[[], Any]], Any]:
     """
-    Declare the compiled form of helper ``py_func``: ``factory()`` returns it, when numba loads.
+    Declare the compiled form of helper ``py_func``: what ``factory()`` returns (made once).
 
-    For what Python and numba must do differently to compute the same values
-    (an LLVM intrinsic such as the fused multiply-add). Compiled code calls
-    what ``factory()`` returns (made once, when the first kernel loads)
-    wherever the source calls ``py_func``.
+    For what Python and numba compute alike only by different code (an LLVM intrinsic).
     """
     def decorate(factory):
         _COMPILED_FORMS[id(py_func)] = factory
@@ -181,14 +108,7 @@ def compiled_form(py_func: Callable[..., Any]) -> Callable[[Callable[[], Any]], 
 
 
 def _compiled_namespace(module_globals: dict[str, Any]) -> dict[str, Any]:
-    """
-    Return the globals of the compiled copies of a module's functions (helpers compiled).
-
-    numba resolves a function's globals when it compiles it: a copy of each
-    declared function with these globals calls the compiled form of every
-    helper it names (from its own module or imported), while the Python
-    function itself keeps calling the Python helpers.
-    """
+    """Return the globals of the compiled copies of a module's functions: its helpers compiled."""
     name = module_globals['__name__']
     namespace = _NAMESPACES.get(name)
     if namespace is None:
@@ -239,18 +159,10 @@ def load_numba() -> None:
 
 def _import_numba_registries_without_scipy_linalg() -> None:
     """
-    Import numba's array-math registry without its import of ``scipy.linalg``.
+    Import ``numba.np.arraymath`` with its BLAS probe answered by whether scipy is installed.
 
-    The first compilation or cache load in a process makes numba import all
-    its lowering registries. One of them, ``numba.np.arraymath``, probes for
-    BLAS when it is imported by importing ``scipy.linalg.cython_blas``, which
-    imports all of ``scipy.linalg``: 0.15 s of a 0.4 s cold start, measured
-    (``benchmarks/bench_cold_start.py``), for kernels that never call BLAS.
-    The probe is answered here by whether scipy is installed at all
-    (``importlib.util.find_spec``, which imports nothing), the case it tells
-    apart in practice. numba's linear algebra (``np.dot`` in a user's function)
-    still imports ``scipy.linalg`` itself when such a function is compiled: only
-    the module-import-time probe is replaced, and only for that one import.
+    The probe imports all of ``scipy.linalg`` (0.15 s of a 0.4 s cold start) for kernels
+    that never call BLAS; numba's linear algebra still imports it when compiled.
     """
     if 'numba.np.arraymath' in sys.modules:
         return
@@ -270,46 +182,25 @@ def _import_numba_registries_without_scipy_linalg() -> None:
         numba_linalg.ensure_blas = probe
 
 
-# A call runs interpreted while each of its arrays holds at most this many
-# values and the kernel is not loaded: 4096 quaternions, so that the blocks
-# of ``rotation_bag convert`` (at most 1023 samples, 9207 values as
-# matrices) run interpreted too. Measured (benchmarks/bench_cold_start.py,
-# bench_bag_convert.py --whole): one interpreted sample costs 5-20 us where
-# importing numba and loading one kernel from the disk cache costs ~0.7 s in
-# a new process (~10-30 ms for each further kernel); a bag of 2e4 Imu
-# messages converts in 0.75-1.09 s interpreted, 1.34-2.00 s loading kernels.
+# An unloaded kernel runs interpreted while each array holds at most this many values
+# (4096 quaternions; convert's blocks of <= 1023 matrices too): one sample costs 5-20 us
+# interpreted, importing numba and loading a first kernel ~0.7 s (bench_cold_start.py).
 INTERPRETED_VALUES = 16384
 # A kernel that has run interpreted this long in all is loaded at its next call.
 INTERPRETED_SECONDS = 0.5
-# A loaded kernel that has copied this many single samples given as lists or
-# tuples of floats into arrays loads its tuple form (Kernel.load_tuple_form)
-# (with ROTATION_NODE_COMPILED=1 at the first such call after its own load).
-# Measured (benchmarks/bench_conversions.py --single): the tuple form saves
-# 0.1-0.4 us a call, and loading it from the disk cache costs ~10-30 ms: as for
-# INTERPRETED_SECONDS, a caller pays the load once its copies have cost about as
-# much, and a program converting a few thousand samples never pays for it. Compiling
-# it costs seconds: warm_up does (and caches it), a call only where asked (copied).
+# A loaded kernel that has copied this many list or tuple samples into arrays loads its
+# tuple form (saves 0.1-0.4 us a call; a cache load costs ~10-30 ms, a compilation seconds).
 TUPLE_COPIES = 100_000
 _NO_TUPLE_FORM = -(1 << 62)   # tuple_copies of a kernel without a tuple form
-# tuple_copies of a kernel whose tuple form was due but not in the disk cache: a call
-# never compiles one (seconds) in the calling thread unasked (warm_up caches them); the
-# kernel goes on copying.
-_TUPLE_FORM_NOT_CACHED = -(1 << 61)
+_TUPLE_FORM_NOT_CACHED = -(1 << 61)   # ... whose tuple form was due but not in the cache
 
 
 def typed_first_call(dispatcher: Any) -> Callable[..., Any]:
     """
     Return the first ``call_unchecked`` of a kernel: a typed call that installs the unchecked one.
 
-    ``call_unchecked`` is the kernel's compiled code, called without numba's
-    typing of the arguments (~100 ns less per call): the caller guarantees
-    that every array argument has exactly the declared type (float64,
-    C-contiguous, aligned, writable, the declared number of dimensions), as
-    :func:`is_single_sample` checks; a wrong number of dimensions would be
-    read out of bounds. Its first call goes through numba's typing instead,
-    so that a call site that breaks the contract raises ``TypeError``; then
-    the compiled code replaces it (on the kernel, where the single-sample
-    path looks it up).
+    Unchecked (~100 ns less), arrays of other types read out of bounds; the typed first call
+    makes a call site breaking that contract raise ``TypeError``.
     """
     def call(*args):
         status_ = dispatcher(*args)
@@ -324,15 +215,7 @@ def typed_first_call(dispatcher: Any) -> Callable[..., Any]:
 
 
 class Kernel:
-    """
-    A declared kernel: its Python function, its one signature, and its compiled form once loaded.
-
-    Calling it runs the compiled code once the kernel is loaded, else
-    interpreted or, for a large call, loads it first (the module's policy).
-    ``call_unchecked`` is the single-sample path: the compiled code without
-    numba's typing of the arguments once loaded (:func:`typed_first_call`),
-    the same policy before.
-    """
+    """A declared kernel: its Python function, its one signature, its compiled form once loaded."""
 
     def __init__(self, py_func: Callable[..., Any], argument_types: Sequence[ArgumentType],
                  returns: Optional[ArgumentType]):
@@ -345,12 +228,10 @@ class Kernel:
         self.dispatcher: Any = None            # numba's, once loaded
         self.call: Callable[..., Any] = self._interpreted_or_loaded
         self.call_unchecked: Callable[..., Any] = self._interpreted_or_loaded
-        self.interpreted_seconds = 0.0        # spent interpreted, in all
-        self.used = False                     # called at least once
-        # The compiled code taking single samples as tuples of floats (load_tuple_form), and
-        # how many lists and tuples the loaded kernel has copied into arrays meanwhile.
-        self.call_tuple: Optional[Callable[..., Any]] = None
-        self.tuple_copies = 0
+        self.interpreted_seconds = 0.0
+        self.used = False
+        self.call_tuple: Optional[Callable[..., Any]] = None   # the tuple form, once loaded
+        self.tuple_copies = 0                 # list samples copied into arrays meanwhile
         self.tuple_form_queued = False        # handed to the background loader
 
     def __repr__(self) -> str:
@@ -362,7 +243,7 @@ class Kernel:
 
     @property
     def signatures(self) -> list[tuple[Any, ...]]:
-        """Return the compiled signatures: one once loaded, none before."""
+        """Return the compiled signatures: one once loaded."""
         return [] if self.dispatcher is None else self.dispatcher.signatures
 
     def numba_signature(self) -> Any:
@@ -390,19 +271,11 @@ class Kernel:
 
     def load_tuple_form(self, widths: tuple[int, ...], may_compile: bool = True) -> None:
         """
-        Load the kernel's tuple form: its first ``len(widths)`` inputs one sample as floats.
+        Load the tuple form: the same source for input ``i`` a tuple of ``widths[i]`` floats.
 
-        ``may_compile=False``: only from the disk cache; where it is not there,
-        nothing (and ``tuple_copies`` stops counting towards it).
-
-        The same source compiled (or loaded from the disk cache) for another
-        signature, in a dispatcher of its own: input ``i`` a tuple of
-        ``widths[i]`` floats, which its ``samples()`` view as one sample in an
-        array on the stack (no copy in Python, no allocation). numba's entry
-        point unboxes the tuple itself: exactly ``widths[i]`` items, each
-        converted by ``float()`` (a wrong length or a non-number raises). Once
-        loaded, ``call_tuple`` is its compiled code; a kernel whose source
-        takes its inputs other than by ``samples()`` has none (stays None).
+        ``samples()`` views the tuple on the stack and numba's entry point unboxes it (a
+        wrong length or a non-number raises). ``may_compile=False``: from the disk cache
+        only. A kernel not reading its inputs by ``samples()`` has none.
         """
         with _loading:
             if (self.call_tuple is not None or self.tuple_copies == _NO_TUPLE_FORM
@@ -451,14 +324,7 @@ class Kernel:
 
 
 def _is_cached(dispatcher: Any, signature: Any) -> bool:
-    """
-    Whether numba's disk cache holds ``dispatcher``'s code for ``signature`` (loading it once).
-
-    ``dispatcher.compile`` then loads it again (~10 ms, once a kernel), rather
-    than this repeating numba's private steps of installing a cached overload.
-    The check is numba's own (``Dispatcher.compile`` asks its ``_cache`` so);
-    a numba without that private attribute counts as not cached: no compilation.
-    """
+    """Whether numba's disk cache (``_cache``) holds ``dispatcher``'s code for ``signature``."""
     from numba.core.compiler_lock import global_compiler_lock
     cache = getattr(dispatcher, '_cache', None)
     if cache is None:
@@ -474,22 +340,16 @@ class TupleForm(NamedTuple):
     widths: tuple[int, ...]
 
     def load(self) -> None:
-        """Load it (compile it, or load it from the disk cache)."""
+        """Compile it, or load it from the disk cache."""
         self.kernel.load_tuple_form(self.widths)
 
 
-# Called with a kernel at its first call, and with a kernel's TupleForm when it is due
-# (warm_up.load_in_background's queue: it calls their load()), or None.
+# warm_up.load_in_background's queue, or None.
 _on_first_use: Optional[Callable[[Kernel | TupleForm], None]] = None
 
 
 def set_first_use_hook(hook: Optional[Callable[[Kernel | TupleForm], None]]) -> None:
-    """
-    Have ``hook(kernel)`` called at each kernel's first call from now on (None: no hook).
-
-    And ``hook(TupleForm(kernel, widths))`` when a loaded kernel's tuple form
-    is due (:func:`copied`), instead of loading it in the calling thread.
-    """
+    """Call ``hook(kernel)`` at each kernel's first call, ``hook(TupleForm)`` when one is due."""
     global _on_first_use
     _on_first_use = hook
 
@@ -500,24 +360,7 @@ _loading_forced = os.environ.get('ROTATION_NODE_COMPILED', '') not in ('', '0')
 
 def kernel(*argument_types: ArgumentType,
            returns: Optional[ArgumentType] = STATUS) -> Callable[[Callable[..., Any]], Kernel]:
-    """
-    Declare a kernel: one signature, interpreted or compiled as the module says.
-
-    Parameters
-    ----------
-    *argument_types : ArgumentType
-        The kernel's arguments, e.g. ``FLAT_IN, FLAT_OUT, INT``. Arrays are
-        C-contiguous, aligned, writable float64 in the canonical layout.
-    returns : ArgumentType or None, optional
-        The result: the status by default; None for a kernel without one.
-
-    Returns
-    -------
-    callable
-        A decorator returning the :class:`Kernel`. Once loaded, a call with
-        other types raises ``TypeError`` instead of compiling again.
-
-    """
+    """Declare a kernel of one signature (``FLAT_IN, FLAT_OUT, INT``); others raise TypeError."""
     def decorate(py_func):
         declared = Kernel(py_func, argument_types, returns)
         KERNELS.append(declared)
@@ -527,41 +370,21 @@ def kernel(*argument_types: ArgumentType,
 
 
 def compile_kernels(kernels: Optional[Sequence[Kernel]] = None) -> int:
-    """
-    Load every kernel (or those given): compiled for its one signature, or from the cache.
-
-    Returns
-    -------
-    int
-        How many kernels were compiled or loaded.
-
-    """
+    """Load every kernel (or those given), compiled or from the cache; return how many."""
     kernels = KERNELS if kernels is None else kernels
     for declared in kernels:
         declared.load()
     return len(kernels)
 
 
-#: The explicit form of a large call's load: every kernel compiled or loaded from the cache.
-load_kernels = compile_kernels
-
-
 class KernelCompilation:
     """
-    Kernels compiled, not loaded from the disk cache, within a ``with`` block.
+    Kernels compiled (not loaded from the disk cache) within a ``with`` block.
 
-    A start after installation compiles each kernel it uses (seconds to
-    minutes); every later one loads them from the cache. ``on_slow()`` is
-    called once, from a timer thread, when a kernel is compiling ``after``
-    seconds after the first compilation in the block started (or at the next
-    start, if none is compiling then), so that a long compilation can be
-    announced while it runs; never after the block. Afterwards ``compiled`` says
-    how many kernels were compiled and ``seconds`` how long the compilations
-    took in all (from the start of the first to the end of the last).
-    Compilations of functions that are not kernels (:func:`kernel`) are not
-    counted. It listens to numba's ``numba:compile`` event, which numba
-    broadcasts only for a compilation, never for a cache load (entering the
-    block imports numba).
+    ``on_slow()`` is called once, from a timer thread, if a kernel is compiling ``after``
+    seconds after the first compilation began (else at the next start; never after the
+    block). ``compiled`` counts them, ``seconds`` spans first start to last end. Listens to
+    numba's ``numba:compile`` event, sent for compilations only (entering imports numba).
     """
 
     def __init__(self, on_slow: Callable[[], None], after: float = 1.0):
@@ -646,27 +469,18 @@ def kernel_layout(a: FloatArray, trailing: tuple[int, ...]) -> FloatArray:
     return a.reshape((-1,) + trailing[1:])
 
 
-def _rows_per_sample(trailing: tuple[int, ...]) -> int:
-    return trailing[0] if trailing else 1
-
-
 def samples(a: FloatArray, width: int) -> Any:
     """
     Return the canonical ``a`` as a stack of samples, shape ``(n, width)`` (``(n,)``: width 0).
 
-    How kernels see their flat arguments. In compiled code (the compiled form
-    below) the view costs nothing: no copy and no call; ``width`` must be a
-    constant there, and any C-contiguous array of ``n width`` values is viewed.
-    Interpreted, the view is a ``memoryview``, whose items are Python floats
-    (an ndarray's are numpy scalars, 3-5x slower in arithmetic): a kernel
-    reads and writes it by ``[s]`` or ``[s, j]`` and reads its ``shape``, no
-    more (sub-views, ``.T``, ``.flat``: :func:`array_samples`). An empty
-    array stays an array.
+    Compiled, a free view (``width`` a constant). Interpreted, a ``memoryview`` of Python
+    floats (numpy scalars are 3-5x slower): index ``[s]``, ``[s, j]`` and ``shape`` only
+    (else :func:`array_samples`).
     """
     if a.size == 0:
         return a.reshape(-1, width) if width else a.reshape(-1)
-    # numpy's stubs make an ndarray a buffer only for Python >= 3.12 (it is one at run time);
-    # typeshed's memoryview.cast takes only the formats it names (a.dtype.char is 'd' here).
+    # numpy's stubs make an ndarray a buffer only for Python >= 3.12; typeshed's
+    # memoryview.cast names its formats (a.dtype.char is 'd').
     view = memoryview(a)   # type: ignore[arg-type]
     if width == 0 and a.ndim == 1:
         return view
@@ -675,14 +489,9 @@ def samples(a: FloatArray, width: int) -> Any:
 
 
 def matrix_samples(a: FloatArray) -> Any:
-    """
-    Return the matrices ``a`` (3 n, 3), or any C-contiguous 9 n values, as (n, 3, 3).
-
-    Interpreted, a ``memoryview`` indexed by ``[s, i, j]`` (see :func:`samples`).
-    """
+    """Return the matrices ``a`` (3 n, 3) as (n, 3, 3), as :func:`samples` does."""
     if a.size == 0:
         return a.reshape(-1, 3, 3)
-    # An ndarray is a buffer and its char is 'd': stubs as in samples().
     return memoryview(a).cast('B').cast(a.dtype.char,  # type: ignore[arg-type]
                                         (a.size // 9, 3, 3))
 
@@ -715,7 +524,6 @@ def _stack_view_intrinsic() -> Any:
         result = a.copy(ndim=1 + len(trailing), layout='C')
 
         def codegen(context, builder, signature, args):
-            # Imported here, when a kernel is compiled: not needed to load one from the cache.
             from numba.core.imputils import impl_ret_borrowed
             from numba.np.arrayobj import make_array, populate_array
             source = make_array(signature.args[0])(context, builder, args[0])
@@ -775,7 +583,7 @@ def _tuple_view_intrinsic() -> Any:
 
 
 def _register_views() -> None:
-    """Register the compiled forms of the sample views (:func:`samples` and the others)."""
+    """Register the compiled forms of the sample views."""
     from numba import types
     from numba.core.errors import RequireLiteralValue
     from numba.extending import overload
@@ -812,9 +620,8 @@ def first_status(a: int, b: int) -> int:
 
 # ------------------------------------------------------------ batch schedules
 
-# Inputs of at least this many samples use a kernel's batch schedule, where
-# it has one (the same count for every input type, so that a conversion and
-# its route through quaternions agree bit for bit).
+# Inputs of at least this many samples use a kernel's batch schedule, where it has one
+# (one count for every input type: a conversion and its route through quaternions agree).
 BATCH_SAMPLES = 1024
 
 
@@ -827,11 +634,8 @@ def is_batch(a: FloatArray, trailing: tuple[int, ...]) -> bool:
 STAGE_CHUNK = 4096
 
 
-# Batches of at least this many samples may be split across threads (the kernels
-# release the GIL). Measured on the shared 2-core EPYC under load (benchmarks/bench_threads.py,
-# docs/performance.md): at 65536 samples two threads were slower than one for 5 of 6
-# operations (1.08-1.54x); at 1e6 faster for 5 (0.75-0.99x) but not for the memory-bound
-# quaternion_product (1.15x).
+# Batches of at least this many samples may be split across threads (the kernels release
+# the GIL); below, two threads measured slower than one (bench_threads.py, performance.md).
 THREADED_SAMPLES = 1 << 18
 _usable_cpus = len(os.sched_getaffinity(0))
 _threads_variable = int(os.environ.get('ROTATION_NODE_THREADS', 0))
@@ -847,12 +651,11 @@ def set_threads(n: int) -> None:
     Parameters
     ----------
     n : int
-        1 runs everything in the calling thread. By default (neither this nor
-        the environment variable ``ROTATION_NODE_THREADS`` set) a large batch
-        is split across the CPUs this process may use only while one of them
-        is idle (the 1-minute load average below their number minus a half):
-        on a busy machine a second thread only competes for the same CPUs, and
-        measured slower. A number set here or by the variable is always used.
+        1 runs everything in the calling thread. By default (neither this nor the
+        environment variable ``ROTATION_NODE_THREADS`` set) a large batch is split across
+        the CPUs this process may use only while one is idle (1-minute load average below
+        their number minus a half: on a busy machine a second thread measured slower). A
+        number set here or by the variable is always used.
 
     """
     global _threads, _pool, _threads_chosen
@@ -875,13 +678,8 @@ def batch_threads(n: int) -> int:
 
 def _run(kernel_: Any, inputs: Sequence[FloatArray], trailings: Sequence[tuple[int, ...]],
          out: FloatArray, out_trailing: tuple[int, ...], args: tuple[Any, ...]) -> int:
-    """
-    Run ``kernel_(*inputs, out, *args)`` on canonical arrays, in threads for large batches.
-
-    The parts are whole samples: rows ``lo r:hi r`` of an argument with ``r``
-    rows per sample.
-    """
-    n = out.shape[0] // _rows_per_sample(out_trailing)
+    """Run ``kernel_(*inputs, out, *args)`` on canonical arrays, in threads for large batches."""
+    n = out.shape[0] // (out_trailing[0] if out_trailing else 1)
     threads = batch_threads(n)
     if threads == 1:
         return kernel_(*inputs, out, *args)
@@ -891,8 +689,8 @@ def _run(kernel_: Any, inputs: Sequence[FloatArray], trailings: Sequence[tuple[i
         _pool = ThreadPoolExecutor(_threads, thread_name_prefix='rotation_node')
     if kernel_.dispatcher is None:
         kernel_.load()   # once, here, rather than in each thread
-    arrays = tuple(inputs) + (out,)
-    rows = [_rows_per_sample(t) for t in tuple(trailings) + (out_trailing,)]
+    arrays = tuple(inputs) + (out,)   # split into whole samples of r rows each
+    rows = [t[0] if t else 1 for t in tuple(trailings) + (out_trailing,)]
     bounds = np.linspace(0, n, threads + 1).astype(int)
     jobs = [_pool.submit(kernel_, *[a[lo * r:hi * r] for a, r in zip(arrays, rows)], *args)
             for lo, hi in zip(bounds[:-1], bounds[1:])]
@@ -905,22 +703,12 @@ def _run(kernel_: Any, inputs: Sequence[FloatArray], trailings: Sequence[tuple[i
 
 # ------------------------------------------------------------ calls
 
-# A single-sample call costs ~1 us in all, and numba's dispatch (typing every
-# argument, choosing the compiled signature) would be ~100 ns of it. The
-# single-sample path makes the checks that typing would make itself, in
-# :func:`single_sample`, and calls the compiled code directly
-# (``kernel_.call_unchecked``): the caller's array as it is (its natural shape
-# is the canonical layout), a scalar result computed into shape (1,), a
-# scalar argument as a float. A single sample given as a list or tuple of
-# numbers goes to the kernel's tuple form (``kernel_.call_tuple``, see
-# Kernel.load_tuple_form) as a tuple: numba's entry point unboxes it (~20 ns;
-# copying it into an array in Python cost ~200 ns, more than checking an
-# array), so that lists and tuples cost no more than a float64 array. Before
-# the tuple form is loaded they are copied into a float64 array of the
-# thread's own (:func:`listed_sample`). An object with attributes x, y, z(, w)
-# (a ROS message, ``_messages``) is read into the tuple of them (~0.1 us for a
-# rosidl class) and then taken as that tuple. The names the path uses are module
-# globals (``np.empty`` looked up through the module costs ~30 ns).
+# A single-sample call costs ~1 us, numba's dispatch ~100 ns of it: the single-sample path
+# checks what typing would and calls the compiled code (``call_unchecked``) with the
+# caller's array as it is, or a list, tuple or message (``_messages``) as a tuple to the
+# tuple form (``call_tuple``; numba unboxes it in ~20 ns), or before that copied into a
+# scratch array of the thread's own. The path's names are module globals (``np.empty``
+# looked up through the module costs ~30 ns).
 _FLOAT64 = np.dtype(np.float64)
 _NDARRAY = np.ndarray
 _ONE = (1,)
@@ -930,25 +718,13 @@ new_array = np.empty
 
 
 def is_listed(x: object, kind: type) -> bool:
-    """
-    Whether ``x`` (of type ``kind``) may be one sample given as Python numbers.
-
-    A list or tuple, or an ``array.array`` of doubles (how rclpy holds a
-    message's float64 sequences); their items are then taken as ``float()``
-    takes them, which numpy's conversion agrees with.
-    """
+    """Whether ``x`` is a list, tuple or ``array.array('d')`` (rclpy's float64 sequences)."""
     return (kind is list or kind is tuple
             or (kind is PythonArray and x.typecode == 'd'))  # type: ignore[attr-defined]
 
 
 class _Scratch(threading.local):
-    """
-    Each thread's arrays for single samples given as lists or tuples.
-
-    ``first`` and ``second`` (one per kernel argument) map a sample shape to
-    ``(array, view, values)``: a float64 array of that shape, a ``memoryview``
-    of its values and how many there are.
-    """
+    """Each thread's scratch arrays, per argument: sample shape -> (array, memoryview, size)."""
 
     first: dict[tuple[int, ...], tuple[FloatArray, memoryview, int]]
     second: dict[tuple[int, ...], tuple[FloatArray, memoryview, int]]
@@ -958,42 +734,20 @@ class _Scratch(threading.local):
         for trailing in ((3,), (4,), (3, 3)):
             for arrays in (self.first, self.second):
                 array = np.empty(trailing)
-                # An ndarray is a buffer at run time; numpy's stubs say so only for 3.12+.
                 arrays[trailing] = (array, memoryview(array.reshape(-1)),  # type: ignore[arg-type]
                                     array.size)
 
 
 _scratch = _Scratch()
-# What a shape without a scratch array (none of the above) gets: no array.
 _NO_SCRATCH = (None, None, 0)
-
-
-def is_single_sample(x: object, trailing: tuple[int, ...]) -> TypeGuard[FloatArray]:
-    """
-    Whether ``x`` is one sample in a float64 array that needs no conversion.
-
-    When it is, ``x`` has exactly the type of a kernel's array argument of
-    ``max(1, len(trailing))`` dimensions, and may be passed to the kernel's
-    ``call_unchecked``.
-    """
-    # ``is``: every native float64 array shares numpy's one float64 dtype; an
-    # equal but distinct dtype object just takes the general path. ``carray``:
-    # C-contiguous, aligned and writable, as kernels take their arguments.
-    return (type(x) is _NDARRAY and x.shape == trailing and x.dtype is _FLOAT64
-            and x.flags.carray)
 
 
 def listed_sample(x: Any, scratch: tuple[Any, Any, int]) -> Any:
     """
-    Return the list, tuple or array.array ``x`` of one sample copied into a scratch array, or None.
+    Return the list, tuple or array.array ``x`` of one sample copied into ``scratch``, or None.
 
-    ``scratch`` is the ``(array, view, values)`` of the sample's shape in
-    ``_scratch.first`` or ``_scratch.second`` (one per argument); the array
-    is valid until the thread's next call. A memoryview's item assignment
-    takes exactly the Python numbers (floats, ints, numpy scalars) that numpy
-    converts alike, and raises for anything else (a string, a wrong length,
-    an int too large for a float): then None, and the general path converts
-    or refuses ``x`` as any array_like.
+    A memoryview's item assignment takes exactly the numbers numpy converts alike and
+    raises for anything else: then None, and the general path converts or refuses ``x``.
     """
     array, m, values = scratch
     try:
@@ -1012,15 +766,11 @@ def listed_sample(x: Any, scratch: tuple[Any, Any, int]) -> Any:
 
 def copied(kernel_: Any, widths: tuple[int, ...]) -> None:
     """
-    Count a single sample that ``kernel_`` took as lists or tuples copied into arrays.
+    Count a list sample ``kernel_`` copied; load its tuple form when due (:data:`TUPLE_COPIES`).
 
-    ``widths``: the sample widths of its list arguments. A loaded kernel
-    loads its tuple form when the count says so (:data:`TUPLE_COPIES`), or
-    hands it to the background loader, where there is one (the node's:
-    a message callback never waits for a compilation). Without one, the
-    calling thread loads it only from the disk cache (``warm_up`` puts it
-    there), never compiling it unasked: it compiles it only with
-    ``ROTATION_NODE_COMPILED=1``, or within :func:`compiling_tuple_forms`.
+    The background loader loads it where there is one (a callback never waits), else the
+    calling thread, from the disk cache only unless asked (``ROTATION_NODE_COMPILED=1``,
+    :func:`compiling_tuple_forms`): a call never compiles one unasked.
     """
     kernel_.tuple_copies += 1
     asked = _loading_forced or _tuple_forms_compiled
@@ -1033,18 +783,12 @@ def copied(kernel_: Any, widths: tuple[int, ...]) -> None:
         _on_first_use(TupleForm(kernel_, widths))
 
 
-# Within compiling_tuple_forms(): copied() compiles (or loads) each tuple form at once.
 _tuple_forms_compiled = False
 
 
 @contextmanager
 def compiling_tuple_forms() -> Iterator[None]:
-    """
-    Within the block, a loaded kernel taking a list or tuple compiles or loads its tuple form.
-
-    At its first such call (the next, for a kernel loaded by that call):
-    how ``warm_up`` compiles and caches the tuple forms that single samples reach.
-    """
+    """Within the block, a loaded kernel given a list sample compiles or loads its tuple form."""
     global _tuple_forms_compiled
     _tuple_forms_compiled = True
     try:
@@ -1055,13 +799,9 @@ def compiling_tuple_forms() -> Iterator[None]:
 
 def single_sample(x: object, trailing: tuple[int, ...], argument: int = 0) -> Optional[FloatArray]:
     """
-    Return ``x`` as one sample in a float64 array a kernel's ``call_unchecked`` takes, or None.
+    Return ``x`` as one sample in a float64 array ``call_unchecked`` takes, or None.
 
-    ``x`` itself when :func:`is_single_sample`; numbers (:func:`is_listed`)
-    and the tuple of an object's attributes x, y, z(, w)
-    (``_messages.message_sample``) copied by :func:`listed_sample`
-    (``argument`` 0 or 1: the first or second argument's array); None for
-    anything else (the general path).
+    An array of exactly the kernel's type as it is, a list or message copied to scratch.
     """
     kind = type(x)
     if kind is _NDARRAY:
@@ -1083,15 +823,8 @@ def call_unary(kernel_: Any, x: ArrayLike, name: str, trailing: tuple[int, ...],
     """
     Validate ``x``, run ``kernel_(x, out[, convention])``, raise for a bad sample.
 
-    ``out`` gets ``x``'s leading shape followed by ``out_trailing``; a 0-d
-    result is returned as a scalar. Both reach the kernel in the canonical
-    layout. ``convention`` is the Euler kernels' convention code (a named
-    argument: unpacking ``*args`` costs ~50 ns of a ~1 us single-sample call).
-    Large inputs go to ``batch_kernel`` (same signature) where one is given,
-    and large batches are split across threads. A single sample (a float64
-    array, list, tuple, or object with attributes x, y, z(, w)) skips
-    straight to the kernel's single-sample path (``kernel_.call_tuple`` or
-    ``kernel_.call_unchecked``), which checks its values.
+    ``out``: ``x``'s leading shape and ``out_trailing`` (0-d: a scalar). ``convention`` is
+    named, not ``*args`` (~50 ns of a ~1 us call). Large inputs go to ``batch_kernel``.
     """
     kind = type(x)   # single_sample, inline: a call costs ~5 % of a ~1 us single sample
     a: Optional[FloatArray]
@@ -1154,33 +887,26 @@ def call_binary(kernel_: Any, x: ArrayLike, y: ArrayLike, names: tuple[str, str]
     """
     Validate and broadcast ``x`` and ``y``, run ``kernel_(x, y, out, *args)``, raise if bad.
 
-    ``out`` gets the common leading shape followed by ``out_trailing``; all
-    three reach the kernel in the canonical layout. Large inputs go to
-    ``batch_kernel`` where one is given, and large batches are split across
-    threads; single samples (float64 arrays, lists, tuples, numbers, objects
-    with attributes x, y, z(, w)) skip the checks that the kernel makes anyway.
-
-    A scalar second argument (``trailings[1] == ()``, an angle) reaches the
-    kernel twice, as ``kernel_(x, ys, out, y, *args)``: a single sample as the
-    float ``y`` with ``ys`` empty, several as the array ``ys`` (``y`` unused),
-    so that the kernel has one signature and one sample costs no array.
+    A scalar ``y`` (``trailings[1] == ()``, an angle) reaches the kernel as
+    ``kernel_(x, ys, out, y, *args)``: one sample as the float ``y`` (``ys`` empty), several
+    as the array ``ys``: one signature, and one sample costs no array.
     """
-    scalar_y = not trailings[1]   # (): an angle
-    if scalar_y and type(y) is not float and (isinstance(y, _NUMBERS) or is_single_sample(y, ())):
+    scalar_y = not trailings[1]
+    if scalar_y and type(y) is not float and (isinstance(y, _NUMBERS) or (
+            type(y) is _NDARRAY and y.shape == () and y.dtype is _FLOAT64
+            and y.flags.carray)):
         y = float(y)
     xv: Any = x   # the arguments as they came; mypy: any object
     yv: Any = y
     kind_x, kind_y = type(xv), type(yv)
-    # is_listed, inline for lists and tuples: a call costs ~5 % of a ~1 us single sample
-    # (tuples, lists and arrays tested in the order of the original expression: no test more)
+    # is_listed, inline: a call costs ~5 % of a ~1 us single sample
     if kind_x is tuple or kind_x is list:
         listed = (kind_y is float if scalar_y else (
             kind_y is tuple or kind_y is list
             or (kind_y is PythonArray and is_listed(yv, kind_y))))
     elif kind_x is _NDARRAY:
         listed = False
-    else:   # an array.array of doubles, or an object with attributes x, y, z(, w) (a ROS
-        # message), given as its tuple; the same for the second argument
+    else:   # an array.array('d'), or a message as its tuple; the same for y
         if kind_x is PythonArray and is_listed(xv, kind_x):
             sx = xv
         else:

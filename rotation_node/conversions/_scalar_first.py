@@ -1,16 +1,9 @@
 """
 ``scalar_first=True``: the public functions for (w, x, y, z) quaternions, from one adapter.
 
-The library's layout is (x, y, z, w). PX4, MuJoCo, ahrs, spatialmath and
-Eigen's coefficient constructor put the scalar first; every public function
-that takes or returns quaternions gets a keyword ``scalar_first`` (default
-False) that reorders its quaternion arguments to (x, y, z, w) on the way in
-and its quaternion result to (w, x, y, z) on the way out. Reordering copies
-the components: the results are the same numbers, bit for bit.
-
-:func:`scalar_first_adapter` writes each adapted function from the original's
-signature (the same parameters, defaults and docstring, plus the keyword), so
-that the default path costs one plain Python call and no argument packing.
+Quaternion arguments are reordered to (x, y, z, w) on the way in and a quaternion result
+to (w, x, y, z) on the way out: the same numbers, bit for bit. Each adapted function is
+written from the original's signature, so the default path costs one plain Python call.
 """
 from __future__ import annotations
 
@@ -27,12 +20,7 @@ _TO_SCALAR_FIRST = [3, 0, 1, 2]
 
 
 def scalar_last(q: Any) -> Any:
-    """
-    Reorder (w, x, y, z) to (x, y, z, w); anything else unchanged (the function checks it).
-
-    Objects with attributes x, y, z, w (ROS messages, and lists of them: an
-    object array) name their components: they are taken as they are.
-    """
+    """Reorder (w, x, y, z) to (x, y, z, w); anything else (messages name their fields) as is."""
     a = np.asarray(q)
     if a.ndim == 0 or a.shape[-1] != 4 or a.dtype == object:
         return q
@@ -52,19 +40,7 @@ _NOTE = """
 
 def scalar_first_adapter(function: Callable[..., Result], quaternions: Sequence[str] = (),
                          returns_quaternion: bool = False) -> Callable[..., Result]:
-    """
-    Return ``function`` with the keyword ``scalar_first`` for (w, x, y, z) quaternions.
-
-    Parameters
-    ----------
-    function : callable
-        A public conversion function.
-    quaternions : sequence of str
-        Names of its parameters that take quaternions.
-    returns_quaternion : bool
-        Whether its result is a quaternion array.
-
-    """
+    """Return ``function`` with the keyword ``scalar_first`` for its ``quaternions`` parameters."""
     signature = inspect.signature(function)
     parameters = [p.replace(annotation=inspect.Parameter.empty)
                   for p in signature.parameters.values()]

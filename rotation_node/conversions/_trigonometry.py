@@ -1,52 +1,11 @@
 """
 ``sin`` and ``cos`` of one angle together, and ``atan2``, in compiled code that vectorises.
 
-numba calls the C library's scalar ``sin``, ``cos`` and ``atan2`` (PyPI's
-llvmlite has no SVML), ~15-20 ns each here, and a call inside a loop stops
-LLVM from vectorising it; numpy's ``arctan2`` is SIMD only on AVX-512
-machines and calls the same scalar C function elsewhere. This module
-evaluates them the way fdlibm does, with arithmetic and selects only, so that
-a loop of them compiles to SIMD code on any x86-64 (or other) machine.
-
-``sin`` and ``cos``:
-
-- Cody-Waite reduction ``r = a - n pi/2`` with pi/2 split in two (33 + 53
-  bits, so ``n * PIO2_HI`` is exact for ``|n| < 2^20``), keeping the rounding
-  error of ``r`` as a tail (fdlibm ``__ieee754_rem_pio2``, medium case);
-- fdlibm's ``__kernel_sin`` and ``__kernel_cos`` minimax polynomials on
-  ``|r| <= pi/4``;
-- the quadrant ``n mod 4`` chosen by selects, not branches.
-
-Accuracy against 300-bit mpmath: within 0.7 ulp of the result, except within
-a few ulps of a zero of sin or cos (``a`` at a multiple of pi/2), where the
-absolute error stays below 4e-21 (fdlibm spends extra reduction steps there to
-keep the relative error small too; a rotation only needs the absolute one).
-
-Round-to-nearest uses the ``1.5 * 2^52`` trick, which is exact under numba's
-default strict floating point. Beyond ``|a| = REDUCTION_LIMIT`` the reduction
-would lose accuracy, and :func:`sin_cos` falls back to the C library (no
-rotation in practice: 5e5 rad is 80000 turns).
-
-``atan2`` (:func:`atan2`): fdlibm's ``atan`` polynomial on ``|r| < 0.47``
-after reducing ``t = |y| / |x|`` to ``r = (t - c) / (1 + c t)`` about
-``c = 0, 1/2, 1, 3/2`` or ``inf``, with three changes that make it both
-branch-free and more accurate than fdlibm (within 0.8 ulp against 300-bit
-mpmath, 0.76 the worst found, next to ``t = 7/16``; fdlibm's own reduction
-~1.3 ulp measured the same way):
-
-- ``r``'s numerator and denominator are formed from ``|x|`` and ``|y|``
-  rather than from the rounded ``t``, exactly as unevaluated sums (Sterbenz
-  subtractions and Fast2Sum), and the rounding error of the quotient is
-  recovered with a fused multiply-add: ``r + r_lo`` is the reduced argument to
-  ~2^-100;
-- ``pi - atan(c)`` for ``x < 0`` comes from a table of double-double
-  constants instead of a final subtraction from pi;
-- the interval is chosen by comparing ``|y|`` with ``c |x|``, the table entry
-  by selects, and arguments beyond ``2^1000`` or below ``2^-900`` are first
-  scaled by a power of two (exact), so no special case takes a branch.
-
-Signed zeros are handled as C's ``atan2`` does (``atan2(+-0, -0) = +-pi``);
-arguments must be finite.
+The C library's scalar functions stop LLVM from vectorising a loop; these are fdlibm's
+polynomials with arithmetic and selects only (no calls, no branches): ``sin``/``cos``
+within 0.7 ulp (absolute error < 4e-21 next to their zeros), ``atan2`` within 0.8 ulp,
+signed zeros as C's, finite arguments. The method: docs/numerics.md. Round-to-nearest
+uses the ``1.5 * 2^52`` trick, exact under numba's default strict floating point.
 """
 from __future__ import annotations
 
@@ -84,11 +43,7 @@ REDUCTION_LIMIT = 2.0 ** 19
 
 @jit
 def reduced_sin_cos(a: float) -> tuple[float, float]:
-    """
-    ``(sin a, cos a)`` for ``|a| <= REDUCTION_LIMIT``, without calls or branches.
-
-    Accurate as the module says; larger ``|a|`` give wrong values: use :func:`sin_cos`.
-    """
+    """``(sin a, cos a)`` for ``|a| <= REDUCTION_LIMIT`` (larger: wrong; use :func:`sin_cos`)."""
     n = (a * _INVPIO2 + _ROUND) - _ROUND
     head = a - n * _PIO2_HI                   # exact
     r = head - n * _PIO2_LO
@@ -120,12 +75,7 @@ def sin_cos(a: float) -> tuple[float, float]:
 
 @jit
 def sin_cos_in_place_kernel(a: FloatArray, cos_out: FloatArray) -> None:
-    """
-    Compute ``a <- sin(a)``, ``cos_out <- cos(a)`` for 1-d float64 arrays of finite angles.
-
-    The batch form of :func:`sin_cos`, same results: one vectorised loop
-    (no calls, no branches) unless some ``|a| > REDUCTION_LIMIT``.
-    """
+    """Compute ``a <- sin(a)``, ``cos_out <- cos(a)``: :func:`sin_cos` in one vectorised loop."""
     big = False
     for i in range(a.shape[0]):
         big |= abs(a[i]) > REDUCTION_LIMIT
@@ -138,13 +88,7 @@ def sin_cos_in_place_kernel(a: FloatArray, cos_out: FloatArray) -> None:
 
 
 def fused_multiply_add(a: float, b: float, c: float) -> float:
-    """
-    Return ``a * b + c`` rounded once.
-
-    Compiled: LLVM's ``fma`` (the instruction, or a C library call without
-    FMA). Interpreted: exact rational arithmetic rounded once (Python's
-    ``int / int`` rounds correctly), with IEEE's signed zeros: the same value.
-    """
+    """Return ``a * b + c`` rounded once: LLVM's ``fma`` compiled, exact rationals interpreted."""
     if a == 0.0 or b == 0.0 or not (math.isfinite(a) and math.isfinite(b) and math.isfinite(c)):
         return a * b + c    # the product is exact (or not finite): one rounding
     from fractions import Fraction   # (and decimal): here only, microseconds beside its use
@@ -202,9 +146,8 @@ def _reduced_atan_argument(ax, ay):
     """
     ``|y| / |x|`` reduced about ``c``: ``(num, num_lo, den, den_lo)`` and the interval flags.
 
-    ``(num + num_lo) / (den + den_lo)`` equals ``(t - c) / (1 + c t)`` for
-    ``t = ay / ax`` exactly (each pair is an unevaluated sum), with ``c`` the
-    first flag set of ``(c = inf, c = 3/2, c = 1, c = 1/2)``, else 0.
+    ``(num + num_lo) / (den + den_lo)`` is exactly ``(t - c) / (1 + c t)``, ``t = ay / ax``,
+    ``c`` the first flag set of ``(inf, 3/2, 1, 1/2)``, else 0.
     """
     beyond_2, beyond_1, beyond_half, beyond_0 = (ay > 2.4375 * ax, ay > 1.1875 * ax,
                                                  ay > 0.6875 * ax, ay > 0.4375 * ax)
@@ -236,13 +179,7 @@ def _reduced_atan_argument(ax, ay):
 
 @jit
 def atan2(y: float, x: float) -> float:
-    """
-    Return the arc tangent of ``y / x`` in the quadrant of ``(x, y)``, to 0.8 ulp, branch-free.
-
-    ``y`` and ``x`` finite.
-
-    See the module for the method. Values and signed zeros as C's ``atan2``.
-    """
+    """Return the arc tangent of finite ``y / x`` in the quadrant of ``(x, y)`` (C's ``atan2``)."""
     ax, ay = abs(x), abs(y)
     largest = max(ax, ay)
     scale = _SCALE_UP if largest < _TINY else (_SCALE_DOWN if largest > _HUGE else 1.0)

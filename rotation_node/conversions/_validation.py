@@ -1,14 +1,10 @@
 """
 Argument checks at the public boundary of :mod:`rotation_node.conversions`.
 
-Public functions validate once, here: they turn array_like arguments into
-C-contiguous, aligned, writable float64 arrays with the right trailing shape, which the
-kernels take in their canonical layout (see ``_runtime``). Per-sample checks
-(finiteness, zero norm, determinant) run inside the compiled kernels, which
-report the first bad sample as a status
-``(flat_index << 4) | (argument << 3) | defect`` (negative when every
-sample is fine); :func:`raise_sample_error` turns it into a ``ValueError``
-that names the argument, the sample and what was wrong.
+Arguments become C-contiguous, aligned, writable float64 arrays of the right trailing
+shape here; per-sample checks run inside the kernels, which report the first bad sample
+as ``(flat_index << 4) | (argument << 3) | defect`` (-1: none), and
+:func:`raise_sample_error` names the argument, the sample and what was wrong.
 """
 from __future__ import annotations
 
@@ -24,7 +20,7 @@ if TYPE_CHECKING:
     from ..type_aliases import FloatArray
 
 
-# Defect codes returned by the kernels (0 = sample is fine).
+# Defect codes returned by the kernels.
 OK = 0
 NON_FINITE = 1
 ZERO_NORM = 2
@@ -44,28 +40,10 @@ _SHAPE_TEXT = {(): '(...)', (3,): '(..., 3)', (4,): '(..., 4)', (3, 3): '(..., 3
 
 def float_array(x: ArrayLike, name: str, trailing: tuple[int, ...]) -> FloatArray:
     """
-    Return ``x`` as a C-contiguous float64 array whose shape ends in ``trailing``.
+    Return ``x`` as a C-contiguous, aligned, writable float64 array ending in ``trailing``.
 
-    Parameters
-    ----------
-    x : array_like
-        The argument as the caller gave it (never modified).
-    name : str
-        The argument's name, for error messages.
-    trailing : tuple of int
-        The required trailing shape, e.g. ``(4,)`` or ``(3, 3)``.
-
-    Returns
-    -------
-    ndarray
-        The values, C-contiguous, aligned and writable; a copy only where a
-        conversion, reordering, realignment or a read-only input needed one.
-
-    Raises
-    ------
-    ValueError
-        If ``x`` is not numeric or its shape does not end in ``trailing``.
-
+    A copy only where needed; ``ValueError`` naming ``name`` for a non-numeric ``x`` or
+    another shape.
     """
     try:
         a = np.asarray(x, dtype=np.float64)
@@ -83,10 +61,7 @@ def _message_array(x: Any, name: str, trailing: tuple[int, ...],
     """
     Return ``x``, which numpy refused, as an array of its messages' values, or raise ValueError.
 
-    ``x``: an object with attributes x, y, z(, w) or a (nested) list or tuple
-    of them (``_messages``). The error names what is wrong: the first object
-    lacking an attribute, else what numpy says of the values (or of ``x``
-    itself, ``refused``, when it holds no such objects).
+    The error names the first object lacking an attribute, else numpy's reason.
     """
     values, found = message_values(x, trailing)
     why: object = refused
@@ -110,15 +85,7 @@ def kernel_ready(a: NDArray[Any]) -> FloatArray:
 
 def broadcast_pair(a: FloatArray, b: FloatArray, trailing_a: tuple[int, ...],
                    trailing_b: tuple[int, ...]) -> tuple[FloatArray, FloatArray]:
-    """
-    Broadcast two arrays from :func:`float_array` against each other's leading shapes.
-
-    Returns
-    -------
-    a, b : ndarray
-        C-contiguous, with a common leading shape (unchanged when it already was).
-
-    """
+    """Broadcast two arrays from :func:`float_array` to a common leading shape."""
     lead_a = a.shape[:a.ndim - len(trailing_a)]
     lead_b = b.shape[:b.ndim - len(trailing_b)]
     if lead_a == lead_b:
@@ -167,21 +134,18 @@ class EulerSequence(NamedTuple):
     proper: bool
 
 
-def _all_sequences() -> dict[str, EulerSequence]:
-    table = {}
-    for a in range(3):
-        for b in range(3):
-            for c in range(3):
-                if a == b or b == c:
-                    continue
-                lower = ''.join('xyz'[i] for i in (a, b, c))
-                for name, intrinsic in ((lower, False), (lower.upper(), True)):
-                    table[name] = EulerSequence(name, (a, b, c), intrinsic, a == c)
-    return table
+_LOWER = ('xyz', 'xzy', 'yxz', 'yzx', 'zxy', 'zyx', 'xyx', 'xzx', 'yxy', 'yzy', 'zxz', 'zyz')
+#: The 24 conventions: 12 extrinsic (lower case) and 12 intrinsic (upper case).
+SEQUENCES = _LOWER + tuple(s.upper() for s in _LOWER)
 
 
-#: The 24 valid conventions by name.
-SEQUENCE_TABLE = _all_sequences()
+def _parsed(name: str) -> EulerSequence:
+    a, b, c = ('xyz'.index(axis) for axis in name.lower())
+    return EulerSequence(name, (a, b, c), name.isupper(), a == c)
+
+
+#: The 24 conventions by name.
+SEQUENCE_TABLE = {name: _parsed(name) for name in SEQUENCES}
 
 
 def parse_sequence(seq: object) -> EulerSequence:

@@ -1,14 +1,10 @@
 """
 Compile and cache every kernel once: ``python -m rotation_node.conversions.warm_up``.
 
-Each kernel (conversions and kinematics) is compiled for its one signature
-and written to numba's disk cache, so that no later process compiles: a first
-call then costs a cache load, not seconds of compilation. So is the tuple form
-of each kernel that a single sample given as a list or tuple reaches
-(``_runtime.copied``), which a later process loads only from the cache. ``./run.sh`` runs
-this after installing. :func:`announcing_compilation` is how a program's
-start-up says that it is compiling, when it is; :func:`load_in_background`
-is how a long-running program (the node) starts without waiting for it.
+Every kernel of conversions and kinematics, and the tuple form that list samples reach,
+goes into numba's disk cache (``./run.sh`` runs this after installing), so no later
+process compiles. :func:`announcing_compilation` is how a start says it is compiling;
+:func:`load_in_background` how the node starts without waiting for it.
 """
 import argparse
 from contextlib import contextmanager
@@ -22,10 +18,8 @@ from typing import Callable, Iterator, List, Optional
 from . import _runtime
 from ._runtime import KernelCompilation
 
-# One single sample for each argument name of the public functions taking samples
-# (their required arguments): a public function whose required arguments are all
-# named here is called with them as tuples, so that its kernel's tuple form is
-# compiled; the others take no single samples as tuples (matrices, time series).
+# A sample for each required argument of the public functions taking tuples: a function
+# whose required arguments are all named here is called with them, compiling its tuple form.
 _TUPLE_ARGUMENTS = {
     'q': (0.0, 0.0, 0.0, 1.0), 'p': (0.0, 0.0, 0.0, 1.0), 'q_dot': (0.0, 0.0, 0.0, 0.0),
     'v': (0.1, 0.2, 0.3), 'axis': (0.0, 0.0, 1.0), 'angles': (0.1, 0.2, 0.3),
@@ -39,33 +33,20 @@ COMPILING = ('compiling the numerical kernels, once after installation (about 15
 
 
 def warm_up() -> int:
-    """
-    Compile every kernel of conversions and kinematics, or load it from the disk cache.
-
-    Returns
-    -------
-    int
-        The number of kernels.
-
-    """
+    """Compile every kernel of conversions and kinematics, or load it from the cache; how many."""
     from .. import conversions, kinematics
     from ._runtime import compile_kernels, compiling_tuple_forms
     count = compile_kernels()
     with compiling_tuple_forms():
-        for module in (conversions, kinematics):
-            for name in module.__all__:
-                _call_with_tuples(getattr(module, name))
+        for function in (getattr(module, name) for module in (conversions, kinematics)
+                         for name in module.__all__):
+            if not inspect.isfunction(function):
+                continue
+            parameters = inspect.signature(function).parameters.values()
+            required = [p.name for p in parameters if p.default is inspect.Parameter.empty]
+            if required and all(name in _TUPLE_ARGUMENTS for name in required):
+                function(*(_TUPLE_ARGUMENTS[name] for name in required))
     return count
-
-
-def _call_with_tuples(function: object) -> None:
-    """Call ``function`` with a tuple for each required argument, if all are named in the table."""
-    if not inspect.isfunction(function):
-        return
-    required = [parameter.name for parameter in inspect.signature(function).parameters.values()
-                if parameter.default is inspect.Parameter.empty]
-    if required and all(name in _TUPLE_ARGUMENTS for name in required):
-        function(*(_TUPLE_ARGUMENTS[name] for name in required))
 
 
 @contextmanager
@@ -74,10 +55,8 @@ def announcing_compilation(say: Callable[[str], None],
     """
     Say on one line when kernels compile for longer than ``after`` seconds, and when they are done.
 
-    For a program's start-up (the first after installation compiles the
-    kernels it uses): ``say(COMPILING)`` while they compile, from a timer
-    thread, and ``say('kernels compiled in ... s')`` at the end of the block.
-    Nothing is said when every kernel is loaded from the disk cache.
+    ``say(COMPILING)`` from a timer thread, ``say('N kernels compiled in ... s and cached')``
+    at the end of the block; nothing when every kernel comes from the disk cache.
     """
     said = []
 
@@ -93,27 +72,12 @@ def announcing_compilation(say: Callable[[str], None],
 
 def load_in_background(say: Callable[[str], None], after: float = 1.0) -> threading.Thread:
     """
-    Load each kernel in a background thread at its first use; calls run interpreted meanwhile.
+    Load each kernel (and tuple form, when due) in a daemon thread at its first use.
 
-    And each kernel's tuple form when it is due (``_runtime.copied``): lists
-    and tuples are copied into arrays meanwhile.
-
-    For a long-running program's start (the node): it converts from its first
-    input, interpreted (the same numbers, see ``_runtime``), while a daemon
-    thread imports numba at once and then compiles, or loads from the disk
-    cache, every kernel the program calls, in the order of their first calls,
-    each taking over as soon as it is ready. So only the kernels that the
-    configured conversions use are compiled. While kernels compile for longer
-    than ``after`` seconds, ``say(COMPILING)`` is called once (from a timer
-    thread), and ``say('N kernels compiled in ... s and cached')`` when the
-    kernels asked for so far are ready; nothing when they all come from the cache.
-
-    Returns
-    -------
-    threading.Thread
-        The loader (a daemon; it waits for kernels to load for as long as the process
-        runs). A second call returns the first one's.
-
+    Calls run interpreted meanwhile, with the same numbers; the thread imports numba at
+    once, then loads the kernels in the order of their first calls, announcing slow
+    compilations as :func:`announcing_compilation` does. Returns the loader (one per
+    process: a second call returns the first one's).
     """
     global _background
     if _background is not None:   # one loader per process
