@@ -128,6 +128,22 @@ def test_a_given_time_offset_is_kept():
     assert angle_deg(found.mounting, streams.mounting) < 0.1
 
 
+def test_nothing_to_estimate_gives_the_residual_of_the_identity(rng):
+    streams = two_streams(33, duration=10.0, time_offset=0.05, world=IDENTITY, mounting=IDENTITY)
+    found = comparison.estimate_alignment(streams.t_ref, streams.q_ref, streams.t_est,
+                                          streams.q_est, time_offset=0.05, world=False,
+                                          mounting=False)
+    assert found.time_offset == 0.05 and found.time_offset_std == 0.0
+    np.testing.assert_array_equal(found.world, IDENTITY)
+    np.testing.assert_array_equal(found.mounting, IDENTITY)
+    assert found.matched >= 20 and 0.0 < found.residual_rms < np.radians(1.0)
+    q_ref, q_est = pairs(rng, 50, 2.0, IDENTITY, IDENTITY)
+    found = comparison.align_pairs(q_ref, q_est, world=False, mounting=False)
+    errors = (Rotation.from_quat(q_ref).inv() * Rotation.from_quat(q_est)).magnitude()
+    assert found.matched == 50
+    assert found.residual_rms == pytest.approx(np.sqrt(np.mean(errors ** 2)), rel=1e-12)
+
+
 def chordal_kabsch(q_ref, q_est):
     """M minimising sum |M - R_est^T R_ref|_F^2, by scipy's align_vectors on the columns."""
     per_pair = (Rotation.from_quat(q_est).inv() * Rotation.from_quat(q_ref)).as_matrix()

@@ -178,7 +178,7 @@ class _Problem:
             body = conversions.rotate_vector(conversions.quaternion_conjugate(mounting), rates)
             blocks.append(inverse_right_jacobian(r) @ body[:, :, None])
         jacobian = np.concatenate(blocks, axis=2)
-        return r.reshape(-1), jacobian.reshape(-1, jacobian.shape[-1])
+        return r.reshape(-1), jacobian.reshape(r.size, -1)   # (p may be 0)
 
 
 def _check_determined(information, columns, count):
@@ -371,7 +371,7 @@ def _pair_linearised(q_ref, q_est):
     def linearised(w, m, dt, columns):
         r = _residuals(q_ref, q_est, w, m)
         jacobian = _rotation_jacobian(r, q_est, m, columns)
-        return r.reshape(-1), jacobian.reshape(-1, jacobian.shape[-1])
+        return r.reshape(-1), jacobian.reshape(r.size, -1)   # (p may be 0)
     return linearised
 
 
