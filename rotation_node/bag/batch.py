@@ -76,8 +76,31 @@ def convert_bag(input_path: str, output_path: str, params: NodeParameters, *,
     """
     Convert one bag as ``rotation_bag convert`` does; report a failure instead of raising it.
 
-    The arguments are ``convert``'s; picklable, for any task runner. A bag that cannot be
-    converted gives ``ok`` False and the error line; nothing is written then.
+    The unit of work of :func:`convert_bags` and :func:`convert_bags_on_dask`;
+    importable and picklable, so any task runner can call it.
+
+    Parameters
+    ----------
+    input_path : str
+        Any bag :func:`rotation_node.bag.reading.reader.open_bag` reads.
+    output_path : str
+        The output bag (must not exist unless ``overwrite``): a rosbag2
+        directory, or a single MCAP file if it ends in ``.mcap``.
+    params : rotation_node.parameters.NodeParameters
+        The node's parameters, as for :func:`rotation_node.bag.convert.convert`.
+    topics : list of str, optional
+        As for :func:`rotation_node.bag.convert.convert`.
+    overwrite, strict : bool, optional
+        As for :func:`rotation_node.bag.convert.convert`.
+    compression : str, optional
+        As for :func:`rotation_node.bag.convert.convert` (default: the input's).
+
+    Returns
+    -------
+    BagResult
+        ``ok`` False, with the error line, if the bag could not be converted
+        (bad or unsupported input, existing output...); nothing is written then.
+
     """
     from rotation_node.bag.convert import convert
     notes: List[str] = []
@@ -108,14 +131,36 @@ def convert_bags(input_paths: Sequence[str], output_directory: str, params: Node
                  compression: Optional[str] = None,
                  on_result: Optional[Callable[[BagResult], None]] = None) -> List[BagResult]:
     """
-    Convert every input into ``output_directory``, ``jobs`` bags at a time; return the results.
+    Convert every input into ``output_directory``, ``jobs`` bags at a time.
 
-    ``jobs`` worker processes (1: one after the other in this process) convert each bag as
-    :func:`convert_bag` (the other arguments are its) into the directory, created if missing,
-    under :func:`batch_output_path`. ``on_result`` receives each :class:`BagResult` as soon
-    as its bag is done; the list is in that order (those done within one 50 ms poll in input
-    order). BagError before any bag is converted if ``jobs`` is not a positive integer, two
-    inputs would share an output, or the directory cannot be created.
+    Parameters
+    ----------
+    input_paths : sequence of str
+        The bags, any :func:`rotation_node.bag.reading.reader.open_bag` reads.
+    output_directory : str
+        Created if missing; outputs are named by :func:`batch_output_path`.
+    params : rotation_node.parameters.NodeParameters
+        The node's parameters, for every bag.
+    jobs : int, optional
+        Worker processes (``1``: one after the other in this process).
+    topics, overwrite, strict, compression
+        As for :func:`convert_bag`.
+    on_result : callable, optional
+        Called with each :class:`BagResult` as soon as its bag is done.
+
+    Returns
+    -------
+    list of BagResult
+        In the order the bags finished (those done within one poll, 50 ms,
+        in input order).
+
+    Raises
+    ------
+    BagError
+        If ``jobs`` is not a positive integer, two inputs would share an
+        output, or the output directory cannot be created (before any bag is
+        converted).
+
     """
     if not (isinstance(jobs, int) and jobs >= 1):
         raise BagError(f'jobs must be a positive integer, got {jobs!r}')

@@ -91,17 +91,54 @@ def convert(input_path: StrPath, output_path: StrPath, params: NodeParameters, *
     """
     Write ``output_path``: the input bag plus the node's outputs for its input topics.
 
-    ``output_path`` is a rosbag2 directory, or an MCAP file if it ends in ``.mcap``, written
-    as ``<output>.part`` and renamed when complete (a failure or a signal removes it;
-    ``overwrite`` replaces an existing one atomically). ``topics`` (names in the bag or ROS 2
-    names) default to every topic of ``params.input_type``'s type (the first of several:
-    ``/tf``); ``compression`` to the input's; ``progress_stream`` (a terminal) to stderr.
-    ``strict`` refuses an unfinished recording or a damaged MCAP file. ``report(line)``
-    receives what the input is and its notes before anything is written, then what reading
-    could not read. ``blocks=False`` converts message by message (the same bytes). Return
-    ``{input topic: PipelineStats}``. BagError for an unreadable input, a missing or
-    mistyped topic, an output topic already in the input, an output that exists (without
-    ``overwrite``), is being written or is the input; DiskFullError (no output left).
+    Parameters
+    ----------
+    input_path : str or os.PathLike
+        Any bag :func:`rotation_node.bag.reading.reader.open_bag` reads; only read.
+    output_path : str or os.PathLike
+        The output bag, a rosbag2 directory or a single MCAP file if it ends
+        in ``.mcap``. It is written as ``<output>.part`` and renamed when
+        complete; a failure or a signal removes it.
+    params : rotation_node.parameters.NodeParameters
+        As loaded from the node's parameters file.
+    topics : list of str, optional
+        Topics to convert (their names in the bag or their ROS 2 names); by
+        default every topic of the type ``params.input_type`` names (for a type
+        with several topics, the first of each group: ``/tf``, not ``/tf_static``).
+    overwrite : bool, optional
+        Replace an existing output (atomically, once the new one is complete).
+    compression : str, optional
+        Chunk compression of the output, ``'zstd'``, ``'lz4'`` or ``'none'``;
+        the input's by default.
+    progress_stream : file, optional
+        Where to draw the progress bar (only if it is a terminal); stderr by default.
+    strict : bool, optional
+        Refuse an unfinished recording or a damaged MCAP file instead of
+        converting what it holds.
+    report : callable, optional
+        ``report(line)`` receives what the input is (``<path>: rosbag2
+        directory (mcap, 3 files), 5000 messages``) and its notes (an
+        unfinished recording, a renamed topic) once it is opened, before
+        anything is written; then what reading found could not be read.
+    blocks : bool, optional
+        Convert in blocks where the parameters allow it (the default; see
+        :mod:`rotation_node.bag.block_convert`); False converts message by
+        message. The output is the same byte for byte.
+
+    Returns
+    -------
+    dict
+        ``{input topic: PipelineStats}``.
+
+    Raises
+    ------
+    BagError
+        If the input is unreadable or corrupt, a topic is missing or of the
+        wrong type, an output topic already exists in the input, or the output
+        exists (without ``overwrite``), is being written by another process
+        (``<output>.part`` exists) or is the input; a ``DiskFullError`` if the
+        disk fills (no output is left then).
+
     """
     with open_bag(input_path, strict=strict) as reader:
         check_output(input_path, output_path)

@@ -153,11 +153,39 @@ def export(input_path: StrPath, output_path: StrPath, params: NodeParameters, *,
     """
     Write the converted values of one topic of a bag as a CSV or Parquet table.
 
-    ``output_path`` (``*.csv``, or ``*.parquet`` with pyarrow) appears only once complete;
-    ``topic`` defaults to the one topic of the input type; the other arguments are
-    ``convert``'s. Return the rows written and the topic's ``PipelineStats``. BagError,
-    leaving nothing behind, for an unreadable input, a missing, mistyped or ambiguous topic,
-    a bad extension, missing pyarrow, or an output that exists or cannot be written.
+    Parameters
+    ----------
+    input_path : str or os.PathLike
+        Any bag :func:`rotation_node.bag.reading.reader.open_bag` reads; only read.
+    output_path : str or os.PathLike
+        ``*.csv`` or ``*.parquet``; appears only once complete.
+    params : rotation_node.parameters.NodeParameters
+        The node's parameters (input type, outputs, conventions).
+    topic : str, optional
+        The topic to export; by default the one topic of the input type
+        (an error if the bag holds several).
+    overwrite : bool, optional
+        Replace an existing output.
+    strict : bool, optional
+        Refuse an unfinished recording.
+    report : callable, optional
+        ``report(line)`` receives what the input is and its notes.
+
+    Returns
+    -------
+    rows : int
+        Rows written.
+    stats : PipelineStats
+        The topic's conversion counters.
+
+    Raises
+    ------
+    BagError
+        The input cannot be read, the topic is missing, of the wrong type or
+        not unique, the output's extension is not .csv or .parquet, Parquet
+        without pyarrow, the output exists (without ``overwrite``) or cannot
+        be written; nothing is left behind.
+
     """
     kind = table_format(output_path)
     if kind == 'parquet':

@@ -140,17 +140,45 @@ def play(path: StrPath, *, rate: float = 1.0, topics: Optional[Sequence[str]] = 
     """
     Publish the messages of a bag until it ends (or forever with ``loop``) or Ctrl-C.
 
-    ``rate`` is a speed factor on the recorded timing (0: as fast as the subscribers
-    acknowledge); ``topics`` (names in the bag or ROS 2 names) default to every installed
-    type's; ``delay`` seconds are waited before the first message, after the subscribers if
-    ``wait_for_subscribers`` (always at rate 0); ``ros_args`` go to ``rclpy.init``;
-    ``strict`` refuses an unfinished recording or a damaged MCAP file; ``report(line)``
-    receives the input's notes (topics left out too) before anything is published, then
-    what reading found it could not read. Return the messages published.
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The bag: anything :func:`rotation_node.bag.reading.reader.open_bag` reads.
+    rate : float, optional
+        Speed factor on the recorded timing; 0 publishes as fast as the
+        subscribers acknowledge, after waiting for a subscriber on every topic.
+    topics : list of str, optional
+        Only these topics (names in the bag or their ROS 2 names); by
+        default every topic whose type is installed.
+    loop : bool, optional
+        Start again at the end.
+    delay : float, optional
+        Seconds to wait before the first message (after the subscribers, if
+        waiting for them), so that subscribers can match the new publishers.
+    wait_for_subscribers : bool, optional
+        Start only once every played topic has a subscriber (always at rate 0).
+    ros_args : list of str, optional
+        Command line passed to ``rclpy.init`` (``--ros-args ...``).
+    strict : bool, optional
+        Refuse an unfinished recording or a damaged MCAP file instead of
+        playing what it holds.
+    report : callable, optional
+        ``report(line)`` receives the input's notes (an unfinished recording,
+        a renamed topic, topics left out) before anything is published, then
+        what reading found could not be read.
 
-    BagError, before anything is published, if the bag is unreadable, a topic is not in it
-    or not a valid name, a type is not installed, the rate is neither 0 nor in
-    ``[MIN_RATE, inf)``, or the delay not in ``[0, MAX_DELAY_S]``.
+    Returns
+    -------
+    int
+        Messages published.
+
+    Raises
+    ------
+    BagError
+        If the bag is unreadable, a topic is not in it or not a valid name, a
+        type is not installed, the rate is neither 0 nor in ``[MIN_RATE, inf)``
+        or the delay not in ``[0, MAX_DELAY_S]``; nothing is published then.
+
     """
     if not (rate == 0 or MIN_RATE <= rate < math.inf):
         raise BagError(f'rate must be 0 or a finite number >= {MIN_RATE:g}, got {rate}')

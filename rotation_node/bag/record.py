@@ -98,14 +98,42 @@ def record(output: StrPath, topics: Sequence[str], *, duration: Optional[float] 
            overwrite: bool = False, compression: str = DEFAULT_COMPRESSION,
            ros_args: Optional[List[str]] = None) -> Dict[str, int]:
     """
-    Record ``topics`` into ``output`` until Ctrl-C, SIGTERM, ``duration`` s or a full disk.
+    Record ``topics`` into ``output`` until Ctrl-C, SIGTERM, ``duration`` or a full disk.
 
-    The bag is closed cleanly on each, after writing what was received by then (for at most
-    ``DRAIN_LIMIT_S``); ``output``, ``overwrite`` and ``compression`` are ``BagWriter``'s,
-    ``ros_args`` go to ``rclpy.init``. Return ``{topic: messages recorded}`` (never-seen
-    topics absent). DiskFullError when the disk filled (the bag keeps what fitted); BagError
-    before anything is written for an existing output, a bad duration or topic name (should
-    writing fail later, what was flushed stays in ``<output>.part``).
+    The bag is closed cleanly on every one of these, so it is always valid;
+    messages already received by then are written first (for at most
+    ``DRAIN_LIMIT_S``).
+
+    Parameters
+    ----------
+    output : str or os.PathLike
+        The bag: a rosbag2 directory, or a single MCAP file if it ends in ``.mcap``.
+    topics : list of str
+        The topics to record.
+    duration : float, optional
+        Seconds to record; until stopped by a signal by default.
+    overwrite : bool, optional
+        Replace an existing ``output``.
+    compression : str, optional
+        Chunk compression, ``'zstd'`` (default, as rosbag2), ``'lz4'`` or ``'none'``.
+    ros_args : list of str, optional
+        Command line passed to ``rclpy.init`` (``--ros-args ...``).
+
+    Returns
+    -------
+    dict
+        ``{topic: messages recorded}``; topics that never appeared are absent.
+
+    Raises
+    ------
+    DiskFullError
+        If the disk filled: the bag was closed with the messages that fitted
+        (``kept``); recording stopped.
+    BagError
+        If ``output`` exists (without ``overwrite``), ``duration`` is not
+        positive or a topic name is invalid, before anything is written.
+        Should writing fail otherwise, what was flushed stays in ``<output>.part``.
+
     """
     if duration is not None and not (0 < duration < math.inf):
         raise BagError(f'duration must be a finite number of seconds > 0, got {duration}')

@@ -87,17 +87,52 @@ class _Channel:
 
 class BagWriter:
     """
-    Write a ROS 2 bag (a rosbag2 directory, or one MCAP file if ``path`` ends in ``.mcap``).
+    Write a ROS 2 bag; a context manager.
 
-    A context manager. Written to ``<path>.part``, renamed to ``path`` on a clean close; an
-    exception in the ``with`` block (or ``abort()``) removes the ``.part``, or keeps it as
-    an unfinished bag with ``keep_unfinished`` (for recordings, which cannot be repeated).
-    ``overwrite`` replaces an existing bag atomically when closed. ``compression``:
-    ``'zstd'`` (rosbag2's default), ``'lz4'`` or ``'none'``. ``chunk_period_s`` also writes
-    a chunk when the last is this old (checked every 64 messages and by ``flush_if_due()``),
-    for live recordings; by default chunks are cut by size only. BagError if ``path``
-    exists (without ``overwrite``), ``<path>.part`` exists (another writer, or a crashed
-    one), or it cannot be created.
+    The bag is written to ``<path>.part`` and renamed to ``path`` when the
+    writer is closed cleanly (end of the ``with`` block or ``close()``). An
+    exception in the ``with`` block (or ``abort()``) removes the ``.part``, or
+    with ``keep_unfinished`` leaves it as an unfinished bag that a linear scan
+    reads. A process killed while writing leaves the ``.part`` holding every
+    message up to the last chunk written.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The bag: a rosbag2 directory, or a single MCAP file if it ends in ``.mcap``.
+    overwrite : bool, optional
+        Replace an existing bag (atomically, when closed). Default False: an
+        existing bag is an error.
+    compression : str, optional
+        Chunk compression: ``'zstd'`` (default, as rosbag2), ``'lz4'`` or ``'none'``.
+    keep_unfinished : bool, optional
+        On failure, keep the ``.part`` instead of removing it (for recordings,
+        which cannot be repeated).
+    chunk_period_s : float, optional
+        Also write a chunk when the last one is this old (checked every 64
+        messages and by ``flush_if_due()``): for live recordings. Default:
+        chunks by size only, so the bag depends on the messages alone.
+
+    Attributes
+    ----------
+    path : str
+    part_path : str
+        Where the bag is until it is closed.
+    message_count : int
+        Messages written to the file so far (not those still collected in
+        memory, nor those dropped on a full disk).
+
+    Raises
+    ------
+    BagError
+        If ``path`` exists and ``overwrite`` is false, ``<path>.part`` exists
+        (another writer, or a crashed one), or it cannot be created.
+
+    Examples
+    --------
+    >>> with BagWriter('out.mcap') as writer:                  # doctest: +SKIP
+    ...     writer.write('/imu', Imu(), log_time_ns=1_700_000_000_000_000_000)
+
     """
 
     def __init__(self, path: StrPath, *, overwrite: bool = False,
