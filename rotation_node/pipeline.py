@@ -152,10 +152,12 @@ class PipelineStats:
 
     received: int = 0    # input messages
     published: int = 0   # output messages, all outputs together
-    dropped: Counter = field(default_factory=Counter)   # samples without output, by reason
+    # samples without output, by reason (DROP_REASONS and the input type's own)
+    dropped: Counter = field(default_factory=Counter)
     skipped: Counter = field(default_factory=Counter)   # samples with some outputs skipped
     normalised: int = 0   # quaternions beyond quaternion.norm_tolerance from unit length
-    near_singular: int = 0   # within euler.singularity_threshold of gimbal lock
+    # within euler.singularity_threshold of gimbal lock (counted when an Euler output is on)
+    near_singular: int = 0
 
 
 @dataclass
@@ -177,7 +179,12 @@ class BlockOutputs:
 
 
 class _Dropped(Exception):
-    """The current sample is invalid and produces no output: ``(reason, fields)``."""
+    """The current sample is invalid and produces no output."""
+
+    def __init__(self, reason, **fields):
+        super().__init__(reason)
+        self.reason = reason
+        self.fields = fields
 
 
 class Value(NamedTuple):
@@ -503,8 +510,7 @@ class ConversionPipeline:
                 else:
                     outputs.append((name, header, compute(params, *needed)))
         except _Dropped as drop:
-            reason, fields = drop.args
-            self._issue(reason, **fields)
+            self._issue(drop.reason, **drop.fields)
             return []
         except ValueError as exc:   # a conversion rejected a value the checks let through
             self._issue(CONVERSION_ERROR, error=exc)
@@ -554,7 +560,7 @@ class ConversionPipeline:
             return None
         form = self._input.orientation_form
         if not all(map(math.isfinite, orientation)):
-            raise _Dropped(NON_FINITE_ORIENTATION, {'form': form, 'values': orientation})
+            raise _Dropped(NON_FINITE_ORIENTATION, form=form, values=orientation)
         if form != registry.QUATERNION:
             q = self._quaternion_from_input_form(orientation)
         else:

@@ -9,7 +9,8 @@ used here. Checked against :data:`CHECKED_RCLPY_VERSIONS` (Jazzy); rclpy's
   shut down under a call, and undeserialisable bytes raise; no public names.
 - :func:`message_lost_event` / :func:`message_lost_count`: the message-lost status
   read once a second. ``SubscriptionEventCallbacks(message_lost=...)`` would add a
-  handler the executor examines at every wake-up (every message at 1 kHz).
+  handler the executor examines at every wake-up (every message at 1 kHz), and
+  ``EventHandler.take_data`` returns data only once the executor has seen it ready.
 - :func:`take_waiting`: take what else is queued, in one message's callback: an
   executor wake-up costs more than a conversion (170-350 us against 6-12 us CPU
   per queued Imu message, docs/node.md); rclpy has no public "take".

@@ -36,10 +36,11 @@ EULER_ANGLES = 'euler_angles'              # of euler.sequence, first and third 
 PUBLISHED_EULER = 'published_euler'        # first and third unwrapped with euler.unwrap
 ANGULAR_VELOCITY = 'angular_velocity'      # rad/s in the output frame, measured or differenced
 EULER_RATES = 'euler_rates'                # unavailable near gimbal lock
-# Rotation-vector covariance (3 x 3, rad^2) in the output frames, about covariance.frame's axes,
-# and the first-order Euler covariance (rad^2 or deg^2); unavailable near gimbal lock or past
-# covariance.max_linearisation_ratio.
+# Rotation-vector covariance (3 x 3, rad^2) in the output frames, about covariance.frame's
+# axes; unavailable when the input has none or it is all zeros (or invalid).
 ORIENTATION_COVARIANCE = 'orientation_covariance'
+# First-order Euler covariance (rad^2 or deg^2); unavailable near gimbal lock or past
+# covariance.max_linearisation_ratio.
 EULER_COVARIANCE = 'euler_covariance'
 PIPELINE_VALUES = (ORIENTATION, OUTPUT_QUATERNION, EULER_ANGLES, PUBLISHED_EULER,
                    ANGULAR_VELOCITY, EULER_RATES, ORIENTATION_COVARIANCE, EULER_COVARIANCE)

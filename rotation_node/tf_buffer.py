@@ -33,7 +33,13 @@ QUATERNION_NORM_TOLERANCE = 10e-3
 _IDENTITY = np.array((0.0, 0.0, 0.0, 1.0))
 
 
-class RejectedTransformError(RotationNodeError):
+class TfError(RotationNodeError):
+    """A TF sample or lookup could not be used; ``reason`` (str) names the kind, for counters."""
+
+    reason: str
+
+
+class RejectedTransformError(TfError):
     """A sample tf2 would ignore (self transform, NaN, old data...); ``reason`` names why."""
 
     def __init__(self, reason: str, message: str):
@@ -41,10 +47,8 @@ class RejectedTransformError(RotationNodeError):
         self.reason = reason
 
 
-class TfLookupError(RotationNodeError):
-    """A lookup has no answer; each subclass's ``reason`` names why, for counters."""
-
-    reason: str
+class TfLookupError(TfError):
+    """A lookup has no answer; each subclass's ``reason`` names why."""
 
 
 class UnknownFrameError(TfLookupError):

@@ -12,16 +12,14 @@ from typing import Any, Callable, Optional, Tuple
 
 import numpy as np
 from rotation_node.registry import Sample, TF_STATIC_TOPIC
-from rotation_node.tf_buffer import (
-    CycleError, ExtrapolationError, NotConnectedError, TfLookupError, TfOrientation,
-    TfOrientationBuffer, UnknownFrameError)
+from rotation_node.tf_buffer import TfLookupError, TfOrientation, TfOrientationBuffer
 from rotation_node.wire.stamps import split_ns
 
 TF_SAMPLE_IGNORED = 'tf_sample_ignored'
-#: Why a TF message gave no sample (``'tf_' +`` the lookup error's reason), or a transform
+#: Why a TF message gave no sample (``'tf_' +`` the lookup error's ``reason``), or a transform
 #: was ignored.
-DROP_REASONS = tuple('tf_' + error.reason for error in (
-    UnknownFrameError, NotConnectedError, CycleError, ExtrapolationError)) + (TF_SAMPLE_IGNORED,)
+DROP_REASONS = ('tf_unknown_frame', 'tf_not_connected', 'tf_cycle', 'tf_extrapolation',
+                TF_SAMPLE_IGNORED)
 
 
 def sample_stream(params: Any, report: Callable[[str, str], None]) -> 'TfSampleStream':

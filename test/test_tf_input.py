@@ -443,3 +443,11 @@ def test_a_rosbag2_directory_written_by_rosbags_converts(tmp_path, rng, storage)
         check_against_oracle(
             chain, [r.message() for r in reader.messages(['/tf/quaternion'])],
             [r.message() for r in reader.messages(['/tf/angular_velocity'])])
+
+
+def test_drop_reasons_are_the_lookup_errors_reasons_and_ignored_samples():
+    from rotation_node import tf_buffer, tf_input
+    lookup_errors = tf_buffer.TfLookupError.__subclasses__()
+    assert len(lookup_errors) == 4
+    assert tf_input.DROP_REASONS == (*('tf_' + error.reason for error in lookup_errors),
+                                     tf_input.TF_SAMPLE_IGNORED)

@@ -42,9 +42,9 @@ MAX_DELAY_S = threading.TIMEOUT_MAX    # what threading can wait for
 def _wait(stop, seconds):
     """Sleep ``seconds`` (any length) or until a stop signal."""
     deadline = time.monotonic() + seconds
-    while (remaining := deadline - time.monotonic()) > 0 and not stop.event.wait(
-            min(remaining, 3600.0)):
-        pass
+    while (remaining := deadline - time.monotonic()) > 0:
+        if stop.event.wait(min(remaining, 3600.0)):
+            return
 
 
 def _playable_topics(reader, topics, report):

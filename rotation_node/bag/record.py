@@ -11,7 +11,7 @@ from __future__ import annotations
 import functools
 import math
 import time
-from typing import Dict, Iterable, List, Optional, Sequence, TYPE_CHECKING
+from typing import Any, Dict, Iterable, List, Optional, Sequence, TYPE_CHECKING
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -42,8 +42,9 @@ class BagRecorder(Node):
     ``{topic: messages written}`` of the subscribed topics, ``pending_topics`` the others.
     """
 
-    def __init__(self, writer: BagWriter, topics: Iterable[str]) -> None:
-        super().__init__(NODE_NAME)
+    def __init__(self, writer: BagWriter, topics: Iterable[str], *, node_name: str = NODE_NAME,
+                 **kwargs: Any) -> None:
+        super().__init__(node_name, **kwargs)   # kwargs: rclpy Node's (context, namespace...)
         self._writer = writer
         self.pending_topics = [self.resolve_topic_name(topic) for topic in topics]
         self.counts: Dict[str, int] = {}

@@ -11,8 +11,8 @@ Errors: :class:`~rotation_node.errors.ComparisonError` (bad arrays, no overlap) 
 :class:`~rotation_node.errors.DegenerateMotionError` (the motion does not determine what was
 asked), both ``ValueError``.
 """
-from ._alignment import (align_pairs, aligned_series, AlignedSeries, Alignment,
-                         estimate_alignment, IDENTITY)
+from ._alignment import (align_pairs, aligned_series, AlignedSeries, Alignment, chordal_mean,
+                         estimate_alignment, IDENTITY, kabsch)
 from ._series import (error_statistics, ErrorStatistics, interpolate_orientations,
                       orientation_errors)
 from ._time_offset import estimate_time_offset, TimeOffset
@@ -21,7 +21,7 @@ from ..kinematics import slerp  # the one slerp, shared with tf_buffer
 
 __all__ = [
     'AlignedSeries', 'Alignment', 'ComparisonError', 'DegenerateMotionError', 'ErrorStatistics',
-    'IDENTITY', 'TimeOffset', 'align_pairs', 'aligned_series', 'error_statistics',
-    'estimate_alignment', 'estimate_time_offset', 'interpolate_orientations', 'orientation_errors',
-    'slerp',
+    'IDENTITY', 'TimeOffset', 'align_pairs', 'aligned_series', 'chordal_mean', 'error_statistics',
+    'estimate_alignment', 'estimate_time_offset', 'interpolate_orientations', 'kabsch',
+    'orientation_errors', 'slerp',
 ]

@@ -330,10 +330,13 @@ def _least_squares(linearised, w, m, dt, columns, times=None, span=0.0):
                 information, jacobian, r, times(), span, r.size / dof)))
         std = np.sqrt(variance)
     std = _blocks(std, columns)
-    return Alignment(float(dt), float(std.get('time_offset', [0.0])[0]),
-                     conversions.canonical_quaternion(w), std.get('world', np.zeros(3)),
-                     conversions.canonical_quaternion(m), std.get('mounting', np.zeros(3)),
-                     r.size // 3, _rms_angle(r))
+    return Alignment(time_offset=float(dt),
+                     time_offset_std=float(std.get('time_offset', [0.0])[0]),
+                     world=conversions.canonical_quaternion(w),
+                     world_std=std.get('world', np.zeros(3)),
+                     mounting=conversions.canonical_quaternion(m),
+                     mounting_std=std.get('mounting', np.zeros(3)),
+                     matched=r.size // 3, residual_rms=_rms_angle(r))
 
 
 def _residuals(q_ref, q_est, w, m):

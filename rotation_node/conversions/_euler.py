@@ -120,7 +120,8 @@ def euler_atan2_arguments(x: float, y: float, z: float, w: float, i: int, j: int
     """
     Return the three ``atan2`` argument pairs: ``(y1, y2, y3), (x1, x2, x3)``.
 
-    Their ``atan2`` are half the middle angle and the half sum and difference of the outer.
+    ``atan2(y1, x1)`` is half the middle angle (in [0, pi/2]), ``atan2(y2, x2)`` and
+    ``atan2(y3, x3)`` the half sum and half difference of the outer angles.
     """
     a, b, c, d, h_ab, h_cd = _bernardes_viollet_terms(x, y, z, w, i, j, k, intrinsic)
     return (h_cd, b, d), (h_ab, a, c)
@@ -132,7 +133,8 @@ def euler_from_half_angles(half_middle: float, half_sum: float, half_diff: float
     """
     Euler angles from the ``atan2`` of :func:`euler_atan2_arguments`.
 
-    ``half_middle == 0`` and ``h_ab == 0`` (the first ``x`` argument) are the exact degeneracies.
+    ``half_middle == 0`` is exactly the degeneracy at 0; ``h_ab == 0`` (the first ``x``
+    argument) the one at pi.
     """
     _, _, _, sign, proper = _working_axes(i, j, k, intrinsic)
     middle = 2.0 * half_middle

@@ -8,8 +8,11 @@ status of the first bad sample (:func:`status`) or -1. Declarations (:data:`jit`
 :func:`kernel`, :func:`compiled_form`) record Python functions and import nothing of
 numba. Each kernel runs interpreted (the Python function on ``memoryview`` s, items
 Python floats) until loaded, then compiled for exactly one signature and cached on disk;
-both runs do the same IEEE operations in the same order, so the results agree bit for
-bit (the policy, the cache and the single-sample paths: docs/library.md).
+both runs do the same IEEE operations in the same order, and kernels call only correctly
+rounded or exact functions (``sqrt``, ``frexp``, ``ldexp``), the C library's ``sin``,
+``cos`` and ``atan2`` (the same in both runs) or ``_trigonometry`` (its fused multiply-add
+exact in both), so the results agree bit for bit; any other math function would break that
+(the policy, the cache and the single-sample paths: docs/library.md).
 :func:`call_unary` and :func:`call_binary` are the one path from public arguments to
 kernels, with single-sample fast paths and threads for large batches.
 """
@@ -199,8 +202,9 @@ def typed_first_call(dispatcher: Any) -> Callable[..., Any]:
     """
     Return the first ``call_unchecked`` of a kernel: a typed call that installs the unchecked one.
 
-    Unchecked (~100 ns less), arrays of other types read out of bounds; the typed first call
-    makes a call site breaking that contract raise ``TypeError``.
+    The unchecked call (~100 ns less) trusts its caller to pass exactly the declared types
+    (float64, C-contiguous, aligned, writable, of the declared ndim); others would read out
+    of bounds. The typed first call makes a call site that breaks this raise ``TypeError``.
     """
     def call(*args):
         status_ = dispatcher(*args)

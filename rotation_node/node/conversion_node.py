@@ -226,7 +226,7 @@ class RotationNode(Node):
         # subscribed again, so that their publishers deliver what they keep once more.
         replay = previous is not None and input_type.stream is not None
         for state in self._inputs:
-            qos = self._input_qos(state)[1]
+            _, qos = self._input_qos(state)
             if replay and state.topic.transient_local:
                 state.finish_handoff()
                 state.reception.forget()
@@ -280,7 +280,7 @@ class RotationNode(Node):
             f'mounting from /tf_static: {lookup.frames} = '
             f'{[round(c, 9) for c in found.mounting_body_rotation]} (x, y, z, w)')
 
-    def _input_qos(self, state: InputTopic, incompatible_policy: Optional[QoSPolicyKind] = None,
+    def _input_qos(self, state: InputTopic, incompatible_policy: Optional[QoSPolicyKind] = None
                    ) -> Tuple[List[QoSProfile], QoSProfile]:
         """Return what ``state``'s publishers offer (auto mode only) and the QoS to take."""
         offered = state.offered_qos() if self.params.qos_reliability == AUTO else []

@@ -36,9 +36,11 @@ class InputTopic:
     One topic of the input type: its subscription, QoS, and what it received.
 
     During a handoff ``retiring`` is the old subscription, still taken from, and
-    ``pending`` holds the new one's messages. The node's callbacks:
-    ``accept(self, message, info)`` for each message taken (maybe seen before),
-    ``drain(self)`` after one of the current subscription outside a handoff.
+    ``pending`` holds the new one's messages. ``memory``: the messages the
+    :class:`Reception` remembers. The node's callbacks: ``accept(self, message, info)``
+    for each message taken (maybe seen before), ``drain(self)`` after one of the current
+    subscription outside a handoff (to take what else waits), and
+    ``on_incompatible_qos(self, event)`` for a publisher the subscription cannot match.
     """
 
     def __init__(self, node: Node, topic: registry.InputTopic, memory: int,

@@ -115,6 +115,8 @@ class MotionStream:
     """
 
     def __init__(self, motion: Motion, duration: float, longest: float) -> None:
+        if not isinstance(motion, (ConstantRate, Coning, TorqueFree, EulerSweep)):
+            raise TypeError(f'motion_truth: not a scene motion: {motion!r}')
         self._motion = motion
         self._duration = duration
         self._torque_free = (
@@ -138,7 +140,7 @@ class MotionStream:
                                    quaternion_from_rotation_vector(w * t[:, np.newaxis]))
             w = w.copy()
         else:   # constant Euler rates: their angular velocity is defined even at gimbal lock
-            assert isinstance(motion, EulerSweep)
+            assert isinstance(motion, EulerSweep)   # (for mypy: __init__ admits only motions)
             start = np.asarray(motion.start, dtype=np.float64)
             rates = (np.asarray(motion.end, dtype=np.float64) - start) / self._duration
             angles = start + rates * t[:, np.newaxis]

@@ -9,7 +9,12 @@ type's installed description (no rclpy, no message package), gives both forms of
 a ``struct.Struct`` for one message and a numpy structured dtype for a block, so the two
 agree by construction.
 
-The format is rmw_fastrtps' plain little-endian CDR (XCDR1). Decoding returns read-only
+The format is rmw_fastrtps' plain little-endian CDR (XCDR1): a 4-byte encapsulation header
+(``00 01 00 00``), then the payload, in which a primitive is aligned to its size from the
+payload's start; a string is a uint32 length counting its NUL, then its bytes and the NUL; a
+sequence is a uint32 count, then its elements aligned as the element type even when empty; a
+nested message adds no alignment; a type without strings or sequences is padded to a multiple
+of 4 bytes. Decoding returns read-only
 named-tuple *views* with the message's field names (fixed arrays as tuples), which stand in
 for rclpy messages wherever fields are only read; other encapsulations go to rclpy. Encoding
 gives rclpy's bytes with zero padding (rclpy leaves it uninitialised), so equal messages give
@@ -74,7 +79,7 @@ def _placed(leaves, string_lengths, offset=0):
     Offsets count from the payload start (after the 4-byte encapsulation header). A primitive
     (or a fixed array's first element) sits at a multiple of its size; a string is its uint32
     length at a multiple of 4, then ``string_lengths``' next count of bytes (the NUL included).
-    Nested messages add no alignment; a type without strings is padded to a multiple of 4.
+    Nested messages add no alignment (the end padding is :class:`PayloadLayout`'s).
     """
     places, strings = [], iter(string_lengths)
     for leaf in leaves:
@@ -95,7 +100,8 @@ class PayloadLayout:
     Where each field of a fixed-layout type is when its strings have given lengths (NUL included).
 
     ``offsets[path]`` is a leaf's payload offset (a string's: its uint32 length); ``size`` the
-    payload's bytes before ``end_padding``; ``struct`` packs one payload as one item per value,
+    payload's bytes before ``end_padding`` (zeros up to a multiple of 4 for a type without
+    strings); ``struct`` packs one payload as one item per value,
     ``count`` per fixed array and two per string (its length, its bytes with the NUL).
     """
 
@@ -460,7 +466,8 @@ def _float64_multi_array_head(layout):
         payload += bytes(_padding(len(payload), 4))
         payload += struct.pack('<II', dim.size, dim.stride)
     payload += _UINT32.pack(layout.data_offset)
-    return CDR_LE + bytes(payload), _padding(len(payload) + 4, 8)   # after the data's uint32 count
+    # A float64 sequence's elements are 8-aligned after its count, even when empty.
+    return CDR_LE + bytes(payload), _padding(len(payload) + 4, 8)
 
 
 def float64_multi_array_encoder(layout: Any) -> Callable[[Sequence[float]], bytes]:

@@ -106,8 +106,9 @@ def matching_policies(offered: Sequence[QoSProfile]) -> Tuple[ReliabilityPolicy,
     """
     Return the reliability and durability that receive every offering publisher's messages.
 
-    As rosbag2's ``adapt_request_to_offers``: reliable, transient local only if every publisher
-    offers it; best effort and volatile (which every publisher matches) when there is none.
+    As rosbag2's ``adapt_request_to_offers``: reliable only if every publisher offers reliable,
+    transient local only if every one offers transient local; best effort and volatile (which
+    every publisher matches) when there is none.
     """
     def every(policy_name, value):
         return bool(offered) and all(getattr(p, policy_name) == value for p in offered)

@@ -87,8 +87,10 @@ def rename_replacing(source: str, destination: str) -> None:
     A file replaces a file with ``rename``; with a directory on either side the two are
     exchanged (``RENAME_EXCHANGE``) and the old one, now at ``source``, removed.
     """
-    with contextlib.suppress(FileExistsError):
+    try:
         return rename_exclusive(source, destination)
+    except FileExistsError:
+        pass
     if not os.path.isdir(source) and not os.path.isdir(destination):
         os.replace(source, destination)
         return
