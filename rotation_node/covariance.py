@@ -17,7 +17,6 @@ Formulas and accuracy: docs/covariance.md.
 """
 from __future__ import annotations
 
-import contextlib
 import math
 from typing import Optional, Sequence, TYPE_CHECKING
 import warnings
@@ -128,6 +127,11 @@ def rotation_vector_covariance_jacobian(angles: ArrayLike, seq: str, frame: str 
     ndarray, shape (..., 3, 3)
         ``J``, with ``d = J da``; defined everywhere (singular at gimbal lock).
 
+    Raises
+    ------
+    ValueError
+        Bad ``seq`` or ``frame``; wrong shape or NaN/Inf ``angles``.
+
     """
     world = is_world_frame(frame)
     a = finite_array(angles, 'angles', (3,))
@@ -159,6 +163,11 @@ def rotation_vector_covariance_from_euler_covariance(angles: ArrayLike, covarian
     -------
     ndarray, shape (..., 3, 3)
         ``J Sigma_a J^T`` in rad^2, exactly symmetric. Defined everywhere.
+
+    Raises
+    ------
+    ValueError
+        Bad ``seq`` or ``frame``; wrong shape or NaN/Inf, naming the argument.
 
     """
     sigma = finite_array(covariance, 'covariance', (3, 3))
@@ -202,6 +211,12 @@ def euler_covariance_from_rotation_vector_covariance(
         Once per call if any sample was within ``singularity_threshold`` of
         gimbal lock, with their count; the mask is ``np.isnan(result[..., 0, 0])``.
 
+    Raises
+    ------
+    ValueError
+        Bad ``seq`` or ``frame``, ``singularity_threshold`` outside [0, pi/2]; wrong shape or
+        NaN/Inf, naming the argument.
+
     """
     world = is_world_frame(frame)
     a = finite_array(angles, 'angles', (3,))
@@ -213,12 +228,18 @@ def euler_covariance_from_rotation_vector_covariance(
                            <= float(singularity_threshold) * (1.0 + 1e-9)))
     except (TypeError, ValueError):
         near = True   # the call below names what was wrong
-    # The warning below replaces the Euler rates' one (catching warnings only when needed).
-    with warnings.catch_warnings() if near else contextlib.nullcontext():
-        if near:
+    frame_name = 'world' if world else 'body'
+    # The warning below replaces the Euler rates' one. Caught only when needed: catch_warnings
+    # resets the warning registries (a 'default' warning already shown would show again).
+    if near:
+        with warnings.catch_warnings():
             warnings.simplefilter('ignore', EulerSingularityWarning)
+            columns = euler_rates_from_angular_velocity(
+                rows, _IDENTITY, seq, frame_name, degrees,
+                singularity_threshold=singularity_threshold)
+    else:
         columns = euler_rates_from_angular_velocity(
-            rows, _IDENTITY, seq, 'world' if world else 'body', degrees,
+            rows, _IDENTITY, seq, frame_name, degrees,
             singularity_threshold=singularity_threshold)
     out = _congruence(np.swapaxes(columns, -1, -2), sigma)
     singular = np.isnan(columns[..., 0, 0])
@@ -264,6 +285,11 @@ def euler_linearisation_ratio(angles: ArrayLike, covariance: ArrayLike, seq: str
     -------
     ndarray, shape (...)
         The ratio; ``inf`` at gimbal lock (unless the covariance is zero).
+
+    Raises
+    ------
+    ValueError
+        Bad ``seq``; wrong shape or NaN/Inf, naming the argument.
 
     """
     a = finite_array(angles, 'angles', (3,))
@@ -311,6 +337,11 @@ def quaternion_covariance_from_rotation_vector_covariance(quaternion: ArrayLike,
         ``M Sigma_d M^T / 4`` at the normalised quaternion, rows and columns ordered
         ``(x, y, z, w)``; rank 3, ``q_hat`` in its null space. The same for ``q`` and ``-q``.
 
+    Raises
+    ------
+    ValueError
+        Bad ``frame``; wrong shape, NaN/Inf or a zero quaternion, naming the argument.
+
     """
     m = _tangent_basis(_unit_quaternion(quaternion), is_world_frame(frame))
     return 0.25 * _congruence(m, finite_array(covariance, 'covariance', (3, 3)))
@@ -339,6 +370,11 @@ def rotation_vector_covariance_from_quaternion_covariance(quaternion: ArrayLike,
         ``4 M^T Sigma_q M`` (rad^2): the tangent-space part of ``Sigma_q``;
         what lies along ``q_hat`` (uncertainty of the norm) is dropped.
 
+    Raises
+    ------
+    ValueError
+        Bad ``frame``; wrong shape, NaN/Inf or a zero quaternion, naming the argument.
+
     """
     m = _tangent_basis(_unit_quaternion(quaternion), is_world_frame(frame))
     sigma = finite_array(covariance, 'covariance', (4, 4))
@@ -363,6 +399,11 @@ def world_rotation_vector_covariance(quaternion: ArrayLike,
         ``R_hat Sigma_body R_hat^T``: the covariance of ``d`` in
         ``R = exp([d]x) R_hat``.
 
+    Raises
+    ------
+    ValueError
+        Wrong shape, NaN/Inf or a zero quaternion, naming the argument.
+
     """
     r = matrix_from_quaternion(_unit_quaternion(quaternion))
     return _congruence(r, finite_array(body_covariance, 'body_covariance', (3, 3)))
@@ -385,6 +426,11 @@ def body_rotation_vector_covariance(quaternion: ArrayLike,
     ndarray, shape (..., 3, 3)
         ``R_hat^T Sigma_world R_hat``: the covariance of ``d`` in
         ``R = R_hat exp([d]x)``.
+
+    Raises
+    ------
+    ValueError
+        Wrong shape, NaN/Inf or a zero quaternion, naming the argument.
 
     """
     r = matrix_from_quaternion(_unit_quaternion(quaternion))

@@ -271,9 +271,31 @@ def convert_bags_on_dask(client: Any, input_paths: Sequence[str], output_directo
     """
     Convert every input into ``output_directory`` as tasks on a Dask cluster.
 
-    As :func:`convert_bags`; ``client`` is a connected ``distributed.Client``, and the paths
-    must name the same files on every worker (a shared file system). ``timeout``: seconds to
-    wait for all tasks (None: until they finish), then TimeoutError, the others cancelled.
+    Each bag is one task running :func:`convert_bag` on a worker; the paths must name the same
+    files on every worker (a shared file system).
+
+    Parameters
+    ----------
+    client : distributed.Client
+        Connected to the cluster (``Client('tcp://scheduler:8786')``, or a ``LocalCluster``).
+    input_paths, output_directory, params, topics, overwrite, strict, compression, on_result
+        As for :func:`convert_bags`.
+    timeout : float, optional
+        Seconds to wait for all tasks; ``None`` waits until they finish.
+
+    Returns
+    -------
+    list of BagResult
+        As :func:`convert_bags` returns them, in the order the tasks finished.
+
+    Raises
+    ------
+    BagError
+        If two inputs would share an output or the output directory cannot be created
+        (before any task is submitted).
+    TimeoutError
+        If ``timeout`` passes first (the remaining tasks are cancelled).
+
     """
     from distributed import as_completed
     outputs = _created_outputs(input_paths, output_directory)

@@ -92,11 +92,36 @@ def read_stream(source: StreamSource, params: Optional[NodeParameters] = None, *
     """
     Read the orientation samples of a topic with the node's sample stream of its input type.
 
-    Samples without an orientation (REP 145), with a non-finite or zero one, or with a
-    repeated stamp are dropped and counted. Rates are the messages' angular velocities if
-    every sample has a finite one and not all are zero, else None (then differentiated).
-    BagError if the topic cannot be read as orientations; ComparisonError for fewer than 2
-    usable samples.
+    Samples without an orientation (an Imu's ``orientation_covariance[0] == -1``), with a
+    non-finite or zero one, or with a repeated stamp are dropped and counted.
+
+    Parameters
+    ----------
+    source : StreamSource
+        The bag, the topic and how to read it.
+    params : NodeParameters, optional
+        Euler sequence and unit of Euler-angle inputs; ``input_type`` picks among types that
+        share a message.
+    strict : bool, optional
+        Refuse unfinished recordings.
+    report : callable, optional
+        Receives the input's notes.
+
+    Returns
+    -------
+    Stream
+        The samples sorted by stamp. Rates are the messages' angular velocities where every
+        sample has a finite one and not all are zero (a field never filled in), else None
+        (the comparison then differentiates the orientations).
+
+    Raises
+    ------
+    BagError
+        The bag is unreadable, the topic is not in it, has no messages or cannot be read as
+        orientations, the frames of ``tf`` are missing.
+    ComparisonError
+        Fewer than 2 usable samples.
+
     """
     params = NodeParameters() if params is None else params
     with open_bag(source.path, strict=strict) as reader:
@@ -182,17 +207,23 @@ class ComparisonResult:
 
     def as_json(self) -> Dict[str, Any]:
         """Return the ``--json`` document."""
-        degrees, stats, alignment = math.degrees, self.statistics, self.alignment
+        degrees = math.degrees
+        stats = self.statistics
+        alignment = self.alignment
         return {
-            'reference': _stream_json(self.reference), 'estimate': _stream_json(self.estimate),
+            'reference': _stream_json(self.reference),
+            'estimate': _stream_json(self.estimate),
             'matched': int(self.series.times.size),
-            'time_offset_s': alignment.time_offset, 'time_offset_std_s': alignment.time_offset_std,
+            'time_offset_s': alignment.time_offset,
+            'time_offset_std_s': alignment.time_offset_std,
             'world_alignment': {'quaternion': alignment.world.tolist(),
                                 'std_rad': alignment.world_std.tolist()},
             'mounting': {'quaternion': alignment.mounting.tolist(),
                          'std_rad': alignment.mounting_std.tolist()},
-            'error_deg': {'rmse': degrees(stats.rmse), 'mean': degrees(stats.mean),
-                          'median': degrees(stats.median), 'p95': degrees(stats.p95),
+            'error_deg': {'rmse': degrees(stats.rmse),
+                          'mean': degrees(stats.mean),
+                          'median': degrees(stats.median),
+                          'p95': degrees(stats.p95),
                           'max': degrees(stats.maximum)},
             'per_axis_error_deg': {'rmse': np.degrees(stats.axis_rmse).tolist(),
                                    'max': np.degrees(stats.axis_maximum).tolist()},
@@ -327,11 +358,37 @@ def compare_bags(reference: StreamSource, estimate: StreamSource, *,
     """
     Compare two topics; write the JSON and the plot, each complete or not at all.
 
-    ``time_offset`` (s) is estimated when None; ``align`` names which of ``W``, ``M`` to
-    estimate (the others: identity); ``params``: Euler inputs' sequence and unit, and the
-    ``input_type`` among types sharing a message; ``max_gap``, ``max_offset``: those of
-    ``comparison.estimate_alignment``. Existing outputs are refused before any work
-    (without ``overwrite``); ``strict``, ``report`` as for ``convert``.
+    Parameters
+    ----------
+    reference, estimate : StreamSource
+        The two topics (of one bag or two).
+    time_offset : float, optional
+        Seconds; estimated when None.
+    align : {'none', 'world', 'mounting', 'both'}, optional
+        Which of ``W`` and ``M`` to estimate (the others are the identity).
+    json_path, plot_path : str or os.PathLike, optional
+        Where to write the JSON document and the PNG.
+    params : NodeParameters, optional
+        As for :func:`read_stream`.
+    max_gap, max_offset : float, optional
+        See :func:`rotation_node.comparison.estimate_alignment`.
+    overwrite : bool, optional
+        Replace existing outputs (refused otherwise, before any work).
+    strict : bool, optional
+        Refuse unfinished recordings.
+    report : callable, optional
+        Receives the inputs' notes.
+
+    Returns
+    -------
+    ComparisonResult
+        The alignment, the aligned series and the error statistics.
+
+    Raises
+    ------
+    BagError, ComparisonError
+        One line each: what was wrong.
+
     """
     with contextlib.ExitStack() as stack:   # each output committed on success, else removed
         outputs = [stack.enter_context(AtomicFile(path, overwrite=overwrite))

@@ -52,7 +52,7 @@ def _euler_panels(title, unit_suffix):
 
 
 def _euler_covariance_panels(params):
-    euler, = _euler_panels('Euler angles', '')(params)
+    euler = _euler_panels('Euler angles', '')(params)[0]
     return [euler, Panel(f'Euler angle covariance, sequence {params.euler_sequence}',
                          euler.unit + '^2',
                          tuple(f'C{row}{col}' for row in (1, 2, 3) for col in (1, 2, 3)), 3)]
@@ -77,6 +77,24 @@ _OUTPUT_PANELS = {
 def output_panels(name: str, params: NodeParameters) -> list:
     """Return the :class:`Panel` of output ``name`` over its ``OutputMessage.numbers``."""
     return _OUTPUT_PANELS[name](params)
+
+
+def _converted_output(topics, topic):
+    """Return the output whose ``convert`` topic ``topic`` is (checked in the bag), or None."""
+    parent, _, name = topic.rpartition('/')
+    output = registry.OUTPUTS.get(name)
+    if (output is None or parent not in topics or topics[topic] != output.type_name
+            or output_topic(parent, name) != topic):
+        return None
+    return output
+
+
+def _input_type(type_name, params):
+    """Return the plain input type of a topic of ``type_name`` (``input_type`` if it is one)."""
+    candidates = [entry for entry in registry.INPUTS.values()
+                  if entry.type_name == type_name and entry.stream is None]
+    preferred = [entry for entry in candidates if entry.name == params.input_type]
+    return next(iter(preferred or candidates), None)
 
 
 def _input_orientation(entry, params):
@@ -120,15 +138,10 @@ def _input_panels(entry, params):
 
 def _panels(topics, topic, params):
     """Return ``(panels, numbers(msg))`` of a topic: the numbers of a message they index."""
-    parent, _, name = topic.rpartition('/')   # an output convert wrote (checked in the bag)?
-    output = registry.OUTPUTS.get(name)
-    if (output is not None and parent in topics and topics[topic] == output.type_name
-            and output_topic(parent, name) == topic):
+    output = _converted_output(topics, topic)
+    if output is not None:
         return output_panels(output.name, params), output.message.numbers
-    plain = [entry for entry in registry.INPUTS.values()
-             if entry.type_name == topics[topic] and entry.stream is None]
-    preferred = [entry for entry in plain if entry.name == params.input_type]
-    entry = next(iter(preferred or plain), None)
+    entry = _input_type(topics[topic], params)
     if entry is not None:
         return _input_panels(entry, params)
     plottable = sorted({e.type_name for e in registry.INPUTS.values() if e.stream is None})
@@ -144,13 +157,39 @@ def plot_topic(bag_path: StrPath, topic: str, output_path: StrPath, *,
                params: Optional[NodeParameters] = None, overwrite: bool = False,
                strict: bool = False, report: Optional[Callable[[str], None]] = None) -> int:
     """
-    Draw ``topic`` of ``bag_path`` over time into the PNG ``output_path``; return the messages.
+    Draw ``topic`` of ``bag_path`` over time into the PNG ``output_path``.
 
-    ``topic`` is its name in the bag or its ROS 2 name; ``params`` those the bag was converted
-    with (the node's defaults if omitted); the PNG appears whole or not at all, replacing one
-    only with ``overwrite``; ``strict`` refuses an unfinished recording or a damaged MCAP file;
-    ``report(line)`` receives the input's notes. BagError if the bag is unreadable, the topic
-    is not in it or has no messages, or its type cannot be plotted.
+    Parameters
+    ----------
+    bag_path : str or os.PathLike
+        The bag to read.
+    topic : str
+        Its name in the bag or its ROS 2 name.
+    output_path : str or os.PathLike
+        Written to a temporary file and renamed, so never half-written.
+    params : rotation_node.parameters.NodeParameters, optional
+        The parameters the bag was converted with: Euler sequence, units and frame for the
+        labels. The node's defaults if omitted.
+    overwrite : bool, optional
+        Replace an existing ``output_path``.
+    strict : bool, optional
+        Refuse an unfinished recording or a damaged MCAP file instead of plotting what it
+        holds.
+    report : callable, optional
+        ``report(line)`` receives the input's notes (an unfinished recording, a renamed
+        topic), then what reading found could not be read.
+
+    Returns
+    -------
+    int
+        The number of messages plotted.
+
+    Raises
+    ------
+    BagError
+        If the bag is unreadable, the topic is not in it or has no messages, or its type
+        cannot be plotted.
+
     """
     params = NodeParameters() if params is None else params
     with open_bag(bag_path, strict=strict) as reader, \
@@ -169,10 +208,33 @@ def plot_topic(bag_path: StrPath, topic: str, output_path: StrPath, *,
 def plot_series(reader: Any, topic: str,
                 params: NodeParameters) -> Tuple[np.ndarray, list, list]:
     """
-    Return what ``plot`` draws for a topic of an open bag: ``(times_ns, panels, values)``.
+    Return what ``plot`` draws for a topic: ``(times_ns, panels, values)``.
 
-    ``times_ns``: int64 stamps; ``values``: per panel, ``(messages, len(panel.labels))``, NaN
-    where unknown or invalid. BagError if the topic is missing, empty or cannot be plotted.
+    Parameters
+    ----------
+    reader : rotation_node.bag.reading.reader.InputBag
+        The open bag.
+    topic : str
+        Its name in the bag or its ROS 2 name.
+    params : rotation_node.parameters.NodeParameters
+        Euler sequence and units (of the plotted Euler angles, and for reading Euler-angle
+        inputs).
+
+    Returns
+    -------
+    times_ns : numpy.ndarray of int64
+        Header stamp (log time for messages without a header) of each message.
+    panels : list of Panel
+        What each panel draws.
+    values : list of numpy.ndarray
+        Per panel, shape ``(messages, len(panel.labels))``; NaN where a value is unknown or
+        invalid (left as a gap in the plot).
+
+    Raises
+    ------
+    BagError
+        If the topic is not in the bag, has no messages or cannot be plotted.
+
     """
     topic = reader.topic_name(topic)
     records = reader.messages([topic])

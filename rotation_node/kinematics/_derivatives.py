@@ -142,6 +142,12 @@ def quaternion_derivative(q: ArrayLike, omega: ArrayLike, frame: str = 'body') -
     ndarray, shape (..., 4)
         ``qdot`` (1/s) of the unit quaternion ``q / |q|``; orthogonal to it.
 
+    Raises
+    ------
+    ValueError
+        Bad ``frame``; wrong shape, NaN/Inf or a zero quaternion, naming the argument and the
+        sample.
+
     """
     return call_binary(_quaternion_derivative_kernel, q, omega, ('q', 'omega'), ((4,), (3,)), (4,),
                        is_world_frame(frame))
@@ -168,6 +174,11 @@ def angular_velocity_from_quaternion_derivative(q: ArrayLike, q_dot: ArrayLike,
         ignored (least squares for a noisy ``q_dot``); inverts :func:`quaternion_derivative`
         to rounding.
 
+    Raises
+    ------
+    ValueError
+        Bad ``frame``; wrong shape, NaN/Inf or a zero ``q``.
+
     """
     return call_binary(_angular_velocity_from_quaternion_derivative_kernel, q, q_dot,
                        ('q', 'q_dot'), ((4,), (4,)), (3,), is_world_frame(frame))
@@ -190,6 +201,11 @@ def matrix_derivative(R: ArrayLike, omega: ArrayLike, frame: str = 'body') -> Fl
     -------
     ndarray, shape (..., 3, 3)
         ``Rdot`` (1/s).
+
+    Raises
+    ------
+    ValueError
+        Bad ``frame``; wrong shape, NaN/Inf or ``det(R) <= 0``.
 
     """
     return call_binary(_matrix_derivative_kernel, R, omega, ('R', 'omega'), ((3, 3), (3,)), (3, 3),
@@ -217,6 +233,11 @@ def angular_velocity_from_matrix_derivative(R: ArrayLike, R_dot: ArrayLike,
         Angular velocity (rad/s) in ``frame``: the vee of the skew-symmetric part of
         ``R^T Rdot`` (``Rdot R^T``); the symmetric part is ignored (least squares for a noisy
         ``R_dot``).
+
+    Raises
+    ------
+    ValueError
+        Bad ``frame``; wrong shape, NaN/Inf or ``det(R) <= 0``.
 
     """
     return call_binary(_angular_velocity_from_matrix_derivative_kernel, R, R_dot,

@@ -160,6 +160,11 @@ def angular_velocity_from_euler_rates(angles: ArrayLike, rates: ArrayLike, seq: 
     ndarray, shape (..., 3)
         Angular velocity (rad/s) in ``frame``; defined everywhere, gimbal lock included.
 
+    Raises
+    ------
+    ValueError
+        Bad ``seq`` or ``frame``; wrong shape or NaN/Inf, naming the argument.
+
     """
     return call_binary(_angular_velocity_kernel, angles, rates, ('angles', 'rates'), ((3,), (3,)),
                        (3,), *_jacobian_axes(seq, frame),
@@ -200,6 +205,12 @@ def euler_rates_from_angular_velocity(
     EulerSingularityWarning
         Once per call if any sample was near-singular, with their count (mask:
         ``np.isnan(rates[..., 0])``).
+
+    Raises
+    ------
+    ValueError
+        Bad ``seq`` or ``frame``, ``singularity_threshold`` outside [0, pi/2]; wrong shape or
+        NaN/Inf, naming the argument.
 
     """
     axes = _jacobian_axes(seq, frame)

@@ -75,6 +75,12 @@ def angular_velocity_from_quaternions(q: ArrayLike, t: ArrayLike,
         give one value: ``angular_velocity_from_quaternions([q_prev, q], [t_prev, t])[0]``.
         A rotation of pi or more per step aliases to the shorter way round.
 
+    Raises
+    ------
+    ValueError
+        Bad ``frame``; ``q`` not (..., N, 4), or with a NaN/Inf or zero sample; ``t`` of the wrong
+        shape, NaN/Inf or not strictly increasing.
+
     """
     world = is_world_frame(frame)
     a = float_array(q, 'q', (4,))
@@ -106,6 +112,11 @@ def slerp(q0: ArrayLike, q1: ArrayLike, fraction: ArrayLike) -> FloatArray:
     -------
     ndarray, shape (..., 4)
         Unit canonical quaternions.
+
+    Raises
+    ------
+    ValueError
+        Wrong shape, NaN/Inf, or a zero quaternion.
 
     """
     q0 = conversions.canonical_quaternion(q0)

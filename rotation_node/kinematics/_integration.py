@@ -213,6 +213,12 @@ def integrate_angular_velocity(q0: ArrayLike,
         Unit canonical (``w >= 0``) orientations at ``t``, the first ``q0`` normalised;
         leading dimensions those of ``q0`` and ``omega`` broadcast.
 
+    Raises
+    ------
+    ValueError
+        Unknown ``method`` or ``frame``; bad ``q0``, ``t`` or ``omega`` (wrong shape, NaN/Inf,
+        zero quaternion, times not strictly increasing, leading shapes that do not broadcast).
+
     """
     try:
         code, nodes = _METHODS[method]

@@ -184,8 +184,20 @@ class BagWriter:
         Register a topic with its QoS profiles and, to copy a topic of any bag, its schema.
 
         ``write`` and ``write_serialized`` register new topics themselves (installed
-        definition, no QoS). BagError if the topic is registered already, or, without its
-        own ``definition``, its type is not an installed ``pkg/msg/Type``.
+        definition, no QoS); call this first to record the publishers' QoS.
+
+        Parameters
+        ----------
+        metadata : TopicMetadata
+            The topic's name, type, QoS profiles and (optionally) definition. A topic with its
+            own ``definition`` keeps its type name as given, for copying topics of any bag.
+
+        Raises
+        ------
+        BagError
+            If the topic is already registered, or, without its own ``definition``, its type
+            is not an installed ``pkg/msg/Type``.
+
         """
         if metadata.name in self._channels:
             raise BagError(f'topic {metadata.name} is already registered in {self.path}')
@@ -203,8 +215,11 @@ class BagWriter:
                       else metadata.type_hash)
         channel_id = self._writer.register_channel(
             topic=metadata.name, message_encoding=metadata.serialization_format,
-            schema_id=schema_id, metadata={'offered_qos_profiles': metadata.offered_qos_profiles,
-                                           'topic_type_hash': topic_hash})
+            schema_id=schema_id,
+            metadata={
+                'offered_qos_profiles': metadata.offered_qos_profiles,
+                'topic_type_hash': topic_hash,
+            })
         self._add_registered(len(metadata.name) + len(metadata.offered_qos_profiles)
                              + len(topic_hash) + 128)
         self._channels[metadata.name] = _Channel(channel_id, metadata.type_name)
@@ -228,12 +243,31 @@ class BagWriter:
     def write(self, topic: str, msg: Any, log_time_ns: int,
               publish_time_ns: Optional[int] = None) -> None:
         """
-        Serialise and write one rclpy message (its class sets the topic's type on first use).
+        Serialise and write one message.
 
         Encoded by :func:`rotation_node.wire.cdr.message_encoder` where it covers the type
-        (zero padding), else by rclpy. Times are integer ns in [0, 2**64) (else BagError);
-        ``publish_time_ns`` defaults to ``log_time_ns``. DiskFullError if the disk filled:
-        the chunk in progress was dropped, ``close()`` keeps everything written before.
+        (zero padding: the same message gives the same bytes), else by ``rclpy.serialization``.
+
+        Parameters
+        ----------
+        topic : str
+            The topic to write on.
+        msg : rclpy message
+            Its class decides the topic's type on first use.
+        log_time_ns : int
+            Receive time, nanoseconds (e.g. since the Unix epoch), in [0, 2**64).
+        publish_time_ns : int, optional
+            Publish time, nanoseconds; defaults to ``log_time_ns``.
+
+        Raises
+        ------
+        BagError
+            If the topic already holds another type, a time is not an integer in
+            [0, 2**64), or an earlier write failed.
+        DiskFullError
+            If the disk filled: the chunk in progress was dropped, ``close()`` keeps
+            everything written before.
+
         """
         channel = self._channels.get(topic)
         if channel is None or channel.msg_class is not type(msg):
@@ -248,10 +282,29 @@ class BagWriter:
     def write_serialized(self, topic: str, type_name: str, data: bytes, log_time_ns: int,
                          publish_time_ns: Optional[int] = None) -> None:
         """
-        Write one CDR-serialised message of ``type_name`` (``pkg/msg/Type``); as ``write``.
+        Write one message that is already CDR-serialised.
 
-        On first use of a topic not registered with ``add_topic``, BagError if the type
-        is not installed.
+        Parameters
+        ----------
+        topic : str
+            The topic to write on.
+        type_name : str
+            ``'pkg/msg/Type'``; decides the topic's type on first use.
+        data : bytes
+            The serialised (CDR) message.
+        log_time_ns : int
+            Receive time, nanoseconds, in [0, 2**64).
+        publish_time_ns : int, optional
+            Publish time, nanoseconds; defaults to ``log_time_ns``.
+
+        Raises
+        ------
+        BagError
+            As ``write``; also if the type is not installed on first use of a topic not
+            registered with ``add_topic``.
+        DiskFullError
+            As ``write``.
+
         """
         channel = self._channels.get(topic)
         if channel is None or channel.type_name != type_name:
@@ -277,10 +330,25 @@ class BagWriter:
     def write_serialized_block(self, messages: Sequence[Tuple[str, str, Any, int, int]]
                                ) -> None:
         """
-        Write ``(topic, type name, data, log_time_ns, publish_time_ns)`` messages, in order.
+        Write messages that are already CDR-serialised, in order; as ``write_serialized`` each.
 
-        Byte for byte (and error for error) as ``write_serialized`` of each in turn, with the
-        per-message work done once for the block.
+        The bag is byte for byte the one ``write_serialized`` of each message in turn writes
+        (chunks are cut after the same messages), with the per-message work done once for the
+        block: the topics' channels looked up once, the times checked as one array.
+
+        Parameters
+        ----------
+        messages : sequence of tuple
+            ``(topic, type name, data, log_time_ns, publish_time_ns)`` each.
+
+        Raises
+        ------
+        BagError
+            As ``write_serialized``, for the first message it would raise it for; the messages
+            before it are written.
+        DiskFullError
+            As ``write``.
+
         """
         if not messages:
             return
@@ -342,8 +410,14 @@ class BagWriter:
         """
         Write the messages collected so far as one chunk (to disk, if a sync is due).
 
-        DiskFullError if the chunk and the space to close the bag do not fit: its first messages
-        that fit are written, the others dropped. BagError if writing failed otherwise.
+        Raises
+        ------
+        DiskFullError
+            If the chunk and the space needed to close the bag do not fit on the disk: as many
+            of its first messages as fit are written, the others dropped.
+        BagError
+            If writing failed otherwise (the bag cannot be closed then).
+
         """
         now = time.monotonic()
         if self._chunk_period_s is not None:
@@ -414,32 +488,47 @@ class BagWriter:
         storage_name = self._output.storage_name
         message_counts = self.message_counts
         return {
-            'version': ROSBAG2_METADATA_VERSION, 'storage_identifier': 'mcap',
-            'duration': duration, 'starting_time': {'nanoseconds_since_epoch': start},
+            'version': ROSBAG2_METADATA_VERSION,
+            'storage_identifier': 'mcap',
+            'duration': duration,
+            'starting_time': {'nanoseconds_since_epoch': start},
             'message_count': count,
             'topics_with_message_count': [{
                 'topic_metadata': {
-                    'name': topic.name, 'type': topic.type_name,
+                    'name': topic.name,
+                    'type': topic.type_name,
                     'serialization_format': topic.serialization_format,
                     'offered_qos_profiles': metadata_yaml.load(topic.offered_qos_profiles) or [],
-                    'type_description_hash': topic.type_hash},
+                    'type_description_hash': topic.type_hash,
+                },
                 'message_count': message_counts[topic.name],
             } for topic in self._topics],
             # rosbag2's own (file or message) compression: none; MCAP compresses chunks.
-            'compression_format': '', 'compression_mode': '',
+            'compression_format': '',
+            'compression_mode': '',
             'relative_file_paths': [storage_name],
-            'files': [{'path': storage_name, 'starting_time': {'nanoseconds_since_epoch': start},
-                       'duration': dict(duration),   # a copy: no YAML alias
-                       'message_count': count}],
-            'custom_data': {}, 'ros_distro': os.environ.get('ROS_DISTRO', 'jazzy'),
+            'files': [{
+                'path': storage_name,
+                'starting_time': {'nanoseconds_since_epoch': start},
+                'duration': dict(duration),   # a copy: no YAML alias
+                'message_count': count,
+            }],
+            'custom_data': {},
+            'ros_distro': os.environ.get('ROS_DISTRO', 'jazzy'),
         }
 
     def close(self) -> None:
         """
         Write what is collected, finish the bag and rename it to ``path``; idempotent.
 
-        After a ``DiskFullError`` it still closes the bag with what was written before.
-        BagError if it cannot: the ``.part`` is removed, or kept with ``keep_unfinished``.
+        After a ``DiskFullError`` it still closes the bag, with the messages written before it.
+
+        Raises
+        ------
+        BagError
+            If the bag cannot be finished; the ``.part`` is removed, or kept with
+            ``keep_unfinished``.
+
         """
         if self._output.closed:
             return
