@@ -110,7 +110,7 @@ class Node:
         return self._stamps
 
     def stamp_set(self):
-        """The set of :meth:`stamps`."""
+        """Return the set of :meth:`stamps`."""
         self.stamps()
         return self._stamp_set
 
