@@ -434,7 +434,8 @@ def _main_single(args):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
-    parser.add_argument('--quick', action='store_true', help='fewer repeats, batches up to 10^5')
+    parser.add_argument('--quick', action='store_true',
+                        help='fewer repeats, one pass of the single samples, batches up to 10^5')
     parser.add_argument('--rounds', type=int, default=None,
                         help='rounds of the batch and peer comparisons (5; --quick: 3)')
     parser.add_argument('--json', help='also write the results to this JSON file')
@@ -453,7 +454,7 @@ def main(argv=None):
     rounds = args.rounds or (3 if args.quick else 5)
     results = {}
 
-    passes, turns = 4, 5 * repeat
+    passes, turns = (1 if args.quick else 4), 5 * repeat
     print_machine()
     print(f'rotation_node.conversions vs scipy {__import__("scipy").__version__} '
           f'(numpy {np.__version__}); batches best of {repeat}; single samples best of '

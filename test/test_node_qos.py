@@ -60,6 +60,7 @@ class Node:
         self.input_topic = f'/{namespace}/input'
         self.publishers = []
         self.euler = []
+        self._stamps, self._stamp_set = [], set()   # of self.euler, kept up to date by stamps()
         # What the middleware reports lost between the node's outputs and this test (a
         # retransmission no longer possible, on a machine too loaded to keep up).
         self.euler_lost = 0
@@ -103,7 +104,15 @@ class Node:
 
     def stamps(self):
         """Stamps (ns) of the euler outputs received so far."""
-        return [out.header.stamp.sec * 10**9 + out.header.stamp.nanosec for out in self.euler]
+        for out in self.euler[len(self._stamps):]:   # only those received since the last call
+            self._stamps.append(out.header.stamp.sec * 10**9 + out.header.stamp.nanosec)
+            self._stamp_set.add(self._stamps[-1])
+        return self._stamps
+
+    def stamp_set(self):
+        """Return the set of :meth:`stamps`."""
+        self.stamps()
+        return self._stamp_set
 
     def logged(self, text):
         return [log.msg for log in self.ros.log
@@ -187,9 +196,9 @@ def lead_in(node, publisher, first):
     lead = [stamp(first - LEAD_IN + k) for k in range(LEAD_IN)]
     for k, wanted in enumerate(lead):
         publisher.publish(imu(first - LEAD_IN + k))
-        if node.ros.spin_until(lambda: not set(lead).isdisjoint(node.stamps()), 0.05):
+        if node.ros.spin_until(lambda: not node.stamp_set().isdisjoint(lead), 0.05):
             return
-    assert node.ros.spin_until(lambda: not set(lead).isdisjoint(node.stamps()), 10.0), (
+    assert node.ros.spin_until(lambda: not node.stamp_set().isdisjoint(lead), 10.0), (
         'the node converted none of the lead-in', node.process.alive())
 
 
@@ -202,10 +211,10 @@ def first_converted(node, first, count):
     output first (it stays in the node's input history until taken); outputs lost on
     their way to this test would show in ``node.euler_lost``.
     """
-    assert node.ros.spin_until(lambda: stamp(first + count - 1) in node.stamps(),
+    assert node.ros.spin_until(lambda: stamp(first + count - 1) in node.stamp_set(),
                                OUTPUTS_TIMEOUT_S), ('last message not converted',
                                                     node.euler_lost)
-    stamps = set(node.stamps())
+    stamps = node.stamp_set()
     return min(k for k in range(first, first + count) if stamp(k) in stamps)
 
 
@@ -217,9 +226,15 @@ def expect_outputs(node, first, count, timeout=OUTPUTS_TIMEOUT_S):
     this test (counted by the subscription's message-lost events).
     """
     wanted = {stamp(first + k) for k in range(count)}
-    assert node.ros.spin_until(
-        lambda: len(wanted & set(node.stamps())) + node.euler_lost >= count, timeout), (
-        len(wanted & set(node.stamps())), node.euler_lost)
+
+    def arrived():
+        # len(stamp_set) bounds len(wanted & stamp_set): the intersection, a pass over
+        # ``count`` stamps, is only taken once enough outputs are in
+        stamps = node.stamp_set()
+        return (len(stamps) + node.euler_lost >= count
+                and len(wanted & stamps) + node.euler_lost >= count)
+    assert node.ros.spin_until(arrived, timeout), (
+        len(wanted & node.stamp_set()), node.euler_lost)
     stamps = node.stamps()
     assert len(stamps) == len(set(stamps)) and stamps == sorted(stamps)
     assert len(wanted & set(stamps)) + node.euler_lost == count
@@ -369,9 +384,9 @@ def test_a_depth_change_during_a_stream_loses_nothing(ros, node):
         assert node.warned_lost()
         # each output received has been published by now: wait until they are all here
         converted = 3000 - int(values['lost'])
-        assert ros.spin_until(lambda: len(set(node.stamps())) + node.euler_lost >= converted,
+        assert ros.spin_until(lambda: len(node.stamp_set()) + node.euler_lost >= converted,
                               OUTPUTS_TIMEOUT_S)
-        assert len(set(node.stamps())) == converted - node.euler_lost
+        assert len(node.stamp_set()) == converted - node.euler_lost
     # The replaced publishers are gone once their messages were acknowledged.
     assert ros.spin_until(lambda: ros.node.count_publishers(f'/{node.namespace}/euler') == 1,
                           DIAGNOSTICS_TIMEOUT_S)

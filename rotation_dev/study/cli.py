@@ -27,8 +27,6 @@ import time
 from rotation_node.bag.writing.atomic_file import AtomicFile
 from rotation_node.errors import BagError
 
-from . import comparison, covariance, integration, measure, performance, report
-
 #: How the study is run, as its messages and documents name it.
 PROG = 'python -m rotation_dev.study'
 
@@ -78,6 +76,7 @@ class _Progress:
 
 def _measure_and_write(args):
     """Run the study and the benchmarks, write the documents; return the exit status."""
+    from . import comparison, covariance, integration, measure, performance, report
     command = PROG + (' --quick' if args.quick else '')
     settings = measure.QUICK if args.quick else measure.FULL
     progress = _Progress()
@@ -130,6 +129,9 @@ def main(argv=None):
     args = build_parser().parse_args(argv)
     try:
         _check_output_directory(args.out)
+        # The study's modules (matplotlib, scipy) only once the arguments are usable: a
+        # mistyped --out is answered at once.
+        from . import performance
         performance.require_benchmarks()
         return _measure_and_write(args)
     except (OSError, BagError) as error:

@@ -17,7 +17,8 @@ process) and collects their ratios, with the command that reproduces each:
   writing the same bag with ``mcap`` alone (its two printed ratios are read).
 
 A ``--quick`` run measures the library only (``bench_conversions.py --quick --rounds 1``:
-one round of the batch and peer comparisons, indicative timings in a third less time);
+one pass of the single samples, one round of the batch and peer comparisons, indicative
+timings in a fifth of the time);
 the node and converter benchmarks are listed with their commands.
 """
 import dataclasses
