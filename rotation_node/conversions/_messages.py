@@ -12,7 +12,6 @@ slot ``_x`` (checked on its code), is read from its slots (~0.15 us less a quate
 from __future__ import annotations
 
 from inspect import getattr_static
-from operator import attrgetter
 from types import MemberDescriptorType
 from typing import Any, Callable, Optional
 
@@ -23,8 +22,22 @@ _NOT_SAMPLES = ('__len__', '__iter__', '__array__', '__float__', '__index__')
 
 
 # Readers of a type's objects: attributes, or for rosidl classes their slots.
-_quaternion, _vector = attrgetter(*QUATERNION_FIELDS), attrgetter(*VECTOR_FIELDS)
-_slot_quaternion, _slot_vector = attrgetter('_x', '_y', '_z', '_w'), attrgetter('_x', '_y', '_z')
+# Plain functions, not operator.attrgetter: measured 5-8 % faster per single-sample call on
+# message objects (bench_conversions.py --single, message/ndarray 0.96-1.02 against 1.01-1.10).
+def _slot_quaternion(m: Any) -> Any:
+    return (m._x, m._y, m._z, m._w)
+
+
+def _slot_vector(m: Any) -> Any:
+    return (m._x, m._y, m._z)
+
+
+def _quaternion(m: Any) -> Any:
+    return (m.x, m.y, m.z, m.w)
+
+
+def _vector(m: Any) -> Any:
+    return (m.x, m.y, m.z)
 
 
 def _returns_slot(self: Any) -> Any:
