@@ -21,17 +21,10 @@ pytestmark = [pytest.mark.timeout(120), pytest.mark.slow]   # starts processes
 
 
 def _record(path, *args):
+    # The tests publish once the publisher has matched the recorder (wait_for_subscriber): its
+    # subscription appears in the graph before the match, and a volatile publisher's messages
+    # before the match are never delivered.
     return RosProcess([script('rotation_bag'), 'record', path, *args])
-
-
-def _wait_until_recorded(client, publisher, timeout=30):
-    """
-    Wait until ``publisher`` has matched the recorder's subscription.
-
-    The recorder subscribes once it discovered the publisher; the subscription in the graph is
-    not yet a match, and a volatile publisher's messages before the match are not delivered.
-    """
-    assert client.spin_until(lambda: publisher.get_subscription_count() >= 1, timeout)
 
 
 @pytest.mark.parametrize('stop_signal', [signal.SIGINT, signal.SIGTERM], ids=lambda s: s.name)
@@ -43,8 +36,8 @@ def test_records_every_message_and_closes_on_signal(tmp_path, rng, stop_signal):
     with TestNode('publisher') as client, _record(path, '--topics', '/imu', 'chatter') as recorder:
         imu = client.node.create_publisher(Imu, '/imu', latched)
         chatter = client.node.create_publisher(String, '/chatter', 10)
-        _wait_until_recorded(client, imu)
-        _wait_until_recorded(client, chatter)
+        assert client.wait_for_subscriber(imu, timeout=30)
+        assert client.wait_for_subscriber(chatter, timeout=30)
         assert not path.exists()   # written to a temporary file until closed
         for msg in messages:
             imu.publish(msg)
@@ -80,7 +73,7 @@ def test_relative_topics_resolve_in_the_namespace(tmp_path):
     with TestNode('publisher') as client, \
             _record(path, '--topics', 'status', '--ros-args', '-r', '__ns:=/robot') as recorder:
         publisher = client.node.create_publisher(String, '/robot/status', 10)
-        _wait_until_recorded(client, publisher)
+        assert client.wait_for_subscriber(publisher, timeout=30)
         publisher.publish(String(data='ok'))
         assert publisher.wait_for_all_acked(Duration(seconds=20))
         assert recorder.stop() == 0, recorder.output
@@ -106,7 +99,7 @@ def test_sigkill_keeps_every_message_written_a_second_before(tmp_path, rng):
     reliable = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
     with TestNode('publisher') as client, _record(path, '--topics', '/imu') as recorder:
         imu = client.node.create_publisher(Imu, '/imu', reliable)
-        _wait_until_recorded(client, imu)
+        assert client.wait_for_subscriber(imu, timeout=30)
         for msg in first:
             imu.publish(msg)
         # Written within about a second of reception (a bounded wait, not a speed test).
@@ -133,7 +126,7 @@ def test_full_disk_stops_and_keeps_a_valid_bag(tmp_path, rng):
         with TestNode('publisher') as client, \
                 _record(path, '--topics', '/imu', '--compression', 'none') as recorder:
             imu = client.node.create_publisher(Imu, '/imu', reliable)
-            _wait_until_recorded(client, imu)
+            assert client.wait_for_subscriber(imu, timeout=30)
             for msg in messages:
                 imu.publish(msg)
             assert wait_for(lambda: not recorder.alive(), timeout=30)
