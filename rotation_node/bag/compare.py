@@ -125,9 +125,7 @@ def read_stream(source: StreamSource, params: Optional[NodeParameters] = None, *
     """
     params = NodeParameters() if params is None else params
     with open_bag(source.path, strict=strict) as reader:
-        if report is not None:
-            for note in reader.notes:
-                report(note)
+        reader.report_notes(report)
         with reader.reporting_new_notes(report):
             topic = reader.topic_name(source.topic)
             entry = _input_type(source, reader.topics[topic], params)

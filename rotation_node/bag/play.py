@@ -186,9 +186,7 @@ def play(path: StrPath, *, rate: float = 1.0, topics: Optional[Sequence[str]] = 
         raise BagError(f'delay must be a number of seconds in [0, {MAX_DELAY_S:.4g}], '
                        f'got {delay}')
     with open_bag(path, strict=strict) as reader:
-        if report is not None:
-            for note in reader.notes:
-                report(note)
+        reader.report_notes(report)
         topics = _playable_topics(reader, topics, report)
         rclpy.init(args=ros_args, signal_handler_options=SignalHandlerOptions.NO)
         try:

@@ -194,9 +194,7 @@ def plot_topic(bag_path: StrPath, topic: str, output_path: StrPath, *,
     params = NodeParameters() if params is None else params
     with open_bag(bag_path, strict=strict) as reader, \
             AtomicFile(output_path, overwrite=overwrite) as output:
-        if report is not None:
-            for note in reader.notes:
-                report(note)
+        reader.report_notes(report)
         with reader.reporting_new_notes(report):
             times_ns, panels, values = plot_series(reader, topic, params)
         _draw(reader.topic_name(topic), times_ns, values, panels).savefig(

@@ -142,6 +142,11 @@ class InputBag:
         if report is not None:
             report(f'{self.path}: {self.description}, '
                    f'{sum(self.message_counts.values())} messages')
+        self.report_notes(report)
+
+    def report_notes(self, report: Optional[Callable[[str], None]]) -> None:
+        """Pass each of this bag's notes to ``report``, if there is one."""
+        if report is not None:
             for note in self.notes:
                 report(note)
 
