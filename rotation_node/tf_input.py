@@ -12,14 +12,23 @@ from typing import Any, Callable, Optional, Tuple
 
 import numpy as np
 from rotation_node.registry import Sample, TF_STATIC_TOPIC
-from rotation_node.tf_buffer import TfLookupError, TfOrientation, TfOrientationBuffer
+from rotation_node.tf_buffer import (
+    CycleError, ExtrapolationError, NotConnectedError, TfLookupError, TfOrientation,
+    TfOrientationBuffer, UnknownFrameError)
 from rotation_node.wire.stamps import split_ns
 
 TF_SAMPLE_IGNORED = 'tf_sample_ignored'
-#: Why a TF message gave no sample (``'tf_' +`` the lookup error's ``reason``), or a transform
-#: was ignored.
-DROP_REASONS = ('tf_unknown_frame', 'tf_not_connected', 'tf_cycle', 'tf_extrapolation',
-                TF_SAMPLE_IGNORED)
+
+
+def _lookup_reason(error: type[TfLookupError]) -> str:
+    """Return the drop reason of a failed lookup: ``tf_`` and the error's ``reason``."""
+    return 'tf_' + error.reason
+
+
+#: Why a TF message gave no sample (tf_unknown_frame, tf_not_connected, tf_cycle,
+#: tf_extrapolation: :func:`_lookup_reason` of each lookup error), or a transform was ignored.
+DROP_REASONS = tuple(_lookup_reason(error) for error in (
+    UnknownFrameError, NotConnectedError, CycleError, ExtrapolationError)) + (TF_SAMPLE_IGNORED,)
 
 
 def sample_stream(params: Any, report: Callable[[str, str], None]) -> 'TfSampleStream':
@@ -47,7 +56,7 @@ class TfSampleStream:
         try:
             found = buffer.lookup_orientation(self.parent, self.child)
         except TfLookupError as exc:
-            self._report('tf_' + exc.reason, f'no orientation of {self.child!r} in '
+            self._report(_lookup_reason(type(exc)), f'no orientation of {self.child!r} in '
                          f'{self.parent!r}: {exc}')
             return ()
         previous = self._previous
